@@ -1,0 +1,54 @@
+"""Small I/O helpers shared by the library and the CLI."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from myoface.errors import MyofaceValueError
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike, *, suffix: str | None = None) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it to ``path`` only if the block succeeds.
+
+    A crash, an exception or Ctrl-C inside the block leaves no half-written ``path`` behind.
+    The temporary name keeps ``path``'s suffix (or ``suffix``) so format-sniffing writers
+    (imageio, matplotlib) still pick the right format.
+
+    Raises
+    ------
+    MyofaceValueError
+        If the parent folder does not exist or is not writable.
+    """
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise MyofaceValueError(f"output folder does not exist: {parent}")
+    if not os.access(parent, os.W_OK):
+        raise MyofaceValueError(f"output folder is not writable: {parent}")
+    sfx = suffix if suffix is not None else path.suffix
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{sfx}", dir=parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, path)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def ensure_output_dir(path: str | os.PathLike) -> Path:
+    """Create the output folder ``path`` (and parents) or fail with a clear message."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise MyofaceValueError(f"cannot create output folder {path}: {exc.strerror}") from exc
+    if not os.access(path, os.W_OK):
+        raise MyofaceValueError(f"output folder is not writable: {path}")
+    return path
