@@ -1,0 +1,177 @@
+"""Reading and writing face meshes: the bundled default face, OBJ/PLY (through trimesh), and
+Keith Waters' classic geoface files."""
+
+from __future__ import annotations
+
+import json
+import os
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.face.mesh import FaceMesh, triangle_normals
+
+#: Waters' geoface coordinates are taken to be centimetres (the face is then 163 mm tall).
+WATERS_UNIT_MM = 10.0
+
+
+def _data_path(name: str) -> Path:
+    return Path(str(resources.files("myoface") / "data" / name))
+
+
+def load_default_face() -> FaceMesh:
+    """The bundled neutral generic face: the MediaPipe canonical face mesh, in millimetres.
+
+    468 vertices, 852 triangles (the tessellation's 898 less the 46 that closed the eyes and the
+    mouth), cylindrical texture coordinates, and named landmark groups (MediaPipe indices).
+    Apache-2.0; see ``myoface/data/NOTICE.md`` and ``tools/build_default_face.py``.
+    """
+    face = load_mesh(_data_path("default_face.obj"))
+    groups = json.loads(_data_path("default_face_landmarks.json").read_text())["groups"]
+    return FaceMesh(face.vertices, face.triangles, face.uv, None,
+                    {k: np.asarray(v) for k, v in groups.items()}, name="default")
+
+
+def _check_file(path) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise MyofaceFileNotFoundError(f"no such file: {path}")
+    if path.is_dir():
+        raise MyofaceValueError(f"expected a file, got a folder: {path}")
+    return path
+
+
+def _read_obj(path: Path) -> FaceMesh:
+    """A small OBJ reader keeping vertex order and per-vertex uv (``f v/vt``) as written."""
+    verts, uvs, faces, face_uv = [], [], [], []
+    try:
+        text = path.read_text(errors="strict")
+    except UnicodeDecodeError as exc:
+        raise MyofaceFormatError(f"{path} is not a text OBJ file") from exc
+    for ln, line in enumerate(text.splitlines(), 1):
+        parts = line.split()
+        if not parts or parts[0].startswith("#"):
+            continue
+        try:
+            if parts[0] == "v":
+                verts.append([float(x) for x in parts[1:4]])
+            elif parts[0] == "vt":
+                uvs.append([float(x) for x in parts[1:3]])
+            elif parts[0] == "f":
+                idx = [p.split("/") for p in parts[1:]]
+                vi = [int(p[0]) for p in idx]
+                ti = [int(p[1]) if len(p) > 1 and p[1] else 0 for p in idx]
+                for k in range(1, len(vi) - 1):  # fan-triangulate polygons
+                    faces.append([vi[0], vi[k], vi[k + 1]])
+                    face_uv.append([ti[0], ti[k], ti[k + 1]])
+        except (ValueError, IndexError) as exc:
+            raise MyofaceFormatError(f"{path}:{ln}: cannot parse {line.strip()!r}") from exc
+    if not verts or not faces:
+        raise MyofaceFormatError(f"{path} has no vertices or no faces")
+    v = np.asarray(verts, float)
+    f = np.asarray(faces, np.int64)
+    f = np.where(f < 0, f + len(v) + 1, f) - 1  # OBJ is 1-based; negatives count from the end
+    uv = None
+    fu = np.asarray(face_uv, np.int64)
+    if uvs and (fu > 0).all():
+        uva = np.asarray(uvs, float)
+        uv = np.zeros((len(v), 2))
+        uv[f.reshape(-1)] = uva[fu.reshape(-1) - 1]
+    return FaceMesh(v, f, uv, name=path.stem)
+
+
+def load_mesh(path: str | os.PathLike, *, scale_mm: float = 1.0) -> FaceMesh:
+    """Read a triangle mesh (OBJ, PLY, STL, OFF, GLB, ... through trimesh) as a FaceMesh.
+
+    OBJ files are read directly (vertex order and per-vertex uv kept exactly). Positions are
+    multiplied by ``scale_mm`` (use 10 for a mesh in centimetres, 1000 for metres).
+    """
+    path = _check_file(path)
+    if path.suffix.lower() == ".obj":
+        face = _read_obj(path)
+    else:
+        import trimesh
+
+        try:
+            m = trimesh.load(str(path), force="mesh", process=False)
+        except Exception as exc:  # trimesh raises many types for unreadable input
+            raise MyofaceFormatError(f"cannot read {path} as a mesh: {exc}") from exc
+        if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
+            raise MyofaceFormatError(f"{path} holds no triangle mesh")
+        uv = getattr(m.visual, "uv", None)
+        face = FaceMesh(np.asarray(m.vertices), np.asarray(m.faces), uv, name=path.stem)
+    if scale_mm != 1.0:
+        face = face.with_vertices(face.vertices * scale_mm)
+    return face
+
+
+def save_mesh(face: FaceMesh, path: str | os.PathLike) -> None:
+    """Write ``face`` as OBJ (with uv if present) or, by suffix, any format trimesh writes."""
+    from myoface._io import atomic_output
+
+    path = Path(path)
+    with atomic_output(path) as tmp:
+        if path.suffix.lower() == ".obj":
+            lines = [f"# {face.name}, millimetres"]
+            lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in face.vertices]
+            if face.uv is not None:
+                lines += [f"vt {a:.6f} {b:.6f}" for a, b in face.uv]
+                lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in face.triangles]
+            else:
+                lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in face.triangles]
+            tmp.write_text("\n".join(lines) + "\n")
+        else:
+            import trimesh
+
+            trimesh.Trimesh(face.vertices, face.triangles, process=False).export(str(tmp))
+
+
+def read_waters_geoface(folder: str | os.PathLike) -> FaceMesh:
+    """Read Keith Waters' geoface mesh (``faceline.dat`` + ``index.dat``) as a full face.
+
+    ``faceline.dat``: a count, then one half face (x <= 0) of vertices. ``index.dat``: a count,
+    then rows of four 1-based indices (a quad), or ``1000 p2 p3 p4`` (a triangle). The half is
+    mirrored in x (midline vertices, x = 0, are shared), quads are split into two triangles, and
+    the winding is made outward. Coordinates are scaled by :data:`WATERS_UNIT_MM`.
+
+    References: Parke & Waters, *Computer Facial Animation*, Appendix (geoface).
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise MyofaceFileNotFoundError(f"no such geoface folder: {folder}")
+    fl, ix = _check_file(folder / "faceline.dat"), _check_file(folder / "index.dat")
+    try:
+        vt = fl.read_text().split()
+        nv = int(vt[0])
+        half = np.asarray(vt[1:1 + 3 * nv], float).reshape(nv, 3)
+        it = ix.read_text().split()
+        npoly = int(it[0])
+        rows = np.asarray(it[1:1 + 4 * npoly], np.int64).reshape(npoly, 4)
+    except (ValueError, IndexError) as exc:
+        raise MyofaceFormatError(f"cannot parse geoface files in {folder}: {exc}") from exc
+    tris = []
+    for r in rows:
+        if r[0] == 1000:
+            tris.append([r[1], r[2], r[3]])
+        else:
+            tris += [[r[0], r[1], r[2]], [r[0], r[2], r[3]]]
+    tris = np.asarray(tris, np.int64) - 1
+    if tris.min() < 0 or tris.max() >= nv:
+        raise MyofaceFormatError(f"index.dat refers to vertices outside 1..{nv}")
+    on_mid = np.abs(half[:, 0]) < 1e-9
+    mirror_idx = np.arange(nv)
+    n_extra = int((~on_mid).sum())
+    mirror_idx[~on_mid] = nv + np.arange(n_extra)
+    mirrored = half[~on_mid] * np.array([-1.0, 1.0, 1.0])
+    verts = np.concatenate([half, mirrored]) * WATERS_UNIT_MM
+    tris_m = mirror_idx[tris][:, ::-1]  # mirroring flips the winding
+    allt = np.concatenate([tris, tris_m])
+    # drop degenerate triangles (repeated indices in the source data)
+    ok = (allt[:, 0] != allt[:, 1]) & (allt[:, 1] != allt[:, 2]) & (allt[:, 0] != allt[:, 2])
+    allt = allt[ok]
+    n = triangle_normals(verts, allt)
+    if n[:, 2].mean() < 0:
+        allt = allt[:, ::-1]
+    return FaceMesh(verts, allt, name="waters-geoface")

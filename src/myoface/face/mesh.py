@@ -1,0 +1,166 @@
+"""The geometry level: :class:`FaceMesh` and stateless mesh functions.
+
+Conventions (all of myoface): millimetres; a right-handed head frame with +y up, +z out of the
+face towards a viewer in front of it, and the subject's left at +x. "l"/"r" in names are the
+*subject's* left/right.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from myoface.errors import MyofaceValueError
+
+
+def triangle_normals(vertices: np.ndarray, triangles: np.ndarray, *, unit: bool = True) -> np.ndarray:
+    """Normals of triangles (F,3) over vertices (V,3) mm; unit length, or area-weighted (2 x area)."""
+    e = vertices[triangles]
+    n = np.cross(e[:, 1] - e[:, 0], e[:, 2] - e[:, 0])
+    if unit:
+        n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return n
+
+
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals, (V,3). Vertices in no triangle get (0, 0, 1)."""
+    fn = triangle_normals(vertices, triangles, unit=False)
+    vn = np.zeros_like(vertices, dtype=np.float64)
+    for k in range(3):
+        np.add.at(vn, triangles[:, k], fn)
+    norm = np.linalg.norm(vn, axis=1, keepdims=True)
+    vn = np.where(norm > 0, vn / np.maximum(norm, 1e-300), np.array([0.0, 0.0, 1.0]))
+    return vn
+
+
+def unique_edges(triangles: np.ndarray) -> np.ndarray:
+    """Undirected edges (E,2), each once, sorted so that ``e[:,0] < e[:,1]``."""
+    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    e = np.sort(e, axis=1)
+    return np.unique(e, axis=0)
+
+
+def boundary_loops(triangles: np.ndarray) -> list[np.ndarray]:
+    """Closed boundary loops of an oriented manifold triangle mesh, longest first.
+
+    Each loop is an array of vertex indices in boundary order. A mesh with the default face's
+    topology has four: the outer rim, two eyes and the mouth.
+    """
+    directed = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    key = set(map(tuple, directed.tolist()))
+    nxt: dict[int, int] = {}
+    for a, b in directed.tolist():
+        if (b, a) not in key:  # a boundary half-edge
+            nxt[a] = b
+    loops, seen = [], set()
+    for start in list(nxt):
+        if start in seen:
+            continue
+        loop, v = [], start
+        while v not in seen and v in nxt:
+            seen.add(v)
+            loop.append(v)
+            v = nxt[v]
+        loops.append(np.array(loop, dtype=np.int64))
+    loops.sort(key=len, reverse=True)
+    return loops
+
+
+@dataclass(eq=False)
+class FaceMesh:
+    """A skin surface: a triangle mesh with optional texture and named landmarks.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float ndarray
+        Positions in millimetres, head frame (+y up, +z out of the face, subject's left at +x).
+    triangles : (F, 3) int ndarray
+        Vertex indices, counter-clockwise seen from outside (normals point out of the head).
+    uv : (V, 2) float ndarray, optional
+        Texture coordinates in [0, 1] (v = 0 at the bottom of the texture image).
+    texture : (H, W, 3) uint8 ndarray, optional
+        Skin texture image (row 0 at the top).
+    landmarks : dict of str to int ndarray
+        Named vertex-index groups (e.g. ``"eyebrow_l"``), see ``default_face_landmarks.json``.
+    name : str
+        Where the mesh came from, for messages and provenance.
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    uv: np.ndarray | None = None
+    texture: np.ndarray | None = None
+    landmarks: dict[str, np.ndarray] = field(default_factory=dict)
+    name: str = "face"
+
+    def __post_init__(self):
+        v = np.asarray(self.vertices, dtype=np.float64)
+        t = np.asarray(self.triangles)
+        if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3:
+            raise MyofaceValueError(f"vertices must have shape (V, 3) with V >= 3; got {v.shape}")
+        if not np.isfinite(v).all():
+            raise MyofaceValueError("vertices must be finite; got NaN or Inf")
+        if t.ndim != 2 or t.shape[1] != 3 or len(t) == 0:
+            raise MyofaceValueError(f"triangles must have shape (F, 3) with F >= 1; got {t.shape}")
+        if not np.issubdtype(t.dtype, np.integer):
+            raise MyofaceValueError(f"triangles must be integer indices; got dtype {t.dtype}")
+        if t.min() < 0 or t.max() >= len(v):
+            raise MyofaceValueError(
+                f"triangle indices must be in [0, {len(v) - 1}]; got range [{t.min()}, {t.max()}]")
+        self.vertices = v
+        self.triangles = t.astype(np.int64)
+        if self.uv is not None:
+            uv = np.asarray(self.uv, dtype=np.float64)
+            if uv.shape != (len(v), 2):
+                raise MyofaceValueError(f"uv must have shape ({len(v)}, 2); got {uv.shape}")
+            self.uv = uv
+        if self.texture is not None:
+            tex = np.asarray(self.texture)
+            if tex.ndim != 3 or tex.shape[2] != 3 or tex.dtype != np.uint8:
+                raise MyofaceValueError(
+                    f"texture must be an (H, W, 3) uint8 image; got {tex.shape} {tex.dtype}")
+            self.texture = tex
+        lm = {}
+        for k, idx in self.landmarks.items():
+            idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+            if len(idx) and (idx.min() < 0 or idx.max() >= len(v)):
+                raise MyofaceValueError(f"landmark group {k!r} has indices outside [0, {len(v) - 1}]")
+            lm[k] = idx
+        self.landmarks = lm
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def n_triangles(self) -> int:
+        return len(self.triangles)
+
+    @cached_property
+    def vertex_normals(self) -> np.ndarray:
+        """(V, 3) unit, area-weighted outward vertex normals."""
+        return vertex_normals(self.vertices, self.triangles)
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(E, 2) unique undirected edges."""
+        return unique_edges(self.triangles)
+
+    @cached_property
+    def boundary_loops(self) -> list[np.ndarray]:
+        """Boundary loops, longest (the outer rim) first."""
+        return boundary_loops(self.triangles)
+
+    def landmark(self, name: str) -> np.ndarray:
+        """Vertex indices of landmark group ``name``; a clear error lists the known groups."""
+        try:
+            return self.landmarks[name]
+        except KeyError:
+            known = ", ".join(sorted(self.landmarks)) or "(none)"
+            raise MyofaceValueError(f"unknown landmark group {name!r}; this face has: {known}") from None
+
+    def with_vertices(self, vertices: np.ndarray) -> FaceMesh:
+        """The same mesh (topology, uv, texture, landmarks) with new vertex positions."""
+        return FaceMesh(vertices, self.triangles, self.uv, self.texture, self.landmarks, self.name)
