@@ -1,0 +1,56 @@
+"""Physics level: the layered mass-spring tissue (Terzopoulos & Waters 1993, Section III-A/B/D).
+
+Builder -> immutable model -> state, in the style of warp.sim::
+
+    model = assemble_tissue(face.vertices, face.triangles)      # TissueModel (packed arrays)
+    state = rest_state(model)                                   # TissueState (x, v)
+    result = relax(model, state, targets)                       # equilibrium, converged flag
+    state = step_rk2(model, state, targets, n_steps=100)        # the paper's dynamics
+"""
+
+from myoface.tissue.forces import LAW_CONTINUOUS, LAW_PAPER
+from myoface.tissue.integrate import (
+    RelaxResult,
+    RelaxWarning,
+    TissueState,
+    internal_forces,
+    kinetic_energy,
+    potential_energy,
+    relax,
+    rest_state,
+    stable_time_step,
+    step_rk2,
+    stiffness_matrix,
+)
+from myoface.tissue.model import (
+    LAYERS,
+    NODE_LAYERS,
+    LayerMaterial,
+    TissueModel,
+    TissueParams,
+    assemble_tissue,
+    lowest_frequency,
+)
+
+__all__ = [
+    "LAW_CONTINUOUS",
+    "LAW_PAPER",
+    "LAYERS",
+    "NODE_LAYERS",
+    "LayerMaterial",
+    "RelaxResult",
+    "RelaxWarning",
+    "TissueModel",
+    "TissueParams",
+    "TissueState",
+    "assemble_tissue",
+    "internal_forces",
+    "kinetic_energy",
+    "lowest_frequency",
+    "potential_energy",
+    "relax",
+    "rest_state",
+    "stable_time_step",
+    "step_rk2",
+    "stiffness_matrix",
+]

@@ -1,0 +1,266 @@
+"""Internal forces of the tissue lattice: biphasic springs (eq. 1-2) and volume preservation.
+
+Every kernel exists twice: a numba implementation (``*_numba``, used by the integrators) and a
+plain numpy reference (``*_numpy``) that the tests hold the numba one against.
+
+Units: positions in mm, stiffness in g/s^2 (= uN/mm), forces in g*mm/s^2 (= uN), energies in
+g*mm^2/s^2 (= nJ).
+
+References: Terzopoulos & Waters 1993, eq. (1)-(4).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+# ---------------------------------------------------------------------------------------------
+# springs, eq. (1)-(2):  s_k = (c_k e_k / |r_k|) r_k,  c_k = alpha if e_k <= e^c_k else beta,
+# with e^c_k = strain_c * l_k (the threshold is a strain, so one value serves every spring of a
+# layer whatever its length).
+# material table rows: [alpha, beta, strain_c]
+#
+# ``law`` selects how the two phases join:
+#   LAW_CONTINUOUS (default): the *stiffness* switches at e^c, the force stays continuous:
+#       |s| = alpha e  (e <= e^c),   alpha e^c + beta (e - e^c)  (e > e^c)
+#     — the two-slope stress-strain curve of collagenous tissue; it has a smooth energy, so an
+#     equilibrium exists and Newton's method converges on it.
+#   LAW_PAPER: eq. (2) literally, |s| = c_k e with c_k jumping from alpha to beta; the force is
+#     discontinuous at e^c (usable with the explicit RK2 integrator only).
+# ---------------------------------------------------------------------------------------------
+
+#: below this length (mm) a spring is treated as degenerate (no direction) and exerts no force
+MIN_SPRING_LENGTH = 1e-12
+LAW_CONTINUOUS = 0
+LAW_PAPER = 1
+
+
+def _magnitude_numpy(e, rest, mat_id, mat, law):
+    a, b, ec = mat[mat_id, 0], mat[mat_id, 1], mat[mat_id, 2] * rest
+    if law == LAW_PAPER:
+        return np.where(e <= ec, a * e, b * e)
+    return np.where(e <= ec, a * e, a * ec + b * (e - ec))
+
+
+def spring_forces_numpy(x, si, sj, rest, mat_id, mat, law=LAW_CONTINUOUS):
+    """Reference: total spring force on every node, (N, 3). See :func:`spring_forces_numba`."""
+    r = x[sj] - x[si]
+    d = np.linalg.norm(r, axis=1)
+    e = d - rest
+    s = (_magnitude_numpy(e, rest, mat_id, mat, law) / np.maximum(d, MIN_SPRING_LENGTH))[:, None] * r
+    f = np.zeros_like(x)
+    np.add.at(f, si, s)  # a stretched spring pulls node i towards j ...
+    np.add.at(f, sj, -s)  # ... and j towards i
+    return f
+
+
+def spring_energy_numpy(x, si, sj, rest, mat_id, mat, law=LAW_CONTINUOUS):
+    """Reference: total elastic energy of the biphasic springs (the integral of eq. 1-2)."""
+    d = np.linalg.norm(x[sj] - x[si], axis=1)
+    e = d - rest
+    a, b, ec = mat[mat_id, 0], mat[mat_id, 1], mat[mat_id, 2] * rest
+    low = 0.5 * a * e**2
+    if law == LAW_PAPER:
+        high = 0.5 * a * ec**2 + 0.5 * b * (e**2 - ec**2)
+    else:
+        high = 0.5 * a * ec**2 + a * ec * (e - ec) + 0.5 * b * (e - ec) ** 2
+    return float(np.sum(np.where(e <= ec, low, high)))
+
+
+@njit(cache=True, inline="always")
+def spring_magnitude(e, lk, m, mat, law):
+    """|s_k| of eq. (1)-(2) for extension e of a spring of rest length lk and material m."""
+    ec = mat[m, 2] * lk
+    if e <= ec:
+        return mat[m, 0] * e
+    if law == LAW_PAPER:
+        return mat[m, 1] * e
+    return mat[m, 0] * ec + mat[m, 1] * (e - ec)
+
+
+@njit(cache=True)
+def _spring_range(x, si, sj, rest, mat_id, mat, law, k0, k1, f):
+    for k in range(k0, k1):
+        i = si[k]
+        j = sj[k]
+        rx = x[j, 0] - x[i, 0]
+        ry = x[j, 1] - x[i, 1]
+        rz = x[j, 2] - x[i, 2]
+        d = np.sqrt(rx * rx + ry * ry + rz * rz)
+        if d < MIN_SPRING_LENGTH:
+            continue
+        s = spring_magnitude(d - rest[k], rest[k], mat_id[k], mat, law) / d
+        fx = s * rx
+        fy = s * ry
+        fz = s * rz
+        f[i, 0] += fx
+        f[i, 1] += fy
+        f[i, 2] += fz
+        f[j, 0] -= fx
+        f[j, 1] -= fy
+        f[j, 2] -= fz
+
+
+@njit(cache=True)
+def spring_forces_numba(x, si, sj, rest, mat_id, mat, law, f):
+    """Add the spring forces on every node to ``f`` (N, 3), one thread.
+
+    Parameters
+    ----------
+    x : (N, 3) float64 — node positions, mm.
+    si, sj : (S,) int — end nodes of each spring.
+    rest : (S,) float64 — natural lengths l_k, mm.
+    mat_id : (S,) int — row of ``mat`` for each spring.
+    mat : (M, 3) float64 — [alpha, beta, strain_c] per material (g/s^2, g/s^2, -).
+    law : int — :data:`LAW_CONTINUOUS` or :data:`LAW_PAPER`.
+    f : (N, 3) float64 — accumulated into (not zeroed).
+    """
+    _spring_range(x, si, sj, rest, mat_id, mat, law, 0, len(si), f)
+
+
+@njit(cache=True, parallel=True)
+def spring_forces_parallel(x, si, sj, rest, mat_id, mat, law, f, buffers):
+    """Like :func:`spring_forces_numba` on all cores: each thread owns a contiguous range of
+    springs and a private force buffer (``buffers``: (T, N, 3)), summed at the end."""
+    nt = buffers.shape[0]
+    n = x.shape[0]
+    ns = si.shape[0]
+    for t in prange(nt):
+        b = buffers[t]
+        for q in range(n):
+            b[q, 0] = 0.0
+            b[q, 1] = 0.0
+            b[q, 2] = 0.0
+        k0 = (ns * t) // nt
+        k1 = (ns * (t + 1)) // nt
+        _spring_range(x, si, sj, rest, mat_id, mat, law, k0, k1, b)
+    # reduce over threads, parallel over nodes
+    for q in prange(n):
+        for t in range(nt):
+            f[q, 0] += buffers[t, q, 0]
+            f[q, 1] += buffers[t, q, 1]
+            f[q, 2] += buffers[t, q, 2]
+
+
+def make_thread_buffers(n_nodes: int) -> np.ndarray:
+    """Per-thread force buffers for :func:`spring_forces_parallel`, (T, N, 3)."""
+    return np.zeros((numba.get_num_threads(), n_nodes, 3))
+
+
+# ---------------------------------------------------------------------------------------------
+# volume preservation:  Q = sum_j kv_j (V_j - V0_j)^2,  force on node i = -dQ/dx_i
+# elements are triangular prisms (6 nodes: top a0 b0 c0, bottom a1 b1 c1), each split into three
+# tetrahedra; the signed volume is multiplied by the model's orientation sign so rest volumes > 0.
+# ---------------------------------------------------------------------------------------------
+
+#: the three tetrahedra of a prism [a0, b0, c0, a1, b1, c1] (indices into the element's 6 nodes)
+PRISM_TETS = np.array([[0, 1, 2, 3], [1, 2, 3, 4], [2, 3, 4, 5]], dtype=np.int64)
+
+
+def element_volumes_numpy(x, elems, sign=1.0):
+    """Reference: volume of each prism element, (E,), mm^3."""
+    vol = np.zeros(len(elems))
+    for t in PRISM_TETS:
+        p0, p1, p2, p3 = (x[elems[:, t[q]]] for q in range(4))
+        vol += np.einsum("ij,ij->i", p1 - p0, np.cross(p2 - p0, p3 - p0)) / 6.0
+    return sign * vol
+
+
+def volume_energy_numpy(x, elems, rest_vol, kv, sign=1.0):
+    """Reference: Q = sum_j kv_j (V_j - V0_j)^2 (Terzopoulos & Waters 1993, Section III-B)."""
+    dv = element_volumes_numpy(x, elems, sign) - rest_vol
+    return float(np.sum(kv * dv * dv))
+
+
+def volume_forces_numpy(x, elems, rest_vol, kv, sign=1.0):
+    """Reference: -dQ/dx for every node, (N, 3)."""
+    dv = element_volumes_numpy(x, elems, sign) - rest_vol
+    coef = -2.0 * kv * dv * sign / 6.0
+    f = np.zeros_like(x)
+    for t in PRISM_TETS:
+        p0, p1, p2, p3 = (x[elems[:, t[q]]] for q in range(4))
+        g1 = np.cross(p2 - p0, p3 - p0)
+        g2 = np.cross(p3 - p0, p1 - p0)
+        g3 = np.cross(p1 - p0, p2 - p0)
+        g0 = -(g1 + g2 + g3)
+        for q, g in zip(t, (g0, g1, g2, g3), strict=True):
+            np.add.at(f, elems[:, q], coef[:, None] * g)
+    return f
+
+
+@njit(cache=True)
+def _prism_volume(x, el, sign):
+    v = 0.0
+    for t in range(3):
+        p0 = el[PRISM_TETS_NB[t, 0]]
+        p1 = el[PRISM_TETS_NB[t, 1]]
+        p2 = el[PRISM_TETS_NB[t, 2]]
+        p3 = el[PRISM_TETS_NB[t, 3]]
+        ax = x[p1, 0] - x[p0, 0]
+        ay = x[p1, 1] - x[p0, 1]
+        az = x[p1, 2] - x[p0, 2]
+        bx = x[p2, 0] - x[p0, 0]
+        by = x[p2, 1] - x[p0, 1]
+        bz = x[p2, 2] - x[p0, 2]
+        cx = x[p3, 0] - x[p0, 0]
+        cy = x[p3, 1] - x[p0, 1]
+        cz = x[p3, 2] - x[p0, 2]
+        v += ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
+    return sign * v / 6.0
+
+
+PRISM_TETS_NB = PRISM_TETS  # a module-level constant numba freezes into the compiled code
+
+
+@njit(cache=True)
+def volume_forces_numba(x, elems, rest_vol, kv, sign, f):
+    """Add -dQ/dx (volume preservation) to ``f`` (N, 3). ``elems``: (E, 6) prism nodes."""
+    for e in range(elems.shape[0]):
+        el = elems[e]
+        dv = _prism_volume(x, el, sign) - rest_vol[e]
+        coef = -2.0 * kv[e] * dv * sign / 6.0
+        if coef == 0.0:
+            continue
+        for t in range(3):
+            i0 = el[PRISM_TETS_NB[t, 0]]
+            i1 = el[PRISM_TETS_NB[t, 1]]
+            i2 = el[PRISM_TETS_NB[t, 2]]
+            i3 = el[PRISM_TETS_NB[t, 3]]
+            ax = x[i1, 0] - x[i0, 0]
+            ay = x[i1, 1] - x[i0, 1]
+            az = x[i1, 2] - x[i0, 2]
+            bx = x[i2, 0] - x[i0, 0]
+            by = x[i2, 1] - x[i0, 1]
+            bz = x[i2, 2] - x[i0, 2]
+            cx = x[i3, 0] - x[i0, 0]
+            cy = x[i3, 1] - x[i0, 1]
+            cz = x[i3, 2] - x[i0, 2]
+            # dV/dp1 = b x c, dV/dp2 = c x a, dV/dp3 = a x b, dV/dp0 = -(sum)
+            g1x = by * cz - bz * cy
+            g1y = bz * cx - bx * cz
+            g1z = bx * cy - by * cx
+            g2x = cy * az - cz * ay
+            g2y = cz * ax - cx * az
+            g2z = cx * ay - cy * ax
+            g3x = ay * bz - az * by
+            g3y = az * bx - ax * bz
+            g3z = ax * by - ay * bx
+            f[i1, 0] += coef * g1x
+            f[i1, 1] += coef * g1y
+            f[i1, 2] += coef * g1z
+            f[i2, 0] += coef * g2x
+            f[i2, 1] += coef * g2y
+            f[i2, 2] += coef * g2z
+            f[i3, 0] += coef * g3x
+            f[i3, 1] += coef * g3y
+            f[i3, 2] += coef * g3z
+            f[i0, 0] -= coef * (g1x + g2x + g3x)
+            f[i0, 1] -= coef * (g1y + g2y + g3y)
+            f[i0, 2] -= coef * (g1z + g2z + g3z)
+
+
+@njit(cache=True)
+def element_volumes_numba(x, elems, sign, out):
+    for e in range(elems.shape[0]):
+        out[e] = _prism_volume(x, elems[e], sign)

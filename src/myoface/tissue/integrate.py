@@ -1,0 +1,393 @@
+"""Time integration and equilibrium of the tissue lattice.
+
+Two integrators behind one API (:func:`relax`):
+
+* ``"rk2"`` — the paper's explicit second-order Runge-Kutta (midpoint) scheme on
+  ``m x'' + gamma x' + g + q = 0`` (eq. 3-4), two force evaluations per step, run until the
+  lattice is at rest;
+* ``"implicit"`` (default) — quasi-static: the equilibrium is the minimum of the lattice's
+  potential energy over the free nodes; L-BFGS with the sparse LU of a rest stiffness matrix as
+  its initial inverse Hessian (factorised once per model) and a backtracking line search finds
+  it. It lands on the same equilibrium as the dynamic scheme (tests check this) at a small
+  fraction of the cost.
+
+Kinematic nodes (bone, and fascia nodes driven by muscles, eq. 5) are set to their target
+positions; their velocities are zero.
+
+References: Terzopoulos & Waters 1993, eq. (3)-(4) and Section III-B.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numba import njit
+from scipy.sparse.linalg import splu
+
+from myoface.errors import MyofaceSimulationError, MyofaceValueError
+from myoface.tissue.forces import (
+    LAW_PAPER,
+    _prism_volume,
+    spring_forces_numba,
+    volume_forces_numba,
+)
+from myoface.tissue.hessian import HessianPattern, assemble_hessian_numba
+from myoface.tissue.model import TissueModel
+
+#: default equilibrium tolerance: largest node move in the last solver step, mm
+RELAX_TOL_MM = 1e-4
+
+
+class RelaxWarning(UserWarning):
+    """A relaxation hit its iteration limit before reaching the tolerance."""
+
+
+@dataclass
+class TissueState:
+    """Positions ``x`` (N, 3) mm and velocities ``v`` (N, 3) mm/s of every node, at time ``t`` s."""
+
+    x: np.ndarray
+    v: np.ndarray
+    t: float = 0.0
+
+    def copy(self) -> TissueState:
+        return TissueState(self.x.copy(), self.v.copy(), self.t)
+
+
+@dataclass
+class RelaxResult:
+    """The outcome of :func:`relax`.
+
+    Attributes
+    ----------
+    state : TissueState — the equilibrium (or the last iterate if not converged).
+    converged : bool
+    iterations : int — Newton iterations (implicit) or time steps (rk2).
+    residual_mm : float — the largest node move in the last iteration (step size for rk2:
+        ``max |v| dt``).
+    max_force : float — largest net internal force on a free node at the end, uN.
+    method : str
+    """
+
+    state: TissueState
+    converged: bool
+    iterations: int
+    residual_mm: float
+    max_force: float
+    method: str
+
+
+def rest_state(model: TissueModel) -> TissueState:
+    """The assembled rest configuration with zero velocity."""
+    return TissueState(model.rest_positions.copy(), np.zeros_like(model.rest_positions), 0.0)
+
+
+def _targets_array(model: TissueModel, targets) -> np.ndarray:
+    k = model.kinematic_index
+    if targets is None:
+        return model.rest_positions[k]
+    t = np.asarray(targets, dtype=np.float64)
+    if t.shape != (len(k), 3):
+        raise MyofaceValueError(f"targets must have shape ({len(k)}, 3) (one per kinematic node); got {t.shape}")
+    if not np.isfinite(t).all():
+        raise MyofaceValueError("targets must be finite")
+    return t
+
+
+def _kargs(model: TissueModel) -> tuple:
+    """The packed arrays every force kernel takes, in kernel argument order."""
+    return (model.spring_i, model.spring_j, model.rest_length, model.spring_material,
+            model.materials, model.spring_law, model.elements, model.rest_volume,
+            model.volume_weight, model.volume_sign)
+
+
+@njit(cache=True)
+def _forces(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, f):
+    f[:, :] = 0.0
+    spring_forces_numba(x, si, sj, rest, mat_id, mat, law, f)
+    volume_forces_numba(x, elems, rest_vol, kv, vsign, f)
+
+
+def internal_forces(model: TissueModel, x: np.ndarray) -> np.ndarray:
+    """-(g + q): the spring and volume forces on every node, (N, 3) uN (eq. 3-4)."""
+    f = np.empty_like(x)
+    _forces(x, *_kargs(model), f)
+    return f
+
+
+def potential_energy(model: TissueModel, x: np.ndarray) -> float:
+    """Elastic energy of the springs plus the volume penalty Q, nJ (= g mm^2 / s^2)."""
+    return float(_energy(x, *_kargs(model)))
+
+
+def kinetic_energy(model: TissueModel, v: np.ndarray) -> float:
+    return float(0.5 * np.sum(model.mass[:, None] * v * v))
+
+
+@njit(cache=True)
+def _energy(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign):
+    en = 0.0
+    for k in range(si.shape[0]):
+        i = si[k]
+        j = sj[k]
+        rx = x[j, 0] - x[i, 0]
+        ry = x[j, 1] - x[i, 1]
+        rz = x[j, 2] - x[i, 2]
+        e = np.sqrt(rx * rx + ry * ry + rz * rz) - rest[k]
+        m = mat_id[k]
+        ec = mat[m, 2] * rest[k]
+        if e <= ec:
+            en += 0.5 * mat[m, 0] * e * e
+        elif law == LAW_PAPER:
+            en += 0.5 * mat[m, 0] * ec * ec + 0.5 * mat[m, 1] * (e * e - ec * ec)
+        else:
+            en += 0.5 * mat[m, 0] * ec * ec + mat[m, 0] * ec * (e - ec) + 0.5 * mat[m, 1] * (e - ec) ** 2
+    for q in range(elems.shape[0]):
+        dv = _prism_volume(x, elems[q], vsign) - rest_vol[q]
+        en += kv[q] * dv * dv
+    return en
+
+
+# ----------------------------------------------------------------------------------- RK2 ----
+
+def stable_time_step(model: TissueModel, safety: float = 0.5) -> float:
+    """A time step (s) inside the explicit scheme's stability limit, from each free node's
+    stiffest local oscillator (beta springs) and its damping."""
+    stiff = np.zeros(model.n_nodes)
+    kb = model.materials[model.spring_material, 1]
+    np.add.at(stiff, model.spring_i, kb)
+    np.add.at(stiff, model.spring_j, kb)
+    free = ~model.kinematic
+    w = np.sqrt(stiff[free] / model.mass[free])
+    g = model.damping[free] / model.mass[free]
+    # for x'' + g x' + w^2 x = 0, midpoint RK2 stays stable for dt below about 2 / (g/2 + w)
+    return float(safety * np.min(2.0 / (0.5 * g + w)))
+
+
+@njit(cache=True)
+def _acc(x, v, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m, damp, free, f, out):
+    _forces(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, f)
+    for i in range(x.shape[0]):
+        if free[i]:
+            for a in range(3):
+                out[i, a] = (f[i, a] - damp[i] * v[i, a]) * inv_m[i]
+        else:
+            for a in range(3):
+                out[i, a] = 0.0
+
+
+@njit(cache=True)
+def _rk2_run(x, v, n_steps, dt, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m,
+             damp, free, tol_mm):
+    """Midpoint RK2 for up to n_steps; stops early when max |v| dt < tol_mm (tol_mm > 0).
+    Returns (steps taken, last max |v| dt, step index of a non-finite value or -1)."""
+    n = x.shape[0]
+    f = np.zeros((n, 3))
+    a1 = np.zeros((n, 3))
+    a2 = np.zeros((n, 3))
+    xm = x.copy()
+    vm = v.copy()
+    h = 0.5 * dt
+    last = 0.0
+    for step in range(n_steps):
+        _acc(x, v, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m, damp, free, f, a1)
+        for i in range(n):
+            for a in range(3):
+                xm[i, a] = x[i, a] + h * v[i, a]
+                vm[i, a] = v[i, a] + h * a1[i, a]
+        _acc(xm, vm, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m, damp, free, f, a2)
+        vmax = 0.0
+        for i in range(n):
+            if free[i]:
+                for a in range(3):
+                    x[i, a] += dt * vm[i, a]
+                    v[i, a] += dt * a2[i, a]
+                    av = abs(v[i, a])
+                    if av > vmax:
+                        vmax = av
+        last = vmax * dt
+        if not np.isfinite(last):
+            return step + 1, last, step
+        if tol_mm > 0.0 and last < tol_mm:
+            return step + 1, last, -1
+    return n_steps, last, -1
+
+
+def _rk2_args(model: TissueModel):
+    return (*_kargs(model), 1.0 / model.mass, model.damping, ~model.kinematic)
+
+
+def step_rk2(model: TissueModel, state: TissueState, targets=None, dt: float | None = None,
+             n_steps: int = 1) -> TissueState:
+    """Advance ``n_steps`` paper RK2 steps of size ``dt`` (default :func:`stable_time_step`).
+
+    The kinematic nodes are first set to ``targets`` ((K, 3), the order of
+    ``model.kinematic_index``; default: their rest positions).
+
+    Raises
+    ------
+    MyofaceSimulationError
+        With the step index, if the state becomes NaN/Inf.
+    """
+    dt = stable_time_step(model) if dt is None else float(dt)
+    if not dt > 0:
+        raise MyofaceValueError(f"dt must be > 0 s; got {dt}")
+    s = state.copy()
+    s.x[model.kinematic_index] = _targets_array(model, targets)
+    s.v[model.kinematic_index] = 0.0
+    done, _, bad = _rk2_run(s.x, s.v, int(n_steps), dt, *_rk2_args(model), 0.0)
+    if bad >= 0:
+        raise MyofaceSimulationError(f"RK2 produced NaN/Inf at step {bad} (dt = {dt:g} s); reduce dt")
+    s.t += done * dt
+    return s
+
+
+# ------------------------------------------------------------------------------ implicit ----
+
+def _pattern(model: TissueModel) -> HessianPattern:
+    pat = model.cache.get("hessian_pattern")
+    if pat is None:
+        pat = HessianPattern(model.n_nodes, model.free_index, model.spring_i, model.spring_j)
+        model.cache["hessian_pattern"] = pat
+    return pat
+
+
+def stiffness_matrix(model: TissueModel, x: np.ndarray):
+    """The projected stiffness matrix over the free nodes at ``x`` (scipy CSR, 3F x 3F)."""
+    pat = _pattern(model)
+    data = np.empty(pat.nnz)
+    assemble_hessian_numba(x, *_kargs(model), pat.fmap, pat.block_indptr, pat.block_indices,
+                           pat.indptr, pat.spring_slots, data)
+    return pat.matrix(data)
+
+
+def _preconditioner(model: TissueModel):
+    """Sparse LU of the rest stiffness with every spring at the geometric mean of its two phases,
+    sqrt(alpha beta): cached on the model, it serves as the initial inverse Hessian of L-BFGS."""
+    lu = model.cache.get("precond_lu")
+    if lu is None:
+        g = np.sqrt(model.materials[:, 0] * model.materials[:, 1])
+        mats = np.column_stack([g, g, model.materials[:, 2]])
+        proxy = replace(model, materials=mats, cache={"hessian_pattern": _pattern(model)})
+        a = stiffness_matrix(proxy, model.rest_positions).tocsc()
+        lu = splu(a, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        model.cache["precond_lu"] = lu
+    return lu
+
+
+def _relax_implicit(model, x, tol_mm, max_iter, memory=8):
+    """L-BFGS on the potential energy over the free nodes, initial inverse Hessian = the cached
+    sparse LU of the rest stiffness (quasi-Newton in the sense of Liu, Bouaziz & Kavan 2017),
+    Armijo backtracking. Monotone in energy; one factorisation per model, none per call."""
+    free = model.free_index
+    lu = _preconditioner(model)
+    xf = x[free].reshape(-1)
+
+    def grad(xflat):
+        xx = x.copy()
+        xx[free] = xflat.reshape(-1, 3)
+        return xx, -internal_forces(model, xx)[free].reshape(-1)
+
+    x, g = grad(xf)
+    energy = potential_energy(model, x)
+    hist_s, hist_y = [], []
+    step = np.inf
+    for it in range(1, max_iter + 1):
+        if not np.isfinite(g).all():
+            raise MyofaceSimulationError(f"implicit relax: non-finite forces at iteration {it}")
+        q = g.copy()
+        coeffs = []
+        for s_, y_ in zip(reversed(hist_s), reversed(hist_y), strict=True):
+            rho = 1.0 / (y_ @ s_)
+            a = rho * (s_ @ q)
+            q -= a * y_
+            coeffs.append((a, rho, s_, y_))
+        z = lu.solve(q)
+        for a, rho, s_, y_ in reversed(coeffs):
+            z += s_ * (a - rho * (y_ @ z))
+        d = -z
+        slope = float(g @ d)
+        if slope >= 0:  # not a descent direction (should not happen): restart from the LU step
+            hist_s.clear()
+            hist_y.clear()
+            d = -lu.solve(g)
+            slope = float(g @ d)
+        t = 1.0
+        while True:
+            xn = x.copy()
+            xn[free] += (t * d).reshape(-1, 3)
+            en = potential_energy(model, xn)
+            if en <= energy + 1e-4 * t * slope or t < 1e-4:
+                break
+            t *= 0.5
+        gn = -internal_forces(model, xn)[free].reshape(-1)
+        sv = t * d
+        yv = gn - g
+        if yv @ sv > 1e-12 * (sv @ sv):
+            hist_s.append(sv)
+            hist_y.append(yv)
+            if len(hist_s) > memory:
+                hist_s.pop(0)
+                hist_y.pop(0)
+        x, g, energy = xn, gn, en
+        step = float(np.abs(sv).max())
+        if step < tol_mm:
+            return x, True, it, step
+    return x, False, max_iter, step
+
+
+def relax(model: TissueModel, state: TissueState | None = None, targets=None, *,
+          method: str = "implicit", tol_mm: float = RELAX_TOL_MM, max_iter: int | None = None,
+          dt: float | None = None) -> RelaxResult:
+    """Bring the lattice to equilibrium with the kinematic nodes at ``targets``.
+
+    Parameters
+    ----------
+    model : TissueModel
+    state : TissueState, optional
+        Where to start (default: rest). Its velocities are ignored by ``"implicit"``.
+    targets : (K, 3) float ndarray, optional
+        Positions (mm) of the kinematic nodes in ``model.kinematic_index`` order (default: rest).
+    method : {"implicit", "rk2"}
+    tol_mm : float
+        Converged when the largest node move of one iteration (implicit) or of one time step
+        (rk2, ``max |v| dt``) is below this, mm.
+    max_iter : int, optional
+        Quasi-Newton iterations (default 300) or RK2 steps (default 200,000).
+    dt : float, optional
+        RK2 time step, s (default :func:`stable_time_step`).
+
+    Returns
+    -------
+    RelaxResult
+        ``converged=False`` comes with a :class:`RelaxWarning`.
+
+    References: Terzopoulos & Waters 1993, eq. (3)-(5) and Section III.
+    """
+    methods = ("implicit", "rk2")
+    if method not in methods:
+        raise MyofaceValueError(f"method must be one of {methods}; got {method!r}")
+    state = state if state is not None else rest_state(model)
+    tg = _targets_array(model, targets)
+    x = state.x.copy()
+    x[model.kinematic_index] = tg
+    if method == "implicit":
+        x, ok, it, res = _relax_implicit(model, x, tol_mm, max_iter or 300)
+        out = TissueState(x, np.zeros_like(x), state.t)
+    else:
+        dt = stable_time_step(model) if dt is None else float(dt)
+        v = state.v.copy()
+        v[model.kinematic_index] = 0.0
+        n = max_iter or 200_000
+        it, res, bad = _rk2_run(x, v, n, dt, *_rk2_args(model), tol_mm)
+        if bad >= 0:
+            raise MyofaceSimulationError(f"RK2 produced NaN/Inf at step {bad} (dt = {dt:g} s)")
+        ok = res < tol_mm
+        out = TissueState(x, v, state.t + it * dt)
+    fmax = float(np.abs(internal_forces(model, out.x)[model.free_index]).max())
+    if not ok:
+        warnings.warn(f"tissue relax ({method}) did not converge in {it} iterations "
+                      f"(last move {res:.2e} mm > tol {tol_mm:g} mm)", RelaxWarning, stacklevel=2)
+    return RelaxResult(out, bool(ok), int(it), float(res), fmax, method)

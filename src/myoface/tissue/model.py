@@ -1,0 +1,321 @@
+"""The layered tissue lattice: parameters, automatic assembly from a skin mesh, packed arrays.
+
+Structure (Terzopoulos & Waters 1993, Section III-A/D, Fig. 3): every skin vertex is copied three
+times along its inward normal, giving four node layers —
+
+====  ==========================  =====================================
+ k    node layer                  depth below the skin (defaults, mm)
+====  ==========================  =====================================
+ 0    epidermis (the skin mesh)   0
+ 1    dermis / fat interface      ``dermis_mm`` = 2
+ 2    fascia (muscles attach)     ``dermis_mm + fat_mm`` = 6
+ 3    bone (fixed)                ``dermis_mm + fat_mm + muscle_mm`` = 9
+====  ==========================  =====================================
+
+Each skin triangle spans three stacked triangular-prism (pentahedral) elements: dermis (0-1),
+subcutaneous fat (1-2) and muscle (2-3). Springs: the triangle edges of layers 0-2, the vertical
+edges, and both diagonals of every quadrilateral side face (against shear). Nodes are numbered
+``layer * n_vertices + vertex``, so the skin nodes are ``0 .. n_vertices-1`` in mesh order.
+
+The paper gives no numeric values for masses, stiffnesses or damping; the defaults below are
+ours, chosen from soft-tissue orders of magnitude (skin ~ 0.1-1 MPa; fat an order softer; collagen
+stiffening ~10x past ~15 % strain) and for an over-damped, stable lattice, as the paper asks.
+Units: mm, g, s; stiffness in g/s^2 (= uN/mm; 1 N/m = 1000 g/s^2).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+
+import numpy as np
+
+from myoface.errors import MyofaceValueError
+from myoface.face.mesh import triangle_normals, unique_edges, vertex_normals
+from myoface.tissue.forces import LAW_CONTINUOUS, LAW_PAPER, element_volumes_numpy
+
+#: lightest node mass as a fraction of the median (keeps the explicit time step reasonable)
+MASS_FLOOR = 0.25
+#: names of the three element layers and the epidermis (the rows of the material table)
+LAYERS = ("epidermis", "dermis", "fat", "muscle")
+NODE_LAYERS = ("epidermis", "dermis_bottom", "fascia", "bone")
+#: a prism whose rest volume is below this fraction of (top area x layer thickness) is treated as
+#: inverted and the layers under its vertices are thinned
+MIN_REL_VOLUME = 0.2
+
+
+@dataclass(frozen=True)
+class LayerMaterial:
+    """Biphasic spring material of one layer (eq. 2).
+
+    Attributes
+    ----------
+    alpha : float
+        Stiffness at small strain, g/s^2.
+    beta : float
+        Stiffness past the threshold, g/s^2 (``alpha < beta``).
+    strain_c : float
+        Threshold strain: ``e^c_k = strain_c * l_k``.
+    volume : float
+        Volume-preservation weight (dimensionless): element j gets
+        ``kv_j = volume * alpha / A_j^2`` (A_j: its mean cross-section area, mm^2), so that
+        compressing it by d mm costs about as much energy as a spring of stiffness ``2 volume alpha``.
+    """
+
+    alpha: float
+    beta: float
+    strain_c: float
+    volume: float = 1.0
+
+    def __post_init__(self):
+        if not (self.alpha > 0 and self.beta >= self.alpha and self.strain_c >= 0 and self.volume >= 0):
+            raise MyofaceValueError(
+                f"layer material needs 0 < alpha <= beta, strain_c >= 0, volume >= 0; got {self}")
+
+
+@dataclass(frozen=True)
+class TissueParams:
+    """Parameters of the tissue lattice (all defaults are ours; the paper gives none)."""
+
+    dermis_mm: float = 2.0
+    fat_mm: float = 4.0
+    muscle_mm: float = 3.0
+    epidermis: LayerMaterial = LayerMaterial(2000.0, 20000.0, 0.15, 0.0)
+    dermis: LayerMaterial = LayerMaterial(1500.0, 15000.0, 0.15, 1.0)
+    fat: LayerMaterial = LayerMaterial(300.0, 3000.0, 0.30, 2.0)
+    muscle: LayerMaterial = LayerMaterial(1000.0, 10000.0, 0.20, 1.0)
+    #: tissue density, g/mm^3 (water); node masses are lumped from element volumes
+    density: float = 1.0e-3
+    #: damping ratio of the lattice's slowest mode (> 1: over-damped, as the paper asks, "slightly");
+    #: damping is mass-proportional, gamma_i = 2 zeta omega_min m_i, so faster modes ring down at
+    #: the same rate zeta omega_min instead of crawling like a uniformly over-damped lattice
+    damping_ratio: float = 1.1
+    #: how the two phases of eq. (2) join: "continuous" (the stiffness switches, the force is
+    #: continuous; needed by the implicit solver) or "paper" (eq. 2 literally; RK2 only)
+    biphasic: str = "continuous"
+    #: normal smoothing passes before offsetting the layers (avoids crossings at sharp creases)
+    normal_smoothing: int = 2
+
+    def materials(self) -> np.ndarray:
+        """(4, 3) table [alpha, beta, strain_c] in :data:`LAYERS` order."""
+        return np.array([[m.alpha, m.beta, m.strain_c] for m in
+                         (self.epidermis, self.dermis, self.fat, self.muscle)], dtype=np.float64)
+
+    @property
+    def depths_mm(self) -> np.ndarray:
+        """Depth of node layers 0..3 below the skin, mm."""
+        return np.cumsum([0.0, self.dermis_mm, self.fat_mm, self.muscle_mm])
+
+
+@dataclass(eq=False)
+class TissueModel:
+    """Packed, read-only arrays of an assembled lattice (build with :func:`assemble_tissue`).
+
+    Attributes
+    ----------
+    rest_positions : (N, 3) float64, mm
+    n_vertices : int — skin vertices; node ``k * n_vertices + v`` is vertex v in layer k.
+    skin_triangles : (F, 3) int64 — the skin mesh (nodes of layer 0).
+    node_layer : (N,) int8 — 0 epidermis, 1 dermis bottom, 2 fascia, 3 bone.
+    spring_i, spring_j : (S,) int64 — spring end nodes.
+    rest_length : (S,) float64, mm — natural lengths l_k.
+    spring_material : (S,) int64 — row of ``materials`` (:data:`LAYERS` order).
+    materials : (4, 3) float64 — [alpha, beta, strain_c].
+    elements : (E, 6) int64 — prisms [a0, b0, c0, a1, b1, c1] (top triangle, then the deeper one).
+    element_layer : (E,) int8 — 1 dermis, 2 fat, 3 muscle.
+    rest_volume : (E,) float64, mm^3; volume_weight : (E,) float64 — kv_j.
+    volume_sign : float — +1 or -1 so that ``volume_sign * signed volume`` is positive at rest.
+    mass : (N,) float64, g; damping : (N,) float64, g/s.
+    kinematic : (N,) bool — nodes whose positions are prescribed (bone, plus driven fascia nodes).
+    """
+
+    rest_positions: np.ndarray
+    n_vertices: int
+    skin_triangles: np.ndarray
+    node_layer: np.ndarray
+    spring_i: np.ndarray
+    spring_j: np.ndarray
+    rest_length: np.ndarray
+    spring_material: np.ndarray
+    materials: np.ndarray
+    elements: np.ndarray
+    element_layer: np.ndarray
+    rest_volume: np.ndarray
+    volume_weight: np.ndarray
+    volume_sign: float
+    mass: np.ndarray
+    damping: np.ndarray
+    kinematic: np.ndarray
+    spring_law: int = LAW_CONTINUOUS
+    params: TissueParams = field(default_factory=TissueParams)
+    cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.rest_positions)
+
+    @property
+    def n_springs(self) -> int:
+        return len(self.spring_i)
+
+    @property
+    def n_elements(self) -> int:
+        return len(self.elements)
+
+    @cached_property
+    def kinematic_index(self) -> np.ndarray:
+        """Indices of the kinematic nodes, in the order :func:`relax` expects their targets."""
+        return np.flatnonzero(self.kinematic)
+
+    @cached_property
+    def free_index(self) -> np.ndarray:
+        return np.flatnonzero(~self.kinematic)
+
+    def layer_nodes(self, layer: int | str) -> np.ndarray:
+        """Node indices of node layer ``layer`` (0-3 or a name in :data:`NODE_LAYERS`), in vertex order."""
+        k = NODE_LAYERS.index(layer) if isinstance(layer, str) else int(layer)
+        return np.arange(k * self.n_vertices, (k + 1) * self.n_vertices)
+
+    def with_kinematic(self, nodes: np.ndarray) -> TissueModel:
+        """A copy in which ``nodes`` (indices) are kinematic too, e.g. muscle-driven fascia nodes."""
+        kin = self.kinematic.copy()
+        kin[np.asarray(nodes, dtype=np.int64)] = True
+        return replace(self, kinematic=kin, cache={})
+
+    def summary(self) -> str:
+        counts = {name: int(np.sum(self.spring_material == k)) for k, name in enumerate(LAYERS)}
+        per = ", ".join(f"{k} {v}" for k, v in counts.items())
+        return (f"{self.n_nodes} nodes ({int(self.kinematic.sum())} kinematic), "
+                f"{self.n_elements} elements, {self.n_springs} springs ({per})")
+
+
+def _smooth_normals(vertices, triangles, passes):
+    n = vertex_normals(vertices, triangles)
+    if passes <= 0:
+        return n
+    edges = unique_edges(triangles)
+    for _ in range(passes):
+        acc = n.copy()
+        np.add.at(acc, edges[:, 0], n[edges[:, 1]])
+        np.add.at(acc, edges[:, 1], n[edges[:, 0]])
+        n = acc / np.linalg.norm(acc, axis=1, keepdims=True)
+    return n
+
+
+def assemble_tissue(vertices: np.ndarray, triangles: np.ndarray,
+                    params: TissueParams | None = None) -> TissueModel:
+    """Build the layered lattice under a skin mesh, automatically (T&W 1993, Section III-D).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float ndarray — skin positions, mm, outward-oriented mesh.
+    triangles : (F, 3) int ndarray — counter-clockwise seen from outside.
+    params : TissueParams, optional
+
+    Returns
+    -------
+    TissueModel
+        With the bone layer kinematic. Where the layers would cross (sharp creases, thin
+        features), the local thickness is reduced until every element has positive volume.
+    """
+    params = params or TissueParams()
+    v = np.asarray(vertices, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    if v.ndim != 2 or v.shape[1] != 3 or not np.isfinite(v).all():
+        raise MyofaceValueError(f"vertices must be a finite (V, 3) array; got shape {v.shape}")
+    if t.ndim != 2 or t.shape[1] != 3 or t.min() < 0 or t.max() >= len(v):
+        raise MyofaceValueError("triangles must be an (F, 3) array of valid vertex indices")
+    nv = len(v)
+    normals = _smooth_normals(v, t, params.normal_smoothing)
+    depths = params.depths_mm
+
+    elems = np.concatenate([np.concatenate([t + k * nv, t + (k + 1) * nv], axis=1) for k in range(3)])
+    elem_layer = np.repeat(np.array([1, 2, 3], np.int8), len(t))
+
+    # offset the layers; where they would cross (sharp creases, thin features such as the lid
+    # and lip margins), shrink the local thickness until every prism keeps a sane volume
+    layer_d = np.diff(depths)[elem_layer - 1]
+    top_area = 0.5 * np.linalg.norm(triangle_normals(v, t, unit=False), axis=1)
+    top_area = np.tile(top_area, 3)
+    # triangles that face against their own vertex normals (folds in the source mesh) give
+    # inverted prisms at any thickness: they keep their signed rest volume and are not thinned
+    tri_n = triangle_normals(v, t)
+    folded = np.tile(np.einsum("ij,ij->i", tri_n, normals[t].mean(axis=1)) < 0.2, 3)
+    scale = np.ones(nv)
+    for _ in range(60):
+        pos = np.concatenate([v - (scale * d)[:, None] * normals for d in depths])
+        vol = -element_volumes_numpy(pos, elems)  # outward skin winding: deeper prisms are negative
+        expected = top_area * layer_d * scale[elems[:, :3] % nv].mean(axis=1)
+        bad = (vol < MIN_REL_VOLUME * expected) & ~folded
+        if not bad.any():
+            break
+        scale[np.unique(elems[bad] % nv)] *= 0.85
+    else:
+        raise MyofaceValueError(
+            f"cannot build tissue layers under this mesh: {int(bad.sum())} elements stay inverted "
+            "(is the mesh consistently oriented, normals pointing out of the head?)")
+    sign = -1.0
+
+    # springs
+    edges = unique_edges(t)
+    a, b = edges[:, 0], edges[:, 1]
+    ii, jj, mm = [], [], []
+
+    def add(i, j, m):
+        ii.append(i)
+        jj.append(j)
+        mm.append(np.full(len(i), m, np.int64))
+
+    add(a, b, 0)                                    # epidermis: the skin triangle edges
+    for k, m in ((0, 1), (1, 2), (2, 3)):           # dermis, fat, muscle elements
+        top, bot = k * nv, (k + 1) * nv
+        add(np.arange(nv) + top, np.arange(nv) + bot, m)  # vertical
+        add(a + top, b + bot, m)                        # shear diagonals of each side face
+        add(b + top, a + bot, m)
+        if k < 2:
+            add(a + bot, b + bot, m)                    # the lower triangle's edges (not bone)
+    si, sj, smat = np.concatenate(ii), np.concatenate(jj), np.concatenate(mm)
+    rest = np.linalg.norm(pos[sj] - pos[si], axis=1)
+
+    # volume weights: kv = volume * alpha / A^2, A = mean area of the prism's two triangles
+    area_top = 0.5 * np.linalg.norm(triangle_normals(pos, elems[:, :3], unit=False), axis=1)
+    area_bot = 0.5 * np.linalg.norm(triangle_normals(pos, elems[:, 3:], unit=False), axis=1)
+    area = np.maximum(0.5 * (area_top + area_bot), 1e-6)
+    layer_mat = [params.dermis, params.fat, params.muscle]
+    vol_w = np.array([layer_mat[k - 1].volume * layer_mat[k - 1].alpha for k in elem_layer]) / area**2
+
+    # lumped masses: each element gives density * V / 6 to each of its nodes; the skin nodes
+    # get at least the dermis share so no free node is massless
+    mass = np.zeros(len(pos))
+    np.add.at(mass, elems.reshape(-1), np.repeat(params.density * vol / 6.0, 6))
+    # nodes of tiny triangles get a floor mass (MASS_FLOOR x median) so the explicit time step is
+    # not dictated by a few slivers
+    mass = np.maximum(mass, MASS_FLOOR * np.median(mass))
+
+    laws = {"continuous": LAW_CONTINUOUS, "paper": LAW_PAPER}
+    if params.biphasic not in laws:
+        raise MyofaceValueError(f"biphasic must be one of {tuple(laws)}; got {params.biphasic!r}")
+    node_layer = np.repeat(np.arange(4, dtype=np.int8), nv)
+    model = TissueModel(
+        rest_positions=pos, n_vertices=nv, skin_triangles=t, node_layer=node_layer,
+        spring_i=si, spring_j=sj, rest_length=rest, spring_material=smat,
+        materials=params.materials(), elements=elems, element_layer=elem_layer, rest_volume=vol,
+        volume_weight=vol_w, volume_sign=sign, mass=mass, damping=np.zeros(len(pos)),
+        kinematic=node_layer == 3, spring_law=laws[params.biphasic], params=params)
+    model.damping[:] = 2.0 * params.damping_ratio * lowest_frequency(model) * mass
+    return model
+
+
+def lowest_frequency(model: TissueModel) -> float:
+    """omega_min (rad/s): the slowest natural mode of the lattice at rest (K v = w^2 M v)."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import eigsh
+
+    from myoface.tissue.integrate import stiffness_matrix
+
+    k = stiffness_matrix(model, model.rest_positions).tocsc()
+    m = np.repeat(model.mass[model.free_index], 3)
+    # symmetric form M^-1/2 K M^-1/2, smallest eigenvalue by shift-invert about 0
+    s = sp.diags(1.0 / np.sqrt(m))
+    w2 = eigsh((s @ k @ s).tocsc(), k=1, sigma=0.0, which="LM", return_eigenvectors=False)[0]
+    return float(np.sqrt(max(w2, 0.0)))
