@@ -30,6 +30,7 @@ from myoface.tissue.model import (
     TissueParams,
     assemble_tissue,
     lowest_frequency,
+    make_lattice,
 )
 
 __all__ = [
@@ -47,6 +48,7 @@ __all__ = [
     "internal_forces",
     "kinetic_energy",
     "lowest_frequency",
+    "make_lattice",
     "potential_energy",
     "relax",
     "rest_state",

@@ -205,7 +205,7 @@ def _rk2_run(x, v, n_steps, dt, si, sj, rest, mat_id, mat, law, elems, rest_vol,
                     x[i, a] += dt * vm[i, a]
                     v[i, a] += dt * a2[i, a]
                     av = abs(v[i, a])
-                    if av > vmax:
+                    if not av <= vmax:  # also catches NaN
                         vmax = av
         last = vmax * dt
         if not np.isfinite(last):

@@ -319,3 +319,42 @@ def lowest_frequency(model: TissueModel) -> float:
     s = sp.diags(1.0 / np.sqrt(m))
     w2 = eigsh((s @ k @ s).tocsc(), k=1, sigma=0.0, which="LM", return_eigenvectors=False)[0]
     return float(np.sqrt(max(w2, 0.0)))
+
+
+def make_lattice(positions, springs, *, materials=None, spring_material=None, mass=1.0,
+                 damping=0.0, kinematic=None, elements=None, volume_weight=0.0,
+                 biphasic: str = "continuous") -> TissueModel:
+    """A TissueModel from explicit arrays — for tests, benchmarks and non-face lattices.
+
+    Parameters
+    ----------
+    positions : (N, 3) float — rest positions, mm.
+    springs : (S, 2) int — node pairs; rest lengths are taken from ``positions``.
+    materials : (M, 3) float, optional — [alpha, beta, strain_c] rows (default one row
+        [1000, 10000, 0.2]).
+    spring_material : (S,) int, optional — default all 0.
+    mass, damping : float or (N,) — g and g/s.
+    kinematic : (N,) bool, optional — prescribed nodes (default none).
+    elements : (E, 6) int, optional — prisms [a0, b0, c0, a1, b1, c1]; volume_weight kv per element.
+    """
+    pos = np.asarray(positions, dtype=np.float64)
+    sp_ = np.asarray(springs, dtype=np.int64).reshape(-1, 2)
+    n = len(pos)
+    mats = np.asarray(materials if materials is not None else [[1000.0, 10000.0, 0.2]], np.float64)
+    smat = (np.zeros(len(sp_), np.int64) if spring_material is None
+            else np.asarray(spring_material, np.int64))
+    el = np.zeros((0, 6), np.int64) if elements is None else np.asarray(elements, np.int64)
+    vol = element_volumes_numpy(pos, el) if len(el) else np.zeros(0)
+    sign = 1.0 if (len(vol) == 0 or np.median(vol) > 0) else -1.0
+    laws = {"continuous": LAW_CONTINUOUS, "paper": LAW_PAPER}
+    return TissueModel(
+        rest_positions=pos, n_vertices=n, skin_triangles=np.zeros((0, 3), np.int64),
+        node_layer=np.zeros(n, np.int8), spring_i=sp_[:, 0].copy(), spring_j=sp_[:, 1].copy(),
+        rest_length=np.linalg.norm(pos[sp_[:, 1]] - pos[sp_[:, 0]], axis=1), spring_material=smat,
+        materials=mats, elements=el, element_layer=np.ones(len(el), np.int8),
+        rest_volume=sign * vol, volume_weight=np.broadcast_to(np.asarray(volume_weight, float),
+                                                              (len(el),)).copy(),
+        volume_sign=sign, mass=np.broadcast_to(np.asarray(mass, float), (n,)).copy(),
+        damping=np.broadcast_to(np.asarray(damping, float), (n,)).copy(),
+        kinematic=np.zeros(n, bool) if kinematic is None else np.asarray(kinematic, bool).copy(),
+        spring_law=laws[biphasic])

@@ -1,0 +1,32 @@
+"""Shared test fixtures. Reference data lives in ../shared/data beside the repo (never copied in)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO.parent / "shared" / "data"
+
+
+def shared_path(*parts: str) -> Path:
+    """Path of a file in ../shared/data, or skip the test with the reason when it is absent."""
+    p = SHARED_DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"reference data not available: {p} (../shared/data is only in the dev checkout)")
+    return p
+
+
+@pytest.fixture(scope="session")
+def default_face():
+    from myoface.face import load_default_face
+
+    return load_default_face()
+
+
+@pytest.fixture(scope="session")
+def default_tissue(default_face):
+    from myoface.tissue import assemble_tissue
+
+    return assemble_tissue(default_face.vertices, default_face.triangles)
