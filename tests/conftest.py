@@ -14,7 +14,9 @@ def shared_path(*parts: str) -> Path:
     """Path of a file in ../shared/data, or skip the test with the reason when it is absent."""
     p = SHARED_DATA.joinpath(*parts)
     if not p.exists():
-        pytest.skip(f"reference data not available: {p} (../shared/data is only in the dev checkout)")
+        pytest.skip(
+            f"reference data not available: {p} (../shared/data is only in the dev checkout)"
+        )
     return p
 
 
@@ -30,3 +32,17 @@ def default_tissue(default_face):
     from myoface.tissue import assemble_tissue
 
     return assemble_tissue(default_face.vertices, default_face.triangles)
+
+
+def pytest_addoption(parser):
+    parser.addoption(
+        "--regen-golden",
+        action="store_true",
+        help="rewrite the golden images under tests/**/golden/ instead of comparing against them",
+    )
+
+
+@pytest.fixture(scope="session")
+def regen_golden(request) -> bool:
+    """True when the run was started with ``--regen-golden``."""
+    return bool(request.config.getoption("--regen-golden"))

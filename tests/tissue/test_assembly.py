@@ -2,11 +2,11 @@
 
 import numpy as np
 import pytest
+from tests.conftest import shared_path
 
 from myoface.errors import MyofaceValueError
 from myoface.face import read_waters_geoface
 from myoface.tissue import LAYERS, TissueParams, assemble_tissue
-from tests.conftest import shared_path
 
 
 def test_default_face_layers(default_face, default_tissue):
@@ -16,13 +16,14 @@ def test_default_face_layers(default_face, default_tissue):
     assert m.n_elements == 3 * default_face.n_triangles
     np.testing.assert_array_equal(m.rest_positions[:nv], default_face.vertices)
     # each deeper layer lies under the skin, along the inward normal, at most its nominal depth
-    depth = np.einsum("ij,ij->i", default_face.vertices - m.rest_positions[3 * nv:],
-                      default_face.vertex_normals)
+    depth = np.einsum(
+        "ij,ij->i", default_face.vertices - m.rest_positions[3 * nv :], default_face.vertex_normals
+    )
     assert depth.max() <= TissueParams().depths_mm[-1] + 1e-9
     assert np.median(depth) > 0.8 * TissueParams().depths_mm[-1]
     assert (m.rest_volume > 0).all()
     assert set(np.unique(m.spring_material)) == set(range(len(LAYERS)))
-    assert m.kinematic.sum() == nv and m.kinematic[3 * nv:].all()
+    assert m.kinematic.sum() == nv and m.kinematic[3 * nv :].all()
     assert (m.rest_length > 0).all()
     # damping is positive, masses are positive
     assert (m.mass > 0).all() and (m.damping > 0).all()
@@ -31,8 +32,10 @@ def test_default_face_layers(default_face, default_tissue):
 def test_waters_geoface_assembles():
     face = read_waters_geoface(shared_path("waters-geoface"))
     m = assemble_tissue(face.vertices, face.triangles)
-    print(f"\nWaters geoface lattice: {m.summary()} "
-          "(the paper's: about 960 elements and 6,500 springs)")
+    print(
+        f"\nWaters geoface lattice: {m.summary()} "
+        "(the paper's: about 960 elements and 6,500 springs)"
+    )
     assert m.n_elements == 3 * face.n_triangles
     assert np.isfinite(m.rest_positions).all()
 

@@ -22,8 +22,13 @@ from myoface.tissue import (
 
 def test_single_spring_oscillates_at_sqrt_k_over_m():
     k, m, rest = 2000.0, 0.05, 5.0
-    lat = make_lattice([[0, 0, 0], [rest, 0, 0]], [[0, 1]], materials=[[k, 10 * k, 10.0]],
-                       mass=m, kinematic=[True, False])
+    lat = make_lattice(
+        [[0, 0, 0], [rest, 0, 0]],
+        [[0, 1]],
+        materials=[[k, 10 * k, 10.0]],
+        mass=m,
+        kinematic=[True, False],
+    )
     omega = np.sqrt(k / m)
     dt = (2 * np.pi / omega) / 2000
     s = TissueState(np.array([[0, 0, 0], [rest + 0.1, 0, 0]], float), np.zeros((2, 3)))
@@ -118,8 +123,13 @@ def test_stiffness_matrix_is_force_jacobian_at_rest(default_tissue):
 
 
 def test_rk2_blowup_raises_with_step_index():
-    lat = make_lattice([[0, 0, 0], [5, 0, 0]], [[0, 1]], materials=[[2000.0, 2000.0, 1.0]],
-                       mass=0.05, kinematic=[True, False])
+    lat = make_lattice(
+        [[0, 0, 0], [5, 0, 0]],
+        [[0, 1]],
+        materials=[[2000.0, 2000.0, 1.0]],
+        mass=0.05,
+        kinematic=[True, False],
+    )
     s = TissueState(np.array([[0, 0, 0], [5.5, 0, 0]], float), np.zeros((2, 3)))
     with pytest.raises(MyofaceSimulationError, match="step"):
         step_rk2(lat, s, dt=1.0, n_steps=5000)

@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from myoface.tissue import LAW_CONTINUOUS, LAW_PAPER, internal_forces, make_lattice, potential_energy
+from myoface.tissue import (
+    LAW_CONTINUOUS,
+    LAW_PAPER,
+    internal_forces,
+    make_lattice,
+    potential_energy,
+)
 from myoface.tissue.forces import (
     element_volumes_numpy,
     make_thread_buffers,
@@ -51,8 +57,9 @@ def test_volume_kernel_matches_numpy_reference(default_tissue):
 def test_energy_matches_numpy_reference(default_tissue):
     m = default_tissue
     x = _perturbed(m, 1.0)
-    ref = (spring_energy_numpy(x, *_spring_args(m), m.spring_law)
-           + volume_energy_numpy(x, m.elements, m.rest_volume, m.volume_weight, m.volume_sign))
+    ref = spring_energy_numpy(x, *_spring_args(m), m.spring_law) + volume_energy_numpy(
+        x, m.elements, m.rest_volume, m.volume_weight, m.volume_sign
+    )
     assert potential_energy(m, x) == pytest.approx(ref, rel=1e-10)
 
 
@@ -90,7 +97,10 @@ def test_volume_force_is_finite_difference_gradient_of_Q():
             xp, xm = x.copy(), x.copy()
             xp[i, a] += h
             xm[i, a] -= h
-            dq = (volume_energy_numpy(xp, el, rest, kv, sign) - volume_energy_numpy(xm, el, rest, kv, sign)) / (2 * h)
+            dq = (
+                volume_energy_numpy(xp, el, rest, kv, sign)
+                - volume_energy_numpy(xm, el, rest, kv, sign)
+            ) / (2 * h)
             assert f[i, a] == pytest.approx(-dq, rel=1e-6, abs=1e-9)
 
 
@@ -118,8 +128,9 @@ def test_biphasic_switch(law):
     alpha, beta, strain_c, rest = 100.0, 1000.0, 0.1, 10.0
     ec = strain_c * rest
     for e in (0.5 * ec, 0.99 * ec, 1.01 * ec, 3.0 * ec, -2.0 * ec):
-        m = make_lattice([[0, 0, 0], [rest, 0, 0]], [[0, 1]],
-                         materials=[[alpha, beta, strain_c]], biphasic=law)
+        m = make_lattice(
+            [[0, 0, 0], [rest, 0, 0]], [[0, 1]], materials=[[alpha, beta, strain_c]], biphasic=law
+        )
         x = np.array([[0, 0, 0], [rest + e, 0, 0]], float)
         fx = internal_forces(m, x)[1, 0]
         if e <= ec:
@@ -130,8 +141,9 @@ def test_biphasic_switch(law):
             expected = -(alpha * ec + beta * (e - ec))
         assert fx == pytest.approx(expected, rel=1e-12)
     # the stiffness really changes across the threshold: slope just above is beta
-    m = make_lattice([[0, 0, 0], [rest, 0, 0]], [[0, 1]], materials=[[alpha, beta, strain_c]],
-                     biphasic=law)
+    m = make_lattice(
+        [[0, 0, 0], [rest, 0, 0]], [[0, 1]], materials=[[alpha, beta, strain_c]], biphasic=law
+    )
 
     def fx(e):
         return internal_forces(m, np.array([[0, 0, 0], [rest + e, 0, 0]], float))[1, 0]

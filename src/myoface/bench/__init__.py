@@ -61,7 +61,9 @@ def benchmark(name: str, unit: str, higher_is_better: bool, peer: str | None = N
     """Register ``func(quick) -> Measurement`` as benchmark ``name``."""
 
     def deco(func: Callable[[bool], Measurement]):
-        REGISTRY[name] = Benchmark(name, unit, higher_is_better, peer, func, (func.__doc__ or "").strip())
+        REGISTRY[name] = Benchmark(
+            name, unit, higher_is_better, peer, func, (func.__doc__ or "").strip()
+        )
         return func
 
     return deco
@@ -90,8 +92,10 @@ def machine_description() -> str:
                     break
     except OSError:
         pass
-    return (f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, "
-            f"Python {platform.python_version()}")
+    return (
+        f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, "
+        f"Python {platform.python_version()}"
+    )
 
 
 def load_all() -> dict[str, Benchmark]:
@@ -104,8 +108,9 @@ def load_all() -> dict[str, Benchmark]:
     return REGISTRY
 
 
-def run(prefix: str | None = None, quick: bool = False, progress: Callable[[str], None] | None = None
-        ) -> list[BenchRecord]:
+def run(
+    prefix: str | None = None, quick: bool = False, progress: Callable[[str], None] | None = None
+) -> list[BenchRecord]:
     """Run the registered benchmarks whose name starts with ``prefix`` (all if None)."""
     reg = load_all()
     machine = machine_description()
@@ -117,6 +122,16 @@ def run(prefix: str | None = None, quick: bool = False, progress: Callable[[str]
         if progress:
             progress(name)
         m = b.func(quick)
-        out.append(BenchRecord(name, float(m.value), b.unit, b.higher_is_better, b.peer,
-                               None if m.peer_value is None else float(m.peer_value), int(m.n), machine))
+        out.append(
+            BenchRecord(
+                name,
+                float(m.value),
+                b.unit,
+                b.higher_is_better,
+                b.peer,
+                None if m.peer_value is None else float(m.peer_value),
+                int(m.n),
+                machine,
+            )
+        )
     return out

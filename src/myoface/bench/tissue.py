@@ -17,15 +17,33 @@ def grid_lattice(n_springs_target: int):
     """
     side = max(3, int(round((n_springs_target / 9.0) ** (1 / 3))))
     idx = np.arange(side**3).reshape(side, side, side)
-    pos = np.stack(np.meshgrid(*(np.arange(side, dtype=float) * 2.0,) * 3, indexing="ij"), -1).reshape(-1, 3)
+    pos = np.stack(
+        np.meshgrid(*(np.arange(side, dtype=float) * 2.0,) * 3, indexing="ij"), -1
+    ).reshape(-1, 3)
     pairs = []
-    offsets = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, -1, 0), (1, 0, 1), (1, 0, -1),
-               (0, 1, 1), (0, 1, -1)]
+    offsets = [
+        (1, 0, 0),
+        (0, 1, 0),
+        (0, 0, 1),
+        (1, 1, 0),
+        (1, -1, 0),
+        (1, 0, 1),
+        (1, 0, -1),
+        (0, 1, 1),
+        (0, 1, -1),
+    ]
     for dx, dy, dz in offsets:
-        a = idx[max(0, -dx):side - max(0, dx), max(0, -dy):side - max(0, dy), max(0, -dz):side - max(0, dz)]
-        b = idx[max(0, dx):side - max(0, -dx) or None, max(0, dy):side - max(0, -dy) or None,
-                max(0, dz):side - max(0, -dz) or None]
-        b = b[:a.shape[0], :a.shape[1], :a.shape[2]]
+        a = idx[
+            max(0, -dx) : side - max(0, dx),
+            max(0, -dy) : side - max(0, dy),
+            max(0, -dz) : side - max(0, dz),
+        ]
+        b = idx[
+            max(0, dx) : side - max(0, -dx) or None,
+            max(0, dy) : side - max(0, -dy) or None,
+            max(0, dz) : side - max(0, -dz) or None,
+        ]
+        b = b[: a.shape[0], : a.shape[1], : a.shape[2]]
         pairs.append(np.stack([a.ravel(), b.ravel()], 1))
     springs = np.concatenate(pairs)
     springs = springs[np.argsort(springs[:, 0], kind="stable")]

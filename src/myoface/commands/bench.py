@@ -35,7 +35,9 @@ def run(args) -> int:
             print(f"{name:32s} {b.unit:12s} peer={b.peer or '-'}")
         return 0
     if args.only and not any(n.startswith(args.only) for n in reg):
-        raise MyofaceValueError(f"--only {args.only!r} matches no benchmark; names: {', '.join(sorted(reg))}")
+        raise MyofaceValueError(
+            f"--only {args.only!r} matches no benchmark; names: {', '.join(sorted(reg))}"
+        )
     print(f"{'name':32s} {'value':>10s} {'unit':8s} {'peer':>10s} {'ratio':>8s}  n   peer name")
     records = []
 
@@ -46,9 +48,14 @@ def run(args) -> int:
         records.append(rec)
         ratio = None
         if rec.peer_value:
-            ratio = rec.value / rec.peer_value if rec.higher_is_better else rec.peer_value / rec.value
-        print(f"{rec.name:32s} {_fmt(rec.value):>10s} {rec.unit:8s} {_fmt(rec.peer_value):>10s} "
-              f"{_fmt(ratio) + 'x' if ratio else '-':>8s}  {rec.n:<3d} {rec.peer or ''}", flush=True)
+            ratio = (
+                rec.value / rec.peer_value if rec.higher_is_better else rec.peer_value / rec.value
+            )
+        print(
+            f"{rec.name:32s} {_fmt(rec.value):>10s} {rec.unit:8s} {_fmt(rec.peer_value):>10s} "
+            f"{_fmt(ratio) + 'x' if ratio else '-':>8s}  {rec.n:<3d} {rec.peer or ''}",
+            flush=True,
+        )
     if args.json:
         with atomic_output(args.json) as tmp:
             tmp.write_text(json.dumps([r.to_dict() for r in records], indent=2) + "\n")

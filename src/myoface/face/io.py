@@ -30,8 +30,14 @@ def load_default_face() -> FaceMesh:
     """
     face = load_mesh(_data_path("default_face.obj"))
     groups = json.loads(_data_path("default_face_landmarks.json").read_text())["groups"]
-    return FaceMesh(face.vertices, face.triangles, face.uv, None,
-                    {k: np.asarray(v) for k, v in groups.items()}, name="default")
+    return FaceMesh(
+        face.vertices,
+        face.triangles,
+        face.uv,
+        None,
+        {k: np.asarray(v) for k, v in groups.items()},
+        name="default",
+    )
 
 
 def _check_file(path) -> Path:
@@ -118,7 +124,10 @@ def save_mesh(face: FaceMesh, path: str | os.PathLike) -> None:
             lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in face.vertices]
             if face.uv is not None:
                 lines += [f"vt {a:.6f} {b:.6f}" for a, b in face.uv]
-                lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in face.triangles]
+                lines += [
+                    f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}"
+                    for a, b, c in face.triangles
+                ]
             else:
                 lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in face.triangles]
             tmp.write_text("\n".join(lines) + "\n")
@@ -145,10 +154,10 @@ def read_waters_geoface(folder: str | os.PathLike) -> FaceMesh:
     try:
         vt = fl.read_text().split()
         nv = int(vt[0])
-        half = np.asarray(vt[1:1 + 3 * nv], float).reshape(nv, 3)
+        half = np.asarray(vt[1 : 1 + 3 * nv], float).reshape(nv, 3)
         it = ix.read_text().split()
         npoly = int(it[0])
-        rows = np.asarray(it[1:1 + 4 * npoly], np.int64).reshape(npoly, 4)
+        rows = np.asarray(it[1 : 1 + 4 * npoly], np.int64).reshape(npoly, 4)
     except (ValueError, IndexError) as exc:
         raise MyofaceFormatError(f"cannot parse geoface files in {folder}: {exc}") from exc
     tris = []

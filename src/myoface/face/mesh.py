@@ -15,7 +15,9 @@ import numpy as np
 from myoface.errors import MyofaceValueError
 
 
-def triangle_normals(vertices: np.ndarray, triangles: np.ndarray, *, unit: bool = True) -> np.ndarray:
+def triangle_normals(
+    vertices: np.ndarray, triangles: np.ndarray, *, unit: bool = True
+) -> np.ndarray:
     """Normals of triangles (F,3) over vertices (V,3) mm; unit length, or area-weighted (2 x area)."""
     e = vertices[triangles]
     n = np.cross(e[:, 1] - e[:, 0], e[:, 2] - e[:, 0])
@@ -108,7 +110,8 @@ class FaceMesh:
             raise MyofaceValueError(f"triangles must be integer indices; got dtype {t.dtype}")
         if t.min() < 0 or t.max() >= len(v):
             raise MyofaceValueError(
-                f"triangle indices must be in [0, {len(v) - 1}]; got range [{t.min()}, {t.max()}]")
+                f"triangle indices must be in [0, {len(v) - 1}]; got range [{t.min()}, {t.max()}]"
+            )
         self.vertices = v
         self.triangles = t.astype(np.int64)
         if self.uv is not None:
@@ -120,13 +123,16 @@ class FaceMesh:
             tex = np.asarray(self.texture)
             if tex.ndim != 3 or tex.shape[2] != 3 or tex.dtype != np.uint8:
                 raise MyofaceValueError(
-                    f"texture must be an (H, W, 3) uint8 image; got {tex.shape} {tex.dtype}")
+                    f"texture must be an (H, W, 3) uint8 image; got {tex.shape} {tex.dtype}"
+                )
             self.texture = tex
         lm = {}
         for k, idx in self.landmarks.items():
             idx = np.asarray(idx, dtype=np.int64).reshape(-1)
             if len(idx) and (idx.min() < 0 or idx.max() >= len(v)):
-                raise MyofaceValueError(f"landmark group {k!r} has indices outside [0, {len(v) - 1}]")
+                raise MyofaceValueError(
+                    f"landmark group {k!r} has indices outside [0, {len(v) - 1}]"
+                )
             lm[k] = idx
         self.landmarks = lm
 
@@ -159,7 +165,9 @@ class FaceMesh:
             return self.landmarks[name]
         except KeyError:
             known = ", ".join(sorted(self.landmarks)) or "(none)"
-            raise MyofaceValueError(f"unknown landmark group {name!r}; this face has: {known}") from None
+            raise MyofaceValueError(
+                f"unknown landmark group {name!r}; this face has: {known}"
+            ) from None
 
     def with_vertices(self, vertices: np.ndarray) -> FaceMesh:
         """The same mesh (topology, uv, texture, landmarks) with new vertex positions."""

@@ -48,7 +48,9 @@ def spring_forces_numpy(x, si, sj, rest, mat_id, mat, law=LAW_CONTINUOUS):
     r = x[sj] - x[si]
     d = np.linalg.norm(r, axis=1)
     e = d - rest
-    s = (_magnitude_numpy(e, rest, mat_id, mat, law) / np.maximum(d, MIN_SPRING_LENGTH))[:, None] * r
+    s = (_magnitude_numpy(e, rest, mat_id, mat, law) / np.maximum(d, MIN_SPRING_LENGTH))[
+        :, None
+    ] * r
     f = np.zeros_like(x)
     np.add.at(f, si, s)  # a stretched spring pulls node i towards j ...
     np.add.at(f, sj, -s)  # ... and j towards i

@@ -40,17 +40,21 @@ class HessianPattern:
         self.indptr = np.concatenate([[0], np.cumsum(row_len)]).astype(np.int64)
         cols = []
         for n in range(nf):
-            c = self.block_indices[self.block_indptr[n]:self.block_indptr[n + 1]]
+            c = self.block_indices[self.block_indptr[n] : self.block_indptr[n + 1]]
             rowcols = (3 * c[:, None] + np.arange(3)[None, :]).reshape(-1)
             cols += [rowcols] * 3
         self.indices = np.concatenate(cols).astype(np.int32)
         self.nnz = len(self.indices)
         # block slot of (i,i), (j,j), (i,j), (j,i) for each spring; -1 where a node is not free
-        self.spring_slots = np.stack([
-            _slots(self.block_indptr, self.block_indices, fi, fi),
-            _slots(self.block_indptr, self.block_indices, fj, fj),
-            _slots(self.block_indptr, self.block_indices, fi, fj),
-            _slots(self.block_indptr, self.block_indices, fj, fi)], axis=1)
+        self.spring_slots = np.stack(
+            [
+                _slots(self.block_indptr, self.block_indices, fi, fi),
+                _slots(self.block_indptr, self.block_indices, fj, fj),
+                _slots(self.block_indptr, self.block_indices, fi, fj),
+                _slots(self.block_indptr, self.block_indices, fj, fi),
+            ],
+            axis=1,
+        )
 
     def matrix(self, data):
         n = 3 * self.n_free
@@ -78,8 +82,25 @@ def _add_block(data, indptr, block_indptr, fmap_row, slot, blk, sgn):
 
 
 @njit(cache=True)
-def assemble_hessian_numba(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
-                           fmap, block_indptr, block_indices, indptr, spring_slots, data):
+def assemble_hessian_numba(
+    x,
+    si,
+    sj,
+    rest,
+    mat_id,
+    mat,
+    law,
+    elems,
+    rest_vol,
+    kv,
+    vsign,
+    fmap,
+    block_indptr,
+    block_indices,
+    indptr,
+    spring_slots,
+    data,
+):
     """Fill ``data`` (CSR values) with the projected Hessian at positions ``x``."""
     data[:] = 0.0
     blk = np.empty((3, 3))

@@ -90,7 +90,9 @@ def _targets_array(model: TissueModel, targets) -> np.ndarray:
         return model.rest_positions[k]
     t = np.asarray(targets, dtype=np.float64)
     if t.shape != (len(k), 3):
-        raise MyofaceValueError(f"targets must have shape ({len(k)}, 3) (one per kinematic node); got {t.shape}")
+        raise MyofaceValueError(
+            f"targets must have shape ({len(k)}, 3) (one per kinematic node); got {t.shape}"
+        )
     if not np.isfinite(t).all():
         raise MyofaceValueError("targets must be finite")
     return t
@@ -98,9 +100,18 @@ def _targets_array(model: TissueModel, targets) -> np.ndarray:
 
 def _kargs(model: TissueModel) -> tuple:
     """The packed arrays every force kernel takes, in kernel argument order."""
-    return (model.spring_i, model.spring_j, model.rest_length, model.spring_material,
-            model.materials, model.spring_law, model.elements, model.rest_volume,
-            model.volume_weight, model.volume_sign)
+    return (
+        model.spring_i,
+        model.spring_j,
+        model.rest_length,
+        model.spring_material,
+        model.materials,
+        model.spring_law,
+        model.elements,
+        model.rest_volume,
+        model.volume_weight,
+        model.volume_sign,
+    )
 
 
 @njit(cache=True)
@@ -143,7 +154,11 @@ def _energy(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign):
         elif law == LAW_PAPER:
             en += 0.5 * mat[m, 0] * ec * ec + 0.5 * mat[m, 1] * (e * e - ec * ec)
         else:
-            en += 0.5 * mat[m, 0] * ec * ec + mat[m, 0] * ec * (e - ec) + 0.5 * mat[m, 1] * (e - ec) ** 2
+            en += (
+                0.5 * mat[m, 0] * ec * ec
+                + mat[m, 0] * ec * (e - ec)
+                + 0.5 * mat[m, 1] * (e - ec) ** 2
+            )
     for q in range(elems.shape[0]):
         dv = _prism_volume(x, elems[q], vsign) - rest_vol[q]
         en += kv[q] * dv * dv
@@ -151,6 +166,7 @@ def _energy(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign):
 
 
 # ----------------------------------------------------------------------------------- RK2 ----
+
 
 def stable_time_step(model: TissueModel, safety: float = 0.5) -> float:
     """A time step (s) inside the explicit scheme's stability limit, from each free node's
@@ -167,7 +183,9 @@ def stable_time_step(model: TissueModel, safety: float = 0.5) -> float:
 
 
 @njit(cache=True)
-def _acc(x, v, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m, damp, free, f, out):
+def _acc(
+    x, v, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m, damp, free, f, out
+):
     _forces(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, f)
     for i in range(x.shape[0]):
         if free[i]:
@@ -179,8 +197,26 @@ def _acc(x, v, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m
 
 
 @njit(cache=True)
-def _rk2_run(x, v, n_steps, dt, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m,
-             damp, free, tol_mm):
+def _rk2_run(
+    x,
+    v,
+    n_steps,
+    dt,
+    si,
+    sj,
+    rest,
+    mat_id,
+    mat,
+    law,
+    elems,
+    rest_vol,
+    kv,
+    vsign,
+    inv_m,
+    damp,
+    free,
+    tol_mm,
+):
     """Midpoint RK2 for up to n_steps; stops early when max |v| dt < tol_mm (tol_mm > 0).
     Returns (steps taken, last max |v| dt, step index of a non-finite value or -1)."""
     n = x.shape[0]
@@ -192,12 +228,48 @@ def _rk2_run(x, v, n_steps, dt, si, sj, rest, mat_id, mat, law, elems, rest_vol,
     h = 0.5 * dt
     last = 0.0
     for step in range(n_steps):
-        _acc(x, v, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m, damp, free, f, a1)
+        _acc(
+            x,
+            v,
+            si,
+            sj,
+            rest,
+            mat_id,
+            mat,
+            law,
+            elems,
+            rest_vol,
+            kv,
+            vsign,
+            inv_m,
+            damp,
+            free,
+            f,
+            a1,
+        )
         for i in range(n):
             for a in range(3):
                 xm[i, a] = x[i, a] + h * v[i, a]
                 vm[i, a] = v[i, a] + h * a1[i, a]
-        _acc(xm, vm, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m, damp, free, f, a2)
+        _acc(
+            xm,
+            vm,
+            si,
+            sj,
+            rest,
+            mat_id,
+            mat,
+            law,
+            elems,
+            rest_vol,
+            kv,
+            vsign,
+            inv_m,
+            damp,
+            free,
+            f,
+            a2,
+        )
         vmax = 0.0
         for i in range(n):
             if free[i]:
@@ -219,8 +291,9 @@ def _rk2_args(model: TissueModel):
     return (*_kargs(model), 1.0 / model.mass, model.damping, ~model.kinematic)
 
 
-def step_rk2(model: TissueModel, state: TissueState, targets=None, dt: float | None = None,
-             n_steps: int = 1) -> TissueState:
+def step_rk2(
+    model: TissueModel, state: TissueState, targets=None, dt: float | None = None, n_steps: int = 1
+) -> TissueState:
     """Advance ``n_steps`` paper RK2 steps of size ``dt`` (default :func:`stable_time_step`).
 
     The kinematic nodes are first set to ``targets`` ((K, 3), the order of
@@ -239,12 +312,15 @@ def step_rk2(model: TissueModel, state: TissueState, targets=None, dt: float | N
     s.v[model.kinematic_index] = 0.0
     done, _, bad = _rk2_run(s.x, s.v, int(n_steps), dt, *_rk2_args(model), 0.0)
     if bad >= 0:
-        raise MyofaceSimulationError(f"RK2 produced NaN/Inf at step {bad} (dt = {dt:g} s); reduce dt")
+        raise MyofaceSimulationError(
+            f"RK2 produced NaN/Inf at step {bad} (dt = {dt:g} s); reduce dt"
+        )
     s.t += done * dt
     return s
 
 
 # ------------------------------------------------------------------------------ implicit ----
+
 
 def _pattern(model: TissueModel) -> HessianPattern:
     pat = model.cache.get("hessian_pattern")
@@ -258,8 +334,16 @@ def stiffness_matrix(model: TissueModel, x: np.ndarray):
     """The projected stiffness matrix over the free nodes at ``x`` (scipy CSR, 3F x 3F)."""
     pat = _pattern(model)
     data = np.empty(pat.nnz)
-    assemble_hessian_numba(x, *_kargs(model), pat.fmap, pat.block_indptr, pat.block_indices,
-                           pat.indptr, pat.spring_slots, data)
+    assemble_hessian_numba(
+        x,
+        *_kargs(model),
+        pat.fmap,
+        pat.block_indptr,
+        pat.block_indices,
+        pat.indptr,
+        pat.spring_slots,
+        data,
+    )
     return pat.matrix(data)
 
 
@@ -272,7 +356,9 @@ def _preconditioner(model: TissueModel):
         mats = np.column_stack([g, g, model.materials[:, 2]])
         proxy = replace(model, materials=mats, cache={"hessian_pattern": _pattern(model)})
         a = stiffness_matrix(proxy, model.rest_positions).tocsc()
-        lu = splu(a, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        lu = splu(
+            a, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+        )
         model.cache["precond_lu"] = lu
     return lu
 
@@ -338,9 +424,16 @@ def _relax_implicit(model, x, tol_mm, max_iter, memory=8):
     return x, False, max_iter, step
 
 
-def relax(model: TissueModel, state: TissueState | None = None, targets=None, *,
-          method: str = "implicit", tol_mm: float = RELAX_TOL_MM, max_iter: int | None = None,
-          dt: float | None = None) -> RelaxResult:
+def relax(
+    model: TissueModel,
+    state: TissueState | None = None,
+    targets=None,
+    *,
+    method: str = "implicit",
+    tol_mm: float = RELAX_TOL_MM,
+    max_iter: int | None = None,
+    dt: float | None = None,
+) -> RelaxResult:
     """Bring the lattice to equilibrium with the kinematic nodes at ``targets``.
 
     Parameters
@@ -388,6 +481,10 @@ def relax(model: TissueModel, state: TissueState | None = None, targets=None, *,
         out = TissueState(x, v, state.t + it * dt)
     fmax = float(np.abs(internal_forces(model, out.x)[model.free_index]).max())
     if not ok:
-        warnings.warn(f"tissue relax ({method}) did not converge in {it} iterations "
-                      f"(last move {res:.2e} mm > tol {tol_mm:g} mm)", RelaxWarning, stacklevel=2)
+        warnings.warn(
+            f"tissue relax ({method}) did not converge in {it} iterations "
+            f"(last move {res:.2e} mm > tol {tol_mm:g} mm)",
+            RelaxWarning,
+            stacklevel=2,
+        )
     return RelaxResult(out, bool(ok), int(it), float(res), fmax, method)

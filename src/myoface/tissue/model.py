@@ -68,9 +68,12 @@ class LayerMaterial:
     volume: float = 1.0
 
     def __post_init__(self):
-        if not (self.alpha > 0 and self.beta >= self.alpha and self.strain_c >= 0 and self.volume >= 0):
+        if not (
+            self.alpha > 0 and self.beta >= self.alpha and self.strain_c >= 0 and self.volume >= 0
+        ):
             raise MyofaceValueError(
-                f"layer material needs 0 < alpha <= beta, strain_c >= 0, volume >= 0; got {self}")
+                f"layer material needs 0 < alpha <= beta, strain_c >= 0, volume >= 0; got {self}"
+            )
 
 
 @dataclass(frozen=True)
@@ -98,8 +101,13 @@ class TissueParams:
 
     def materials(self) -> np.ndarray:
         """(4, 3) table [alpha, beta, strain_c] in :data:`LAYERS` order."""
-        return np.array([[m.alpha, m.beta, m.strain_c] for m in
-                         (self.epidermis, self.dermis, self.fat, self.muscle)], dtype=np.float64)
+        return np.array(
+            [
+                [m.alpha, m.beta, m.strain_c]
+                for m in (self.epidermis, self.dermis, self.fat, self.muscle)
+            ],
+            dtype=np.float64,
+        )
 
     @property
     def depths_mm(self) -> np.ndarray:
@@ -185,8 +193,10 @@ class TissueModel:
     def summary(self) -> str:
         counts = {name: int(np.sum(self.spring_material == k)) for k, name in enumerate(LAYERS)}
         per = ", ".join(f"{k} {v}" for k, v in counts.items())
-        return (f"{self.n_nodes} nodes ({int(self.kinematic.sum())} kinematic), "
-                f"{self.n_elements} elements, {self.n_springs} springs ({per})")
+        return (
+            f"{self.n_nodes} nodes ({int(self.kinematic.sum())} kinematic), "
+            f"{self.n_elements} elements, {self.n_springs} springs ({per})"
+        )
 
 
 def _smooth_normals(vertices, triangles, passes):
@@ -202,8 +212,9 @@ def _smooth_normals(vertices, triangles, passes):
     return n
 
 
-def assemble_tissue(vertices: np.ndarray, triangles: np.ndarray,
-                    params: TissueParams | None = None) -> TissueModel:
+def assemble_tissue(
+    vertices: np.ndarray, triangles: np.ndarray, params: TissueParams | None = None
+) -> TissueModel:
     """Build the layered lattice under a skin mesh, automatically (T&W 1993, Section III-D).
 
     Parameters
@@ -229,7 +240,9 @@ def assemble_tissue(vertices: np.ndarray, triangles: np.ndarray,
     normals = _smooth_normals(v, t, params.normal_smoothing)
     depths = params.depths_mm
 
-    elems = np.concatenate([np.concatenate([t + k * nv, t + (k + 1) * nv], axis=1) for k in range(3)])
+    elems = np.concatenate(
+        [np.concatenate([t + k * nv, t + (k + 1) * nv], axis=1) for k in range(3)]
+    )
     elem_layer = np.repeat(np.array([1, 2, 3], np.int8), len(t))
 
     # offset the layers; where they would cross (sharp creases, thin features such as the lid
@@ -253,7 +266,8 @@ def assemble_tissue(vertices: np.ndarray, triangles: np.ndarray,
     else:
         raise MyofaceValueError(
             f"cannot build tissue layers under this mesh: {int(bad.sum())} elements stay inverted "
-            "(is the mesh consistently oriented, normals pointing out of the head?)")
+            "(is the mesh consistently oriented, normals pointing out of the head?)"
+        )
     sign = -1.0
 
     # springs
@@ -266,14 +280,14 @@ def assemble_tissue(vertices: np.ndarray, triangles: np.ndarray,
         jj.append(j)
         mm.append(np.full(len(i), m, np.int64))
 
-    add(a, b, 0)                                    # epidermis: the skin triangle edges
-    for k, m in ((0, 1), (1, 2), (2, 3)):           # dermis, fat, muscle elements
+    add(a, b, 0)  # epidermis: the skin triangle edges
+    for k, m in ((0, 1), (1, 2), (2, 3)):  # dermis, fat, muscle elements
         top, bot = k * nv, (k + 1) * nv
         add(np.arange(nv) + top, np.arange(nv) + bot, m)  # vertical
-        add(a + top, b + bot, m)                        # shear diagonals of each side face
+        add(a + top, b + bot, m)  # shear diagonals of each side face
         add(b + top, a + bot, m)
         if k < 2:
-            add(a + bot, b + bot, m)                    # the lower triangle's edges (not bone)
+            add(a + bot, b + bot, m)  # the lower triangle's edges (not bone)
     si, sj, smat = np.concatenate(ii), np.concatenate(jj), np.concatenate(mm)
     rest = np.linalg.norm(pos[sj] - pos[si], axis=1)
 
@@ -282,7 +296,9 @@ def assemble_tissue(vertices: np.ndarray, triangles: np.ndarray,
     area_bot = 0.5 * np.linalg.norm(triangle_normals(pos, elems[:, 3:], unit=False), axis=1)
     area = np.maximum(0.5 * (area_top + area_bot), 1e-6)
     layer_mat = [params.dermis, params.fat, params.muscle]
-    vol_w = np.array([layer_mat[k - 1].volume * layer_mat[k - 1].alpha for k in elem_layer]) / area**2
+    vol_w = (
+        np.array([layer_mat[k - 1].volume * layer_mat[k - 1].alpha for k in elem_layer]) / area**2
+    )
 
     # lumped masses: each element gives density * V / 6 to each of its nodes; the skin nodes
     # get at least the dermis share so no free node is massless
@@ -297,11 +313,26 @@ def assemble_tissue(vertices: np.ndarray, triangles: np.ndarray,
         raise MyofaceValueError(f"biphasic must be one of {tuple(laws)}; got {params.biphasic!r}")
     node_layer = np.repeat(np.arange(4, dtype=np.int8), nv)
     model = TissueModel(
-        rest_positions=pos, n_vertices=nv, skin_triangles=t, node_layer=node_layer,
-        spring_i=si, spring_j=sj, rest_length=rest, spring_material=smat,
-        materials=params.materials(), elements=elems, element_layer=elem_layer, rest_volume=vol,
-        volume_weight=vol_w, volume_sign=sign, mass=mass, damping=np.zeros(len(pos)),
-        kinematic=node_layer == 3, spring_law=laws[params.biphasic], params=params)
+        rest_positions=pos,
+        n_vertices=nv,
+        skin_triangles=t,
+        node_layer=node_layer,
+        spring_i=si,
+        spring_j=sj,
+        rest_length=rest,
+        spring_material=smat,
+        materials=params.materials(),
+        elements=elems,
+        element_layer=elem_layer,
+        rest_volume=vol,
+        volume_weight=vol_w,
+        volume_sign=sign,
+        mass=mass,
+        damping=np.zeros(len(pos)),
+        kinematic=node_layer == 3,
+        spring_law=laws[params.biphasic],
+        params=params,
+    )
     model.damping[:] = 2.0 * params.damping_ratio * lowest_frequency(model) * mass
     return model
 
@@ -321,9 +352,19 @@ def lowest_frequency(model: TissueModel) -> float:
     return float(np.sqrt(max(w2, 0.0)))
 
 
-def make_lattice(positions, springs, *, materials=None, spring_material=None, mass=1.0,
-                 damping=0.0, kinematic=None, elements=None, volume_weight=0.0,
-                 biphasic: str = "continuous") -> TissueModel:
+def make_lattice(
+    positions,
+    springs,
+    *,
+    materials=None,
+    spring_material=None,
+    mass=1.0,
+    damping=0.0,
+    kinematic=None,
+    elements=None,
+    volume_weight=0.0,
+    biphasic: str = "continuous",
+) -> TissueModel:
     """A TissueModel from explicit arrays — for tests, benchmarks and non-face lattices.
 
     Parameters
@@ -341,20 +382,32 @@ def make_lattice(positions, springs, *, materials=None, spring_material=None, ma
     sp_ = np.asarray(springs, dtype=np.int64).reshape(-1, 2)
     n = len(pos)
     mats = np.asarray(materials if materials is not None else [[1000.0, 10000.0, 0.2]], np.float64)
-    smat = (np.zeros(len(sp_), np.int64) if spring_material is None
-            else np.asarray(spring_material, np.int64))
+    smat = (
+        np.zeros(len(sp_), np.int64)
+        if spring_material is None
+        else np.asarray(spring_material, np.int64)
+    )
     el = np.zeros((0, 6), np.int64) if elements is None else np.asarray(elements, np.int64)
     vol = element_volumes_numpy(pos, el) if len(el) else np.zeros(0)
     sign = 1.0 if (len(vol) == 0 or np.median(vol) > 0) else -1.0
     laws = {"continuous": LAW_CONTINUOUS, "paper": LAW_PAPER}
     return TissueModel(
-        rest_positions=pos, n_vertices=n, skin_triangles=np.zeros((0, 3), np.int64),
-        node_layer=np.zeros(n, np.int8), spring_i=sp_[:, 0].copy(), spring_j=sp_[:, 1].copy(),
-        rest_length=np.linalg.norm(pos[sp_[:, 1]] - pos[sp_[:, 0]], axis=1), spring_material=smat,
-        materials=mats, elements=el, element_layer=np.ones(len(el), np.int8),
-        rest_volume=sign * vol, volume_weight=np.broadcast_to(np.asarray(volume_weight, float),
-                                                              (len(el),)).copy(),
-        volume_sign=sign, mass=np.broadcast_to(np.asarray(mass, float), (n,)).copy(),
+        rest_positions=pos,
+        n_vertices=n,
+        skin_triangles=np.zeros((0, 3), np.int64),
+        node_layer=np.zeros(n, np.int8),
+        spring_i=sp_[:, 0].copy(),
+        spring_j=sp_[:, 1].copy(),
+        rest_length=np.linalg.norm(pos[sp_[:, 1]] - pos[sp_[:, 0]], axis=1),
+        spring_material=smat,
+        materials=mats,
+        elements=el,
+        element_layer=np.ones(len(el), np.int8),
+        rest_volume=sign * vol,
+        volume_weight=np.broadcast_to(np.asarray(volume_weight, float), (len(el),)).copy(),
+        volume_sign=sign,
+        mass=np.broadcast_to(np.asarray(mass, float), (n,)).copy(),
         damping=np.broadcast_to(np.asarray(damping, float), (n,)).copy(),
         kinematic=np.zeros(n, bool) if kinematic is None else np.asarray(kinematic, bool).copy(),
-        spring_law=laws[biphasic])
+        spring_law=laws[biphasic],
+    )
