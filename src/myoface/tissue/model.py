@@ -212,6 +212,27 @@ def _smooth_normals(vertices, triangles, passes):
     return n
 
 
+def _order_free_volumes(pos: np.ndarray, elems: np.ndarray) -> np.ndarray:
+    """Prism volumes averaged over the 6 vertex orders of their triangles.
+
+    A prism's split into three tetrahedra depends on which vertex comes first; averaging over
+    all orders makes the thickness reduction below independent of it, so a mirror-symmetric
+    mesh gets a mirror-symmetric lattice.
+    """
+    vol = np.zeros(len(elems))
+    for perm, sgn in (
+        ((0, 1, 2), 1),
+        ((1, 2, 0), 1),
+        ((2, 0, 1), 1),
+        ((0, 2, 1), -1),
+        ((2, 1, 0), -1),
+        ((1, 0, 2), -1),
+    ):
+        cols = list(perm) + [q + 3 for q in perm]
+        vol += sgn * element_volumes_numpy(pos, elems[:, cols])
+    return vol / 6.0
+
+
 def assemble_tissue(
     vertices: np.ndarray, triangles: np.ndarray, params: TissueParams | None = None
 ) -> TissueModel:
@@ -257,7 +278,7 @@ def assemble_tissue(
     scale = np.ones(nv)
     for _ in range(60):
         pos = np.concatenate([v - (scale * d)[:, None] * normals for d in depths])
-        vol = -element_volumes_numpy(pos, elems)  # outward skin winding: deeper prisms are negative
+        vol = -_order_free_volumes(pos, elems)  # outward winding: deeper prisms are negative
         expected = top_area * layer_d * scale[elems[:, :3] % nv].mean(axis=1)
         bad = (vol < MIN_REL_VOLUME * expected) & ~folded
         if not bad.any():

@@ -1,0 +1,415 @@
+"""Muscle files: the TOML muscle format (the default set is one), and Waters' ``muscle.dat``.
+
+The TOML format
+---------------
+A muscle file places muscles on a particular mesh, by vertex index and depth, so the same file
+serves every mesh with that topology (the default set works on any face in MediaPipe's 468-vertex
+topology, e.g. a personal face made from a photo)::
+
+    [meta]
+    name = "..."
+
+    [[muscle]]
+    id = "zygomaticus_major"        # anatomical id
+    sides = "lr"                    # "lr": defined on the subject's left (+x) and mirrored to
+                                    #       the right as <id>_l / <id>_r;  "mid": one muscle <id>
+    type = "linear"                 # linear | sheet | sphincter | waters
+    origin = { vertex = 345, depth_mm = 12.0 }
+    insertion = { vertex = 291, depth_mm = 6.0 }
+    radius_mm = 18.0
+    max_shortening_mm = 12.0
+    region = "all"                  # all | upper | lower (side of the mouth slit it acts on)
+
+A point is ``{ vertex = i }`` (a vertex of the mesh), ``{ landmark = "name" }`` (the mean of a
+landmark group of the face, or of several: ``landmark = ["a", "b"]``), or ``{ xyz_mm = [x, y, z] }``; optional ``offset_mm = [dx, dy, dz]``
+(head frame) and ``depth_mm`` (into the face, along the inward surface normal at the vertex).
+Types and their keys:
+
+- ``linear``: origin, insertion, radius_mm, max_shortening_mm (T&W 1993, eq. (5)-(6)).
+- ``sheet``: origin (the top of the strip, in bone), insertion (centre of the insertion line),
+  width_mm, below_mm, max_shortening_mm.
+- ``sphincter``: center, semi_axes_mm = [a, b], falloff, max_contraction_mm, protrusion_mm,
+  optional axis_u (default [1, 0, 0]) and normal (default: the mean surface normal at center).
+- ``waters``: skin, bone, fall_start_mm, fall_end_mm, zone_deg, clamp.
+
+An optional ``[jaw]`` table: ``hinge`` (a point), ``axis`` (default [1, 0, 0]),
+``max_angle_rad``, and the harmonic weight constraints ``lower`` / ``upper`` (lists of landmark
+group names or vertex indices held at 1 / 0), ``lower_below`` / ``upper_above`` (points: every
+vertex below / above that point's height is held at 1 / 0). Vertices listed as both are left free.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.face.io import WATERS_UNIT_MM
+from myoface.face.mesh import FaceMesh
+from myoface.muscles.jaw import Jaw, harmonic_weights
+from myoface.muscles.muscleset import MuscleSet
+from myoface.muscles.types import LinearMuscle, SheetMuscle, SphincterMuscle, WatersMuscle
+
+DEFAULT_MUSCLES_FILE = "default_muscles.toml"
+TYPES = ("linear", "sheet", "sphincter", "waters")
+SIDES = ("lr", "mid")
+_COMMON_KEYS = {"id", "sides", "type", "region", "note"}
+_KEYS = {
+    "linear": {"origin", "insertion", "radius_mm", "max_shortening_mm"},
+    "sheet": {"origin", "insertion", "width_mm", "below_mm", "max_shortening_mm"},
+    "sphincter": {
+        "center",
+        "semi_axes_mm",
+        "falloff",
+        "max_contraction_mm",
+        "protrusion_mm",
+        "axis_u",
+        "normal",
+    },
+    "waters": {"skin", "bone", "fall_start_mm", "fall_end_mm", "zone_deg", "clamp"},
+}
+_OPTIONAL = {"sphincter": {"axis_u", "normal", "protrusion_mm"}}
+
+
+class _Placer:
+    """Resolves point specs of a muscle file on one face."""
+
+    def __init__(self, face: FaceMesh, where: str):
+        self.face = face
+        self.where = where
+        self.normals = face.vertex_normals
+
+    def _vertices(self, spec: dict, ctx: str) -> np.ndarray:
+        if "vertex" in spec:
+            i = spec["vertex"]
+            if not isinstance(i, int) or not 0 <= i < self.face.n_vertices:
+                raise MyofaceFormatError(
+                    f"{self.where}: {ctx}: vertex must be an index in 0..{self.face.n_vertices - 1}"
+                    f"; got {i!r}"
+                )
+            return np.array([i])
+        if "landmark" in spec:
+            names = spec["landmark"]
+            names = [names] if isinstance(names, str) else list(names)
+            try:
+                return np.concatenate([np.asarray(self.face.landmark(n)) for n in names])
+            except (KeyError, MyofaceValueError) as exc:
+                raise MyofaceFormatError(f"{self.where}: {ctx}: {exc}") from None
+        raise MyofaceFormatError(f"{self.where}: {ctx}: a point needs vertex, landmark or xyz_mm")
+
+    def point(self, spec, ctx: str) -> np.ndarray:
+        if not isinstance(spec, dict):
+            raise MyofaceFormatError(f"{self.where}: {ctx} must be a table; got {spec!r}")
+        unknown = set(spec) - {"vertex", "landmark", "xyz_mm", "offset_mm", "depth_mm"}
+        if unknown:
+            raise MyofaceFormatError(f"{self.where}: {ctx}: unknown keys {sorted(unknown)}")
+        if "xyz_mm" in spec:
+            p = _floats(spec["xyz_mm"], 3, f"{self.where}: {ctx}.xyz_mm")
+            normal = None
+        else:
+            idx = self._vertices(spec, ctx)
+            p = self.face.vertices[idx].mean(axis=0)
+            n = self.normals[idx].sum(axis=0)
+            normal = n / np.linalg.norm(n)
+        if "offset_mm" in spec:
+            p = p + _floats(spec["offset_mm"], 3, f"{self.where}: {ctx}.offset_mm")
+        depth = float(spec.get("depth_mm", 0.0))
+        if depth:
+            if normal is None:
+                raise MyofaceFormatError(f"{self.where}: {ctx}: depth_mm needs a vertex/landmark")
+            p = p - depth * normal
+        return p
+
+    def normal_at(self, spec) -> np.ndarray:
+        if isinstance(spec, dict) and ("vertex" in spec or "landmark" in spec):
+            n = self.normals[self._vertices(spec, "normal")].sum(axis=0)
+            return n / np.linalg.norm(n)
+        return np.array([0.0, 0.0, 1.0])
+
+    def vertex_set(self, items, ctx: str) -> np.ndarray:
+        out = []
+        for it in items:
+            if isinstance(it, int):
+                out.append(self._vertices({"vertex": it}, ctx))
+            else:
+                out.append(self._vertices({"landmark": it}, ctx))
+        return np.concatenate(out) if out else np.zeros(0, np.int64)
+
+
+def _floats(v, n: int, ctx: str) -> np.ndarray:
+    try:
+        a = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    if a.shape != (n,) or not np.isfinite(a).all():
+        raise MyofaceFormatError(f"{ctx} must be {n} finite numbers; got {v!r}")
+    return a
+
+
+def _number(entry: dict, key: str, ctx: str) -> float:
+    v = entry.get(key)
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise MyofaceFormatError(f"{ctx}: {key} must be a number; got {v!r}")
+    return float(v)
+
+
+def _build(entry: dict, placer: _Placer, ctx: str):
+    kind = entry.get("type")
+    if kind not in TYPES:
+        raise MyofaceFormatError(f"{ctx}: type must be one of {TYPES}; got {kind!r}")
+    keys = set(entry) - _COMMON_KEYS
+    unknown = keys - _KEYS[kind]
+    if unknown:
+        raise MyofaceFormatError(f"{ctx}: unknown keys for a {kind} muscle: {sorted(unknown)}")
+    missing = _KEYS[kind] - keys - _OPTIONAL.get(kind, set())
+    if missing:
+        raise MyofaceFormatError(f"{ctx}: missing keys for a {kind} muscle: {sorted(missing)}")
+    region = entry.get("region", "all")
+    mid = entry["id"]
+    if kind == "linear":
+        return LinearMuscle(
+            mid,
+            placer.point(entry["origin"], f"{ctx}.origin"),
+            placer.point(entry["insertion"], f"{ctx}.insertion"),
+            _number(entry, "radius_mm", ctx),
+            _number(entry, "max_shortening_mm", ctx),
+            region,
+        )
+    if kind == "sheet":
+        return SheetMuscle(
+            mid,
+            placer.point(entry["origin"], f"{ctx}.origin"),
+            placer.point(entry["insertion"], f"{ctx}.insertion"),
+            _number(entry, "width_mm", ctx),
+            _number(entry, "below_mm", ctx),
+            _number(entry, "max_shortening_mm", ctx),
+            placer.normal_at(entry["insertion"]),
+            region,
+        )
+    if kind == "sphincter":
+        normal = (
+            _floats(entry["normal"], 3, f"{ctx}.normal")
+            if "normal" in entry
+            else placer.normal_at(entry["center"])
+        )
+        axis_u = _floats(entry.get("axis_u", [1.0, 0.0, 0.0]), 3, f"{ctx}.axis_u")
+        return SphincterMuscle(
+            mid,
+            placer.point(entry["center"], f"{ctx}.center"),
+            normal,
+            axis_u,
+            tuple(_floats(entry["semi_axes_mm"], 2, f"{ctx}.semi_axes_mm")),
+            _number(entry, "falloff", ctx),
+            _number(entry, "max_contraction_mm", ctx),
+            float(entry.get("protrusion_mm", 0.0)),
+            region,
+        )
+    return WatersMuscle(
+        mid,
+        placer.point(entry["skin"], f"{ctx}.skin"),
+        placer.point(entry["bone"], f"{ctx}.bone"),
+        _number(entry, "fall_start_mm", ctx),
+        _number(entry, "fall_end_mm", ctx),
+        _number(entry, "zone_deg", ctx),
+        _number(entry, "clamp", ctx),
+        region,
+    )
+
+
+def _build_jaw(spec: dict, placer: _Placer, where: str) -> Jaw:
+    allowed = {"hinge", "axis", "max_angle_rad", "lower", "upper", "lower_below", "upper_above"}
+    unknown = set(spec) - allowed - {"note"}
+    if unknown:
+        raise MyofaceFormatError(f"{where}: [jaw]: unknown keys {sorted(unknown)}")
+    if "hinge" not in spec or "max_angle_rad" not in spec:
+        raise MyofaceFormatError(f"{where}: [jaw] needs hinge and max_angle_rad")
+    face = placer.face
+    y = face.vertices[:, 1]
+    ones = placer.vertex_set(spec.get("lower", []), "[jaw].lower")
+    zeros = placer.vertex_set(spec.get("upper", []), "[jaw].upper")
+    if "lower_below" in spec:
+        ones = np.r_[ones, np.flatnonzero(y < placer.point(spec["lower_below"], "lower_below")[1])]
+    if "upper_above" in spec:
+        zeros = np.r_[zeros, np.flatnonzero(y > placer.point(spec["upper_above"], "upper_above")[1])]
+    both = np.intersect1d(ones, zeros)
+    ones, zeros = np.setdiff1d(ones, both), np.setdiff1d(zeros, both)
+    if len(ones) == 0:
+        raise MyofaceFormatError(f"{where}: [jaw]: no vertex is held at 1 (lower / lower_below)")
+    w = harmonic_weights(face.n_vertices, face.triangles, ones, zeros)
+    return Jaw(
+        placer.point(spec["hinge"], "[jaw].hinge"),
+        _floats(spec.get("axis", [1.0, 0.0, 0.0]), 3, f"{where}: [jaw].axis"),
+        _number(spec, "max_angle_rad", f"{where}: [jaw]"),
+        w,
+    )
+
+
+def muscles_from_dict(doc: dict, face: FaceMesh, where: str = "muscle file") -> MuscleSet:
+    """Build a :class:`MuscleSet` on ``face`` from a parsed muscle file (see module doc)."""
+    placer = _Placer(face, where)
+    entries = doc.get("muscle", [])
+    if not isinstance(entries, list) or not entries:
+        raise MyofaceFormatError(f"{where}: no [[muscle]] entries")
+    muscles = []
+    for k, entry in enumerate(entries):
+        ctx = f"{where}: muscle #{k + 1}"
+        if not isinstance(entry, dict) or not isinstance(entry.get("id"), str):
+            raise MyofaceFormatError(f"{ctx}: needs a string id")
+        ctx = f"{where}: muscle {entry['id']!r}"
+        sides = entry.get("sides", "mid")
+        if sides not in SIDES:
+            raise MyofaceFormatError(f"{ctx}: sides must be one of {SIDES}; got {sides!r}")
+        try:
+            if sides == "mid":
+                muscles.append(_build(entry, placer, ctx))
+            else:
+                left = _build({**entry, "id": entry["id"] + "_l"}, placer, ctx)
+                muscles += [left, left.mirrored(entry["id"] + "_r")]
+        except MyofaceValueError as exc:
+            if isinstance(exc, MyofaceFormatError):
+                raise
+            raise MyofaceFormatError(f"{ctx}: {exc}") from None
+    jaw = _build_jaw(doc["jaw"], placer, where) if "jaw" in doc else None
+    name = str(doc.get("meta", {}).get("name", where))
+    return MuscleSet(muscles, jaw, name=name)
+
+
+def load_muscles(path: str | os.PathLike, face: FaceMesh) -> MuscleSet:
+    """Read a TOML muscle file (see module doc) and place its muscles on ``face``."""
+    path = Path(path)
+    if not path.is_file():
+        raise MyofaceFileNotFoundError(f"no such muscle file: {path}")
+    try:
+        doc = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise MyofaceFormatError(f"{path}: not a valid TOML file: {exc}") from None
+    return muscles_from_dict(doc, face, where=str(path))
+
+
+@lru_cache(maxsize=1)
+def _default_doc() -> dict:
+    text = (resources.files("myoface") / "data" / DEFAULT_MUSCLES_FILE).read_text()
+    return tomllib.loads(text)
+
+
+def load_default_muscles(face: FaceMesh | None = None) -> MuscleSet:
+    """The default muscle set (``data/default_muscles.toml``) placed on ``face``.
+
+    ``face`` must have the default face's topology (468 vertices, MediaPipe indexing); default:
+    the bundled default face.
+    """
+    if face is None:
+        from myoface.face import load_default_face
+
+        face = load_default_face()
+    if face.n_vertices != 468:
+        raise MyofaceValueError(
+            "the default muscle set needs a face in the default (MediaPipe, 468-vertex) topology; "
+            f"got {face.n_vertices} vertices. Give a muscle file for this mesh instead."
+        )
+    return muscles_from_dict(_default_doc(), face, where=DEFAULT_MUSCLES_FILE)
+
+
+# --------------------------------------------------------------------------- Waters' files
+
+
+def _waters_file(path, name: str) -> Path:
+    p = Path(path)
+    if p.is_dir():
+        p = p / name
+    if not p.is_file():
+        raise MyofaceFileNotFoundError(f"no such file: {p}")
+    return p
+
+
+def _waters_id(source: str, x: float) -> str:
+    """``Left_Zygomatic_Major`` -> ``zygomatic_major_r``: the side follows the position.
+
+    Waters' "Left" muscles lie at x < 0, which in our head frame (face looking along +z) is the
+    subject's right; we name sides as the subject's, so the suffix comes from the sign of x.
+    """
+    base = source
+    for prefix in ("Left_", "Right_"):
+        if base.startswith(prefix):
+            base = base[len(prefix) :]
+    side = "l" if x > 0 else "r"
+    return f"{base.lower()}_{side}"
+
+
+def read_waters_muscles(path: str | os.PathLike) -> MuscleSet:
+    """Read Waters' ``muscle.dat`` (a file or the geoface folder) as a :class:`MuscleSet`.
+
+    Each entry: a name, the skin-end point, the bone point, then ``fall-start fall-end zone-angle
+    clamp`` (Waters' units, scaled by ``WATERS_UNIT_MM``). No jaw. Ids are lower-case with the
+    subject's side as suffix (see :func:`_waters_id`); ``source_name`` keeps Waters' name.
+    """
+    p = _waters_file(path, "muscle.dat")
+    tok = p.read_text().split()
+    try:
+        n = int(tok[0])
+        muscles = []
+        k = 1
+        for _ in range(n):
+            name = tok[k]
+            vals = np.asarray(tok[k + 1 : k + 11], dtype=np.float64)
+            if len(vals) != 10:
+                raise IndexError("truncated entry")
+            k += 11
+            skin = vals[0:3] * WATERS_UNIT_MM
+            bone = vals[3:6] * WATERS_UNIT_MM
+            fs, fe, zone, clamp = vals[6:10]
+            muscles.append(
+                WatersMuscle(
+                    _waters_id(name, skin[0]),
+                    skin,
+                    bone,
+                    fs * WATERS_UNIT_MM,
+                    fe * WATERS_UNIT_MM,
+                    zone,
+                    clamp,
+                    source_name=name,
+                )
+            )
+    except (ValueError, IndexError) as exc:
+        raise MyofaceFormatError(f"cannot parse Waters muscle file {p}: {exc}") from None
+    return MuscleSet(muscles, None, name="waters-geoface")
+
+
+def read_waters_expressions(path: str | os.PathLike, muscles: MuscleSet) -> dict[str, np.ndarray]:
+    """Read Waters' ``expression-macros.dat`` as contraction vectors over ``muscles``.
+
+    Waters' values are his raw contraction values; we map each to c = min(value, clamp) / clamp
+    of its muscle (his clamp is the muscle's largest value), so c is in [0, 1]. Returns
+    ``{expression name (lower case): (M,) array}``.
+    """
+    p = _waters_file(path, "expression-macros.dat")
+    by_source = {m.source_name: i for i, m in enumerate(muscles.muscles) if m.kind == "waters"}
+    tok = p.read_text().split()
+    out: dict[str, np.ndarray] = {}
+    try:
+        n = int(tok[0])
+        k = 1
+        for _ in range(n):
+            name = tok[k].lower()
+            k += 1
+            c = np.zeros(len(muscles))
+            while k < len(tok) and tok[k] in by_source:
+                i = by_source[tok[k]]
+                v = float(tok[k + 1])
+                if not np.isfinite(v) or v < 0:
+                    raise ValueError(f"bad value {tok[k + 1]!r} for {tok[k]}")
+                c[i] = min(v, muscles.muscles[i].clamp) / muscles.muscles[i].clamp
+                k += 2
+            out[name] = c
+    except (ValueError, IndexError) as exc:
+        raise MyofaceFormatError(f"cannot parse Waters expression file {p}: {exc}") from None
+    if k != len(tok):
+        raise MyofaceFormatError(
+            f"{p}: unexpected token {tok[k]!r} (a muscle not in the muscle set?)"
+        )
+    return out

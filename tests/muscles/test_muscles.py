@@ -1,0 +1,245 @@
+"""Muscle fields, the default set, the jaw, muscle files and Waters' data."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.muscles import (
+    LinearMuscle,
+    SheetMuscle,
+    SphincterMuscle,
+    WatersMuscle,
+    harmonic_weights,
+    load_default_muscles,
+    load_muscles,
+    read_waters_expressions,
+    read_waters_muscles,
+    rotate_about_axis,
+)
+from tests.conftest import shared_path
+
+PAPER_TWELVE = [
+    f"{m}_{s}"
+    for m in (
+        "frontalis_inner",
+        "frontalis_major",
+        "frontalis_outer",
+        "zygomaticus_major",
+        "depressor_labii_inferioris",
+        "levator_labii_superioris_alaeque_nasi",
+    )
+    for s in "lr"
+]
+
+
+@pytest.fixture(scope="module")
+def muscles(default_face):
+    return load_default_muscles(default_face)
+
+
+def mirror_map(vertices):
+    d, idx = cKDTree(vertices).query(vertices * [-1, 1, 1])
+    assert d.max() < 1e-6  # the canonical face is mirror symmetric
+    return idx
+
+
+def test_linear_muscle_is_eq6_cosine_blend():
+    m = LinearMuscle("m", [0, 0, -20], [0, 0, 0], radius_mm=10, max_shortening_mm=4)
+    pts = np.array([[0, 0, 0], [5, 0, 0], [10, 0, 0], [12, 0, 0]], float)
+    f = m.field(pts, np.zeros(4))
+    expected = 4 * np.cos(np.array([0, 0.5, 1.0, 1.0]) * np.pi / 2)
+    expected[3] = 0
+    np.testing.assert_allclose(f[:, 2], -expected, atol=1e-12)  # towards the origin (-z)
+    np.testing.assert_allclose(f[:, :2], 0, atol=1e-12)
+
+
+def test_sheet_muscle_moves_along_the_surface_and_fades_at_edges():
+    m = SheetMuscle("s", [0, 40, -5], [0, 0, 0], 20, 10, 8, normal=[0, 0, 1])
+    pts = np.array([[0, 0, 0], [0, 20, 0], [0, 41, 0], [5, 0, 0], [10, 0, 0], [0, -10, 0]], float)
+    f = m.field(pts, np.zeros(len(pts)))
+    np.testing.assert_allclose(f[:, [0, 2]], 0, atol=1e-12)  # tangential: no push into bone
+    assert f[0, 1] == pytest.approx(8)
+    assert f[1, 1] == pytest.approx(8 * np.cos(20 / np.hypot(40, 5) * np.pi / 2))
+    assert f[2, 1] == pytest.approx(0, abs=1e-12)
+    assert 0 < f[3, 1] < f[0, 1] and f[4, 1] == pytest.approx(0, abs=1e-12)
+    assert f[5, 1] == pytest.approx(0, abs=1e-12)
+
+
+def test_sphincter_draws_ring_towards_centre():
+    m = SphincterMuscle("o", [0, 0, 0], [0, 0, 1], [1, 0, 0], (20, 10), 0.5, 5, protrusion_mm=2)
+    pts = np.array([[20, 0, 0], [-20, 0, 0], [0, 10, 0], [0, -10, 0], [0, 0, 0], [40, 0, 0]], float)
+    f = m.field(pts, np.zeros(len(pts)))
+    np.testing.assert_allclose(f[0], [-5, 0, 2], atol=1e-12)
+    np.testing.assert_allclose(f[1], [5, 0, 2], atol=1e-12)
+    np.testing.assert_allclose(f[2], [0, -5, 2], atol=1e-12)
+    np.testing.assert_allclose(f[3], [0, 5, 2], atol=1e-12)
+    np.testing.assert_allclose(f[4], 0, atol=1e-12)
+    np.testing.assert_allclose(f[5], 0, atol=1e-12)
+
+
+def test_waters_muscle_zone_and_falloff():
+    m = WatersMuscle("w", [0, 0, 10], [0, 0, 0], 1.0, 20.0, 30.0, clamp=2.0)
+    pts = np.array([[0, 0, 5], [0, 5, 5], [0, 0, 25], [0, 0, -5]], float)
+    f = m.field(pts, np.zeros(4))
+    # inside the cone: towards the bone point; factor clamp (cos a / cos zone - 1) R
+    r = np.cos((5 - 1) / 19 * np.pi / 2)
+    np.testing.assert_allclose(f[0], [0, 0, -5 * 2 * (1 / np.cos(np.pi / 6) - 1) * r])
+    np.testing.assert_allclose(f[1:], 0, atol=1e-12)  # outside the zone / beyond fall-off / behind
+
+
+def test_region_keeps_lower_lip_muscles_off_the_upper_lip():
+    m = LinearMuscle("m", [0, -20, 0], [0, 0, 0], 10, 5, region="lower")
+    pts = np.zeros((2, 3))
+    f = m.field(pts, np.array([1.0, 0.0]))
+    assert f[0, 1] < 0 and np.all(f[1] == 0)
+
+
+def test_default_set_has_the_required_muscles(muscles):
+    required = PAPER_TWELVE + [
+        f"{m}_{s}"
+        for m in ("corrugator_supercilii", "depressor_anguli_oris", "mentalis", "risorius")
+        for s in "lr"
+    ]
+    required += ["orbicularis_oris", "orbicularis_oculi_l", "orbicularis_oculi_r", "jaw"]
+    assert set(required) <= set(muscles.ids)
+    assert muscles.ids[-1] == "jaw" and muscles.jaw_index == len(muscles) - 1
+    kinds = {m.kind for m in muscles.muscles}
+    assert {"linear", "sheet", "sphincter"} <= kinds
+
+
+def test_default_set_origins_in_bone_insertions_under_skin(muscles, default_face):
+    tree = cKDTree(default_face.vertices)
+    for m in muscles.muscles:
+        if m.kind == "sphincter":
+            continue
+        d_origin = tree.query(m.origin)[0]
+        d_ins = tree.query(m.insertion)[0]
+        assert d_origin >= 9.0, m.id  # below the 9 mm of tissue
+        assert d_ins < 9.0, m.id
+
+
+def test_default_set_is_mirror_symmetric(muscles):
+    flip = np.array([-1.0, 1.0, 1.0])
+    pairs = muscles.mirror_pairs()
+    assert len(pairs) == 14
+    for left, right in pairs:
+        ml, mr = muscles[left], muscles[right]
+        assert ml.insertion[0] > 0 > mr.insertion[0]  # _l is the subject's left, +x
+        np.testing.assert_allclose(mr.origin, ml.origin * flip, atol=1e-9)
+        np.testing.assert_allclose(mr.insertion, ml.insertion * flip, atol=1e-9)
+    assert abs(muscles["orbicularis_oris"].center[0]) < 1e-9
+    assert muscles.jaw.mirror_error_mm() < 1e-9
+
+
+def test_basis_mirror_symmetric(muscles, default_face):
+    v = default_face.vertices
+    mi = mirror_map(v)
+    b = muscles.basis(v, muscles.jaw.weights)
+    flip = np.array([-1.0, 1.0, 1.0])
+    for left, right in muscles.mirror_pairs():
+        bl = b[:, :, muscles.index(left)]
+        br = b[:, :, muscles.index(right)]
+        np.testing.assert_allclose(br[mi] * flip, bl, atol=1e-9)
+    bo = b[:, :, muscles.index("orbicularis_oris")]
+    np.testing.assert_allclose(bo[mi] * flip, bo, atol=1e-9)
+    assert np.all(b[:, :, muscles.jaw_index] == 0)
+
+
+def test_jaw_weights_follow_anatomy(muscles, default_face):
+    w = muscles.jaw.weights
+    f = default_face
+    assert np.all((w >= 0) & (w <= 1))
+    np.testing.assert_allclose(w[f.landmark("menton")], 1)
+    np.testing.assert_allclose(w[f.landmark("nose_tip")], 0)
+    corners = set(f.landmark("mouth_corner_l")) | set(f.landmark("mouth_corner_r"))
+    lower = [i for i in f.landmark("lip_lower_inner") if i not in (78, 308)]
+    upper = [i for i in f.landmark("lip_upper_inner") if i not in (78, 308)]
+    assert np.all(w[lower] == 1) and np.all(w[upper] == 0)
+    assert all(0.2 < w[i] < 0.8 for i in corners)  # the corners stretch between the lips
+    assert np.all(w[f.vertices[:, 1] > 0] == 0)  # eyes, brows, forehead never follow the jaw
+
+
+def test_rotate_about_axis_is_rigid_rotation():
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(10, 3))
+    q = rotate_about_axis(p, np.array([1.0, 2, 3]), np.array([0, 0, 2.0]), np.pi / 2)
+    np.testing.assert_allclose(
+        np.linalg.norm(q[1:] - q[0], axis=1), np.linalg.norm(p[1:] - p[0], axis=1)
+    )
+    r = rotate_about_axis(np.array([[2.0, 2, 3]]), np.array([1.0, 2, 3]), [0, 0, 1], np.pi / 2)
+    np.testing.assert_allclose(r, [[1, 3, 3]], atol=1e-12)
+
+
+def test_harmonic_weights_linear_on_a_path():
+    tris = np.array([[0, 1, 5], [1, 2, 5], [2, 3, 5], [3, 4, 5]])  # a fan: 5 is the hub
+    w = harmonic_weights(6, tris, ones=[0], zeros=[4])
+    assert w[0] == 1 and w[4] == 0 and np.all(np.diff(w[:5]) <= 1e-12)
+
+
+def test_validate_contractions(muscles):
+    c = muscles.validate({"zygomaticus_major_l": 0.5})
+    assert c.shape == (len(muscles),) and c[muscles.index("zygomaticus_major_l")] == 0.5
+    with pytest.raises(MyofaceValueError, match=r"got 1.7 for zygomaticus_major_l"):
+        muscles.validate({"zygomaticus_major_l": 1.7})
+    with pytest.raises(MyofaceValueError, match="did you mean zygomaticus_major_l"):
+        muscles.validate({"zygomaticus_major_left": 0.5})
+    with pytest.raises(MyofaceValueError, match="finite"):
+        muscles.validate(np.full(len(muscles), np.nan))
+    with pytest.raises(MyofaceValueError, match="shape"):
+        muscles.validate(np.zeros(3))
+    with pytest.raises(MyofaceValueError, match="must be a number"):
+        muscles.validate({"jaw": "open"})
+    with pytest.raises(MyofaceValueError, match="got -0.1 for jaw"):
+        muscles.validate({"jaw": -0.1})
+
+
+def test_muscle_file_errors(tmp_path, default_face):
+    with pytest.raises(MyofaceFileNotFoundError):
+        load_muscles(tmp_path / "missing.toml", default_face)
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[[muscle]\nid=")
+    with pytest.raises(MyofaceFormatError, match="not a valid TOML"):
+        load_muscles(bad, default_face)
+    bad.write_text('[[muscle]]\nid = "x"\ntype = "linear"\norigin = { vertex = 9999 }\n')
+    with pytest.raises(MyofaceFormatError, match="missing keys"):
+        load_muscles(bad, default_face)
+    bad.write_text(
+        '[[muscle]]\nid = "x"\ntype = "linear"\norigin = { vertex = 9999 }\n'
+        "insertion = { vertex = 1 }\nradius_mm = 5\nmax_shortening_mm = 2\n"
+    )
+    with pytest.raises(MyofaceFormatError, match="vertex must be an index"):
+        load_muscles(bad, default_face)
+    bad.write_text('[[muscle]]\nid = "x"\ntype = "spring"\n')
+    with pytest.raises(MyofaceFormatError, match="type must be one of"):
+        load_muscles(bad, default_face)
+
+
+def test_muscle_file_roundtrip_custom(tmp_path, default_face):
+    f = tmp_path / "m.toml"
+    f.write_text(
+        '[[muscle]]\nid = "pull"\nsides = "lr"\ntype = "linear"\n'
+        "origin = { vertex = 345, depth_mm = 12 }\ninsertion = { xyz_mm = [24, -43, 40] }\n"
+        "radius_mm = 10\nmax_shortening_mm = 3\n"
+    )
+    ms = load_muscles(f, default_face)
+    assert ms.ids == ("pull_l", "pull_r") and ms.jaw is None
+    np.testing.assert_allclose(ms["pull_r"].insertion, [-24, -43, 40])
+
+
+def test_waters_muscles_and_expressions():
+    folder = shared_path("waters-geoface")
+    ms = read_waters_muscles(folder)
+    assert len(ms) == 18 and ms.jaw is None
+    zm = ms["zygomatic_major_l"]
+    assert zm.source_name == "Right_Zygomatic_Major" and zm.skin_point[0] > 0
+    # the zygomatic major pulls the mouth corner up and outwards
+    d = zm.field(zm.skin_point[None, :], np.zeros(1))[0]
+    assert d[1] > 0 and d[0] > 0
+    ex = read_waters_expressions(folder, ms)
+    assert sorted(ex) == ["anger", "disgust", "fear", "happiness", "sadness", "surprise"]
+    for c in ex.values():
+        ms.validate(c)
+    # happiness is led by the zygomatic majors (clamped at their clamp value 1.0 -> c = 1)
+    h = ex["happiness"]
+    assert h[ms.index("zygomatic_major_l")] == 1.0 and h[ms.index("zygomatic_major_r")] == 1.0
