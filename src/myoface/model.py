@@ -153,9 +153,7 @@ class FaceModel:
         c = self.validate(contractions)
         s0 = self.state if start == "current" else rest_state(self.tissue)
         kw = {} if tol_mm is None else {"tol_mm": tol_mm}
-        res = relax(
-            self.tissue, s0, self.targets(c), method=method, max_iter=max_iter, **kw
-        )
+        res = relax(self.tissue, s0, self.targets(c), method=method, max_iter=max_iter, **kw)
         self.state = res.state
         self._contractions = c
         return res

@@ -235,7 +235,9 @@ def _build_jaw(spec: dict, placer: _Placer, where: str) -> Jaw:
     if "lower_below" in spec:
         ones = np.r_[ones, np.flatnonzero(y < placer.point(spec["lower_below"], "lower_below")[1])]
     if "upper_above" in spec:
-        zeros = np.r_[zeros, np.flatnonzero(y > placer.point(spec["upper_above"], "upper_above")[1])]
+        zeros = np.r_[
+            zeros, np.flatnonzero(y > placer.point(spec["upper_above"], "upper_above")[1])
+        ]
     both = np.intersect1d(ones, zeros)
     ones, zeros = np.setdiff1d(ones, both), np.setdiff1d(zeros, both)
     if len(ones) == 0:

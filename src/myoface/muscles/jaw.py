@@ -111,7 +111,10 @@ class Jaw:
     def rotate(self, points: np.ndarray, weights: np.ndarray, opening: float) -> np.ndarray:
         """Positions of ``points`` (N, 3) when the jaw control is ``opening`` in [0, 1]."""
         angles = float(opening) * self.max_angle_rad * np.asarray(weights)
-        return rotate_about_axis(points, self.hinge_point, self.hinge_axis, angles)
+        out = np.array(points, dtype=np.float64)
+        m = angles != 0  # points that do not follow the jaw stay bit-for-bit where they are
+        out[m] = rotate_about_axis(out[m], self.hinge_point, self.hinge_axis, angles[m])
+        return out
 
     def mirror_error_mm(self) -> float:
         """Distance of the hinge from the mid-sagittal plane plus the axis' tilt (for tests)."""

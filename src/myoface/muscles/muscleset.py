@@ -74,7 +74,9 @@ class MuscleSet:
     def mirror_pairs(self) -> list[tuple[str, str]]:
         """(left id, right id) for every muscle whose id ends in ``_l`` and has an ``_r`` twin."""
         return [
-            (i, i[:-2] + "_r") for i in self.ids if i.endswith("_l") and i[:-2] + "_r" in self._index
+            (i, i[:-2] + "_r")
+            for i in self.ids
+            if i.endswith("_l") and i[:-2] + "_r" in self._index
         ]
 
     def validate(self, contractions) -> np.ndarray:

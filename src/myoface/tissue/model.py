@@ -290,6 +290,8 @@ def assemble_tissue(
             "(is the mesh consistently oriented, normals pointing out of the head?)"
         )
     sign = -1.0
+    # the rest volume as the force kernels measure it (their fixed tetrahedral split)
+    vol = sign * element_volumes_numpy(pos, elems)
 
     # springs
     edges = unique_edges(t)
