@@ -93,9 +93,10 @@ def bench_rk2(quick: bool) -> Measurement:
     try:
         state = rest_state(model)
         targets = fm.targets(fm.muscles.validate({}))
+        dt = fm.stable_dt()
 
         def run():
-            step_rk2(model, state, targets, n_steps=steps)
+            step_rk2(model, state, targets, dt, n_steps=steps)
 
         n = 3 if quick else 7
         t = time_median(run, n)
@@ -107,8 +108,10 @@ def bench_rk2(quick: bool) -> Measurement:
 @benchmark("tissue.relax_ms", "ms", higher_is_better=False)
 def bench_relax(quick: bool) -> Measurement:
     """From neutral, a step change of contractions to surprise, to equilibrium (implicit relax)."""
+    from myoface.control import expression_contractions
+
     fm = _default_face_model()
-    c = fm.expression_contractions("surprise")
+    c = expression_contractions("surprise", 1.0, fm.ids)
     fm.relax(c)  # warm-up: JIT and the cached factorisation
     times = []
     n = 3 if quick else 9

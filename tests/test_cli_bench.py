@@ -1,0 +1,111 @@
+"""The CLI skeleton, ``myoface info`` and ``myoface bench`` (smoke runs so they cannot rot)."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from myoface.cli import main
+from tests.conftest import REPO
+
+
+def test_no_command_is_a_usage_error(capsys):
+    assert main([]) == 2
+
+
+def test_info_prints_lattice_counts(capsys):
+    assert main(["info", "--muscles-list"]) == 0
+    out = capsys.readouterr().out
+    assert "2556 elements, 13302 springs" in out
+    assert "zygomaticus_major_l" in out and "jaw" in out
+
+
+def test_info_bad_face_is_one_line_error(capsys, tmp_path):
+    assert main(["info", "--face", str(tmp_path / "none.obj")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no such face model" in err[0]
+
+
+def test_bench_list_has_the_contract_names(capsys):
+    assert main(["bench", "--list"]) == 0
+    out = capsys.readouterr().out
+    for name in ("tissue.rk2_steps_per_s", "tissue.relax_ms", "tissue.ns_per_spring_1m"):
+        assert name in out
+
+
+def test_bench_unknown_prefix(capsys):
+    assert main(["bench", "--only", "nothing."]) == 1
+
+
+def test_bench_json_record_schema(tmp_path, capsys):
+    out = tmp_path / "b.json"
+    assert main(["bench", "--quick", "--only", "tissue.rk2", "--json", str(out)]) == 0
+    rec = json.loads(out.read_text())
+    assert len(rec) == 1
+    r = rec[0]
+    assert set(r) == {
+        "name",
+        "value",
+        "unit",
+        "higher_is_better",
+        "peer",
+        "peer_value",
+        "n",
+        "machine",
+    }
+    assert r["name"] == "tissue.rk2_steps_per_s" and r["value"] > 0 and r["n"] >= 1
+
+
+def test_benchmarks_md_generator(tmp_path):
+    run = tmp_path / "run.json"
+    run.write_text(
+        json.dumps(
+            [
+                {
+                    "name": "snakes.track_fps_9x40_256",
+                    "value": 1000.0,
+                    "unit": "1/s",
+                    "higher_is_better": True,
+                    "peer": "skimage",
+                    "peer_value": 10.0,
+                    "n": 5,
+                    "machine": "test machine",
+                },
+                {
+                    "name": "tissue.relax_ms",
+                    "value": 20.0,
+                    "unit": "ms",
+                    "higher_is_better": False,
+                    "peer": None,
+                    "peer_value": None,
+                    "n": 3,
+                    "machine": "test machine",
+                },
+            ]
+        )
+    )
+    md = tmp_path / "B.md"
+    subprocess.run(
+        [
+            sys.executable,
+            str(REPO / "benchmarks" / "make_benchmarks_md.py"),
+            "--json",
+            str(run),
+            "--out",
+            str(md),
+        ],
+        check=True,
+        capture_output=True,
+    )
+    text = md.read_text()
+    assert "test machine" in text
+    assert "| `snakes.track_fps_9x40_256` | 1,000 | 1/s | skimage | 10 | 100× |" in text
+    assert ">= 500 (met)" in text and "< 10 (**not met**)" in text
+
+
+@pytest.mark.slow
+def test_every_benchmark_runs_quick(tmp_path):
+    out = tmp_path / "all.json"
+    assert main(["bench", "--quick", "--json", str(out)]) == 0
+    assert all(r["value"] == r["value"] for r in json.loads(out.read_text()))  # no NaN

@@ -1,0 +1,21 @@
+"""README's Quickstart has exactly two commands, and CI runs the second one verbatim."""
+
+import re
+
+from tests.conftest import REPO
+
+
+def quickstart_commands():
+    text = (REPO / "README.md").read_text()
+    section = text.split("## Quickstart", 1)[1].split("\n## ", 1)[0]
+    return [m.strip() for m in re.findall(r"^    (\S.*)$", section, flags=re.M)]
+
+
+def test_quickstart_has_two_commands():
+    cmds = quickstart_commands()
+    assert cmds == ["pip install -e . && myoface demo", 'pip install -e ".[test]" && pytest']
+
+
+def test_ci_runs_the_readme_test_command():
+    ci = (REPO / ".ci" / "run").read_text().splitlines()
+    assert quickstart_commands()[1] in [line.strip() for line in ci]
