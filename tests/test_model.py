@@ -205,3 +205,43 @@ def test_waters_model_assembles_and_reproduces_his_expressions():
         for s in (-1, 1)
     ]
     assert all(moves["happiness"][i, 1] > 1.0 for i in corners)
+
+
+def test_load_mesh_with_muscle_file(tmp_path):
+    """Any triangle mesh plus a muscle file: here a dome with one linear muscle and a jaw."""
+    import trimesh
+
+    dome = trimesh.creation.icosphere(subdivisions=3, radius=60.0)
+    keep = dome.vertices[dome.faces].mean(axis=1)[:, 2] > 5.0
+    dome = trimesh.Trimesh(dome.vertices, dome.faces[keep], process=True)
+    dome.remove_unreferenced_vertices()
+    path = tmp_path / "dome.obj"
+    dome.export(path)
+    top = int(np.argmax(dome.vertices[:, 2]))
+    low = [int(i) for i in np.flatnonzero(dome.vertices[:, 1] < -40)]
+    (tmp_path / "dome.muscles.toml").write_text(
+        "[[muscle]]\n"
+        'id = "lift"\ntype = "linear"\n'
+        f"origin = {{ vertex = {top}, depth_mm = 15, offset_mm = [0, 30, 0] }}\n"
+        f"insertion = {{ vertex = {top}, depth_mm = 6 }}\n"
+        "radius_mm = 25\nmax_shortening_mm = 5\n"
+        "[jaw]\nhinge = { xyz_mm = [0, 0, -40] }\nmax_angle_rad = 0.2\n"
+        f"lower = {low}\nupper = [{top}]\n"
+    )
+    fm = load_face_model(path)
+    assert fm.ids == ("lift", "jaw")
+    fm.relax({"lift": 1.0})
+    d = fm.skin_vertices() - fm.face.vertices
+    assert d[top, 1] > 1.0  # pulled up, towards the origin
+    fm.relax({"lift": 0.0, "jaw": 1.0}, start="rest")
+    d = fm.skin_vertices() - fm.face.vertices
+    assert d[low, 1].mean() < -1.0 and abs(d[top]).max() < abs(d[low]).max()
+
+
+def test_default_topology_obj_gets_default_muscles(tmp_path, default_face):
+    from myoface.face import save_mesh
+
+    path = tmp_path / "face.obj"
+    save_mesh(default_face, path)
+    fm = load_face_model(path)
+    assert fm.ids == build_face_model().ids

@@ -270,6 +270,16 @@ def load_face_model(path: str | os.PathLike | None = None, *, muscles=None, para
             expr = read_waters_expressions(p, ms)
         return FaceModel(face, ms, params, expressions=expr)
     face = load_mesh(p)
+    if face.n_vertices == 468 and not face.landmarks:
+        # the default (MediaPipe) topology: give it the default face's landmark groups
+        face = FaceMesh(
+            face.vertices,
+            face.triangles,
+            face.uv,
+            face.texture,
+            load_default_face().landmarks,
+            name=face.name,
+        )
     side = p.with_name(p.stem + ".muscles.toml")
     if muscles:
         ms = load_muscles(muscles, face)

@@ -242,6 +242,11 @@ def _build_jaw(spec: dict, placer: _Placer, where: str) -> Jaw:
     ones, zeros = np.setdiff1d(ones, both), np.setdiff1d(zeros, both)
     if len(ones) == 0:
         raise MyofaceFormatError(f"{where}: [jaw]: no vertex is held at 1 (lower / lower_below)")
+    if len(zeros) == 0:
+        raise MyofaceFormatError(
+            f"{where}: [jaw]: no vertex is held at 0 (upper / upper_above): the whole face "
+            "would follow the jaw"
+        )
     w = harmonic_weights(face.n_vertices, face.triangles, ones, zeros)
     return Jaw(
         placer.point(spec["hinge"], "[jaw].hinge"),
