@@ -1,0 +1,189 @@
+"""``myoface synth``: render expressions, action units, muscles or a timeline to PNG or MP4."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from myoface.commands._common import add_face_argument, load_model
+from myoface.errors import MyofaceValueError
+
+NAME = "synth"
+HELP = "render an expression / action units / muscles / a timeline to an image or a video"
+DESCRIPTION = """Synthesize facial expressions with the physics-based face model.
+
+Examples:
+  myoface synth --expression surprise --intensity 0.8 --duration 1.5 -o surprise.mp4
+  myoface synth --au 12=0.7 --au 6=0.4 -o smile.png
+  myoface synth --muscle zygomaticus_major_l=0.6 -o half-smile.png
+  myoface synth --timeline examples/talk.toml -o talk.mp4
+
+The output type follows the suffix: .png/.jpg for one image at the apex, .mp4 for a video."""
+
+
+def _pairs(items, what):
+    out = {}
+    for it in items or []:
+        if "=" not in it:
+            raise MyofaceValueError(f"--{what} takes NAME=VALUE (e.g. 12=0.7); got {it!r}")
+        k, v = it.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def add_arguments(p):
+    import argparse
+
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
+    src = p.add_argument_group("what to show (combine freely, except --timeline)")
+    src.add_argument(
+        "--expression", metavar="NAME", help="anger, disgust, fear, happiness, sadness, surprise"
+    )
+    src.add_argument(
+        "--intensity", type=float, default=1.0, help="emphasis of --expression / --viseme in [0, 1]"
+    )
+    src.add_argument(
+        "--au",
+        action="append",
+        metavar="N=I",
+        help="action unit N at intensity I (repeatable; L12/R12 for one side)",
+    )
+    src.add_argument(
+        "--muscle",
+        action="append",
+        metavar="ID=C",
+        help="muscle contraction (repeatable); see `myoface info --muscles-list`",
+    )
+    src.add_argument("--viseme", metavar="NAME", help="a speech viseme (e.g. A, O, U, PBM, FV)")
+    src.add_argument("--timeline", metavar="FILE", help="a timeline file (TOML/JSON) of events")
+    out = p.add_argument_group("output")
+    out.add_argument(
+        "-o", "--output", required=True, help="output .png/.jpg (apex) or .mp4 (video)"
+    )
+    out.add_argument(
+        "--duration", type=float, default=1.5, help="event duration in s for videos (default 1.5)"
+    )
+    out.add_argument("--fps", type=float, default=30.0)
+    out.add_argument("--width", type=int, default=512)
+    out.add_argument("--height", type=int, default=512)
+    out.add_argument("--view", default="front", help="front, three_quarter or profile")
+    out.add_argument(
+        "--ssaa", type=int, default=2, help="anti-aliasing supersampling 1-4 (default 2)"
+    )
+    out.add_argument("--texture", metavar="IMAGE", help="a texture image for the face's UVs")
+    out.add_argument("--overlay", choices=["muscles"], help="draw the muscle vectors")
+    out.add_argument("--dynamics", default="quasistatic", help="quasistatic (default) or rk2")
+    out.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_face_argument(p)
+
+
+def _apex(args, fm):
+    import numpy as np
+
+    from myoface.control import (
+        au_contractions,
+        expression_contractions,
+        muscle_contractions,
+        viseme_contractions,
+    )
+
+    parts = []
+    ids = fm.ids
+    if args.expression:
+        if args.expression in fm.expressions:  # the model's own (e.g. Waters' macros)
+            from myoface.control.facs import parse_intensity
+
+            parts.append(
+                fm.expressions[args.expression] * parse_intensity(args.intensity, "--intensity")
+            )
+        else:
+            parts.append(expression_contractions(args.expression, args.intensity, ids))
+    if args.au:
+        parts.append(au_contractions(_pairs(args.au, "au"), ids))
+    if args.muscle:
+        parts.append(muscle_contractions(_pairs(args.muscle, "muscle"), ids))
+    if args.viseme:
+        parts.append(viseme_contractions(args.viseme, args.intensity, ids))
+    if not parts:
+        raise MyofaceValueError(
+            "nothing to show: give --expression, --au, --muscle, --viseme or --timeline"
+        )
+    keep = np.ones(len(ids))
+    for c in parts:
+        keep *= 1 - c
+    return 1 - keep
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from myoface.control import load_timeline
+    from myoface.render import Renderer, write_image
+    from myoface.synth import Synthesizer, make_camera
+
+    out = Path(args.output)
+    suffix = out.suffix.lower()
+    video = suffix in (".mp4", ".mov", ".mkv", ".avi")
+    if not video and suffix not in (".png", ".jpg", ".jpeg"):
+        raise MyofaceValueError(f"-o must end in .png, .jpg or .mp4; got {out.name}")
+    if args.timeline and any((args.expression, args.au, args.muscle, args.viseme)):
+        raise MyofaceValueError("--timeline cannot be combined with other event options")
+    if not (args.duration > 0 and np.isfinite(args.duration)):
+        raise MyofaceValueError(f"--duration must be > 0 s; got {args.duration}")
+    if not out.parent.is_dir():
+        raise MyofaceValueError(f"output folder does not exist: {out.parent}")
+    fm = load_model(args)
+    timeline = load_timeline(args.timeline) if args.timeline else None
+    apex = None if timeline else _apex(args, fm)
+    cam = make_camera(fm.face.vertices, args.view, args.width, args.height)
+    renderer = Renderer(fm.face, cam, texture=args.texture, ssaa=args.ssaa)
+    syn = Synthesizer(fm, renderer, overlay=args.overlay, dynamics=args.dynamics)
+    if not video:
+        if timeline is not None:
+            t_apex = max(timeline.events, key=lambda e: e.intensity)
+            a0, a1 = t_apex.apex_interval()
+            apex = timeline.contractions([0.5 * (a0 + a1)], fm.ids)[0]
+        img = syn.image(apex)
+        write_image(out, img)
+    else:
+        if timeline is None:
+            # one event: ramp up, hold, ramp down, with a short rest before and after
+            timeline = _ApexTimeline(apex, args.duration, fm.ids)
+        syn.video(timeline, out, fps=args.fps, show_progress=not args.quiet)
+    st = syn.stats
+    msg = f"wrote {out}"
+    if st.relax_ms:
+        msg += (
+            f" ({len(st.render_ms)} frame(s); median relax {np.median(st.relax_ms):.0f} ms, "
+            f"render {np.median(st.render_ms):.0f} ms per frame)"
+        )
+    print(msg)
+    if st.unconverged:
+        print(
+            f"note: the tissue did not fully converge on {st.unconverged} frame(s)", file=sys.stderr
+        )
+    return 0
+
+
+class _ApexTimeline:
+    """A fixed contraction vector under a raised-cosine envelope, with 0.25 s rest around it."""
+
+    REST_S = 0.25
+
+    def __init__(self, apex, duration, ids):
+        from myoface.control import envelope
+
+        self._apex = apex
+        self._ids = tuple(ids)
+        self._env = envelope
+        self._d = float(duration)
+        self.duration = self._d + 2 * self.REST_S
+
+    def contractions(self, times, muscle_ids):
+        import numpy as np
+
+        if tuple(muscle_ids) != self._ids:
+            raise MyofaceValueError("internal: muscle ids changed")
+        ramp = min(0.35, self._d / 3)
+        w = self._env(np.asarray(times), self.REST_S, ramp, self._d - 2 * ramp, ramp)
+        return w[:, None] * self._apex[None, :]

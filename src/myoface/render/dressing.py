@@ -1,0 +1,169 @@
+"""What the skin mesh lacks to read as a face: eyeballs behind the eye openings, dark sockets and
+a mouth cavity closing the holes, and a neutral skin texture (lips, brows) for the default face.
+
+The dressing follows the animated skin: sockets and the mouth cavity are fans attached to the
+current boundary loops of the openings, so they keep filling the mouth when the jaw opens;
+eyeballs stay fixed in the head.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: colours (linear RGB)
+SCLERA = (0.78, 0.74, 0.70)
+IRIS = (0.10, 0.055, 0.030)
+PUPIL = (0.005, 0.005, 0.005)
+SOCKET = (0.05, 0.025, 0.022)
+MOUTH = (0.09, 0.015, 0.015)
+#: eye geometry (mm, degrees): eyeball radius; angular radii of iris and pupil
+EYE_RADIUS_MM = 12.0
+IRIS_DEG = 24.0
+PUPIL_DEG = 10.0
+
+
+def _srgb_to_linear(c):
+    c = np.asarray(c, dtype=np.float64) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def eyeball(center: np.ndarray, forward: np.ndarray, radius: float, n_lon: int = 40):
+    """An eyeball sphere: vertices (N,3), triangles, unit normals, linear colours (N,3).
+
+    Rings of latitude are doubled at the pupil and iris edges so the colour changes sharply.
+    """
+    f = forward / np.linalg.norm(forward)
+    a = np.array([0.0, 1.0, 0.0]) if abs(f[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    u = np.cross(a, f)
+    u /= np.linalg.norm(u)
+    w = np.cross(f, u)
+    eps = 0.05
+    thetas = [0.0, 4.0, PUPIL_DEG - eps, PUPIL_DEG + eps, 15.0, 20.0, IRIS_DEG - eps]
+    thetas += [IRIS_DEG + eps, 32.0, 45.0, 60.0, 75.0, 90.0, 110.0, 135.0, 160.0, 180.0]
+    th = np.deg2rad(np.array(thetas))
+    ph = np.linspace(0, 2 * np.pi, n_lon, endpoint=False)
+    verts, cols = [], []
+    for t, tdeg in zip(th, thetas, strict=True):
+        col = PUPIL if tdeg < PUPIL_DEG else IRIS if tdeg < IRIS_DEG else SCLERA
+        if 0 < tdeg < 180:
+            for p in ph:
+                d = np.cos(t) * f + np.sin(t) * (np.cos(p) * u + np.sin(p) * w)
+                verts.append(d)
+                cols.append(col)
+        else:
+            verts.append(np.cos(t) * f)
+            cols.append(col)
+    verts = np.array(verts)
+    tris = []
+    # cap at the front pole (index 0), rings 1..R, back pole last
+    n_rings = len(thetas) - 2
+    ring = lambda r, k: 1 + r * n_lon + (k % n_lon)  # noqa: E731
+    for k in range(n_lon):
+        tris.append([0, ring(0, k), ring(0, k + 1)])
+    for r in range(n_rings - 1):
+        for k in range(n_lon):
+            a0, a1 = ring(r, k), ring(r, k + 1)
+            b0, b1 = ring(r + 1, k), ring(r + 1, k + 1)
+            tris += [[a0, b0, b1], [a0, b1, a1]]
+    last = len(verts) - 1
+    for k in range(n_lon):
+        tris.append([last, ring(n_rings - 1, k + 1), ring(n_rings - 1, k)])
+    normals = verts.copy()
+    return center + radius * verts, np.array(tris, np.int64), normals, np.array(cols)
+
+
+def _loop_containing(loops, vertices_of_feature) -> np.ndarray | None:
+    feat = set(int(v) for v in vertices_of_feature)
+    best, score = None, 0
+    for lp in loops:
+        s = len(feat & set(lp.tolist()))
+        if s > score:
+            best, score = lp, s
+    return best
+
+
+@dataclass
+class Opening:
+    """A hole of the skin mesh closed by a fan to a point ``depth_mm`` behind it."""
+
+    name: str
+    loop: np.ndarray  # vertex indices, in order
+    depth_mm: float
+    color: tuple
+
+
+def find_openings(face) -> list[Opening]:
+    """The eye and mouth openings of a face with the default landmark groups (else none)."""
+    out = []
+    loops = face.boundary_loops
+    if not loops:
+        return out
+    rim = max(loops, key=len)
+    inner = [lp for lp in loops if lp is not rim]
+    lm = face.landmarks
+    for name, key, depth, col in (
+        ("eye_l", "eye_l", 9.0, SOCKET),
+        ("eye_r", "eye_r", 9.0, SOCKET),
+        ("mouth", "lip_upper_inner", 16.0, MOUTH),
+    ):
+        if key not in lm:
+            continue
+        lp = _loop_containing(inner, lm[key])
+        if lp is not None:
+            out.append(Opening(name, lp, depth, col))
+    return out
+
+
+def orient_fan(loop_pts: np.ndarray, center: np.ndarray) -> bool:
+    """True if the fan (loop_i, loop_i+1, center) faces +z as given (else reverse it)."""
+    a = loop_pts
+    b = np.roll(loop_pts, -1, axis=0)
+    n = np.cross(b - a, center - a).sum(axis=0)
+    return n[2] > 0
+
+
+def default_skin_texture(face, size: int = 512) -> np.ndarray:
+    """A neutral skin texture (size, size, 3) float32 linear RGB in the face's UV space:
+    even skin tone, tinted lips, soft brows and a faint blush, from the landmark groups."""
+    from matplotlib.path import Path as MplPath
+    from scipy.ndimage import gaussian_filter
+
+    skin = _srgb_to_linear([222, 176, 152])
+    lips = _srgb_to_linear([178, 96, 96])
+    brow = _srgb_to_linear([92, 66, 52])
+    blush = _srgb_to_linear([214, 146, 132])
+    uv = face.uv
+    ys, xs = np.mgrid[0:size, 0:size]
+    pts = np.column_stack([(xs.ravel() + 0.5) / size, 1.0 - (ys.ravel() + 0.5) / size])
+
+    def mask(poly_uv, blur_px):
+        m = MplPath(poly_uv).contains_points(pts).reshape(size, size).astype(np.float64)
+        return gaussian_filter(m, blur_px) if blur_px > 0 else m
+
+    rng = np.random.default_rng(0)
+    tex = np.empty((size, size, 3))
+    tex[:] = skin
+    # a faint mottling so the skin is not plastic
+    noise = gaussian_filter(rng.normal(0, 1, (size, size)), 2.0)
+    tex *= (1.0 + 0.025 * noise / noise.std())[:, :, None]
+    lm = face.landmarks
+    s = size / 512.0
+    for side in ("l", "r"):
+        if f"cheek_{side}" in lm:
+            c = uv[lm[f"cheek_{side}"]].mean(axis=0)
+            d2 = ((pts - c) ** 2).sum(axis=1).reshape(size, size)
+            wgt = 0.35 * np.exp(-d2 / (2 * 0.045**2))
+            tex = tex * (1 - wgt[:, :, None]) + blush * wgt[:, :, None]
+    if "lip_upper_outer" in lm and "lip_lower_outer" in lm:
+        poly = np.vstack([uv[lm["lip_upper_outer"]], uv[lm["lip_lower_outer"]][::-1]])
+        wgt = 0.9 * mask(poly, 2.5 * s)
+        tex = tex * (1 - wgt[:, :, None]) + lips * wgt[:, :, None]
+    for side in ("l", "r"):
+        up, lo = f"eyebrow_{side}", f"eyebrow_{side}_lower"
+        if up in lm and lo in lm:
+            poly = np.vstack([uv[lm[up]], uv[lm[lo]][::-1]])
+            wgt = 0.85 * mask(poly, 3.0 * s)
+            tex = tex * (1 - wgt[:, :, None]) + brow * wgt[:, :, None]
+    return np.clip(tex, 0, 1).astype(np.float32)

@@ -1,0 +1,330 @@
+"""Rendering a face (or any triangle mesh) to an RGB image on the CPU.
+
+>>> from myoface.face import load_default_face
+>>> from myoface.render import Camera, Renderer
+>>> face = load_default_face()
+>>> r = Renderer(face, Camera.front(face.vertices, width=512, height=512))
+>>> image = r.render()                   # (512, 512, 3) uint8; r.render(new_vertices) re-renders
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.render import dressing
+from myoface.render.camera import Camera
+from myoface.render.raster import downsample, rasterize, vertex_normals_numba
+
+BACKGROUND_TOP = (0.050, 0.055, 0.065)  # linear RGB, a soft studio gradient
+BACKGROUND_BOTTOM = (0.012, 0.013, 0.016)
+
+
+@dataclass(frozen=True)
+class Light:
+    """A directional light: ``direction`` points from the scene towards the light (world)."""
+
+    direction: tuple
+    color: tuple = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+
+
+def default_lights() -> list[Light]:
+    """Key (upper left of the image, warm), fill (right, cool), rim (behind, above)."""
+    return [
+        Light((-0.55, 0.55, 0.75), (1.0, 0.95, 0.88), 0.95),
+        Light((0.75, 0.05, 0.6), (0.85, 0.9, 1.0), 0.35),
+        Light((0.0, 0.6, -0.8), (1.0, 1.0, 1.0), 0.25),
+    ]
+
+
+@dataclass(frozen=True)
+class SkinMaterial:
+    """Skin reflectance: ``albedo`` (linear RGB, multiplies the texture), ambient light,
+    Blinn-Phong specular strength and shininess (skin is a fairly rough dielectric)."""
+
+    albedo: tuple = (1.0, 1.0, 1.0)
+    ambient: tuple = (0.16, 0.15, 0.15)
+    specular: float = 0.10
+    shininess: float = 22.0
+
+
+def _check_vertices(v, n: int, what: str = "vertices") -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64)
+    if a.shape != (n, 3):
+        raise MyofaceValueError(f"{what} must have shape ({n}, 3); got {a.shape}")
+    if not np.isfinite(a).all():
+        raise MyofaceValueError(f"{what} contain NaN or Inf")
+    return np.ascontiguousarray(a)
+
+
+def load_texture(texture) -> np.ndarray:
+    """A texture as float32 linear RGB (H, W, 3) from an image array (uint8/float) or a path."""
+    if isinstance(texture, str | os.PathLike):
+        p = Path(texture)
+        if not p.is_file():
+            raise MyofaceFileNotFoundError(f"no such texture image: {p}")
+        import imageio.v3 as iio
+
+        try:
+            texture = iio.imread(p)
+        except Exception as exc:  # imageio raises many types for unreadable images
+            raise MyofaceFormatError(f"cannot read texture image {p}: {exc}") from None
+    t = np.asarray(texture)
+    if t.ndim == 2:
+        t = np.repeat(t[:, :, None], 3, axis=2)
+    if t.ndim != 3 or t.shape[2] not in (3, 4) or t.shape[0] < 1 or t.shape[1] < 1:
+        raise MyofaceValueError(f"a texture must be an (H, W, 3) image; got shape {t.shape}")
+    t = t[:, :, :3]
+    t = t.astype(np.float64) / 255.0 if t.dtype == np.uint8 else t.astype(np.float64)
+    t = np.clip(t, 0, 1)
+    lin = np.where(t <= 0.04045, t / 12.92, ((t + 0.055) / 1.055) ** 2.4)
+    return np.ascontiguousarray(lin, dtype=np.float32)
+
+
+def to_srgb8(linear: np.ndarray) -> np.ndarray:
+    c = np.clip(linear, 0.0, 1.0)
+    s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
+    return (s * 255.0 + 0.5).astype(np.uint8)
+
+
+@dataclass
+class _Scene:
+    """Packed static arrays of everything drawn: mesh + dressing."""
+
+    tris: np.ndarray
+    tri_tex: np.ndarray
+    uv: np.ndarray
+    vcol: np.ndarray
+    n_face: int
+    normals_static: np.ndarray  # (N, 3) for the static part (eyeballs)
+    fans: list = field(default_factory=list)  # (loop, first copy index, center index, depth)
+    n_dynamic: int = 0  # face vertices + fan vertices (normals computed per frame)
+    dyn_tris: np.ndarray | None = None
+
+
+class Renderer:
+    """Renders a :class:`~myoface.face.FaceMesh` (rest or deformed) with a camera and lights.
+
+    Everything static (topology, texture, dressing) is prepared once; :meth:`render` takes new
+    skin vertex positions (V, 3) mm each frame.
+
+    Parameters
+    ----------
+    face : FaceMesh
+    camera : Camera
+    lights : list of Light (default :func:`default_lights`)
+    material : SkinMaterial
+    texture : image array, path, or None — overrides ``face.texture``; when both are absent a
+        face with the default landmarks gets :func:`dressing.default_skin_texture`.
+    ssaa : int — supersampling factor per axis (anti-aliasing; 1 = off).
+    dress : bool — add eyeballs, sockets and the mouth cavity (faces with eye/mouth landmarks).
+    """
+
+    def __init__(
+        self,
+        face,
+        camera: Camera,
+        lights: list[Light] | None = None,
+        material: SkinMaterial | None = None,
+        texture=None,
+        ssaa: int = 2,
+        dress: bool = True,
+    ):
+        if not isinstance(ssaa, int | np.integer) or not 1 <= ssaa <= 4:
+            raise MyofaceValueError(f"ssaa must be an integer in 1..4; got {ssaa!r}")
+        self.face = face
+        self.camera = camera
+        self.lights = list(default_lights() if lights is None else lights)
+        self.material = material or SkinMaterial()
+        self.ssaa = int(ssaa)
+        if texture is not None:
+            self.texture = load_texture(texture)
+        elif face.texture is not None:
+            self.texture = load_texture(face.texture)
+        elif face.uv is not None and "lip_upper_outer" in face.landmarks:
+            self.texture = dressing.default_skin_texture(face)
+        else:
+            self.texture = None
+        self._scene = self._build_scene(dress)
+        self._big = camera.with_size(camera.width * self.ssaa, camera.height * self.ssaa)
+        h, w = self._big.height, self._big.width
+        self._img = np.empty((h, w, 3), np.float32)
+        self._zbuf = np.empty((h, w))
+        self._tid = np.empty((h, w), np.int32)
+        self._small = np.empty((camera.height, camera.width, 3), np.float32)
+        rows = np.linspace(0, 1, h)[:, None]
+        top, bot = np.array(BACKGROUND_TOP), np.array(BACKGROUND_BOTTOM)
+        self._background = (top * (1 - rows) + bot * rows)[:, None, :].astype(np.float32)
+        self._light_dir = np.array(
+            [np.asarray(li.direction, float) / np.linalg.norm(li.direction) for li in self.lights]
+        ).reshape(-1, 3)
+        self._light_col = np.array(
+            [np.asarray(li.color, float) * li.intensity for li in self.lights]
+        ).reshape(-1, 3)
+        self.last_coverage = 0.0
+
+    # ------------------------------------------------------------------ scene
+    def _build_scene(self, dress: bool) -> _Scene:
+        f = self.face
+        nv = f.n_vertices
+        tris = [f.triangles]
+        has_tex = self.texture is not None and f.uv is not None
+        tri_tex = [np.full(len(f.triangles), has_tex)]
+        uv = [f.uv if f.uv is not None else np.zeros((nv, 2))]
+        vcol = [np.tile(np.asarray(self.material.albedo, float), (nv, 1))]
+        fans = []
+        n = nv
+        openings = dressing.find_openings(f) if dress else []
+        for op in openings:
+            k = len(op.loop)
+            first, center = n, n + k
+            ring = np.arange(k)
+            fan = np.column_stack([first + ring, first + (ring + 1) % k, np.full(k, center)])
+            pts = f.vertices[op.loop]
+            c = pts.mean(axis=0) - np.array([0, 0, op.depth_mm])
+            if not dressing.orient_fan(pts, c):
+                fan = fan[:, ::-1]
+            tris.append(fan)
+            tri_tex.append(np.zeros(k, bool))
+            uv.append(np.zeros((k + 1, 2)))
+            vcol.append(np.tile(op.color, (k + 1, 1)))
+            fans.append((op.loop, first, center, op.depth_mm))
+            n += k + 1
+        n_dynamic = n
+        dyn_tris = np.concatenate(tris).astype(np.int64)
+        static_normals = []
+        static_pos = []
+        for op in openings:
+            if not op.name.startswith("eye"):
+                continue
+            pts = f.vertices[op.loop]
+            rim_c = pts.mean(axis=0)
+            center = rim_c - np.array([0, 0, dressing.EYE_RADIUS_MM - 3.5])
+            v, t, nrm, col = dressing.eyeball(center, np.array([0, 0, 1.0]), dressing.EYE_RADIUS_MM)
+            tris.append(t + n)
+            tri_tex.append(np.zeros(len(t), bool))
+            uv.append(np.zeros((len(v), 2)))
+            vcol.append(col)
+            static_pos.append(v)
+            static_normals.append(nrm)
+            n += len(v)
+        scene = _Scene(
+            np.ascontiguousarray(np.concatenate(tris), dtype=np.int64),
+            np.concatenate(tri_tex),
+            np.ascontiguousarray(np.concatenate(uv), dtype=np.float64),
+            np.ascontiguousarray(np.concatenate(vcol), dtype=np.float64),
+            nv,
+            np.concatenate(static_normals) if static_normals else np.zeros((0, 3)),
+            fans,
+            n_dynamic,
+            dyn_tris,
+        )
+        self._static_pos = np.concatenate(static_pos) if static_pos else np.zeros((0, 3))
+        self._n_total = n
+        return scene
+
+    def _positions(self, skin: np.ndarray) -> np.ndarray:
+        sc = self._scene
+        pos = np.empty((self._n_total, 3))
+        pos[: sc.n_face] = skin
+        for loop, first, center, depth in sc.fans:
+            pts = skin[loop]
+            pos[first : first + len(loop)] = pts
+            pos[center] = pts.mean(axis=0) - np.array([0.0, 0.0, depth])
+        pos[sc.n_dynamic :] = self._static_pos
+        return pos
+
+    # ------------------------------------------------------------------ render
+    def render_linear(self, vertices=None) -> np.ndarray:
+        """The image (H, W, 3) float32 in linear RGB (before tone mapping)."""
+        skin = (
+            self.face.vertices
+            if vertices is None
+            else _check_vertices(vertices, self.face.n_vertices)
+        )
+        sc = self._scene
+        pos = self._positions(skin)
+        normals = np.empty_like(pos)
+        vertex_normals_numba(pos[: sc.n_dynamic], sc.dyn_tris, normals[: sc.n_dynamic])
+        normals[sc.n_dynamic :] = sc.normals_static
+        cam = self._big
+        scr = cam.project(pos)
+        winv = np.ones(len(pos)) if cam.orthographic else 1.0 / np.maximum(scr[:, 2], 1e-9)
+        self._img[:] = self._background
+        self._zbuf[:] = np.inf
+        self._tid[:] = -1
+        tex = self.texture if self.texture is not None else np.ones((1, 1, 3), np.float32)
+        m = self.material
+        rasterize(
+            scr,
+            winv,
+            sc.tris,
+            normals,
+            pos,
+            sc.uv,
+            sc.vcol,
+            tex,
+            sc.tri_tex,
+            cam.eye,
+            cam._basis[2],
+            cam.orthographic,
+            self._light_dir,
+            self._light_col,
+            np.asarray(m.ambient, dtype=np.float64),
+            float(m.specular),
+            float(m.shininess),
+            self._img,
+            self._zbuf,
+            self._tid,
+        )
+        self.last_coverage = float(np.mean(self._tid >= 0))
+        if self.ssaa == 1:
+            return self._img.copy()
+        downsample(self._img, self.ssaa, self._small)
+        return self._small.copy()
+
+    def render(self, vertices=None) -> np.ndarray:
+        """The image (H, W, 3) uint8 sRGB of the skin at ``vertices`` (default: rest)."""
+        return to_srgb8(self.render_linear(vertices))
+
+    def triangle_ids(self) -> np.ndarray:
+        """Per-pixel triangle index of the last render at supersampled size (-1: background);
+        indices below ``face.n_triangles`` are skin triangles."""
+        return self._tid.copy()
+
+
+def render_mesh(
+    vertices: np.ndarray,
+    triangles: np.ndarray,
+    camera: Camera,
+    *,
+    colors=None,
+    uv=None,
+    texture=None,
+    lights: list[Light] | None = None,
+    material: SkinMaterial | None = None,
+    ssaa: int = 1,
+    linear: bool = False,
+) -> np.ndarray:
+    """Render any triangle mesh (vertices (N, 3) mm, triangles (F, 3)) to (H, W, 3).
+
+    ``colors`` (N, 3) linear albedo per vertex (default white); ``uv`` (N, 2) + ``texture`` for
+    texture mapping. Returns uint8 sRGB, or float32 linear RGB with ``linear=True``.
+    """
+    from myoface.face import FaceMesh
+
+    v = _check_vertices(vertices, len(np.asarray(vertices)))
+    face = FaceMesh(v, np.asarray(triangles), uv if uv is not None else None, None, {})
+    r = Renderer(face, camera, lights, material, texture, ssaa=ssaa, dress=False)
+    if colors is not None:
+        col = np.asarray(colors, dtype=np.float64)
+        if col.shape != (len(v), 3):
+            raise MyofaceValueError(f"colors must have shape ({len(v)}, 3); got {col.shape}")
+        r._scene.vcol[: len(v)] = col
+    out = r.render_linear()
+    return out if linear else to_srgb8(out)

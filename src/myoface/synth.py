@@ -1,0 +1,133 @@
+"""Synthesis: contractions or a timeline -> face model physics -> rendered images and video.
+
+The physics per video frame is the paper's quasi-static scheme: at each frame the contractions
+of that instant are applied and the tissue relaxes to its new equilibrium, starting from the
+previous frame's (Terzopoulos & Waters 1993, Section V-G: "the model reaches equilibrium
+quickly on each frame"). ``dynamics="rk2"`` integrates in time with the paper's RK2 instead.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from myoface.control import Timeline
+from myoface.errors import MyofaceValueError
+from myoface.render import Camera, Renderer, VideoWriter, overlay_segments, progress
+from myoface.tissue import RelaxWarning
+
+VIEWS = ("front", "three_quarter", "profile")
+DYNAMICS = ("quasistatic", "rk2")
+
+
+def make_camera(vertices: np.ndarray, view: str = "front", width: int = 512, height: int = 512):
+    """A camera preset (``front``, ``three_quarter``, ``profile``) framing ``vertices``."""
+    if view not in VIEWS:
+        raise MyofaceValueError(f"view must be one of {VIEWS}; got {view!r}")
+    return getattr(Camera, view)(vertices, width=width, height=height)
+
+
+def muscle_segments(model) -> tuple[np.ndarray, np.ndarray]:
+    """Insertion and origin points (N, 3) of the model's muscles (for overlays, Fig. 4)."""
+    ins = np.array([m.insertion for m in model.muscles.muscles])
+    org = np.array([m.origin for m in model.muscles.muscles])
+    return ins, org
+
+
+@dataclass
+class FrameStats:
+    relax_ms: list
+    render_ms: list
+    unconverged: int = 0
+
+
+class Synthesizer:
+    """Drives a :class:`~myoface.model.FaceModel` and renders it.
+
+    Parameters
+    ----------
+    model : FaceModel
+    renderer : Renderer, optional (default: front view, 512x512)
+    overlay : {None, "muscles"} — draw the muscle vectors over the image.
+    dynamics : {"quasistatic", "rk2"}
+    """
+
+    def __init__(
+        self, model, renderer: Renderer | None = None, overlay=None, dynamics="quasistatic"
+    ):
+        if dynamics not in DYNAMICS:
+            raise MyofaceValueError(f"dynamics must be one of {DYNAMICS}; got {dynamics!r}")
+        if overlay not in (None, "muscles"):
+            raise MyofaceValueError(f"overlay must be None or 'muscles'; got {overlay!r}")
+        self.model = model
+        self.renderer = renderer or Renderer(model.face, make_camera(model.face.vertices))
+        self.overlay = overlay
+        self.dynamics = dynamics
+        self.stats = FrameStats([], [])
+
+    def _relax(self, c) -> None:
+        t0 = time.perf_counter()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RelaxWarning)
+            res = self.model.relax(c, start="current")
+        if not res.converged or any(issubclass(w.category, RelaxWarning) for w in caught):
+            self.stats.unconverged += 1
+        self.stats.relax_ms.append((time.perf_counter() - t0) * 1e3)
+
+    def frame(self) -> np.ndarray:
+        """Render the model's current skin (uint8 RGB)."""
+        t0 = time.perf_counter()
+        img = self.renderer.render(self.model.skin_vertices())
+        if self.overlay == "muscles":
+            ins, org = muscle_segments(self.model)
+            img = overlay_segments(img, self.renderer.camera, ins, org)
+        self.stats.render_ms.append((time.perf_counter() - t0) * 1e3)
+        return img
+
+    def image(self, contractions) -> np.ndarray:
+        """Relax to ``contractions`` and render."""
+        self._relax(contractions)
+        return self.frame()
+
+    def frames(self, table: np.ndarray, times: Sequence[float]):
+        """Yield one image per row of ``table`` (T, M) at ``times`` (s)."""
+        times = np.asarray(times, dtype=np.float64)
+        if self.dynamics == "quasistatic":
+            for c in table:
+                yield self.image(c)
+            return
+        prev = times[0]
+        for k, c in enumerate(table):
+            if k == 0:
+                self._relax(c)
+            else:
+                dt = times[k] - prev
+                n = max(1, int(np.ceil(dt / self.model.stable_dt())))
+                self.model.step(c, dt=dt / n, n_steps=n)
+            prev = times[k]
+            yield self.frame()
+
+    def video(
+        self,
+        timeline: Timeline,
+        path: str | os.PathLike,
+        fps: float = 30.0,
+        show_progress: bool = True,
+    ) -> Path:
+        """Render ``timeline`` to a video file at ``fps``; returns the path."""
+        n = max(1, int(round(timeline.duration * fps)) + 1)
+        times = np.arange(n) / fps
+        table = timeline.contractions(times, self.model.ids)
+        self.model.reset()
+        with VideoWriter(path, fps) as vw:
+            for img in progress(
+                self.frames(table, times), total=n, desc="rendering", enabled=show_progress
+            ):
+                vw.write(img)
+        return Path(path)
