@@ -112,4 +112,12 @@ def progress(iterable, total: int | None = None, desc: str = "", enabled: bool =
     """A tqdm progress bar on stderr (silent when ``enabled`` is False)."""
     from tqdm.auto import tqdm
 
-    return tqdm(iterable, total=total, desc=desc, disable=not enabled, unit="frame", leave=False)
+    return tqdm(
+        iterable,
+        total=total,
+        desc=desc,
+        disable=not enabled,
+        unit="frame",
+        leave=False,
+        mininterval=0.5,
+    )
