@@ -12,7 +12,7 @@ an open surface are lit), albedo = vertex colour x texture (bilinear, wrap-free 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 #: pixels whose depth is below this (mm) are behind the camera's near plane
 NEAR_MM = 1.0
@@ -44,7 +44,9 @@ def _tex_bilinear(tex, u, v, out):
 
 
 @njit(cache=True, fastmath=True)
-def rasterize(
+def _raster_band(
+    band_lo,  # first image row of this band
+    band_hi,  # one past its last row
     scr,  # (N, 3) pixel x, pixel y, depth
     winv,  # (N,) 1/w (1/depth for perspective, 1 for orthographic)
     tris,  # (F, 3) int
@@ -66,7 +68,7 @@ def rasterize(
     zbuf,  # (H, W) float64 out
     tri_id,  # (H, W) int32 out
 ):
-    h, w = img.shape[0], img.shape[1]
+    w = img.shape[1]
     nl = light_dir.shape[0]
     texel = np.empty(3)
     for f in range(tris.shape[0]):
@@ -82,8 +84,8 @@ def rasterize(
         inv_area = 1.0 / area
         xmin = max(int(np.floor(min(x0, x1, x2))), 0)
         xmax = min(int(np.ceil(max(x0, x1, x2))), w - 1)
-        ymin = max(int(np.floor(min(y0, y1, y2))), 0)
-        ymax = min(int(np.ceil(max(y0, y1, y2))), h - 1)
+        ymin = max(int(np.floor(min(y0, y1, y2))), band_lo)
+        ymax = min(int(np.ceil(max(y0, y1, y2))), band_hi - 1)
         if xmin > xmax or ymin > ymax:
             continue
         q0, q1, q2 = winv[i0], winv[i1], winv[i2]
@@ -153,14 +155,78 @@ def rasterize(
                     hx, hy, hz = lx + vx, ly + vy, lz + vz
                     hn = np.sqrt(hx * hx + hy * hy + hz * hz) + 1e-12
                     ndh = (nx * hx + ny * hy + nz * hz) / hn
-                    if ndh > 0.0:
-                        sp = ks * ndh**shininess
+                    if ndh > 0.2 and ks > 0.0:
+                        sp = ks * np.exp(shininess * np.log(ndh))
                         sr += sp * light_col[k, 0]
                         sg += sp * light_col[k, 1]
                         sb += sp * light_col[k, 2]
                 img[py, px, 0] = ar * dr + sr
                 img[py, px, 1] = ag * dg + sg
                 img[py, px, 2] = ab * db + sb
+
+
+@njit(cache=True, parallel=True)
+def rasterize(
+    scr,
+    winv,
+    tris,
+    normals,
+    world,
+    uv,
+    vcol,
+    tex,
+    tri_tex,
+    eye,
+    view_dir,
+    ortho,
+    light_dir,
+    light_col,
+    ambient,
+    ks,
+    shininess,
+    background,
+    img,
+    zbuf,
+    tri_id,
+):
+    """Clear the buffers (image <- ``background`` (H, 1, 3) rows) and draw every triangle with
+    z-buffering and per-pixel shading; the image is split into horizontal bands drawn in
+    parallel (each band owns its rows, so no two threads write the same pixel)."""
+    h = img.shape[0]
+    n_bands = min(h, 8)
+    for b in prange(n_bands):
+        lo = b * h // n_bands
+        hi = (b + 1) * h // n_bands
+        for y in range(lo, hi):
+            for x in range(img.shape[1]):
+                zbuf[y, x] = np.inf
+                tri_id[y, x] = -1
+                for c in range(3):
+                    img[y, x, c] = background[y, 0, c]
+        _raster_band(
+            lo,
+            hi,
+            scr,
+            winv,
+            tris,
+            normals,
+            world,
+            uv,
+            vcol,
+            tex,
+            tri_tex,
+            eye,
+            view_dir,
+            ortho,
+            light_dir,
+            light_col,
+            ambient,
+            ks,
+            shininess,
+            img,
+            zbuf,
+            tri_id,
+        )
 
 
 def rasterize_coverage_numpy(scr: np.ndarray, tris: np.ndarray, h: int, w: int):
@@ -186,6 +252,35 @@ def rasterize_coverage_numpy(scr: np.ndarray, tris: np.ndarray, h: int, w: int):
         zbuf[better] = z[better]
         tid[better] = f
     return tid, zbuf
+
+
+def srgb_lut(n: int = 4096) -> np.ndarray:
+    """uint8 sRGB codes of linear values (i + 0.5) / n, i = 0..n-1 (IEC 61966-2-1)."""
+    c = (np.arange(n) + 0.5) / n
+    s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
+    return (s * 255.0 + 0.5).astype(np.uint8)
+
+
+@njit(cache=True, parallel=True)
+def resolve_srgb(img, f, lut, out):
+    """Box-filter (H*f, W*f, 3) linear RGB down by ``f`` and encode to sRGB uint8 via ``lut``."""
+    h, w = out.shape[0], out.shape[1]
+    inv = 1.0 / (f * f)
+    n = lut.shape[0]
+    for y in prange(h):
+        for x in range(w):
+            for c in range(3):
+                s = 0.0
+                for dy in range(f):
+                    for dx in range(f):
+                        s += img[y * f + dy, x * f + dx, c]
+                v = s * inv
+                k = int(v * n)
+                if k < 0:
+                    k = 0
+                elif k >= n:
+                    k = n - 1
+                out[y, x, c] = lut[k]
 
 
 @njit(cache=True)

@@ -18,7 +18,15 @@ import numpy as np
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 from myoface.render import dressing
 from myoface.render.camera import Camera
-from myoface.render.raster import downsample, rasterize, vertex_normals_numba
+from myoface.render.raster import (
+    downsample,
+    rasterize,
+    resolve_srgb,
+    srgb_lut,
+    vertex_normals_numba,
+)
+
+_SRGB_LUT = srgb_lut()
 
 BACKGROUND_TOP = (0.050, 0.055, 0.065)  # linear RGB, a soft studio gradient
 BACKGROUND_BOTTOM = (0.012, 0.013, 0.016)
@@ -166,7 +174,6 @@ class Renderer:
         self._light_col = np.array(
             [np.asarray(li.color, float) * li.intensity for li in self.lights]
         ).reshape(-1, 3)
-        self.last_coverage = 0.0
 
     # ------------------------------------------------------------------ scene
     def _build_scene(self, dress: bool) -> _Scene:
@@ -242,6 +249,13 @@ class Renderer:
     # ------------------------------------------------------------------ render
     def render_linear(self, vertices=None) -> np.ndarray:
         """The image (H, W, 3) float32 in linear RGB (before tone mapping)."""
+        self._draw(vertices)
+        if self.ssaa == 1:
+            return self._img.copy()
+        downsample(self._img, self.ssaa, self._small)
+        return self._small.copy()
+
+    def _draw(self, vertices) -> None:
         skin = (
             self.face.vertices
             if vertices is None
@@ -255,9 +269,6 @@ class Renderer:
         cam = self._big
         scr = cam.project(pos)
         winv = np.ones(len(pos)) if cam.orthographic else 1.0 / np.maximum(scr[:, 2], 1e-9)
-        self._img[:] = self._background
-        self._zbuf[:] = np.inf
-        self._tid[:] = -1
         tex = self.texture if self.texture is not None else np.ones((1, 1, 3), np.float32)
         m = self.material
         rasterize(
@@ -278,19 +289,18 @@ class Renderer:
             np.asarray(m.ambient, dtype=np.float64),
             float(m.specular),
             float(m.shininess),
+            self._background,
             self._img,
             self._zbuf,
             self._tid,
         )
-        self.last_coverage = float(np.mean(self._tid >= 0))
-        if self.ssaa == 1:
-            return self._img.copy()
-        downsample(self._img, self.ssaa, self._small)
-        return self._small.copy()
 
     def render(self, vertices=None) -> np.ndarray:
         """The image (H, W, 3) uint8 sRGB of the skin at ``vertices`` (default: rest)."""
-        return to_srgb8(self.render_linear(vertices))
+        self._draw(vertices)
+        out = np.empty((self.camera.height, self.camera.width, 3), np.uint8)
+        resolve_srgb(self._img, self.ssaa, _SRGB_LUT, out)
+        return out
 
     def triangle_ids(self) -> np.ndarray:
         """Per-pixel triangle index of the last render at supersampled size (-1: background);
