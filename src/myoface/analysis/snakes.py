@@ -1,0 +1,519 @@
+"""Deformable contours ("snakes") and tracking them through a video.
+
+Terzopoulos & Waters 1993, Section V, eq. (7)-(13). A set of contours (open or closed) is one
+system of n nodes x_i (pixels, (x, y) = (column, row)) joined in series by springs:
+
+- tension (eq. 7): spring i between nodes i and i+1 pulls with ``a_i e_i r_i / |r_i|``,
+  e_i = |r_i| - l_i;
+- viscoelastic rest lengths (eq. 8): ``dl_i/dt = nu_i e_i`` (a held stretch relaxes);
+- rigidity (eq. 9): ``K x`` with K = D^T diag(b) D, D the second difference;
+- dynamics (eq. 10-11), semi-implicit: rigidity at t + dt, tension and external forces at t::
+
+      (gamma/dt + K) x^{t+dt} = (gamma/dt) x^t + F_tension(x^t) + f(x^t)
+
+- external force (eq. 12): ``f_i = -p grad P(x_i) + f_i^u`` (descending the potential P of eq.
+  (13), whose ravines are edges; f^u are user forces, e.g. a dragged node).
+
+Contours are separated by breaks (a = b = 0 across them), so any number of open and closed
+contours live in one system. The matrix (gamma/dt I + K) is constant: it is factorized once
+(banded Cholesky; closed contours are interleaved so the cyclic matrix becomes banded) and each
+step costs one forward and one backward substitution.
+
+Time: ``dt`` is one iteration with gamma = 1, so gamma/dt = ``gamma_over_dt`` and eq. (8)
+advances rest lengths by ``nu e / gamma_over_dt`` per iteration.
+
+Equilibrium: the contours are at rest when no node moved more than ``tol_px`` over the last
+``WINDOW`` (10) iterations; :func:`relax_contours` stops there (``converged=True``) or after
+``max_iter``. (A per-iteration test would stop a contour that creeps slowly towards a distant
+edge.)
+
+Parameter defaults are the paper's (Section V-E): gamma/dt = 0.5, a = 1.0, b = 0.5, nu = 0.2,
+p = 0.001, nodes about 1 pixel apart.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from myoface.analysis.potentials import bilinear, image_potential, potential_gradient
+from myoface.errors import MyofaceValueError
+
+
+@dataclass(frozen=True)
+class SnakeParams:
+    """Snake parameters; scalars, or arrays per node (a, nu: per spring i -> i+1; b: per node).
+
+    Defaults: Terzopoulos & Waters 1993, Section V-E.
+    """
+
+    a: float | np.ndarray = 1.0  # T&W 1993 §V-E: tension
+    b: float | np.ndarray = 0.5  # T&W 1993 §V-E: rigidity
+    nu: float | np.ndarray = 0.2  # T&W 1993 §V-E: viscoelasticity of rest lengths
+    gamma_over_dt: float = 0.5  # T&W 1993 §V-E: damping / time step
+    p: float = 0.001  # T&W 1993 §V-E: image force strength (8-bit grey levels)
+    max_iter: int = 300
+    tol_px: float = 0.05  # equilibrium: largest node move over WINDOW iterations, pixels
+    escape_ratio: float = 0.25  # a node has escaped when |P| < this x the contour's reference
+
+    def __post_init__(self):
+        if not (np.isfinite(self.gamma_over_dt) and self.gamma_over_dt > 0):
+            raise MyofaceValueError(f"gamma_over_dt must be > 0; got {self.gamma_over_dt}")
+        if not (np.isfinite(self.p) and self.p >= 0):
+            raise MyofaceValueError(f"p must be >= 0; got {self.p}")
+        if not (isinstance(self.max_iter, int | np.integer) and self.max_iter >= 1):
+            raise MyofaceValueError(f"max_iter must be an integer >= 1; got {self.max_iter}")
+        if not (np.isfinite(self.tol_px) and self.tol_px > 0):
+            raise MyofaceValueError(f"tol_px must be > 0; got {self.tol_px}")
+        for k in ("a", "b", "nu"):
+            v = np.asarray(getattr(self, k), dtype=np.float64)
+            if not np.isfinite(v).all() or (v < 0).any():
+                raise MyofaceValueError(f"{k} must be finite and >= 0")
+
+
+@dataclass
+class Contours:
+    """Several contours packed into one node array.
+
+    Attributes
+    ----------
+    nodes : (N, 2) float64 — (x, y) pixels, contour after contour.
+    offsets : (K + 1,) int — contour k is ``nodes[offsets[k]:offsets[k + 1]]``.
+    closed : (K,) bool
+    names : tuple of str
+    """
+
+    nodes: np.ndarray
+    offsets: np.ndarray
+    closed: np.ndarray
+    names: tuple
+
+    @property
+    def n_contours(self) -> int:
+        return len(self.closed)
+
+    def split(self, nodes: np.ndarray | None = None) -> list[np.ndarray]:
+        x = self.nodes if nodes is None else nodes
+        return [x[self.offsets[k] : self.offsets[k + 1]] for k in range(self.n_contours)]
+
+    def with_nodes(self, nodes: np.ndarray) -> Contours:
+        return Contours(np.asarray(nodes, float).copy(), self.offsets, self.closed, self.names)
+
+
+def make_contours(
+    contours: Sequence[np.ndarray], closed: bool | Sequence[bool] = False, names=None
+) -> Contours:
+    """Pack contours ((K_i, 2) arrays of (x, y) pixels) into one :class:`Contours`."""
+    if isinstance(contours, np.ndarray) and contours.ndim == 2:
+        contours = [contours]
+    if len(contours) == 0:
+        raise MyofaceValueError("no contours given")
+    cl = [bool(closed)] * len(contours) if isinstance(closed, bool | np.bool_) else list(closed)
+    if len(cl) != len(contours):
+        raise MyofaceValueError(f"closed must have one flag per contour ({len(contours)})")
+    names = (
+        tuple(names) if names is not None else tuple(f"contour{k}" for k in range(len(contours)))
+    )
+    if len(names) != len(contours):
+        raise MyofaceValueError("names must have one entry per contour")
+    arrs = []
+    for k, c in enumerate(contours):
+        a = np.asarray(c, dtype=np.float64)
+        if a.ndim != 2 or a.shape[1] != 2:
+            raise MyofaceValueError(
+                f"contour {names[k]!r} must be a (K, 2) array of (x, y); got shape {a.shape}"
+            )
+        if len(a) < (4 if cl[k] else 3):
+            raise MyofaceValueError(
+                f"contour {names[k]!r} needs at least {4 if cl[k] else 3} nodes; got {len(a)}"
+            )
+        if not np.isfinite(a).all():
+            raise MyofaceValueError(f"contour {names[k]!r} has NaN or infinite coordinates")
+        arrs.append(a)
+    offsets = np.concatenate([[0], np.cumsum([len(a) for a in arrs])]).astype(np.int64)
+    return Contours(np.concatenate(arrs), offsets, np.array(cl), names)
+
+
+def resample_polyline(points: np.ndarray, spacing_px: float = 1.0, closed: bool = False):
+    """Nodes about ``spacing_px`` apart along a polyline through ``points`` (M, 2)."""
+    p = np.asarray(points, dtype=np.float64)
+    if closed:
+        p = np.vstack([p, p[:1]])
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    s = np.concatenate([[0], np.cumsum(seg)])
+    n = max(3, int(round(s[-1] / spacing_px)) + (0 if closed else 1))
+    t = np.linspace(0, s[-1], n, endpoint=not closed)
+    return np.column_stack([np.interp(t, s, p[:, 0]), np.interp(t, s, p[:, 1])])
+
+
+# ------------------------------------------------------------------------------ the system
+
+
+def _per(v, n: int, name: str) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64)
+    if a.ndim == 0:
+        return np.full(n, float(a))
+    if a.shape != (n,):
+        raise MyofaceValueError(f"{name} must be a scalar or have shape ({n},); got {a.shape}")
+    return a.copy()
+
+
+def _topology(contours: Contours, params: SnakeParams):
+    """Springs (i, j, a, nu) and rigidity rows (i-1, i, i+1, b) of all contours."""
+    n = len(contours.nodes)
+    a_n = _per(params.a, n, "a")
+    b_n = _per(params.b, n, "b")
+    nu_n = _per(params.nu, n, "nu")
+    si, sj, rows = [], [], []
+    for k in range(contours.n_contours):
+        o0, o1 = contours.offsets[k], contours.offsets[k + 1]
+        m = o1 - o0
+        idx = np.arange(o0, o1)
+        if contours.closed[k]:
+            si.append(idx)
+            sj.append(np.roll(idx, -1))
+            rows.append(np.column_stack([np.roll(idx, 1), idx, np.roll(idx, -1)]))
+        else:
+            si.append(idx[:-1])
+            sj.append(idx[1:])
+            if m >= 3:
+                rows.append(np.column_stack([idx[:-2], idx[1:-1], idx[2:]]))
+    si, sj = np.concatenate(si), np.concatenate(sj)
+    rows = np.concatenate(rows) if rows else np.zeros((0, 3), np.int64)
+    return si, sj, a_n[si], nu_n[si], rows, b_n[rows[:, 1]]
+
+
+def system_matrix_dense(contours: Contours, params: SnakeParams) -> np.ndarray:
+    """The constant matrix gamma/dt I + K (N, N), dense (the test oracle)."""
+    n = len(contours.nodes)
+    _, _, _, _, rows, bw = _topology(contours, params)
+    a = np.eye(n) * params.gamma_over_dt
+    d = np.array([1.0, -2.0, 1.0])
+    for r, b in zip(rows, bw, strict=True):
+        a[np.ix_(r, r)] += b * np.outer(d, d)
+    return a
+
+
+def _interleave(m: int) -> np.ndarray:
+    """Order 0, m-1, 1, m-2, ... : a cyclic band matrix becomes a plain band matrix."""
+    order = np.empty(m, np.int64)
+    order[0::2] = np.arange((m + 1) // 2)
+    order[1::2] = m - 1 - np.arange(m // 2)
+    return order
+
+
+@njit(cache=True)
+def _band_cholesky(a_band, bw):
+    """In-place banded Cholesky: a_band[i, k] holds A[i, i - k] (k = 0..bw) on input, L[i, i-k]
+    on output (A = L L^T)."""
+    n = a_band.shape[0]
+    for i in range(n):
+        for k in range(min(i, bw), -1, -1):
+            j = i - k
+            s = a_band[i, k]
+            for m in range(1, bw + 1 - k):
+                if j - m < 0:
+                    break
+                s -= a_band[i, k + m] * a_band[j, m]
+            if k == 0:
+                if s <= 0.0:
+                    return False
+                a_band[i, 0] = np.sqrt(s)
+            else:
+                a_band[i, k] = s / a_band[j, 0]
+    return True
+
+
+@njit(cache=True)
+def _band_solve(lb, bw, rhs, out):
+    """Solve L L^T x = rhs (columns solved together; rhs (n, c)) into ``out``."""
+    n, c = rhs.shape
+    for q in range(c):
+        for i in range(n):
+            s = rhs[i, q]
+            for k in range(1, min(i, bw) + 1):
+                s -= lb[i, k] * out[i - k, q]
+            out[i, q] = s / lb[i, 0]
+        for i in range(n - 1, -1, -1):
+            s = out[i, q]
+            for k in range(1, min(n - 1 - i, bw) + 1):
+                s -= lb[i + k, k] * out[i + k, q]
+            out[i, q] = s / lb[i, 0]
+
+
+class SnakeSystem:
+    """The factorized system of a set of contours (build once, reuse every step and frame)."""
+
+    def __init__(self, contours: Contours, params: SnakeParams | None = None):
+        self.params = params or SnakeParams()
+        self.contours = contours
+        si, sj, a_s, nu_s, rows, b_r = _topology(contours, self.params)
+        self.si, self.sj, self.a_s, self.nu_s = si, sj, a_s, nu_s
+        perm = []
+        for k in range(contours.n_contours):
+            o0, o1 = contours.offsets[k], contours.offsets[k + 1]
+            local = _interleave(o1 - o0) if contours.closed[k] else np.arange(o1 - o0)
+            perm.append(o0 + local)
+        self.perm = np.concatenate(perm).astype(np.int64)  # position -> node
+        pos = np.empty_like(self.perm)
+        pos[self.perm] = np.arange(len(self.perm))  # node -> position
+        self.pos = pos
+        n = len(contours.nodes)
+        # assemble (gamma/dt + K) in band storage of the permuted order
+        entries = {}
+        for i in range(n):
+            entries[(pos[i], pos[i])] = self.params.gamma_over_dt
+        d = (1.0, -2.0, 1.0)
+        for r, b in zip(rows, b_r, strict=True):
+            if b == 0:
+                continue
+            for u in range(3):
+                for v in range(3):
+                    key = (pos[r[u]], pos[r[v]])
+                    entries[key] = entries.get(key, 0.0) + b * d[u] * d[v]
+        bw = max((abs(i - j) for (i, j) in entries), default=0)
+        band = np.zeros((n, bw + 1))
+        for (i, j), v in entries.items():
+            if i >= j:
+                band[i, i - j] += v
+        if not _band_cholesky(band, bw):
+            raise MyofaceValueError("the snake system is not positive definite (bad parameters)")
+        self.band, self.bw = band, bw
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve (gamma/dt + K) x = rhs for rhs (N, 2) in node order."""
+        r = np.ascontiguousarray(rhs[self.perm])
+        out = np.empty_like(r)
+        _band_solve(self.band, self.bw, r, out)
+        x = np.empty_like(out)
+        x[self.perm] = out
+        return x
+
+
+#: iterations over which the equilibrium test measures the motion
+WINDOW = 10
+
+
+@njit(cache=True)
+def _iterate(x, rest, si, sj, a_s, nu_s, pot, gx, gy, p, user, g_dt, max_iter, tol, perm, band, bw):
+    n = x.shape[0]
+    f = np.empty((n, 2))
+    rhs = np.empty((n, 2))
+    sol = np.empty((n, 2))
+    ref = x.copy()  # positions WINDOW iterations ago
+    moved = 0.0
+    for it in range(max_iter):
+        for i in range(n):
+            f[i, 0] = -p * bilinear(gx, x[i, 0], x[i, 1]) + user[i, 0]
+            f[i, 1] = -p * bilinear(gy, x[i, 0], x[i, 1]) + user[i, 1]
+        for s in range(si.shape[0]):
+            i, j = si[s], sj[s]
+            rx = x[j, 0] - x[i, 0]
+            ry = x[j, 1] - x[i, 1]
+            d = np.sqrt(rx * rx + ry * ry)
+            e = d - rest[s]
+            if d > 1e-12 and a_s[s] != 0.0:
+                c = a_s[s] * e / d
+                f[i, 0] += c * rx
+                f[i, 1] += c * ry
+                f[j, 0] -= c * rx
+                f[j, 1] -= c * ry
+            rest[s] += nu_s[s] * e / g_dt  # eq. (8), dt = 1 / (gamma/dt) with gamma = 1
+        for q in range(n):
+            i = perm[q]
+            rhs[q, 0] = g_dt * x[i, 0] + f[i, 0]
+            rhs[q, 1] = g_dt * x[i, 1] + f[i, 1]
+        _band_solve(band, bw, rhs, sol)
+        for q in range(n):
+            i = perm[q]
+            x[i, 0] = sol[q, 0]
+            x[i, 1] = sol[q, 1]
+        if (it + 1) % WINDOW == 0:
+            moved = 0.0
+            for i in range(n):
+                d = max(abs(x[i, 0] - ref[i, 0]), abs(x[i, 1] - ref[i, 1]))
+                if not d <= moved:  # also catches NaN
+                    moved = d
+                ref[i, 0] = x[i, 0]
+                ref[i, 1] = x[i, 1]
+            if not np.isfinite(moved):
+                return it + 1, moved
+            if moved < tol:
+                return it + 1, moved
+    return max_iter, moved
+
+
+@njit(cache=True)
+def _sample(pot, x, out):
+    for i in range(x.shape[0]):
+        out[i] = bilinear(pot, x[i, 0], x[i, 1])
+
+
+@dataclass
+class SnakeResult:
+    """Outcome of :func:`relax_contours` on one potential.
+
+    Attributes
+    ----------
+    contours : Contours — with the equilibrium nodes.
+    rest_lengths : (S,) — the springs' rest lengths after the relaxation (eq. 8).
+    converged : bool; iterations : int; residual_px : float — the largest node move over the
+        last WINDOW iterations.
+    mean_potential : (K,) — mean P under each contour (more negative: on stronger edges).
+    escaped : (K,) int — nodes per contour whose |P| fell below ``escape_ratio`` x the
+        contour's reference level, or that left the image.
+    """
+
+    contours: Contours
+    rest_lengths: np.ndarray
+    converged: bool
+    iterations: int
+    residual_px: float
+    mean_potential: np.ndarray
+    escaped: np.ndarray
+    node_potential: np.ndarray = field(repr=False, default=None)
+
+    @property
+    def nodes(self) -> np.ndarray:
+        return self.contours.nodes
+
+    def split(self) -> list[np.ndarray]:
+        return self.contours.split()
+
+
+def _check_inside(x: np.ndarray, shape, names, offsets) -> None:
+    h, w = shape
+    bad = (x[:, 0] < 0) | (x[:, 0] > w - 1) | (x[:, 1] < 0) | (x[:, 1] > h - 1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        k = int(np.searchsorted(offsets, i, side="right") - 1)
+        raise MyofaceValueError(
+            f"contour {names[k]!r} has nodes outside the {w}x{h} image, e.g. node {i - offsets[k]} "
+            f"at (x, y) = ({x[i, 0]:.1f}, {x[i, 1]:.1f})"
+        )
+
+
+class Snakes:
+    """Contours with their factorized system and viscoelastic state, ready to relax on a
+    sequence of potentials (the tracker's state between frames)."""
+
+    def __init__(self, contours: Contours, params: SnakeParams | None = None):
+        self.params = params or SnakeParams()
+        self.system = SnakeSystem(contours, self.params)
+        self.contours = contours.with_nodes(contours.nodes)
+        s = self.system
+        x = self.contours.nodes
+        self.rest = np.linalg.norm(x[s.sj] - x[s.si], axis=1)  # l_i = initial spacings
+        self.reference = None  # (K,) mean |P| per contour on the first relaxed frame
+
+    def relax(self, potential: np.ndarray, user_forces: np.ndarray | None = None) -> SnakeResult:
+        """Let the contours settle in ``potential`` (H, W), from where they are now."""
+        pot = np.ascontiguousarray(potential, dtype=np.float64)
+        if pot.ndim != 2 or min(pot.shape) < 3:
+            raise MyofaceValueError(f"the potential must be a 2-D image; got shape {pot.shape}")
+        if not np.isfinite(pot).all():
+            raise MyofaceValueError("the potential contains NaN or Inf")
+        c = self.contours
+        _check_inside(c.nodes, pot.shape, c.names, c.offsets)
+        n = len(c.nodes)
+        if user_forces is None:
+            user = np.zeros((n, 2))
+        else:
+            user = np.asarray(user_forces, dtype=np.float64)
+            if user.shape != (n, 2) or not np.isfinite(user).all():
+                raise MyofaceValueError(f"user_forces must be a finite ({n}, 2) array")
+        gx = np.empty_like(pot)
+        gy = np.empty_like(pot)
+        potential_gradient(pot, gx, gy)
+        s, p = self.system, self.params
+        x = c.nodes
+        it, moved = _iterate(
+            x,
+            self.rest,
+            s.si,
+            s.sj,
+            s.a_s,
+            s.nu_s,
+            pot,
+            gx,
+            gy,
+            float(p.p),
+            user,
+            float(p.gamma_over_dt),
+            int(p.max_iter),
+            float(p.tol_px),
+            s.perm,
+            s.band,
+            s.bw,
+        )
+        if not np.isfinite(moved):
+            raise MyofaceValueError(
+                "the contours diverged (NaN); reduce p or increase gamma_over_dt"
+            )
+        h, w = pot.shape
+        np.clip(x[:, 0], 0, w - 1, out=x[:, 0])
+        np.clip(x[:, 1], 0, h - 1, out=x[:, 1])
+        vals = np.empty(n)
+        _sample(pot, x, vals)
+        k = c.n_contours
+        mean = np.array([vals[c.offsets[j] : c.offsets[j + 1]].mean() for j in range(k)])
+        if self.reference is None:
+            self.reference = np.abs(mean)
+        edge = np.concatenate(
+            [np.full(c.offsets[j + 1] - c.offsets[j], self.reference[j]) for j in range(k)]
+        )
+        border = (x[:, 0] <= 0) | (x[:, 0] >= w - 1) | (x[:, 1] <= 0) | (x[:, 1] >= h - 1)
+        lost = (np.abs(vals) < p.escape_ratio * edge) | border
+        escaped = np.array([int(lost[c.offsets[j] : c.offsets[j + 1]].sum()) for j in range(k)])
+        return SnakeResult(
+            c.with_nodes(x),
+            self.rest.copy(),
+            bool(moved < p.tol_px),
+            int(it),
+            float(moved),
+            mean,
+            escaped,
+            vals,
+        )
+
+
+def relax_contours(
+    potential: np.ndarray,
+    contours: Contours,
+    params: SnakeParams | None = None,
+    user_forces: np.ndarray | None = None,
+) -> SnakeResult:
+    """Relax ``contours`` in ``potential`` (H, W) to equilibrium (one-shot; see :class:`Snakes`
+    to keep the viscoelastic state across frames)."""
+    return Snakes(contours, params).relax(potential, user_forces)
+
+
+@dataclass
+class TrackFrame:
+    """Per-frame tracking result: frame index and the :class:`SnakeResult` on it."""
+
+    index: int
+    result: SnakeResult
+
+
+def track_contours(
+    frames: Iterable[np.ndarray],
+    contours: Contours,
+    params: SnakeParams | None = None,
+    *,
+    sigma: float = 2.0,
+    method: str = "gaussian",
+) -> Iterator[TrackFrame]:
+    """Track ``contours`` through ``frames`` ((H, W) or (H, W, 3) images): relax on frame k,
+    continue on frame k + 1 from that equilibrium (T&W 1993, Section V-D). Yields one
+    :class:`TrackFrame` per frame with its diagnostics."""
+    snakes = Snakes(contours, params)
+    for k, frame in enumerate(frames):
+        f = np.asarray(frame)
+        if f.size == 0:
+            raise MyofaceValueError(f"frame {k} is empty")
+        pot = image_potential(f, sigma=sigma, method=method)
+        yield TrackFrame(k, snakes.relax(pot))

@@ -1,0 +1,184 @@
+"""Snakes on synthetic images with known answers (T&W 1993, eq. (7)-(13))."""
+
+import numpy as np
+import pytest
+
+from myoface.analysis.potentials import image_potential, image_potential_numpy, to_intensity
+from myoface.analysis.snakes import (
+    SnakeParams,
+    Snakes,
+    SnakeSystem,
+    make_contours,
+    relax_contours,
+    resample_polyline,
+    system_matrix_dense,
+    track_contours,
+)
+from myoface.bench.snakes import ellipse_distance, ellipse_task
+from myoface.errors import MyofaceValueError
+
+
+def ellipse_image(size=96, center=(48.0, 44.0), radii=(24.0, 16.0), dark=40, bright=200):
+    ys, xs = np.mgrid[0:size, 0:size]
+    r = np.sqrt(((xs - center[0]) / radii[0]) ** 2 + ((ys - center[1]) / radii[1]) ** 2)
+    inside = np.clip((1.0 - r) * min(radii) + 0.5, 0, 1)  # a 1-px anti-aliased edge
+    return (bright * (1 - inside) + dark * inside).astype(np.uint8)
+
+
+def ellipse_points(center, radii, n, grow=0.0):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack(
+        [center[0] + (radii[0] + grow) * np.cos(t), center[1] + (radii[1] + grow) * np.sin(t)]
+    )
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.float32, np.float64])
+def test_contour_converges_onto_a_dark_ellipse(dtype):
+    img = ellipse_image()
+    if dtype is not np.uint8:
+        img = (img / 255.0).astype(dtype)  # floats in 0-1 are read as 0-255 grey levels
+    c = make_contours([ellipse_points((48, 44), (24, 16), 126, grow=3.0)], closed=True)
+    res = relax_contours(image_potential(img, sigma=2.0), c, SnakeParams(max_iter=3000))
+    assert res.converged
+    err = ellipse_distance(res.nodes, (48, 44), (24, 16))
+    assert err.max() < 1.0, err.max()
+    assert res.escaped[0] == 0
+
+
+def test_tracks_a_translating_ravine():
+    """A vertical step edge (the ravine of P = -|grad I|) moving 2 px per frame; an open snake
+    started 1 px off it follows it."""
+    size, frames, xs = 64, [], []
+    cols = np.arange(size)
+    for k in range(8):
+        x0 = 20.0 + 2.0 * k
+        dark = np.clip(x0 - cols + 0.5, 0, 1)  # dark left of x0, 1-px anti-aliased
+        img = np.tile(210.0 - 150.0 * dark, (size, 1))
+        frames.append(img.astype(np.uint8))
+        xs.append(x0)
+    line = np.column_stack([np.full(40, 21.0), np.linspace(12, 51, 40)])
+    out = list(track_contours(frames, make_contours([line]), SnakeParams(p=0.005)))
+    assert len(out) == 8
+    for fr, x0 in zip(out, xs, strict=True):
+        assert np.abs(fr.result.nodes[:, 0] - x0).max() < 0.5, (fr.index, x0)
+        assert fr.result.escaped[0] == 0
+    # tension shortens an open contour from its ends (its rest lengths relax, eq. 8), but it
+    # still spans most of the edge after 8 frames
+    last = out[-1].result.nodes
+    assert np.linalg.norm(np.diff(last, axis=0), axis=1).sum() > 0.7 * 39.0
+
+
+def test_breaks_separate_contours():
+    """Two contours in one system: moving one (a user force) does not move the other."""
+    a = resample_polyline(np.array([[10.0, 10], [30, 10]]))
+    b = resample_polyline(np.array([[10.0, 30], [30, 30]]))
+    c = make_contours([a, b])
+    flat = np.zeros((48, 48))
+    f = np.zeros((len(c.nodes), 2))
+    f[: len(a), 1] = 0.05  # push the first contour down
+    res = relax_contours(flat, c, SnakeParams(max_iter=20), user_forces=f)
+    pa, pb = res.split()
+    assert pa[:, 1].min() > 10.5
+    np.testing.assert_allclose(pb, b, atol=1e-12)
+    k = system_matrix_dense(c, SnakeParams())
+    assert np.all(k[: len(a), len(a) :] == 0)  # no coupling in the matrix either
+
+
+def test_rest_lengths_follow_eq8():
+    """A stretched open contour on a flat potential: each iteration the rest lengths move by
+    nu e / (gamma/dt) towards the current lengths (eq. 8 with gamma = 1)."""
+    pts = np.column_stack([np.arange(6.0) * 2.0 + 5, np.full(6, 10.0)])  # spacing 2
+    params = SnakeParams(a=1.0, b=0.0, nu=0.2, gamma_over_dt=0.5, max_iter=1)
+    s = Snakes(make_contours([pts]), params)
+    s.rest[:] = 1.0  # natural length 1, so every spring is stretched by e = 1
+    s.relax(np.zeros((24, 32)))
+    np.testing.assert_allclose(s.rest, 1.0 + 0.2 * 1.0 / 0.5)
+
+
+def test_banded_solve_equals_dense_oracle():
+    rng = np.random.default_rng(0)
+    conts = [
+        ellipse_points((30, 30), (10, 7), 25),
+        resample_polyline(np.array([[5.0, 50], [40, 55], [60, 45]])),
+        ellipse_points((60, 20), (6, 6), 12),
+    ]
+    c = make_contours(conts, closed=[True, False, True])
+    params = SnakeParams(b=rng.uniform(0.1, 1.0, len(c.nodes)))
+    sysm = SnakeSystem(c, params)
+    assert sysm.bw <= 4
+    rhs = rng.normal(size=(len(c.nodes), 2))
+    np.testing.assert_allclose(
+        sysm.solve(rhs), np.linalg.solve(system_matrix_dense(c, params), rhs), atol=1e-10
+    )
+
+
+def test_closed_and_open_boundaries():
+    """Rigidity alone (flat potential, no tension): an open straight line and a closed circle
+    are equilibria; the open ends are free (no row of K reaches past them)."""
+    line = resample_polyline(np.array([[5.0, 20], [35, 20]]))
+    circ = ellipse_points((20, 40), (8, 8), 50)
+    c = make_contours([line, circ], closed=[False, True])
+    k = system_matrix_dense(c, SnakeParams(gamma_over_dt=0.0 + 1e-9))
+    x = c.nodes
+    np.testing.assert_allclose((k @ x)[: len(line)], 1e-9 * x[: len(line)], atol=1e-9)
+    kc = k[len(line) :, len(line) :]
+    # the cyclic matrix couples the first and last nodes of the closed contour
+    assert kc[0, -1] != 0 and kc[0, -2] != 0
+    kl = k[: len(line), : len(line)]
+    assert kl[0, -1] == 0
+
+
+def test_potentials():
+    img = ellipse_image()
+    p = image_potential(img, sigma=2.0)
+    np.testing.assert_allclose(p, image_potential_numpy(img, sigma=2.0), atol=1e-9)
+    assert p.max() <= 0 and p.min() < -10  # ravines at the edge
+    pp = image_potential(img, method="paper")
+    assert pp.shape == img.shape and pp.min() < -10
+    rgb = np.repeat(img[:, :, None], 3, axis=2)
+    np.testing.assert_allclose(to_intensity(rgb), img.astype(float), atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: make_contours([np.zeros((5, 3))]), r"\(K, 2\)"),
+        (lambda: make_contours([np.full((5, 2), np.nan)]), "NaN"),
+        (lambda: make_contours([np.zeros((2, 2))]), "at least 3"),
+        (
+            lambda: relax_contours(np.zeros((20, 20)), make_contours([np.full((4, 2), 30.0)])),
+            "outside",
+        ),
+        (lambda: image_potential(np.zeros((0, 0))), "empty"),
+        (lambda: image_potential(np.zeros((10, 10, 7))), "shape"),
+        (lambda: image_potential(np.full((10, 10), np.nan)), "NaN"),
+        (
+            lambda: list(track_contours([np.zeros((0, 5))], make_contours([np.ones((4, 2))]))),
+            "frame 0 is empty",
+        ),
+        (lambda: SnakeParams(gamma_over_dt=0), "gamma_over_dt"),
+    ],
+)
+def test_bad_input(call, match):
+    with pytest.raises(MyofaceValueError, match=match):
+        call()
+
+
+def test_escaped_contour_is_reported():
+    img = ellipse_image()
+    c = make_contours([ellipse_points((48, 44), (24, 16), 126, grow=1.0)], closed=True)
+    s = Snakes(c, SnakeParams(max_iter=500))
+    s.relax(image_potential(img))
+    res = s.relax(image_potential(np.full_like(img, 128)))  # the feature is gone
+    assert res.escaped[0] == len(c.nodes)
+
+
+def test_beats_skimage_on_the_benchmark_task():
+    """Our tracker on 6 frames of the benchmark task is accurate; the same task is the
+    comparison with skimage in BENCHMARKS.md."""
+    from myoface.bench.snakes import track_myoface
+
+    frames, centres, init = ellipse_task(6)
+    out = track_myoface(frames, init)
+    worst = max(ellipse_distance(c, ctr).max() for c, ctr in zip(out, centres[-1], strict=True))
+    assert worst < 1.0
