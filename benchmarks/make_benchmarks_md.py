@@ -105,7 +105,10 @@ def main(argv=None) -> int:
 
     from myoface import bench
 
-    docs = {k: (b.doc or "").splitlines()[0] if b.doc else "" for k, b in bench.load_all().items()}
+    docs = {
+        k: " ".join((b.doc or "").strip().split("\n\n")[0].split())
+        for k, b in bench.load_all().items()
+    }
     if args.json:
         records = json.loads(args.json.read_text())
         command = f"myoface bench --json {args.json.name}"

@@ -10,7 +10,7 @@ meaning. Colour frames are reduced to intensity with the Rec. 601 luma weights
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from myoface.errors import MyofaceValueError
 
@@ -45,12 +45,12 @@ def to_intensity(image) -> np.ndarray:
     return a_f
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _blur_separable(img, kernel, out, tmp):
     """Separable correlation with ``kernel`` (odd length), edges replicated."""
     h, w = img.shape
     r = kernel.shape[0] // 2
-    for y in range(h):
+    for y in prange(h):
         for x in range(w):
             s = 0.0
             if r <= x < w - r:
@@ -60,7 +60,7 @@ def _blur_separable(img, kernel, out, tmp):
                 for k in range(-r, r + 1):
                     s += kernel[k + r] * img[y, min(max(x + k, 0), w - 1)]
             tmp[y, x] = s
-    for y in range(h):
+    for y in prange(h):
         if r <= y < h - r:
             for x in range(w):
                 out[y, x] = 0.0
@@ -76,10 +76,10 @@ def _blur_separable(img, kernel, out, tmp):
                 out[y, x] = s
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _neg_grad_mag_central(img, out):
     h, w = img.shape
-    for y in range(h):
+    for y in prange(h):
         for x in range(w):
             gx = 0.5 * (img[y, min(x + 1, w - 1)] - img[y, max(x - 1, 0)])
             gy = 0.5 * (img[min(y + 1, h - 1), x] - img[max(y - 1, 0), x])
@@ -149,11 +149,11 @@ def image_potential_numpy(image, sigma: float = 2.0) -> np.ndarray:
     return -np.hypot(gx, gy)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def potential_gradient(pot, gx, gy):
     """Central-difference gradient of the potential (one-sided at the borders)."""
     h, w = pot.shape
-    for y in range(h):
+    for y in prange(h):
         for x in range(w):
             x0, x1 = max(x - 1, 0), min(x + 1, w - 1)
             y0, y1 = max(y - 1, 0), min(y + 1, h - 1)

@@ -56,7 +56,7 @@ class SnakeParams:
     gamma_over_dt: float = 0.5  # T&W 1993 §V-E: damping / time step
     p: float = 0.001  # T&W 1993 §V-E: image force strength (8-bit grey levels)
     max_iter: int = 300
-    tol_px: float = 0.05  # equilibrium: largest node move over WINDOW iterations, pixels
+    tol_px: float = 0.1  # equilibrium: largest node move over WINDOW iterations, pixels
     escape_ratio: float = 0.25  # a node has escaped when |P| < this x the contour's reference
 
     def __post_init__(self):
