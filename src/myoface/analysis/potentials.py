@@ -15,7 +15,7 @@ from numba import njit, prange
 from myoface.errors import MyofaceValueError
 
 LUMA_601 = (0.299, 0.587, 0.114)
-METHODS = ("gaussian", "paper")
+METHODS = ("gaussian", "paper", "line+edge")
 
 
 def to_intensity(image) -> np.ndarray:
@@ -121,6 +121,10 @@ def image_potential(image, sigma: float = 2.0, method: str = "gaussian") -> np.n
     differences; sigma in pixels widens the ravines so they attract from farther away).
     ``"paper"``: the variant of the paper's experiment (T&W 1993, Section V-E): two passes of
     4-neighbour averaging and the forward-difference gradient (``sigma`` is ignored).
+    ``"line+edge"``: ``G_sigma * I - |grad(G_sigma * I)|``: eq. (13) plus the "line" term of
+    Kass, Witkin & Terzopoulos (1988). Thin dark features (brows, furrows, pencilled lines) are
+    ridges of eq. (13) (its ravines run along their two sides); with the intensity term their
+    centre lines become the ravines.
     """
     if method not in METHODS:
         raise MyofaceValueError(f"method must be one of {METHODS}; got {method!r}")
@@ -135,6 +139,8 @@ def image_potential(image, sigma: float = 2.0, method: str = "gaussian") -> np.n
     blurred = np.empty_like(img)
     _blur_separable(img, gaussian_kernel(float(sigma)), blurred, tmp)
     _neg_grad_mag_central(blurred, out)
+    if method == "line+edge":
+        out += blurred
     return out
 
 

@@ -124,9 +124,23 @@ def orient_fan(loop_pts: np.ndarray, center: np.ndarray) -> bool:
     return n[2] > 0
 
 
-def default_skin_texture(face, size: int = 512) -> np.ndarray:
+def _polyline_mask(pts_uv: np.ndarray, px: np.ndarray, size: int, width_uv: float):
+    """Soft stroke along a polyline in UV space: 1 on the line, falling off over width_uv."""
+    d = np.full(len(px), np.inf)
+    for a, b in zip(pts_uv[:-1], pts_uv[1:], strict=True):
+        ab = b - a
+        t = np.clip(((px - a) @ ab) / max(ab @ ab, 1e-12), 0, 1)
+        d = np.minimum(d, np.linalg.norm(px - (a + t[:, None] * ab), axis=1))
+    return np.exp(-0.5 * (d / width_uv) ** 2).reshape(size, size)
+
+
+def default_skin_texture(face, size: int = 512, makeup: bool = False) -> np.ndarray:
     """A neutral skin texture (size, size, 3) float32 linear RGB in the face's UV space:
-    even skin tone, tinted lips, soft brows and a faint blush, from the landmark groups."""
+    even skin tone, tinted lips, soft brows and a faint blush, from the landmark groups.
+
+    ``makeup=True`` darkens the features the snakes track, as the paper's subject wore make-up
+    (T&W 1993, Section V-E): dark brows, darker lips, and dark lines along the hairline, the
+    nasolabial furrows, the nose base and the chin boss."""
     from matplotlib.path import Path as MplPath
     from scipy.ndimage import gaussian_filter
 
@@ -166,4 +180,20 @@ def default_skin_texture(face, size: int = 512) -> np.ndarray:
             poly = np.vstack([uv[lm[up]], uv[lm[lo]][::-1]])
             wgt = 0.85 * mask(poly, 3.0 * s)
             tex = tex * (1 - wgt[:, :, None]) + brow * wgt[:, :, None]
+    if makeup:
+        dark = _srgb_to_linear([40, 26, 22])
+        for side in ("l", "r"):  # fill the brows dark
+            up, lo = f"eyebrow_{side}", f"eyebrow_{side}_lower"
+            if up in lm and lo in lm:
+                poly = np.vstack([uv[lm[up]], uv[lm[lo]][::-1]])
+                wgt = mask(poly, 1.0 * s)
+                tex = tex * (1 - wgt[:, :, None]) + dark * wgt[:, :, None]
+        if "lip_upper_outer" in lm and "lip_lower_outer" in lm:  # and the lips darker red
+            poly = np.vstack([uv[lm["lip_upper_outer"]], uv[lm["lip_lower_outer"]][::-1]])
+            wgt = mask(poly, 1.0 * s)
+            tex = tex * (1 - wgt[:, :, None]) + 0.45 * lips * wgt[:, :, None]
+        for g in ("forehead_top", "nasolabial_l", "nasolabial_r", "nose_base", "chin_boss"):
+            if g in lm:
+                wgt = 0.9 * _polyline_mask(uv[lm[g]], pts, size, 0.006)
+                tex = tex * (1 - wgt[:, :, None]) + dark * wgt[:, :, None]
     return np.clip(tex, 0, 1).astype(np.float32)

@@ -1,0 +1,80 @@
+"""Files of the analysis loop: initial contours (JSON) and contractions (CSV)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from myoface.analysis.pipeline import (
+    SECTIONS,
+    FrameMeasurement,
+    load_init,
+    read_contractions_csv,
+    save_init,
+    write_contractions_csv,
+)
+from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
+
+
+def test_every_section_names_a_landmark_group(default_face):
+    for group in SECTIONS.values():
+        assert len(default_face.landmark(group)) >= 3
+
+
+def test_init_roundtrip_and_errors(tmp_path):
+    p = tmp_path / "init.json"
+    conts = {"eyebrow_l": np.array([[10.0, 20], [20, 18], [30, 21]])}
+    save_init(p, conts)
+    back = load_init(p)
+    np.testing.assert_allclose(back["eyebrow_l"], conts["eyebrow_l"])
+    with pytest.raises(MyofaceFileNotFoundError):
+        load_init(tmp_path / "none.json")
+    for doc, match in [
+        ("{", "not valid JSON"),
+        (json.dumps({"contours": {"mouth": [[1, 2], [3, 4]]}}), "unknown section 'mouth'"),
+        (json.dumps({"contours": {"chin": [[1, 2, 3]]}}), "at least 2"),
+        (json.dumps({"contours": {"chin": [[1, 2], [None, 4]]}}), "NaN"),
+        (json.dumps({"curves": {}}), "expected"),
+    ]:
+        p.write_text(doc)
+        with pytest.raises(MyofaceFormatError, match=match):
+            load_init(p)
+
+
+def test_contractions_csv_roundtrip(tmp_path):
+    import csv
+
+    ids = ("zygomaticus_major_l", "jaw")
+    frames = [
+        FrameMeasurement(0, 0.0, "ok", np.array([0.0, 0.1]), np.zeros(2)),
+        FrameMeasurement(1, 0.04, "escaped:chin", np.full(2, np.nan), np.array([1.0, -2.0])),
+        FrameMeasurement(2, 0.08, "ok", np.array([0.5, 0.3]), np.zeros(2)),
+    ]
+    p = tmp_path / "c.csv"
+    write_contractions_csv(p, ids, frames, jaw_max_rad=0.3)
+    with open(p, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert rows[1]["zygomaticus_major_l"] == "" and rows[1]["quality"] == "escaped:chin"
+    assert float(rows[2]["jaw_angle_rad"]) == pytest.approx(0.09)
+    t, table, q = read_contractions_csv(p, ["jaw", "zygomaticus_major_l", "risorius_l"])
+    np.testing.assert_allclose(t, [0, 0.04, 0.08])
+    assert table[2].tolist() == [0.3, 0.5, 0.0] and np.isnan(table[1, 0])
+    assert q == ["ok", "escaped:chin", "ok"]
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("frame,jaw\n0,0.1\n", "missing column 'time_s'"),
+        ("time_s,smile\n0,0.1\n", "no column names a muscle"),
+        ("time_s,jaw\n0,nan\n", r"must be a number in \[0, 1\]"),
+        ("time_s,jaw\n0,1.5\n", r"must be a number in \[0, 1\]"),
+        ("time_s,jaw\n1,0.1\n0,0.1\n", "non-decreasing"),
+        ("time_s,jaw\n", "no rows"),
+    ],
+)
+def test_contractions_csv_errors(tmp_path, text, match):
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(MyofaceFormatError, match=match):
+        read_contractions_csv(p, ["jaw"])
