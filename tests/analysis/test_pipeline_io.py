@@ -16,9 +16,17 @@ from myoface.analysis.pipeline import (
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
 
 
-def test_every_section_names_a_landmark_group(default_face):
-    for group in SECTIONS.values():
-        assert len(default_face.landmark(group)) >= 3
+def test_every_section_is_a_contour_of_the_default_face(default_face):
+    from myoface.analysis.pipeline import FEATURES, model_fiducials, section_vertices
+
+    for sec in SECTIONS:
+        v = section_vertices(default_face, sec)
+        assert len(v) >= 3 and len(set(v.tolist())) == len(v), sec
+    fids = model_fiducials(default_face)
+    assert len(fids) == sum(len(f) for f in FEATURES.values())
+    names = {f.name: f for f in fids}
+    corner_l = default_face.landmark("mouth_corner_l")[0]
+    assert names["lips:corner_l"].vertex == corner_l  # the rightmost lip point in the image
 
 
 def test_init_roundtrip_and_errors(tmp_path):

@@ -35,10 +35,15 @@ METHODS = ("model", "paper")
 
 @dataclass(frozen=True)
 class Fiducial:
-    """A fiducial point: a name and the skin vertex of the face model it stands for."""
+    """A fiducial point: a name and the skin vertex of the face model it stands for (or a
+    tuple of vertices whose mean it stands for, e.g. a contour's centroid)."""
 
     name: str
-    vertex: int
+    vertex: int | tuple
+
+    @property
+    def vertex_list(self) -> tuple:
+        return tuple(self.vertex) if isinstance(self.vertex, tuple | list) else (self.vertex,)
 
 
 def paper_fiducials(face) -> list[Fiducial]:
@@ -81,17 +86,26 @@ class ContractionEstimator:
         for i in ids:
             model.muscles.index(i)  # validates
         self.ids = tuple(ids)
-        self.vertices = np.array([f.vertex for f in self.fiducials])
+        nv = model.face.n_vertices
+        self.weights = np.zeros((len(self.fiducials), nv))  # fiducial = weights @ skin
+        for i, f in enumerate(self.fiducials):
+            vl = f.vertex_list
+            self.weights[i, list(vl)] = 1.0 / len(vl)
+        self.vertices = np.array([f.vertex_list[0] for f in self.fiducials])
         self.jacobian = self._probe()  # (F, 2, K)
+
+    def positions(self, skin: np.ndarray) -> np.ndarray:
+        """Fiducial positions (F, 2) (x-y plane, mm) of skin vertices (V, 3)."""
+        return self.weights @ skin[:, :2]
 
     def _probe(self) -> np.ndarray:
         fm = self.model
         fm.reset()
-        rest = fm.skin_vertices()[self.vertices, :2]
+        rest = self.positions(fm.skin_vertices())
         cols = []
         for mid in self.ids:
             fm.relax({mid: PROBE_CONTRACTION}, start="rest")
-            cols.append((fm.skin_vertices()[self.vertices, :2] - rest) / PROBE_CONTRACTION)
+            cols.append((self.positions(fm.skin_vertices()) - rest) / PROBE_CONTRACTION)
         fm.reset()
         return np.stack(cols, axis=-1)
 
@@ -125,12 +139,12 @@ class ContractionEstimator:
         a = self.jacobian[ok].reshape(-1, len(self.ids))
         c = np.clip(self._solve(a, d[ok].reshape(-1), 0.0, 1.0), 0.0, 1.0)
         fm = self.model
-        rest = fm.face.vertices[self.vertices, :2]
+        rest = self.positions(fm.face.vertices)
         for _ in range(int(refine)):
             full = np.zeros(len(fm.ids))
             full[[fm.ids.index(i) for i in self.ids]] = c
             fm.relax(full, start="current")
-            pred = fm.skin_vertices()[self.vertices, :2] - rest
+            pred = self.positions(fm.skin_vertices()) - rest
             step = self._solve(a, (d - pred)[ok].reshape(-1), -c, 1.0 - c)
             c = np.clip(c + step, 0.0, 1.0)
         return c

@@ -2,26 +2,25 @@
 head frame -> muscle contractions and jaw rotation per frame (Terzopoulos & Waters 1993,
 Section V).
 
-Contours (the paper's nine sections) and the model's landmark groups they follow:
+Contours (the paper's nine sections, with the two lip contours joined into one closed
+contour around the lips and the brows traced around their outline):
 
-=================  ===================  ==========================================
-section            landmark group       node order in the image (frontal view)
-=================  ===================  ==========================================
-hairline           forehead_top         image left -> right
-eyebrow_r          eyebrow_r            inner -> outer (image right -> left)
-eyebrow_l          eyebrow_l            inner -> outer (image left -> right)
-nasolabial_r       nasolabial_r         top -> bottom
-nasolabial_l       nasolabial_l         top -> bottom
-nose               nose_base            image left -> right
-upper_lip          lip_upper_outer      image left -> right (corner to corner)
-lower_lip          lip_lower_outer      image left -> right (corner to corner)
-chin               chin_outline         image left -> right (the lower edge of the chin)
-=================  ===================  ==========================================
+============  ==================================  =======================================
+section       landmark groups (default face)      fiducial features read off the contour
+============  ==================================  =======================================
+hairline      forehead_top                        centroid
+eyebrow_r/l   eyebrow + eyebrow_lower (closed)    inner end, centroid, outer end
+nasolabial    nasolabial_r / nasolabial_l         top
+nose          nose_base                           centroid
+lips          lip_upper + lip_lower outer (closed) corners, top, bottom, lower-lip sides
+chin          chin_outline                        bottom
+============  ==================================  =======================================
 
+Features are geometric (extremes, centroids) rather than node identities, because snake nodes
+slide along the edges they sit on. The same rules applied to the model's landmark contours (front
+view, rest) pick the model vertices the features stand for.
 ``_l`` / ``_r`` are the subject's left / right (the subject's left is on the image's right).
-Each landmark vertex of a section is tied to the contour at the same fraction of arc length as
-it has along the model's (front-projected) landmark polyline, so the tracked contours give one
-image point per landmark vertex: the fiducials. Their displacements from the calibration frame,
+The fiducials' displacements from the calibration frame,
 in the head frame (translation of the head reference contour removed, pixels scaled to mm with
 the model's size), are inverted to contractions by
 :class:`~myoface.analysis.estimate.ContractionEstimator`.
@@ -41,36 +40,89 @@ from myoface.analysis.potentials import image_potential
 from myoface.analysis.snakes import SnakeParams, Snakes, make_contours, resample_polyline
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 
+#: section -> (landmark groups whose concatenation is the contour, closed)
 SECTIONS = {
-    "hairline": "forehead_top",
-    "eyebrow_r": "eyebrow_r",
-    "eyebrow_l": "eyebrow_l",
-    "nasolabial_r": "nasolabial_r",
-    "nasolabial_l": "nasolabial_l",
-    "nose": "nose_base",
-    "upper_lip": "lip_upper_outer",
-    "lower_lip": "lip_lower_outer",
-    "chin": "chin_outline",
+    "hairline": (("forehead_top",), False),
+    "eyebrow_r": (("eyebrow_r", "eyebrow_r_lower*"), True),
+    "eyebrow_l": (("eyebrow_l", "eyebrow_l_lower*"), True),
+    "nasolabial_r": (("nasolabial_r",), False),
+    "nasolabial_l": (("nasolabial_l",), False),
+    "nose": (("nose_base",), False),
+    "lips": (("lip_upper_outer", "lip_lower_outer*"), True),
+    "chin": (("chin_outline",), False),
 }
+#: the fiducial features read off each section's contour (see :func:`section_features`)
+FEATURES = {
+    "hairline": ("centroid",),
+    "eyebrow_r": ("inner", "centroid", "outer"),
+    "eyebrow_l": ("inner", "centroid", "outer"),
+    "nasolabial_r": ("top",),
+    "nasolabial_l": ("top",),
+    "nose": ("centroid",),
+    "lips": ("corner_r", "corner_l", "top", "bottom", "bottom_r", "bottom_l"),
+    "chin": ("bottom",),
+}
+
+
+def section_vertices(face, section: str) -> np.ndarray:
+    """Vertex indices of a section's contour on the face model (``*``: reversed group, the
+    first vertex dropped when it repeats the previous group's last)."""
+    groups, _ = SECTIONS[section]
+    out: list[int] = []
+    for g in groups:
+        rev = g.endswith("*")
+        idx = list(face.landmark(g.rstrip("*")))
+        if rev:
+            idx = idx[::-1]
+        if out and idx and idx[0] == out[-1]:
+            idx = idx[1:]
+        out += [int(i) for i in idx]
+    if SECTIONS[section][1] and len(out) > 1 and out[-1] == out[0]:
+        out = out[:-1]
+    return np.array(out)
+
+
+def section_features(section: str, pts: np.ndarray, midline_x: float) -> np.ndarray:
+    """The feature points (F, 2) of a contour ``pts`` (K, 2), image (x, y) pixels:
+    ``inner``/``outer`` the points nearest to / farthest from the face's midline, ``top`` /
+    ``bottom`` the highest / lowest, ``corner_r`` / ``corner_l`` the leftmost / rightmost in the
+    image (the subject's right / left), ``bottom_r`` / ``bottom_l`` the lowest point of the
+    middle third of the image-left / image-right half, ``centroid`` the mean."""
+    out = []
+    for f in FEATURES[section]:
+        if f == "centroid":
+            out.append(pts.mean(axis=0))
+        elif f == "inner":
+            out.append(pts[np.argmin(np.abs(pts[:, 0] - midline_x))])
+        elif f == "outer":
+            out.append(pts[np.argmax(np.abs(pts[:, 0] - midline_x))])
+        elif f == "top":
+            out.append(pts[np.argmin(pts[:, 1])])
+        elif f == "bottom":
+            out.append(pts[np.argmax(pts[:, 1])])
+        elif f == "corner_r":
+            out.append(pts[np.argmin(pts[:, 0])])
+        elif f == "corner_l":
+            out.append(pts[np.argmax(pts[:, 0])])
+        elif f in ("bottom_r", "bottom_l"):
+            # the lowest point of the middle third of the contour's left / right half
+            x0, x1 = pts[:, 0].min(), pts[:, 0].max()
+            c = 0.5 * (x0 + x1)
+            lo, hi = (
+                (x0 + (c - x0) / 3, c - (c - x0) / 3)
+                if f == "bottom_r"
+                else (c + (x1 - c) / 3, x1 - (x1 - c) / 3)
+            )
+            m = (pts[:, 0] >= lo) & (pts[:, 0] <= hi)
+            q = pts[m] if m.any() else pts
+            out.append(q[np.argmax(q[:, 1])])
+    return np.array(out)
+
+
 #: the muscles the paper estimates, plus the jaw
 PAPER_MUSCLES = tuple(PAPER_ASSIGNMENT)
 #: a frame is unusable when more than this fraction of a contour's nodes escaped its edge
 ESCAPE_LIMIT = 0.5
-#: sections whose mean motion defines the head translation (the paper: the hairline)
-HEAD_REFERENCE = ("hairline",)
-
-
-def _arc_fractions(points: np.ndarray) -> np.ndarray:
-    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    return s / s[-1] if s[-1] > 0 else np.linspace(0, 1, len(points))
-
-
-def _at_fractions(nodes: np.ndarray, fractions: np.ndarray) -> np.ndarray:
-    f = _arc_fractions(nodes)
-    return np.column_stack(
-        [np.interp(fractions, f, nodes[:, 0]), np.interp(fractions, f, nodes[:, 1])]
-    )
 
 
 # ------------------------------------------------------------------------------ init files
@@ -123,10 +175,28 @@ def save_init(path: str | os.PathLike, contours: dict[str, np.ndarray], note: st
 
 
 def project_sections(model, camera) -> dict[str, np.ndarray]:
-    """The model's sections projected by ``camera`` (for synthetic video whose camera is
-    known, e.g. the closed-loop test: an exact automatic initialisation)."""
+    """The model's section contours projected by ``camera`` (for synthetic video whose camera
+    is known, e.g. the closed-loop test: an exact automatic initialisation)."""
     v = camera.project(model.skin_vertices())[:, :2]
-    return {name: v[model.face.landmark(group)] for name, group in SECTIONS.items()}
+    return {name: v[section_vertices(model.face, name)] for name in SECTIONS}
+
+
+def model_fiducials(face) -> list[Fiducial]:
+    """The fiducials of every section's features on the face model, found with the same rules
+    as on the image (:func:`section_features`) on the front view of the rest face."""
+    out = []
+    img_like = face.vertices[:, :2] * np.array([1.0, -1.0])  # image y points down
+    for sec in SECTIONS:
+        verts = section_vertices(face, sec)
+        pts = img_like[verts]
+        feats = section_features(sec, pts, 0.0)
+        for name, q in zip(FEATURES[sec], feats, strict=True):
+            if name == "centroid":
+                out.append(Fiducial(f"{sec}:{name}", tuple(int(v) for v in verts)))
+            else:
+                k = int(np.argmin(np.linalg.norm(pts - q, axis=1)))
+                out.append(Fiducial(f"{sec}:{name}", int(verts[k])))
+    return out
 
 
 # ------------------------------------------------------------------------------ the analyzer
@@ -149,12 +219,15 @@ class Analyzer:
     Parameters
     ----------
     model : FaceModel — its muscles are estimated; its face gives the landmark groups.
-    init : {section: (K, 2)} initial contours in the calibration frame (pixels).
+    init : {section: (K, 2)} initial contours in the calibration frame (pixels); sections may
+        be missing (their fiducials are then not used).
     muscle_ids : muscles to estimate (default: the paper's 12 + jaw).
-    method : "model" (joint, through the physics; default) or "paper" (each muscle from one
-        fiducial, the paper's scheme).
-    refine : Gauss-Newton corrections per frame with the ``"model"`` method.
-    sigma : Gaussian width (px) of the image potential.
+    refine : Gauss-Newton corrections per frame through the model (0: linear estimate only).
+    sigma : Gaussian width (px) of the image potential; ``potential``: see
+        :func:`~myoface.analysis.potentials.image_potential`.
+    head_reference : sections whose centroid motion is the head's translation (the paper uses
+        the hairline; the nose is the default here, as the brows move the hairline contour
+        of a face mesh without hair).
     """
 
     def __init__(
@@ -162,54 +235,50 @@ class Analyzer:
         model,
         init: dict[str, np.ndarray],
         muscle_ids=PAPER_MUSCLES,
-        method: str = "model",
         refine: int = 1,
         sigma: float = 1.5,
         params: SnakeParams | None = None,
         spacing_px: float = 1.0,
         potential: str = "gaussian",
+        head_reference=("nose",),
     ):
-        if method not in ("model", "paper"):
-            raise MyofaceValueError(f"method must be 'model' or 'paper'; got {method!r}")
         if not init:
             raise MyofaceValueError("no initial contours")
+        unknown = set(init) - set(SECTIONS)
+        if unknown:
+            raise MyofaceValueError(f"unknown sections {sorted(unknown)}; see SECTIONS")
         self.model = model
-        self.method = method
         self.refine = int(refine)
         self.sigma = float(sigma)
         self.potential = potential
         self.sections = [s for s in SECTIONS if s in init]
-        face = model.face
-        front = face.vertices[:, :2]
-        fids, self._ties = [], []
-        polylines = []
-        for s in self.sections:
-            verts = face.landmark(SECTIONS[s])
-            fr = _arc_fractions(front[verts])
-            poly = resample_polyline(init[s], spacing_px)
-            polylines.append(poly)
-            self._ties.append(fr)
-            fids += [Fiducial(f"{s}:{int(v)}", int(v)) for v in verts]
-        self.contours = make_contours(polylines, closed=False, names=self.sections)
+        self.head_reference = [s for s in head_reference if s in self.sections]
+        polys, closed = [], []
+        for sec in self.sections:
+            polys.append(resample_polyline(init[sec], spacing_px, closed=SECTIONS[sec][1]))
+            closed.append(SECTIONS[sec][1])
+        self.contours = make_contours(polys, closed=closed, names=self.sections)
         self.params = params or SnakeParams(p=0.01)
         self.snakes = Snakes(self.contours, self.params)
+        all_fids = {f.name: f for f in model_fiducials(model.face)}
+        self.fiducials = [all_fids[f"{s}:{n}"] for s in self.sections for n in FEATURES[s]]
         self.ids = tuple(muscle_ids)
-        self.estimator = ContractionEstimator(model, fids, self.ids)
-        self.fiducials = fids
+        self.estimator = ContractionEstimator(model, self.fiducials, self.ids)
         self._p0 = None
         self._ref0 = None
         self.mm_per_px = None
 
-    def _fiducial_points(self, contours: list[np.ndarray]) -> np.ndarray:
-        return np.concatenate(
-            [_at_fractions(c, fr) for c, fr in zip(contours, self._ties, strict=True)]
+    def _features(self, conts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        allpts = np.concatenate(conts)
+        named = dict(zip(self.sections, conts, strict=True))
+        mid = named["nose"].mean(axis=0)[0] if "nose" in named else allpts[:, 0].mean()
+        feats = np.concatenate([section_features(s, named[s], mid) for s in self.sections])
+        ref = (
+            np.concatenate([named[s] for s in self.head_reference]).mean(axis=0)
+            if self.head_reference
+            else np.zeros(2)
         )
-
-    def _head_ref(self, contours: list[np.ndarray]) -> np.ndarray:
-        ref = [c for s, c in zip(self.sections, contours, strict=True) if s in HEAD_REFERENCE]
-        if not ref:  # no hairline: fall back on the nose
-            ref = [c for s, c in zip(self.sections, contours, strict=True) if s == "nose"]
-        return np.concatenate(ref).mean(axis=0) if ref else np.zeros(2)
+        return feats, ref
 
     def measure(self, frame: np.ndarray, index: int = 0, time_s: float = 0.0) -> FrameMeasurement:
         """Track the contours into ``frame`` and estimate its contractions. The first frame
@@ -217,8 +286,7 @@ class Analyzer:
         pot = image_potential(frame, sigma=self.sigma, method=self.potential)
         res = self.snakes.relax(pot)
         conts = res.split()
-        pts = self._fiducial_points(conts)
-        ref = self._head_ref(conts)
+        pts, ref = self._features(conts)
         sizes = np.diff(self.contours.offsets)
         bad = [
             s
@@ -227,16 +295,14 @@ class Analyzer:
         ]
         if self._p0 is None:
             self._p0, self._ref0 = pts, ref
-            face = self.model.face
-            model_xy = face.vertices[[f.vertex for f in self.fiducials], :2]
+            model_xy = self.estimator.positions(self.model.face.vertices)
             rms_mm = np.sqrt(((model_xy - model_xy.mean(0)) ** 2).sum(1).mean())
             rms_px = np.sqrt(((pts - pts.mean(0)) ** 2).sum(1).mean())
             if rms_px < 5:
                 raise MyofaceValueError("the initial contours are too small (under 5 px)")
             self.mm_per_px = rms_mm / rms_px
         shift = ref - self._ref0
-        d_px = pts - self._p0 - shift
-        d_mm = d_px * self.mm_per_px * np.array([1.0, -1.0])  # image y points down
+        d_mm = (pts - self._p0 - shift) * self.mm_per_px * np.array([1.0, -1.0])
         named = dict(zip(self.sections, conts, strict=True))
         if bad:
             return FrameMeasurement(
@@ -248,24 +314,8 @@ class Analyzer:
                 named,
                 res.iterations,
             )
-        if self.method == "model":
-            c = self.estimator.estimate(d_mm, refine=self.refine)
-        else:
-            c = self.estimator.estimate_paper(
-                d_mm,
-                {k: self._paper_fiducial(v) for k, v in PAPER_ASSIGNMENT.items() if k in self.ids},
-            )
+        c = self.estimator.estimate(d_mm, refine=self.refine)
         return FrameMeasurement(index, time_s, "ok", c, shift, named, res.iterations)
-
-    def _paper_fiducial(self, name: str) -> str:
-        """The paper's fiducial name -> our fiducial (section:vertex) that stands for it."""
-        from myoface.analysis.estimate import paper_fiducials
-
-        v = {f.name: f.vertex for f in paper_fiducials(self.model.face)}[name]
-        for f in self.fiducials:
-            if f.vertex == v:
-                return f.name
-        raise MyofaceValueError(f"fiducial {name} is not on the tracked contours")
 
 
 def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_rad: float) -> None:
