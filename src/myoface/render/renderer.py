@@ -338,3 +338,12 @@ def render_mesh(
         r._scene.vcol[: len(v)] = col
     out = r.render_linear()
     return out if linear else to_srgb8(out)
+
+
+def resize_nearest(image: np.ndarray, height: int) -> np.ndarray:
+    """Nearest-neighbour resize of an (H, W, 3) image to ``height`` rows (aspect kept)."""
+    h, w = image.shape[:2]
+    width = max(2, int(round(w * height / h)))
+    rows = np.minimum((np.arange(height) + 0.5) * h / height, h - 1).astype(int)
+    cols = np.minimum((np.arange(width) + 0.5) * w / width, w - 1).astype(int)
+    return image[rows][:, cols]
