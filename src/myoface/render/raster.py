@@ -5,6 +5,8 @@ Shading model, per pixel, in linear RGB::
 
     colour = albedo * (ambient + sum_l max(n.L_l, 0) c_l) + ks * sum_l (n.h_l)^shininess c_l
 
+(the power by Schlick's rational approximation x / (s - s x + x), Schlick 1994)
+
 with the normal n interpolated from the vertices and flipped towards the viewer (both sides of
 an open surface are lit), albedo = vertex colour x texture (bilinear, wrap-free clamp).
 """
@@ -155,8 +157,9 @@ def _raster_band(
                     hx, hy, hz = lx + vx, ly + vy, lz + vz
                     hn = np.sqrt(hx * hx + hy * hy + hz * hz) + 1e-12
                     ndh = (nx * hx + ny * hy + nz * hz) / hn
-                    if ndh > 0.2 and ks > 0.0:
-                        sp = ks * np.exp(shininess * np.log(ndh))
+                    if ndh > 0.5 and ks > 0.0:
+                        # Schlick's rational approximation of ndh^shininess (Schlick 1994)
+                        sp = ks * ndh / (shininess - shininess * ndh + ndh)
                         sr += sp * light_col[k, 0]
                         sg += sp * light_col[k, 1]
                         sb += sp * light_col[k, 2]
