@@ -186,3 +186,28 @@ def bilinear(img, x, y):
     a = img[y0, x0] * (1 - fx) + img[y0, x0 + 1] * fx
     b = img[y0 + 1, x0] * (1 - fx) + img[y0 + 1, x0 + 1] * fx
     return a * (1 - fy) + b * fy
+
+
+@njit(cache=True, inline="always")
+def bilinear2(ga, gb, x, y):
+    """Bilinear samples of two same-shape images at (x, y), sharing the index arithmetic."""
+    h, w = ga.shape
+    if x < 0.0:
+        x = 0.0
+    elif x > w - 1.0:
+        x = w - 1.0
+    if y < 0.0:
+        y = 0.0
+    elif y > h - 1.0:
+        y = h - 1.0
+    x0 = min(int(x), w - 2) if w > 1 else 0
+    y0 = min(int(y), h - 2) if h > 1 else 0
+    fx = x - x0
+    fy = y - y0
+    w00 = (1 - fx) * (1 - fy)
+    w01 = fx * (1 - fy)
+    w10 = (1 - fx) * fy
+    w11 = fx * fy
+    a = w00 * ga[y0, x0] + w01 * ga[y0, x0 + 1] + w10 * ga[y0 + 1, x0] + w11 * ga[y0 + 1, x0 + 1]
+    b = w00 * gb[y0, x0] + w01 * gb[y0, x0 + 1] + w10 * gb[y0 + 1, x0] + w11 * gb[y0 + 1, x0 + 1]
+    return a, b

@@ -39,7 +39,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from myoface.analysis.potentials import bilinear, image_potential, potential_gradient
+from myoface.analysis.potentials import (
+    bilinear,
+    bilinear2,
+    image_potential,
+    potential_gradient,
+)
 from myoface.errors import MyofaceValueError
 
 
@@ -307,8 +312,9 @@ def _iterate(x, rest, si, sj, a_s, nu_s, pot, gx, gy, p, user, g_dt, max_iter, t
     moved = 0.0
     for it in range(max_iter):
         for i in range(n):
-            f[i, 0] = -p * bilinear(gx, x[i, 0], x[i, 1]) + user[i, 0]
-            f[i, 1] = -p * bilinear(gy, x[i, 0], x[i, 1]) + user[i, 1]
+            sx, sy = bilinear2(gx, gy, x[i, 0], x[i, 1])
+            f[i, 0] = -p * sx + user[i, 0]
+            f[i, 1] = -p * sy + user[i, 1]
         for s in range(si.shape[0]):
             i, j = si[s], sj[s]
             rx = x[j, 0] - x[i, 0]

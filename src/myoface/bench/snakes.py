@@ -57,10 +57,13 @@ def ellipse_distance(points: np.ndarray, center, radii=RADII) -> np.ndarray:
 
 
 def track_myoface(frames, init):
+    """Our tracker: image force p = 0.02 (the synthetic edges are soft, sigma 1.5 px) and at
+    most 40 iterations per frame (the paper: contours settle "within a few steps" per frame,
+    and the next frame continues from there)."""
     from myoface.analysis.potentials import image_potential
     from myoface.analysis.snakes import SnakeParams, Snakes, make_contours
 
-    snakes = Snakes(make_contours(init, closed=True), SnakeParams(p=0.01, max_iter=200))
+    snakes = Snakes(make_contours(init, closed=True), SnakeParams(p=0.02, max_iter=40))
     out = None
     for f in frames:
         out = snakes.relax(image_potential(f, sigma=SIGMA))
@@ -68,6 +71,9 @@ def track_myoface(frames, init):
 
 
 def track_skimage(frames, init):
+    """The peer: active_contour per contour per frame, from the previous frame's result, on the
+    same frames smoothed with the same Gaussian; parameters were the best of several tried
+    (skimage's defaults lose more contours)."""
     from skimage.filters import gaussian
     from skimage.segmentation import active_contour
 
