@@ -168,9 +168,8 @@ def potential_gradient(pot, gx, gy):
 
 
 @njit(cache=True, inline="always")
-def bilinear(img, x, y):
-    """Bilinear sample of ``img`` at (x, y) = (column, row), clamped to the image."""
-    h, w = img.shape
+def _cell(h, w, x, y):
+    """Clamp (x, y) into the image; the cell's corner (x0, y0) and the fractions (fx, fy)."""
     if x < 0.0:
         x = 0.0
     elif x > w - 1.0:
@@ -181,8 +180,13 @@ def bilinear(img, x, y):
         y = h - 1.0
     x0 = min(int(x), w - 2) if w > 1 else 0
     y0 = min(int(y), h - 2) if h > 1 else 0
-    fx = x - x0
-    fy = y - y0
+    return x0, y0, x - x0, y - y0
+
+
+@njit(cache=True, inline="always")
+def bilinear(img, x, y):
+    """Bilinear sample of ``img`` at (x, y) = (column, row), clamped to the image."""
+    x0, y0, fx, fy = _cell(img.shape[0], img.shape[1], x, y)
     a = img[y0, x0] * (1 - fx) + img[y0, x0 + 1] * fx
     b = img[y0 + 1, x0] * (1 - fx) + img[y0 + 1, x0 + 1] * fx
     return a * (1 - fy) + b * fy
@@ -191,19 +195,7 @@ def bilinear(img, x, y):
 @njit(cache=True, inline="always")
 def bilinear2(ga, gb, x, y):
     """Bilinear samples of two same-shape images at (x, y), sharing the index arithmetic."""
-    h, w = ga.shape
-    if x < 0.0:
-        x = 0.0
-    elif x > w - 1.0:
-        x = w - 1.0
-    if y < 0.0:
-        y = 0.0
-    elif y > h - 1.0:
-        y = h - 1.0
-    x0 = min(int(x), w - 2) if w > 1 else 0
-    y0 = min(int(y), h - 2) if h > 1 else 0
-    fx = x - x0
-    fy = y - y0
+    x0, y0, fx, fy = _cell(ga.shape[0], ga.shape[1], x, y)
     w00 = (1 - fx) * (1 - fy)
     w01 = fx * (1 - fy)
     w10 = (1 - fx) * fy

@@ -257,6 +257,16 @@ def rasterize_coverage_numpy(scr: np.ndarray, tris: np.ndarray, h: int, w: int):
     return tid, zbuf
 
 
+@njit(cache=True, inline="always")
+def _box(img, f, y, x, c):
+    """Mean of the f x f block of channel c whose corner is (y f, x f)."""
+    s = 0.0
+    for dy in range(f):
+        for dx in range(f):
+            s += img[y * f + dy, x * f + dx, c]
+    return s / (f * f)
+
+
 def srgb_lut(n: int = 4096) -> np.ndarray:
     """uint8 sRGB codes of linear values (i + 0.5) / n, i = 0..n-1 (IEC 61966-2-1)."""
     c = (np.arange(n) + 0.5) / n
@@ -268,16 +278,11 @@ def srgb_lut(n: int = 4096) -> np.ndarray:
 def resolve_srgb(img, f, lut, out):
     """Box-filter (H*f, W*f, 3) linear RGB down by ``f`` and encode to sRGB uint8 via ``lut``."""
     h, w = out.shape[0], out.shape[1]
-    inv = 1.0 / (f * f)
     n = lut.shape[0]
     for y in prange(h):
         for x in range(w):
             for c in range(3):
-                s = 0.0
-                for dy in range(f):
-                    for dx in range(f):
-                        s += img[y * f + dy, x * f + dx, c]
-                v = s * inv
+                v = _box(img, f, y, x, c)
                 k = int(v * n)
                 if k < 0:
                     k = 0
@@ -290,15 +295,10 @@ def resolve_srgb(img, f, lut, out):
 def downsample(img, f, out):
     """Box-filter an (H*f, W*f, 3) image down to (H, W, 3)."""
     h, w = out.shape[0], out.shape[1]
-    inv = 1.0 / (f * f)
     for y in range(h):
         for x in range(w):
             for c in range(3):
-                s = 0.0
-                for dy in range(f):
-                    for dx in range(f):
-                        s += img[y * f + dy, x * f + dx, c]
-                out[y, x, c] = s * inv
+                out[y, x, c] = _box(img, f, y, x, c)
 
 
 @njit(cache=True)
