@@ -1,0 +1,39 @@
+"""Benchmark of the viewer (name fixed by BENCH.md)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from myoface.bench import Measurement, benchmark
+
+
+@benchmark("viewer.update_ms", "ms", higher_is_better=False)
+def bench_update(quick: bool) -> Measurement:
+    """A muscle slider moved by 0.1 (as the GUI callback does it) until the worker has relaxed
+    the tissue and pushed the new mesh to the viser scene; server running, no client."""
+    try:
+        from myoface.viewer.app import FaceViewer
+    except ImportError:  # pragma: no cover - viser missing
+        return Measurement(float("nan"), 0)
+    from myoface.model import build_face_model
+
+    v = FaceViewer(build_face_model(), port=0)
+    try:
+        slider = v._sliders["zygomaticus_major_l"]
+        n = 8 if quick else 30
+        times = []
+        for k in range(n + 2):
+            value = round(0.1 * (k % 10), 2)
+            t0 = time.perf_counter()
+            v.state.set_muscle("zygomaticus_major_l", value)
+            slider.value = value
+            v._update()
+            time.sleep(0.0005)
+            v.worker.settled.wait(30)
+            if k >= 2:  # the first two include JIT and factorisations
+                times.append((time.perf_counter() - t0) * 1e3)
+    finally:
+        v.close()
+    return Measurement(float(np.median(times)), n)

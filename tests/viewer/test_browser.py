@@ -1,0 +1,61 @@
+"""The viewer in a real headless Chromium: move a muscle slider in the page, the face moves."""
+
+import shutil
+import time
+
+import numpy as np
+import pytest
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.mark.slow
+def test_slider_moves_the_face_in_the_browser(tmp_path):
+    pytest.importorskip("viser")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    if CHROMIUM is None:
+        pytest.skip("Debian's chromium is not installed (.ci/run installs it)")
+    from myoface.model import build_face_model
+    from myoface.viewer.app import FaceViewer
+
+    fm = build_face_model()
+    corner = int(fm.face.landmark("mouth_corner_l")[0])
+    y0 = fm.skin_vertices()[corner, 1]
+    viewer = FaceViewer(fm, port=0)
+    try:
+        with sync_api.sync_playwright() as pw:
+            browser = pw.chromium.launch(
+                executable_path=CHROMIUM,
+                headless=True,
+                args=[
+                    "--no-sandbox",
+                    "--disable-gpu",
+                    "--disable-background-networking",
+                    "--enable-unsafe-swiftshader",
+                ],
+            )
+            page = browser.new_page(viewport={"width": 1000, "height": 700})
+            page.goto(viewer.url)
+            page.wait_for_selector("canvas", timeout=30000)
+            slider = page.get_by_role("slider").first
+            slider.wait_for(timeout=30000)
+            time.sleep(3.0)  # let the scene arrive and draw
+            before = page.screenshot(path=str(tmp_path / "before.png"))
+            slider.focus()
+            page.keyboard.press("End")  # the first slider: zygomaticus major, left -> 1.0
+            deadline = time.time() + 20
+            while time.time() < deadline and fm.skin_vertices()[corner, 1] - y0 < 2.0:
+                time.sleep(0.2)
+            time.sleep(2.0)
+            after = page.screenshot(path=str(tmp_path / "after.png"))
+            browser.close()
+    finally:
+        viewer.close()
+    assert fm.skin_vertices()[corner, 1] - y0 > 2.0  # the server's mesh: the corner rose
+    import imageio.v3 as iio
+
+    a = iio.imread(before).astype(int)
+    b = iio.imread(after).astype(int)
+    changed = np.abs(a - b).sum(axis=2) > 30
+    # the GUI panel changes too; require changes in the 3-D view (left part of the page)
+    assert changed[:, : a.shape[1] // 2].sum() > 50
