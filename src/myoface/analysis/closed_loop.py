@@ -50,7 +50,13 @@ def truth_sequence(n_frames: int, ids, seed: int = 0) -> np.ndarray:
 
 
 def run_closed_loop(
-    model, n_frames: int = 24, size: int = 256, ids=PAPER_MUSCLES, seed: int = 0, refine: int = 2
+    model,
+    n_frames: int = 24,
+    size: int = 256,
+    ids=PAPER_MUSCLES,
+    seed: int = 0,
+    refine: int = 2,
+    head_frame: str = "contours",
 ) -> ClosedLoopResult:
     """Render ``n_frames`` of known contractions (orthographic frontal camera, make-up texture),
     analyse them with :class:`Analyzer` (contours initialised from the known camera; static
@@ -70,7 +76,7 @@ def run_closed_loop(
         frames.append(renderer.render(model.skin_vertices()))
     model.reset()
     init = project_sections(model, cam)
-    an = Analyzer(model, init, ids, refine=refine, head_reference=())
+    an = Analyzer(model, init, ids, refine=refine, head_frame=head_frame, head_reference=())
     est, quality = [], []
     for k, f in enumerate(frames):
         m = an.measure(f, k)

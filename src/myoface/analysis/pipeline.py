@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from myoface.analysis.estimate import PAPER_ASSIGNMENT, ContractionEstimator, Fiducial
+from myoface.analysis.headframe import HeadTracker, Similarity, head_box
 from myoface.analysis.potentials import image_potential
 from myoface.analysis.snakes import SnakeParams, Snakes, make_contours, resample_polyline
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
@@ -208,9 +209,11 @@ class FrameMeasurement:
     time_s: float
     quality: str  # "ok", or why the frame could not be measured
     contractions: np.ndarray  # (M,) over Analyzer.ids, NaN when not measured
-    head_shift_px: np.ndarray  # (2,)
+    head_shift_px: np.ndarray  # (2,) the head's translation from the calibration frame
     contours: dict = field(repr=False, default_factory=dict)
     iterations: int = 0
+    head_scale: float = 1.0
+    head_rot_rad: float = 0.0
 
 
 class Analyzer:
@@ -225,9 +228,13 @@ class Analyzer:
     refine : Gauss-Newton corrections per frame through the model (0: linear estimate only).
     sigma : Gaussian width (px) of the image potential; ``potential``: see
         :func:`~myoface.analysis.potentials.image_potential`.
-    head_reference : sections whose centroid motion is the head's translation (the paper uses
-        the hairline; the nose is the default here, as the brows move the hairline contour
-        of a face mesh without hair).
+    head_frame : ``"register"`` (default): the head's similarity motion (translation, scale,
+        in-plane rotation) from image registration of the upper face
+        (:class:`~myoface.analysis.headframe.HeadTracker`); the contours are carried along
+        with it before they relax on each frame. ``"contours"``: the paper's scheme, the
+        translation of the ``head_reference`` sections' centroid (the paper uses the
+        hairline).
+    head_reference : sections for ``head_frame="contours"``.
     """
 
     def __init__(
@@ -240,8 +247,15 @@ class Analyzer:
         params: SnakeParams | None = None,
         spacing_px: float = 1.0,
         potential: str = "gaussian",
+        head_frame: str = "register",
         head_reference=("nose",),
     ):
+        if head_frame not in ("register", "contours"):
+            raise MyofaceValueError(
+                f"head_frame must be 'register' or 'contours'; got {head_frame!r}"
+            )
+        self.head_frame = head_frame
+        self.head = None  # HeadTracker, made on the calibration frame
         if not init:
             raise MyofaceValueError("no initial contours")
         unknown = set(init) - set(SECTIONS)
@@ -266,7 +280,9 @@ class Analyzer:
         self.estimator = ContractionEstimator(model, self.fiducials, self.ids)
         self._p0 = None
         self._ref0 = None
+        self._sim = Similarity()
         self.mm_per_px = None
+        self._init = {k: np.asarray(v, dtype=np.float64) for k, v in init.items()}
 
     def _features(self, conts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         allpts = np.concatenate(conts)
@@ -283,10 +299,24 @@ class Analyzer:
     def measure(self, frame: np.ndarray, index: int = 0, time_s: float = 0.0) -> FrameMeasurement:
         """Track the contours into ``frame`` and estimate its contractions. The first frame
         measured is the neutral calibration frame."""
+        if self.head_frame == "register":
+            if self.head is None:
+                self.head = HeadTracker(frame, head_box(self._init, np.shape(frame)))
+                self._sim = self.head.current
+            else:
+                sim = self.head.track(frame)
+                a, b = sim.relative_to(self._sim)
+                self.snakes.transform(a, b)
+                self._sim = sim
         pot = image_potential(frame, sigma=self.sigma, method=self.potential)
         res = self.snakes.relax(pot)
         conts = res.split()
-        pts, ref = self._features(conts)
+        if self.head_frame == "register":
+            # measure in the calibration frame's coordinates: the head's motion removed
+            conts_cal = [self._sim.inverse_apply(c) for c in conts]
+            pts, ref = self._features(conts_cal)
+        else:
+            pts, ref = self._features(conts)
         sizes = np.diff(self.contours.offsets)
         bad = [
             s
@@ -301,7 +331,13 @@ class Analyzer:
             if rms_px < 5:
                 raise MyofaceValueError("the initial contours are too small (under 5 px)")
             self.mm_per_px = rms_mm / rms_px
-        shift = ref - self._ref0
+        if self.head_frame == "register":
+            shift = np.zeros(2)
+            head_t = np.asarray(self._sim.t, dtype=np.float64)
+        else:
+            shift = ref - self._ref0
+            head_t = shift
+        hs = (self._sim.s, self._sim.theta)
         d_mm = (pts - self._p0 - shift) * self.mm_per_px * np.array([1.0, -1.0])
         named = dict(zip(self.sections, conts, strict=True))
         if bad:
@@ -310,20 +346,31 @@ class Analyzer:
                 time_s,
                 "escaped:" + "+".join(bad),
                 np.full(len(self.ids), np.nan),
-                shift,
+                head_t,
                 named,
                 res.iterations,
+                *hs,
             )
         c = self.estimator.estimate(d_mm, refine=self.refine)
-        return FrameMeasurement(index, time_s, "ok", c, shift, named, res.iterations)
+        return FrameMeasurement(index, time_s, "ok", c, head_t, named, res.iterations, *hs)
 
 
 def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_rad: float) -> None:
-    """``frame,time_s,quality,<muscle ids...>,jaw_angle_rad,head_dx_px,head_dy_px`` (empty
-    cells where a frame could not be measured)."""
+    """``frame,time_s,quality,<muscle ids...>,jaw_angle_rad,head_dx_px,head_dy_px,head_scale,
+    head_rot_deg`` (empty cells where a frame could not be measured)."""
     from myoface._io import atomic_output
 
-    cols = ["frame", "time_s", "quality", *ids, "jaw_angle_rad", "head_dx_px", "head_dy_px"]
+    cols = [
+        "frame",
+        "time_s",
+        "quality",
+        *ids,
+        "jaw_angle_rad",
+        "head_dx_px",
+        "head_dy_px",
+        "head_scale",
+        "head_rot_deg",
+    ]
     lines = [",".join(cols)]
     for f in frames:
         vals = ["" if not np.isfinite(v) else f"{v:.5f}" for v in f.contractions]
@@ -340,6 +387,8 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_ra
                     jaw,
                     f"{f.head_shift_px[0]:.3f}",
                     f"{f.head_shift_px[1]:.3f}",
+                    f"{f.head_scale:.5f}",
+                    f"{np.degrees(f.head_rot_rad):.3f}",
                 ]
             )
         )

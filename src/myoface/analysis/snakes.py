@@ -415,6 +415,17 @@ class Snakes:
         self.rest = np.linalg.norm(x[s.sj] - x[s.si], axis=1)  # l_i = initial spacings
         self.reference = None  # (K,) mean |P| per contour on the first relaxed frame
 
+    def transform(self, a, b) -> None:
+        """Move every node by the affine map x -> a x + b (e.g. the head's motion between two
+        frames, applied before relaxing on the next one); rest lengths scale with it."""
+        a = np.asarray(a, dtype=np.float64).reshape(2, 2)
+        b = np.asarray(b, dtype=np.float64).reshape(2)
+        if not (np.isfinite(a).all() and np.isfinite(b).all()):
+            raise MyofaceValueError("the contour transform must be finite")
+        x = self.contours.nodes
+        x[:] = x @ a.T + b
+        self.rest *= np.sqrt(abs(np.linalg.det(a)))
+
     def relax(self, potential: np.ndarray, user_forces: np.ndarray | None = None) -> SnakeResult:
         """Let the contours settle in ``potential`` (H, W), from where they are now."""
         pot = np.ascontiguousarray(potential, dtype=np.float64)
