@@ -77,9 +77,14 @@ class ContractionEstimator:
     fiducials : list of Fiducial
     muscle_ids : the muscles to estimate (default: all of the model's, jaw included);
         the others are held at 0.
+    measure : optional ``skin (V, 3) -> (F, 2)``: how the fiducials are read off the model's
+        skin (x-y plane, mm). Default: the fiducials' vertices. The analyzer passes the same
+        geometric feature rules it applies to the tracked contours, so that the forward model
+        and the measurement agree (a mouth corner is the contour's extreme point, whichever
+        vertex that is in a given expression).
     """
 
-    def __init__(self, model, fiducials: list[Fiducial], muscle_ids=None):
+    def __init__(self, model, fiducials: list[Fiducial], muscle_ids=None, measure=None):
         self.model = model
         self.fiducials = list(fiducials)
         ids = list(model.ids if muscle_ids is None else muscle_ids)
@@ -92,10 +97,13 @@ class ContractionEstimator:
             vl = f.vertex_list
             self.weights[i, list(vl)] = 1.0 / len(vl)
         self.vertices = np.array([f.vertex_list[0] for f in self.fiducials])
+        self._measure = measure
         self.jacobian = self._probe()  # (F, 2, K)
 
     def positions(self, skin: np.ndarray) -> np.ndarray:
         """Fiducial positions (F, 2) (x-y plane, mm) of skin vertices (V, 3)."""
+        if self._measure is not None:
+            return np.asarray(self._measure(skin), dtype=np.float64)
         return self.weights @ skin[:, :2]
 
     def _probe(self) -> np.ndarray:

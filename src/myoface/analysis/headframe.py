@@ -153,21 +153,20 @@ class HeadTracker:
 
 
 def head_box(contours: dict, image_shape) -> tuple[float, float, float, float]:
-    """The registration region from the calibration contours: from above the brows (forehead
-    and hair) down to the nose base, as wide as the brows (the mouth, cheeks and jaw are left
-    out; they move with the muscles)."""
+    """The registration region from the calibration contours: from just below the brows down
+    to the nose base, as wide as the brows (eyes, nose bridge and upper cheeks). The forehead
+    and brows are left out because the frontalis moves them (a region that included them
+    mistook brow raises for head motion in the closed-loop test), and so are the mouth, lower
+    cheeks and jaw."""
     brows = [contours[k] for k in ("eyebrow_r", "eyebrow_l") if k in contours]
     nose = contours.get("nose")
     if not brows or nose is None:
         raise MyofaceValueError("the head frame needs the eyebrow and nose contours")
     b = np.concatenate(brows)
     x0, x1 = b[:, 0].min(), b[:, 0].max()
-    top, bottom = b[:, 1].min(), nose[:, 1].max()
-    hgt = bottom - top
+    brow_low, bottom = b[:, 1].max(), nose[:, 1].max()
+    top = brow_low + 0.1 * (bottom - brow_low)
+    if bottom - top < 4 or x1 - x0 < 8:
+        raise MyofaceValueError("the face is too small for the head frame (brows to nose)")
     h, w = image_shape[:2]
-    return (
-        max(0.0, x0),
-        max(0.0, top - 0.8 * hgt),
-        min(w - 1.0, x1),
-        min(h - 1.0, bottom),
-    )
+    return (max(0.0, x0), max(0.0, top), min(w - 1.0, x1), min(h - 1.0, bottom))

@@ -13,7 +13,9 @@ the real hairline, so its top row does not lie on an image edge.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 import warnings
 
 import numpy as np
@@ -31,6 +33,25 @@ AUTO_SECTIONS = (
     "lips",
     "chin",
 )
+
+
+@contextlib.contextmanager
+def _quiet_native_stderr():
+    """Silence the native (C++) log lines MediaPipe and TensorFlow Lite print to the process's
+    stderr while they set up (``INFO: Created TensorFlow Lite XNNPACK delegate``, ...)."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no real stderr (e.g. captured): nothing to silence
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def _import_mediapipe():
@@ -67,7 +88,7 @@ class FaceMeshDetector:
 
     def __init__(self, video: bool = False, min_confidence: float = 0.5):
         _, face_mesh = _import_mediapipe()
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _quiet_native_stderr():
             warnings.simplefilter("ignore")
             self._fm = face_mesh.FaceMesh(
                 static_image_mode=not video,
@@ -76,6 +97,8 @@ class FaceMeshDetector:
                 min_detection_confidence=min_confidence,
                 min_tracking_confidence=min_confidence,
             )
+            # start the graph now (its threads log as they start), inside the silenced window
+            self._fm.process(np.zeros((64, 64, 3), dtype=np.uint8))
 
     def detect(self, frame) -> np.ndarray | None:
         img = np.asarray(frame)
@@ -136,3 +159,120 @@ def auto_init(frames, face, max_search: int = 30):
         f"no face found in the first {seen} frames of the video (MediaPipe face mesh); "
         "is there a frontal face in it?"
     )
+
+
+# ------------------------------------------------------------------ landmark tracking (option 3)
+
+
+def rigid_vertices(model, fraction: float = 0.05) -> np.ndarray:
+    """Skin vertices that no muscle moves by more than ``fraction`` of the largest motion any
+    unit contraction causes (the head frame is fitted to them)."""
+    fm = model
+    fm.reset()
+    rest = fm.skin_vertices().copy()
+    moved = np.zeros(len(rest))
+    for mid in fm.ids:
+        fm.relax({mid: 1.0}, start="rest")
+        moved = np.maximum(moved, np.linalg.norm(fm.skin_vertices() - rest, axis=1))
+    fm.reset()
+    return np.flatnonzero(moved < fraction * moved.max())
+
+
+def fit_similarity(src: np.ndarray, dst: np.ndarray):
+    """Least-squares similarity (complex scale s = scale * e^{i theta}, translations) with
+    ``dst ~ s (src - src_mean) + dst_mean`` for (N, 2) point sets."""
+    ms, md = src.mean(axis=0), dst.mean(axis=0)
+    za = (src[:, 0] - ms[0]) + 1j * (src[:, 1] - ms[1])
+    zb = (dst[:, 0] - md[0]) + 1j * (dst[:, 1] - md[1])
+    den = np.vdot(za, za).real
+    if den <= 0:
+        raise MyofaceValueError("degenerate point set for the head frame")
+    return np.vdot(za, zb) / den, ms, md
+
+
+def _apply_similarity(s, ms, md, pts):
+    z = ((pts[:, 0] - ms[0]) + 1j * (pts[:, 1] - ms[1])) * s
+    return np.stack([z.real + md[0], z.imag + md[1]], axis=1)
+
+
+class LandmarkAnalyzer:
+    """The analysis loop with MediaPipe's face mesh as the feature tracker instead of snakes.
+
+    Beyond the paper: the detector gives every frame the 468 points of the default face's
+    topology, so the fiducials are read at the very vertices the estimator's forward model
+    uses (no sliding along contours). The head frame is the similarity (translation, scale,
+    in-plane rotation) that best maps the current frame's rigid points (vertices that no
+    muscle moves, :func:`rigid_vertices`) onto the calibration frame's. Frames without a face
+    are reported (``quality="no_face"``) with empty values; the calibration frame is the first
+    frame with a face.
+
+    ``measure(frame, index, time_s)`` returns the same
+    :class:`~myoface.analysis.pipeline.FrameMeasurement` as the snake
+    :class:`~myoface.analysis.pipeline.Analyzer`; its contours are the sections read off the
+    detected points (for the overlay).
+    """
+
+    tracker = "landmarks"
+
+    def __init__(self, model, muscle_ids=None, refine: int = 1, detector=None):
+        from myoface.analysis.estimate import ContractionEstimator
+        from myoface.analysis.pipeline import PAPER_MUSCLES, SECTIONS, model_fiducials
+
+        if model.face.n_vertices != 468:
+            raise MyofaceValueError(
+                "the landmark tracker needs a face model with MediaPipe's 468-point topology "
+                f"(the default face); this one has {model.face.n_vertices} vertices"
+            )
+        self.model = model
+        self.refine = int(refine)
+        self.ids = tuple(PAPER_MUSCLES if muscle_ids is None else muscle_ids)
+        self.sections = [s for s in SECTIONS if s != "hairline"]
+        self.fiducials = [
+            f for f in model_fiducials(model.face) if not f.name.startswith(("hairline", "nose"))
+        ]
+        self.estimator = ContractionEstimator(model, self.fiducials, self.ids)
+        self.rigid = rigid_vertices(model)
+        self.detector = detector if detector is not None else FaceMeshDetector(video=True)
+        self.params = None
+        self.mm_per_px = None
+        self._ref = None  # calibration points (468, 2)
+        self._p0 = None
+
+    def measure(self, frame, index: int = 0, time_s: float = 0.0):
+        from myoface.analysis.pipeline import FrameMeasurement
+
+        pts = self.detector.detect(frame)
+        nan = np.full(len(self.ids), np.nan)
+        if pts is None:  # (before a face is seen, calibration waits for the first face)
+            return FrameMeasurement(index, time_s, "no_face", nan, np.full(2, np.nan), {}, 0)
+        xy = pts[:, :2]
+        contours = contours_from_landmarks(self.model.face, xy, self.sections)
+        if self._ref is None:
+            self._ref = xy.copy()
+            model_xy = self.model.face.vertices[:, :2] * np.array([1.0, -1.0])
+            s, _, _ = fit_similarity(xy, model_xy)
+            self.mm_per_px = float(abs(s))
+            self._p0 = self.estimator.weights @ xy
+        # the current frame mapped into the calibration frame by its rigid points
+        s, ms, md = fit_similarity(xy[self.rigid], self._ref[self.rigid])
+        cal = _apply_similarity(s, ms, md, xy)
+        d_mm = (self.estimator.weights @ cal - self._p0) * self.mm_per_px * np.array([1.0, -1.0])
+        c = self.estimator.estimate(d_mm, refine=self.refine)
+        # head motion (calibration -> current): the rigid points' centroid shift, and the
+        # scale and rotation of the inverse map
+        inv = 1.0 / s
+        head_t = ms - md
+        return FrameMeasurement(
+            index,
+            time_s,
+            "ok",
+            c,
+            np.asarray(head_t, dtype=np.float64),
+            contours,
+            0,
+            float(abs(inv)),
+            float(np.angle(inv)),
+        )
+
+    def close(self) -> None:
+        self.detector.close()

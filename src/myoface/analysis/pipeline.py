@@ -54,12 +54,14 @@ SECTIONS = {
 }
 #: the fiducial features read off each section's contour (see :func:`section_features`)
 FEATURES = {
-    "hairline": ("centroid",),
+    # the hairline and the nose are tracked (head reference, midline) but give no fiducial: an
+    # open contour's centroid moves as its ends slide, by more than these features move
+    "hairline": (),
     "eyebrow_r": ("inner", "centroid", "outer"),
     "eyebrow_l": ("inner", "centroid", "outer"),
     "nasolabial_r": ("top",),
     "nasolabial_l": ("top",),
-    "nose": ("centroid",),
+    "nose": (),
     "lips": ("corner_r", "corner_l", "top", "bottom", "bottom_r", "bottom_l"),
     "chin": ("bottom",),
 }
@@ -83,6 +85,17 @@ def section_vertices(face, section: str) -> np.ndarray:
     return np.array(out)
 
 
+def curve_centroid(pts: np.ndarray, closed: bool) -> np.ndarray:
+    """The centroid of a polyline as a curve (segment midpoints weighted by length), so that
+    it does not move when nodes slide along the curve."""
+    q = np.vstack([pts, pts[:1]]) if closed else pts
+    seg = np.linalg.norm(np.diff(q, axis=0), axis=1)
+    if seg.sum() <= 0:
+        return pts.mean(axis=0)
+    mid = 0.5 * (q[1:] + q[:-1])
+    return (mid * seg[:, None]).sum(axis=0) / seg.sum()
+
+
 def section_features(section: str, pts: np.ndarray, midline_x: float) -> np.ndarray:
     """The feature points (F, 2) of a contour ``pts`` (K, 2), image (x, y) pixels:
     ``inner``/``outer`` the points nearest to / farthest from the face's midline, ``top`` /
@@ -92,7 +105,7 @@ def section_features(section: str, pts: np.ndarray, midline_x: float) -> np.ndar
     out = []
     for f in FEATURES[section]:
         if f == "centroid":
-            out.append(pts.mean(axis=0))
+            out.append(curve_centroid(pts, SECTIONS[section][1]))
         elif f == "inner":
             out.append(pts[np.argmin(np.abs(pts[:, 0] - midline_x))])
         elif f == "outer":
@@ -117,7 +130,7 @@ def section_features(section: str, pts: np.ndarray, midline_x: float) -> np.ndar
             m = (pts[:, 0] >= lo) & (pts[:, 0] <= hi)
             q = pts[m] if m.any() else pts
             out.append(q[np.argmax(q[:, 1])])
-    return np.array(out)
+    return np.array(out).reshape(-1, 2)
 
 
 #: the muscles the paper estimates, plus the jaw
@@ -284,10 +297,21 @@ class Analyzer:
         self.mm_per_px = None
         self._init = {k: np.asarray(v, dtype=np.float64) for k, v in init.items()}
 
+    def _model_features(self, skin: np.ndarray) -> np.ndarray:
+        """The fiducial features of the model's section contours (front view, x-y mm, y up),
+        by the same rules as on the image."""
+        img = skin[:, :2] * np.array([1.0, -1.0])  # image y points down
+        face = self.model.face
+        if not hasattr(self, "_sec_verts"):
+            self._sec_verts = {s: section_vertices(face, s) for s in self.sections}
+        mid = img[self._sec_verts["nose"]].mean(axis=0)[0] if "nose" in self.sections else 0.0
+        feats = [section_features(s, img[self._sec_verts[s]], mid) for s in self.sections]
+        return np.concatenate(feats) * np.array([1.0, -1.0])
+
     def _features(self, conts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         allpts = np.concatenate(conts)
         named = dict(zip(self.sections, conts, strict=True))
-        mid = named["nose"].mean(axis=0)[0] if "nose" in named else allpts[:, 0].mean()
+        mid = curve_centroid(named["nose"], False)[0] if "nose" in named else allpts[:, 0].mean()
         feats = np.concatenate([section_features(s, named[s], mid) for s in self.sections])
         ref = (
             np.concatenate([named[s] for s in self.head_reference]).mean(axis=0)

@@ -9,14 +9,22 @@ from myoface.errors import MyofaceValueError
 
 NAME = "analyze"
 HELP = "track facial features in a video and estimate muscle contractions per frame"
-DESCRIPTION = """Track the face's feature contours (snakes) through a video and estimate the
-contractions of the paper's 12 muscles and the jaw rotation, frame by frame.
+DESCRIPTION = """Track the face's features through a video and estimate the contractions of the
+paper's 12 muscles and the jaw rotation, frame by frame. The first frame is the neutral
+calibration frame.
 
-The contours are initialised from a JSON file you edit (--init; format in
-myoface.analysis.pipeline), drawn on the calibration frame with --check-init so you can see
-them. Writes into the output folder:
+Trackers (--tracker):
+  snakes     the paper's: deformable contours on the feature edges. They start from a JSON
+             file you edit (--init; format in myoface.analysis.pipeline; --check-init draws
+             them on the first frame), or, without --init, from MediaPipe's face mesh on the
+             first frame with a face (needs: pip install "myoface[mediapipe]").
+  landmarks  MediaPipe's face mesh on every frame (same extra): its 468 points share the
+             default face's topology, so fiducials are read at the model's own vertices.
+             Robust on real video where faces are small; needs the default face.
 
-  contractions.csv   frame, time_s, quality, one column per muscle, jaw_angle_rad, head shift
+Writes into the output folder:
+
+  contractions.csv   frame, time_s, quality, one column per muscle, jaw_angle_rad, head frame
   analysis.json      settings, calibration and per-frame diagnostics
   contractions.png   the contractions over time (the paper's Fig. 8)
   overlay.mp4        the contours on the frames (the paper's Fig. 7a)"""
@@ -28,14 +36,27 @@ def add_arguments(p):
     p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("video", help="a video file (mp4, mov, avi, ...) or a folder of images")
     p.add_argument("-o", "--output", help="output folder (required unless --check-init)")
-    p.add_argument("--init", required=True, help="initial contours (JSON) on the first frame")
+    p.add_argument(
+        "--tracker",
+        choices=("snakes", "landmarks"),
+        default="snakes",
+        help="feature tracker (default: snakes, the paper's)",
+    )
+    p.add_argument(
+        "--init",
+        help="initial contours (JSON) on the first frame, for the snakes (default: found "
+        "automatically with MediaPipe's face mesh)",
+    )
     p.add_argument(
         "--check-init", metavar="PNG", help="draw the initial contours on the first frame and stop"
     )
     p.add_argument("--max-frames", type=int, help="analyse at most this many frames")
     p.add_argument("--sigma", type=float, default=1.5, help="potential smoothing, px (default 1.5)")
     p.add_argument(
-        "--refine", type=int, default=1, help="Gauss-Newton corrections per frame (default 1)"
+        "--refine",
+        type=int,
+        help="Gauss-Newton corrections per frame through the model "
+        "(default 1 for snakes, 0 for landmarks)",
     )
     p.add_argument("--quiet", action="store_true")
     add_face_argument(p)
@@ -89,19 +110,49 @@ def plot_contractions(path, ids, times, table, quality):
     plt.close(fig)
 
 
+def _make_analyzer(args, video, fm):
+    """The analyzer and a description of its initialisation (for the sidecar)."""
+    from myoface.analysis.pipeline import Analyzer, load_init
+
+    if args.tracker == "landmarks":
+        from myoface.analysis.landmarks import LandmarkAnalyzer
+
+        if args.init:
+            raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
+        refine = 0 if args.refine is None else args.refine
+        return LandmarkAnalyzer(fm, refine=refine), "MediaPipe face mesh on every frame", 0
+    refine = 1 if args.refine is None else args.refine
+    if args.init:
+        init = load_init(args.init)
+        how, start = str(Path(args.init).resolve()), 0
+    else:
+        from myoface.analysis.landmarks import auto_init
+
+        start, _, init, _ = auto_init(iter(video), fm.face)
+        how = f"automatic: MediaPipe face mesh on frame {start}"
+    w, h = video.size
+    for name, pts in init.items():
+        if (pts < 0).any() or (pts[:, 0] > w - 1).any() or (pts[:, 1] > h - 1).any():
+            raise MyofaceValueError(f"contour {name!r} of {args.init} lies outside the frame")
+    return Analyzer(fm, init, refine=refine, sigma=args.sigma), how, start
+
+
 def run(args) -> int:
     import json
+    import shutil
 
     import numpy as np
 
     from myoface._io import atomic_output, ensure_output_dir
-    from myoface.analysis.pipeline import Analyzer, load_init, write_contractions_csv
+    from myoface.analysis.pipeline import load_init, write_contractions_csv
     from myoface.analysis.video import open_video
     from myoface.render import VideoWriter, progress, write_image
 
     video = open_video(args.video)
-    init = load_init(args.init)
     if args.check_init:
+        if not args.init:
+            raise MyofaceValueError("--check-init draws the contours of --init; give --init")
+        init = load_init(args.init)
         first = next(iter(video), None)
         if first is None:
             raise MyofaceValueError(f"{args.video}: the video has no frames")
@@ -110,30 +161,19 @@ def run(args) -> int:
         return 0
     if not args.output:
         raise MyofaceValueError("give an output folder with -o")
-    h_w = (video.size[1], video.size[0])
-    for name, pts in init.items():
-        if (pts < 0).any() or (pts[:, 0] > h_w[1] - 1).any() or (pts[:, 1] > h_w[0] - 1).any():
-            raise MyofaceValueError(f"contour {name!r} of {args.init} lies outside the frame")
-    out = ensure_output_dir(args.output)
     fm = load_model(args)
-    an = Analyzer(fm, init, refine=args.refine, sigma=args.sigma)
-    frames = []
-    n = video.n_frames if args.max_frames is None else min(args.max_frames, video.n_frames or 10**9)
-    with VideoWriter(out / "overlay.mp4", fps=video.fps) as vw:
-        for k, frame in enumerate(
-            progress(video, total=n, desc="analyzing", enabled=not args.quiet)
-        ):
-            if args.max_frames is not None and k >= args.max_frames:
-                break
-            m = an.measure(frame, k, k / video.fps)
-            frames.append(m)
-            vw.write(
-                draw_contours(
-                    frame, m.contours, (255, 215, 0) if m.quality == "ok" else (230, 40, 40)
-                )
-            )
-    if not frames:
-        raise MyofaceValueError(f"{args.video}: the video has no frames")
+    an, how, start = _make_analyzer(args, video, fm)
+    existed = Path(args.output).exists()
+    out = ensure_output_dir(args.output)
+    try:
+        frames = _analyze(args, video, an, out, start, progress, VideoWriter)
+    except BaseException:
+        if not existed:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    finally:
+        if hasattr(an, "close"):
+            an.close()
     jaw_max = fm.muscles.jaw.max_angle_rad if fm.muscles.jaw is not None else 0.0
     write_contractions_csv(out / "contractions.csv", an.ids, frames, jaw_max)
     table = np.array([f.contractions for f in frames])
@@ -143,22 +183,61 @@ def run(args) -> int:
         "video": str(Path(args.video).resolve()),
         "fps": video.fps,
         "size": list(video.size),
-        "init": str(Path(args.init).resolve()),
+        "tracker": args.tracker,
+        "init": how,
+        "calibration_frame": start,
         "face": args.face or "default",
         "muscles": list(an.ids),
         "mm_per_px": an.mm_per_px,
-        "sigma_px": args.sigma,
-        "refine": args.refine,
-        "snake_params": {
-            k: float(np.mean(v)) if not isinstance(v, int) else v
-            for k, v in vars(an.params).items()
-        },
+        "refine": an.refine,
         "frames": [
             {"frame": f.index, "quality": f.quality, "iterations": f.iterations} for f in frames
         ],
     }
+    if args.tracker == "snakes":
+        side["sigma_px"] = args.sigma
+        side["snake_params"] = {
+            k: float(np.mean(v)) if not isinstance(v, int) else v
+            for k, v in vars(an.params).items()
+        }
     with atomic_output(out / "analysis.json") as tmp:
         tmp.write_text(json.dumps(side, indent=1))
     ok = sum(f.quality == "ok" for f in frames)
     print(f"analysed {len(frames)} frames ({ok} measured); output folder: {out.resolve()}")
     return 0
+
+
+def _analyze(args, video, an, out, start, progress, VideoWriter):
+    """Measure every frame from ``start`` on, writing the overlay video; a clear error when
+    nothing could be measured."""
+    frames = []
+    n = video.n_frames
+    if n is not None:
+        n -= start
+    if args.max_frames is not None:
+        n = args.max_frames if n is None else min(n, args.max_frames)
+    with VideoWriter(out / "overlay.mp4", fps=video.fps) as vw:
+        for k, frame in enumerate(
+            progress(
+                video,
+                total=None if n is None else n + start,
+                desc="analyzing",
+                enabled=not args.quiet,
+            )
+        ):
+            if k < start:
+                continue
+            if args.max_frames is not None and len(frames) >= args.max_frames:
+                break
+            m = an.measure(frame, k, k / video.fps)
+            frames.append(m)
+            vw.write(
+                draw_contours(
+                    frame, m.contours, (255, 215, 0) if m.quality == "ok" else (230, 40, 40)
+                )
+            )
+        if not frames:
+            raise MyofaceValueError(f"{args.video}: the video has no frames")
+        if not any(f.quality == "ok" for f in frames):
+            raise MyofaceValueError(f"{args.video}: no frame could be measured (no face found?)")
+    return frames
