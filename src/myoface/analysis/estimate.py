@@ -107,7 +107,13 @@ class ContractionEstimator:
         return self.weights @ skin[:, :2]
 
     def _probe(self) -> np.ndarray:
+        # the responses depend only on the model, the muscles and the fiducials: cached on the
+        # model, so a second analysis in the same session does not relax the tissue again
         fm = self.model
+        key = ("probe", self.ids, self.weights.tobytes()) if self._measure is None else None
+        cache = fm.__dict__.setdefault("_analysis_cache", {})
+        if key is not None and key in cache:
+            return cache[key]
         fm.reset()
         rest = self.positions(fm.skin_vertices())
         cols = []
@@ -115,7 +121,10 @@ class ContractionEstimator:
             fm.relax({mid: PROBE_CONTRACTION}, start="rest")
             cols.append((self.positions(fm.skin_vertices()) - rest) / PROBE_CONTRACTION)
         fm.reset()
-        return np.stack(cols, axis=-1)
+        jac = np.stack(cols, axis=-1)
+        if key is not None:
+            cache[key] = jac
+        return jac
 
     def _solve(self, a, b, lo, hi):
         k = len(self.ids)

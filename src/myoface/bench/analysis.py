@@ -37,3 +37,99 @@ def bench_closed_loop_corr(quick: bool) -> Measurement:
     return Measurement(
         float(np.nanmin(c)) if np.isfinite(c).any() else float("nan"), len(res.truth)
     )
+
+
+def _sample_video():
+    """The sample video (cached; fetched once, as ``myoface demo`` does)."""
+    from myoface.analysis.sample import fetch_sample_video
+
+    return fetch_sample_video(quiet=True)
+
+
+def _analysis_pass(path, tracker: str, max_frames: int | None) -> int:
+    """Decode ``path`` and analyse every frame (no output files); returns the frame count."""
+    from myoface.analysis.video import open_video
+    from myoface.model import build_face_model
+
+    fm = _cache.get("model")
+    if fm is None:
+        fm = _cache["model"] = build_face_model()
+    video = open_video(path)
+    if tracker == "landmarks":
+        from myoface.analysis.landmarks import LandmarkAnalyzer
+
+        an = LandmarkAnalyzer(fm, refine=0)
+        start = 0
+    else:
+        from myoface.analysis.landmarks import auto_init
+        from myoface.analysis.pipeline import Analyzer
+
+        start, _, init, _ = auto_init(iter(video), fm.face)
+        an = Analyzer(fm, init)
+    n = 0
+    try:
+        for k, frame in enumerate(video):
+            if max_frames is not None and n >= max_frames:
+                break
+            if k >= start:
+                an.measure(frame, k, k / video.fps)
+                n += 1
+    finally:
+        if hasattr(an, "close"):
+            an.close()
+    return n
+
+
+def _mediapipe_pass(path, max_frames: int | None) -> int:
+    from myoface.analysis.landmarks import FaceMeshDetector
+    from myoface.analysis.video import open_video
+
+    n = 0
+    with FaceMeshDetector(video=True) as det:
+        for frame in open_video(path):
+            if max_frames is not None and n >= max_frames:
+                break
+            det.detect(frame)
+            n += 1
+    return n
+
+
+def _fps(fn, quick: bool) -> tuple[float, int]:
+    import statistics
+    import time
+
+    fn()  # warm-up: JIT compilation, model set-up, file cache
+    rates = []
+    for _ in range(1 if quick else 5):
+        t0 = time.perf_counter()
+        n = fn()
+        rates.append(n / (time.perf_counter() - t0))
+    return statistics.median(rates), len(rates)
+
+
+@benchmark("analysis.fps", "1/s", higher_is_better=True, peer="mediapipe face_mesh 0.10.14")
+def bench_analysis_fps(quick: bool) -> Measurement:
+    """Frames per second of the analysis loop on the sample video ``single_face.mp4`` (72
+    frames, 640x360), decode included, no output files: the landmark tracker (MediaPipe's
+    face mesh on every frame, rigid-point head frame, linear model-based estimate). Peer:
+    MediaPipe's face mesh alone on the same decoded frames (video mode), in the same run; the
+    tracker includes it, so the ratio is the cost of myoface's head frame and estimation. The
+    model's one-time set-up (its responses to each muscle, ~1 s) is cached on the model by the
+    untimed warm-up pass, as in a session that analyses several videos."""
+    path = _sample_video()
+    m = None if not quick else 24
+    ours, n = _fps(lambda: _analysis_pass(path, "landmarks", m), quick)
+    peer, _ = _fps(lambda: _mediapipe_pass(path, m), quick)
+    return Measurement(ours, n, peer)
+
+
+@benchmark("analysis.fps_snakes", "1/s", higher_is_better=True, peer="mediapipe face_mesh 0.10.14")
+def bench_analysis_fps_snakes(quick: bool) -> Measurement:
+    """The same with the paper's tracker: snakes on nine contours (automatic initialisation
+    from MediaPipe on the first frame), registered head frame, one Gauss-Newton correction
+    through the model per frame. Peer as for ``analysis.fps``."""
+    path = _sample_video()
+    m = None if not quick else 12
+    ours, n = _fps(lambda: _analysis_pass(path, "snakes", m), quick)
+    peer, _ = _fps(lambda: _mediapipe_pass(path, m), quick)
+    return Measurement(ours, n, peer)

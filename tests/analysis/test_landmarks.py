@@ -1,0 +1,145 @@
+"""The landmark tracker and automatic initialisation (MediaPipe's face mesh, an optional extra),
+and the acceptance test on the real face video (neutral -> smile -> neutral)."""
+
+import numpy as np
+import pytest
+
+from myoface.analysis.landmarks import (
+    contours_from_landmarks,
+    fit_similarity,
+    mediapipe_available,
+    rigid_vertices,
+)
+from myoface.errors import MyofaceValueError
+from tests.conftest import shared_path
+
+needs_mediapipe = pytest.mark.skipif(
+    not mediapipe_available(), reason='needs pip install "myoface[mediapipe]"'
+)
+
+
+def test_fit_similarity_recovers_a_known_map():
+    rng = np.random.default_rng(1)
+    src = rng.normal(size=(30, 2)) * 20
+    s_true = 1.3 * np.exp(1j * 0.2)
+    z = (src[:, 0] + 1j * src[:, 1]) * s_true + (5 - 7j)
+    dst = np.stack([z.real, z.imag], axis=1)
+    s, ms, md = fit_similarity(src, dst)
+    assert abs(s - s_true) < 1e-12
+    zs = (src[:, 0] - ms[0] + 1j * (src[:, 1] - ms[1])) * s + (md[0] + 1j * md[1])
+    assert np.allclose(np.stack([zs.real, zs.imag], 1), dst)
+    with pytest.raises(MyofaceValueError, match="degenerate"):
+        fit_similarity(np.ones((4, 2)), dst[:4])
+
+
+def test_rigid_vertices_leave_out_what_muscles_move():
+    from myoface.analysis.pipeline import model_fiducials
+    from myoface.model import build_face_model
+
+    fm = build_face_model()
+    rigid = set(rigid_vertices(fm).tolist())
+    assert len(rigid) >= 20  # enough points for a stable similarity fit
+    moving = {
+        f.vertex
+        for f in model_fiducials(fm.face)
+        if isinstance(f.vertex, int) and f.name.startswith(("lips", "chin", "eyebrow"))
+    }
+    assert not rigid & moving
+
+
+def test_contours_from_landmarks_checks_the_topology(default_face):
+    pts = default_face.vertices[:, :2] * np.array([10.0, -10.0]) + 300
+    c = contours_from_landmarks(default_face, pts)
+    assert "lips" in c and "hairline" not in c
+    with pytest.raises(MyofaceValueError, match="468"):
+        contours_from_landmarks(default_face, pts[:100])
+
+
+@pytest.fixture(scope="module")
+def real_video():
+    import imageio.v3 as iio
+
+    return iio.imread(shared_path("video", "single_face.mp4"), plugin="pyav")
+
+
+@needs_mediapipe
+@pytest.mark.shared_data
+@pytest.mark.slow
+def test_real_video_smile_with_the_landmark_tracker(real_video):
+    """The sample video: neutral for ~17 frames, a broad smile from frame ~20 to ~68, back to
+    neutral on the last frames (70-71). Zygomaticus major must rise clearly in the smile and
+    fall at the end; the brows do not move in this video, so the frontalis must stay low.
+    Measured when written: zygomatic majors 0.05-0.1 before, 1.0 during, 0.44 on the last
+    frame; frontalis at most 0.39 (the right major belly, frames 5-18), mean 0.06."""
+    from myoface.analysis.landmarks import LandmarkAnalyzer
+    from myoface.model import build_face_model
+
+    fm = build_face_model()
+    an = LandmarkAnalyzer(fm)
+    try:
+        ms = [an.measure(f, k, k / 30) for k, f in enumerate(real_video)]
+    finally:
+        an.close()
+    assert all(m.quality == "ok" for m in ms)
+    c = np.array([m.contractions for m in ms])
+    ids = list(an.ids)
+    for s in "lr":
+        z = c[:, ids.index(f"zygomaticus_major_{s}")]
+        before, smile = z[:15].mean(), z[25:65].mean()
+        assert smile > 0.6 and smile > before + 0.5, (before, smile)
+        assert z[-1] < smile - 0.3, (z[-1], smile)
+    brows = c[:, [i for i, m in enumerate(ids) if m.startswith("frontalis")]]
+    assert brows.max() < 0.5 and brows.mean() < 0.15, (brows.max(), brows.mean())
+    # the head frame: the scale stays near 1 (the subject barely moves toward the camera)
+    assert all(abs(m.head_scale - 1) < 0.05 for m in ms)
+
+
+@needs_mediapipe
+@pytest.mark.shared_data
+def test_no_face_video_fails_cleanly(tmp_path, capsys):
+    from myoface.cli import main
+
+    video = shared_path("video", "no_face.mp4")
+    for tracker in ("snakes", "landmarks"):
+        out = tmp_path / tracker
+        argv = ["analyze", str(video), "-o", str(out), "--tracker", tracker, "--quiet"]
+        assert main(argv) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "face" in err[0], err
+        assert not out.exists()
+
+
+@needs_mediapipe
+@pytest.mark.shared_data
+@pytest.mark.slow
+def test_analyze_real_video_with_automatic_init(tmp_path, capsys):
+    import csv
+    import json
+
+    from myoface.cli import main
+
+    video = shared_path("video", "single_face.mp4")
+    out = tmp_path / "auto"
+    assert main(["analyze", str(video), "-o", str(out), "--max-frames", "6", "--quiet"]) == 0
+    side = json.loads((out / "analysis.json").read_text())
+    assert side["tracker"] == "snakes" and side["init"].startswith("automatic")
+    with open(out / "contractions.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 6 and {"head_scale", "head_rot_deg", "jaw_angle_rad"} <= set(rows[0])
+    # --init belongs to the snakes
+    assert (
+        main(
+            [
+                "analyze",
+                str(video),
+                "-o",
+                str(tmp_path / "x"),
+                "--tracker",
+                "landmarks",
+                "--init",
+                "i.json",
+            ]
+        )
+        == 1
+    )
+    assert "--init is for the snakes" in capsys.readouterr().err
