@@ -57,6 +57,29 @@ def _meets(name: str, value: float) -> str:
     return f"{op} {t:g} {'(met)' if ok else '(**not met**)'}"
 
 
+def _detail_table(r: dict) -> list[str]:
+    """A record's breakdown ``{group: {row: {column: value}}}`` (e.g. tracker -> muscle ->
+    rmse/corr) as one Markdown table with a column per (group, column)."""
+    det = r.get("detail")
+    if not det:
+        return []
+    groups = list(det)
+    rows = list(next(iter(det.values())))
+    cols = list(next(iter(next(iter(det.values())).values())))
+    head = [f"{g} {c}" for g in groups for c in cols]
+    out = [
+        "",
+        f"### `{r['name']}`, in detail",
+        "",
+        "| | " + " | ".join(head) + " |",
+        "|---|" + "---:|" * len(head),
+    ]
+    for row in rows:
+        vals = [det[g].get(row, {}).get(c) for g in groups for c in cols]
+        out.append(f"| {row} | " + " | ".join(_fmt(v) for v in vals) + " |")
+    return out
+
+
 def render(records: list[dict], command: str, date: str, docs: dict[str, str]) -> str:
     machine = records[0]["machine"] if records else "unknown"
     lines = [
@@ -88,6 +111,8 @@ def render(records: list[dict], command: str, date: str, docs: dict[str, str]) -
             f"{_fmt(r['peer_value'])} | {_fmt(ratio) + '×' if ratio else '–'} | {r['n']} | "
             f"{_meets(r['name'], r['value'])} |"
         )
+    for r in records:
+        lines += _detail_table(r)
     lines += ["", "## What each benchmark measures", ""]
     for r in records:
         lines.append(f"- `{r['name']}`: {docs.get(r['name'], '').strip()}")
@@ -111,6 +136,8 @@ def main(argv=None) -> int:
     }
     if args.json:
         records = json.loads(args.json.read_text())
+        side = args.json.with_name(args.json.stem + ".detail.json")
+        details = json.loads(side.read_text()) if side.is_file() else {}
         command = f"myoface bench --json {args.json.name}"
     else:
         cmd = ["myoface", "bench"] + (["--quick"] if args.quick else [])
@@ -119,8 +146,12 @@ def main(argv=None) -> int:
             out = Path(d) / "run.json"
             subprocess.run([*cmd, "--json", str(out)], check=True, stdout=sys.stderr)
             records = json.loads(out.read_text())
+            side = out.with_name(out.stem + ".detail.json")
+            details = json.loads(side.read_text()) if side.is_file() else {}
         command = " ".join(cmd)
     date = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    for r in records:
+        r["detail"] = details.get(r["name"])
     text = render(records, command, date, docs)
     tmp = args.out.with_suffix(".md.part")
     tmp.write_text(text)

@@ -13,7 +13,10 @@ def quickstart_commands():
 
 def test_quickstart_has_two_commands():
     cmds = quickstart_commands()
-    assert cmds == ["pip install -e . && myoface demo", 'pip install -e ".[test]" && pytest']
+    assert cmds == [
+        'pip install -e ".[mediapipe]" && myoface demo',
+        'pip install -e ".[test]" && pytest',
+    ]
 
 
 def test_ci_runs_the_readme_test_command():

@@ -57,10 +57,14 @@ def run_closed_loop(
     seed: int = 0,
     refine: int = 2,
     head_frame: str = "contours",
+    tracker: str = "snakes",
 ) -> ClosedLoopResult:
     """Render ``n_frames`` of known contractions (orthographic frontal camera, make-up texture),
     analyse them with :class:`Analyzer` (contours initialised from the known camera; static
-    head, so no head-frame correction), and return truth and estimates."""
+    head, so no head-frame correction), and return truth and estimates.
+
+    ``tracker="landmarks"`` analyses the same frames with
+    :class:`~myoface.analysis.landmarks.LandmarkAnalyzer` (MediaPipe's face mesh) instead."""
     from myoface.render import Camera, Renderer, to_srgb8
     from myoface.render.dressing import default_skin_texture
 
@@ -75,6 +79,17 @@ def run_closed_loop(
         model.relax(dict(zip(ids, c, strict=True)))
         frames.append(renderer.render(model.skin_vertices()))
     model.reset()
+    if tracker == "landmarks":
+        from myoface.analysis.landmarks import LandmarkAnalyzer
+
+        an = LandmarkAnalyzer(model, ids, refine=0)
+        try:
+            ms = [an.measure(f, k) for k, f in enumerate(frames)]
+        finally:
+            an.close()
+        return ClosedLoopResult(
+            ids, truth, np.array([m.contractions for m in ms]), [m.quality for m in ms]
+        )
     init = project_sections(model, cam)
     an = Analyzer(model, init, ids, refine=refine, head_frame=head_frame, head_reference=())
     est, quality = [], []

@@ -333,6 +333,7 @@ class Analyzer:
                 self.snakes.transform(a, b)
                 self._sim = sim
         pot = image_potential(frame, sigma=self.sigma, method=self.potential)
+        self.last_potential = pot  # for the overlay on the potential (the paper's Fig. 7b)
         res = self.snakes.relax(pot)
         conts = res.split()
         if self.head_frame == "register":

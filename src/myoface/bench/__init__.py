@@ -25,6 +25,8 @@ class Measurement:
     value: float
     n: int
     peer_value: float | None = None
+    #: optional breakdown (JSON-serialisable), e.g. per-muscle errors; shown in BENCHMARKS.md
+    detail: dict | None = None
 
 
 @dataclass
@@ -39,9 +41,13 @@ class BenchRecord:
     peer_value: float | None
     n: int
     machine: str
+    detail: dict | None = None
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The record in BENCH.md's schema (the breakdown ``detail`` is not part of it)."""
+        d = asdict(self)
+        d.pop("detail")
+        return d
 
 
 @dataclass
@@ -132,6 +138,7 @@ def run(
                 None if m.peer_value is None else float(m.peer_value),
                 int(m.n),
                 machine,
+                m.detail,
             )
         )
     return out

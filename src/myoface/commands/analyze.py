@@ -27,7 +27,8 @@ Writes into the output folder:
   contractions.csv   frame, time_s, quality, one column per muscle, jaw_angle_rad, head frame
   analysis.json      settings, calibration and per-frame diagnostics
   contractions.png   the contractions over time (the paper's Fig. 8)
-  overlay.mp4        the contours on the frames (the paper's Fig. 7a)"""
+  overlay.mp4        the contours on the frames (the paper's Fig. 7a)
+  potential.mp4      (snakes) the contours on the image potential (the paper's Fig. 7b)"""
 
 
 def add_arguments(p):
@@ -49,6 +50,14 @@ def add_arguments(p):
     )
     p.add_argument(
         "--check-init", metavar="PNG", help="draw the initial contours on the first frame and stop"
+    )
+    p.add_argument(
+        "--calibration-frame",
+        type=int,
+        default=0,
+        metavar="N",
+        help="the neutral frame to calibrate on; analysis starts there (default 0); with "
+        "--init, the contours are on this frame",
     )
     p.add_argument("--max-frames", type=int, help="analyse at most this many frames")
     p.add_argument("--sigma", type=float, default=1.5, help="potential smoothing, px (default 1.5)")
@@ -77,6 +86,15 @@ def draw_contours(frame, contours: dict, color=(255, 215, 0)):
         yi = np.clip(np.round(y).astype(int), 0, h - 1)
         img[yi, xi] = color
     return img
+
+
+def potential_image(pot):
+    """The potential as a grey RGB image, edges (its ravines) dark, as in the paper's Fig. 7b."""
+    import numpy as np
+
+    lo, hi = np.percentile(pot, [1, 99.5])
+    g = np.clip((pot - lo) / max(hi - lo, 1e-12), 0, 1)
+    return np.repeat((g * 255).astype(np.uint8)[:, :, None], 3, axis=2)
 
 
 def plot_contractions(path, ids, times, table, quality):
@@ -112,23 +130,31 @@ def plot_contractions(path, ids, times, table, quality):
 
 def _make_analyzer(args, video, fm):
     """The analyzer and a description of its initialisation (for the sidecar)."""
+    import itertools
+
     from myoface.analysis.pipeline import Analyzer, load_init
 
+    first = int(args.calibration_frame)
+    if first < 0 or (video.n_frames is not None and first >= video.n_frames):
+        raise MyofaceValueError(
+            f"--calibration-frame must be in [0, {video.n_frames}); got {first}"
+        )
     if args.tracker == "landmarks":
         from myoface.analysis.landmarks import LandmarkAnalyzer
 
         if args.init:
             raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
         refine = 0 if args.refine is None else args.refine
-        return LandmarkAnalyzer(fm, refine=refine), "MediaPipe face mesh on every frame", 0
+        return LandmarkAnalyzer(fm, refine=refine), "MediaPipe face mesh on every frame", first
     refine = 1 if args.refine is None else args.refine
     if args.init:
         init = load_init(args.init)
-        how, start = str(Path(args.init).resolve()), 0
+        how, start = str(Path(args.init).resolve()), first
     else:
         from myoface.analysis.landmarks import auto_init
 
-        start, _, init, _ = auto_init(iter(video), fm.face)
+        k, _, init, _ = auto_init(itertools.islice(video, first, None), fm.face)
+        start = first + k
         how = f"automatic: MediaPipe face mesh on frame {start}"
     w, h = video.size
     for name, pts in init.items():
@@ -216,7 +242,13 @@ def _analyze(args, video, an, out, start, progress, VideoWriter):
         n -= start
     if args.max_frames is not None:
         n = args.max_frames if n is None else min(n, args.max_frames)
-    with VideoWriter(out / "overlay.mp4", fps=video.fps) as vw:
+    import contextlib
+
+    with contextlib.ExitStack() as stack:
+        vw = stack.enter_context(VideoWriter(out / "overlay.mp4", fps=video.fps))
+        pw = None
+        if args.tracker == "snakes":
+            pw = stack.enter_context(VideoWriter(out / "potential.mp4", fps=video.fps))
         for k, frame in enumerate(
             progress(
                 video,
@@ -231,11 +263,10 @@ def _analyze(args, video, an, out, start, progress, VideoWriter):
                 break
             m = an.measure(frame, k, k / video.fps)
             frames.append(m)
-            vw.write(
-                draw_contours(
-                    frame, m.contours, (255, 215, 0) if m.quality == "ok" else (230, 40, 40)
-                )
-            )
+            color = (255, 215, 0) if m.quality == "ok" else (230, 40, 40)
+            vw.write(draw_contours(frame, m.contours, color))
+            if pw is not None:
+                pw.write(draw_contours(potential_image(an.last_potential), m.contours, color))
         if not frames:
             raise MyofaceValueError(f"{args.video}: the video has no frames")
         if not any(f.quality == "ok" for f in frames):

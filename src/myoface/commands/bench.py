@@ -12,6 +12,14 @@ NAME = "bench"
 HELP = "run the benchmarks and print a table (see BENCHMARKS.md)"
 
 
+def detail_path(json_path):
+    """Where ``--json FILE`` puts the benchmarks' breakdowns: ``FILE`` with ``.detail.json``."""
+    from pathlib import Path
+
+    p = Path(json_path)
+    return p.with_name(p.stem + ".detail.json")
+
+
 def add_arguments(p):
     p.add_argument("--quick", action="store_true", help="smaller sizes / fewer repeats (< 60 s)")
     p.add_argument("--only", metavar="PREFIX", help="only benchmarks whose name starts with PREFIX")
@@ -60,4 +68,10 @@ def run(args) -> int:
         with atomic_output(args.json) as tmp:
             tmp.write_text(json.dumps([r.to_dict() for r in records], indent=2) + "\n")
         print(f"wrote {args.json}")
+        details = {r.name: r.detail for r in records if r.detail}
+        if details:  # breakdowns (e.g. per muscle) beside the records, outside their schema
+            side = detail_path(args.json)
+            with atomic_output(side) as tmp:
+                tmp.write_text(json.dumps(details, indent=2) + "\n")
+            print(f"wrote {side}")
     return 0
