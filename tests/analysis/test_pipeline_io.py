@@ -86,3 +86,22 @@ def test_contractions_csv_errors(tmp_path, text, match):
     p.write_text(text)
     with pytest.raises(MyofaceFormatError, match=match):
         read_contractions_csv(p, ["jaw"])
+
+
+def test_low_contrast_frame_is_reported_not_measured():
+    """A washed-out frame (a fade to grey) is recorded as low contrast with empty values."""
+    from myoface.analysis.pipeline import Analyzer, project_sections
+    from myoface.model import build_face_model
+    from myoface.render import Camera, Renderer, to_srgb8
+    from myoface.render.dressing import default_skin_texture
+
+    fm = build_face_model()
+    cam = Camera.front(fm.face.vertices, width=160, height=160, fov_deg=None)
+    r = Renderer(fm.face, cam, texture=to_srgb8(default_skin_texture(fm.face, 256, makeup=True)))
+    img = r.render(fm.skin_vertices()).astype(np.float64)
+    faded = (0.15 * img + 0.85 * img.mean()).astype(np.uint8)
+    an = Analyzer(fm, project_sections(fm, cam), head_frame="contours", head_reference=())
+    q = [an.measure(f, k).quality for k, f in enumerate([img.astype(np.uint8), faded])]
+    assert q[0] == "ok" and q[1] == "low_contrast", q
+    m = an.measure(faded, 2)
+    assert np.isnan(m.contractions).all()

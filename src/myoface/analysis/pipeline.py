@@ -137,6 +137,8 @@ def section_features(section: str, pts: np.ndarray, midline_x: float) -> np.ndar
 PAPER_MUSCLES = tuple(PAPER_ASSIGNMENT)
 #: a frame is unusable when more than this fraction of a contour's nodes escaped its edge
 ESCAPE_LIMIT = 0.5
+#: ... or when its strongest edges are weaker than this fraction of the calibration frame's
+LOW_CONTRAST = 0.35
 
 
 # ------------------------------------------------------------------------------ init files
@@ -296,6 +298,7 @@ class Analyzer:
         self._sim = Similarity()
         self.mm_per_px = None
         self._init = {k: np.asarray(v, dtype=np.float64) for k, v in init.items()}
+        self._contrast0 = None
 
     def _model_features(self, skin: np.ndarray) -> np.ndarray:
         """The fiducial features of the model's section contours (front view, x-y mm, y up),
@@ -334,6 +337,11 @@ class Analyzer:
                 self._sim = sim
         pot = image_potential(frame, sigma=self.sigma, method=self.potential)
         self.last_potential = pot  # for the overlay on the potential (the paper's Fig. 7b)
+        # contrast: the strongest edges of the frame (99th percentile of |P|)
+        contrast = float(np.percentile(-pot, 99))
+        if self._contrast0 is None:
+            self._contrast0 = contrast
+        low = contrast < LOW_CONTRAST * self._contrast0
         res = self.snakes.relax(pot)
         conts = res.split()
         if self.head_frame == "register":
@@ -365,11 +373,13 @@ class Analyzer:
         hs = (self._sim.s, self._sim.theta)
         d_mm = (pts - self._p0 - shift) * self.mm_per_px * np.array([1.0, -1.0])
         named = dict(zip(self.sections, conts, strict=True))
+        if low and self._p0 is not None:
+            bad = ["low_contrast"]
         if bad:
             return FrameMeasurement(
                 index,
                 time_s,
-                "escaped:" + "+".join(bad),
+                "low_contrast" if bad == ["low_contrast"] else "escaped:" + "+".join(bad),
                 np.full(len(self.ids), np.nan),
                 head_t,
                 named,
