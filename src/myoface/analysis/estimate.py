@@ -77,14 +77,9 @@ class ContractionEstimator:
     fiducials : list of Fiducial
     muscle_ids : the muscles to estimate (default: all of the model's, jaw included);
         the others are held at 0.
-    measure : optional ``skin (V, 3) -> (F, 2)``: how the fiducials are read off the model's
-        skin (x-y plane, mm). Default: the fiducials' vertices. The analyzer passes the same
-        geometric feature rules it applies to the tracked contours, so that the forward model
-        and the measurement agree (a mouth corner is the contour's extreme point, whichever
-        vertex that is in a given expression).
     """
 
-    def __init__(self, model, fiducials: list[Fiducial], muscle_ids=None, measure=None):
+    def __init__(self, model, fiducials: list[Fiducial], muscle_ids=None):
         self.model = model
         self.fiducials = list(fiducials)
         ids = list(model.ids if muscle_ids is None else muscle_ids)
@@ -97,22 +92,19 @@ class ContractionEstimator:
             vl = f.vertex_list
             self.weights[i, list(vl)] = 1.0 / len(vl)
         self.vertices = np.array([f.vertex_list[0] for f in self.fiducials])
-        self._measure = measure
         self.jacobian = self._probe()  # (F, 2, K)
 
     def positions(self, skin: np.ndarray) -> np.ndarray:
         """Fiducial positions (F, 2) (x-y plane, mm) of skin vertices (V, 3)."""
-        if self._measure is not None:
-            return np.asarray(self._measure(skin), dtype=np.float64)
         return self.weights @ skin[:, :2]
 
     def _probe(self) -> np.ndarray:
         # the responses depend only on the model, the muscles and the fiducials: cached on the
         # model, so a second analysis in the same session does not relax the tissue again
         fm = self.model
-        key = ("probe", self.ids, self.weights.tobytes()) if self._measure is None else None
+        key = ("probe", self.ids, self.weights.tobytes())
         cache = fm.__dict__.setdefault("_analysis_cache", {})
-        if key is not None and key in cache:
+        if key in cache:
             return cache[key]
         fm.reset()
         rest = self.positions(fm.skin_vertices())
@@ -122,8 +114,7 @@ class ContractionEstimator:
             cols.append((self.positions(fm.skin_vertices()) - rest) / PROBE_CONTRACTION)
         fm.reset()
         jac = np.stack(cols, axis=-1)
-        if key is not None:
-            cache[key] = jac
+        cache[key] = jac
         return jac
 
     def _solve(self, a, b, lo, hi):

@@ -237,7 +237,6 @@ class LandmarkAnalyzer:
         self.estimator = ContractionEstimator(model, self.fiducials, self.ids)
         self.rigid = rigid_vertices(model)
         self.detector = detector if detector is not None else FaceMeshDetector(video=True)
-        self.params = None
         self.mm_per_px = None
         self._ref = None  # calibration points (468, 2)
         self._p0 = None

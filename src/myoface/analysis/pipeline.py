@@ -300,17 +300,6 @@ class Analyzer:
         self._init = {k: np.asarray(v, dtype=np.float64) for k, v in init.items()}
         self._contrast0 = None
 
-    def _model_features(self, skin: np.ndarray) -> np.ndarray:
-        """The fiducial features of the model's section contours (front view, x-y mm, y up),
-        by the same rules as on the image."""
-        img = skin[:, :2] * np.array([1.0, -1.0])  # image y points down
-        face = self.model.face
-        if not hasattr(self, "_sec_verts"):
-            self._sec_verts = {s: section_vertices(face, s) for s in self.sections}
-        mid = img[self._sec_verts["nose"]].mean(axis=0)[0] if "nose" in self.sections else 0.0
-        feats = [section_features(s, img[self._sec_verts[s]], mid) for s in self.sections]
-        return np.concatenate(feats) * np.array([1.0, -1.0])
-
     def _features(self, conts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         allpts = np.concatenate(conts)
         named = dict(zip(self.sections, conts, strict=True))
