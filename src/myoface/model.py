@@ -96,6 +96,9 @@ class FaceModel:
         self.expressions = dict(expressions or {})
         self.state: TissueState = rest_state(self.tissue)
         self._contractions = np.zeros(len(self.ids))
+        #: results derived from this model that do not change with its state (e.g. the
+        #: analysis' responses to each muscle), computed once per model
+        self.cache: dict = {}
 
     # ------------------------------------------------------------------ inputs
     @property

@@ -83,18 +83,12 @@ def run_closed_loop(
         from myoface.analysis.landmarks import LandmarkAnalyzer
 
         an = LandmarkAnalyzer(model, ids, refine=0)
-        try:
-            ms = [an.measure(f, k) for k, f in enumerate(frames)]
-        finally:
-            an.close()
-        return ClosedLoopResult(
-            ids, truth, np.array([m.contractions for m in ms]), [m.quality for m in ms]
-        )
-    init = project_sections(model, cam)
-    an = Analyzer(model, init, ids, refine=refine, head_frame=head_frame, head_reference=())
-    est, quality = [], []
-    for k, f in enumerate(frames):
-        m = an.measure(f, k)
-        est.append(m.contractions)
-        quality.append(m.quality)
+    else:
+        init = project_sections(model, cam)
+        an = Analyzer(model, init, ids, refine=refine, head_frame=head_frame, head_reference=())
+    try:
+        ms = [an.measure(f, k) for k, f in enumerate(frames)]
+    finally:
+        an.close()
+    est, quality = [m.contractions for m in ms], [m.quality for m in ms]
     return ClosedLoopResult(ids, truth, np.array(est), quality)

@@ -103,9 +103,8 @@ class ContractionEstimator:
         # model, so a second analysis in the same session does not relax the tissue again
         fm = self.model
         key = ("probe", self.ids, self.weights.tobytes())
-        cache = fm.__dict__.setdefault("_analysis_cache", {})
-        if key in cache:
-            return cache[key]
+        if key in fm.cache:
+            return fm.cache[key]
         fm.reset()
         rest = self.positions(fm.skin_vertices())
         cols = []
@@ -114,7 +113,7 @@ class ContractionEstimator:
             cols.append((self.positions(fm.skin_vertices()) - rest) / PROBE_CONTRACTION)
         fm.reset()
         jac = np.stack(cols, axis=-1)
-        cache[key] = jac
+        fm.cache[key] = jac
         return jac
 
     def _solve(self, a, b, lo, hi):

@@ -168,9 +168,8 @@ def rigid_vertices(model, fraction: float = 0.05) -> np.ndarray:
     """Skin vertices that no muscle moves by more than ``fraction`` of the largest motion any
     unit contraction causes (the head frame is fitted to them). Cached on the model."""
     fm = model
-    cache = fm.__dict__.setdefault("_analysis_cache", {})
-    if ("rigid", fraction) in cache:
-        return cache[("rigid", fraction)]
+    if ("rigid", fraction) in fm.cache:
+        return fm.cache[("rigid", fraction)]
     fm.reset()
     rest = fm.skin_vertices().copy()
     moved = np.zeros(len(rest))
@@ -178,7 +177,7 @@ def rigid_vertices(model, fraction: float = 0.05) -> np.ndarray:
         fm.relax({mid: 1.0}, start="rest")
         moved = np.maximum(moved, np.linalg.norm(fm.skin_vertices() - rest, axis=1))
     fm.reset()
-    out = cache[("rigid", fraction)] = np.flatnonzero(moved < fraction * moved.max())
+    out = fm.cache[("rigid", fraction)] = np.flatnonzero(moved < fraction * moved.max())
     return out
 
 

@@ -362,13 +362,11 @@ class Analyzer:
         hs = (self._sim.s, self._sim.theta)
         d_mm = (pts - self._p0 - shift) * self.mm_per_px * np.array([1.0, -1.0])
         named = dict(zip(self.sections, conts, strict=True))
-        if low and self._p0 is not None:
-            bad = ["low_contrast"]
-        if bad:
+        if low or bad:
             return FrameMeasurement(
                 index,
                 time_s,
-                "low_contrast" if bad == ["low_contrast"] else "escaped:" + "+".join(bad),
+                "low_contrast" if low else "escaped:" + "+".join(bad),
                 np.full(len(self.ids), np.nan),
                 head_t,
                 named,
@@ -377,6 +375,72 @@ class Analyzer:
             )
         c = self.estimator.estimate(d_mm, refine=self.refine)
         return FrameMeasurement(index, time_s, "ok", c, head_t, named, res.iterations, *hs)
+
+    def close(self) -> None:
+        """Nothing to release (the landmark tracker's detector has to be closed)."""
+
+
+def make_analyzer(
+    model,
+    video,
+    tracker: str = "snakes",
+    init=None,
+    calibration_frame: int = 0,
+    refine=None,
+    sigma: float = 1.5,
+):
+    """The analyzer for ``video`` (a :class:`~myoface.analysis.video.Video`), how it was
+    initialised (text) and the calibration frame's index.
+
+    ``tracker="snakes"``: :class:`Analyzer` from ``init`` (contours on the calibration frame)
+    or, when ``init`` is None, from MediaPipe's face mesh on the first frame with a face from
+    ``calibration_frame`` on. ``tracker="landmarks"``:
+    :class:`~myoface.analysis.landmarks.LandmarkAnalyzer` (``init`` must be None).
+    ``refine`` defaults to 1 for the snakes and 0 for the landmarks.
+    """
+    import itertools
+
+    first = int(calibration_frame)
+    if first < 0 or (video.n_frames is not None and first >= video.n_frames):
+        raise MyofaceValueError(
+            f"--calibration-frame must be in [0, {video.n_frames}); got {first}"
+        )
+    if tracker == "landmarks":
+        from myoface.analysis.landmarks import LandmarkAnalyzer
+
+        if init is not None:
+            raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
+        an = LandmarkAnalyzer(model, refine=0 if refine is None else refine)
+        return an, "MediaPipe face mesh on every frame", first
+    if tracker != "snakes":
+        raise MyofaceValueError(f"tracker must be 'snakes' or 'landmarks'; got {tracker!r}")
+    if init is not None:
+        how, start = "contours given", first
+    else:
+        from myoface.analysis.landmarks import auto_init
+
+        k, _, init, _ = auto_init(itertools.islice(video, first, None), model.face)
+        start = first + k
+        how = f"automatic: MediaPipe face mesh on frame {start}"
+    w, h = video.size
+    for name, pts in init.items():
+        if (pts < 0).any() or (pts[:, 0] > w - 1).any() or (pts[:, 1] > h - 1).any():
+            raise MyofaceValueError(f"contour {name!r} lies outside the frame")
+    an = Analyzer(model, init, refine=1 if refine is None else refine, sigma=sigma)
+    return an, how, start
+
+
+def measure_frames(video, analyzer, start: int = 0, max_frames: int | None = None):
+    """Yield ``(frame, FrameMeasurement)`` for the frames of ``video`` from ``start`` on (at
+    most ``max_frames``)."""
+    n = 0
+    for k, frame in enumerate(video):
+        if k < start:
+            continue
+        if max_frames is not None and n >= max_frames:
+            break
+        n += 1
+        yield frame, analyzer.measure(frame, k, k / video.fps)
 
 
 def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_rad: float) -> None:

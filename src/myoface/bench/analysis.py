@@ -70,6 +70,7 @@ def _sample_video():
 
 def _analysis_pass(path, tracker: str, max_frames: int | None) -> int:
     """Decode ``path`` and analyse every frame (no output files); returns the frame count."""
+    from myoface.analysis.pipeline import make_analyzer, measure_frames
     from myoface.analysis.video import open_video
     from myoface.model import build_face_model
 
@@ -77,29 +78,11 @@ def _analysis_pass(path, tracker: str, max_frames: int | None) -> int:
     if fm is None:
         fm = _cache["model"] = build_face_model()
     video = open_video(path)
-    if tracker == "landmarks":
-        from myoface.analysis.landmarks import LandmarkAnalyzer
-
-        an = LandmarkAnalyzer(fm, refine=0)
-        start = 0
-    else:
-        from myoface.analysis.landmarks import auto_init
-        from myoface.analysis.pipeline import Analyzer
-
-        start, _, init, _ = auto_init(iter(video), fm.face)
-        an = Analyzer(fm, init)
-    n = 0
+    an, _, start = make_analyzer(fm, video, tracker)
     try:
-        for k, frame in enumerate(video):
-            if max_frames is not None and n >= max_frames:
-                break
-            if k >= start:
-                an.measure(frame, k, k / video.fps)
-                n += 1
+        return sum(1 for _ in measure_frames(video, an, start, max_frames))
     finally:
-        if hasattr(an, "close"):
-            an.close()
-    return n
+        an.close()
 
 
 def _mediapipe_pass(path, max_frames: int | None) -> int:
@@ -117,16 +100,13 @@ def _mediapipe_pass(path, max_frames: int | None) -> int:
 
 
 def _fps(fn, quick: bool) -> tuple[float, int]:
-    import statistics
-    import time
+    """Frames per second of ``fn() -> frames`` (median over repeats, after a warm-up that
+    also compiles, sets the model up and fills the file cache)."""
+    from myoface.bench import time_median
 
-    fn()  # warm-up: JIT compilation, model set-up, file cache
-    rates = []
-    for _ in range(1 if quick else 5):
-        t0 = time.perf_counter()
-        n = fn()
-        rates.append(n / (time.perf_counter() - t0))
-    return statistics.median(rates), len(rates)
+    reps = 1 if quick else 5
+    n = fn()  # the warm-up
+    return n / time_median(fn, reps, warmup=0), reps
 
 
 @benchmark("analysis.fps", "1/s", higher_is_better=True, peer="mediapipe face_mesh 0.10.14")

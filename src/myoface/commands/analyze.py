@@ -128,41 +128,6 @@ def plot_contractions(path, ids, times, table, quality):
     plt.close(fig)
 
 
-def _make_analyzer(args, video, fm):
-    """The analyzer and a description of its initialisation (for the sidecar)."""
-    import itertools
-
-    from myoface.analysis.pipeline import Analyzer, load_init
-
-    first = int(args.calibration_frame)
-    if first < 0 or (video.n_frames is not None and first >= video.n_frames):
-        raise MyofaceValueError(
-            f"--calibration-frame must be in [0, {video.n_frames}); got {first}"
-        )
-    if args.tracker == "landmarks":
-        from myoface.analysis.landmarks import LandmarkAnalyzer
-
-        if args.init:
-            raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
-        refine = 0 if args.refine is None else args.refine
-        return LandmarkAnalyzer(fm, refine=refine), "MediaPipe face mesh on every frame", first
-    refine = 1 if args.refine is None else args.refine
-    if args.init:
-        init = load_init(args.init)
-        how, start = str(Path(args.init).resolve()), first
-    else:
-        from myoface.analysis.landmarks import auto_init
-
-        k, _, init, _ = auto_init(itertools.islice(video, first, None), fm.face)
-        start = first + k
-        how = f"automatic: MediaPipe face mesh on frame {start}"
-    w, h = video.size
-    for name, pts in init.items():
-        if (pts < 0).any() or (pts[:, 0] > w - 1).any() or (pts[:, 1] > h - 1).any():
-            raise MyofaceValueError(f"contour {name!r} of {args.init} lies outside the frame")
-    return Analyzer(fm, init, refine=refine, sigma=args.sigma), how, start
-
-
 def run(args) -> int:
     import json
     import shutil
@@ -170,7 +135,7 @@ def run(args) -> int:
     import numpy as np
 
     from myoface._io import atomic_output, ensure_output_dir
-    from myoface.analysis.pipeline import load_init, write_contractions_csv
+    from myoface.analysis.pipeline import load_init, make_analyzer, write_contractions_csv
     from myoface.analysis.video import open_video
     from myoface.render import VideoWriter, progress, write_image
 
@@ -188,7 +153,14 @@ def run(args) -> int:
     if not args.output:
         raise MyofaceValueError("give an output folder with -o")
     fm = load_model(args)
-    an, how, start = _make_analyzer(args, video, fm)
+    # (with the landmark tracker, make_analyzer refuses any --init before it is read)
+    init = args.init if args.tracker == "landmarks" else args.init and load_init(args.init)
+    init = init or None
+    an, how, start = make_analyzer(
+        fm, video, args.tracker, init, args.calibration_frame, args.refine, args.sigma
+    )
+    if args.init:
+        how = str(Path(args.init).resolve())
     existed = Path(args.output).exists()
     out = ensure_output_dir(args.output)
     try:
@@ -198,8 +170,7 @@ def run(args) -> int:
             shutil.rmtree(out, ignore_errors=True)
         raise
     finally:
-        if hasattr(an, "close"):
-            an.close()
+        an.close()
     jaw_max = fm.muscles.jaw.max_angle_rad if fm.muscles.jaw is not None else 0.0
     write_contractions_csv(out / "contractions.csv", an.ids, frames, jaw_max)
     table = np.array([f.contractions for f in frames])
@@ -234,34 +205,25 @@ def run(args) -> int:
 
 
 def _analyze(args, video, an, out, start, progress, VideoWriter):
-    """Measure every frame from ``start`` on, writing the overlay video; a clear error when
+    """Measure every frame from ``start`` on, writing the overlay videos; a clear error when
     nothing could be measured."""
+    import contextlib
+
+    from myoface.analysis.pipeline import measure_frames
+
     frames = []
     n = video.n_frames
     if n is not None:
         n -= start
     if args.max_frames is not None:
         n = args.max_frames if n is None else min(n, args.max_frames)
-    import contextlib
-
     with contextlib.ExitStack() as stack:
         vw = stack.enter_context(VideoWriter(out / "overlay.mp4", fps=video.fps))
         pw = None
         if args.tracker == "snakes":
             pw = stack.enter_context(VideoWriter(out / "potential.mp4", fps=video.fps))
-        for k, frame in enumerate(
-            progress(
-                video,
-                total=None if n is None else n + start,
-                desc="analyzing",
-                enabled=not args.quiet,
-            )
-        ):
-            if k < start:
-                continue
-            if args.max_frames is not None and len(frames) >= args.max_frames:
-                break
-            m = an.measure(frame, k, k / video.fps)
+        measured = measure_frames(video, an, start, args.max_frames)
+        for frame, m in progress(measured, total=n, desc="analyzing", enabled=not args.quiet):
             frames.append(m)
             color = (255, 215, 0) if m.quality == "ok" else (230, 40, 40)
             vw.write(draw_contours(frame, m.contours, color))
