@@ -49,8 +49,14 @@ def _check_file(path) -> Path:
     return path
 
 
-def _read_obj(path: Path) -> FaceMesh:
-    """A small OBJ reader keeping vertex order and per-vertex uv (``f v/vt``) as written."""
+def _read_obj(path: Path, split_uv_seams: bool = False) -> FaceMesh:
+    """A small OBJ reader keeping vertex order and per-vertex uv (``f v/vt``) as written.
+
+    A vertex with several texture coordinates (on a seam of the texture atlas) keeps the last
+    one, unless ``split_uv_seams``: then every distinct (vertex, uv) pair becomes a vertex of its
+    own (same position), so that the texture maps without cracks; the mesh then has boundaries
+    along the seams.
+    """
     verts, uvs, faces, face_uv = [], [], [], []
     try:
         text = path.read_text(errors="strict")
@@ -81,6 +87,12 @@ def _read_obj(path: Path) -> FaceMesh:
     f = np.where(f < 0, f + len(v) + 1, f) - 1  # OBJ is 1-based; negatives count from the end
     uv = None
     fu = np.asarray(face_uv, np.int64)
+    if uvs and (fu > 0).all() and split_uv_seams:
+        pairs, inv = np.unique(np.stack([f.ravel(), fu.ravel()], 1), axis=0, return_inverse=True)
+        uva = np.asarray(uvs, float)
+        return FaceMesh(
+            v[pairs[:, 0]], inv.reshape(-1, 3), uva[pairs[:, 1] - 1], name=path.stem
+        )
     if uvs and (fu > 0).all():
         uva = np.asarray(uvs, float)
         uv = np.zeros((len(v), 2))
@@ -88,15 +100,18 @@ def _read_obj(path: Path) -> FaceMesh:
     return FaceMesh(v, f, uv, name=path.stem)
 
 
-def load_mesh(path: str | os.PathLike, *, scale_mm: float = 1.0) -> FaceMesh:
+def load_mesh(
+    path: str | os.PathLike, *, scale_mm: float = 1.0, split_uv_seams: bool = False
+) -> FaceMesh:
     """Read a triangle mesh (OBJ, PLY, STL, OFF, GLB, ... through trimesh) as a FaceMesh.
 
-    OBJ files are read directly (vertex order and per-vertex uv kept exactly). Positions are
-    multiplied by ``scale_mm`` (use 10 for a mesh in centimetres, 1000 for metres).
+    OBJ files are read directly (vertex order and per-vertex uv kept exactly, or split at the
+    texture's seams with ``split_uv_seams``, see :func:`_read_obj`). Positions are multiplied by
+    ``scale_mm`` (use 10 for a mesh in centimetres, 1000 for metres).
     """
     path = _check_file(path)
     if path.suffix.lower() == ".obj":
-        face = _read_obj(path)
+        face = _read_obj(path, split_uv_seams)
     else:
         import trimesh
 

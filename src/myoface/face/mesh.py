@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import cached_property
 
+import numba
 import numpy as np
 
 from myoface.errors import MyofaceValueError
@@ -172,3 +173,65 @@ class FaceMesh:
     def with_vertices(self, vertices: np.ndarray) -> FaceMesh:
         """The same mesh (topology, uv, texture, landmarks) with new vertex positions."""
         return FaceMesh(vertices, self.triangles, self.uv, self.texture, self.landmarks, self.name)
+
+
+@numba.njit(cache=True)
+def _closest_on_triangle(p, a, b, c):
+    """Closest point to p on triangle abc (Ericson, Real-Time Collision Detection, 5.1.5)."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = ab @ ap, ac @ ap
+    if d1 <= 0 and d2 <= 0:
+        return a
+    bp = p - b
+    d3, d4 = ab @ bp, ac @ bp
+    if d3 >= 0 and d4 <= d3:
+        return b
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0 and d1 >= 0 and d3 <= 0:
+        return a + d1 / (d1 - d3) * ab
+    cp = p - c
+    d5, d6 = ab @ cp, ac @ cp
+    if d6 >= 0 and d5 <= d6:
+        return c
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0 and d2 >= 0 and d6 <= 0:
+        return a + d2 / (d2 - d6) * ac
+    va = d3 * d6 - d5 * d4
+    if va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:
+        return b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b)
+    denom = 1.0 / (va + vb + vc)
+    return a + ab * (vb * denom) + ac * (vc * denom)
+
+
+@numba.njit(cache=True)
+def _point_mesh_distance(points, verts, tris, cand):
+    out = np.empty(points.shape[0])
+    for i in range(points.shape[0]):
+        best = np.inf
+        for k in range(cand.shape[1]):
+            f = cand[i, k]
+            q = _closest_on_triangle(points[i], verts[tris[f, 0]], verts[tris[f, 1]], verts[tris[f, 2]])
+            d = np.sqrt(((points[i] - q) ** 2).sum())
+            best = min(best, d)
+        out[i] = best
+    return out
+
+
+def point_mesh_distance(
+    points: np.ndarray, vertices: np.ndarray, triangles: np.ndarray, n_candidates: int = 32
+) -> np.ndarray:
+    """Distance (mm) from each of ``points`` (N, 3) to the surface of a triangle mesh.
+
+    Exact over the ``n_candidates`` triangles whose centroids are nearest each point (a k-d tree
+    picks them); on meshes whose triangles are small against the distances asked, that is the
+    nearest triangle.
+    """
+    from scipy.spatial import cKDTree
+
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    t = np.ascontiguousarray(triangles, dtype=np.int64)
+    k = min(n_candidates, len(t))
+    _, cand = cKDTree(v[t].mean(axis=1)).query(p, k=k)
+    cand = np.asarray(cand, dtype=np.int64).reshape(len(p), k)
+    return _point_mesh_distance(p, v, t, cand)

@@ -1,0 +1,370 @@
+"""Personal face models: the generic face conformed to one person's scan or photograph.
+
+From a scan (Terzopoulos & Waters 1993, Section IV): the head is sampled into cylindrical range
+and colour maps (:mod:`myoface.face.cylindrical`); the generic mesh is aligned to the person by
+the landmarks, projected radially into the maps' (angle, height) domain, pulled onto the
+person's features while its edges act as springs that keep its shape, and each node then samples
+the range map: its cylindrical coordinates and the sampled radius give its 3-D position, and the
+same coordinates are its texture coordinates into the colour map.
+
+From a photograph (beyond the paper): MediaPipe's face mesh gives the 468 points of the default
+face's topology; they become the personal mesh (its depth blended with the generic face's), and
+the photo its texture.
+
+Because the result keeps the default face's topology (468 vertices, MediaPipe indexing), the
+default muscle set, the landmark groups and everything built on them carry over unchanged.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.face.cylindrical import CYBERWARE_SHAPE, CylindricalMaps, maps_from_mesh
+from myoface.face.mesh import FaceMesh, point_mesh_distance
+
+#: iBUG-68 index ranges of the label names of menpo's LJSON files (and their short forms)
+IBUG_LABELS = {
+    "jaw": range(0, 17),
+    "chin": range(0, 17),
+    "left_eyebrow": range(17, 22),
+    "leyebrow": range(17, 22),
+    "right_eyebrow": range(22, 27),
+    "reyebrow": range(22, 27),
+    "nose": range(27, 36),
+    "left_eye": range(36, 42),
+    "leye": range(36, 42),
+    "right_eye": range(42, 48),
+    "reye": range(42, 48),
+    "mouth": range(48, 68),
+}
+#: iBUG-68 points used to align the generic face and to pull it onto the person: all but the
+#: jaw line, which annotators place on the 2-D silhouette and so matches no fixed vertex
+INNER_IBUG = np.arange(17, 68)
+#: a face's landmarks fit the generic face's after a similarity to within this fraction of the
+#: face's size (RMS); more means the points are not a face's (or not in iBUG order)
+MAX_FIT_RESIDUAL = 0.12
+#: weight of a landmark constraint against one edge spring in the 2-D relaxation
+LANDMARK_WEIGHT = 50.0
+
+
+@lru_cache(maxsize=1)
+def ibug68_to_mediapipe() -> tuple[tuple[int, ...], ...]:
+    """For each iBUG-68 landmark, the default-face vertices whose mean is that point.
+
+    Source: P. Yan, Mediapipe_2_Dlib_Landmarks (2024), see ``data/ibug68_mediapipe.json``.
+    """
+    text = (resources.files("myoface") / "data" / "ibug68_mediapipe.json").read_text()
+    return tuple(tuple(v) for v in json.loads(text)["ibug68_to_mediapipe"])
+
+
+def ibug_points_of(vertices: np.ndarray) -> np.ndarray:
+    """(68, D) iBUG-68 points of a (468, D) array in the default topology."""
+    return np.array([np.asarray(vertices)[list(ix)].mean(axis=0) for ix in ibug68_to_mediapipe()])
+
+
+def read_landmarks(path: str | os.PathLike) -> np.ndarray:
+    """Read 68 3-D landmarks (iBUG-68 order, mm) from a file.
+
+    Accepted: menpo's ``.ljson`` (label groups jaw/chin, left/right eyebrow, nose, left/right eye,
+    mouth are put in iBUG order; otherwise the points must already be in it), a ``.json`` list of
+    68 [x, y, z] (or ``{"points": [...]}``), ``.npy``, or a text file of 68 rows ``x y z``.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise MyofaceFileNotFoundError(f"no such landmark file: {p}")
+    try:
+        if p.suffix.lower() == ".npy":
+            pts = np.load(p, allow_pickle=False)
+        elif p.suffix.lower() in (".json", ".ljson"):
+            doc = json.loads(p.read_text())
+            pts = _points_from_json(doc)
+        else:
+            pts = np.loadtxt(p, delimiter="," if p.suffix.lower() == ".csv" else None)
+    except (OSError, ValueError, TypeError, KeyError, IndexError) as exc:
+        raise MyofaceFormatError(f"cannot read landmarks from {p}: {exc}") from None
+    pts = np.asarray(pts, dtype=np.float64)
+    if pts.shape != (68, 3) or not np.isfinite(pts).all():
+        raise MyofaceFormatError(
+            f"{p}: expected 68 finite 3-D points (iBUG-68 order); got shape {pts.shape}"
+        )
+    return pts
+
+
+def _points_from_json(doc) -> np.ndarray:
+    if isinstance(doc, list):
+        return np.asarray(doc, dtype=np.float64)
+    if "points" in doc:
+        return np.asarray(doc["points"], dtype=np.float64)
+    groups = doc.get("groups", {})
+    if not groups:
+        raise KeyError("no 'points' and no 'groups'")
+    g = groups.get("LJSON", next(iter(groups.values())))
+    pts = np.asarray(g["landmarks"]["points"], dtype=np.float64)
+    labels = g.get("labels", [])
+    if len(pts) != 68 or not labels:
+        return pts
+    out = np.full((68, pts.shape[1]), np.nan)
+    for lab in labels:
+        rng = IBUG_LABELS.get(str(lab["label"]).lower())
+        if rng is None or len(rng) != len(lab["mask"]):
+            return pts  # unknown labelling: take the points in their order
+        out[list(rng)] = pts[lab["mask"]]
+    return out
+
+
+# --------------------------------------------------------------------------- alignment
+
+
+def fit_similarity_3d(src: np.ndarray, dst: np.ndarray):
+    """Least-squares ``dst ~ s R src + t`` (Umeyama 1991). Returns (s, R (3,3), t (3,))."""
+    src, dst = np.asarray(src, float), np.asarray(dst, float)
+    ms, md = src.mean(0), dst.mean(0)
+    a, b = src - ms, dst - md
+    u, sig, vt = np.linalg.svd(b.T @ a)
+    d = np.sign(np.linalg.det(u @ vt))
+    dmat = np.diag([1.0, 1.0, d])
+    r = u @ dmat @ vt
+    s = float(np.trace(np.diag(sig) @ dmat) / (a**2).sum())
+    return s, r, md - s * r @ ms
+
+
+@dataclass
+class Alignment:
+    """How a person's scan sits against the generic face.
+
+    ``X_head = rotation.T @ (X_scan - translation_mm)`` takes scan coordinates to the head frame,
+    where the generic face scaled by ``scale`` fits the person's landmarks.
+    """
+
+    scale: float
+    rotation: np.ndarray
+    translation_mm: np.ndarray
+    residual_mm: float  # RMS landmark distance after the fit
+    face_size_mm: float
+
+    def to_head(self, points: np.ndarray) -> np.ndarray:
+        return (np.asarray(points, float) - self.translation_mm) @ self.rotation
+
+
+def align_to_generic(landmarks_mm: np.ndarray, generic: FaceMesh) -> Alignment:
+    """Fit the generic face's iBUG points to a person's (68, 3) landmarks by a similarity."""
+    lm = np.asarray(landmarks_mm, float)
+    g = ibug_points_of(generic.vertices)
+    s, r, t = fit_similarity_3d(g[INNER_IBUG], lm[INNER_IBUG])
+    fit = s * g[INNER_IBUG] @ r.T + t
+    res = float(np.sqrt(((fit - lm[INNER_IBUG]) ** 2).sum(1).mean()))
+    size = float(np.sqrt(((lm[INNER_IBUG] - lm[INNER_IBUG].mean(0)) ** 2).sum(1).mean()))
+    if not size > 0:
+        raise MyofaceValueError("the landmarks all lie at one point")
+    if res > MAX_FIT_RESIDUAL * size or s <= 0:
+        raise MyofaceValueError(
+            f"the landmarks do not fit a face: after the best similarity they are "
+            f"{res:.1f} mm (RMS) from the generic face's, {res / size:.0%} of the face's size "
+            f"(at most {MAX_FIT_RESIDUAL:.0%} for a face). Are they 68 iBUG points in iBUG order?"
+        )
+    return Alignment(s, r, t, res, size)
+
+
+def orient_mesh(mesh: FaceMesh, alignment: Alignment) -> FaceMesh:
+    """``mesh`` moved into the head frame of ``alignment`` (same topology, uv, texture)."""
+    return FaceMesh(
+        alignment.to_head(mesh.vertices),
+        mesh.triangles,
+        mesh.uv,
+        mesh.texture,
+        mesh.landmarks,
+        mesh.name,
+    )
+
+
+# --------------------------------------------------------------------------- conformation
+
+
+def _edge_operator(n: int, edges: np.ndarray):
+    from scipy import sparse
+
+    m = len(edges)
+    rows = np.repeat(np.arange(m), 2)
+    cols = edges.ravel()
+    vals = np.tile([1.0, -1.0], m)
+    return sparse.csr_matrix((vals, (rows, cols)), shape=(m, n))
+
+
+def relax_2d(
+    start: np.ndarray,
+    edges: np.ndarray,
+    groups: list,
+    targets: np.ndarray,
+    weight: float = LANDMARK_WEIGHT,
+) -> np.ndarray:
+    """Pull a 2-D spring mesh onto feature targets, its edges resisting change.
+
+    Minimises ``sum_edges |(p_i - p_j) - (q_i - q_j)|^2 + weight sum_k |mean(p[groups[k]]) -
+    targets[k]|^2`` over node positions p (N, 2), starting shape q = ``start``: the edges are
+    springs whose rest vectors are the generic mesh's, the features stiff springs to their targets.
+    """
+    from scipy import sparse
+    from scipy.sparse.linalg import spsolve
+
+    q = np.asarray(start, float)
+    n = len(q)
+    d = _edge_operator(n, edges)
+    rows, cols, vals = [], [], []
+    for k, g in enumerate(groups):
+        for i in g:
+            rows.append(k)
+            cols.append(i)
+            vals.append(1.0 / len(g))
+    c = sparse.csr_matrix((vals, (rows, cols)), shape=(len(groups), n))
+    a = (d.T @ d + weight * (c.T @ c)).tocsc()
+    out = np.empty_like(q)
+    for k in range(q.shape[1]):
+        b = d.T @ (d @ q[:, k]) + weight * (c.T @ targets[:, k])
+        out[:, k] = spsolve(a, b)
+    return out
+
+
+@dataclass
+class Conformation:
+    """A personal face mesh and how it was made (see :func:`conform_to_maps`)."""
+
+    face: FaceMesh
+    maps: CylindricalMaps
+    theta_y: np.ndarray  # (V, 2) the nodes' angles (rad) and heights (mm) in the maps
+    landmark_error_mm: np.ndarray  # (68,) distance of each iBUG point of the mesh to the target
+    info: dict = field(default_factory=dict)
+
+
+def conform_to_maps(
+    maps: CylindricalMaps,
+    landmarks_mm: np.ndarray,
+    generic: FaceMesh,
+    *,
+    use: np.ndarray | None = None,
+    name: str = "person",
+    max_hole_cells: int = 64,
+) -> Conformation:
+    """Conform the generic mesh to a person's maps (T&W 1993 §IV).
+
+    Parameters
+    ----------
+    maps : the person's range and colour maps (head frame).
+    landmarks_mm : (68, 3) the person's iBUG-68 landmarks in the maps' head frame.
+    generic : the generic face (default topology).
+    use : iBUG indices that pull the mesh (default :data:`INNER_IBUG`); the others are only
+        measured (a hold-out).
+    max_hole_cells : holes in the range map up to this size are filled; a node landing in a
+        larger hole is an error.
+    """
+    lm = np.asarray(landmarks_mm, float)
+    use = INNER_IBUG if use is None else np.asarray(use)
+    al = align_to_generic(lm, generic)
+    placed = al.scale * generic.vertices @ al.rotation.T + al.translation_mm
+    filled = maps.filled(max_hole_cells)
+    cyl = filled.to_cylindrical(placed)
+    r0 = float(np.median(cyl[:, 2]))  # angles are scaled to arc length at this radius (mm)
+    q = np.column_stack([cyl[:, 0] * r0, cyl[:, 1]])
+    tgt_cyl = filled.to_cylindrical(lm)
+    groups = [list(ibug68_to_mediapipe()[k]) for k in use]
+    targets = np.column_stack([tgt_cyl[use, 0] * r0, tgt_cyl[use, 1]])
+    p = relax_2d(q, generic.edges, groups, targets)
+    theta, y = p[:, 0] / r0, p[:, 1]
+    r = filled.sample_radius(theta, y)
+    bad = ~np.isfinite(r)
+    if bad.any():
+        frac = bad.mean()
+        raise MyofaceValueError(
+            f"the range map has holes under the face: {bad.sum()} of {len(r)} mesh nodes "
+            f"({frac:.0%}) land where the scan has no surface (holes larger than "
+            f"{max_hole_cells} cells are not filled). Rescan, or fill the holes first."
+        )
+    verts = filled.to_cartesian(theta, y, r)
+    face = FaceMesh(
+        verts,
+        generic.triangles,
+        filled.uv_of(theta, y),
+        filled.rgb,
+        generic.landmarks,
+        name=name,
+    )
+    err = np.linalg.norm(ibug_points_of(verts) - lm, axis=1)
+    info = {
+        "scale": al.scale,
+        "alignment_residual_mm": al.residual_mm,
+        "landmarks_used": [int(k) for k in use],
+        "filled_hole_cells": int(maps.holes.sum() - filled.holes.sum()),
+    }
+    return Conformation(face, filled, np.column_stack([theta, y]), err, info)
+
+
+def surface_errors(face: FaceMesh, scan: FaceMesh) -> dict:
+    """Distances (mm) from the personal mesh's vertices to the scanned surface, and back from
+    the scan's vertices in the face region (within the mesh's cylindrical footprint) to it."""
+    d_fwd = point_mesh_distance(face.vertices, scan.vertices, scan.triangles)
+    lo, hi = face.vertices.min(0), face.vertices.max(0)
+    front = scan.vertices[:, 2] > np.percentile(face.vertices[:, 2], 5)
+    inside = (
+        (scan.vertices[:, 0] > lo[0]) & (scan.vertices[:, 0] < hi[0])
+        & (scan.vertices[:, 1] > lo[1]) & (scan.vertices[:, 1] < hi[1]) & front
+    )
+    d_back = point_mesh_distance(scan.vertices[inside], face.vertices, face.triangles)
+    return {
+        "mesh_to_scan_mean_mm": float(d_fwd.mean()),
+        "mesh_to_scan_max_mm": float(d_fwd.max()),
+        "scan_to_mesh_mean_mm": float(d_back.mean()) if len(d_back) else float("nan"),
+        "scan_to_mesh_p95_mm": float(np.percentile(d_back, 95)) if len(d_back) else float("nan"),
+    }
+
+
+def face_from_scan(
+    scan: FaceMesh,
+    landmarks_mm: np.ndarray,
+    *,
+    generic: FaceMesh | None = None,
+    shape: tuple[int, int] = CYBERWARE_SHAPE,
+    name: str | None = None,
+) -> Conformation:
+    """The whole scan route: orient the scan by its landmarks, make its maps, conform.
+
+    ``scan`` is a (textured) head mesh in millimetres with +y roughly up; ``landmarks_mm`` its
+    (68, 3) iBUG-68 points in the same coordinates. The result is in the head frame.
+    """
+    from myoface.face.io import load_default_face
+
+    generic = load_default_face() if generic is None else generic
+    al = align_to_generic(landmarks_mm, generic)
+    head = orient_mesh(scan, al)
+    lm = al.to_head(landmarks_mm)
+    axis_z = al.scale * float(generic.vertices[[234, 454], 2].mean())
+    maps = maps_from_mesh(head, shape, axis_x_mm=0.0, axis_z_mm=axis_z)
+    _check_head(maps, lm)
+    conf = conform_to_maps(maps, lm, generic, name=name or scan.name)
+    conf.info["scan_rotation"] = al.rotation.tolist()
+    conf.info["scan_translation_mm"] = al.translation_mm.tolist()
+    conf.info["head_scan"] = head
+    return conf
+
+
+def _check_head(maps: CylindricalMaps, lm_head: np.ndarray) -> None:
+    """A head seen from its axis: the rays towards the face must meet the surface."""
+    tc = maps.to_cylindrical(lm_head)
+    row, col = maps.to_cells(tc[:, 0], tc[:, 1])
+    h, w = maps.shape
+    r0, r1 = int(max(row.min(), 0)), int(min(row.max(), h - 1)) + 1
+    c0, c1 = int(col.min()), int(col.max()) + 1
+    if r1 <= r0 or c1 <= c0:
+        raise MyofaceValueError("the landmarks fall outside the scan's maps")
+    region = maps.holes[r0:r1, np.arange(c0, c1) % w]
+    if region.mean() > 0.5:
+        raise MyofaceValueError(
+            f"this mesh is not a head around its vertical axis: {region.mean():.0%} of the rays "
+            "towards the face (between the landmarks) meet no surface"
+        )
