@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from myoface.errors import MyofaceFileNotFoundError, MyofaceValueError
+from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 from myoface.face import FaceMesh, load_default_face, load_mesh, read_waters_geoface
 from myoface.muscles import (
     MuscleSet,
@@ -253,6 +253,8 @@ def load_face_model(path: str | os.PathLike | None = None, *, muscles=None, para
     - ``None`` or ``"default"``: the bundled default face and muscles;
     - a folder with Waters' geoface files (``faceline.dat``, ``index.dat``, ``muscle.dat``,
       optionally ``expression-macros.dat``, whose expressions land in ``model.expressions``);
+    - a ``.myoface`` face file (:mod:`myoface.face.facefile`), e.g. a personal face made by
+      ``myoface face from-scan`` / ``from-photo``: its mesh, texture and muscles;
     - a mesh file (OBJ/PLY/...) with a muscle file: ``muscles=`` or ``<mesh stem>.muscles.toml``
       beside it; a mesh in the default 468-vertex topology may use the default muscles.
     """
@@ -272,6 +274,8 @@ def load_face_model(path: str | os.PathLike | None = None, *, muscles=None, para
         if (p / "expression-macros.dat").is_file() and not muscles:
             expr = read_waters_expressions(p, ms)
         return FaceModel(face, ms, params, expressions=expr)
+    if p.suffix.lower() == ".myoface":
+        return _load_face_file(p, muscles, params)
     face = load_mesh(p)
     if face.n_vertices == 468 and not face.landmarks:
         # the default (MediaPipe) topology: give it the default face's landmark groups
@@ -294,4 +298,30 @@ def load_face_model(path: str | os.PathLike | None = None, *, muscles=None, para
         raise MyofaceFileNotFoundError(
             f"no muscle file for {p}: give one (muscles=...) or put it at {side}"
         )
+    return FaceModel(face, ms, params)
+
+
+def _load_face_file(path: Path, muscles, params) -> FaceModel:
+    import tomllib
+
+    from myoface.face import default_mirror_map, is_default_topology
+    from myoface.face.facefile import read_face
+    from myoface.muscles import muscles_from_dict
+
+    face, toml_text, _ = read_face(path)
+    if muscles:
+        return FaceModel(face, load_muscles(muscles, face), params)
+    default_topology = is_default_topology(face)
+    if toml_text is None:
+        if not default_topology:
+            raise MyofaceFileNotFoundError(
+                f"{path} holds no muscles and is not in the default topology: give muscles=..."
+            )
+        return FaceModel(face, load_default_muscles(face), params)
+    try:
+        doc = tomllib.loads(toml_text)
+    except tomllib.TOMLDecodeError as exc:
+        raise MyofaceFormatError(f"{path}: its muscles.toml is not valid TOML: {exc}") from None
+    mirror = default_mirror_map() if default_topology else None
+    ms = muscles_from_dict(doc, face, where=f"{path}:muscles.toml", mirror=mirror)
     return FaceModel(face, ms, params)

@@ -1,6 +1,13 @@
 """Geometry level: the skin surface (:class:`FaceMesh`), its readers/writers and the default face."""
 
-from myoface.face.io import load_default_face, load_mesh, read_waters_geoface, save_mesh
+from myoface.face.io import (
+    default_mirror_map,
+    is_default_topology,
+    load_default_face,
+    load_mesh,
+    read_waters_geoface,
+    save_mesh,
+)
 from myoface.face.mesh import (
     FaceMesh,
     boundary_loops,
@@ -12,6 +19,8 @@ from myoface.face.mesh import (
 __all__ = [
     "FaceMesh",
     "boundary_loops",
+    "default_mirror_map",
+    "is_default_topology",
     "load_default_face",
     "load_mesh",
     "read_waters_geoface",

@@ -119,7 +119,11 @@ class CylindricalMaps:
         """Angles, heights and radii -> (N, 3) points in the head frame (mm)."""
         t, r = np.asarray(theta_rad, float), np.asarray(radius_mm, float)
         return np.column_stack(
-            [self.axis_x_mm + r * np.sin(t), np.asarray(y_mm, float), self.axis_z_mm + r * np.cos(t)]
+            [
+                self.axis_x_mm + r * np.sin(t),
+                np.asarray(y_mm, float),
+                self.axis_z_mm + r * np.cos(t),
+            ]
         )
 
     def sample_radius(self, theta_rad, y_mm) -> np.ndarray:
@@ -168,7 +172,9 @@ class CylindricalMaps:
         for _ in range(400):  # Jacobi sweeps of the Laplace equation inside the small holes
             for arr in (r, rgb):
                 nb = (
-                    np.roll(arr, 1, 1) + np.roll(arr, -1, 1) + _shift_rows(arr, 1)
+                    np.roll(arr, 1, 1)
+                    + np.roll(arr, -1, 1)
+                    + _shift_rows(arr, 1)
                     + _shift_rows(arr, -1)
                 ) / 4
                 arr[fill] = nb[fill]

@@ -40,6 +40,32 @@ def load_default_face() -> FaceMesh:
     )
 
 
+_MIRROR_MAP: np.ndarray | None = None
+
+
+def default_mirror_map() -> np.ndarray:
+    """(468,) for each vertex of the default topology, its left/right mirror partner.
+
+    Found on the bundled default face, which is exactly symmetric in x (midline vertices are
+    their own partners).
+    """
+    global _MIRROR_MAP
+    if _MIRROR_MAP is None:
+        from scipy.spatial import cKDTree
+
+        v = load_default_face().vertices
+        d, idx = cKDTree(v).query(v * np.array([-1.0, 1.0, 1.0]))
+        if d.max() > 1e-3 or len(set(idx.tolist())) != len(v):
+            raise RuntimeError("the default face is not symmetric; cannot pair its vertices")
+        _MIRROR_MAP = idx.astype(np.int64)
+    return _MIRROR_MAP.copy()
+
+
+def is_default_topology(face: FaceMesh) -> bool:
+    """Whether ``face`` has the default face's vertices and triangles by number (MediaPipe's)."""
+    return face.n_vertices == 468 and np.array_equal(face.triangles, load_default_face().triangles)
+
+
 def _check_file(path) -> Path:
     path = Path(path)
     if not path.exists():
@@ -90,9 +116,7 @@ def _read_obj(path: Path, split_uv_seams: bool = False) -> FaceMesh:
     if uvs and (fu > 0).all() and split_uv_seams:
         pairs, inv = np.unique(np.stack([f.ravel(), fu.ravel()], 1), axis=0, return_inverse=True)
         uva = np.asarray(uvs, float)
-        return FaceMesh(
-            v[pairs[:, 0]], inv.reshape(-1, 3), uva[pairs[:, 1] - 1], name=path.stem
-        )
+        return FaceMesh(v[pairs[:, 0]], inv.reshape(-1, 3), uva[pairs[:, 1] - 1], name=path.stem)
     if uvs and (fu > 0).all():
         uva = np.asarray(uvs, float)
         uv = np.zeros((len(v), 2))

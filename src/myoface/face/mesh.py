@@ -170,6 +170,19 @@ class FaceMesh:
                 f"unknown landmark group {name!r}; this face has: {known}"
             ) from None
 
+    def mirrored(self, mirror: np.ndarray) -> FaceMesh:
+        """The mesh reflected in x (x -> -x) and renumbered by ``mirror`` (a vertex permutation
+        pairing each vertex with its mirror partner), so that vertex i of the result lies where
+        the reflection of vertex ``mirror[i]`` does. On a face with a left/right symmetric
+        topology, whatever is placed on the result's left side by vertex numbers lands, reflected
+        back, on this face's right side.
+        """
+        m = np.asarray(mirror, dtype=np.int64)
+        if m.shape != (self.n_vertices,) or not np.array_equal(np.sort(m), np.arange(len(m))):
+            raise MyofaceValueError("mirror must be a permutation of the vertex indices")
+        v = self.vertices[m] * np.array([-1.0, 1.0, 1.0])
+        return FaceMesh(v, m[self.triangles][:, [0, 2, 1]], None, None, self.landmarks, self.name)
+
     def with_vertices(self, vertices: np.ndarray) -> FaceMesh:
         """The same mesh (topology, uv, texture, landmarks) with new vertex positions."""
         return FaceMesh(vertices, self.triangles, self.uv, self.texture, self.landmarks, self.name)
@@ -210,7 +223,9 @@ def _point_mesh_distance(points, verts, tris, cand):
         best = np.inf
         for k in range(cand.shape[1]):
             f = cand[i, k]
-            q = _closest_on_triangle(points[i], verts[tris[f, 0]], verts[tris[f, 1]], verts[tris[f, 2]])
+            q = _closest_on_triangle(
+                points[i], verts[tris[f, 0]], verts[tris[f, 1]], verts[tris[f, 2]]
+            )
             d = np.sqrt(((points[i] - q) ** 2).sum())
             best = min(best, d)
         out[i] = best

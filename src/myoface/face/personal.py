@@ -312,8 +312,11 @@ def surface_errors(face: FaceMesh, scan: FaceMesh) -> dict:
     lo, hi = face.vertices.min(0), face.vertices.max(0)
     front = scan.vertices[:, 2] > np.percentile(face.vertices[:, 2], 5)
     inside = (
-        (scan.vertices[:, 0] > lo[0]) & (scan.vertices[:, 0] < hi[0])
-        & (scan.vertices[:, 1] > lo[1]) & (scan.vertices[:, 1] < hi[1]) & front
+        (scan.vertices[:, 0] > lo[0])
+        & (scan.vertices[:, 0] < hi[0])
+        & (scan.vertices[:, 1] > lo[1])
+        & (scan.vertices[:, 1] < hi[1])
+        & front
     )
     d_back = point_mesh_distance(scan.vertices[inside], face.vertices, face.triangles)
     return {
@@ -368,3 +371,99 @@ def _check_head(maps: CylindricalMaps, lm_head: np.ndarray) -> None:
             f"this mesh is not a head around its vertical axis: {region.mean():.0%} of the rays "
             "towards the face (between the landmarks) meet no surface"
         )
+
+
+# --------------------------------------------------------------------------- found landmarks
+
+#: resolution (H, W) of the colour map the landmark detector looks at: about 0.6 mm per cell on
+#: a head, so that the face spans a few hundred pixels
+DETECTION_SHAPE = (512, 1024)
+
+
+def find_landmarks(scan: FaceMesh) -> np.ndarray:
+    """The (68, 3) iBUG-68 landmarks of a textured head mesh, found automatically.
+
+    Jaw-line points (0-16) that fall where the scan has no surface are NaN; the others are
+    always finite.
+
+    The scan's colour map, seen from its vertical axis, looks like a photograph of the face;
+    MediaPipe's face mesh (the ``mediapipe`` extra) finds the default topology's 468 points in
+    it, their angles and heights plus the range map give them in 3-D, and the iBUG points are
+    their means (:func:`ibug_points_of`).
+    """
+    from myoface.analysis.landmarks import FaceMeshDetector
+
+    if scan.texture is None or scan.uv is None:
+        raise MyofaceValueError(
+            "cannot find facial features on an untextured mesh: give its texture, or give "
+            "landmarks (68 iBUG points)"
+        )
+    maps = maps_from_mesh(scan, DETECTION_SHAPE)
+    with FaceMeshDetector(video=False) as det:
+        pts = det.detect(maps.rgb)
+    if pts is None:
+        raise MyofaceValueError(
+            "no face found in the scan's colour map (is it a textured head, upright, +y up?); "
+            "give landmarks (68 iBUG points) instead"
+        )
+    theta, y = maps.from_cells(pts[:, 1] - 0.5, pts[:, 0] - 0.5)
+    r = maps.filled().sample_radius(theta, y)
+    p3 = maps.to_cartesian(theta, y, r)
+    lm = ibug_points_of(p3)  # jaw points found over holes (under the chin) stay NaN
+    if not np.isfinite(lm[INNER_IBUG]).all():
+        raise MyofaceValueError("the face found in the scan's colour map lies over holes in it")
+    return lm
+
+
+# --------------------------------------------------------------------------- photographs
+
+#: share of the generic face's depth mixed into the depth MediaPipe infers from one photo
+PHOTO_DEPTH_BLEND = 0.5
+
+
+def face_from_photo(
+    image: np.ndarray,
+    *,
+    generic: FaceMesh | None = None,
+    name: str = "person",
+    depth_blend: float = PHOTO_DEPTH_BLEND,
+) -> tuple[FaceMesh, dict]:
+    """A personal face from one frontal photograph (RGB uint8 (H, W, 3)).
+
+    MediaPipe's face mesh (the ``mediapipe`` extra) gives the 468 points of the default
+    topology; a similarity takes them onto the generic face (one photo has no absolute scale, so
+    the face gets the generic face's size), the depth is blended with the generic face's
+    (``depth_blend`` of it; monocular depth is the weakest coordinate), and the photo becomes the
+    texture, each vertex's texture coordinate being where it was found in it.
+    """
+    from myoface.analysis.landmarks import FaceMeshDetector
+    from myoface.face.io import load_default_face
+
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
+        raise MyofaceValueError(f"a photo must be an (H, W, 3) uint8 image; got {img.shape}")
+    img = np.ascontiguousarray(img[:, :, :3])
+    if not 0 <= depth_blend <= 1:
+        raise MyofaceValueError(f"depth_blend must be in [0, 1]; got {depth_blend}")
+    generic = load_default_face() if generic is None else generic
+    with FaceMeshDetector(video=False) as det:
+        pts = det.detect(img)
+    if pts is None:
+        raise MyofaceValueError("no face found in the photo")
+    h, w = img.shape[:2]
+    found = np.column_stack([pts[:, 0], -pts[:, 1], -pts[:, 2]])  # right-handed, +z to camera
+    s, r, t = fit_similarity_3d(generic.vertices, found)
+    head = (found - t) @ r / s
+    head[:, 2] = (1 - depth_blend) * head[:, 2] + depth_blend * generic.vertices[:, 2]
+    res = float(np.sqrt(((head - generic.vertices) ** 2).sum(1).mean()))
+    uv = np.column_stack([pts[:, 0] / w, 1 - pts[:, 1] / h])
+    face = FaceMesh(head, generic.triangles, uv, img, generic.landmarks, name=name)
+    yaw = float(np.degrees(np.arctan2(r[0, 2], r[2, 2])))
+    info = {
+        "face_width_px": float(np.ptp(pts[:, 0])),
+        "pixels_per_mm": float(s),
+        "head_yaw_deg": yaw,
+        "fit_rms_to_generic_mm": res,
+        "depth_blend": depth_blend,
+    }
+    return face, info

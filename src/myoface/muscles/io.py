@@ -256,9 +256,19 @@ def _build_jaw(spec: dict, placer: _Placer, where: str) -> Jaw:
     )
 
 
-def muscles_from_dict(doc: dict, face: FaceMesh, where: str = "muscle file") -> MuscleSet:
-    """Build a :class:`MuscleSet` on ``face`` from a parsed muscle file (see module doc)."""
+def muscles_from_dict(
+    doc: dict, face: FaceMesh, where: str = "muscle file", mirror: np.ndarray | None = None
+) -> MuscleSet:
+    """Build a :class:`MuscleSet` on ``face`` from a parsed muscle file (see module doc).
+
+    Muscles with ``sides = "lr"`` are written for the subject's left. Without ``mirror`` the right
+    one is the left one reflected in x (right for a symmetric face); with ``mirror`` (a vertex
+    permutation pairing left and right vertices, :func:`myoface.face.default_mirror_map`) it is
+    placed on the face's own right-side vertices, so an asymmetric (personal) face gets muscles
+    that follow each side of it.
+    """
     placer = _Placer(face, where)
+    right_placer = _Placer(face.mirrored(mirror), where) if mirror is not None else None
     entries = doc.get("muscle", [])
     if not isinstance(entries, list) or not entries:
         raise MyofaceFormatError(f"{where}: no [[muscle]] entries")
@@ -276,7 +286,11 @@ def muscles_from_dict(doc: dict, face: FaceMesh, where: str = "muscle file") -> 
                 muscles.append(_build(entry, placer, ctx))
             else:
                 left = _build({**entry, "id": entry["id"] + "_l"}, placer, ctx)
-                muscles += [left, left.mirrored(entry["id"] + "_r")]
+                if right_placer is not None:
+                    twin = _build({**entry, "id": entry["id"] + "_l"}, right_placer, ctx)
+                else:
+                    twin = left
+                muscles += [left, twin.mirrored(entry["id"] + "_r")]
         except MyofaceValueError as exc:
             if isinstance(exc, MyofaceFormatError):
                 raise
@@ -319,7 +333,11 @@ def load_default_muscles(face: FaceMesh | None = None) -> MuscleSet:
             "the default muscle set needs a face in the default (MediaPipe, 468-vertex) topology; "
             f"got {face.n_vertices} vertices. Give a muscle file for this mesh instead."
         )
-    return muscles_from_dict(_default_doc(), face, where=DEFAULT_MUSCLES_FILE)
+    from myoface.face import default_mirror_map
+
+    return muscles_from_dict(
+        _default_doc(), face, where=DEFAULT_MUSCLES_FILE, mirror=default_mirror_map()
+    )
 
 
 # --------------------------------------------------------------------------- Waters' files
