@@ -44,34 +44,11 @@ def add_arguments(p):
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def contact_sheet(images: dict, path: Path, title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from myoface._io import atomic_output
-
-    names = list(images)
-    cols = 3
-    rows = (len(names) + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 3.5 * rows), facecolor="#16181c")
-    for ax in axes.ravel():
-        ax.axis("off")
-    for ax, name in zip(axes.ravel(), names, strict=False):
-        ax.imshow(images[name])
-        ax.set_title(name, color="#e8e8e8", fontsize=13)
-    fig.suptitle(title, color="#e8e8e8", fontsize=11)
-    fig.tight_layout()
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp, dpi=110, facecolor=fig.get_facecolor())
-    plt.close(fig)
-
-
 def run(args) -> int:
     import time
 
     from myoface._io import ensure_output_dir
+    from myoface.commands._common import contact_sheet
     from myoface.control import Timeline, expression_contractions, list_expressions
     from myoface.control.timeline import Event
     from myoface.model import build_face_model

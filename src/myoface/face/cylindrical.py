@@ -17,7 +17,8 @@ Layout (all of myoface)
   uint8, registered cell for cell (black in holes).
 
 Files: ``.npz`` with arrays ``radius_mm``, ``rgb`` and a JSON string ``meta`` (axis_x_mm,
-axis_z_mm, y_top_mm, y_bottom_mm, format version); or a folder with ``range.png`` (16-bit
+axis_z_mm, y_top_mm, y_bottom_mm, format version, and the head's 68 iBUG landmarks in the maps'
+frame as ``landmarks_mm`` or null); or a folder with ``range.png`` (16-bit
 grey, radius in units of 0.01 mm, 0 = hole), ``rgb.png`` and ``maps.json`` (the same meta).
 """
 
@@ -51,6 +52,8 @@ class CylindricalMaps:
     axis_x_mm, axis_z_mm : float — where the vertical axis crosses the horizontal plane.
     y_top_mm, y_bottom_mm : float — heights of the top edge of row 0 and the bottom edge of the
         last row (``y_top_mm > y_bottom_mm``).
+    landmarks_mm : (68, 3) float ndarray, optional — the head's iBUG-68 landmarks in the maps'
+        frame, when they were known as the maps were made.
     """
 
     radius_mm: np.ndarray
@@ -59,6 +62,7 @@ class CylindricalMaps:
     axis_z_mm: float = 0.0
     y_top_mm: float = 1.0
     y_bottom_mm: float = 0.0
+    landmarks_mm: np.ndarray | None = None
 
     def __post_init__(self):
         r = np.asarray(self.radius_mm, dtype=np.float32)
@@ -79,6 +83,11 @@ class CylindricalMaps:
                 f"y_top_mm must be above y_bottom_mm; got {self.y_top_mm} <= {self.y_bottom_mm}"
             )
         self.radius_mm, self.rgb = r, rgb
+        if self.landmarks_mm is not None:
+            lm = np.asarray(self.landmarks_mm, dtype=np.float64)
+            if lm.shape != (68, 3):
+                raise MyofaceValueError(f"landmarks_mm must be (68, 3); got {lm.shape}")
+            self.landmarks_mm = lm
 
     # ----------------------------------------------------------------- geometry
     @property
@@ -186,6 +195,7 @@ class CylindricalMaps:
             self.axis_z_mm,
             self.y_top_mm,
             self.y_bottom_mm,
+            self.landmarks_mm,
         )
 
     # ----------------------------------------------------------------- files
@@ -197,6 +207,7 @@ class CylindricalMaps:
             "axis_z_mm": float(self.axis_z_mm),
             "y_top_mm": float(self.y_top_mm),
             "y_bottom_mm": float(self.y_bottom_mm),
+            "landmarks_mm": None if self.landmarks_mm is None else self.landmarks_mm.tolist(),
         }
 
     def save(self, path: str | os.PathLike) -> Path:
@@ -265,6 +276,7 @@ def load_maps(path: str | os.PathLike) -> CylindricalMaps:
             float(meta["axis_z_mm"]),
             float(meta["y_top_mm"]),
             float(meta["y_bottom_mm"]),
+            meta.get("landmarks_mm"),
         )
     except KeyError as exc:
         raise MyofaceFormatError(f"{path}: maps meta lacks {exc}") from None

@@ -241,6 +241,7 @@ class Conformation:
     theta_y: np.ndarray  # (V, 2) the nodes' angles (rad) and heights (mm) in the maps
     landmark_error_mm: np.ndarray  # (68,) distance of each iBUG point of the mesh to the target
     info: dict = field(default_factory=dict)
+    scan: FaceMesh | None = None  # the scan moved into the head frame (scan route only)
 
 
 def conform_to_maps(
@@ -257,12 +258,15 @@ def conform_to_maps(
     Parameters
     ----------
     maps : the person's range and colour maps (head frame).
-    landmarks_mm : (68, 3) the person's iBUG-68 landmarks in the maps' head frame.
+    landmarks_mm : (68, 3) the person's iBUG-68 landmarks in the maps' frame (mm).
     generic : the generic face (default topology).
     use : iBUG indices that pull the mesh (default :data:`INNER_IBUG`); the others are only
         measured (a hold-out).
     max_hole_cells : holes in the range map up to this size are filled; a node landing in a
         larger hole is an error.
+
+    The mesh is returned in the head frame of the landmarks' fit (:class:`Alignment`), with
+    texture coordinates into the maps' colour map.
     """
     lm = np.asarray(landmarks_mm, float)
     use = INNER_IBUG if use is None else np.asarray(use)
@@ -284,18 +288,19 @@ def conform_to_maps(
         raise MyofaceValueError(
             f"the range map has holes under the face: {bad.sum()} of {len(r)} mesh nodes "
             f"({frac:.0%}) land where the scan has no surface (holes larger than "
-            f"{max_hole_cells} cells are not filled). Rescan, or fill the holes first."
+            f"{max_hole_cells} cells are not filled). Rescan or fill the holes, and check that "
+            "the landmarks are in the maps' frame."
         )
     verts = filled.to_cartesian(theta, y, r)
+    err = np.linalg.norm(ibug_points_of(verts) - lm, axis=1)
     face = FaceMesh(
-        verts,
+        al.to_head(verts),  # the maps' frame -> the head frame (identity for oriented maps)
         generic.triangles,
         filled.uv_of(theta, y),
         filled.rgb,
         generic.landmarks,
         name=name,
     )
-    err = np.linalg.norm(ibug_points_of(verts) - lm, axis=1)
     info = {
         "scale": al.scale,
         "alignment_residual_mm": al.residual_mm,
@@ -343,22 +348,38 @@ def face_from_scan(
     from myoface.face.io import load_default_face
 
     generic = load_default_face() if generic is None else generic
-    al = align_to_generic(landmarks_mm, generic)
-    head = orient_mesh(scan, al)
+    head, maps, al = head_maps(scan, landmarks_mm, generic, shape)
     lm = al.to_head(landmarks_mm)
-    axis_z = al.scale * float(generic.vertices[[234, 454], 2].mean())
-    maps = maps_from_mesh(head, shape, axis_x_mm=0.0, axis_z_mm=axis_z)
     _check_head(maps, lm)
     conf = conform_to_maps(maps, lm, generic, name=name or scan.name)
     conf.info["scan_rotation"] = al.rotation.tolist()
     conf.info["scan_translation_mm"] = al.translation_mm.tolist()
-    conf.info["head_scan"] = head
+    conf.scan = head
     return conf
+
+
+def head_maps(
+    scan: FaceMesh,
+    landmarks_mm: np.ndarray,
+    generic: FaceMesh,
+    shape: tuple[int, int] = CYBERWARE_SHAPE,
+) -> tuple[FaceMesh, CylindricalMaps, Alignment]:
+    """Move a scan into the head frame by its landmarks and make its maps there.
+
+    The axis stands on the midline (x = 0) at the depth of the generic face's sides (its
+    vertices 234 and 454, in front of the ears), scaled to the person.
+    """
+    al = align_to_generic(landmarks_mm, generic)
+    head = orient_mesh(scan, al)
+    axis_z = al.scale * float(generic.vertices[[234, 454], 2].mean())
+    maps = maps_from_mesh(head, shape, axis_x_mm=0.0, axis_z_mm=axis_z)
+    maps.landmarks_mm = al.to_head(landmarks_mm)
+    return head, maps, al
 
 
 def _check_head(maps: CylindricalMaps, lm_head: np.ndarray) -> None:
     """A head seen from its axis: the rays towards the face must meet the surface."""
-    tc = maps.to_cylindrical(lm_head)
+    tc = maps.to_cylindrical(lm_head[INNER_IBUG])
     row, col = maps.to_cells(tc[:, 0], tc[:, 1])
     h, w = maps.shape
     r0, r1 = int(max(row.min(), 0)), int(min(row.max(), h - 1)) + 1
@@ -391,21 +412,28 @@ def find_landmarks(scan: FaceMesh) -> np.ndarray:
     it, their angles and heights plus the range map give them in 3-D, and the iBUG points are
     their means (:func:`ibug_points_of`).
     """
-    from myoface.analysis.landmarks import FaceMeshDetector
-
     if scan.texture is None or scan.uv is None:
         raise MyofaceValueError(
             "cannot find facial features on an untextured mesh: give its texture, or give "
             "landmarks (68 iBUG points)"
         )
-    maps = maps_from_mesh(scan, DETECTION_SHAPE)
+    return find_landmarks_in_maps(maps_from_mesh(scan, DETECTION_SHAPE))
+
+
+def find_landmarks_in_maps(maps: CylindricalMaps) -> np.ndarray:
+    """(68, 3) iBUG-68 landmarks found in cylindrical maps (see :func:`find_landmarks`)."""
+    from myoface.analysis.landmarks import FaceMeshDetector
+
+    k = max(1, int(np.ceil(DETECTION_SHAPE[0] / maps.shape[0])))
+    img = np.repeat(np.repeat(maps.rgb, k, 0), k, 1)
     with FaceMeshDetector(video=False) as det:
-        pts = det.detect(maps.rgb)
+        pts = det.detect(img)
     if pts is None:
         raise MyofaceValueError(
             "no face found in the scan's colour map (is it a textured head, upright, +y up?); "
             "give landmarks (68 iBUG points) instead"
         )
+    pts = pts / k
     theta, y = maps.from_cells(pts[:, 1] - 0.5, pts[:, 0] - 0.5)
     r = maps.filled().sample_radius(theta, y)
     p3 = maps.to_cartesian(theta, y, r)

@@ -1,0 +1,328 @@
+"""``myoface face``: personal face models from 3-D scans and photographs, and scan maps."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from myoface.errors import MyofaceFileNotFoundError, MyofaceValueError
+
+NAME = "face"
+HELP = "make personal face models (.myoface) from a 3-D head scan or a photograph"
+DESCRIPTION = (
+    "Personal face models. 'from-scan' conforms the generic face to a textured head mesh (or to "
+    "its cylindrical range/colour maps) as in Terzopoulos & Waters 1993, Section IV; "
+    "'from-photo' builds one from a frontal photograph (needs the mediapipe extra); 'maps' "
+    "writes a mesh's cylindrical range and colour maps. Use the result with --face in every "
+    "other command."
+)
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
+VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm")
+
+
+def add_arguments(p):
+    sub = p.add_subparsers(dest="face_command", metavar="ACTION")
+    s = sub.add_parser("from-scan", help="conform the generic face to a head scan or its maps")
+    s.add_argument("scan", help="textured head mesh (OBJ/PLY, mm, +y up) or maps (.npz/folder)")
+    s.add_argument("-o", "--output", required=True, help="the face file to write (.myoface)")
+    s.add_argument(
+        "--landmarks",
+        metavar="FILE",
+        help="68 iBUG landmarks of the scan in its coordinates (.ljson/.json/.npy/.txt); "
+        "default: those stored in the maps, else found automatically in the colour map (needs "
+        "the mediapipe extra)",
+    )
+    s.add_argument(
+        "--texture",
+        metavar="IMAGE",
+        help="texture image of the mesh (default: <stem>.jpg/.png beside it, if any)",
+    )
+    s.add_argument("--scale-mm", type=float, default=1.0, help="mesh units in mm (10 for cm)")
+    s.add_argument("--maps-out", metavar="PATH", help="also write the maps (.npz or a folder)")
+    _common_outputs(s)
+
+    ph = sub.add_parser("from-photo", help="build a face from one frontal photograph")
+    ph.add_argument("photo", help="an image, or a video (its --frame) of one frontal face")
+    ph.add_argument("-o", "--output", required=True, help="the face file to write (.myoface)")
+    ph.add_argument("--frame", type=int, default=0, help="frame of a video to use (default 0)")
+    ph.add_argument(
+        "--depth-blend",
+        type=float,
+        default=None,
+        help="share of the generic face's depth mixed into the photo's (0..1, default 0.5)",
+    )
+    _common_outputs(ph)
+
+    m = sub.add_parser("maps", help="cylindrical range and colour maps of a head mesh")
+    m.add_argument("mesh", help="head mesh (OBJ/PLY), +y up")
+    m.add_argument("-o", "--output", required=True, help=".npz file or a folder (PNG layout)")
+    m.add_argument("--texture", metavar="IMAGE", help="texture image (default: beside the mesh)")
+    m.add_argument("--landmarks", metavar="FILE", help="68 iBUG landmarks: orient the head")
+    m.add_argument("--scale-mm", type=float, default=1.0, help="mesh units in mm")
+    m.add_argument("--size", default="512x256", help="W x H cells (default the paper's 512x256)")
+
+
+def _common_outputs(p) -> None:
+    p.add_argument("--name", help="name of the person (default: the input's stem)")
+    p.add_argument(
+        "--preview",
+        metavar="PNG",
+        help="also render the face neutral and with two expressions, front and three-quarter",
+    )
+
+
+def run(args) -> int:
+    if args.face_command is None:
+        raise MyofaceValueError("give an action: from-scan, from-photo or maps")
+    return {"from-scan": _from_scan, "from-photo": _from_photo, "maps": _maps}[args.face_command](
+        args
+    )
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _check_output(path: str, suffix: str | None = ".myoface") -> Path:
+    import os
+
+    out = Path(path)
+    if suffix and out.suffix.lower() != suffix:
+        raise MyofaceValueError(f"-o must be a {suffix} file; got {out}")
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise MyofaceValueError(f"output folder does not exist: {parent}")
+    if not os.access(parent, os.W_OK):
+        raise MyofaceValueError(f"output folder is not writable: {parent}")
+    return out
+
+
+def _load_scan(path: Path, texture: str | None, scale_mm: float):
+    from myoface.face import load_mesh
+    from myoface.render.renderer import load_texture, to_srgb8
+
+    if not scale_mm > 0:
+        raise MyofaceValueError(f"--scale-mm must be positive; got {scale_mm}")
+    scan = load_mesh(path, scale_mm=scale_mm, split_uv_seams=True)
+    tex_path = Path(texture) if texture else None
+    if tex_path is None:
+        for sfx in (".jpg", ".jpeg", ".png"):
+            if path.with_suffix(sfx).is_file():
+                tex_path = path.with_suffix(sfx)
+                break
+    if tex_path is not None:
+        if scan.uv is None:
+            raise MyofaceValueError(f"{path} has no texture coordinates for {tex_path}")
+        scan.texture = to_srgb8(load_texture(tex_path))
+        print(f"texture    {tex_path}")
+    else:
+        print("texture    none (the colour map will be grey)")
+    return scan, tex_path
+
+
+def _write_preview(face, path: str) -> None:
+    import numpy as np
+
+    from myoface.commands._common import contact_sheet
+    from myoface.control import expression_contractions
+    from myoface.model import build_face_model
+    from myoface.render import Renderer
+    from myoface.synth import Synthesizer, make_camera
+
+    out = _check_output(path, ".png")
+    fm = build_face_model(face)
+    images = {}
+    for view in ("front", "three_quarter"):
+        syn = Synthesizer(fm, Renderer(fm.face, make_camera(fm.face.vertices, view, 384, 384)))
+        for expr in ("neutral", "happiness", "surprise"):
+            fm.reset()
+            c = np.zeros(fm.n_muscles) if expr == "neutral" else None
+            if c is None:
+                c = expression_contractions(expr, 1.0, fm.ids)
+            images[f"{expr} ({view.replace('_', '-')})"] = syn.image(c)
+    contact_sheet(images, out, f"{face.name}: personal face model, neutral and two expressions")
+    print(f"wrote {out}")
+
+
+def _save(face, out: Path, provenance: dict) -> None:
+    from importlib import resources
+
+    from myoface.face.facefile import save_face
+    from myoface.muscles.io import DEFAULT_MUSCLES_FILE
+
+    muscles = (resources.files("myoface") / "data" / DEFAULT_MUSCLES_FILE).read_text()
+    save_face(out, face, muscles_toml=muscles, provenance=provenance)
+    print(f"wrote {out}")
+
+
+# --------------------------------------------------------------------------- actions
+
+
+def _from_scan(args) -> int:
+    import numpy as np
+
+    import myoface
+    from myoface.face import load_default_face
+    from myoface.face.cylindrical import load_maps
+    from myoface.face.personal import (
+        INNER_IBUG,
+        conform_to_maps,
+        face_from_scan,
+        find_landmarks,
+        find_landmarks_in_maps,
+        read_landmarks,
+        surface_errors,
+    )
+
+    out = _check_output(args.output)
+    src = Path(args.scan)
+    if not src.exists():
+        raise MyofaceFileNotFoundError(f"no such scan: {src}")
+    name = args.name or src.stem
+    lm = read_landmarks(args.landmarks) if args.landmarks else None
+    how = f"given ({args.landmarks})" if lm is not None else "found (MediaPipe on the colour map)"
+    provenance = {
+        "made_by": f"myoface {myoface.__version__} face from-scan",
+        "method": "Terzopoulos & Waters 1993, Section IV: cylindrical maps, generic mesh "
+        "projected radially, conformed to the landmarks as a 2-D spring mesh, radius sampled",
+        "source": {"path": src.name},
+    }
+    if src.is_dir() or src.suffix.lower() == ".npz":
+        maps = load_maps(src)
+        if lm is None and maps.landmarks_mm is not None:
+            lm, how = maps.landmarks_mm, f"stored in {src.name}"
+        elif lm is None:
+            lm = find_landmarks_in_maps(maps)
+        conf = conform_to_maps(maps, lm, load_default_face(), name=name)
+        scan = None
+    else:
+        provenance["source"]["sha256"] = _sha256(src)
+        scan, tex = _load_scan(src, args.texture, args.scale_mm)
+        if tex is not None:
+            provenance["source"]["texture"] = tex.name
+        print(f"scan       {scan.n_vertices} vertices, {scan.n_triangles} triangles")
+        if lm is None:
+            lm = find_landmarks(scan)
+        conf = face_from_scan(scan, lm, name=name)
+        scan = conf.scan
+    provenance["landmarks"] = how
+    err = conf.landmark_error_mm
+    print(
+        f"landmarks  {how}; fitted to the generic face within "
+        f"{conf.info['alignment_residual_mm']:.1f} mm RMS (scale {conf.info['scale']:.3f})"
+    )
+    print(
+        f"conformed  landmark error {np.nanmean(err[INNER_IBUG]):.2f} mm mean, "
+        f"{np.nanmax(err[INNER_IBUG]):.2f} mm max (inner 51 points)"
+    )
+    provenance["fit"] = {
+        k: v for k, v in conf.info.items() if k not in ("scan_rotation", "scan_translation_mm")
+    }
+    provenance["fit"]["landmark_error_mean_mm"] = float(np.nanmean(err[INNER_IBUG]))
+    if scan is not None:
+        se = surface_errors(conf.face, scan)
+        provenance["fit"].update(se)
+        print(
+            f"surface    mesh to scan {se['mesh_to_scan_mean_mm']:.2f} mm mean, "
+            f"{se['mesh_to_scan_max_mm']:.2f} mm max; scan to mesh "
+            f"{se['scan_to_mesh_mean_mm']:.2f} mm mean"
+        )
+    _save(conf.face, out, provenance)
+    if args.maps_out:
+        conf.maps.save(args.maps_out)
+        print(f"wrote {args.maps_out}")
+    if args.preview:
+        _write_preview(conf.face, args.preview)
+    return 0
+
+
+def _read_photo(path: Path, frame: int):
+    import numpy as np
+
+    if not path.is_file():
+        raise MyofaceFileNotFoundError(f"no such photo: {path}")
+    if path.suffix.lower() in VIDEO_SUFFIXES:
+        from myoface.analysis.video import open_video
+
+        if frame < 0:
+            raise MyofaceValueError(f"--frame must be >= 0; got {frame}")
+        frames = open_video(path).read_all(max_frames=frame + 1)
+        if len(frames) <= frame:
+            raise MyofaceValueError(f"{path} has {len(frames)} frames; no frame {frame}")
+        return frames[frame]
+    import imageio.v3 as iio
+
+    try:
+        img = iio.imread(path)
+    except Exception as exc:  # imageio raises many types for unreadable files
+        raise MyofaceValueError(f"cannot read {path} as an image: {exc}") from None
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+    if img.dtype != np.uint8:
+        raise MyofaceValueError(f"{path}: expected an 8-bit image; got {img.dtype}")
+    return img[:, :, :3]
+
+
+def _from_photo(args) -> int:
+    import myoface
+    from myoface.face.personal import PHOTO_DEPTH_BLEND, face_from_photo
+
+    out = _check_output(args.output)
+    src = Path(args.photo)
+    img = _read_photo(src, args.frame)
+    blend = PHOTO_DEPTH_BLEND if args.depth_blend is None else args.depth_blend
+    face, info = face_from_photo(img, name=args.name or src.stem, depth_blend=blend)
+    print(
+        f"face found {info['face_width_px']:.0f} px wide; yaw {info['head_yaw_deg']:.1f} deg; "
+        f"{info['fit_rms_to_generic_mm']:.1f} mm RMS from the generic face's shape"
+    )
+    provenance = {
+        "made_by": f"myoface {myoface.__version__} face from-photo",
+        "method": "MediaPipe face mesh (468 points of the default topology) on one photo; "
+        "similarity to the generic face; depth blended with the generic face's",
+        "source": {"path": src.name, "sha256": _sha256(src), "frame": args.frame},
+        "fit": info,
+        "note": "one photograph has no absolute scale: the face has the generic face's size",
+    }
+    _save(face, out, provenance)
+    if args.preview:
+        _write_preview(face, args.preview)
+    return 0
+
+
+def _maps(args) -> int:
+    from myoface.face.cylindrical import maps_from_mesh
+    from myoface.face.personal import head_maps, read_landmarks
+
+    try:
+        w, h = (int(x) for x in args.size.lower().split("x"))
+    except ValueError:
+        raise MyofaceValueError(f"--size must be WxH, e.g. 512x256; got {args.size}") from None
+    src = Path(args.mesh)
+    if not src.exists():
+        raise MyofaceFileNotFoundError(f"no such mesh: {src}")
+    scan, _ = _load_scan(src, args.texture, args.scale_mm)
+    if args.landmarks:
+        from myoface.face import load_default_face
+
+        lm = read_landmarks(args.landmarks)
+        _, maps, _ = head_maps(scan, lm, load_default_face(), (h, w))
+        print("oriented   the head by its landmarks (head frame: +y up, +z out of the face)")
+    else:
+        maps = maps_from_mesh(scan, (h, w))
+    out = Path(args.output)
+    if out.suffix and out.suffix.lower() != ".npz":
+        raise MyofaceValueError(f"-o must be a .npz file or a folder; got {out}")
+    maps.save(out)
+    print(
+        f"wrote {out}: {w}x{h} cells, axis at x={maps.axis_x_mm:.1f} z={maps.axis_z_mm:.1f} mm, "
+        f"{maps.holes.mean():.0%} holes"
+    )
+    return 0
