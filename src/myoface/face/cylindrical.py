@@ -136,9 +136,15 @@ class CylindricalMaps:
         )
 
     def sample_radius(self, theta_rad, y_mm) -> np.ndarray:
-        """Radius (mm) at angles/heights, bilinear (angle wraps around; NaN next to a hole)."""
+        """Radius (mm) at angles/heights, bilinear over the valid cells of the four around
+        (angle wraps around); NaN only where all four are holes."""
         row, col = self.to_cells(theta_rad, y_mm)
-        return _bilinear(self.radius_mm.astype(np.float64)[..., None], row, col)[..., 0]
+        r = self.radius_mm.astype(np.float64)[..., None]
+        valid = np.isfinite(r)
+        num = _bilinear(np.where(valid, r, 0.0), row, col)[..., 0]
+        den = _bilinear(valid.astype(np.float64), row, col)[..., 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(den > 1e-9, num / np.maximum(den, 1e-12), np.nan)
 
     def sample_rgb(self, theta_rad, y_mm) -> np.ndarray:
         """Colour (N, 3) float in [0, 255] at angles/heights, bilinear."""

@@ -51,6 +51,8 @@ INNER_IBUG = np.arange(17, 68)
 #: a face's landmarks fit the generic face's after a similarity to within this fraction of the
 #: face's size (RMS); more means the points are not a face's (or not in iBUG order)
 MAX_FIT_RESIDUAL = 0.12
+#: landmarks of a scan lie on its surface: their median distance to it may be at most this (mm)
+MAX_LANDMARK_OFF_SURFACE_MM = 5.0
 #: weight of a landmark constraint against one edge spring in the 2-D relaxation
 LANDMARK_WEIGHT = 50.0
 
@@ -348,6 +350,14 @@ def face_from_scan(
     from myoface.face.io import load_default_face
 
     generic = load_default_face() if generic is None else generic
+    lm_in = np.asarray(landmarks_mm, float)[INNER_IBUG]
+    off = float(np.median(point_mesh_distance(lm_in, scan.vertices, scan.triangles)))
+    if off > MAX_LANDMARK_OFF_SURFACE_MM:
+        raise MyofaceValueError(
+            f"the landmarks are not on this mesh: their median distance to its surface is "
+            f"{off:.1f} mm (at most {MAX_LANDMARK_OFF_SURFACE_MM} mm). Is the mesh a head, in the "
+            "landmarks' coordinates and units (--scale-mm)?"
+        )
     head, maps, al = head_maps(scan, landmarks_mm, generic, shape)
     lm = al.to_head(landmarks_mm)
     _check_head(maps, lm)
