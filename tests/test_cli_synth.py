@@ -127,4 +127,9 @@ def test_demo_smoke(tmp_path, capsys):
     assert main(["demo", "-o", str(out), "--size", "64", "--no-video", "--quiet"]) == 0
     assert (out / "expressions.png").stat().st_size > 1000
     assert (out / "muscles.png").exists()
-    assert str(out.resolve()) in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert str(out.resolve()) in text
+    ana = out / "analysis"
+    assert (ana / "resynth.mp4").stat().st_size > 1000
+    if "analysing the sample face video" in text:  # the real video (else the synthetic one)
+        assert (ana / "person.myoface").is_file() and (ana / "resynth_person.mp4").is_file()

@@ -22,7 +22,12 @@ to a synthetic video rendered by the model itself (snakes, initialised from the 
 and says so. Into OUT/analysis/:
 
   contractions.csv, contractions.png, overlay.mp4, analysis.json   (myoface analyze)
-  resynth.mp4       input | resynthesis, side by side (myoface resynth; the paper's Fig. 7c)"""
+  resynth.mp4       input | resynthesis, side by side (myoface resynth; the paper's Fig. 7c)
+
+and, for the real video, the person's own face built from the calibration frame (myoface face
+from-photo) driven by the same contractions:
+
+  person.myoface, person.png, resynth_person.mp4"""
 
 
 def add_arguments(p):
@@ -141,7 +146,8 @@ def analysis_loop(folder: Path, args) -> None:
             video = fetch_sample_video(quiet=args.quiet)
         except SampleUnavailable as exc:
             print(f"the sample video is unavailable ({exc}); using a synthetic video instead")
-    if video is not None:
+    real = video is not None
+    if real:
         print(f"analysing the sample face video {video} (MediaPipe face mesh tracker)")
         argv = ["analyze", str(video), "-o", str(folder), "--tracker", "landmarks", *quiet]
     else:
@@ -154,3 +160,16 @@ def analysis_loop(folder: Path, args) -> None:
     argv = ["resynth", str(folder / "contractions.csv"), "-o", str(res), "--side-by-side"]
     if main([*argv, str(video), *quiet]) != 0:
         raise SystemExit(1)
+    if real:
+        import json
+
+        # beyond the paper: the person's own face, from the calibration frame, resynthesized
+        start = json.loads((folder / "analysis.json").read_text())["calibration_frame"]
+        person = folder / "person.myoface"
+        face_argv = ["face", "from-photo", str(video), "--frame", str(start), "-o", str(person)]
+        if main([*face_argv, "--name", "sample person", "--preview", str(folder / "person.png")]):
+            raise SystemExit(1)
+        res = folder / "resynth_person.mp4"
+        argv = ["resynth", str(folder / "contractions.csv"), "-o", str(res), "--side-by-side"]
+        if main([*argv, str(video), "--face", str(person), *quiet]) != 0:
+            raise SystemExit(1)
