@@ -20,6 +20,17 @@ def shared_path(*parts: str) -> Path:
     return p
 
 
+def _mediapipe_available() -> bool:
+    from myoface.analysis.landmarks import mediapipe_available
+
+    return mediapipe_available()
+
+
+needs_mediapipe = pytest.mark.skipif(
+    not _mediapipe_available(), reason='needs pip install "myoface[mediapipe]"'
+)
+
+
 @pytest.fixture(scope="session")
 def default_face():
     from myoface.face import load_default_face

@@ -7,15 +7,10 @@ import pytest
 from myoface.analysis.landmarks import (
     contours_from_landmarks,
     fit_similarity,
-    mediapipe_available,
     rigid_vertices,
 )
 from myoface.errors import MyofaceValueError
-from tests.conftest import shared_path
-
-needs_mediapipe = pytest.mark.skipif(
-    not mediapipe_available(), reason='needs pip install "myoface[mediapipe]"'
-)
+from tests.conftest import needs_mediapipe, shared_path
 
 
 def test_fit_similarity_recovers_a_known_map():

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 import trimesh
 
-from myoface.analysis.landmarks import mediapipe_available
 from myoface.cli import main
 from myoface.errors import MyofaceValueError
 from myoface.face import FaceMesh, default_mirror_map, load_default_face
@@ -24,11 +23,7 @@ from myoface.face.personal import (
 )
 from myoface.model import build_face_model, load_face_model
 from myoface.muscles import load_default_muscles
-from tests.conftest import shared_path
-
-needs_mediapipe = pytest.mark.skipif(
-    not mediapipe_available(), reason='needs pip install "myoface[mediapipe]"'
-)
+from tests.conftest import needs_mediapipe, shared_path
 
 
 def closed(face: FaceMesh) -> FaceMesh:

