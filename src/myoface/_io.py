@@ -12,6 +12,18 @@ from pathlib import Path
 from myoface.errors import MyofaceValueError
 
 
+def check_output_path(path: str | os.PathLike) -> Path:
+    """``path`` as a Path, once its folder is known to exist and be writable (else a clear
+    :class:`MyofaceValueError`), so long work can fail before it starts."""
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise MyofaceValueError(f"output folder does not exist: {parent}")
+    if not os.access(parent, os.W_OK):
+        raise MyofaceValueError(f"output folder is not writable: {parent}")
+    return path
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike, *, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` only if the block succeeds.
@@ -25,12 +37,8 @@ def atomic_output(path: str | os.PathLike, *, suffix: str | None = None) -> Iter
     MyofaceValueError
         If the parent folder does not exist or is not writable.
     """
-    path = Path(path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise MyofaceValueError(f"output folder does not exist: {parent}")
-    if not os.access(parent, os.W_OK):
-        raise MyofaceValueError(f"output folder is not writable: {parent}")
+    path = check_output_path(path)
+    parent = path.parent
     sfx = suffix if suffix is not None else path.suffix
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{sfx}", dir=parent)
     os.close(fd)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from myoface._io import sha256_file
+from myoface._io import check_output_path, sha256_file
 from myoface.errors import MyofaceFileNotFoundError, MyofaceValueError
 
 NAME = "face"
@@ -82,18 +82,11 @@ def run(args) -> int:
 # --------------------------------------------------------------------------- helpers
 
 
-def _check_output(path: str, suffix: str | None = ".myoface") -> Path:
-    import os
-
+def _check_output(path: str, suffix: str) -> Path:
     out = Path(path)
-    if suffix and out.suffix.lower() != suffix:
+    if out.suffix.lower() != suffix:
         raise MyofaceValueError(f"-o must be a {suffix} file; got {out}")
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise MyofaceValueError(f"output folder does not exist: {parent}")
-    if not os.access(parent, os.W_OK):
-        raise MyofaceValueError(f"output folder is not writable: {parent}")
-    return out
+    return check_output_path(out)
 
 
 def _load_scan(path: Path, texture: str | None, scale_mm: float):
@@ -173,7 +166,7 @@ def _from_scan(args) -> int:
         surface_errors,
     )
 
-    out = _check_output(args.output)
+    out = _check_output(args.output, ".myoface")
     src = Path(args.scan)
     if not src.exists():
         raise MyofaceFileNotFoundError(f"no such scan: {src}")
@@ -266,7 +259,7 @@ def _from_photo(args) -> int:
     import myoface
     from myoface.face.personal import PHOTO_DEPTH_BLEND, face_from_photo
 
-    out = _check_output(args.output)
+    out = _check_output(args.output, ".myoface")
     src = Path(args.photo)
     img = _read_photo(src, args.frame)
     blend = PHOTO_DEPTH_BLEND if args.depth_blend is None else args.depth_blend
