@@ -20,8 +20,8 @@ from numba import njit, prange
 NEAR_MM = 1.0
 
 
-@njit(cache=True, fastmath=True)
-def _tex_bilinear(tex, u, v, out):
+@njit(cache=True, fastmath=True, inline="always")
+def _tex_bilinear(tex, u, v):
     h, w = tex.shape[0], tex.shape[1]
     x = u * w - 0.5
     y = (1.0 - v) * h - 0.5
@@ -39,144 +39,213 @@ def _tex_bilinear(tex, u, v, out):
     y1 = min(y0 + 1, h - 1)
     fx = x - x0
     fy = y - y0
-    for c in range(3):
-        a = tex[y0, x0, c] * (1 - fx) + tex[y0, x1, c] * fx
-        b = tex[y1, x0, c] * (1 - fx) + tex[y1, x1, c] * fx
-        out[c] = a * (1 - fy) + b * fy
+    w00 = (1.0 - fx) * (1.0 - fy)
+    w01 = fx * (1.0 - fy)
+    w10 = (1.0 - fx) * fy
+    w11 = fx * fy
+    r = w00 * tex[y0, x0, 0] + w01 * tex[y0, x1, 0] + w10 * tex[y1, x0, 0] + w11 * tex[y1, x1, 0]
+    g = w00 * tex[y0, x0, 1] + w01 * tex[y0, x1, 1] + w10 * tex[y1, x0, 1] + w11 * tex[y1, x1, 1]
+    b = w00 * tex[y0, x0, 2] + w01 * tex[y0, x1, 2] + w10 * tex[y1, x0, 2] + w11 * tex[y1, x1, 2]
+    return r, g, b
 
 
-@njit(cache=True, fastmath=True)
-def _raster_band(
-    band_lo,  # first image row of this band
-    band_hi,  # one past its last row
-    scr,  # (N, 3) pixel x, pixel y, depth
-    winv,  # (N,) 1/w (1/depth for perspective, 1 for orthographic)
-    tris,  # (F, 3) int
-    normals,  # (N, 3) world unit normals
-    world,  # (N, 3) world positions
-    uv,  # (N, 2)
-    vcol,  # (N, 3) linear albedo per vertex
-    tex,  # (H, W, 3) float32 linear texture (1x1 white when unused)
-    tri_tex,  # (F,) bool: triangle uses the texture
-    eye,  # (3,) camera position (perspective) — for view vectors
-    view_dir,  # (3,) camera forward (orthographic)
-    ortho,  # bool
-    light_dir,  # (L, 3) unit, towards the light
-    light_col,  # (L, 3)
-    ambient,  # (3,)
-    ks,
-    shininess,
-    img,  # (H, W, 3) float32 out (holds the background)
-    zbuf,  # (H, W) float64 out
-    tri_id,  # (H, W) int32 out
-):
-    w = img.shape[1]
-    nl = light_dir.shape[0]
-    texel = np.empty(3)
+#: columns of the per-triangle set-up table built by :func:`setup_triangles`
+_A0, _B0, _C0, _A1, _B1, _C1, _KA, _KB, _KC, _R0, _R1, _R2 = range(12)
+SETUP_COLS = 12
+#: samples within this many pixels outside an edge still count as inside (no cracks between
+#: triangles that share an edge; the z-buffer resolves the overlap)
+_EDGE_EPS = 1e-5
+
+
+@njit(cache=True)
+def setup_triangles(scr, winv, tris, cull, ortho, width, height, fct, setup, tbox, bbox):
+    """Per-triangle screen-space set-up for one frame.
+
+    ``setup[f]`` holds the barycentric planes l0 = a0 x + b0 y + c0, l1 = a1 x + b1 y + c1
+    (l2 = 1 - l0 - l1), the plane of the depth key (-1/depth for perspective, which is affine
+    in screen space; depth for orthographic) and 1/a0, 1/a1, 1/a2 (0 where a = 0).
+    Triangles with ``cull[f]`` (parts of closed, outward-wound surfaces) are dropped when they
+    face away from the camera (positive screen area, y pointing down). ``tbox[f]`` = pixel (x0, x1, y0, y1), inclusive,
+    clipped to the image, or x0 > x1 for a triangle that is not drawn (degenerate, off-screen or
+    crossing the near plane). ``bbox`` = the union of the drawn boxes (x0, x1, y0, y1), grown
+    to whole blocks of ``fct`` x ``fct`` samples (output pixels)."""
+    bbox[0] = width
+    bbox[1] = -1
+    bbox[2] = height
+    bbox[3] = -1
     for f in range(tris.shape[0]):
         i0, i1, i2 = tris[f, 0], tris[f, 1], tris[f, 2]
+        tbox[f, 0] = 1
+        tbox[f, 1] = 0
         if scr[i0, 2] < NEAR_MM or scr[i1, 2] < NEAR_MM or scr[i2, 2] < NEAR_MM:
             continue
         x0, y0 = scr[i0, 0], scr[i0, 1]
         x1, y1 = scr[i1, 0], scr[i1, 1]
         x2, y2 = scr[i2, 0], scr[i2, 1]
         area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-        if abs(area) < 1e-12:
+        if abs(area) < 1e-12 or (cull[f] and area > 0.0):
             continue
-        inv_area = 1.0 / area
         xmin = max(int(np.floor(min(x0, x1, x2))), 0)
-        xmax = min(int(np.ceil(max(x0, x1, x2))), w - 1)
-        ymin = max(int(np.floor(min(y0, y1, y2))), band_lo)
-        ymax = min(int(np.ceil(max(y0, y1, y2))), band_hi - 1)
+        xmax = min(int(np.ceil(max(x0, x1, x2))), width - 1)
+        ymin = max(int(np.floor(min(y0, y1, y2))), 0)
+        ymax = min(int(np.ceil(max(y0, y1, y2))), height - 1)
         if xmin > xmax or ymin > ymax:
             continue
-        q0, q1, q2 = winv[i0], winv[i1], winv[i2]
-        use_tex = tri_tex[f]
-        for py in range(ymin, ymax + 1):
-            cy = py + 0.5
-            for px in range(xmin, xmax + 1):
-                cx = px + 0.5
-                l0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * inv_area
-                l1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * inv_area
-                l2 = 1.0 - l0 - l1
-                if l0 < 0.0 or l1 < 0.0 or l2 < 0.0:
-                    continue
-                # perspective-correct weights
-                p0, p1, p2 = l0 * q0, l1 * q1, l2 * q2
-                s = p0 + p1 + p2
-                p0 /= s
-                p1 /= s
-                p2 /= s
-                z = p0 * scr[i0, 2] + p1 * scr[i1, 2] + p2 * scr[i2, 2]
-                if z >= zbuf[py, px]:
-                    continue
-                zbuf[py, px] = z
-                tri_id[py, px] = f
-                nx = p0 * normals[i0, 0] + p1 * normals[i1, 0] + p2 * normals[i2, 0]
-                ny = p0 * normals[i0, 1] + p1 * normals[i1, 1] + p2 * normals[i2, 1]
-                nz = p0 * normals[i0, 2] + p1 * normals[i1, 2] + p2 * normals[i2, 2]
-                nn = np.sqrt(nx * nx + ny * ny + nz * nz) + 1e-12
-                nx /= nn
-                ny /= nn
-                nz /= nn
-                if ortho:
-                    vx, vy, vz = -view_dir[0], -view_dir[1], -view_dir[2]
-                else:
-                    wx = p0 * world[i0, 0] + p1 * world[i1, 0] + p2 * world[i2, 0]
-                    wy = p0 * world[i0, 1] + p1 * world[i1, 1] + p2 * world[i2, 1]
-                    wz = p0 * world[i0, 2] + p1 * world[i1, 2] + p2 * world[i2, 2]
-                    vx, vy, vz = eye[0] - wx, eye[1] - wy, eye[2] - wz
-                    vn = np.sqrt(vx * vx + vy * vy + vz * vz) + 1e-12
-                    vx /= vn
-                    vy /= vn
-                    vz /= vn
-                if nx * vx + ny * vy + nz * vz < 0.0:  # the back of an open surface
-                    nx, ny, nz = -nx, -ny, -nz
-                ar = p0 * vcol[i0, 0] + p1 * vcol[i1, 0] + p2 * vcol[i2, 0]
-                ag = p0 * vcol[i0, 1] + p1 * vcol[i1, 1] + p2 * vcol[i2, 1]
-                ab = p0 * vcol[i0, 2] + p1 * vcol[i1, 2] + p2 * vcol[i2, 2]
-                if use_tex:
-                    tu = p0 * uv[i0, 0] + p1 * uv[i1, 0] + p2 * uv[i2, 0]
-                    tv = p0 * uv[i0, 1] + p1 * uv[i1, 1] + p2 * uv[i2, 1]
-                    _tex_bilinear(tex, tu, tv, texel)
-                    ar *= texel[0]
-                    ag *= texel[1]
-                    ab *= texel[2]
-                dr, dg, db = ambient[0], ambient[1], ambient[2]
-                sr = 0.0
-                sg = 0.0
-                sb = 0.0
-                for k in range(nl):
-                    lx, ly, lz = light_dir[k, 0], light_dir[k, 1], light_dir[k, 2]
-                    ndl = nx * lx + ny * ly + nz * lz
-                    if ndl <= 0.0:
-                        continue
-                    dr += ndl * light_col[k, 0]
-                    dg += ndl * light_col[k, 1]
-                    db += ndl * light_col[k, 2]
-                    hx, hy, hz = lx + vx, ly + vy, lz + vz
-                    hn = np.sqrt(hx * hx + hy * hy + hz * hz) + 1e-12
-                    ndh = (nx * hx + ny * hy + nz * hz) / hn
-                    if ndh > 0.5 and ks > 0.0:
-                        # Schlick's rational approximation of ndh^shininess (Schlick 1994)
-                        sp = ks * ndh / (shininess - shininess * ndh + ndh)
-                        sr += sp * light_col[k, 0]
-                        sg += sp * light_col[k, 1]
-                        sb += sp * light_col[k, 2]
-                img[py, px, 0] = ar * dr + sr
-                img[py, px, 1] = ag * dg + sg
-                img[py, px, 2] = ab * db + sb
+        ia = 1.0 / area
+        # l0 = ((x1 - x)(y2 - y) - (x2 - x)(y1 - y)) / area, l1 likewise with (2, 0)
+        a0 = (y1 - y2) * ia
+        b0 = (x2 - x1) * ia
+        c0 = (x1 * y2 - x2 * y1) * ia
+        a1 = (y2 - y0) * ia
+        b1 = (x0 - x2) * ia
+        c1 = (x2 * y0 - x0 * y2) * ia
+        if ortho:
+            k0, k1, k2 = scr[i0, 2], scr[i1, 2], scr[i2, 2]
+        else:
+            k0, k1, k2 = -winv[i0], -winv[i1], -winv[i2]
+        setup[f, _A0] = a0
+        setup[f, _B0] = b0
+        setup[f, _C0] = c0
+        setup[f, _A1] = a1
+        setup[f, _B1] = b1
+        setup[f, _C1] = c1
+        # key = l0 k0 + l1 k1 + (1 - l0 - l1) k2
+        setup[f, _KA] = a0 * (k0 - k2) + a1 * (k1 - k2)
+        setup[f, _KB] = b0 * (k0 - k2) + b1 * (k1 - k2)
+        setup[f, _KC] = c0 * (k0 - k2) + c1 * (k1 - k2) + k2
+        a2 = -a0 - a1
+        setup[f, _R0] = 1.0 / a0 if a0 != 0.0 else 0.0
+        setup[f, _R1] = 1.0 / a1 if a1 != 0.0 else 0.0
+        setup[f, _R2] = 1.0 / a2 if a2 != 0.0 else 0.0
+        tbox[f, 0] = xmin
+        tbox[f, 1] = xmax
+        tbox[f, 2] = ymin
+        tbox[f, 3] = ymax
+        bbox[0] = min(bbox[0], xmin)
+        bbox[1] = max(bbox[1], xmax)
+        bbox[2] = min(bbox[2], ymin)
+        bbox[3] = max(bbox[3], ymax)
+    if bbox[0] <= bbox[1]:
+        bbox[0] -= bbox[0] % fct
+        bbox[2] -= bbox[2] % fct
+        bbox[1] = min(bbox[1] - bbox[1] % fct + fct - 1, width - 1)
+        bbox[3] = min(bbox[3] - bbox[3] % fct + fct - 1, height - 1)
+
+
+@njit(cache=True, inline="always")
+def _span(a, ra, b, c, cy, lo, hi):
+    """Narrow the x interval [lo, hi] to where a x + b cy + c >= 0 (ra = 1 / a)."""
+    v = b * cy + c
+    if a > 0.0:
+        lo = max(lo, -v * ra)
+    elif a < 0.0:
+        hi = min(hi, -v * ra)
+    elif v < 0.0:
+        hi = lo - 1.0
+    return lo, hi
 
 
 @njit(cache=True, parallel=True)
-def rasterize(
-    scr,
-    winv,
-    tris,
-    normals,
-    world,
-    uv,
-    vcol,
+def visibility(setup, tbox, bbox, zbuf, tri_id, nt):
+    """The z-buffer pass: for every sample (pixel centre) inside ``bbox``, the nearest
+    triangle's index into ``tri_id`` (-1: none) and its depth key into ``zbuf``. Rows are split
+    into bands drawn by ``nt`` threads, interleaved so that the dense eye rows are shared (a band
+    owns its rows); each triangle row is a solved span, so the inner loop is a depth test only."""
+    bx0, bx1, by0, by1 = bbox[0], bbox[1], bbox[2], bbox[3]
+    if bx0 > bx1 or by0 > by1:
+        return
+    n_rows = by1 - by0 + 1
+    n_bands = min(n_rows, 32)
+    for th in prange(nt):
+        for b in range(th, n_bands, nt):
+            lo = by0 + b * n_rows // n_bands
+            hi = by0 + (b + 1) * n_rows // n_bands  # one past
+            for y in range(lo, hi):
+                for x in range(bx0, bx1 + 1):
+                    zbuf[y, x] = np.inf
+                    tri_id[y, x] = -1
+            for f in range(setup.shape[0]):
+                tx0, tx1 = tbox[f, 0], tbox[f, 1]
+                if tx0 > tx1:
+                    continue
+                ty0 = max(tbox[f, 2], lo)
+                ty1 = min(tbox[f, 3], hi - 1)
+                if ty0 > ty1:
+                    continue
+                a0, b0, c0 = setup[f, _A0], setup[f, _B0], setup[f, _C0]
+                a1, b1, c1 = setup[f, _A1], setup[f, _B1], setup[f, _C1]
+                a2, b2, c2 = -a0 - a1, -b0 - b1, 1.0 - c0 - c1
+                ka, kb, kc = setup[f, _KA], setup[f, _KB], setup[f, _KC]
+                r0, r1, r2 = setup[f, _R0], setup[f, _R1], setup[f, _R2]
+                for py in range(ty0, ty1 + 1):
+                    cy = py + 0.5
+                    xl = tx0 - 1.0
+                    xh = tx1 + 2.0
+                    xl, xh = _span(a0, r0, b0, c0, cy, xl, xh)
+                    xl, xh = _span(a1, r1, b1, c1, cy, xl, xh)
+                    xl, xh = _span(a2, r2, b2, c2, cy, xl, xh)
+                    if xl > xh:
+                        continue
+                    px0 = max(int(np.ceil(xl - 0.5 - _EDGE_EPS)), tx0)
+                    px1 = min(int(np.floor(xh - 0.5 + _EDGE_EPS)), tx1)
+                    key = ka * (px0 + 0.5) + kb * cy + kc
+                    for px in range(px0, px1 + 1):
+                        if key < zbuf[py, px]:
+                            zbuf[py, px] = key
+                            tri_id[py, px] = f
+                        key += ka
+
+
+#: attributes interpolated across a triangle, in the order of :func:`attribute_planes`:
+#: the perspective denominator, normal xyz, world xyz, albedo rgb, texture uv
+N_PLANES = 12
+
+
+@njit(cache=True, parallel=True)
+def attribute_planes(setup, tbox, tris, winv, normals, world, vcol, uv, planes):
+    """Per drawn triangle, the screen-space planes of every perspective-correct attribute.
+
+    With barycentrics l_k affine in (x, y) and q_k = 1/w_k, the numerator sum_k l_k q_k a_k of
+    each attribute a and the denominator D = sum_k l_k q_k are affine in (x, y); so attribute
+    a at a pixel is (A x + B y + C) / D, one plane each (``planes[f, 3 i : 3 i + 3]``)."""
+    for f in prange(tris.shape[0]):
+        if tbox[f, 0] > tbox[f, 1]:
+            continue
+        i0, i1, i2 = tris[f, 0], tris[f, 1], tris[f, 2]
+        a0, b0, c0 = setup[f, _A0], setup[f, _B0], setup[f, _C0]
+        a1, b1, c1 = setup[f, _A1], setup[f, _B1], setup[f, _C1]
+        a2, b2, c2 = -a0 - a1, -b0 - b1, 1.0 - c0 - c1
+        q0, q1, q2 = winv[i0], winv[i1], winv[i2]
+        for j in range(N_PLANES):
+            if j == 0:
+                v0, v1, v2 = 1.0, 1.0, 1.0
+            elif j < 4:
+                v0, v1, v2 = normals[i0, j - 1], normals[i1, j - 1], normals[i2, j - 1]
+            elif j < 7:
+                v0, v1, v2 = world[i0, j - 4], world[i1, j - 4], world[i2, j - 4]
+            elif j < 10:
+                v0, v1, v2 = vcol[i0, j - 7], vcol[i1, j - 7], vcol[i2, j - 7]
+            else:
+                v0, v1, v2 = uv[i0, j - 10], uv[i1, j - 10], uv[i2, j - 10]
+            v0 *= q0
+            v1 *= q1
+            v2 *= q2
+            planes[f, 3 * j] = a0 * v0 + a1 * v1 + a2 * v2
+            planes[f, 3 * j + 1] = b0 * v0 + b1 * v1 + b2 * v2
+            planes[f, 3 * j + 2] = c0 * v0 + c1 * v1 + c2 * v2
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _plane(planes, f, j, cx, cy):
+    return planes[f, 3 * j] * cx + planes[f, 3 * j + 1] * cy + planes[f, 3 * j + 2]
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _shade(
+    f,
+    cx,
+    cy,
+    planes,
     tex,
     tri_tex,
     eye,
@@ -187,49 +256,207 @@ def rasterize(
     ambient,
     ks,
     shininess,
-    background,
-    img,
-    zbuf,
-    tri_id,
 ):
-    """Clear the buffers (image <- ``background`` (H, 1, 3) rows) and draw every triangle with
-    z-buffering and per-pixel shading; the image is split into horizontal bands drawn in
-    parallel (each band owns its rows, so no two threads write the same pixel)."""
-    h = img.shape[0]
-    n_bands = min(h, 8)
-    for b in prange(n_bands):
-        lo = b * h // n_bands
-        hi = (b + 1) * h // n_bands
-        for y in range(lo, hi):
-            for x in range(img.shape[1]):
-                zbuf[y, x] = np.inf
-                tri_id[y, x] = -1
-                for c in range(3):
-                    img[y, x, c] = background[y, 0, c]
-        _raster_band(
-            lo,
-            hi,
-            scr,
-            winv,
-            tris,
-            normals,
-            world,
-            uv,
-            vcol,
-            tex,
-            tri_tex,
-            eye,
-            view_dir,
-            ortho,
-            light_dir,
-            light_col,
-            ambient,
-            ks,
-            shininess,
-            img,
-            zbuf,
-            tri_id,
-        )
+    """Linear RGB of triangle ``f`` at screen point (cx, cy): perspective-correct attributes,
+    normal flipped towards the viewer, Blinn-Phong with every light."""
+    inv = 1.0 / _plane(planes, f, 0, cx, cy)
+    nx = _plane(planes, f, 1, cx, cy)  # (scaled by D > 0; normalized below)
+    ny = _plane(planes, f, 2, cx, cy)
+    nz = _plane(planes, f, 3, cx, cy)
+    nn = 1.0 / (np.sqrt(nx * nx + ny * ny + nz * nz) + 1e-30)
+    nx *= nn
+    ny *= nn
+    nz *= nn
+    if ortho:
+        vx, vy, vz = -view_dir[0], -view_dir[1], -view_dir[2]
+    else:
+        vx = eye[0] - _plane(planes, f, 4, cx, cy) * inv
+        vy = eye[1] - _plane(planes, f, 5, cx, cy) * inv
+        vz = eye[2] - _plane(planes, f, 6, cx, cy) * inv
+        vn = 1.0 / (np.sqrt(vx * vx + vy * vy + vz * vz) + 1e-12)
+        vx *= vn
+        vy *= vn
+        vz *= vn
+    if nx * vx + ny * vy + nz * vz < 0.0:  # the back of an open surface
+        nx, ny, nz = -nx, -ny, -nz
+    ar = _plane(planes, f, 7, cx, cy) * inv
+    ag = _plane(planes, f, 8, cx, cy) * inv
+    ab = _plane(planes, f, 9, cx, cy) * inv
+    if tri_tex[f]:
+        tu = _plane(planes, f, 10, cx, cy) * inv
+        tv = _plane(planes, f, 11, cx, cy) * inv
+        tr, tg, tb = _tex_bilinear(tex, tu, tv)
+        ar *= tr
+        ag *= tg
+        ab *= tb
+    dr, dg, db = ambient[0], ambient[1], ambient[2]
+    sr = 0.0
+    sg = 0.0
+    sb = 0.0
+    for k in range(light_dir.shape[0]):
+        lx, ly, lz = light_dir[k, 0], light_dir[k, 1], light_dir[k, 2]
+        ndl = nx * lx + ny * ly + nz * lz
+        if ndl <= 0.0:
+            continue
+        dr += ndl * light_col[k, 0]
+        dg += ndl * light_col[k, 1]
+        db += ndl * light_col[k, 2]
+        hx, hy, hz = lx + vx, ly + vy, lz + vz
+        hn = np.sqrt(hx * hx + hy * hy + hz * hz) + 1e-12
+        ndh = (nx * hx + ny * hy + nz * hz) / hn
+        if ndh > 0.5 and ks > 0.0:
+            # Schlick's rational approximation of ndh^shininess (Schlick 1994)
+            sp = ks * ndh / (shininess - shininess * ndh + ndh)
+            sr += sp * light_col[k, 0]
+            sg += sp * light_col[k, 1]
+            sb += sp * light_col[k, 2]
+    return ar * dr + sr, ag * dg + sg, ab * db + sb
+
+
+@njit(cache=True, parallel=True, fastmath=True)
+def shade_resolve(
+    fct,  # supersampling factor per axis
+    bbox,
+    tri_id,
+    planes,  # from attribute_planes
+    tex,
+    tri_tex,
+    eye,
+    view_dir,
+    ortho,
+    light_dir,
+    light_col,
+    ambient,
+    ks,
+    shininess,
+    background,  # (H * fct, 3) linear background per supersampled row
+    lut,  # sRGB codes (used when srgb)
+    srgb,  # bool: write ``out8`` (uint8 sRGB) instead of ``outf`` (float32 linear)
+    out8,
+    outf,
+    nt,  # threads (rows are interleaved between them)
+):
+    """Shade and resolve to the output size, like multisample anti-aliasing: each output pixel
+    looks at its fct x fct samples and shades every distinct triangle among them once, at the
+    centroid of the samples it covers, weighted by their number (background samples get the
+    background). Interior pixels (one triangle) are shaded once instead of fct^2 times."""
+    h = out8.shape[0] if srgb else outf.shape[0]
+    w = out8.shape[1] if srgb else outf.shape[1]
+    n_lut = lut.shape[0]
+    nss = fct * fct
+    inv = 1.0 / nss
+    offy = np.empty(nss, np.int64)  # sample s of a pixel is at (y fct + offy[s], x fct + offx[s])
+    offx = np.empty(nss, np.int64)
+    for s in range(nss):
+        offy[s] = s // fct
+        offx[s] = s % fct
+    for th in prange(nt):
+        ids = np.empty(nss, np.int64)
+        for y in range(th, h, nt):  # interleaved rows balance the threads
+            bgr = 0.0
+            bgg = 0.0
+            bgb = 0.0
+            for j in range(fct):
+                bgr += background[y * fct + j, 0]
+                bgg += background[y * fct + j, 1]
+                bgb += background[y * fct + j, 2]
+            bgr /= fct
+            bgg /= fct
+            bgb /= fct
+            k = int(bgr * n_lut)
+            bg8r = lut[min(max(k, 0), n_lut - 1)]
+            k = int(bgg * n_lut)
+            bg8g = lut[min(max(k, 0), n_lut - 1)]
+            k = int(bgb * n_lut)
+            bg8b = lut[min(max(k, 0), n_lut - 1)]
+            # the box is whole pixels, so every sample of a pixel inside it was drawn
+            if bbox[2] <= y * fct and y * fct <= bbox[3]:
+                xin0 = bbox[0] // fct
+                xin1 = bbox[1] // fct
+            else:
+                xin0 = w
+                xin1 = -1
+            for x in range(w):
+                if x < xin0 or x > xin1:
+                    if srgb:
+                        out8[y, x, 0] = bg8r
+                        out8[y, x, 1] = bg8g
+                        out8[y, x, 2] = bg8b
+                    else:
+                        outf[y, x, 0] = bgr
+                        outf[y, x, 1] = bgg
+                        outf[y, x, 2] = bgb
+                    continue
+                r, g, b = bgr, bgg, bgb
+                t0 = tri_id[y * fct, x * fct]
+                same = True
+                for s in range(1, nss):
+                    if tri_id[y * fct + offy[s], x * fct + offx[s]] != t0:
+                        same = False
+                        break
+                if same:  # the common case: one triangle (or none) covers the pixel
+                    if t0 >= 0:
+                        r, g, b = _shade(
+                            t0, (x + 0.5) * fct, (y + 0.5) * fct, planes, tex, tri_tex, eye,
+                            view_dir, ortho, light_dir, light_col, ambient, ks, shininess,
+                        )  # fmt: skip
+                else:
+                    for s in range(nss):
+                        ids[s] = tri_id[y * fct + offy[s], x * fct + offx[s]]
+                    r = 0.0
+                    g = 0.0
+                    b = 0.0
+                    for s in range(nss):
+                        t = ids[s]
+                        seen = False  # this triangle was handled at an earlier sample
+                        for s2 in range(s):
+                            if ids[s2] == t:
+                                seen = True
+                                break
+                        if seen:
+                            continue
+                        # this triangle's samples in the pixel: count, centroid, background
+                        cnt = 0
+                        mx = 0.0
+                        my = 0.0
+                        br = 0.0
+                        bg = 0.0
+                        bb = 0.0
+                        for s2 in range(s, nss):
+                            if ids[s2] == t:
+                                sy2 = y * fct + offy[s2]
+                                cnt += 1
+                                mx += x * fct + offx[s2] + 0.5
+                                my += sy2 + 0.5
+                                br += background[sy2, 0]
+                                bg += background[sy2, 1]
+                                bb += background[sy2, 2]
+                        if t < 0:
+                            r += br
+                            g += bg
+                            b += bb
+                            continue
+                        cr, cg, cb = _shade(
+                            t, mx / cnt, my / cnt, planes, tex, tri_tex, eye, view_dir,
+                            ortho, light_dir, light_col, ambient, ks, shininess,
+                        )  # fmt: skip
+                        r += cr * cnt
+                        g += cg * cnt
+                        b += cb * cnt
+                    r *= inv
+                    g *= inv
+                    b *= inv
+                if srgb:
+                    k = int(r * n_lut)
+                    out8[y, x, 0] = lut[min(max(k, 0), n_lut - 1)]
+                    k = int(g * n_lut)
+                    out8[y, x, 1] = lut[min(max(k, 0), n_lut - 1)]
+                    k = int(b * n_lut)
+                    out8[y, x, 2] = lut[min(max(k, 0), n_lut - 1)]
+                else:
+                    outf[y, x, 0] = r
+                    outf[y, x, 1] = g
+                    outf[y, x, 2] = b
 
 
 def rasterize_coverage_numpy(scr: np.ndarray, tris: np.ndarray, h: int, w: int):
@@ -257,48 +484,11 @@ def rasterize_coverage_numpy(scr: np.ndarray, tris: np.ndarray, h: int, w: int):
     return tid, zbuf
 
 
-@njit(cache=True, inline="always")
-def _box(img, f, y, x, c):
-    """Mean of the f x f block of channel c whose corner is (y f, x f)."""
-    s = 0.0
-    for dy in range(f):
-        for dx in range(f):
-            s += img[y * f + dy, x * f + dx, c]
-    return s / (f * f)
-
-
 def srgb_lut(n: int = 4096) -> np.ndarray:
     """uint8 sRGB codes of linear values (i + 0.5) / n, i = 0..n-1 (IEC 61966-2-1)."""
     c = (np.arange(n) + 0.5) / n
     s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
     return (s * 255.0 + 0.5).astype(np.uint8)
-
-
-@njit(cache=True, parallel=True)
-def resolve_srgb(img, f, lut, out):
-    """Box-filter (H*f, W*f, 3) linear RGB down by ``f`` and encode to sRGB uint8 via ``lut``."""
-    h, w = out.shape[0], out.shape[1]
-    n = lut.shape[0]
-    for y in prange(h):
-        for x in range(w):
-            for c in range(3):
-                v = _box(img, f, y, x, c)
-                k = int(v * n)
-                if k < 0:
-                    k = 0
-                elif k >= n:
-                    k = n - 1
-                out[y, x, c] = lut[k]
-
-
-@njit(cache=True)
-def downsample(img, f, out):
-    """Box-filter an (H*f, W*f, 3) image down to (H, W, 3)."""
-    h, w = out.shape[0], out.shape[1]
-    for y in range(h):
-        for x in range(w):
-            for c in range(3):
-                out[y, x, c] = _box(img, f, y, x, c)
 
 
 @njit(cache=True)

@@ -13,20 +13,26 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 from myoface.render import dressing
 from myoface.render.camera import Camera
 from myoface.render.raster import (
-    downsample,
-    rasterize,
-    resolve_srgb,
+    N_PLANES,
+    SETUP_COLS,
+    attribute_planes,
+    setup_triangles,
+    shade_resolve,
     srgb_lut,
     vertex_normals_numba,
+    visibility,
 )
 
 _SRGB_LUT = srgb_lut()
+_NO_U8 = np.zeros((1, 1, 3), np.uint8)  # placeholders for the output shade_resolve does not use
+_NO_F32 = np.zeros((1, 1, 3), np.float32)
 
 BACKGROUND_TOP = (0.050, 0.055, 0.065)  # linear RGB, a soft studio gradient
 BACKGROUND_BOTTOM = (0.012, 0.013, 0.016)
@@ -106,6 +112,7 @@ class _Scene:
 
     tris: np.ndarray
     tri_tex: np.ndarray
+    tri_cull: np.ndarray  # back-face culled (the closed eyeballs)
     uv: np.ndarray
     vcol: np.ndarray
     n_face: int
@@ -161,13 +168,17 @@ class Renderer:
         self._scene = self._build_scene(dress)
         self._big = camera.with_size(camera.width * self.ssaa, camera.height * self.ssaa)
         h, w = self._big.height, self._big.width
-        self._img = np.empty((h, w, 3), np.float32)
-        self._zbuf = np.empty((h, w))
+        # supersampled buffers, valid inside the last frame's drawn box only
+        self._zbuf = np.empty((h, w), np.float32)
         self._tid = np.empty((h, w), np.int32)
-        self._small = np.empty((camera.height, camera.width, 3), np.float32)
+        n_tris = len(self._scene.tris)
+        self._setup = np.zeros((n_tris, SETUP_COLS))
+        self._planes = np.zeros((n_tris, 3 * N_PLANES))
+        self._tbox = np.zeros((n_tris, 4), np.int64)
+        self._bbox = np.array([w, -1, h, -1], np.int64)
         rows = np.linspace(0, 1, h)[:, None]
         top, bot = np.array(BACKGROUND_TOP), np.array(BACKGROUND_BOTTOM)
-        self._background = (top * (1 - rows) + bot * rows)[:, None, :].astype(np.float32)
+        self._background = np.ascontiguousarray(top * (1 - rows) + bot * rows)
         self._light_dir = np.array(
             [np.asarray(li.direction, float) / np.linalg.norm(li.direction) for li in self.lights]
         ).reshape(-1, 3)
@@ -182,6 +193,7 @@ class Renderer:
         tris = [f.triangles]
         has_tex = self.texture is not None and f.uv is not None
         tri_tex = [np.full(len(f.triangles), has_tex)]
+        tri_cull = [np.zeros(len(f.triangles), bool)]
         uv = [f.uv if f.uv is not None else np.zeros((nv, 2))]
         vcol = [np.tile(np.asarray(self.material.albedo, float), (nv, 1))]
         fans = []
@@ -198,6 +210,7 @@ class Renderer:
                 fan = fan[:, ::-1]
             tris.append(fan)
             tri_tex.append(np.zeros(k, bool))
+            tri_cull.append(np.zeros(k, bool))
             uv.append(np.zeros((k + 1, 2)))
             vcol.append(np.tile(op.color, (k + 1, 1)))
             fans.append((op.loop, first, center, op.depth_mm))
@@ -215,6 +228,7 @@ class Renderer:
             v, t, nrm, col = dressing.eyeball(center, np.array([0, 0, 1.0]), dressing.EYE_RADIUS_MM)
             tris.append(t + n)
             tri_tex.append(np.zeros(len(t), bool))
+            tri_cull.append(np.ones(len(t), bool))
             uv.append(np.zeros((len(v), 2)))
             vcol.append(col)
             static_pos.append(v)
@@ -223,6 +237,7 @@ class Renderer:
         scene = _Scene(
             np.ascontiguousarray(np.concatenate(tris), dtype=np.int64),
             np.concatenate(tri_tex),
+            np.concatenate(tri_cull),
             np.ascontiguousarray(np.concatenate(uv), dtype=np.float64),
             np.ascontiguousarray(np.concatenate(vcol), dtype=np.float64),
             nv,
@@ -249,13 +264,17 @@ class Renderer:
     # ------------------------------------------------------------------ render
     def render_linear(self, vertices=None) -> np.ndarray:
         """The image (H, W, 3) float32 in linear RGB (before tone mapping)."""
-        self._draw(vertices)
-        if self.ssaa == 1:
-            return self._img.copy()
-        downsample(self._img, self.ssaa, self._small)
-        return self._small.copy()
+        out = np.empty((self.camera.height, self.camera.width, 3), np.float32)
+        self._draw(vertices, None, out)
+        return out
 
-    def _draw(self, vertices) -> None:
+    def render(self, vertices=None) -> np.ndarray:
+        """The image (H, W, 3) uint8 sRGB of the skin at ``vertices`` (default: rest)."""
+        out = np.empty((self.camera.height, self.camera.width, 3), np.uint8)
+        self._draw(vertices, out, None)
+        return out
+
+    def _draw(self, vertices, out8, outf) -> None:
         skin = (
             self.face.vertices
             if vertices is None
@@ -269,16 +288,23 @@ class Renderer:
         cam = self._big
         scr = cam.project(pos)
         winv = np.ones(len(pos)) if cam.orthographic else 1.0 / np.maximum(scr[:, 2], 1e-9)
+        setup_triangles(
+            scr, winv, sc.tris, sc.tri_cull, cam.orthographic, cam.width, cam.height, self.ssaa,
+            self._setup, self._tbox, self._bbox,
+        )  # fmt: skip
+        nt = numba.get_num_threads()
+        visibility(self._setup, self._tbox, self._bbox, self._zbuf, self._tid, nt)
+        attribute_planes(
+            self._setup, self._tbox, sc.tris, winv, normals, pos, sc.vcol, sc.uv, self._planes
+        )
         tex = self.texture if self.texture is not None else np.ones((1, 1, 3), np.float32)
         m = self.material
-        rasterize(
-            scr,
-            winv,
-            sc.tris,
-            normals,
-            pos,
-            sc.uv,
-            sc.vcol,
+        srgb = out8 is not None
+        shade_resolve(
+            self.ssaa,
+            self._bbox,
+            self._tid,
+            self._planes,
             tex,
             sc.tri_tex,
             cam.eye,
@@ -290,22 +316,21 @@ class Renderer:
             float(m.specular),
             float(m.shininess),
             self._background,
-            self._img,
-            self._zbuf,
-            self._tid,
+            _SRGB_LUT,
+            srgb,
+            out8 if srgb else _NO_U8,
+            _NO_F32 if srgb else outf,
+            nt,
         )
-
-    def render(self, vertices=None) -> np.ndarray:
-        """The image (H, W, 3) uint8 sRGB of the skin at ``vertices`` (default: rest)."""
-        self._draw(vertices)
-        out = np.empty((self.camera.height, self.camera.width, 3), np.uint8)
-        resolve_srgb(self._img, self.ssaa, _SRGB_LUT, out)
-        return out
 
     def triangle_ids(self) -> np.ndarray:
         """Per-pixel triangle index of the last render at supersampled size (-1: background);
         indices below ``face.n_triangles`` are skin triangles."""
-        return self._tid.copy()
+        out = np.full(self._tid.shape, -1, np.int32)
+        x0, x1, y0, y1 = self._bbox
+        if x0 <= x1 and y0 <= y1:
+            out[y0 : y1 + 1, x0 : x1 + 1] = self._tid[y0 : y1 + 1, x0 : x1 + 1]
+        return out
 
 
 def render_mesh(
