@@ -32,8 +32,9 @@ def _render_fps(width: int, height: int, quick: bool) -> Measurement:
 
 @benchmark("render.fps_640x480", "1/s", higher_is_better=True)
 def bench_render_640(quick: bool) -> Measurement:
-    """Default face, textured, lit (3 lights), eyes and mouth, 2x2 supersampling, 640x480,
-    new vertex positions every frame, to a uint8 sRGB image."""
+    """Default face, textured, lit (3 lights), eyes and mouth, 640x480, anti-aliased with 2x2
+    coverage samples per pixel (each triangle shaded once per pixel it covers), new vertex
+    positions every frame, to a uint8 sRGB image."""
     return _render_fps(640, 480, quick)
 
 

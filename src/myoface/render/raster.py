@@ -1,5 +1,15 @@
-"""The z-buffer rasterizer: numba kernel with per-pixel (Phong-interpolated) Blinn-Phong shading,
+"""The z-buffer rasterizer: numba kernels with per-pixel (Phong-interpolated) Blinn-Phong shading,
 perspective-correct attributes and bilinear texture lookup; a plain numpy reference beside it.
+
+A frame is drawn in passes, like a GPU with multisample anti-aliasing:
+
+1. :func:`setup_triangles` — per triangle, its barycentric and depth planes in screen space and
+   its pixel box (back-facing triangles of closed surfaces are dropped);
+2. :func:`visibility` — the z-buffer at ``fct`` x ``fct`` samples per output pixel, storing only
+   the nearest triangle per sample (each triangle row is a solved span);
+3. :func:`attribute_planes` — per triangle, the planes of its perspective-correct attributes;
+4. :func:`shade_resolve` — per output pixel, each distinct triangle among its samples is shaded
+   once (at the centroid of its samples) and weighted by its coverage, then encoded to sRGB.
 
 Shading model, per pixel, in linear RGB::
 
@@ -8,7 +18,8 @@ Shading model, per pixel, in linear RGB::
 (the power by Schlick's rational approximation x / (s - s x + x), Schlick 1994)
 
 with the normal n interpolated from the vertices and flipped towards the viewer (both sides of
-an open surface are lit), albedo = vertex colour x texture (bilinear, wrap-free clamp).
+an open surface are lit), albedo = vertex colour x texture (bilinear, wrap-free clamp), and the
+view and half vectors h_l taken at each triangle's centroid.
 """
 
 from __future__ import annotations
@@ -197,17 +208,30 @@ def visibility(setup, tbox, bbox, zbuf, tri_id, nt):
 
 
 #: attributes interpolated across a triangle, in the order of :func:`attribute_planes`:
-#: the perspective denominator, normal xyz, world xyz, albedo rgb, texture uv
-N_PLANES = 12
+#: the perspective denominator, normal xyz, albedo rgb, texture uv
+N_PLANES = 9
+
+
+def planes_columns(n_lights: int) -> int:
+    """Columns of the per-triangle table of :func:`attribute_planes`."""
+    return 3 * N_PLANES + 3 + 3 * n_lights
 
 
 @njit(cache=True, parallel=True)
-def attribute_planes(setup, tbox, tris, winv, normals, world, vcol, uv, planes):
-    """Per drawn triangle, the screen-space planes of every perspective-correct attribute.
+def attribute_planes(
+    setup, tbox, tris, winv, normals, world, vcol, uv, eye, view_dir, ortho, light_dir, planes
+):
+    """Per drawn triangle, the screen-space planes of every perspective-correct attribute, and
+    its view and half vectors.
 
     With barycentrics l_k affine in (x, y) and q_k = 1/w_k, the numerator sum_k l_k q_k a_k of
     each attribute a and the denominator D = sum_k l_k q_k are affine in (x, y); so attribute
-    a at a pixel is (A x + B y + C) / D, one plane each (``planes[f, 3 i : 3 i + 3]``)."""
+    a at a pixel is (A x + B y + C) / D, one plane each (``planes[f, 3 j : 3 j + 3]``).
+    The unit vector to the eye is taken at the triangle's centroid (a triangle spans about a
+    degree of view), and with it the Blinn-Phong half vector of each light
+    (``planes[f, 3 N_PLANES :]``: view xyz, then half xyz per light)."""
+    nl = light_dir.shape[0]
+    o = 3 * N_PLANES
     for f in prange(tris.shape[0]):
         if tbox[f, 0] > tbox[f, 1]:
             continue
@@ -222,17 +246,34 @@ def attribute_planes(setup, tbox, tris, winv, normals, world, vcol, uv, planes):
             elif j < 4:
                 v0, v1, v2 = normals[i0, j - 1], normals[i1, j - 1], normals[i2, j - 1]
             elif j < 7:
-                v0, v1, v2 = world[i0, j - 4], world[i1, j - 4], world[i2, j - 4]
-            elif j < 10:
-                v0, v1, v2 = vcol[i0, j - 7], vcol[i1, j - 7], vcol[i2, j - 7]
+                v0, v1, v2 = vcol[i0, j - 4], vcol[i1, j - 4], vcol[i2, j - 4]
             else:
-                v0, v1, v2 = uv[i0, j - 10], uv[i1, j - 10], uv[i2, j - 10]
+                v0, v1, v2 = uv[i0, j - 7], uv[i1, j - 7], uv[i2, j - 7]
             v0 *= q0
             v1 *= q1
             v2 *= q2
             planes[f, 3 * j] = a0 * v0 + a1 * v1 + a2 * v2
             planes[f, 3 * j + 1] = b0 * v0 + b1 * v1 + b2 * v2
             planes[f, 3 * j + 2] = c0 * v0 + c1 * v1 + c2 * v2
+        if ortho:
+            vx, vy, vz = -view_dir[0], -view_dir[1], -view_dir[2]
+        else:
+            vx = eye[0] - (world[i0, 0] + world[i1, 0] + world[i2, 0]) / 3.0
+            vy = eye[1] - (world[i0, 1] + world[i1, 1] + world[i2, 1]) / 3.0
+            vz = eye[2] - (world[i0, 2] + world[i1, 2] + world[i2, 2]) / 3.0
+            vn = np.sqrt(vx * vx + vy * vy + vz * vz) + 1e-12
+            vx /= vn
+            vy /= vn
+            vz /= vn
+        planes[f, o] = vx
+        planes[f, o + 1] = vy
+        planes[f, o + 2] = vz
+        for k in range(nl):
+            hx, hy, hz = light_dir[k, 0] + vx, light_dir[k, 1] + vy, light_dir[k, 2] + vz
+            hn = np.sqrt(hx * hx + hy * hy + hz * hz) + 1e-12
+            planes[f, o + 3 + 3 * k] = hx / hn
+            planes[f, o + 4 + 3 * k] = hy / hn
+            planes[f, o + 5 + 3 * k] = hz / hn
 
 
 @njit(cache=True, fastmath=True, inline="always")
@@ -241,22 +282,7 @@ def _plane(planes, f, j, cx, cy):
 
 
 @njit(cache=True, fastmath=True, inline="always")
-def _shade(
-    f,
-    cx,
-    cy,
-    planes,
-    tex,
-    tri_tex,
-    eye,
-    view_dir,
-    ortho,
-    light_dir,
-    light_col,
-    ambient,
-    ks,
-    shininess,
-):
+def _shade(f, cx, cy, planes, tex, tri_tex, light_dir, light_col, ambient, ks, shininess):
     """Linear RGB of triangle ``f`` at screen point (cx, cy): perspective-correct attributes,
     normal flipped towards the viewer, Blinn-Phong with every light."""
     inv = 1.0 / _plane(planes, f, 0, cx, cy)
@@ -267,24 +293,16 @@ def _shade(
     nx *= nn
     ny *= nn
     nz *= nn
-    if ortho:
-        vx, vy, vz = -view_dir[0], -view_dir[1], -view_dir[2]
-    else:
-        vx = eye[0] - _plane(planes, f, 4, cx, cy) * inv
-        vy = eye[1] - _plane(planes, f, 5, cx, cy) * inv
-        vz = eye[2] - _plane(planes, f, 6, cx, cy) * inv
-        vn = 1.0 / (np.sqrt(vx * vx + vy * vy + vz * vz) + 1e-12)
-        vx *= vn
-        vy *= vn
-        vz *= vn
+    o = 3 * N_PLANES
+    vx, vy, vz = planes[f, o], planes[f, o + 1], planes[f, o + 2]
     if nx * vx + ny * vy + nz * vz < 0.0:  # the back of an open surface
         nx, ny, nz = -nx, -ny, -nz
-    ar = _plane(planes, f, 7, cx, cy) * inv
-    ag = _plane(planes, f, 8, cx, cy) * inv
-    ab = _plane(planes, f, 9, cx, cy) * inv
+    ar = _plane(planes, f, 4, cx, cy) * inv
+    ag = _plane(planes, f, 5, cx, cy) * inv
+    ab = _plane(planes, f, 6, cx, cy) * inv
     if tri_tex[f]:
-        tu = _plane(planes, f, 10, cx, cy) * inv
-        tv = _plane(planes, f, 11, cx, cy) * inv
+        tu = _plane(planes, f, 7, cx, cy) * inv
+        tv = _plane(planes, f, 8, cx, cy) * inv
         tr, tg, tb = _tex_bilinear(tex, tu, tv)
         ar *= tr
         ag *= tg
@@ -301,9 +319,8 @@ def _shade(
         dr += ndl * light_col[k, 0]
         dg += ndl * light_col[k, 1]
         db += ndl * light_col[k, 2]
-        hx, hy, hz = lx + vx, ly + vy, lz + vz
-        hn = np.sqrt(hx * hx + hy * hy + hz * hz) + 1e-12
-        ndh = (nx * hx + ny * hy + nz * hz) / hn
+        hx, hy, hz = planes[f, o + 3 + 3 * k], planes[f, o + 4 + 3 * k], planes[f, o + 5 + 3 * k]
+        ndh = nx * hx + ny * hy + nz * hz
         if ndh > 0.5 and ks > 0.0:
             # Schlick's rational approximation of ndh^shininess (Schlick 1994)
             sp = ks * ndh / (shininess - shininess * ndh + ndh)
@@ -321,9 +338,6 @@ def shade_resolve(
     planes,  # from attribute_planes
     tex,
     tri_tex,
-    eye,
-    view_dir,
-    ortho,
     light_dir,
     light_col,
     ambient,
@@ -397,8 +411,8 @@ def shade_resolve(
                 if same:  # the common case: one triangle (or none) covers the pixel
                     if t0 >= 0:
                         r, g, b = _shade(
-                            t0, (x + 0.5) * fct, (y + 0.5) * fct, planes, tex, tri_tex, eye,
-                            view_dir, ortho, light_dir, light_col, ambient, ks, shininess,
+                            t0, (x + 0.5) * fct, (y + 0.5) * fct, planes, tex, tri_tex,
+                            light_dir, light_col, ambient, ks, shininess,
                         )  # fmt: skip
                 else:
                     for s in range(nss):
@@ -437,8 +451,8 @@ def shade_resolve(
                             b += bb
                             continue
                         cr, cg, cb = _shade(
-                            t, mx / cnt, my / cnt, planes, tex, tri_tex, eye, view_dir,
-                            ortho, light_dir, light_col, ambient, ks, shininess,
+                            t, mx / cnt, my / cnt, planes, tex, tri_tex,
+                            light_dir, light_col, ambient, ks, shininess,
                         )  # fmt: skip
                         r += cr * cnt
                         g += cg * cnt

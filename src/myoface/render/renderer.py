@@ -20,9 +20,9 @@ from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, Myoface
 from myoface.render import dressing
 from myoface.render.camera import Camera
 from myoface.render.raster import (
-    N_PLANES,
     SETUP_COLS,
     attribute_planes,
+    planes_columns,
     setup_triangles,
     shade_resolve,
     srgb_lut,
@@ -173,7 +173,7 @@ class Renderer:
         self._tid = np.empty((h, w), np.int32)
         n_tris = len(self._scene.tris)
         self._setup = np.zeros((n_tris, SETUP_COLS))
-        self._planes = np.zeros((n_tris, 3 * N_PLANES))
+        self._planes = np.zeros((n_tris, planes_columns(len(self.lights))))
         self._tbox = np.zeros((n_tris, 4), np.int64)
         self._bbox = np.array([w, -1, h, -1], np.int64)
         rows = np.linspace(0, 1, h)[:, None]
@@ -295,8 +295,9 @@ class Renderer:
         nt = numba.get_num_threads()
         visibility(self._setup, self._tbox, self._bbox, self._zbuf, self._tid, nt)
         attribute_planes(
-            self._setup, self._tbox, sc.tris, winv, normals, pos, sc.vcol, sc.uv, self._planes
-        )
+            self._setup, self._tbox, sc.tris, winv, normals, pos, sc.vcol, sc.uv,
+            cam.eye, cam._basis[2], cam.orthographic, self._light_dir, self._planes,
+        )  # fmt: skip
         tex = self.texture if self.texture is not None else np.ones((1, 1, 3), np.float32)
         m = self.material
         srgb = out8 is not None
@@ -307,9 +308,6 @@ class Renderer:
             self._planes,
             tex,
             sc.tri_tex,
-            cam.eye,
-            cam._basis[2],
-            cam.orthographic,
             self._light_dir,
             self._light_col,
             np.asarray(m.ambient, dtype=np.float64),
