@@ -372,7 +372,9 @@ def _preconditioner(model: TissueModel):
 def _relax_implicit(model, x, tol_mm, max_iter, memory=8):
     """L-BFGS on the potential energy over the free nodes, initial inverse Hessian = the cached
     sparse LU of the rest stiffness (quasi-Newton in the sense of Liu, Bouaziz & Kavan 2017),
-    Armijo backtracking. Monotone in energy; one factorisation per model, none per call."""
+    Armijo backtracking with a safeguarded quadratic step (so an overshooting trial step is cut
+    to its predicted minimiser in one go, not by repeated halving). Monotone in energy; one
+    factorisation per model, none per call."""
     free = model.free_index
     lu = _preconditioner(model)
     xf = x[free].reshape(-1)
@@ -413,7 +415,11 @@ def _relax_implicit(model, x, tol_mm, max_iter, memory=8):
             en = potential_energy(model, xn)
             if en <= energy + 1e-4 * t * slope or t < 1e-4:
                 break
-            t *= 0.5
+            # safeguarded minimiser of the quadratic through phi(0), phi'(0), phi(t)
+            # (Nocedal & Wright 2006, eq. 3.58), kept within [0.1 t, 0.5 t]
+            curv = en - energy - slope * t
+            tq = -slope * t * t / (2.0 * curv) if curv > 0 else 0.5 * t
+            t = min(max(tq, 0.1 * t), 0.5 * t)
         gn = -internal_forces(model, xn)[free].reshape(-1)
         sv = t * d
         yv = gn - g
