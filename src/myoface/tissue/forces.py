@@ -217,13 +217,14 @@ PRISM_TETS_NB = PRISM_TETS  # a module-level constant numba freezes into the com
 
 @njit(cache=True)
 def volume_forces_numba(x, elems, rest_vol, kv, sign, f):
-    """Add -dQ/dx (volume preservation) to ``f`` (N, 3). ``elems``: (E, 6) prism nodes."""
+    """Add -dQ/dx (volume preservation) to ``f`` (N, 3). ``elems``: (E, 6) prism nodes.
+
+    One pass per element: the cross products of each tetrahedron's edges give both its volume
+    (a . (b x c) / 6) and its volume gradient, so they are computed once and kept in ``g``."""
+    g = np.empty((3, 3, 3))  # [tet, vertex 1..3, axis]: dV/dp of the tetrahedron's last 3 nodes
     for e in range(elems.shape[0]):
         el = elems[e]
-        dv = _prism_volume(x, el, sign) - rest_vol[e]
-        coef = -2.0 * kv[e] * dv * sign / 6.0
-        if coef == 0.0:
-            continue
+        vol = 0.0
         for t in range(3):
             i0 = el[PRISM_TETS_NB[t, 0]]
             i1 = el[PRISM_TETS_NB[t, 1]]
@@ -239,27 +240,27 @@ def volume_forces_numba(x, elems, rest_vol, kv, sign, f):
             cy = x[i3, 1] - x[i0, 1]
             cz = x[i3, 2] - x[i0, 2]
             # dV/dp1 = b x c, dV/dp2 = c x a, dV/dp3 = a x b, dV/dp0 = -(sum)
-            g1x = by * cz - bz * cy
-            g1y = bz * cx - bx * cz
-            g1z = bx * cy - by * cx
-            g2x = cy * az - cz * ay
-            g2y = cz * ax - cx * az
-            g2z = cx * ay - cy * ax
-            g3x = ay * bz - az * by
-            g3y = az * bx - ax * bz
-            g3z = ax * by - ay * bx
-            f[i1, 0] += coef * g1x
-            f[i1, 1] += coef * g1y
-            f[i1, 2] += coef * g1z
-            f[i2, 0] += coef * g2x
-            f[i2, 1] += coef * g2y
-            f[i2, 2] += coef * g2z
-            f[i3, 0] += coef * g3x
-            f[i3, 1] += coef * g3y
-            f[i3, 2] += coef * g3z
-            f[i0, 0] -= coef * (g1x + g2x + g3x)
-            f[i0, 1] -= coef * (g1y + g2y + g3y)
-            f[i0, 2] -= coef * (g1z + g2z + g3z)
+            g[t, 0, 0] = by * cz - bz * cy
+            g[t, 0, 1] = bz * cx - bx * cz
+            g[t, 0, 2] = bx * cy - by * cx
+            g[t, 1, 0] = cy * az - cz * ay
+            g[t, 1, 1] = cz * ax - cx * az
+            g[t, 1, 2] = cx * ay - cy * ax
+            g[t, 2, 0] = ay * bz - az * by
+            g[t, 2, 1] = az * bx - ax * bz
+            g[t, 2, 2] = ax * by - ay * bx
+            vol += ax * g[t, 0, 0] + ay * g[t, 0, 1] + az * g[t, 0, 2]
+        dv = sign * vol / 6.0 - rest_vol[e]
+        coef = -2.0 * kv[e] * dv * sign / 6.0
+        if coef == 0.0:
+            continue
+        for t in range(3):
+            i0 = el[PRISM_TETS_NB[t, 0]]
+            for q in range(3):
+                iq = el[PRISM_TETS_NB[t, q + 1]]
+                for d in range(3):
+                    f[iq, d] += coef * g[t, q, d]
+                    f[i0, d] -= coef * g[t, q, d]
 
 
 @njit(cache=True)
