@@ -187,3 +187,19 @@ def test_video_writer_roundtrip_and_atomicity(tmp_path):
         vw.write(frames[0])
         vw.write(np.zeros((10, 10, 3), np.uint8))
     assert not (tmp_path / "s.mp4").exists()
+
+
+def test_antialiased_edge_pixel_is_the_coverage_weighted_mean():
+    """With 2x2 samples, a pixel that a white unlit square covers with exactly one column of
+    samples is the mean of white and the background of its row; pixels inside are white."""
+    from myoface.face import FaceMesh
+
+    cam = ortho(64, 64, span=64.0)  # 1 mm per pixel, x = 0 at pixel 32
+    edge = 10.5 - 32.0  # output pixel 10 spans samples at x = 10.25 and 10.75: one is inside
+    v = np.array([[-40, -40, 0], [edge, -40, 0], [edge, 40, 0], [-40, 40, 0.0]])
+    r = Renderer(FaceMesh(v, np.array([[0, 1, 2], [0, 2, 3]])), cam, [], FLAT, dress=False)
+    img = r.render_linear()
+    np.testing.assert_allclose(img[:, :10], 1.0, atol=1e-6)
+    background = img[:, 40]  # same row, no geometry
+    np.testing.assert_allclose(img[:, 10], 0.5 * (1.0 + background), atol=1e-6)
+    assert (background < 0.1).all()
