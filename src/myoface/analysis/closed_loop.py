@@ -58,13 +58,15 @@ def run_closed_loop(
     refine: int = 2,
     head_frame: str = "contours",
     tracker: str = "snakes",
+    **analyzer_options,
 ) -> ClosedLoopResult:
     """Render ``n_frames`` of known contractions (orthographic frontal camera, make-up texture),
     analyse them with :class:`Analyzer` (contours initialised from the known camera; static
     head, so no head-frame correction), and return truth and estimates.
 
     ``tracker="landmarks"`` analyses the same frames with
-    :class:`~myoface.analysis.landmarks.LandmarkAnalyzer` (MediaPipe's face mesh) instead."""
+    :class:`~myoface.analysis.landmarks.LandmarkAnalyzer` (MediaPipe's face mesh) instead.
+    ``analyzer_options`` go to :class:`Analyzer` (e.g. ``estimator="fiducials"``)."""
     from myoface.render import Camera, Renderer, to_srgb8
     from myoface.render.dressing import default_skin_texture
 
@@ -85,7 +87,15 @@ def run_closed_loop(
         an = LandmarkAnalyzer(model, ids, refine=0)
     else:
         init = project_sections(model, cam)
-        an = Analyzer(model, init, ids, refine=refine, head_frame=head_frame, head_reference=())
+        an = Analyzer(
+            model,
+            init,
+            ids,
+            refine=refine,
+            head_frame=head_frame,
+            head_reference=(),
+            **analyzer_options,
+        )
     try:
         ms = [an.measure(f, k) for k, f in enumerate(frames)]
     finally:

@@ -33,6 +33,27 @@ RIDGE = 1e-3
 METHODS = ("model", "paper")
 
 
+def skin_response(model, ids) -> np.ndarray:
+    """The skin's displacement per unit contraction of each muscle in ``ids`` (V, 3, K), mm:
+    the tissue relaxed from rest at :data:`PROBE_CONTRACTION` of one muscle at a time.
+
+    Depends only on the model and the muscles, so it is cached on the model: a second
+    analysis in the same session does not relax the tissue again."""
+    key = ("response", tuple(ids))
+    if key in model.cache:
+        return model.cache[key]
+    model.reset()
+    rest = model.skin_vertices().copy()
+    cols = []
+    for mid in ids:
+        model.relax({mid: PROBE_CONTRACTION}, start="rest")
+        cols.append((model.skin_vertices() - rest) / PROBE_CONTRACTION)
+    model.reset()
+    resp = np.stack(cols, axis=-1)
+    model.cache[key] = resp
+    return resp
+
+
 @dataclass(frozen=True)
 class Fiducial:
     """A fiducial point: a name and the skin vertex of the face model it stands for (or a
@@ -99,22 +120,8 @@ class ContractionEstimator:
         return self.weights @ skin[:, :2]
 
     def _probe(self) -> np.ndarray:
-        # the responses depend only on the model, the muscles and the fiducials: cached on the
-        # model, so a second analysis in the same session does not relax the tissue again
-        fm = self.model
-        key = ("probe", self.ids, self.weights.tobytes())
-        if key in fm.cache:
-            return fm.cache[key]
-        fm.reset()
-        rest = self.positions(fm.skin_vertices())
-        cols = []
-        for mid in self.ids:
-            fm.relax({mid: PROBE_CONTRACTION}, start="rest")
-            cols.append((self.positions(fm.skin_vertices()) - rest) / PROBE_CONTRACTION)
-        fm.reset()
-        jac = np.stack(cols, axis=-1)
-        fm.cache[key] = jac
-        return jac
+        resp = skin_response(self.model, self.ids)  # (V, 3, K)
+        return np.einsum("fv,vdk->fdk", self.weights, resp[:, :2])
 
     def _solve(self, a, b, lo, hi):
         k = len(self.ids)

@@ -133,6 +133,14 @@ def section_features(section: str, pts: np.ndarray, midline_x: float) -> np.ndar
     return np.array(out).reshape(-1, 2)
 
 
+#: sections tracked as thin dark lines (the "line" potential) rather than as edges
+LINE_SECTIONS = ("nasolabial_r", "nasolabial_l")
+#: sections tracked but not fitted by the curve estimator: the nose is the head reference, and
+#: its lower contour is a shading boundary (the alae's shadow), not a mark on the skin, so its
+#: snake does not stay on the same skin as the face moves
+CURVE_EXCLUDED = ("nose",)
+#: how contractions are read off the contours (see :class:`Analyzer`)
+ESTIMATORS = ("curves", "fiducials")
 #: the muscles the paper estimates, plus the jaw
 PAPER_MUSCLES = tuple(PAPER_ASSIGNMENT)
 #: a frame is unusable when more than this fraction of a contour's nodes escaped its edge
@@ -250,6 +258,13 @@ class Analyzer:
         translation of the ``head_reference`` sections' centroid (the paper uses the
         hairline).
     head_reference : sections for ``head_frame="contours"``.
+    estimator : ``"curves"`` (default; beyond the paper): the model's skin curves fitted to
+        the whole contours, distances along the contours' normals
+        (:class:`~myoface.analysis.curvefit.CurveEstimator`). ``"fiducials"``: the paper's
+        scheme, fiducial points read off the contours (:func:`section_features`) and inverted
+        jointly by :class:`~myoface.analysis.estimate.ContractionEstimator`.
+    line_sections : sections tracked in the ``"line"`` potential (thin dark lines) instead of
+        ``potential``.
     """
 
     def __init__(
@@ -264,7 +279,12 @@ class Analyzer:
         potential: str = "gaussian",
         head_frame: str = "register",
         head_reference=("nose",),
+        estimator: str = "curves",
+        line_sections=LINE_SECTIONS,
     ):
+        if estimator not in ESTIMATORS:
+            raise MyofaceValueError(f"estimator must be one of {ESTIMATORS}; got {estimator!r}")
+        self.method = estimator
         if head_frame not in ("register", "contours"):
             raise MyofaceValueError(
                 f"head_frame must be 'register' or 'contours'; got {head_frame!r}"
@@ -288,11 +308,22 @@ class Analyzer:
             closed.append(SECTIONS[sec][1])
         self.contours = make_contours(polys, closed=closed, names=self.sections)
         self.params = params or SnakeParams(p=0.01)
-        self.snakes = Snakes(self.contours, self.params)
+        self.layers = [1 if s in line_sections else 0 for s in self.sections]
+        self.snakes = Snakes(self.contours, self.params, layers=self.layers)
         all_fids = {f.name: f for f in model_fiducials(model.face)}
         self.fiducials = [all_fids[f"{s}:{n}"] for s in self.sections for n in FEATURES[s]]
         self.ids = tuple(muscle_ids)
         self.estimator = ContractionEstimator(model, self.fiducials, self.ids)
+        self.curves = None
+        if estimator == "curves":
+            from myoface.analysis.curvefit import CurveEstimator
+
+            secs = {
+                s: (section_vertices(model.face, s), SECTIONS[s][1])
+                for s in self.sections
+                if s not in CURVE_EXCLUDED
+            }
+            self.curves = CurveEstimator(model, secs, self.ids)
         self._p0 = None
         self._ref0 = None
         self._sim = Similarity()
@@ -326,19 +357,24 @@ class Analyzer:
                 self._sim = sim
         pot = image_potential(frame, sigma=self.sigma, method=self.potential)
         self.last_potential = pot  # for the overlay on the potential (the paper's Fig. 7b)
+        if any(self.layers):
+            line = image_potential(frame, sigma=self.sigma, method="line")
+            stack = np.stack([pot, line])
+        else:
+            stack = pot[None]
         # contrast: the strongest edges of the frame (99th percentile of |P|)
         contrast = float(np.percentile(-pot, 99))
         if self._contrast0 is None:
             self._contrast0 = contrast
         low = contrast < LOW_CONTRAST * self._contrast0
-        res = self.snakes.relax(pot)
+        res = self.snakes.relax(stack)
         conts = res.split()
         if self.head_frame == "register":
             # measure in the calibration frame's coordinates: the head's motion removed
             conts_cal = [self._sim.inverse_apply(c) for c in conts]
-            pts, ref = self._features(conts_cal)
         else:
-            pts, ref = self._features(conts)
+            conts_cal = conts
+        pts, ref = self._features(conts_cal)
         sizes = np.diff(self.contours.offsets)
         bad = [
             s
@@ -353,6 +389,16 @@ class Analyzer:
             if rms_px < 5:
                 raise MyofaceValueError("the initial contours are too small (under 5 px)")
             self.mm_per_px = rms_mm / rms_px
+            if self.curves is not None:
+                from myoface.analysis.landmarks import fit_similarity
+
+                # the model (image-like mm) onto the calibration frame (px)
+                z, ms, md = fit_similarity(model_xy * np.array([1.0, -1.0]), pts)
+                mat = np.array([[z.real, -z.imag], [z.imag, z.real]])
+                self.curves.calibrate(
+                    dict(zip(self.sections, conts_cal, strict=True)), mat, md - mat @ ms
+                )
+                self.mm_per_px = self.curves.mm_per_px
         if self.head_frame == "register":
             shift = np.zeros(2)
             head_t = np.asarray(self._sim.t, dtype=np.float64)
@@ -373,7 +419,13 @@ class Analyzer:
                 res.iterations,
                 *hs,
             )
-        c = self.estimator.estimate(d_mm, refine=self.refine)
+        if self.curves is not None:
+            c = self.curves.estimate(
+                {s: q - shift for s, q in zip(self.sections, conts_cal, strict=True)},
+                refine=self.refine,
+            )
+        else:
+            c = self.estimator.estimate(d_mm, refine=self.refine)
         return FrameMeasurement(index, time_s, "ok", c, head_t, named, res.iterations, *hs)
 
     def close(self) -> None:

@@ -15,7 +15,7 @@ from numba import njit, prange
 from myoface.errors import MyofaceValueError
 
 LUMA_601 = (0.299, 0.587, 0.114)
-METHODS = ("gaussian", "paper", "line+edge")
+METHODS = ("gaussian", "paper", "line+edge", "line")
 
 
 def to_intensity(image) -> np.ndarray:
@@ -125,6 +125,10 @@ def image_potential(image, sigma: float = 2.0, method: str = "gaussian") -> np.n
     Kass, Witkin & Terzopoulos (1988). Thin dark features (brows, furrows, pencilled lines) are
     ridges of eq. (13) (its ravines run along their two sides); with the intensity term their
     centre lines become the ravines.
+    ``"line"``: ``G_sigma * I - G_(4 sigma) * I``, a difference of Gaussians (Marr & Hildreth
+    1980): about 0 on smooth skin, negative along thin dark lines (furrows, pencilled lines)
+    with its ravine on their centre line, so that an open contour on a line neither sits on
+    one of its sides nor slides off its ends as it does on eq. (13).
     """
     if method not in METHODS:
         raise MyofaceValueError(f"method must be one of {METHODS}; got {method!r}")
@@ -138,6 +142,11 @@ def image_potential(image, sigma: float = 2.0, method: str = "gaussian") -> np.n
         raise MyofaceValueError(f"sigma must be > 0 pixels; got {sigma}")
     blurred = np.empty_like(img)
     _blur_separable(img, gaussian_kernel(float(sigma)), blurred, tmp)
+    if method == "line":
+        wide = np.empty_like(img)
+        _blur_separable(img, gaussian_kernel(4.0 * float(sigma)), wide, tmp)
+        np.subtract(blurred, wide, out=out)
+        return out
     _neg_grad_mag_central(blurred, out)
     if method == "line+edge":
         out += blurred

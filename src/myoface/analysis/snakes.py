@@ -303,7 +303,9 @@ WINDOW = 10
 
 
 @njit(cache=True)
-def _iterate(x, rest, si, sj, a_s, nu_s, pot, gx, gy, p, user, g_dt, max_iter, tol, perm, band, bw):
+def _iterate(
+    x, rest, si, sj, a_s, nu_s, layer, gx, gy, p, user, g_dt, max_iter, tol, perm, band, bw
+):
     n = x.shape[0]
     f = np.empty((n, 2))
     rhs = np.empty((n, 2))
@@ -312,7 +314,7 @@ def _iterate(x, rest, si, sj, a_s, nu_s, pot, gx, gy, p, user, g_dt, max_iter, t
     moved = 0.0
     for it in range(max_iter):
         for i in range(n):
-            sx, sy = bilinear2(gx, gy, x[i, 0], x[i, 1])
+            sx, sy = bilinear2(gx[layer[i]], gy[layer[i]], x[i, 0], x[i, 1])
             f[i, 0] = -p * sx + user[i, 0]
             f[i, 1] = -p * sy + user[i, 1]
         for s in range(si.shape[0]):
@@ -353,9 +355,9 @@ def _iterate(x, rest, si, sj, a_s, nu_s, pot, gx, gy, p, user, g_dt, max_iter, t
 
 
 @njit(cache=True)
-def _sample(pot, x, out):
+def _sample(pot, layer, x, out):
     for i in range(x.shape[0]):
-        out[i] = bilinear(pot, x[i, 0], x[i, 1])
+        out[i] = bilinear(pot[layer[i]], x[i, 0], x[i, 1])
 
 
 @dataclass
@@ -404,12 +406,22 @@ def _check_inside(x: np.ndarray, shape, names, offsets) -> None:
 
 class Snakes:
     """Contours with their factorized system and viscoelastic state, ready to relax on a
-    sequence of potentials (the tracker's state between frames)."""
+    sequence of potentials (the tracker's state between frames).
 
-    def __init__(self, contours: Contours, params: SnakeParams | None = None):
+    ``layers`` (one int per contour, default all 0): which layer of a stacked potential
+    (L, H, W) each contour moves in, so that different features can be tracked in different
+    potentials (e.g. edges for the lips, a line detector for a furrow)."""
+
+    def __init__(self, contours: Contours, params: SnakeParams | None = None, layers=None):
         self.params = params or SnakeParams()
         self.system = SnakeSystem(contours, self.params)
         self.contours = contours.with_nodes(contours.nodes)
+        k = contours.n_contours
+        lay = np.zeros(k, dtype=np.int64) if layers is None else np.asarray(layers, np.int64)
+        if lay.shape != (k,) or (lay < 0).any():
+            raise MyofaceValueError(f"layers must be {k} non-negative ints, one per contour")
+        self.layers = lay
+        self.node_layer = np.repeat(lay, np.diff(contours.offsets))
         s = self.system
         x = self.contours.nodes
         self.rest = np.linalg.norm(x[s.sj] - x[s.si], axis=1)  # l_i = initial spacings
@@ -427,14 +439,23 @@ class Snakes:
         self.rest *= np.sqrt(abs(np.linalg.det(a)))
 
     def relax(self, potential: np.ndarray, user_forces: np.ndarray | None = None) -> SnakeResult:
-        """Let the contours settle in ``potential`` (H, W), from where they are now."""
+        """Let the contours settle in ``potential`` (H, W), or (L, H, W) with the layers
+        given at construction, from where they are now."""
         pot = np.ascontiguousarray(potential, dtype=np.float64)
-        if pot.ndim != 2 or min(pot.shape) < 3:
-            raise MyofaceValueError(f"the potential must be a 2-D image; got shape {pot.shape}")
+        if pot.ndim == 2:
+            pot = pot[None]
+        if pot.ndim != 3 or min(pot.shape[1:]) < 3:
+            raise MyofaceValueError(
+                f"the potential must be a 2-D image (or a stack of them); got shape {pot.shape}"
+            )
+        if self.layers.max() >= len(pot):
+            raise MyofaceValueError(
+                f"the contours use potential layer {self.layers.max()}; got {len(pot)} layer(s)"
+            )
         if not np.isfinite(pot).all():
             raise MyofaceValueError("the potential contains NaN or Inf")
         c = self.contours
-        _check_inside(c.nodes, pot.shape, c.names, c.offsets)
+        _check_inside(c.nodes, pot.shape[1:], c.names, c.offsets)
         n = len(c.nodes)
         if user_forces is None:
             user = np.zeros((n, 2))
@@ -444,7 +465,8 @@ class Snakes:
                 raise MyofaceValueError(f"user_forces must be a finite ({n}, 2) array")
         gx = np.empty_like(pot)
         gy = np.empty_like(pot)
-        potential_gradient(pot, gx, gy)
+        for q in range(len(pot)):
+            potential_gradient(pot[q], gx[q], gy[q])
         s, p = self.system, self.params
         x = c.nodes
         it, moved = _iterate(
@@ -454,7 +476,7 @@ class Snakes:
             s.sj,
             s.a_s,
             s.nu_s,
-            pot,
+            self.node_layer,
             gx,
             gy,
             float(p.p),
@@ -470,11 +492,11 @@ class Snakes:
             raise MyofaceValueError(
                 "the contours diverged (NaN); reduce p or increase gamma_over_dt"
             )
-        h, w = pot.shape
+        h, w = pot.shape[1:]
         np.clip(x[:, 0], 0, w - 1, out=x[:, 0])
         np.clip(x[:, 1], 0, h - 1, out=x[:, 1])
         vals = np.empty(n)
-        _sample(pot, x, vals)
+        _sample(pot, self.node_layer, x, vals)
         k = c.n_contours
         mean = np.array([vals[c.offsets[j] : c.offsets[j + 1]].mean() for j in range(k)])
         if self.reference is None:
