@@ -146,9 +146,10 @@ class CurveEstimator:
             w[m] = np.where(at_end, 0.0, self.node_weight[m])
         return normal, res, w
 
-    def _solve(self, normal, res, w, lo, hi):
+    def _solve(self, normal, res, w, lo, hi, jac=None):
         k = len(self.ids)
-        a = np.einsum("nd,ndk->nk", normal, self.jac) * self.mm_per_px
+        jac = self.jac if jac is None else jac
+        a = np.einsum("nd,ndk->nk", normal, jac) * self.mm_per_px
         r = np.abs(res)
         hub = np.where(r > HUBER_MM, HUBER_MM / np.maximum(r, 1e-12), 1.0)
         sw = np.sqrt(w * hub)
@@ -172,12 +173,24 @@ class CurveEstimator:
             step = self._solve(normal, res, w, -c, 1.0 - c)
             c = np.clip(c + step, 0.0, 1.0)
         fm = self.model
+        jac = self.jac.copy()
+        # secant pairs (contractions, predicted nodes): the rest state is one
+        c_prev, p_prev = np.zeros(k), self.p0
+        cols = [fm.ids.index(i) for i in self.ids]
         for _ in range(int(refine)):
             full = np.zeros(len(fm.ids))
-            full[[fm.ids.index(i) for i in self.ids]] = c
+            full[cols] = c
             fm.relax(full, start="current")
             pred = self.predicted(fm.skin_vertices())
+            # Broyden's update: the Jacobian made exact along the last step, so that the
+            # stiffening tissue's smaller response is not overshot again (Nocedal & Wright,
+            # eq. 11.27)
+            dc = c - c_prev
+            dd = float(dc @ dc)
+            if dd > 1e-12:
+                jac += np.multiply.outer((pred - p_prev) - jac @ dc, dc / dd)
+            c_prev, p_prev = c.copy(), pred
             normal, res, w = self._rows(curves, pred)
-            step = self._solve(normal, res, w, -c, 1.0 - c)
+            step = self._solve(normal, res, w, -c, 1.0 - c, jac)
             c = np.clip(c + step, 0.0, 1.0)
         return c

@@ -265,6 +265,9 @@ class Analyzer:
         jointly by :class:`~myoface.analysis.estimate.ContractionEstimator`.
     line_sections : sections tracked in the ``"line"`` potential (thin dark lines) instead of
         ``potential``.
+    reseed : with ``estimator="curves"``, a second pass per frame: the contours are moved to
+        where the model, at the first estimate, puts their skin, relaxed again and the
+        contractions re-estimated (analysis by synthesis; twice the tracking cost).
     """
 
     def __init__(
@@ -281,10 +284,13 @@ class Analyzer:
         head_reference=("nose",),
         estimator: str = "curves",
         line_sections=LINE_SECTIONS,
+        reseed: bool = True,
     ):
         if estimator not in ESTIMATORS:
             raise MyofaceValueError(f"estimator must be one of {ESTIMATORS}; got {estimator!r}")
         self.method = estimator
+        self.reseed = bool(reseed)
+        self._calibration_index = None
         if head_frame not in ("register", "contours"):
             raise MyofaceValueError(
                 f"head_frame must be 'register' or 'contours'; got {head_frame!r}"
@@ -383,6 +389,7 @@ class Analyzer:
         ]
         if self._p0 is None:
             self._p0, self._ref0 = pts, ref
+            self._calibration_index = index
             model_xy = self.estimator.positions(self.model.face.vertices)
             rms_mm = np.sqrt(((model_xy - model_xy.mean(0)) ** 2).sum(1).mean())
             rms_px = np.sqrt(((pts - pts.mean(0)) ** 2).sum(1).mean())
@@ -419,13 +426,45 @@ class Analyzer:
                 res.iterations,
                 *hs,
             )
-        if self.curves is not None:
+        if self.curves is None:
+            c = self.estimator.estimate(d_mm, refine=self.refine)
+            return FrameMeasurement(index, time_s, "ok", c, head_t, named, res.iterations, *hs)
+        c = self.curves.estimate(
+            {s: q - shift for s, q in zip(self.sections, conts_cal, strict=True)},
+            refine=self.refine,
+        )
+        if self.reseed and index != self._calibration_index:
+            # analysis by synthesis: put the contours where the model, at this estimate, says
+            # the skin went, let them settle on the frame's edges again and re-estimate. A
+            # contour that stopped on a nearer edge (the lower lip on the mouth's inner edge as
+            # the jaw drops) is moved past it.
+            if self.refine > 0:
+                pred = self.curves.predicted(self.model.skin_vertices())
+            else:
+                pred = self.curves.p0 + self.curves.jac @ c
+            pred = pred + shift
+            if self.head_frame == "register":
+                pred = self._sim.apply(pred)
+            nodes = self.snakes.contours.nodes
+            off = self.contours.offsets
+            k = 0
+            for name in self.curves.names:
+                j = self.sections.index(name)
+                n = off[j + 1] - off[j]
+                nodes[off[j] : off[j + 1]] = pred[k : k + n]
+                k += n
+            res = self.snakes.relax(stack)
+            conts = res.split()
+            conts_cal = (
+                [self._sim.inverse_apply(q) for q in conts]
+                if self.head_frame == "register"
+                else conts
+            )
+            named = dict(zip(self.sections, conts, strict=True))
             c = self.curves.estimate(
                 {s: q - shift for s, q in zip(self.sections, conts_cal, strict=True)},
                 refine=self.refine,
             )
-        else:
-            c = self.estimator.estimate(d_mm, refine=self.refine)
         return FrameMeasurement(index, time_s, "ok", c, head_t, named, res.iterations, *hs)
 
     def close(self) -> None:
