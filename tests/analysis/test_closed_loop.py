@@ -1,14 +1,15 @@
 """Closed loop on a short synthetic sequence: render known contractions, analyse, compare.
 
-Tolerances: the errors measured when this test was written were jaw RMSE 0.065-0.08 with
-correlation 0.95-0.97, and zygomatic majors RMSE 0.06-0.125 with correlation 0.80-0.97 on this
-16-frame sequence; the spread comes from floating-point-level changes in the tracking (the joint
-inversion is ill-conditioned between muscles with overlapping effects). The bounds sit above that
-spread, so the test fails on a real regression and not on noise. They are a regression floor, not the
-issue's targets (RMSE <= 0.05 and correlation >= 0.9 for every muscle):
-the jaw and the zygomatic majors are recovered well; the frontalis bellies (whose fields overlap
-on the brow), the depressor labii inferioris (confounded with the jaw on the lower lip) and the
-levator labii superioris alaeque nasi (a small motion at the nose) are not yet.
+Tolerances. With the default analysis (snakes, curve fit, a second tracking pass from the
+model's prediction) the errors measured on this 16-frame sequence when this test was written
+were: frontalis bellies RMSE 0.009-0.013, zygomatic majors 0.019-0.020, levator labii
+superioris alaeque nasi 0.022-0.040, depressor labii inferioris 0.071-0.082, jaw 0.004;
+correlation at least 0.94 for every muscle. The bounds below sit about 1.5-2.5x above those,
+because the tracking moves by fractions of a pixel with floating-point-level changes (in the
+renderer, the tissue solver) and the depressors, whose signature beyond the jaw's is a
+sub-pixel change of the lower lip's outline at 256 x 256, amplify that. They are a regression
+floor; the issue's targets (RMSE <= 0.05, correlation >= 0.9 for every muscle) are measured on
+the 48-frame sequence by ``myoface bench --only analysis.closed_loop`` (see BENCHMARKS.md).
 """
 
 import numpy as np
@@ -19,15 +20,36 @@ from myoface.model import build_face_model
 
 
 @pytest.mark.slow
-def test_closed_loop_recovers_jaw_and_zygomatic_major():
+def test_closed_loop_recovers_every_muscle():
     res = run_closed_loop(build_face_model(), n_frames=16, size=256)
     assert all(q == "ok" for q in res.quality)
-    rmse, corr = res.rmse(), res.corr()
+    rmse, corr = (
+        dict(zip(res.ids, res.rmse(), strict=True)),
+        dict(zip(res.ids, res.corr(), strict=True)),
+    )
+    table = res.table()
+    assert rmse["jaw"] < 0.02 and corr["jaw"] > 0.99, table
+    for m in res.ids:
+        bound = 0.2 if m.startswith("depressor") else 0.08 if m.startswith("levator") else 0.04
+        assert rmse[m] < bound, table
+        assert corr[m] > 0.85, table
+    # every frame is measured and in range
+    assert np.isfinite(res.estimate).all() and res.estimate.min() >= 0 and res.estimate.max() <= 1
+
+
+@pytest.mark.slow
+def test_the_papers_fiducial_scheme_is_still_available():
+    """``estimator="fiducials"``: fiducial points read off the contours (Section V-F). Less
+    accurate than the curve fit (its worst muscles were at RMSE 0.3-0.4 when the curve fit
+    replaced it), but the jaw and the zygomatic majors are recovered (measured when written:
+    jaw RMSE 0.072 with correlation 0.98, zygomatic majors 0.075-0.164 with 0.82-0.89)."""
+    res = run_closed_loop(
+        build_face_model(), n_frames=16, size=256, estimator="fiducials", reseed=False
+    )
     ids = list(res.ids)
+    rmse, corr = res.rmse(), res.corr()
     j = ids.index("jaw")
     assert rmse[j] < 0.15 and corr[j] > 0.9, res.table()
     for s in "lr":
         z = ids.index(f"zygomaticus_major_{s}")
-        assert rmse[z] < 0.2 and corr[z] > 0.7, res.table()
-    # every frame is measured and in range
-    assert np.isfinite(res.estimate).all() and res.estimate.min() >= 0 and res.estimate.max() <= 1
+        assert rmse[z] < 0.25 and corr[z] > 0.7, res.table()

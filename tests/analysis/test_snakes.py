@@ -182,3 +182,37 @@ def test_beats_skimage_on_the_benchmark_task():
     out = track_myoface(frames, init)
     worst = max(ellipse_distance(c, ctr).max() for c, ctr in zip(out, centres[-1], strict=True))
     assert worst < 1.0
+
+
+def test_each_contour_moves_in_its_own_potential_layer():
+    """Two contours on the same image, each in its own potential: one is pulled onto a dark
+    line by the "line" potential, the other onto an ellipse's edge by eq. (13)."""
+    img = ellipse_image(size=96)
+    img[70:73, 10:86] = 40  # a 3-px dark line, rows 70-72
+    pot = np.stack(
+        [image_potential(img, sigma=1.5), image_potential(img, sigma=1.5, method="line")]
+    )
+    line0 = np.column_stack([np.linspace(20, 76, 29), np.full(29, 68.5)])
+    c = make_contours(
+        [ellipse_points((48, 44), (24, 16), 126, grow=2.0), line0], closed=[True, False]
+    )
+    s = Snakes(c, SnakeParams(p=0.01), layers=[0, 1])
+    ell, line = s.relax(pot).split()
+    assert ellipse_distance(ell, (48, 44), (24, 16)).max() < 1.0
+    # the line's centre row is 71; the middle nodes settle on it
+    assert np.abs(line[5:-5, 1] - 71.0).max() < 0.5
+    with pytest.raises(MyofaceValueError, match="layer"):
+        s.relax(pot[0])
+    with pytest.raises(MyofaceValueError, match="layers"):
+        Snakes(c, layers=[0])
+
+
+def test_line_potential_has_its_ravine_on_a_thin_dark_lines_centre():
+    img = np.full((40, 60), 200, np.uint8)
+    img[:, 29:32] = 60  # columns 29-31
+    row = image_potential(img, sigma=1.5, method="line")[20]
+    assert int(np.argmin(row)) == 30
+    assert row[30] < -50 and abs(row[3]) < 5  # deep on the line, about 0 on the flat
+    # eq. (13) has a ridge there instead, with its ravines on the line's sides
+    edge = image_potential(img, sigma=1.5)[20]
+    assert edge[30] > edge[28] and edge[30] > edge[32]

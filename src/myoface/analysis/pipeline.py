@@ -133,6 +133,10 @@ def section_features(section: str, pts: np.ndarray, midline_x: float) -> np.ndar
     return np.array(out).reshape(-1, 2)
 
 
+#: the potential's Gaussian width on the face, mm (``sigma=None``): features are blurred by
+#: the same amount of skin whatever the face's size in pixels (1.5 px on the 256 x 256
+#: closed-loop frames, where a pixel is 0.77 mm)
+SIGMA_MM = 1.2
 #: sections tracked as thin dark lines (the "line" potential) rather than as edges
 LINE_SECTIONS = ("nasolabial_r", "nasolabial_l")
 #: sections tracked but not fitted by the curve estimator: the nose is the head reference, and
@@ -226,6 +230,18 @@ def model_fiducials(face) -> list[Fiducial]:
 # ------------------------------------------------------------------------------ the analyzer
 
 
+def _init_mm_per_px(model, init: dict) -> float:
+    """The face's scale in initial contours: RMS radius of the model's section curves (mm)
+    over that of the contours (px)."""
+    mm = np.concatenate([model.face.vertices[section_vertices(model.face, s), :2] for s in init])
+    px = np.concatenate([np.asarray(init[s], dtype=np.float64) for s in init])
+    r_mm = np.sqrt(((mm - mm.mean(0)) ** 2).sum(1).mean())
+    r_px = np.sqrt(((px - px.mean(0)) ** 2).sum(1).mean())
+    if not r_px > 0:
+        raise MyofaceValueError("the initial contours are degenerate (a single point)")
+    return float(r_mm / r_px)
+
+
 @dataclass
 class FrameMeasurement:
     index: int
@@ -249,7 +265,8 @@ class Analyzer:
         be missing (their fiducials are then not used).
     muscle_ids : muscles to estimate (default: the paper's 12 + jaw).
     refine : Gauss-Newton corrections per frame through the model (0: linear estimate only).
-    sigma : Gaussian width (px) of the image potential; ``potential``: see
+    sigma : Gaussian width (px) of the image potential; None (default): :data:`SIGMA_MM` on
+        the face, converted with the face's scale in the initial contours. ``potential``: see
         :func:`~myoface.analysis.potentials.image_potential`.
     head_frame : ``"register"`` (default): the head's similarity motion (translation, scale,
         in-plane rotation) from image registration of the upper face
@@ -276,7 +293,7 @@ class Analyzer:
         init: dict[str, np.ndarray],
         muscle_ids=PAPER_MUSCLES,
         refine: int = 1,
-        sigma: float = 1.5,
+        sigma: float | None = None,
         params: SnakeParams | None = None,
         spacing_px: float = 1.0,
         potential: str = "gaussian",
@@ -304,7 +321,9 @@ class Analyzer:
             raise MyofaceValueError(f"unknown sections {sorted(unknown)}; see SECTIONS")
         self.model = model
         self.refine = int(refine)
-        self.sigma = float(sigma)
+        self.sigma = float(sigma) if sigma is not None else SIGMA_MM / _init_mm_per_px(model, init)
+        if not (np.isfinite(self.sigma) and self.sigma > 0):
+            raise MyofaceValueError(f"sigma must be > 0 pixels; got {self.sigma}")
         self.potential = potential
         self.sections = [s for s in SECTIONS if s in init]
         self.head_reference = [s for s in head_reference if s in self.sections]
@@ -478,7 +497,7 @@ def make_analyzer(
     init=None,
     calibration_frame: int = 0,
     refine=None,
-    sigma: float = 1.5,
+    sigma: float | None = None,
 ):
     """The analyzer for ``video`` (a :class:`~myoface.analysis.video.Video`), how it was
     initialised (text) and the calibration frame's index.

@@ -60,7 +60,12 @@ def add_arguments(p):
         "--init, the contours are on this frame",
     )
     p.add_argument("--max-frames", type=int, help="analyse at most this many frames")
-    p.add_argument("--sigma", type=float, default=1.5, help="potential smoothing, px (default 1.5)")
+    p.add_argument(
+        "--sigma",
+        type=float,
+        default=None,
+        help="potential smoothing, px (default: 1.2 mm on the face, from its size in the frame)",
+    )
     p.add_argument(
         "--refine",
         type=int,
@@ -192,7 +197,7 @@ def run(args) -> int:
         ],
     }
     if args.tracker == "snakes":
-        side["sigma_px"] = args.sigma
+        side["sigma_px"] = an.sigma
         side["snake_params"] = {
             k: float(np.mean(v)) if not isinstance(v, int) else v
             for k, v in vars(an.params).items()
