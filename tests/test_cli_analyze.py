@@ -50,6 +50,18 @@ def test_analyze_then_resynth(smile_video, tmp_path, capsys):
         rows = list(csv.DictReader(fh))
     z = np.array([float(r["zygomaticus_major_l"]) for r in rows])
     assert len(rows) == 7 and z[3] > z[0] + 0.3 and z[3] > z[6] + 0.3  # rises and returns
+    import json
+
+    side = json.loads((out / "analysis.json").read_text())
+    assert side["estimator"] == "curves" and side["sigma_px"] > 0
+    # the paper's fiducial scheme, on request
+    out2 = tmp_path / "ana_fid"
+    argv = ["analyze", str(smile_video / "smile.mp4"), "--init", str(smile_video / "init.json")]
+    assert main([*argv, "-o", str(out2), "--estimator", "fiducials", "--quiet"]) == 0
+    assert json.loads((out2 / "analysis.json").read_text())["estimator"] == "fiducials"
+    with open(out2 / "contractions.csv", newline="") as fh:
+        z2 = np.array([float(r["zygomaticus_major_l"]) for r in csv.DictReader(fh)])
+    assert z2[3] > z2[0] + 0.3
     video = tmp_path / "re.mp4"
     assert (
         main(

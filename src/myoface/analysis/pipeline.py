@@ -20,9 +20,11 @@ Features are geometric (extremes, centroids) rather than node identities, becaus
 slide along the edges they sit on. The same rules applied to the model's landmark contours (front
 view, rest) pick the model vertices the features stand for.
 ``_l`` / ``_r`` are the subject's left / right (the subject's left is on the image's right).
-The fiducials' displacements from the calibration frame,
-in the head frame (translation of the head reference contour removed, pixels scaled to mm with
-the model's size), are inverted to contractions by
+By default (``estimator="curves"``) the contractions come from the whole contours, not from
+these points: :class:`~myoface.analysis.curvefit.CurveEstimator` fits the model's curves to
+them. With ``estimator="fiducials"`` (the paper's scheme) the fiducials' displacements from the
+calibration frame, in the head frame (translation of the head reference contour removed, pixels
+scaled to mm with the model's size), are inverted to contractions by
 :class:`~myoface.analysis.estimate.ContractionEstimator`.
 """
 
@@ -498,6 +500,7 @@ def make_analyzer(
     calibration_frame: int = 0,
     refine=None,
     sigma: float | None = None,
+    estimator: str = "curves",
 ):
     """The analyzer for ``video`` (a :class:`~myoface.analysis.video.Video`), how it was
     initialised (text) and the calibration frame's index.
@@ -506,7 +509,8 @@ def make_analyzer(
     or, when ``init`` is None, from MediaPipe's face mesh on the first frame with a face from
     ``calibration_frame`` on. ``tracker="landmarks"``:
     :class:`~myoface.analysis.landmarks.LandmarkAnalyzer` (``init`` must be None).
-    ``refine`` defaults to 1 for the snakes and 0 for the landmarks.
+    ``refine`` defaults to 1 for the snakes and 0 for the landmarks; ``estimator`` is the
+    snakes' (see :class:`Analyzer`).
     """
     import itertools
 
@@ -536,7 +540,9 @@ def make_analyzer(
     for name, pts in init.items():
         if (pts < 0).any() or (pts[:, 0] > w - 1).any() or (pts[:, 1] > h - 1).any():
             raise MyofaceValueError(f"contour {name!r} lies outside the frame")
-    an = Analyzer(model, init, refine=1 if refine is None else refine, sigma=sigma)
+    an = Analyzer(
+        model, init, refine=1 if refine is None else refine, sigma=sigma, estimator=estimator
+    )
     return an, how, start
 
 

@@ -41,7 +41,8 @@ def _per_muscle() -> dict:
 def bench_closed_loop_rmse(quick: bool) -> Measurement:
     """Worst per-muscle RMSE of recovered vs true contractions (the paper's 12 muscles + jaw)
     on a synthetic sequence rendered by the model with make-up (256x256, frontal,
-    orthographic), analysed by snakes + fiducials + the model-based estimator."""
+    orthographic), analysed by snakes + the curve fit (the model's skin curves fitted to the
+    tracked contours, two corrections through the tissue, two tracking passes per frame)."""
     res = _closed_loop(quick)
     from myoface.analysis.landmarks import mediapipe_available
 
@@ -128,8 +129,9 @@ def bench_analysis_fps(quick: bool) -> Measurement:
 @benchmark("analysis.fps_snakes", "1/s", higher_is_better=True, peer="mediapipe face_mesh 0.10.14")
 def bench_analysis_fps_snakes(quick: bool) -> Measurement:
     """The same with the paper's tracker: snakes on nine contours (automatic initialisation
-    from MediaPipe on the first frame), registered head frame, one Gauss-Newton correction
-    through the model per frame. Peer as for ``analysis.fps``."""
+    from MediaPipe on the first frame), registered head frame, the curve fit with one
+    correction through the tissue, and each frame tracked twice (the second pass from the
+    model's prediction). Peer as for ``analysis.fps``."""
     path = _sample_video()
     m = None if not quick else 12
     ours, n = _fps(lambda: _analysis_pass(path, "snakes", m), quick)

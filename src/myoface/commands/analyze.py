@@ -67,6 +67,13 @@ def add_arguments(p):
         help="potential smoothing, px (default: 1.2 mm on the face, from its size in the frame)",
     )
     p.add_argument(
+        "--estimator",
+        choices=("curves", "fiducials"),
+        default="curves",
+        help="(snakes) how contractions are read off the contours: the model's skin curves "
+        "fitted to the whole contours (default), or the paper's fiducial points",
+    )
+    p.add_argument(
         "--refine",
         type=int,
         help="Gauss-Newton corrections per frame through the model "
@@ -162,7 +169,14 @@ def run(args) -> int:
     init = args.init if args.tracker == "landmarks" else args.init and load_init(args.init)
     init = init or None
     an, how, start = make_analyzer(
-        fm, video, args.tracker, init, args.calibration_frame, args.refine, args.sigma
+        fm,
+        video,
+        args.tracker,
+        init,
+        args.calibration_frame,
+        args.refine,
+        args.sigma,
+        estimator=args.estimator,
     )
     if args.init:
         how = str(Path(args.init).resolve())
@@ -198,6 +212,7 @@ def run(args) -> int:
     }
     if args.tracker == "snakes":
         side["sigma_px"] = an.sigma
+        side["estimator"] = an.method
         side["snake_params"] = {
             k: float(np.mean(v)) if not isinstance(v, int) else v
             for k, v in vars(an.params).items()
