@@ -57,6 +57,18 @@ def real_video():
     return iio.imread(shared_path("video", "single_face.mp4"), plugin="pyav")
 
 
+def assert_smile(c: np.ndarray, ids: list) -> None:
+    """Contractions (T, M) of the sample video: the zygomatic majors rise clearly in the smile
+    (frames 25-65) and fall at the end; the frontalis stays low throughout."""
+    for s in "lr":
+        z = c[:, ids.index(f"zygomaticus_major_{s}")]
+        before, smile = z[:15].mean(), z[25:65].mean()
+        assert smile > 0.6 and smile > before + 0.5, (before, smile)
+        assert z[-1] < smile - 0.3, (z[-1], smile)
+    brows = c[:, [i for i, m in enumerate(ids) if m.startswith("frontalis")]]
+    assert brows.max() < 0.5 and brows.mean() < 0.15, (brows.max(), brows.mean())
+
+
 @needs_mediapipe
 @pytest.mark.shared_data
 @pytest.mark.slow
@@ -76,15 +88,7 @@ def test_real_video_smile_with_the_landmark_tracker(real_video):
     finally:
         an.close()
     assert all(m.quality == "ok" for m in ms)
-    c = np.array([m.contractions for m in ms])
-    ids = list(an.ids)
-    for s in "lr":
-        z = c[:, ids.index(f"zygomaticus_major_{s}")]
-        before, smile = z[:15].mean(), z[25:65].mean()
-        assert smile > 0.6 and smile > before + 0.5, (before, smile)
-        assert z[-1] < smile - 0.3, (z[-1], smile)
-    brows = c[:, [i for i, m in enumerate(ids) if m.startswith("frontalis")]]
-    assert brows.max() < 0.5 and brows.mean() < 0.15, (brows.max(), brows.mean())
+    assert_smile(np.array([m.contractions for m in ms]), list(an.ids))
     # the head frame: the scale stays near 1 (the subject barely moves toward the camera)
     assert all(abs(m.head_scale - 1) < 0.05 for m in ms)
 
@@ -107,15 +111,7 @@ def test_real_video_smile_with_the_snakes(real_video):
     an = Analyzer(fm, init)
     ms = [an.measure(f, k, k / 30) for k, f in enumerate(real_video[k0:], start=k0)]
     assert all(m.quality == "ok" for m in ms), [m.quality for m in ms]
-    c = np.array([m.contractions for m in ms])
-    ids = list(an.ids)
-    for s in "lr":
-        z = c[:, ids.index(f"zygomaticus_major_{s}")]
-        before, smile = z[:15].mean(), z[25:65].mean()
-        assert smile > 0.6 and smile > before + 0.5, (before, smile)
-        assert z[-1] < smile - 0.3, (z[-1], smile)
-    brows = c[:, [i for i, m in enumerate(ids) if m.startswith("frontalis")]]
-    assert brows.max() < 0.5 and brows.mean() < 0.15, (brows.max(), brows.mean())
+    assert_smile(np.array([m.contractions for m in ms]), list(an.ids))
 
 
 @needs_mediapipe
