@@ -370,6 +370,17 @@ class Analyzer:
         )
         return feats, ref
 
+    def _to_calibration(self, conts: list[np.ndarray]) -> list[np.ndarray]:
+        """Contours in the calibration frame's coordinates (the registered head motion
+        removed; with ``head_frame="contours"`` the shift is removed later)."""
+        if self.head_frame == "register":
+            return [self._sim.inverse_apply(c) for c in conts]
+        return conts
+
+    def _fit_curves(self, conts_cal: list[np.ndarray], shift: np.ndarray) -> np.ndarray:
+        named = {s: q - shift for s, q in zip(self.sections, conts_cal, strict=True)}
+        return self.curves.estimate(named, refine=self.refine)
+
     def measure(self, frame: np.ndarray, index: int = 0, time_s: float = 0.0) -> FrameMeasurement:
         """Track the contours into ``frame`` and estimate its contractions. The first frame
         measured is the neutral calibration frame."""
@@ -396,11 +407,7 @@ class Analyzer:
         low = contrast < LOW_CONTRAST * self._contrast0
         res = self.snakes.relax(stack)
         conts = res.split()
-        if self.head_frame == "register":
-            # measure in the calibration frame's coordinates: the head's motion removed
-            conts_cal = [self._sim.inverse_apply(c) for c in conts]
-        else:
-            conts_cal = conts
+        conts_cal = self._to_calibration(conts)
         pts, ref = self._features(conts_cal)
         sizes = np.diff(self.contours.offsets)
         bad = [
@@ -450,10 +457,7 @@ class Analyzer:
         if self.curves is None:
             c = self.estimator.estimate(d_mm, refine=self.refine)
             return FrameMeasurement(index, time_s, "ok", c, head_t, named, res.iterations, *hs)
-        c = self.curves.estimate(
-            {s: q - shift for s, q in zip(self.sections, conts_cal, strict=True)},
-            refine=self.refine,
-        )
+        c = self._fit_curves(conts_cal, shift)
         if self.reseed and index != self._calibration_index:
             # analysis by synthesis: put the contours where the model, at this estimate, says
             # the skin went, let them settle on the frame's edges again and re-estimate. A
@@ -476,16 +480,8 @@ class Analyzer:
                 k += n
             res = self.snakes.relax(stack)
             conts = res.split()
-            conts_cal = (
-                [self._sim.inverse_apply(q) for q in conts]
-                if self.head_frame == "register"
-                else conts
-            )
             named = dict(zip(self.sections, conts, strict=True))
-            c = self.curves.estimate(
-                {s: q - shift for s, q in zip(self.sections, conts_cal, strict=True)},
-                refine=self.refine,
-            )
+            c = self._fit_curves(self._to_calibration(conts), shift)
         return FrameMeasurement(index, time_s, "ok", c, head_t, named, res.iterations, *hs)
 
     def close(self) -> None:
