@@ -16,6 +16,7 @@ Example
 
 from __future__ import annotations
 
+import copy
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -127,6 +128,14 @@ class FaceModel:
         if j is not None and c[j] > 0:
             x = self.muscles.jaw.rotate(x, self._kin_jaw, c[j])
         return x
+
+    def clone(self) -> FaceModel:
+        """A model at rest sharing this one's structure (face, muscles, tissue, caches) with
+        its own state: cheap, for a second simulation such as a video export. Do not run the
+        physics of both at the same time from two threads."""
+        twin = copy.copy(self)
+        twin.reset()
+        return twin
 
     # ------------------------------------------------------------------ physics
     def reset(self) -> None:

@@ -645,3 +645,16 @@ def read_contractions_csv(path, muscle_ids) -> tuple[np.ndarray, np.ndarray, lis
     if not np.isfinite(times).all() or np.any(np.diff(times) < 0):
         raise MyofaceFormatError(f"{p}: times must be finite and non-decreasing")
     return times, table, quality
+
+
+def hold_last_measured(table: np.ndarray) -> np.ndarray:
+    """Fill the unmeasured rows (NaN) of a contraction table with the last measured row (zeros
+    before the first), so a model can be driven through them; returns a new array."""
+    out = np.array(table, dtype=np.float64)
+    last = np.zeros(out.shape[1])
+    for k in range(len(out)):
+        if np.isnan(out[k]).any():
+            out[k] = last
+        else:
+            last = out[k]
+    return out

@@ -21,7 +21,7 @@ def add_arguments(p):
 def run(args) -> int:
     import numpy as np
 
-    from myoface.analysis.pipeline import read_contractions_csv
+    from myoface.analysis.pipeline import hold_last_measured, read_contractions_csv
     from myoface.render import Renderer, VideoWriter, progress
     from myoface.synth import Synthesizer, make_camera
 
@@ -29,14 +29,7 @@ def run(args) -> int:
         raise MyofaceValueError(f"-o must be a video file (.mp4); got {args.output}")
     fm = load_model(args)
     times, table, quality = read_contractions_csv(args.csv, list(fm.ids))
-    # frames that could not be measured hold the last measured contractions
-    last = np.zeros(len(fm.ids))
-    for k in range(len(table)):
-        row = table[k]
-        if np.isnan(row).any():
-            table[k] = last
-        else:
-            last = row
+    table = hold_last_measured(table)  # unmeasured frames hold the last measured contractions
     fps = 1.0 / np.median(np.diff(times)) if len(times) > 1 else 30.0
     src = None
     if args.side_by_side:

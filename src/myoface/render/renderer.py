@@ -165,13 +165,13 @@ class Renderer:
             self.texture = dressing.default_skin_texture(face)
         else:
             self.texture = None
-        self._scene = self._build_scene(dress)
+        self.scene = self._build_scene(dress)
         self._big = camera.with_size(camera.width * self.ssaa, camera.height * self.ssaa)
         h, w = self._big.height, self._big.width
         # supersampled buffers, valid inside the last frame's drawn box only
         self._zbuf = np.empty((h, w), np.float32)
         self._tid = np.empty((h, w), np.int32)
-        n_tris = len(self._scene.tris)
+        n_tris = len(self.scene.tris)
         self._setup = np.zeros((n_tris, SETUP_COLS))
         self._planes = np.zeros((n_tris, planes_columns(len(self.lights))))
         self._tbox = np.zeros((n_tris, 4), np.int64)
@@ -250,8 +250,10 @@ class Renderer:
         self._n_total = n
         return scene
 
-    def _positions(self, skin: np.ndarray) -> np.ndarray:
-        sc = self._scene
+    def positions(self, skin: np.ndarray) -> np.ndarray:
+        """Positions (N, 3) mm of every drawn vertex (skin, dressing fans, eyeballs) for the
+        skin vertices ``skin``, in the order of :attr:`scene`."""
+        sc = self.scene
         pos = np.empty((self._n_total, 3))
         pos[: sc.n_face] = skin
         for loop, first, center, depth in sc.fans:
@@ -280,8 +282,8 @@ class Renderer:
             if vertices is None
             else _check_vertices(vertices, self.face.n_vertices)
         )
-        sc = self._scene
-        pos = self._positions(skin)
+        sc = self.scene
+        pos = self.positions(skin)
         normals = np.empty_like(pos)
         vertex_normals_numba(pos[: sc.n_dynamic], sc.dyn_tris, normals[: sc.n_dynamic])
         normals[sc.n_dynamic :] = sc.normals_static
@@ -358,7 +360,7 @@ def render_mesh(
         col = np.asarray(colors, dtype=np.float64)
         if col.shape != (len(v), 3):
             raise MyofaceValueError(f"colors must have shape ({len(v)}, 3); got {col.shape}")
-        r._scene.vcol[: len(v)] = col
+        r.scene.vcol[: len(v)] = col
     out = r.render_linear()
     return out if linear else to_srgb8(out)
 

@@ -1,20 +1,39 @@
 """The web viewer (viser): the face responding live to muscle, action-unit, expression and jaw
-controls, with muscle vectors, playback of analyses and timelines, and exports."""
+controls; views of the skin (plain or textured), muscle vectors, tissue layers and bone nodes;
+camera presets; playback of analyses and timelines; exports (contractions, images, video)."""
 
 from __future__ import annotations
 
 import json
+import tempfile
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 
-from myoface.errors import MyofaceDependencyError, MyofaceError
+from myoface.errors import MyofaceDependencyError, MyofaceError, MyofaceValueError
+from myoface.render import Camera, Renderer, VideoWriter
+from myoface.render.renderer import to_srgb8
+from myoface.viewer.scene import MM, FaceScene
 from myoface.viewer.state import REGIONS, PhysicsWorker, ViewerState, region_of
 
-SKIN_RGB = (226, 178, 154)
 UI_AUS = (1, 2, 4, 5, 6, 7, 9, 10, 12, 14, 15, 16, 17, 20, 23, 24, 25, 26, 27)
-MM = 1e-3  # the scene is in metres
+#: camera presets: name -> (Camera preset, side)
+CAMERA_PRESETS = {
+    "front": ("front", None),
+    "3/4 left": ("three_quarter", "l"),
+    "3/4 right": ("three_quarter", "r"),
+    "profile left": ("profile", "l"),
+    "profile right": ("profile", "r"),
+}
+#: exported images and videos: height in pixels (width follows the browser's aspect)
+EXPORT_HEIGHT = 720
+VIDEO_HEIGHT = 360
+VIDEO_FPS = 30.0
+MAX_EXPORT_WIDTH = 1920
+#: the skin's opacity when a view of the tissue under it is switched on
+SEE_THROUGH_OPACITY = 0.35
 
 
 def _viser():
@@ -27,62 +46,68 @@ def _viser():
     return viser
 
 
-class FaceViewer:
-    """A running viewer: ``FaceViewer(model, port=8080).serve_forever()``; ``url`` says where."""
+def _png(image: np.ndarray) -> bytes:
+    import imageio.v3 as iio
 
-    def __init__(self, model, host: str = "127.0.0.1", port: int = 8080):
+    return iio.imwrite("<bytes>", np.asarray(image, dtype=np.uint8), extension=".png")
+
+
+class FaceViewer:
+    """A running viewer: ``FaceViewer(model, port=8080).serve_forever()``; ``url`` says where.
+
+    Parameters
+    ----------
+    model : FaceModel
+    host, port : where to serve (``port=0``: any free port).
+    texture : image array or path for the face's UVs (default: the face's own texture, else the
+        default face's neutral skin texture).
+    """
+
+    def __init__(self, model, host: str = "127.0.0.1", port: int = 8080, texture=None):
         viser = _viser()
         self.model = model
         self.state = ViewerState(model)
+        self.renderer = Renderer(model.face, Camera.front(model.face.vertices), texture=texture)
+        tex = self.renderer.texture
+        self._texture8 = None if tex is None else to_srgb8(tex)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.host, self.port = host, self.server.get_port()
-        v = model.skin_vertices()
-        self.mesh = self.server.scene.add_mesh_simple(
-            "/face",
-            (v * MM).astype(np.float32),
-            model.face.triangles.astype(np.int32),
-            color=SKIN_RGB,
-            side="double",
-        )
-        ins = np.array([m.insertion for m in model.muscles.muscles])
-        org = np.array([m.origin for m in model.muscles.muscles])
-        self.vectors = self.server.scene.add_line_segments(
-            "/muscles",
-            (np.stack([ins, org], axis=1) * MM).astype(np.float32),
-            colors=(255, 200, 40),
-            thickness=2.0,
-            thickness_units="screen",
-            visible=False,
-        )
+        self.scene = FaceScene(self.server.scene, model, self.renderer)
         self.worker = PhysicsWorker(model, self._publish, self._notify)
         self.worker.start()
         self._syncing = False
         self._sliders = {}
         self._playing = False
+        self._exporting = False
+        self.last_error = ""
+        self.last_message = ""
+        self.last_download: tuple[str, bytes] | None = None
         self._build_gui()
         self.server.on_client_connect(self._on_connect)
-        self.last_error = ""
 
     @property
     def url(self) -> str:
         return f"http://{self.host}:{self.port}"
 
     # ------------------------------------------------------------------ plumbing
-    def _publish(self, skin: np.ndarray) -> None:
-        self.mesh.vertices = (skin * MM).astype(np.float32)
+    def _publish(self, x: np.ndarray) -> None:
+        self.scene.update(x)
 
-    def _notify(self, message: str) -> None:
-        self.last_error = message
+    def _notify(self, message: str, error: bool = True) -> None:
+        if error:
+            self.last_error = message
+        else:
+            self.last_message = message
         for client in self.server.get_clients().values():
             try:
-                client.add_notification(title="myoface", body=message, color="red")
+                client.add_notification(
+                    title="myoface", body=message, color="red" if error else "green"
+                )
             except Exception:  # noqa: BLE001 - a client that went away must not stop us
                 pass
 
     def _on_connect(self, client) -> None:
-        client.camera.position = (0.0, 0.0, 0.42)
-        client.camera.look_at = (0.0, -0.005, 0.04)
-        client.camera.up_direction = (0.0, 1.0, 0.0)
+        self.set_camera(client, "front")
 
     def _update(self) -> None:
         self.worker.request(self.state.contractions())
@@ -97,6 +122,139 @@ class FaceViewer:
                 self._notify(str(exc))
 
         return wrapped
+
+    # ------------------------------------------------------------------ cameras
+    def camera_preset(self, name: str, width: int, height: int, fov_deg: float) -> Camera:
+        """The preset camera ``name`` (see :data:`CAMERA_PRESETS`) framing the face."""
+        if name not in CAMERA_PRESETS:
+            raise MyofaceValueError(f"unknown camera preset {name!r}")
+        kind, side = CAMERA_PRESETS[name]
+        kw = {"width": int(width), "height": int(height), "fov_deg": float(fov_deg)}
+        if side is not None:
+            kw["side"] = side
+        return getattr(Camera, kind)(self.model.face.vertices, **kw)
+
+    def set_camera(self, client, name: str) -> None:
+        """Move a browser's camera to a preset."""
+        cam = client.camera
+        aspect = float(getattr(cam, "aspect", 1.0) or 1.0)
+        preset = self.camera_preset(name, round(400 * aspect), 400, np.rad2deg(cam.fov))
+        with client.atomic():
+            cam.up_direction = tuple(preset.up)
+            cam.position = tuple(preset.eye * MM)
+            cam.look_at = tuple(preset.target * MM)
+
+    def client_camera(self, client, height: int) -> Camera:
+        """A renderer camera that sees what ``client``'s browser sees, ``height`` px high."""
+        cam = client.camera
+        aspect = float(getattr(cam, "aspect", 1.0) or 1.0)
+        width = int(min(MAX_EXPORT_WIDTH, max(16, round(height * aspect))))
+        return Camera(
+            np.asarray(cam.position, float) / MM,
+            np.asarray(cam.look_at, float) / MM,
+            np.asarray(cam.up_direction, float),
+            width,
+            int(height),
+            float(np.rad2deg(cam.fov)),
+        )
+
+    # ------------------------------------------------------------------ exports
+    def render_image(self, camera: Camera | None = None) -> np.ndarray:
+        """The current face rendered on the CPU (textured, lit, dressed) as uint8 RGB."""
+        camera = camera or self.renderer.camera
+        r = Renderer(self.model.face, camera, texture=self._texture8)
+        with self.worker.lock:
+            skin = self.model.skin_vertices()
+        return r.render(skin)
+
+    def playback_video(
+        self, path, camera: Camera | None = None, fps: float = VIDEO_FPS, on_frame=None
+    ) -> Path:
+        """Render the loaded playback to a video file at ``fps`` with a clone of the model
+        (the live face is not disturbed); ``on_frame(k, n)`` reports progress."""
+        if self.state.playback is None:
+            raise MyofaceValueError("load a contractions.csv or a timeline first")
+        from myoface.synth import Synthesizer
+
+        times, _ = self.state.playback
+        n = max(1, int(np.floor((times[-1] - times[0]) * fps)) + 1)
+        camera = camera or Camera.front(
+            self.model.face.vertices, width=VIDEO_HEIGHT, height=VIDEO_HEIGHT
+        )
+        syn = Synthesizer(
+            self.model.clone(), Renderer(self.model.face, camera, texture=self._texture8)
+        )
+        with VideoWriter(path, fps) as vw:
+            for k in range(n):
+                c = self.state.frame_at(times[0] + k / fps)
+                with self.worker.lock:
+                    img = syn.image(c)
+                vw.write(img)
+                if on_frame is not None:
+                    on_frame(k + 1, n)
+        return Path(path)
+
+    def _download(self, event, filename: str, data: bytes) -> None:
+        client = getattr(event, "client", None) if event is not None else None
+        if client is None:
+            return
+        try:
+            client.send_file_download(filename, data, save_immediately=True)
+            self.last_download = (filename, data)
+        except Exception as exc:  # noqa: BLE001 - the client may have gone
+            self._notify(f"could not send {filename}: {exc}")
+
+    def _export_contractions(self, event) -> None:
+        data = json.dumps(
+            dict(zip(self.model.ids, self.state.contractions().tolist(), strict=True)), indent=1
+        ).encode()
+        self._download(event, "contractions.json", data)
+
+    def _export_screenshot(self, event) -> None:
+        client = event.client
+        cam = self.client_camera(client, EXPORT_HEIGHT)
+        img = np.asarray(
+            client.get_render(cam.height, cam.width, transport_format="png", timeout=20.0)
+        )
+        if img.shape[-1] == 4:  # the page's background is transparent: put it on white
+            a = img[..., 3:4].astype(np.float64) / 255.0
+            img = np.round(img[..., :3] * a + 255.0 * (1.0 - a)).astype(np.uint8)
+        self._download(event, "myoface_view.png", _png(img))
+
+    def _export_render(self, event) -> None:
+        img = self.render_image(self.client_camera(event.client, EXPORT_HEIGHT))
+        self._download(event, "myoface_render.png", _png(img))
+
+    def _export_video(self, event) -> None:
+        if self.state.playback is None:
+            raise MyofaceValueError("load a contractions.csv or a timeline first")
+        if self._exporting:
+            raise MyofaceValueError("a video export is already running")
+        cam = self.client_camera(event.client, VIDEO_HEIGHT)
+        cam = Camera(
+            cam.eye, cam.target, cam.up, cam.width + cam.width % 2, cam.height, cam.fov_deg
+        )
+
+        def work():
+            self._exporting = True
+            try:
+                with tempfile.TemporaryDirectory() as tmp:
+                    path = Path(tmp) / "myoface_playback.mp4"
+
+                    def report(k, n):
+                        self._status.content = f"rendering video: frame {k} of {n}"
+
+                    self.playback_video(path, cam, on_frame=report)
+                    self._status.content = "video ready"
+                    self._download(event, path.name, path.read_bytes())
+            except MyofaceError as exc:
+                self._notify(str(exc))
+            except Exception as exc:  # noqa: BLE001 - reported; the server keeps running
+                self._notify(f"video export failed: {exc}")
+            finally:
+                self._exporting = False
+
+        threading.Thread(target=work, daemon=True).start()
 
     # ------------------------------------------------------------------ GUI
     def _build_gui(self) -> None:
@@ -118,9 +276,25 @@ class FaceViewer:
                     self._sliders[mid] = self._muscle_slider(gui, mid)
         if "jaw" in ids:
             self._sliders["jaw"] = self._muscle_slider(gui, "jaw")
-        with gui.add_folder("expression", expand_by_default=False):
-            from myoface.control import list_expressions
+        reset = gui.add_button("reset")
+        reset.on_click(self._guard(lambda e: self._reset()))
+        self._expression_gui(gui)
+        self._au_gui(gui)
+        self._preset_gui(gui)
+        self._view_gui(gui)
+        self._playback_gui(gui)
+        with gui.add_folder("export", expand_by_default=False):
+            b = gui.add_button("contractions (JSON)")
+            b.on_click(self._guard(self._export_contractions))
+            b = gui.add_button("screenshot of this view (PNG)")
+            b.on_click(self._guard(self._export_screenshot))
+            b = gui.add_button("render this view on the CPU (PNG)")
+            b.on_click(self._guard(self._export_render))
 
+    def _expression_gui(self, gui) -> None:
+        from myoface.control import list_expressions
+
+        with gui.add_folder("expression", expand_by_default=False):
             expr = gui.add_dropdown(
                 "expression", ("none", *list_expressions()), initial_value="none"
             )
@@ -132,10 +306,12 @@ class FaceViewer:
 
             expr.on_update(self._guard(set_expr))
             inten.on_update(self._guard(set_expr))
-        with gui.add_folder("action units", expand_by_default=False):
-            from myoface.control import au_table
 
-            table = au_table()
+    def _au_gui(self, gui) -> None:
+        from myoface.control import au_table
+
+        table = au_table()
+        with gui.add_folder("action units", expand_by_default=False):
             for n in UI_AUS:
                 if n not in table:
                     continue
@@ -148,22 +324,98 @@ class FaceViewer:
                     self._update()
 
                 s.on_update(self._guard(set_au))
+
+    def _preset_gui(self, gui) -> None:
+        with gui.add_folder("presets", expand_by_default=False):
+            self._preset_menu = gui.add_dropdown(
+                "preset", tuple(self.state.presets), initial_value="neutral"
+            )
+            apply = gui.add_button("apply preset")
+            name = gui.add_text("name", initial_value="")
+            save = gui.add_button("save current as preset")
+            path = gui.add_text("preset file (JSON)", initial_value="")
+            load = gui.add_button("load preset file")
+
+            def do_apply(event):
+                self.apply_preset(self._preset_menu.value)
+
+            def do_save(event):
+                self.state.save_preset(name.value)
+                self._refresh_presets(name.value.strip())
+
+            def do_load(event):
+                stem = self.state.load_preset_file(path.value)
+                self._refresh_presets(stem)
+                self._sync_sliders()
+                self._update()
+
+            apply.on_click(self._guard(do_apply))
+            save.on_click(self._guard(do_save))
+            load.on_click(self._guard(do_load))
+
+    def _refresh_presets(self, current: str) -> None:
+        self._preset_menu.options = tuple(self.state.presets)
+        self._preset_menu.value = current
+
+    def _view_gui(self, gui) -> None:
+        sc = self.scene
         with gui.add_folder("view", expand_by_default=False):
+            for name in CAMERA_PRESETS:
+                b = gui.add_button(f"camera: {name}")
+
+                def on_cam(event, name=name):
+                    if event.client is not None:
+                        self.set_camera(event.client, name)
+
+                b.on_click(self._guard(on_cam))
+            if sc.textured is not None:
+                tex = gui.add_checkbox("textured skin", initial_value=False)
+                tex.on_update(self._guard(lambda e: sc.set_textured(tex.value)))
             show = gui.add_checkbox("muscle vectors", initial_value=False)
 
             @show.on_update
             def _(event) -> None:
-                self.vectors.visible = show.value
+                sc.vectors.visible = show.value
 
-            reset = gui.add_button("reset")
-            reset.on_click(self._guard(lambda e: self._reset()))
-            export = gui.add_button("download contractions (JSON)")
-            export.on_click(self._guard(self._export))
+            skin = gui.add_slider("skin opacity", min=0.1, max=1.0, step=0.05, initial_value=1.0)
+
+            def on_opacity(event=None):
+                sc.skin.opacity = None if skin.value >= 1.0 else float(skin.value)
+
+            skin.on_update(self._guard(on_opacity))
+
+            def see_inside(on: bool) -> None:
+                # what lies under the skin shows through it: make an opaque skin translucent
+                if on and skin.value >= 1.0:
+                    skin.value = SEE_THROUGH_OPACITY
+                    on_opacity()
+
+            for layer in sc.layers:
+                box = gui.add_checkbox(f"lattice: {layer} springs", initial_value=False)
+
+                def on_layer(event, layer=layer, box=box):
+                    with self.worker.lock:
+                        sc.set_layer(layer, box.value)
+                    see_inside(box.value)
+
+                box.on_update(self._guard(on_layer))
+            bones = gui.add_checkbox("bone nodes", initial_value=False)
+
+            def on_bones(event):
+                with self.worker.lock:
+                    sc.set_bones(bones.value)
+                see_inside(bones.value)
+
+            bones.on_update(self._guard(on_bones))
+
+    def _playback_gui(self, gui) -> None:
         with gui.add_folder("playback", expand_by_default=False):
             path = gui.add_text("file (contractions.csv or timeline)", initial_value="")
             load = gui.add_button("load")
             play = gui.add_button("play")
             self._time = gui.add_slider("time (s)", min=0.0, max=1.0, step=0.01, initial_value=0.0)
+            video = gui.add_button("export video of the playback (MP4)")
+            self._status = gui.add_markdown("")
 
             def do_load(event):
                 dur = self.state.load_playback(path.value.strip())
@@ -173,6 +425,7 @@ class FaceViewer:
             load.on_click(self._guard(do_load))
             play.on_click(self._guard(lambda e: self._play()))
             self._time.on_update(self._guard(lambda e: self._scrub()))
+            video.on_click(self._guard(self._export_video))
 
     def _muscle_slider(self, gui, mid: str):
         s = gui.add_slider(mid.replace("_", " "), min=0.0, max=1.0, step=0.01, initial_value=0.0)
@@ -194,22 +447,26 @@ class FaceViewer:
         s.on_update(self._guard(on_change))
         return s
 
-    def _reset(self) -> None:
-        self.state.reset()
+    def _sync_sliders(self) -> None:
+        """Show the state's muscle values on the sliders without triggering their callbacks."""
         self._syncing = True
         try:
-            for s in self._sliders.values():
-                s.value = 0.0
+            for mid, s in self._sliders.items():
+                s.value = float(round(self.state.muscles[self.model.ids.index(mid)], 2))
         finally:
             self._syncing = False
+
+    def apply_preset(self, name: str) -> None:
+        """Set the face to a preset (see :meth:`ViewerState.apply_preset`) and the sliders with
+        it."""
+        self.state.apply_preset(name)
+        self._sync_sliders()
         self._update()
 
-    def _export(self, event) -> None:
-        data = json.dumps(
-            dict(zip(self.model.ids, self.state.contractions().tolist(), strict=True)), indent=1
-        ).encode()
-        if event is not None and getattr(event, "client", None) is not None:
-            event.client.send_file_download("contractions.json", data)
+    def _reset(self) -> None:
+        self.state.reset()
+        self._sync_sliders()
+        self._update()
 
     def _scrub(self) -> None:
         if self.state.playback is not None:

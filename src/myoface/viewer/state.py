@@ -10,9 +10,17 @@ from pathlib import Path
 
 import numpy as np
 
-from myoface.control import au_contractions, expression_contractions
+from myoface.control import (
+    au_contractions,
+    expression_contractions,
+    list_expressions,
+    list_visemes,
+    muscle_contractions,
+    viseme_contractions,
+)
 from myoface.control.facs import parse_intensity
 from myoface.errors import MyofaceError, MyofaceValueError
+from myoface.synth import SYNTH_TOL_MM
 
 REGIONS = {
     "brows and eyes": ("frontalis", "corrugator", "orbicularis_oculi"),
@@ -46,6 +54,7 @@ class ViewerState:
         self.playback: tuple[np.ndarray, np.ndarray] | None = None  # times, table
         self.version = 0
         self._lock = threading.Lock()
+        self.presets: dict[str, np.ndarray] = self.builtin_presets()
 
     # ------------------------------------------------------------------ requests
     def _bump(self):
@@ -82,6 +91,65 @@ class ViewerState:
             self.expression = (name, v)
             self._bump()
 
+    def set_muscles(self, values) -> None:
+        """Set every muscle at once from ``{muscle id or paired base name: value}`` or an (M,)
+        vector; the action units and the expression are cleared (a preset replaces the face)."""
+        if isinstance(values, dict):
+            v = muscle_contractions(values, self.ids)
+        else:
+            v = np.asarray(values, dtype=np.float64)
+            if v.shape != (len(self.ids),) or not np.isfinite(v).all():
+                raise MyofaceValueError(
+                    f"a contraction vector needs {len(self.ids)} finite values; got {v.shape}"
+                )
+            if v.min() < 0 or v.max() > 1:
+                raise MyofaceValueError("contractions must lie in [0, 1]")
+        with self._lock:
+            self.muscles[:] = v
+            self.aus.clear()
+            self.expression = None
+            self._bump()
+
+    # ------------------------------------------------------------------ presets
+    def builtin_presets(self) -> dict[str, np.ndarray]:
+        """neutral, the six expressions at full intensity and the visemes."""
+        out = {"neutral": np.zeros(len(self.ids))}
+        for name in list_expressions():
+            out[name] = expression_contractions(name, 1.0, self.ids, strict=False)
+        for name in list_visemes():
+            out[f"viseme {name}"] = viseme_contractions(name, 1.0, self.ids, strict=False)
+        return out
+
+    def save_preset(self, name: str) -> None:
+        name = (name or "").strip()
+        if not name:
+            raise MyofaceValueError("give the preset a name")
+        self.presets[name] = self.contractions()
+
+    def apply_preset(self, name: str) -> None:
+        if name not in self.presets:
+            raise MyofaceValueError(f"unknown preset {name!r}")
+        self.set_muscles(self.presets[name])
+
+    def load_preset_file(self, path) -> str:
+        """Load a JSON object ``{muscle: value}`` (what the viewer's export writes) as a preset
+        named after the file, and apply it; returns the name."""
+        import json
+
+        p = Path(str(path).strip())
+        if not p.is_file():
+            raise MyofaceValueError(f"no such file: {p}")
+        try:
+            data = json.loads(p.read_text())
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise MyofaceValueError(f"{p.name} is not JSON: {exc}") from None
+        if not isinstance(data, dict) or not data:
+            raise MyofaceValueError(f"{p.name} must hold an object {{muscle: value}}")
+        vec = muscle_contractions(data, self.ids)
+        self.presets[p.stem] = vec
+        self.set_muscles(vec)
+        return p.stem
+
     def reset(self) -> None:
         with self._lock:
             self.muscles[:] = 0
@@ -108,18 +176,13 @@ class ViewerState:
     # ------------------------------------------------------------------ playback
     def load_playback(self, path) -> float:
         """Load a ``contractions.csv`` or a timeline file; returns its duration (s)."""
-        from myoface.analysis.pipeline import read_contractions_csv
+        from myoface.analysis.pipeline import hold_last_measured, read_contractions_csv
         from myoface.control import load_timeline
 
         p = Path(path)
         if p.suffix.lower() == ".csv":
             times, table, _ = read_contractions_csv(p, list(self.ids))
-            last = np.zeros(len(self.ids))
-            for k in range(len(table)):  # unmeasured frames hold the last measured one
-                if np.isnan(table[k]).any():
-                    table[k] = last
-                else:
-                    last = table[k]
+            table = hold_last_measured(table)
         else:
             tl = load_timeline(p)
             times = np.linspace(0, tl.duration, max(2, int(tl.duration * 30) + 1))
@@ -138,7 +201,12 @@ class ViewerState:
 
 class PhysicsWorker(threading.Thread):
     """Relaxes the model towards the latest requested contractions and calls ``publish``
-    with the new skin vertices; coalesces requests that arrive while it works."""
+    with the new tissue node positions (N, 3) mm (the skin's vertices first); coalesces
+    requests that arrive while it works.
+
+    ``lock`` is held while the model's physics runs: anything else that drives the model's
+    physics (e.g. a video export on a clone sharing its caches) takes it too.
+    """
 
     def __init__(self, model, publish, on_error=None):
         super().__init__(daemon=True)
@@ -150,6 +218,7 @@ class PhysicsWorker(threading.Thread):
         self._stop = False
         self.last_ms = float("nan")
         self.settled = threading.Event()
+        self.lock = threading.Lock()
 
     def request(self, contractions: np.ndarray) -> None:
         with self._cond:
@@ -174,10 +243,11 @@ class PhysicsWorker(threading.Thread):
                 c, self._target = self._target, None
             t0 = time.perf_counter()
             try:
-                with warnings.catch_warnings():
+                with self.lock, warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    self.model.relax(c, start="current", tol_mm=5e-3)
-                self.publish(self.model.skin_vertices())
+                    self.model.relax(c, start="current", tol_mm=SYNTH_TOL_MM)
+                    x = self.model.state.x
+                self.publish(x)
             except MyofaceError as exc:  # reported, the worker keeps running
                 if self.on_error:
                     self.on_error(str(exc))

@@ -1,0 +1,271 @@
+"""What the viewer draws, and how it follows the physics: the skin (plain or texture-mapped), the
+dressing that makes the openings read as eyes and a mouth, the muscle vectors, the tissue
+lattice's spring layers and the bone nodes.
+
+Everything is built once; :meth:`FaceScene.update` moves what is visible to a new tissue state.
+The scene is in metres (viser's unit); the model is in millimetres.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import struct
+
+import numpy as np
+
+from myoface.render.raster import vertex_normals_numba
+from myoface.render.renderer import to_srgb8
+
+MM = 1e-3
+SKIN_RGB = (226, 178, 154)
+#: spring layers of the lattice (``TissueModel.spring_material``), names and colours
+SPRING_LAYERS = (
+    ("epidermis", (240, 240, 240)),
+    ("dermis", (230, 120, 110)),
+    ("fat", (240, 200, 60)),
+    ("muscle layer", (200, 60, 60)),
+)
+BONE_RGB = (90, 140, 255)
+MUSCLE_RGB = (255, 200, 40)
+#: the textured skin's bounds in the GLB are the rest bounds widened by this (m), so the
+#: client's culling never clips a deformed face
+GLB_BOUNDS_PAD_M = 0.04
+
+
+def _srgb8(linear) -> tuple[int, int, int]:
+    c = to_srgb8(np.asarray(linear, dtype=np.float64).reshape(1, 1, 3))[0, 0]
+    return tuple(int(x) for x in c)
+
+
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    out = np.zeros_like(vertices, dtype=np.float64)
+    vertex_normals_numba(
+        np.ascontiguousarray(vertices, dtype=np.float64),
+        np.ascontiguousarray(triangles, dtype=np.int64),
+        out,
+    )
+    return out
+
+
+class TexturedSkinGLB:
+    """A binary glTF of the texture-mapped skin whose vertex positions and normals can be
+    replaced in place: the texture is encoded once, each update only rewrites two arrays.
+
+    Parameters
+    ----------
+    vertices : (V, 3) mm — rest positions (for the bounds).
+    triangles : (T, 3) int
+    uv : (V, 2) texture coordinates
+    texture : (H, W, 3) linear RGB in [0, 1] or sRGB uint8
+    """
+
+    def __init__(self, vertices, triangles, uv, texture):
+        import trimesh
+        from PIL import Image
+
+        tex = texture if texture.dtype == np.uint8 else to_srgb8(texture)
+        material = trimesh.visual.material.PBRMaterial(
+            baseColorTexture=Image.fromarray(tex),
+            metallicFactor=0.0,
+            roughnessFactor=0.65,
+            doubleSided=True,
+        )
+        v = np.asarray(vertices, dtype=np.float64)
+        mesh = trimesh.Trimesh(
+            v * MM,
+            np.asarray(triangles),
+            visual=trimesh.visual.TextureVisuals(uv=np.asarray(uv), material=material),
+            process=False,
+        )
+        glb = mesh.export(file_type="glb", include_normals=True)
+        (json_len,) = struct.unpack_from("<I", glb, 12)
+        doc = json.loads(glb[20 : 20 + json_len])
+        binary = glb[20 + json_len + 8 :]
+        prim = doc["meshes"][0]["primitives"][0]["attributes"]
+        self._offsets = {}
+        for key in ("POSITION", "NORMAL"):
+            acc = doc["accessors"][prim[key]]
+            if acc["count"] != len(v) or acc["componentType"] != 5126:
+                raise RuntimeError("unexpected glTF layout from trimesh")  # pragma: no cover
+            view = doc["bufferViews"][acc["bufferView"]]
+            self._offsets[key] = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+        pos = doc["accessors"][prim["POSITION"]]
+        pos["min"] = (v.min(axis=0) * MM - GLB_BOUNDS_PAD_M).tolist()
+        pos["max"] = (v.max(axis=0) * MM + GLB_BOUNDS_PAD_M).tolist()
+        header = json.dumps(doc, separators=(",", ":")).encode()
+        header += b" " * (-len(header) % 4)
+        out = io.BytesIO()
+        total = 12 + 8 + len(header) + 8 + len(binary)
+        out.write(struct.pack("<4sII", b"glTF", 2, total))
+        out.write(struct.pack("<I4s", len(header), b"JSON") + header)
+        out.write(struct.pack("<I4s", len(binary), b"BIN\x00") + binary)
+        self._glb = bytearray(out.getvalue())
+        self._bin = 12 + 8 + len(header) + 8
+        self.triangles = np.asarray(triangles)
+        self.n = len(v)
+
+    def data(self, vertices) -> bytes:
+        """The GLB with the skin at ``vertices`` (V, 3) mm."""
+        v = np.asarray(vertices, dtype=np.float64)
+        n = vertex_normals(v, self.triangles)
+        for key, arr in (("POSITION", v * MM), ("NORMAL", n)):
+            a = np.ascontiguousarray(arr, dtype="<f4").tobytes()
+            o = self._bin + self._offsets[key]
+            self._glb[o : o + len(a)] = a
+        return bytes(self._glb)
+
+
+def read_glb_positions(glb: bytes) -> np.ndarray:
+    """The POSITION array (V, 3) of the first primitive of a GLB (for tests and checks)."""
+    (json_len,) = struct.unpack_from("<I", glb, 12)
+    doc = json.loads(glb[20 : 20 + json_len])
+    acc = doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]]
+    view = doc["bufferViews"][acc["bufferView"]]
+    o = 20 + json_len + 8 + view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    return np.frombuffer(glb, "<f4", acc["count"] * 3, o).reshape(-1, 3).astype(np.float64)
+
+
+class FaceScene:
+    """The viewer's 3-D scene for one model, on a viser ``SceneApi``.
+
+    ``renderer`` provides the dressing (eye sockets, mouth cavity, eyeballs) and the skin
+    texture, so the web view and the rendered images show the same face.
+    """
+
+    def __init__(self, scene_api, model, renderer):
+        self.api = scene_api
+        self.model = model
+        self.renderer = renderer
+        sc = renderer.scene
+        face = model.face
+        skin = model.skin_vertices()
+        self.skin = scene_api.add_mesh_simple(
+            "/face/skin",
+            (skin * MM).astype(np.float32),
+            face.triangles.astype(np.int32),
+            color=SKIN_RGB,
+            side="double",
+        )
+        self.textured = None
+        self._glb = None
+        if renderer.texture is not None and face.uv is not None:
+            self._glb = TexturedSkinGLB(face.vertices, face.triangles, face.uv, renderer.texture)
+            self.textured = scene_api.add_glb(
+                "/face/skin_textured", self._glb.data(skin), visible=False
+            )
+        # dressing: one fan per opening (follows the skin), the eyeballs (fixed in the head)
+        pos = renderer.positions(skin)
+        self.fans = []
+        start = len(face.triangles)
+        for k, (loop, first, center, _depth) in enumerate(sc.fans):
+            tris = sc.tris[start : start + len(loop)] - first
+            start += len(loop)
+            handle = scene_api.add_mesh_simple(
+                f"/face/dressing/opening_{k}",
+                (pos[first : center + 1] * MM).astype(np.float32),
+                tris.astype(np.int32),
+                color=_srgb8(sc.vcol[first]),
+                side="double",
+            )
+            self.fans.append((handle, first, center))
+        eye_tris = sc.tris[sc.tris.min(axis=1) >= sc.n_dynamic] - sc.n_dynamic
+        if len(eye_tris):
+            import trimesh
+
+            col = to_srgb8(sc.vcol[sc.n_dynamic :].reshape(1, -1, 3))[0]
+            eyes = trimesh.Trimesh(
+                pos[sc.n_dynamic :] * MM,
+                eye_tris,
+                vertex_colors=np.column_stack([col, np.full(len(col), 255, np.uint8)]),
+                process=False,
+            )
+            self.eyes = scene_api.add_mesh_trimesh("/face/dressing/eyes", eyes)
+        else:
+            self.eyes = None
+        ins = np.array([m.insertion for m in model.muscles.muscles])
+        org = np.array([m.origin for m in model.muscles.muscles])
+        self.vectors = scene_api.add_line_segments(
+            "/muscles",
+            (np.stack([ins, org], axis=1) * MM).astype(np.float32),
+            colors=MUSCLE_RGB,
+            thickness=2.0,
+            thickness_units="screen",
+            visible=False,
+        )
+        t = model.tissue
+        x = model.state.x
+        self.layers = {}
+        for m, (name, rgb) in enumerate(SPRING_LAYERS):
+            sel = np.flatnonzero(t.spring_material == m)
+            if len(sel) == 0:
+                continue
+            handle = scene_api.add_line_segments(
+                f"/lattice/{name.replace(' ', '_')}",
+                self._segments(x, sel),
+                colors=rgb,
+                thickness=1.0,
+                thickness_units="screen",
+                visible=False,
+            )
+            self.layers[name] = (handle, sel)
+        self.bone_index = np.flatnonzero(t.kinematic)
+        self.bones = scene_api.add_point_cloud(
+            "/lattice/bone_nodes",
+            (x[self.bone_index] * MM).astype(np.float32),
+            colors=BONE_RGB,
+            point_size=0.0018,
+            point_shape="circle",
+            precision="float32",
+            visible=False,
+        )
+
+    def _segments(self, x, sel) -> np.ndarray:
+        t = self.model.tissue
+        return (np.stack([x[t.spring_i[sel]], x[t.spring_j[sel]]], axis=1) * MM).astype(np.float32)
+
+    # ------------------------------------------------------------------ visibility
+    @property
+    def textured_on(self) -> bool:
+        return self.textured is not None and self.textured.visible
+
+    def set_textured(self, on: bool) -> None:
+        """Show the texture-mapped skin (when the face has a texture) or the plain one."""
+        if self.textured is None:
+            return
+        skin = self.model.skin_vertices()
+        if on:
+            self.textured.glb_data = self._glb.data(skin)
+        else:
+            self.skin.vertices = (skin * MM).astype(np.float32)
+        self.textured.visible = bool(on)
+        self.skin.visible = not on
+
+    def set_layer(self, name: str, on: bool) -> None:
+        handle, sel = self.layers[name]
+        if on:
+            handle.points = self._segments(self.model.state.x, sel)
+        handle.visible = bool(on)
+
+    def set_bones(self, on: bool) -> None:
+        if on:
+            self.bones.points = (self.model.state.x[self.bone_index] * MM).astype(np.float32)
+        self.bones.visible = bool(on)
+
+    # ------------------------------------------------------------------ updates
+    def update(self, x: np.ndarray) -> None:
+        """Move everything visible to the tissue node positions ``x`` (N, 3) mm."""
+        skin = x[: self.model.face.n_vertices]
+        if self.textured_on:
+            self.textured.glb_data = self._glb.data(skin)
+        else:
+            self.skin.vertices = (skin * MM).astype(np.float32)
+        if self.fans:
+            pos = self.renderer.positions(skin)
+            for handle, first, center in self.fans:
+                handle.vertices = (pos[first : center + 1] * MM).astype(np.float32)
+        for handle, sel in self.layers.values():
+            if handle.visible:
+                handle.points = self._segments(x, sel)
+        if self.bones.visible:
+            self.bones.points = (x[self.bone_index] * MM).astype(np.float32)
