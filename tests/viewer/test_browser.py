@@ -48,9 +48,23 @@ def test_slider_moves_the_face_in_the_browser(tmp_path):
                 time.sleep(0.2)
             time.sleep(2.0)
             after = page.screenshot(path=str(tmp_path / "after.png"))
+            # a camera preset moves the browser's camera to the face's left side
+            client = next(iter(viewer.server.get_clients().values()))
+            page.get_by_text("view", exact=True).click()
+            page.get_by_text("camera: profile left").click()
+            deadline = time.time() + 20
+            while time.time() < deadline and client.camera.position[0] < 0.2:
+                time.sleep(0.2)
+            cam_x = client.camera.position[0]
+            # the page's own screenshot comes back as a PNG download
+            page.get_by_text("export", exact=True).click()
+            with page.expect_download(timeout=60000) as dl:
+                page.get_by_text("screenshot of this view (PNG)").click()
+            dl.value.save_as(tmp_path / "shot.png")
             browser.close()
     finally:
         viewer.close()
+    assert cam_x > 0.2  # metres along +x: the subject's left
     assert fm.skin_vertices()[corner, 1] - y0 > 2.0  # the server's mesh: the corner rose
     import imageio.v3 as iio
 
@@ -59,3 +73,7 @@ def test_slider_moves_the_face_in_the_browser(tmp_path):
     changed = np.abs(a - b).sum(axis=2) > 30
     # the GUI panel changes too; require changes in the 3-D view (left part of the page)
     assert changed[:, : a.shape[1] // 2].sum() > 50
+    shot = iio.imread(tmp_path / "shot.png")
+    assert shot.ndim == 3 and shot.shape[0] == 720
+    face = np.abs(shot.astype(int) - 255).sum(axis=2) > 60  # not the white page
+    assert 0.02 < face.mean() < 0.6

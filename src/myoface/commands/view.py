@@ -16,6 +16,11 @@ def add_arguments(p):
     )
     p.add_argument("--port", type=int, default=8080)
     p.add_argument("--open", action="store_true", help="open the page in a web browser")
+    p.add_argument(
+        "--texture",
+        metavar="IMAGE",
+        help="a texture image for the face's UVs (default: the face's own, or a neutral skin)",
+    )
     add_face_argument(p)
 
 
@@ -24,7 +29,7 @@ def run(args) -> int:
 
     _viser()  # fail early, with the pip command, when viser is missing
     fm = load_model(args)
-    v = FaceViewer(fm, host=args.host, port=args.port)
+    v = FaceViewer(fm, host=args.host, port=args.port, texture=args.texture)
     where = "this machine only" if args.host == "127.0.0.1" else f"all who can reach {args.host}"
     print(f"myoface viewer at {v.url} (serving {where}; Ctrl-C to stop)", flush=True)
     if args.open:
