@@ -33,6 +33,7 @@ TARGETS = {
     "analysis.closed_loop_rmse": ("<=", 0.05),
     "analysis.closed_loop_corr": (">=", 0.9),
     "viewer.update_ms": ("<", 100),
+    "viewer.drag_updates_per_s": (">=", 30),
 }
 
 
