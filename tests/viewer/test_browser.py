@@ -6,7 +6,10 @@ import time
 import numpy as np
 import pytest
 
+from tests.conftest import REPO
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+TALK = REPO / "examples" / "talk.toml"
 
 
 @pytest.mark.slow
@@ -48,6 +51,7 @@ def test_slider_moves_the_face_in_the_browser(tmp_path):
                 time.sleep(0.2)
             time.sleep(2.0)
             after = page.screenshot(path=str(tmp_path / "after.png"))
+            rose = fm.skin_vertices()[corner, 1] - y0
             # a camera preset moves the browser's camera to the face's left side
             client = next(iter(viewer.server.get_clients().values()))
             page.get_by_text("view", exact=True).click()
@@ -61,11 +65,29 @@ def test_slider_moves_the_face_in_the_browser(tmp_path):
             with page.expect_download(timeout=60000) as dl:
                 page.get_by_text("screenshot of this view (PNG)").click()
             dl.value.save_as(tmp_path / "shot.png")
+            # a playback typed into the page; the browser goes away while it plays
+            page.get_by_text("playback", exact=True).click()
+            field = page.get_by_text("file (contractions.csv or timeline)", exact=True)
+            field.locator("xpath=following::input[1]").fill(str(TALK))
+            page.get_by_role("button", name="load", exact=True).click()
+            deadline = time.time() + 20
+            while time.time() < deadline and viewer.state.playback is None:
+                time.sleep(0.2)
+            page.get_by_role("button", name="play", exact=True).click()
+            deadline = time.time() + 20
+            while time.time() < deadline and not viewer._playing:
+                time.sleep(0.1)
+            played = viewer._playing
             browser.close()
+        time.sleep(1.0)
+        alive = viewer.worker.is_alive()
+        after_gone = viewer.apply(fm.validate({"jaw": 0.5}))
     finally:
         viewer.close()
+    assert played and alive and viewer.last_error == ""
+    assert after_gone[corner, 1] < y0  # the jaw still opens: the server kept working
     assert cam_x > 0.2  # metres along +x: the subject's left
-    assert fm.skin_vertices()[corner, 1] - y0 > 2.0  # the server's mesh: the corner rose
+    assert rose > 2.0  # the server's mesh: the corner rose
     import imageio.v3 as iio
 
     a = iio.imread(before).astype(int)

@@ -32,7 +32,9 @@ def test_textured_skin_glb_carries_the_new_positions_and_normals():
 
     fm = build_face_model()
     face = fm.face
-    glb = TexturedSkinGLB(face.vertices, face.triangles, face.uv, dressing.default_skin_texture(face))
+    glb = TexturedSkinGLB(
+        face.vertices, face.triangles, face.uv, dressing.default_skin_texture(face)
+    )
     moved = face.vertices + np.array([0.0, 5.0, 0.0]) * (face.vertices[:, 1:2] > 0)
     data = glb.data(moved)
     np.testing.assert_allclose(read_glb_positions(data) / 1e-3, moved, atol=1e-4)
@@ -59,9 +61,7 @@ def test_scene_follows_the_physics(viewer):
         mouth = max(sc.fans, key=lambda f: f[2] - f[1])
         first = mouth[1]
         loop = viewer.renderer.scene.fans[[f[1] for f in sc.fans].index(first)][0]
-        np.testing.assert_allclose(
-            mouth[0].vertices[: len(loop)], skin[loop] * 1e-3, atol=1e-6
-        )
+        np.testing.assert_allclose(mouth[0].vertices[: len(loop)], skin[loop] * 1e-3, atol=1e-6)
         # the lattice layer and the bone nodes moved with the tissue
         handle, sel = sc.layers["fat"]
         x = fm.state.x

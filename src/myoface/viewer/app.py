@@ -79,6 +79,7 @@ class FaceViewer:
         self._sliders = {}
         self._playing = False
         self._exporting = False
+        self._closed = threading.Event()
         self.last_error = ""
         self.last_message = ""
         self.last_download: tuple[str, bytes] | None = None
@@ -483,12 +484,14 @@ class FaceViewer:
             try:
                 t0 = time.perf_counter()
                 dur = self._time.max
-                while True:
+                while not self._closed.is_set():
                     t = time.perf_counter() - t0
                     if t > dur:
                         break
                     self._time.value = round(t, 2)
-                    time.sleep(1 / 30)
+                    self._closed.wait(1 / 30)
+            except Exception as exc:  # noqa: BLE001 - reported; the server keeps running
+                self._notify(f"playback stopped: {exc}")
             finally:
                 self._playing = False
 
@@ -510,5 +513,6 @@ class FaceViewer:
             self.close()
 
     def close(self) -> None:
+        self._closed.set()
         self.worker.stop()
         self.server.stop()
