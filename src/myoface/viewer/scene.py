@@ -16,6 +16,7 @@ import numpy as np
 
 from myoface.render.raster import vertex_normals_numba
 from myoface.render.renderer import to_srgb8
+from myoface.synth import muscle_segments
 
 MM = 1e-3
 SKIN_RGB = (226, 178, 154)
@@ -183,8 +184,7 @@ class FaceScene:
             self.eyes = scene_api.add_mesh_trimesh("/face/dressing/eyes", eyes)
         else:
             self.eyes = None
-        ins = np.array([m.insertion for m in model.muscles.muscles])
-        org = np.array([m.origin for m in model.muscles.muscles])
+        ins, org = muscle_segments(model)
         self.vectors = scene_api.add_line_segments(
             "/muscles",
             (np.stack([ins, org], axis=1) * MM).astype(np.float32),
