@@ -46,6 +46,11 @@ def _viser():
     return viser
 
 
+def _aspect(camera) -> float:
+    """A browser camera's width / height (1 before the browser said)."""
+    return float(getattr(camera, "aspect", 1.0) or 1.0)
+
+
 def _png(image: np.ndarray) -> bytes:
     import imageio.v3 as iio
 
@@ -138,18 +143,17 @@ class FaceViewer:
     def set_camera(self, client, name: str) -> None:
         """Move a browser's camera to a preset."""
         cam = client.camera
-        aspect = float(getattr(cam, "aspect", 1.0) or 1.0)
-        preset = self.camera_preset(name, round(400 * aspect), 400, np.rad2deg(cam.fov))
+        preset = self.camera_preset(name, round(400 * _aspect(cam)), 400, np.rad2deg(cam.fov))
         with client.atomic():
             cam.up_direction = tuple(preset.up)
             cam.position = tuple(preset.eye * MM)
             cam.look_at = tuple(preset.target * MM)
 
     def client_camera(self, client, height: int) -> Camera:
-        """A renderer camera that sees what ``client``'s browser sees, ``height`` px high."""
+        """A renderer camera that sees what ``client``'s browser sees, ``height`` px high (the
+        width is even, as video encoders want)."""
         cam = client.camera
-        aspect = float(getattr(cam, "aspect", 1.0) or 1.0)
-        width = int(min(MAX_EXPORT_WIDTH, max(16, round(height * aspect))))
+        width = 2 * int(min(MAX_EXPORT_WIDTH, max(16, height * _aspect(cam))) // 2)
         return Camera(
             np.asarray(cam.position, float) / MM,
             np.asarray(cam.look_at, float) / MM,
@@ -232,9 +236,6 @@ class FaceViewer:
         if self._exporting:
             raise MyofaceValueError("a video export is already running")
         cam = self.client_camera(event.client, VIDEO_HEIGHT)
-        cam = Camera(
-            cam.eye, cam.target, cam.up, cam.width + cam.width % 2, cam.height, cam.fov_deg
-        )
 
         def work():
             self._exporting = True
