@@ -9,6 +9,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from myoface.analysis.pipeline import PAPER_MUSCLES, Analyzer, project_sections
+from myoface.errors import MyofaceValueError
+
+#: what ``run_closed_loop`` analyses the frames with
+TRACKERS = ("snakes", "landmarks", "oracle")
 
 
 @dataclass
@@ -66,10 +70,16 @@ def run_closed_loop(
 
     ``tracker="landmarks"`` analyses the same frames with
     :class:`~myoface.analysis.landmarks.LandmarkAnalyzer` (MediaPipe's face mesh) instead.
+    ``tracker="oracle"`` skips the images: the curve estimator is given the model's own
+    section curves, projected by the camera, as if tracked perfectly; what error remains is
+    the estimator's (its linearisation and the ``refine`` rounds through the tissue), so the
+    difference from ``"snakes"`` is the tracking's share.
     ``analyzer_options`` go to :class:`Analyzer` (e.g. ``estimator="fiducials"``)."""
     from myoface.render import Camera, Renderer, to_srgb8
     from myoface.render.dressing import default_skin_texture
 
+    if tracker not in TRACKERS:
+        raise MyofaceValueError(f"tracker must be one of {TRACKERS}; got {tracker!r}")
     ids = tuple(ids)
     cam = Camera.front(model.face.vertices, width=size, height=size, fov_deg=None)
     tex = to_srgb8(default_skin_texture(model.face, 512, makeup=True))
@@ -79,8 +89,14 @@ def run_closed_loop(
     frames = []
     for c in truth:
         model.relax(dict(zip(ids, c, strict=True)))
-        frames.append(renderer.render(model.skin_vertices()))
+        if tracker == "oracle":
+            frames.append(project_sections(model, cam))
+        else:
+            frames.append(renderer.render(model.skin_vertices()))
     model.reset()
+    if tracker == "oracle":
+        est = _estimate_from_true_curves(model, cam, frames, ids, refine)
+        return ClosedLoopResult(ids, truth, est, ["ok"] * len(frames))
     if tracker == "landmarks":
         from myoface.analysis.landmarks import LandmarkAnalyzer
 
@@ -102,3 +118,30 @@ def run_closed_loop(
         an.close()
     est, quality = [m.contractions for m in ms], [m.quality for m in ms]
     return ClosedLoopResult(ids, truth, np.array(est), quality)
+
+
+def _estimate_from_true_curves(model, cam, curves: list[dict], ids, refine: int) -> np.ndarray:
+    """The curve estimator on exact section curves (``tracker="oracle"``): calibrated on the
+    first frame's curves, resampled at 1 px like the snakes' nodes, with the model-to-image
+    map that the camera gives."""
+    from myoface.analysis.curvefit import CurveEstimator
+    from myoface.analysis.landmarks import fit_similarity
+    from myoface.analysis.pipeline import CURVE_EXCLUDED, SECTIONS, section_vertices
+    from myoface.analysis.snakes import resample_polyline
+
+    secs = {
+        s: (section_vertices(model.face, s), SECTIONS[s][1])
+        for s in SECTIONS
+        if s not in CURVE_EXCLUDED
+    }
+    est = CurveEstimator(model, secs, ids)
+    verts = np.concatenate([v for v, _ in secs.values()])
+    mm = model.face.vertices[verts, :2] * np.array([1.0, -1.0])  # image-like: y down
+    z, ms, md = fit_similarity(mm, cam.project(model.face.vertices)[verts, :2])
+    mat = np.array([[z.real, -z.imag], [z.imag, z.real]])
+    first = {s: resample_polyline(curves[0][s], 1.0, closed=c) for s, (_, c) in secs.items()}
+    est.calibrate(first, mat, md - mat @ ms)
+    try:
+        return np.array([est.estimate({s: cur[s] for s in secs}, refine=refine) for cur in curves])
+    finally:
+        model.reset()

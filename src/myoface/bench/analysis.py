@@ -51,6 +51,15 @@ def bench_closed_loop_rmse(quick: bool) -> Measurement:
     return Measurement(float(np.nanmax(res.rmse())), len(res.truth), detail=_per_muscle())
 
 
+@benchmark("analysis.closed_loop_rmse_oracle", "contraction", higher_is_better=False)
+def bench_closed_loop_rmse_oracle(quick: bool) -> Measurement:
+    """As analysis.closed_loop_rmse, but the curve fit is given the model's true section
+    curves instead of the tracked contours (``run_closed_loop(tracker="oracle")``): the
+    estimator's share of the error; the rest of analysis.closed_loop_rmse is the tracking's."""
+    res = _closed_loop(quick, "oracle")
+    return Measurement(float(np.nanmax(res.rmse())), len(res.truth))
+
+
 @benchmark("analysis.closed_loop_corr", "-", higher_is_better=True)
 def bench_closed_loop_corr(quick: bool) -> Measurement:
     """Worst per-muscle correlation of recovered vs true contractions on the same sequence
