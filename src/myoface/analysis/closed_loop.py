@@ -125,7 +125,7 @@ def _estimate_from_true_curves(model, cam, curves: list[dict], ids, refine: int)
     first frame's curves, resampled at 1 px like the snakes' nodes, with the model-to-image
     map that the camera gives."""
     from myoface.analysis.curvefit import CurveEstimator
-    from myoface.analysis.landmarks import fit_similarity
+    from myoface.analysis.landmarks import similarity_affine
     from myoface.analysis.pipeline import CURVE_EXCLUDED, SECTIONS, section_vertices
     from myoface.analysis.snakes import resample_polyline
 
@@ -137,10 +137,9 @@ def _estimate_from_true_curves(model, cam, curves: list[dict], ids, refine: int)
     est = CurveEstimator(model, secs, ids)
     verts = np.concatenate([v for v, _ in secs.values()])
     mm = model.face.vertices[verts, :2] * np.array([1.0, -1.0])  # image-like: y down
-    z, ms, md = fit_similarity(mm, cam.project(model.face.vertices)[verts, :2])
-    mat = np.array([[z.real, -z.imag], [z.imag, z.real]])
+    mat, off = similarity_affine(mm, cam.project(model.face.vertices)[verts, :2])
     first = {s: resample_polyline(curves[0][s], 1.0, closed=c) for s, (_, c) in secs.items()}
-    est.calibrate(first, mat, md - mat @ ms)
+    est.calibrate(first, mat, off)
     try:
         return np.array([est.estimate({s: cur[s] for s in secs}, refine=refine) for cur in curves])
     finally:

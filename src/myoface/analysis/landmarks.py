@@ -193,6 +193,13 @@ def fit_similarity(src: np.ndarray, dst: np.ndarray):
     return np.vdot(za, zb) / den, ms, md
 
 
+def similarity_affine(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fit_similarity` as a matrix and an offset: ``dst ~ matrix @ src + offset``."""
+    z, ms, md = fit_similarity(src, dst)
+    mat = np.array([[z.real, -z.imag], [z.imag, z.real]])
+    return mat, md - mat @ ms
+
+
 def _apply_similarity(s, ms, md, pts):
     z = ((pts[:, 0] - ms[0]) + 1j * (pts[:, 1] - ms[1])) * s
     return np.stack([z.real + md[0], z.imag + md[1]], axis=1)

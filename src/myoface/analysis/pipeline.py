@@ -425,14 +425,11 @@ class Analyzer:
                 raise MyofaceValueError("the initial contours are too small (under 5 px)")
             self.mm_per_px = rms_mm / rms_px
             if self.curves is not None:
-                from myoface.analysis.landmarks import fit_similarity
+                from myoface.analysis.landmarks import similarity_affine
 
                 # the model (image-like mm) onto the calibration frame (px)
-                z, ms, md = fit_similarity(model_xy * np.array([1.0, -1.0]), pts)
-                mat = np.array([[z.real, -z.imag], [z.imag, z.real]])
-                self.curves.calibrate(
-                    dict(zip(self.sections, conts_cal, strict=True)), mat, md - mat @ ms
-                )
+                mat, off = similarity_affine(model_xy * np.array([1.0, -1.0]), pts)
+                self.curves.calibrate(dict(zip(self.sections, conts_cal, strict=True)), mat, off)
                 self.mm_per_px = self.curves.mm_per_px
         if self.head_frame == "register":
             shift = np.zeros(2)
