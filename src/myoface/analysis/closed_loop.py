@@ -82,8 +82,9 @@ def run_closed_loop(
         raise MyofaceValueError(f"tracker must be one of {TRACKERS}; got {tracker!r}")
     ids = tuple(ids)
     cam = Camera.front(model.face.vertices, width=size, height=size, fov_deg=None)
-    tex = to_srgb8(default_skin_texture(model.face, 512, makeup=True))
-    renderer = Renderer(model.face, cam, texture=tex)
+    if tracker != "oracle":  # the oracle reads the model's curves, not images
+        tex = to_srgb8(default_skin_texture(model.face, 512, makeup=True))
+        renderer = Renderer(model.face, cam, texture=tex)
     truth = truth_sequence(n_frames, ids, seed)
     model.reset()
     frames = []
