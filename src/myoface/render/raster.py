@@ -20,6 +20,9 @@ Shading model, per pixel, in linear RGB::
 with the normal n interpolated from the vertices and flipped towards the viewer (both sides of
 an open surface are lit), albedo = vertex colour x texture (bilinear, wrap-free clamp), and the
 view and half vectors h_l taken at each triangle's centroid.
+
+The hot kernels use ``error_model="numpy"``: a float division by zero gives inf (every divisor
+here is guarded or nonzero) instead of a Python exception, so numba need not test each one.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from numba import njit, prange
 NEAR_MM = 1.0
 
 
-@njit(cache=True, fastmath=True, inline="always")
+@njit(cache=True, fastmath=True, inline="always", error_model="numpy")
 def _tex_bilinear(tex, u, v):
     h, w = tex.shape[0], tex.shape[1]
     x = u * w - 0.5
@@ -156,7 +159,7 @@ def _span(a, ra, b, c, cy, lo, hi):
     return lo, hi
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def visibility(setup, tbox, bbox, zbuf, tri_id, nt):
     """The z-buffer pass: for every sample (pixel centre) inside ``bbox``, the nearest
     triangle's index into ``tri_id`` (-1: none) and its depth key into ``zbuf``. Rows are split
@@ -217,7 +220,7 @@ def planes_columns(n_lights: int) -> int:
     return 3 * N_PLANES + 3 + 3 * n_lights
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, error_model="numpy")
 def attribute_planes(
     setup, tbox, tris, winv, normals, world, vcol, uv, eye, view_dir, ortho, light_dir, planes
 ):
@@ -276,12 +279,12 @@ def attribute_planes(
             planes[f, o + 5 + 3 * k] = hz / hn
 
 
-@njit(cache=True, fastmath=True, inline="always")
+@njit(cache=True, fastmath=True, inline="always", error_model="numpy")
 def _plane(planes, f, j, cx, cy):
     return planes[f, 3 * j] * cx + planes[f, 3 * j + 1] * cy + planes[f, 3 * j + 2]
 
 
-@njit(cache=True, fastmath=True, inline="always")
+@njit(cache=True, fastmath=True, inline="always", error_model="numpy")
 def _shade(f, cx, cy, planes, tex, tri_tex, light_dir, light_col, ambient, ks, shininess):
     """Linear RGB of triangle ``f`` at screen point (cx, cy): perspective-correct attributes,
     normal flipped towards the viewer, Blinn-Phong with every light."""
@@ -330,7 +333,7 @@ def _shade(f, cx, cy, planes, tex, tri_tex, light_dir, light_col, ambient, ks, s
     return ar * dr + sr, ag * dg + sg, ab * db + sb
 
 
-@njit(cache=True, parallel=True, fastmath=True)
+@njit(cache=True, parallel=True, fastmath=True, error_model="numpy")
 def shade_resolve(
     fct,  # supersampling factor per axis
     bbox,
