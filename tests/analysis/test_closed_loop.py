@@ -19,9 +19,15 @@ from myoface.analysis.closed_loop import run_closed_loop
 from myoface.model import build_face_model
 
 
+@pytest.fixture(scope="module")
+def plain():
+    """The default analysis (no analysis by synthesis) of the 16-frame sequence."""
+    return run_closed_loop(build_face_model(), n_frames=16, size=256)
+
+
 @pytest.mark.slow
-def test_closed_loop_recovers_every_muscle():
-    res = run_closed_loop(build_face_model(), n_frames=16, size=256)
+def test_closed_loop_recovers_every_muscle(plain):
+    res = plain
     assert all(q == "ok" for q in res.quality)
     rmse, corr = (
         dict(zip(res.ids, res.rmse(), strict=True)),
@@ -35,6 +41,32 @@ def test_closed_loop_recovers_every_muscle():
         assert corr[m] > 0.85, table
     # every frame is measured and in range
     assert np.isfinite(res.estimate).all() and res.estimate.min() >= 0 and res.estimate.max() <= 1
+
+
+@pytest.mark.slow
+def test_analysis_by_synthesis_removes_the_trackers_bias(plain):
+    """``synthesis=True``: the model, textured from the first frame and deformed by each
+    estimate, is tracked like the video and the difference drives the fit. Measured when
+    written, 16 frames, 3 rounds: worst RMSE 0.044 (depressors 0.032-0.044, levators
+    0.029-0.039, frontalis at most 0.015) against 0.082 without. The bounds allow the same
+    sub-pixel jitter as the test above; the depressors, whose error is the tracker's bias this
+    removes, must come out at most 0.75 of the plain run's."""
+    res = run_closed_loop(build_face_model(), n_frames=16, size=256, synthesis=True)
+    assert all(q == "ok" for q in res.quality)
+    rmse, table = dict(zip(res.ids, res.rmse(), strict=True)), res.table()
+    base = dict(zip(plain.ids, plain.rmse(), strict=True))
+    assert max(rmse.values()) < 0.07, table
+    assert res.corr().min() > 0.95, table
+    for s in "lr":
+        m = f"depressor_labii_inferioris_{s}"
+        assert rmse[m] < 0.75 * base[m], (table, plain.table())
+
+
+def test_synthesis_is_refused_without_snakes():
+    from myoface.errors import MyofaceValueError
+
+    with pytest.raises(MyofaceValueError, match="synthesis=True needs tracker='snakes'"):
+        run_closed_loop(build_face_model(), n_frames=2, tracker="oracle", synthesis=True)
 
 
 @pytest.mark.slow

@@ -62,6 +62,7 @@ def run_closed_loop(
     refine: int = 2,
     head_frame: str = "contours",
     tracker: str = "snakes",
+    synthesis: bool = False,
     **analyzer_options,
 ) -> ClosedLoopResult:
     """Render ``n_frames`` of known contractions (orthographic frontal camera, make-up texture),
@@ -74,12 +75,17 @@ def run_closed_loop(
     section curves, projected by the camera, as if tracked perfectly; what error remains is
     the estimator's (its linearisation and the ``refine`` rounds through the tissue), so the
     difference from ``"snakes"`` is the tracking's share.
+    ``synthesis=True`` (snakes only) gives the analyzer the camera, so that it removes the
+    tracker's bias by analysis by synthesis (:mod:`myoface.analysis.synthesis`); its
+    appearance model is made from the first (neutral) frame, not from the known texture.
     ``analyzer_options`` go to :class:`Analyzer` (e.g. ``estimator="fiducials"``)."""
     from myoface.render import Camera, Renderer, to_srgb8
     from myoface.render.dressing import default_skin_texture
 
     if tracker not in TRACKERS:
         raise MyofaceValueError(f"tracker must be one of {TRACKERS}; got {tracker!r}")
+    if synthesis and tracker != "snakes":
+        raise MyofaceValueError("synthesis=True needs tracker='snakes'")
     ids = tuple(ids)
     cam = Camera.front(model.face.vertices, width=size, height=size, fov_deg=None)
     if tracker != "oracle":  # the oracle reads the model's curves, not images
@@ -111,6 +117,7 @@ def run_closed_loop(
             refine=refine,
             head_frame=head_frame,
             head_reference=(),
+            synthesis=cam if synthesis else None,
             **analyzer_options,
         )
     try:

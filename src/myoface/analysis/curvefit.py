@@ -128,8 +128,10 @@ class CurveEstimator:
         u = (1 - self.ta)[:, None] * xy[self.ia] + self.ta[:, None] * xy[self.ib]
         return self.p0 + u @ self.matrix.T
 
-    def _rows(self, curves: dict, pred: np.ndarray):
-        """Normals, the residuals n . (foot - pred) in mm and the weights, per node."""
+    def residuals(self, curves: dict, pred: np.ndarray):
+        """Per node: the normal of ``curves`` ({name: (N, 2) px}) at its foot, the signed
+        distance n . (foot - pred) in mm from ``pred`` (the nodes, (N, 2) px) along it, and the
+        weight (0 where a contour is missing or the node is past an open contour's end)."""
         n = len(pred)
         normal = np.zeros((n, 2))
         res = np.zeros(n)
@@ -167,7 +169,7 @@ class CurveEstimator:
         c = np.zeros(k)
         for _ in range(ICP_ROUNDS):
             pred = self.p0 + self.jac @ c
-            normal, res, w = self._rows(curves, pred)
+            normal, res, w = self.residuals(curves, pred)
             if w.sum() <= 0:
                 return np.full(k, np.nan)
             step = self._solve(normal, res, w, -c, 1.0 - c)
@@ -190,7 +192,20 @@ class CurveEstimator:
             if dd > 1e-12:
                 jac += np.multiply.outer((pred - p_prev) - jac @ dc, dc / dd)
             c_prev, p_prev = c.copy(), pred
-            normal, res, w = self._rows(curves, pred)
+            normal, res, w = self.residuals(curves, pred)
             step = self._solve(normal, res, w, -c, 1.0 - c, jac)
             c = np.clip(c + step, 0.0, 1.0)
         return c
+
+    def synthesis_step(self, c, pred, video: dict, synth: dict, synth_rest) -> np.ndarray:
+        """The contractions after one analysis-by-synthesis step from ``c`` (see
+        :mod:`myoface.analysis.synthesis`): ``pred`` are the nodes for the model relaxed at
+        ``c``; ``video`` and ``synth`` the contours tracked on the real frame and on the model
+        rendered at ``c``; ``synth_rest`` the residuals (mm, per node) of the contours tracked
+        on the model rendered at rest (the tracker's bias on the calibration frame)."""
+        normal, r_video, w = self.residuals(video, pred)
+        _, r_synth, w_synth = self.residuals(synth, pred)
+        res = r_video - (r_synth - np.asarray(synth_rest))
+        c = np.asarray(c, dtype=np.float64)
+        step = self._solve(normal, res, np.minimum(w, w_synth), -c, 1.0 - c)
+        return np.clip(c + step, 0.0, 1.0)

@@ -287,6 +287,12 @@ class Analyzer:
     reseed : with ``estimator="curves"``, a second pass per frame: the contours are moved to
         where the model, at the first estimate, puts their skin, relaxed again and the
         contractions re-estimated (analysis by synthesis; twice the tracking cost).
+    synthesis : a :class:`~myoface.render.Camera` that maps the model's rest shape onto the
+        calibration frame, or None (default). With ``estimator="curves"``, the model is then
+        rendered as the calibration frame showed it, deformed by each frame's estimate,
+        tracked like the video, and ``synthesis_rounds`` Gauss-Newton steps remove the
+        tracker's own bias (:mod:`myoface.analysis.synthesis`; one render, one tissue relax
+        and one tracking per round).
     """
 
     def __init__(
@@ -304,6 +310,8 @@ class Analyzer:
         estimator: str = "curves",
         line_sections=LINE_SECTIONS,
         reseed: bool = True,
+        synthesis=None,
+        synthesis_rounds: int = 3,
     ):
         if estimator not in ESTIMATORS:
             raise MyofaceValueError(f"estimator must be one of {ESTIMATORS}; got {estimator!r}")
@@ -357,6 +365,13 @@ class Analyzer:
         self.mm_per_px = None
         self._init = {k: np.asarray(v, dtype=np.float64) for k, v in init.items()}
         self._contrast0 = None
+        if synthesis is not None and estimator != "curves":
+            raise MyofaceValueError("synthesis needs estimator='curves'")
+        if not (isinstance(synthesis_rounds, int | np.integer) and synthesis_rounds >= 0):
+            raise MyofaceValueError(f"synthesis_rounds must be an int >= 0; got {synthesis_rounds}")
+        self.synthesis_camera = synthesis
+        self.synthesis_rounds = int(synthesis_rounds)
+        self._synth = None  # FrameSynthesizer, made on the calibration frame
 
     def _features(self, conts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         allpts = np.concatenate(conts)
@@ -431,6 +446,8 @@ class Analyzer:
                 mat, off = similarity_affine(model_xy * np.array([1.0, -1.0]), pts)
                 self.curves.calibrate(dict(zip(self.sections, conts_cal, strict=True)), mat, off)
                 self.mm_per_px = self.curves.mm_per_px
+                if self.synthesis_camera is not None:
+                    self._start_synthesis(frame, conts_cal)
         if self.head_frame == "register":
             shift = np.zeros(2)
             head_t = np.asarray(self._sim.t, dtype=np.float64)
@@ -478,8 +495,48 @@ class Analyzer:
             res = self.snakes.relax(stack)
             conts = res.split()
             named = dict(zip(self.sections, conts, strict=True))
-            c = self._fit_curves(self._to_calibration(conts), shift)
+            conts_cal = self._to_calibration(conts)
+            c = self._fit_curves(conts_cal, shift)
+        if self._synth is not None and index != self._calibration_index:
+            c = self._by_synthesis(c, conts_cal, shift)
         return FrameMeasurement(index, time_s, "ok", c, head_t, named, res.iterations, *hs)
+
+    # ------------------------------------------------------------ analysis by synthesis
+    def _track_synthetic(self, skin: np.ndarray, start: list[np.ndarray]) -> dict:
+        """The contours tracked on the model rendered at ``skin``, from the nodes ``start``
+        (calibration coordinates), with the video tracker's rest lengths and parameters."""
+        img = self._synth.render(skin)
+        pot = image_potential(img, sigma=self.sigma, method=self.potential)
+        if any(self.layers):
+            pot = np.stack([pot, image_potential(img, sigma=self.sigma, method="line")])
+        sn = self._synth_snakes
+        sn.contours.nodes[:] = np.concatenate(start)
+        sn.rest[:] = self.snakes.rest / (self._sim.s if self.head_frame == "register" else 1.0)
+        sn.reference = self.snakes.reference
+        return dict(zip(self.sections, sn.relax(pot).split(), strict=True))
+
+    def _start_synthesis(self, frame: np.ndarray, conts_cal: list[np.ndarray]) -> None:
+        from myoface.analysis.synthesis import FrameSynthesizer
+
+        self._synth = FrameSynthesizer(self.model.face, self.synthesis_camera, frame)
+        self._synth_snakes = Snakes(self.contours, self.params, layers=self.layers)
+        rest = self._track_synthetic(self.model.face.vertices, conts_cal)
+        _, self._synth_bias, _ = self.curves.residuals(rest, self.curves.p0)
+
+    def _by_synthesis(self, c: np.ndarray, conts_cal: list[np.ndarray], shift) -> np.ndarray:
+        fm = self.model
+        cols = [fm.ids.index(i) for i in self.ids]
+        start = [q - shift for q in conts_cal]
+        video = dict(zip(self.sections, start, strict=True))
+        for _ in range(self.synthesis_rounds):
+            full = np.zeros(len(fm.ids))
+            full[cols] = c
+            fm.relax(full, start="current")
+            skin = fm.skin_vertices()
+            synth = self._track_synthetic(skin, start)
+            pred = self.curves.predicted(skin)
+            c = self.curves.synthesis_step(c, pred, video, synth, self._synth_bias)
+        return c
 
     def close(self) -> None:
         """Nothing to release (the landmark tracker's detector has to be closed)."""
