@@ -373,6 +373,14 @@ class Analyzer:
         self.synthesis_rounds = int(synthesis_rounds)
         self._synth = None  # FrameSynthesizer, made on the calibration frame
 
+    def _potentials(self, frame: np.ndarray) -> np.ndarray:
+        """The stack (L, H, W) of potentials the contours move in: ``potential``, then the
+        line potential when some section is tracked as a line."""
+        pot = image_potential(frame, sigma=self.sigma, method=self.potential)
+        if any(self.layers):
+            return np.stack([pot, image_potential(frame, sigma=self.sigma, method="line")])
+        return pot[None]
+
     def _features(self, conts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         allpts = np.concatenate(conts)
         named = dict(zip(self.sections, conts, strict=True))
@@ -408,13 +416,9 @@ class Analyzer:
                 a, b = sim.relative_to(self._sim)
                 self.snakes.transform(a, b)
                 self._sim = sim
-        pot = image_potential(frame, sigma=self.sigma, method=self.potential)
+        stack = self._potentials(frame)
+        pot = stack[0]
         self.last_potential = pot  # for the overlay on the potential (the paper's Fig. 7b)
-        if any(self.layers):
-            line = image_potential(frame, sigma=self.sigma, method="line")
-            stack = np.stack([pot, line])
-        else:
-            stack = pot[None]
         # contrast: the strongest edges of the frame (99th percentile of |P|)
         contrast = float(np.percentile(-pot, 99))
         if self._contrast0 is None:
@@ -505,10 +509,7 @@ class Analyzer:
     def _track_synthetic(self, skin: np.ndarray, start: list[np.ndarray]) -> dict:
         """The contours tracked on the model rendered at ``skin``, from the nodes ``start``
         (calibration coordinates), with the video tracker's rest lengths and parameters."""
-        img = self._synth.render(skin)
-        pot = image_potential(img, sigma=self.sigma, method=self.potential)
-        if any(self.layers):
-            pot = np.stack([pot, image_potential(img, sigma=self.sigma, method="line")])
+        pot = self._potentials(self._synth.render(skin))
         sn = self._synth_snakes
         sn.contours.nodes[:] = np.concatenate(start)
         sn.rest[:] = self.snakes.rest / (self._sim.s if self.head_frame == "register" else 1.0)
