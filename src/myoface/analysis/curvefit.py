@@ -174,16 +174,11 @@ class CurveEstimator:
                 return np.full(k, np.nan)
             step = self._solve(normal, res, w, -c, 1.0 - c)
             c = np.clip(c + step, 0.0, 1.0)
-        fm = self.model
         jac = self.jac.copy()
         # secant pairs (contractions, predicted nodes): the rest state is one
         c_prev, p_prev = np.zeros(k), self.p0
-        cols = [fm.ids.index(i) for i in self.ids]
         for _ in range(int(refine)):
-            full = np.zeros(len(fm.ids))
-            full[cols] = c
-            fm.relax(full, start="current")
-            pred = self.predicted(fm.skin_vertices())
+            pred = self.predicted(self.relaxed_skin(c))
             # Broyden's update: the Jacobian made exact along the last step, so that the
             # stiffening tissue's smaller response is not overshot again (Nocedal & Wright,
             # eq. 11.27)
@@ -196,6 +191,15 @@ class CurveEstimator:
             step = self._solve(normal, res, w, -c, 1.0 - c, jac)
             c = np.clip(c + step, 0.0, 1.0)
         return c
+
+    def relaxed_skin(self, c) -> np.ndarray:
+        """The model's skin vertices (V, 3) relaxed (from its current state) at contractions
+        ``c`` of the estimated muscles, every other muscle at rest."""
+        fm = self.model
+        full = np.zeros(len(fm.ids))
+        full[[fm.ids.index(i) for i in self.ids]] = c
+        fm.relax(full, start="current")
+        return fm.skin_vertices()
 
     def synthesis_step(self, c, pred, video: dict, synth: dict, synth_rest) -> np.ndarray:
         """The contractions after one analysis-by-synthesis step from ``c`` (see

@@ -525,15 +525,10 @@ class Analyzer:
         _, self._synth_bias, _ = self.curves.residuals(rest, self.curves.p0)
 
     def _by_synthesis(self, c: np.ndarray, conts_cal: list[np.ndarray], shift) -> np.ndarray:
-        fm = self.model
-        cols = [fm.ids.index(i) for i in self.ids]
         start = [q - shift for q in conts_cal]
         video = dict(zip(self.sections, start, strict=True))
         for _ in range(self.synthesis_rounds):
-            full = np.zeros(len(fm.ids))
-            full[cols] = c
-            fm.relax(full, start="current")
-            skin = fm.skin_vertices()
+            skin = self.curves.relaxed_skin(c)
             synth = self._track_synthetic(skin, start)
             pred = self.curves.predicted(skin)
             c = self.curves.synthesis_step(c, pred, video, synth, self._synth_bias)

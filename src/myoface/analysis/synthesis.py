@@ -66,11 +66,11 @@ class FrameSynthesizer:
         gloss = lit - matte
         skin = self.renderer.triangle_ids()[:: self.renderer.ssaa, :: self.renderer.ssaa]
         skin = (skin >= 0) & (skin < face.n_triangles)
+        if not skin.any():
+            raise MyofaceValueError("the camera does not see the face on the frame")
         albedo = (load_texture(img[:, :, :3]) - gloss) / np.maximum(matte, 1e-3)
         # skin that the calibration frame did not show (the inner lips, behind the eyelids)
         # takes the colour of the nearest skin it did
-        if not skin.any():
-            raise MyofaceValueError("the camera does not see the face on the frame")
         _, (iy, ix) = distance_transform_edt(~skin, return_indices=True)
         albedo = np.clip(albedo[iy, ix], 0.0, 1.0)
         self.renderer.texture = np.ascontiguousarray(albedo, dtype=np.float32)
