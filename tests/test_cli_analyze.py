@@ -19,11 +19,11 @@ def smile_video(tmp_path_factory):
     fm = build_face_model()
     cam = Camera.front(fm.face.vertices, width=192, height=192, fov_deg=None)
     r = Renderer(fm.face, cam, texture=to_srgb8(default_skin_texture(fm.face, 256, makeup=True)))
+    state = fm.rest_state()
     with VideoWriter(d / "smile.mp4", fps=10) as vw:
         for c in (0.0, 0.3, 0.6, 0.9, 0.6, 0.3, 0.0):
-            fm.relax({"zygomaticus_major_l": c, "zygomaticus_major_r": c})
-            vw.write(r.render(fm.skin_vertices()))
-    fm.reset()
+            state = fm.relax({"zygomaticus_major_l": c, "zygomaticus_major_r": c}, state).state
+            vw.write(r.render(fm.skin_vertices(state)))
     save_init(d / "init.json", project_sections(fm, cam))
     return d
 

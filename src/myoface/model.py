@@ -1,24 +1,31 @@
-"""The assembled face model: a face mesh, its tissue lattice and its muscles, driven together.
+"""The assembled face model (immutable) and its state (a value), in the style of warp.sim.
 
-:class:`FaceModel` joins the geometry, physics and muscle levels: a contraction vector c (M,)
-(one entry per id of the muscle set, the jaw last) becomes target positions of the kinematic
-nodes — the bone layer, rotated by the jaw, and the fascia nodes the muscles reach, displaced by
-eq. (5) (Terzopoulos & Waters 1993) — and the lattice relaxes (or is integrated in time) to the
-deformed skin.
+:class:`FaceModel` joins the geometry, physics and muscle levels. It is built once, never
+changes, and may be shared between threads: the face, the muscles, the tissue lattice, the packed
+arrays that map a contraction vector c (M,) (one entry per id of the muscle set, the jaw last) to
+target positions of the kinematic nodes — the bone layer, rotated by the jaw, and the fascia nodes
+the muscles reach, displaced by eq. (5) (Terzopoulos & Waters 1993) — and results derived from
+the model alone (e.g. the analysis' responses to each muscle, :meth:`FaceModel.memo`).
+
+:class:`FaceState` (node positions, velocities, contractions, time) is a value: :func:`relax`,
+:func:`step` and :func:`simulate` take one and return a new one. Whoever needs a state (the
+viewer, an analysis run, a video writer) keeps its own.
 
 Example
 -------
->>> from myoface.model import build_face_model
+>>> from myoface.model import build_face_model, relax
 >>> fm = build_face_model()
->>> res = fm.relax({"zygomaticus_major_l": 0.8, "zygomaticus_major_r": 0.8})
->>> skin = fm.skin_vertices()          # (468, 3) mm
+>>> res = relax(fm, {"zygomaticus_major_l": 0.8, "zygomaticus_major_r": 0.8})
+>>> skin = fm.skin_vertices(res.state)          # (468, 3) mm
+>>> res2 = fm.relax({"zygomaticus_major_l": 0.9}, res.state)   # warm start from the smile
 """
 
 from __future__ import annotations
 
-import copy
 import os
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -38,28 +45,64 @@ from myoface.tissue import (
     TissueParams,
     TissueState,
     assemble_tissue,
-    relax,
-    rest_state,
     stable_time_step,
     step_rk2,
 )
+from myoface.tissue import relax as relax_tissue
 
 #: fascia nodes whose largest unit-contraction displacement is below this (mm) stay free
 DRIVEN_MIN_MM = 1e-3
 
 
+def _frozen(a) -> np.ndarray:
+    a = np.array(a, dtype=np.float64)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class FaceState:
+    """A configuration of a face model's tissue: a value (its arrays are read-only).
+
+    Attributes
+    ----------
+    x : (N, 3) float ndarray — every lattice node's position, mm (the first V are the skin).
+    v : (N, 3) float ndarray — velocities, mm/s.
+    contractions : (M,) float ndarray — the contractions the kinematic nodes were set to.
+    t : float — time, s.
+    """
+
+    x: np.ndarray
+    v: np.ndarray
+    contractions: np.ndarray
+    t: float = 0.0
+
+    def __post_init__(self):
+        for name in ("x", "v", "contractions"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+
+    @classmethod
+    def _from_tissue(cls, s: TissueState, contractions) -> FaceState:
+        return cls(s.x, s.v, contractions, float(s.t))
+
+    def tissue_state(self) -> TissueState:
+        """A (mutable) copy for the tissue level's functions."""
+        return TissueState(self.x.copy(), self.v.copy(), self.t)
+
+
 class FaceModel:
-    """A face mesh + tissue lattice + muscle set, with the current tissue state.
+    """A face mesh + tissue lattice + muscle set. Immutable: safe to share between threads.
 
     Attributes
     ----------
     face : FaceMesh — the rest skin surface.
     muscles : MuscleSet
     tissue : TissueModel — with the bone layer and the muscle-driven fascia nodes kinematic.
-    state : TissueState — the current configuration (starts at rest).
     ids : tuple of str — contraction vector order (``muscles.ids``).
     driven_nodes : (D,) int — fascia nodes moved by at least one muscle.
     expressions : dict of name -> (M,) — expressions that came with the model (Waters' macros).
+    stable_dt : float — the RK2 step (s) inside the explicit scheme's stability limit,
+        computed once per model.
     """
 
     def __init__(
@@ -69,9 +112,10 @@ class FaceModel:
         params: TissueParams | None = None,
         expressions: dict[str, np.ndarray] | None = None,
     ):
-        self.face = face
-        self.muscles = muscles
-        self.ids = muscles.ids
+        s = super().__setattr__
+        s("face", face)
+        s("muscles", muscles)
+        s("ids", muscles.ids)
         base = assemble_tissue(face.vertices, face.triangles, params)
         nv = base.n_vertices
         fascia = base.layer_nodes("fascia")
@@ -83,33 +127,36 @@ class FaceModel:
         fb = muscles.basis(base.rest_positions[fascia], jaw_w)
         reach = np.abs(fb).max(axis=(1, 2))
         driven_v = np.flatnonzero(reach > DRIVEN_MIN_MM)
-        self.driven_nodes = fascia[driven_v]
-        self.tissue: TissueModel = base.with_kinematic(self.driven_nodes)
-        kin = self.tissue.kinematic_index
+        driven = fascia[driven_v]
+        s("driven_nodes", driven)
+        tissue: TissueModel = base.with_kinematic(driven)
+        s("tissue", tissue)
+        kin = tissue.kinematic_index
         # per kinematic node: its vertex, rest position, jaw weight and muscle basis
-        self._kin_vertex = kin % nv
-        self._kin_rest = self.tissue.rest_positions[kin]
-        self._kin_jaw = jaw_w[self._kin_vertex]
+        s("_kin_vertex", kin % nv)
+        s("_kin_rest", _frozen(tissue.rest_positions[kin]))
+        s("_kin_jaw", _frozen(jaw_w[kin % nv]))
         basis = np.zeros((len(kin), 3, len(self.ids)))
-        pos = np.searchsorted(kin, self.driven_nodes)
-        basis[pos] = fb[driven_v]
-        self._kin_basis = basis
-        self.expressions = dict(expressions or {})
-        self.state: TissueState = rest_state(self.tissue)
-        self._contractions = np.zeros(len(self.ids))
-        #: results derived from this model that do not change with its state (e.g. the
-        #: analysis' responses to each muscle), computed once per model
-        self.cache: dict = {}
+        basis[np.searchsorted(kin, driven)] = fb[driven_v]
+        s("_kin_basis", _frozen(basis))
+        s("expressions", dict(expressions or {}))
+        s("stable_dt", float(stable_time_step(tissue)))
+        s(
+            "_rest",
+            FaceState(
+                tissue.rest_positions, np.zeros_like(tissue.rest_positions), np.zeros(len(self.ids))
+            ),
+        )
+        s("_memo", {})
+        s("_memo_lock", threading.Lock())
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"FaceModel is immutable: cannot set {name!r}")
 
     # ------------------------------------------------------------------ inputs
     @property
     def n_muscles(self) -> int:
         return len(self.ids)
-
-    @property
-    def contractions(self) -> np.ndarray:
-        """The contraction vector of the current state (M,)."""
-        return self._contractions.copy()
 
     def validate(self, contractions) -> np.ndarray:
         """See :meth:`MuscleSet.validate`."""
@@ -122,118 +169,52 @@ class FaceModel:
         the muscles then add ``sum_i c_i B_i`` (T&W 1993, eq. (5)), rotated with the jaw.
         """
         c = self.validate(contractions)
-        disp = self._kin_basis @ c
-        x = self._kin_rest + disp
+        x = self._kin_rest + self._kin_basis @ c
         j = self.muscles.jaw_index
         if j is not None and c[j] > 0:
             x = self.muscles.jaw.rotate(x, self._kin_jaw, c[j])
         return x
 
-    def clone(self) -> FaceModel:
-        """A model at rest sharing this one's structure (face, muscles, tissue, caches) with
-        its own state: cheap, for a second simulation such as a video export. Do not run the
-        physics of both at the same time from two threads."""
-        twin = copy.copy(self)
-        twin.reset()
-        return twin
+    def rest_state(self) -> FaceState:
+        """The rest configuration: no contraction, zero velocity, t = 0."""
+        return self._rest
+
+    def memo(self, key: Hashable, compute: Callable[[], object]):
+        """A result derived from this model alone (never from a state), computed once.
+
+        ``compute()`` runs at most once per key, even when several threads ask at the same
+        time; its result must not be changed by the caller."""
+        with self._memo_lock:
+            if key not in self._memo:
+                self._memo[key] = compute()
+            return self._memo[key]
 
     # ------------------------------------------------------------------ physics
-    def reset(self) -> None:
-        """Back to the rest state."""
-        self.state = rest_state(self.tissue)
-        self._contractions = np.zeros(len(self.ids))
+    def relax(self, contractions, state: FaceState | None = None, **kwargs) -> RelaxResult:
+        """:func:`relax` on this model."""
+        return relax(self, contractions, state, **kwargs)
 
-    def relax(
-        self,
-        contractions,
-        *,
-        start: str = "current",
-        method: str = "implicit",
-        tol_mm: float | None = None,
-        max_iter: int | None = None,
-    ) -> RelaxResult:
-        """Set ``contractions`` and bring the tissue to equilibrium; update :attr:`state`.
-
-        Parameters
-        ----------
-        contractions : mapping {id: value} or (M,) array in [0, 1]
-        start : {"current", "rest"} — the initial guess.
-        method : {"implicit", "rk2"} — see :func:`myoface.tissue.relax`.
-        """
-        if start not in ("current", "rest"):
-            raise MyofaceValueError(f"start must be 'current' or 'rest'; got {start!r}")
-        c = self.validate(contractions)
-        s0 = self.state if start == "current" else rest_state(self.tissue)
-        kw = {} if tol_mm is None else {"tol_mm": tol_mm}
-        res = relax(self.tissue, s0, self.targets(c), method=method, max_iter=max_iter, **kw)
-        self.state = res.state
-        self._contractions = c
-        return res
-
-    def step(self, contractions, dt: float | None = None, n_steps: int = 1) -> TissueState:
-        """Advance :attr:`state` by ``n_steps`` RK2 steps of ``dt`` s (default: stable step)."""
-        c = self.validate(contractions)
-        dt = self.stable_dt() if dt is None else float(dt)
-        self.state = step_rk2(self.tissue, self.state, self.targets(c), dt, n_steps)
-        self._contractions = c
-        return self.state
-
-    def stable_dt(self) -> float:
-        if "stable_dt" not in self.tissue.cache:
-            self.tissue.cache["stable_dt"] = stable_time_step(self.tissue)
-        return self.tissue.cache["stable_dt"]
+    def step(
+        self, state: FaceState | None, contractions, dt: float | None = None, n_steps: int = 1
+    ) -> FaceState:
+        """:func:`step` on this model."""
+        return step(self, state, contractions, dt, n_steps)
 
     def simulate(
-        self,
-        contractions: Callable[[float], object] | np.ndarray,
-        times: np.ndarray,
-        *,
-        dt: float | None = None,
-    ) -> np.ndarray:
-        """Integrate in time (paper RK2) and return the skin at each of ``times`` (T, V, 3) mm.
-
-        ``contractions`` is a function of time returning a contraction vector/mapping, or an
-        array (T, M) giving the contractions at each of ``times`` (held between samples).
-        Starts from the current state at ``times[0]``.
-        """
-        times = np.asarray(times, dtype=np.float64)
-        if times.ndim != 1 or len(times) == 0 or np.any(np.diff(times) < 0):
-            raise MyofaceValueError("times must be a non-empty, non-decreasing 1-D array (s)")
-        if callable(contractions):
-            get = contractions
-        else:
-            table = np.asarray(contractions, dtype=np.float64)
-            if table.shape != (len(times), self.n_muscles):
-                raise MyofaceValueError(
-                    f"contractions must have shape ({len(times)}, {self.n_muscles}); "
-                    f"got {table.shape}"
-                )
-
-            def get(t, _table=table):
-                return _table[min(np.searchsorted(times, t, side="right") - 1, len(times) - 1)]
-
-        dt = self.stable_dt() if dt is None else float(dt)
-        out = np.empty((len(times), self.face.n_vertices, 3))
-        t = float(times[0])
-        for k, tk in enumerate(times):
-            while t < tk - 1e-12:
-                h = min(dt, tk - t)
-                n = max(1, int(np.floor((tk - t) / h + 1e-9)))
-                c = self.validate(get(t))
-                self.state = step_rk2(self.tissue, self.state, self.targets(c), h, n)
-                self._contractions = c
-                t += n * h
-            out[k] = self.skin_vertices()
-        return out
+        self, contractions, times, state: FaceState | None = None, *, dt: float | None = None
+    ) -> Simulation:
+        """:func:`simulate` on this model."""
+        return simulate(self, contractions, times, state, dt=dt)
 
     # ------------------------------------------------------------------ outputs
-    def skin_vertices(self, state: TissueState | None = None) -> np.ndarray:
-        """Positions (V, 3) mm of the skin (epidermal) nodes of ``state`` (default current)."""
-        s = self.state if state is None else state
-        return s.x[: self.face.n_vertices].copy()
+    def skin_vertices(self, state: FaceState | None = None) -> np.ndarray:
+        """Positions (V, 3) mm of the skin (epidermal) nodes of ``state`` (default: rest)."""
+        s = self._rest if state is None else state
+        return np.array(s.x[: self.face.n_vertices])
 
-    def skin_mesh(self, state: TissueState | None = None) -> FaceMesh:
-        """The deformed skin as a FaceMesh (same topology, UVs, texture, landmarks)."""
+    def skin_mesh(self, state: FaceState | None = None) -> FaceMesh:
+        """The skin of ``state`` (default: rest) as a FaceMesh (same topology, UVs, texture,
+        landmarks)."""
         return self.face.with_vertices(self.skin_vertices(state))
 
     def summary(self) -> str:
@@ -243,6 +224,119 @@ class FaceModel:
             f"{' + jaw' if self.muscles.jaw is not None else ''}; "
             f"{len(self.driven_nodes)} driven fascia nodes; lattice: {self.tissue.summary()}"
         )
+
+
+@dataclass(frozen=True, eq=False)
+class Simulation:
+    """The outcome of :func:`simulate`: the skin at each requested time and the final state."""
+
+    skin: np.ndarray  # (T, V, 3) mm
+    state: FaceState
+
+
+def relax(
+    model: FaceModel,
+    contractions,
+    state: FaceState | None = None,
+    *,
+    method: str | None = None,
+    tol_mm: float | None = None,
+    max_iter: int | None = None,
+) -> RelaxResult:
+    """The tissue's equilibrium for ``contractions``, starting from ``state`` (default: rest).
+
+    Parameters
+    ----------
+    model : FaceModel
+    contractions : mapping {id: value} or (M,) array in [0, 1]
+    state : FaceState, optional
+        The initial guess (a warm start: in a video, the previous frame's state).
+    method : str, optional
+        See :func:`myoface.tissue.relax` (default: its fast solver; ``"rk2"`` the paper's
+        explicit integration run to rest).
+    tol_mm, max_iter : optional
+        See :func:`myoface.tissue.relax`.
+
+    Returns
+    -------
+    RelaxResult
+        Its ``state`` is a new :class:`FaceState`; ``state`` is not changed.
+    """
+    c = model.validate(contractions)
+    s0 = (model._rest if state is None else state).tissue_state()
+    kw = {
+        k: v
+        for k, v in (("method", method), ("tol_mm", tol_mm), ("max_iter", max_iter))
+        if v is not None
+    }
+    res = relax_tissue(model.tissue, s0, model.targets(c), **kw)
+    return replace(res, state=FaceState._from_tissue(res.state, c))
+
+
+def step(
+    model: FaceModel,
+    state: FaceState | None,
+    contractions,
+    dt: float | None = None,
+    n_steps: int = 1,
+) -> FaceState:
+    """``n_steps`` paper RK2 steps of ``dt`` s (default: the model's stable step) from ``state``
+    (default: rest) with the kinematic nodes at ``contractions``; returns the new state."""
+    c = model.validate(contractions)
+    dt = model.stable_dt if dt is None else float(dt)
+    s0 = (model._rest if state is None else state).tissue_state()
+    s = step_rk2(model.tissue, s0, model.targets(c), dt, n_steps)
+    return FaceState._from_tissue(s, c)
+
+
+def simulate(
+    model: FaceModel,
+    contractions: Callable[[float], object] | np.ndarray,
+    times: np.ndarray,
+    state: FaceState | None = None,
+    *,
+    dt: float | None = None,
+) -> Simulation:
+    """Integrate in time (paper RK2) from ``state`` (default: rest) at ``times[0]``.
+
+    ``contractions`` is a function of time returning a contraction vector/mapping, or an
+    array (T, M) giving the contractions at each of ``times`` (held between samples).
+    Returns the skin (T, V, 3) mm at each of ``times`` and the final state.
+    """
+    times = np.asarray(times, dtype=np.float64)
+    if (
+        times.ndim != 1
+        or len(times) == 0
+        or not np.isfinite(times).all()
+        or np.any(np.diff(times) < 0)
+    ):
+        raise MyofaceValueError("times must be a non-empty, finite, non-decreasing 1-D array (s)")
+    if callable(contractions):
+        get = contractions
+    else:
+        table = np.asarray(contractions, dtype=np.float64)
+        if table.shape != (len(times), model.n_muscles):
+            raise MyofaceValueError(
+                f"contractions must have shape ({len(times)}, {model.n_muscles}); got {table.shape}"
+            )
+
+        def get(t, _table=table):
+            return _table[min(np.searchsorted(times, t, side="right") - 1, len(times) - 1)]
+
+    dt = model.stable_dt if dt is None else float(dt)
+    if not dt > 0:
+        raise MyofaceValueError(f"dt must be > 0 s; got {dt}")
+    s = model._rest if state is None else state
+    out = np.empty((len(times), model.face.n_vertices, 3))
+    t = float(times[0])
+    for k, tk in enumerate(times):
+        while t < tk - 1e-12:
+            h = min(dt, tk - t)
+            n = max(1, int(np.floor((tk - t) / h + 1e-9)))
+            s = step(model, s, get(t), h, n)
+            t += n * h
+        out[k] = model.skin_vertices(s)
+    return Simulation(out, s)
 
 
 def build_face_model(

@@ -73,12 +73,15 @@ class Synthesizer:
         self.overlay = overlay
         self.dynamics = dynamics
         self.stats = FrameStats([], [])
+        #: this synthesizer's own state of the (shared, immutable) model
+        self.state = model.rest_state()
 
     def _relax(self, c) -> None:
         t0 = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RelaxWarning)
-            res = self.model.relax(c, start="current", tol_mm=SYNTH_TOL_MM)
+            res = self.model.relax(c, self.state, tol_mm=SYNTH_TOL_MM)
+        self.state = res.state
         if not res.converged or any(issubclass(w.category, RelaxWarning) for w in caught):
             self.stats.unconverged += 1
         self.stats.relax_ms.append((time.perf_counter() - t0) * 1e3)
@@ -86,7 +89,7 @@ class Synthesizer:
     def frame(self) -> np.ndarray:
         """Render the model's current skin (uint8 RGB)."""
         t0 = time.perf_counter()
-        img = self.renderer.render(self.model.skin_vertices())
+        img = self.renderer.render(self.model.skin_vertices(self.state))
         if self.overlay == "muscles":
             ins, org = muscle_segments(self.model)
             img = overlay_segments(img, self.renderer.camera, ins, org)
@@ -111,8 +114,8 @@ class Synthesizer:
                 self._relax(c)
             else:
                 dt = times[k] - prev
-                n = max(1, int(np.ceil(dt / self.model.stable_dt())))
-                self.model.step(c, dt=dt / n, n_steps=n)
+                n = max(1, int(np.ceil(dt / self.model.stable_dt)))
+                self.state = self.model.step(self.state, c, dt=dt / n, n_steps=n)
             prev = times[k]
             yield self.frame()
 
@@ -127,7 +130,7 @@ class Synthesizer:
         n = max(1, int(round(timeline.duration * fps)) + 1)
         times = np.arange(n) / fps
         table = timeline.contractions(times, self.model.ids)
-        self.model.reset()
+        self.state = self.model.rest_state()
         with VideoWriter(path, fps) as vw:
             for img in progress(
                 self.frames(table, times), total=n, desc="rendering", enabled=show_progress

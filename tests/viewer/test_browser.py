@@ -25,6 +25,10 @@ def test_slider_moves_the_face_in_the_browser(tmp_path):
     corner = int(fm.face.landmark("mouth_corner_l")[0])
     y0 = fm.skin_vertices()[corner, 1]
     viewer = FaceViewer(fm, port=0)
+
+    def live_y():
+        return fm.skin_vertices(viewer.worker.current)[corner, 1]
+
     try:
         with sync_api.sync_playwright() as pw:
             browser = pw.chromium.launch(
@@ -47,11 +51,11 @@ def test_slider_moves_the_face_in_the_browser(tmp_path):
             slider.focus()
             page.keyboard.press("End")  # the first slider: zygomaticus major, left -> 1.0
             deadline = time.time() + 20
-            while time.time() < deadline and fm.skin_vertices()[corner, 1] - y0 < 2.0:
+            while time.time() < deadline and live_y() - y0 < 2.0:
                 time.sleep(0.2)
             time.sleep(2.0)
             after = page.screenshot(path=str(tmp_path / "after.png"))
-            rose = fm.skin_vertices()[corner, 1] - y0
+            rose = live_y() - y0
             # a camera preset moves the browser's camera to the face's left side
             client = next(iter(viewer.server.get_clients().values()))
             page.get_by_text("view", exact=True).click()

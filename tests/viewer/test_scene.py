@@ -64,7 +64,7 @@ def test_scene_follows_the_physics(viewer):
         np.testing.assert_allclose(mouth[0].vertices[: len(loop)], skin[loop] * 1e-3, atol=1e-6)
         # the lattice layer and the bone nodes moved with the tissue
         handle, sel = sc.layers["fat"]
-        x = fm.state.x
+        x = viewer.worker.current.x
         t = fm.tissue
         np.testing.assert_allclose(handle.points[:, 0], x[t.spring_i[sel]] * 1e-3, atol=1e-6)
         moved = np.linalg.norm(sc.bones.points - bones0, axis=1)
@@ -134,7 +134,7 @@ def test_playback_video_leaves_the_live_face_alone(viewer, tmp_path):
         frames = iio.imread(out, plugin="pyav")
         assert frames.shape == (n, 96, 96, 3)
         assert np.abs(frames.astype(int) - frames[0]).max() > 30  # the face moves
-        np.testing.assert_array_equal(fm.skin_vertices(), live)
+        np.testing.assert_array_equal(fm.skin_vertices(viewer.worker.current), live)
     finally:
         viewer.state.playback = None
     with pytest.raises(MyofaceValueError, match="load a contractions.csv"):

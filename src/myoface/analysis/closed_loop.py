@@ -92,15 +92,14 @@ def run_closed_loop(
         tex = to_srgb8(default_skin_texture(model.face, 512, makeup=True))
         renderer = Renderer(model.face, cam, texture=tex)
     truth = truth_sequence(n_frames, ids, seed)
-    model.reset()
     frames = []
+    state = model.rest_state()
     for c in truth:
-        model.relax(dict(zip(ids, c, strict=True)))
+        state = model.relax(dict(zip(ids, c, strict=True)), state).state
         if tracker == "oracle":
-            frames.append(project_sections(model, cam))
+            frames.append(project_sections(model, cam, state))
         else:
-            frames.append(renderer.render(model.skin_vertices()))
-    model.reset()
+            frames.append(renderer.render(model.skin_vertices(state)))
     if tracker == "oracle":
         est = _estimate_from_true_curves(model, cam, frames, ids, refine)
         return ClosedLoopResult(ids, truth, est, ["ok"] * len(frames))
@@ -148,7 +147,4 @@ def _estimate_from_true_curves(model, cam, curves: list[dict], ids, refine: int)
     mat, off = similarity_affine(mm, cam.project(model.face.vertices)[verts, :2])
     first = {s: resample_polyline(curves[0][s], 1.0, closed=c) for s, (_, c) in secs.items()}
     est.calibrate(first, mat, off)
-    try:
-        return np.array([est.estimate({s: cur[s] for s in secs}, refine=refine) for cur in curves])
-    finally:
-        model.reset()
+    return np.array([est.estimate({s: cur[s] for s in secs}, refine=refine) for cur in curves])

@@ -73,6 +73,8 @@ class CurveEstimator:
 
     def __init__(self, model, sections: dict, muscle_ids):
         self.model = model
+        #: this estimator's own state of the model (each relax starts from the last one's)
+        self.state = model.rest_state()
         self.ids = tuple(muscle_ids)
         flip = np.array([1.0, -1.0])  # image-like model coordinates: y points down
         self.response = skin_response(model, self.ids)[:, :2] * flip[None, :, None]  # (V,2,K)
@@ -198,8 +200,8 @@ class CurveEstimator:
         fm = self.model
         full = np.zeros(len(fm.ids))
         full[[fm.ids.index(i) for i in self.ids]] = c
-        fm.relax(full, start="current")
-        return fm.skin_vertices()
+        self.state = fm.relax(full, self.state).state
+        return fm.skin_vertices(self.state)
 
     def synthesis_step(self, c, pred, video: dict, synth: dict, synth_rest) -> np.ndarray:
         """The contractions after one analysis-by-synthesis step from ``c`` (see

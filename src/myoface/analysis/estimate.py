@@ -37,21 +37,22 @@ def skin_response(model, ids) -> np.ndarray:
     """The skin's displacement per unit contraction of each muscle in ``ids`` (V, 3, K), mm:
     the tissue relaxed from rest at :data:`PROBE_CONTRACTION` of one muscle at a time.
 
-    Depends only on the model and the muscles, so it is cached on the model: a second
-    analysis in the same session does not relax the tissue again."""
-    key = ("response", tuple(ids))
-    if key in model.cache:
-        return model.cache[key]
-    model.reset()
-    rest = model.skin_vertices().copy()
-    cols = []
-    for mid in ids:
-        model.relax({mid: PROBE_CONTRACTION}, start="rest")
-        cols.append((model.skin_vertices() - rest) / PROBE_CONTRACTION)
-    model.reset()
-    resp = np.stack(cols, axis=-1)
-    model.cache[key] = resp
-    return resp
+    Depends only on the model and the muscles, so it is computed once per model
+    (:meth:`~myoface.model.FaceModel.memo`): a second analysis in the same session does not
+    relax the tissue again. Read-only."""
+
+    def compute():
+        rest = model.skin_vertices()
+        cols = [
+            (model.skin_vertices(model.relax({mid: PROBE_CONTRACTION}).state) - rest)
+            / PROBE_CONTRACTION
+            for mid in ids
+        ]
+        resp = np.stack(cols, axis=-1)
+        resp.flags.writeable = False
+        return resp
+
+    return model.memo(("response", tuple(ids)), compute)
 
 
 @dataclass(frozen=True)
@@ -94,7 +95,8 @@ class ContractionEstimator:
 
     Parameters
     ----------
-    model : FaceModel — the model whose muscles are estimated (its state is reset).
+    model : FaceModel — the model whose muscles are estimated (never changed: the estimator
+        keeps its own state).
     fiducials : list of Fiducial
     muscle_ids : the muscles to estimate (default: all of the model's, jaw included);
         the others are held at 0.
@@ -102,6 +104,8 @@ class ContractionEstimator:
 
     def __init__(self, model, fiducials: list[Fiducial], muscle_ids=None):
         self.model = model
+        #: this estimator's own state of the model (its refinements relax from it)
+        self.state = model.rest_state()
         self.fiducials = list(fiducials)
         ids = list(model.ids if muscle_ids is None else muscle_ids)
         for i in ids:
@@ -157,8 +161,8 @@ class ContractionEstimator:
         for _ in range(int(refine)):
             full = np.zeros(len(fm.ids))
             full[[fm.ids.index(i) for i in self.ids]] = c
-            fm.relax(full, start="current")
-            pred = self.positions(fm.skin_vertices()) - rest
+            self.state = fm.relax(full, self.state).state
+            pred = self.positions(fm.skin_vertices(self.state)) - rest
             step = self._solve(a, (d - pred)[ok].reshape(-1), -c, 1.0 - c)
             c = np.clip(c + step, 0.0, 1.0)
         return c

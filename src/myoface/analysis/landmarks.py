@@ -166,19 +166,19 @@ def auto_init(frames, face, max_search: int = 30):
 
 def rigid_vertices(model, fraction: float = 0.05) -> np.ndarray:
     """Skin vertices that no muscle moves by more than ``fraction`` of the largest motion any
-    unit contraction causes (the head frame is fitted to them). Cached on the model."""
-    fm = model
-    if ("rigid", fraction) in fm.cache:
-        return fm.cache[("rigid", fraction)]
-    fm.reset()
-    rest = fm.skin_vertices().copy()
-    moved = np.zeros(len(rest))
-    for mid in fm.ids:
-        fm.relax({mid: 1.0}, start="rest")
-        moved = np.maximum(moved, np.linalg.norm(fm.skin_vertices() - rest, axis=1))
-    fm.reset()
-    out = fm.cache[("rigid", fraction)] = np.flatnonzero(moved < fraction * moved.max())
-    return out
+    unit contraction causes (the head frame is fitted to them). Computed once per model."""
+
+    def compute():
+        rest = model.skin_vertices()
+        moved = np.zeros(len(rest))
+        for mid in model.ids:
+            skin = model.skin_vertices(model.relax({mid: 1.0}).state)
+            moved = np.maximum(moved, np.linalg.norm(skin - rest, axis=1))
+        out = np.flatnonzero(moved < fraction * moved.max())
+        out.flags.writeable = False
+        return out
+
+    return model.memo(("rigid", fraction), compute)
 
 
 def fit_similarity(src: np.ndarray, dst: np.ndarray):

@@ -204,10 +204,11 @@ def save_init(path: str | os.PathLike, contours: dict[str, np.ndarray], note: st
         tmp.write_text(json.dumps(doc, indent=1))
 
 
-def project_sections(model, camera) -> dict[str, np.ndarray]:
-    """The model's section contours projected by ``camera`` (for synthetic video whose camera
-    is known, e.g. the closed-loop test: an exact automatic initialisation)."""
-    v = camera.project(model.skin_vertices())[:, :2]
+def project_sections(model, camera, state=None) -> dict[str, np.ndarray]:
+    """The model's section contours in ``state`` (default: rest) projected by ``camera`` (for
+    synthetic video whose camera is known, e.g. the closed-loop test: an exact automatic
+    initialisation)."""
+    v = camera.project(model.skin_vertices(state))[:, :2]
     return {name: v[section_vertices(model.face, name)] for name in SECTIONS}
 
 
@@ -482,7 +483,7 @@ class Analyzer:
             # contour that stopped on a nearer edge (the lower lip on the mouth's inner edge as
             # the jaw drops) is moved past it.
             if self.refine > 0:
-                pred = self.curves.predicted(self.model.skin_vertices())
+                pred = self.curves.predicted(self.model.skin_vertices(self.curves.state))
             else:
                 pred = self.curves.p0 + self.curves.jac @ c
             pred = pred + shift

@@ -68,7 +68,7 @@ def run(args) -> int:
     syn = Synthesizer(fm, Renderer(fm.face, cam))
     apex = {}
     for name in list_expressions():
-        fm.reset()
+        syn.state = fm.rest_state()
         apex[name] = syn.image(expression_contractions(name, 1.0, fm.ids))
     contact_sheet(
         apex,
@@ -76,7 +76,6 @@ def run(args) -> int:
         "myoface: FACS action units -> 29 muscles + jaw -> layered tissue physics -> render",
     )
     print(f"wrote {out / 'expressions.png'}")
-    fm.reset()
     from myoface.render import overlay_segments
 
     ins, org = muscle_segments(fm)
@@ -111,11 +110,12 @@ def _synthetic_video(folder: Path, fps: float) -> tuple[Path, Path]:
     video = folder / "synthetic_smile.mp4"
     env = np.concatenate([np.zeros(6), np.linspace(0, 0.8, 12), np.full(12, 0.8)])
     env = np.concatenate([env, env[::-1]])
+    state = fm.rest_state()
     with VideoWriter(video, fps=fps) as vw:
         for c in env:
-            fm.relax({"zygomaticus_major_l": c, "zygomaticus_major_r": c, "jaw": 0.4 * c})
-            vw.write(r.render(fm.skin_vertices()))
-    fm.reset()
+            c3 = {"zygomaticus_major_l": c, "zygomaticus_major_r": c, "jaw": 0.4 * c}
+            state = fm.relax(c3, state).state
+            vw.write(r.render(fm.skin_vertices(state)))
     init = folder / "synthetic_init.json"
     save_init(init, project_sections(fm, cam), note="exact contours of the synthetic video")
     return video, init

@@ -127,7 +127,7 @@ def _write_preview(face, path: str) -> None:
     for view in ("front", "three_quarter"):
         syn = Synthesizer(fm, Renderer(fm.face, make_camera(fm.face.vertices, view, 384, 384)))
         for expr in ("neutral", "happiness", "surprise"):
-            fm.reset()
+            syn.state = fm.rest_state()
             c = np.zeros(fm.n_muscles) if expr == "neutral" else None
             if c is None:
                 c = expression_contractions(expr, 1.0, fm.ids)

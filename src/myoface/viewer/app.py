@@ -168,15 +168,13 @@ class FaceViewer:
         """The current face rendered on the CPU (textured, lit, dressed) as uint8 RGB."""
         camera = camera or self.renderer.camera
         r = Renderer(self.model.face, camera, texture=self._texture8)
-        with self.worker.lock:
-            skin = self.model.skin_vertices()
-        return r.render(skin)
+        return r.render(self.model.skin_vertices(self.worker.current))
 
     def playback_video(
         self, path, camera: Camera | None = None, fps: float = VIDEO_FPS, on_frame=None
     ) -> Path:
-        """Render the loaded playback to a video file at ``fps`` with a clone of the model
-        (the live face is not disturbed); ``on_frame(k, n)`` reports progress."""
+        """Render the loaded playback to a video file at ``fps`` with a state of its own (the
+        live face is not disturbed); ``on_frame(k, n)`` reports progress."""
         if self.state.playback is None:
             raise MyofaceValueError("load a contractions.csv or a timeline first")
         from myoface.synth import Synthesizer
@@ -186,15 +184,10 @@ class FaceViewer:
         camera = camera or Camera.front(
             self.model.face.vertices, width=VIDEO_HEIGHT, height=VIDEO_HEIGHT
         )
-        syn = Synthesizer(
-            self.model.clone(), Renderer(self.model.face, camera, texture=self._texture8)
-        )
+        syn = Synthesizer(self.model, Renderer(self.model.face, camera, texture=self._texture8))
         with VideoWriter(path, fps) as vw:
             for k in range(n):
-                c = self.state.frame_at(times[0] + k / fps)
-                with self.worker.lock:
-                    img = syn.image(c)
-                vw.write(img)
+                vw.write(syn.image(self.state.frame_at(times[0] + k / fps)))
                 if on_frame is not None:
                     on_frame(k + 1, n)
         return Path(path)
@@ -504,7 +497,7 @@ class FaceViewer:
         self.worker.request(self.model.validate(contractions))
         time.sleep(0.001)
         self.worker.settled.wait(timeout_s)
-        return self.model.skin_vertices()
+        return self.model.skin_vertices(self.worker.current)
 
     def serve_forever(self) -> None:
         try:

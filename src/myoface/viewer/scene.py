@@ -141,6 +141,8 @@ class FaceScene:
         sc = renderer.scene
         face = model.face
         skin = model.skin_vertices()
+        #: the tissue node positions (N, 3) mm shown now (the last :meth:`update`)
+        self.x = model.rest_state().x
         self.skin = scene_api.add_mesh_simple(
             "/face/skin",
             (skin * MM).astype(np.float32),
@@ -194,7 +196,7 @@ class FaceScene:
             visible=False,
         )
         t = model.tissue
-        x = model.state.x
+        x = self.x
         self.layers = {}
         for m, (name, rgb) in enumerate(SPRING_LAYERS):
             sel = np.flatnonzero(t.spring_material == m)
@@ -233,7 +235,7 @@ class FaceScene:
         """Show the texture-mapped skin (when the face has a texture) or the plain one."""
         if self.textured is None:
             return
-        skin = self.model.skin_vertices()
+        skin = self.x[: self.model.face.n_vertices]
         if on:
             self.textured.glb_data = self._glb.data(skin)
         else:
@@ -244,17 +246,18 @@ class FaceScene:
     def set_layer(self, name: str, on: bool) -> None:
         handle, sel = self.layers[name]
         if on:
-            handle.points = self._segments(self.model.state.x, sel)
+            handle.points = self._segments(self.x, sel)
         handle.visible = bool(on)
 
     def set_bones(self, on: bool) -> None:
         if on:
-            self.bones.points = (self.model.state.x[self.bone_index] * MM).astype(np.float32)
+            self.bones.points = (self.x[self.bone_index] * MM).astype(np.float32)
         self.bones.visible = bool(on)
 
     # ------------------------------------------------------------------ updates
     def update(self, x: np.ndarray) -> None:
         """Move everything visible to the tissue node positions ``x`` (N, 3) mm."""
+        self.x = x
         skin = x[: self.model.face.n_vertices]
         if self.textured_on:
             self.textured.glb_data = self._glb.data(skin)

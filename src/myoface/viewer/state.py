@@ -204,8 +204,9 @@ class PhysicsWorker(threading.Thread):
     with the new tissue node positions (N, 3) mm (the skin's vertices first); coalesces
     requests that arrive while it works.
 
-    ``lock`` is held while the model's physics runs: anything else that drives the model's
-    physics (e.g. a video export on a clone sharing its caches) takes it too.
+    The worker owns the live face's state (:attr:`current`, a :class:`~myoface.model.FaceState`
+    value replaced after each relax); the model itself is immutable, so an export or any other
+    reader may use it at the same time with a state of its own.
     """
 
     def __init__(self, model, publish, on_error=None):
@@ -218,7 +219,8 @@ class PhysicsWorker(threading.Thread):
         self._stop = False
         self.last_ms = float("nan")
         self.settled = threading.Event()
-        self.lock = threading.Lock()
+        #: the live face's state (replaced, never changed in place)
+        self.current = model.rest_state()
 
     def request(self, contractions: np.ndarray) -> None:
         with self._cond:
@@ -243,11 +245,11 @@ class PhysicsWorker(threading.Thread):
                 c, self._target = self._target, None
             t0 = time.perf_counter()
             try:
-                with self.lock, warnings.catch_warnings():
+                with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    self.model.relax(c, start="current", tol_mm=SYNTH_TOL_MM)
-                    x = self.model.state.x
-                self.publish(x)
+                    state = self.model.relax(c, self.current, tol_mm=SYNTH_TOL_MM).state
+                self.current = state
+                self.publish(state.x)
             except MyofaceError as exc:  # reported, the worker keeps running
                 if self.on_error:
                     self.on_error(str(exc))
