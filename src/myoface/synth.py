@@ -43,6 +43,23 @@ def muscle_segments(model) -> tuple[np.ndarray, np.ndarray]:
     return ins, org
 
 
+def render_face(
+    model,
+    state=None,
+    *,
+    view: str = "front",
+    width: int = 512,
+    height: int = 512,
+    texture=None,
+) -> np.ndarray:
+    """The skin of ``model`` in ``state`` (default: rest) rendered as an (H, W, 3) uint8 image:
+    lit, texture-mapped (``texture``: an image or path for the face's UVs; default the face's
+    own), with eyes and mouth, seen from a camera preset ``view`` (:data:`VIEWS`) that frames
+    the rest face."""
+    cam = make_camera(model.face.vertices, view, width, height)
+    return Renderer(model.face, cam, texture=texture).render(model.skin_vertices(state))
+
+
 @dataclass
 class FrameStats:
     relax_ms: list

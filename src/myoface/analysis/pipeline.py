@@ -593,6 +593,87 @@ def make_analyzer(
     return an, how, start
 
 
+@dataclass
+class VideoAnalysis:
+    """What :func:`analyze_video` measured.
+
+    Attributes
+    ----------
+    ids : tuple of str — the estimated muscles (and ``"jaw"``), column order of
+        :attr:`contractions`.
+    frames : list of FrameMeasurement — one per analysed frame, in order.
+    """
+
+    ids: tuple
+    frames: list
+
+    @property
+    def times(self) -> np.ndarray:
+        """(T,) s."""
+        return np.array([f.time_s for f in self.frames])
+
+    @property
+    def contractions(self) -> np.ndarray:
+        """(T, K) in [0, 1]; NaN rows where a frame could not be measured."""
+        return np.array([f.contractions for f in self.frames]).reshape(-1, len(self.ids))
+
+    @property
+    def quality(self) -> list[str]:
+        """Per frame ``"ok"`` or why it could not be measured."""
+        return [f.quality for f in self.frames]
+
+
+def analyze_video(
+    video,
+    model=None,
+    *,
+    tracker: str = "snakes",
+    init=None,
+    calibration_frame: int = 0,
+    max_frames: int | None = None,
+    estimator: str = "curves",
+    show_progress: bool = False,
+) -> VideoAnalysis:
+    """Track the face in ``video`` (a path, or a :class:`~myoface.analysis.video.Video`) and
+    estimate the muscle contractions of each frame (T&W 1993, Section V).
+
+    ``model`` defaults to the bundled face model (never changed: the analysis keeps its own
+    state). ``tracker``, ``init`` (contours on the calibration frame; default: found with
+    MediaPipe), ``calibration_frame`` and ``estimator`` are as in :func:`make_analyzer`.
+    The command ``myoface analyze`` does the same and also writes the CSV, plot and overlays.
+    """
+    from myoface.analysis.video import Video, open_video
+    from myoface.render import progress
+
+    if model is None:
+        from myoface.model import build_face_model
+
+        model = build_face_model()
+    if not isinstance(video, Video):
+        video = open_video(video)
+    if isinstance(init, str | os.PathLike):
+        init = load_init(init)
+    an, _, start = make_analyzer(
+        model, video, tracker, init, calibration_frame, estimator=estimator
+    )
+    try:
+        n = None if video.n_frames is None else video.n_frames - start
+        if max_frames is not None:
+            n = max_frames if n is None else min(n, max_frames)
+        frames = [
+            m
+            for _, m in progress(
+                measure_frames(video, an, start, max_frames),
+                total=n,
+                desc="analyzing",
+                enabled=show_progress,
+            )
+        ]
+    finally:
+        an.close()
+    return VideoAnalysis(tuple(an.ids), frames)
+
+
 def measure_frames(video, analyzer, start: int = 0, max_frames: int | None = None):
     """Yield ``(frame, FrameMeasurement)`` for the frames of ``video`` from ``start`` on (at
     most ``max_frames``)."""
