@@ -28,6 +28,7 @@ TARGETS = {
     "tissue.ns_per_spring_1m": ("<=", 5),
     "render.fps_640x480": (">=", 300),
     "synth.realtime_factor": (">", 1),
+    "synth.resynth_fps_512": (">=", 30),
     "snakes.track_fps_9x40_256": (">=", 500),
     "analysis.fps": (">=", 100),
     "analysis.closed_loop_rmse": ("<=", 0.05),

@@ -11,8 +11,8 @@ from __future__ import annotations
 import os
 import time
 import warnings
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -62,9 +62,13 @@ def render_face(
 
 @dataclass
 class FrameStats:
+    """Per-frame wall times (ms) of a :class:`Synthesizer`'s physics, rendering and (for
+    :meth:`Synthesizer.write_video`) video encoding, and how many relaxations did not converge."""
+
     relax_ms: list
     render_ms: list
     unconverged: int = 0
+    encode_ms: list = field(default_factory=list)
 
 
 class Synthesizer:
@@ -136,6 +140,36 @@ class Synthesizer:
             prev = times[k]
             yield self.frame()
 
+    def write_video(
+        self,
+        table: np.ndarray,
+        times: Sequence[float],
+        path: str | os.PathLike,
+        fps: float,
+        *,
+        compose: Callable[[int, np.ndarray], np.ndarray] | None = None,
+        show_progress: bool = True,
+        desc: str = "rendering",
+    ) -> Path:
+        """Write one video frame per row of ``table`` (T, M) at ``times`` (s) (see
+        :meth:`frames`, continuing from :attr:`state`) to ``path`` at ``fps``; returns the path.
+
+        Each frame is encoded in a background thread while the next one is simulated and
+        rendered (:class:`~myoface.render.VideoWriter` with ``background=True``).
+        ``compose(k, image)``, if given, returns the picture to write for frame ``k`` (e.g. the
+        image beside an input video's frame). The encoding times land in
+        ``stats.encode_ms``.
+        """
+        table = np.asarray(table, dtype=np.float64)
+        frames = progress(
+            self.frames(table, times), total=len(table), desc=desc, enabled=show_progress
+        )
+        with VideoWriter(path, fps, background=True) as vw:
+            for k, img in enumerate(frames):
+                vw.write(img if compose is None else compose(k, img))
+        self.stats.encode_ms.extend(vw.encode_ms)  # complete once the encoder has finished
+        return Path(path)
+
     def video(
         self,
         timeline: Timeline,
@@ -143,14 +177,10 @@ class Synthesizer:
         fps: float = 30.0,
         show_progress: bool = True,
     ) -> Path:
-        """Render ``timeline`` to a video file at ``fps``; returns the path."""
+        """Render ``timeline`` to a video file at ``fps``, from the rest state; returns the
+        path."""
         n = max(1, int(round(timeline.duration * fps)) + 1)
         times = np.arange(n) / fps
         table = timeline.contractions(times, self.model.ids)
         self.state = self.model.rest_state()
-        with VideoWriter(path, fps) as vw:
-            for img in progress(
-                self.frames(table, times), total=n, desc="rendering", enabled=show_progress
-            ):
-                vw.write(img)
-        return Path(path)
+        return self.write_video(table, times, path, fps, show_progress=show_progress)

@@ -65,3 +65,93 @@ def bench_synth(quick: bool) -> Measurement:
             syn.video(tl, Path(d) / "b.mp4", fps=30.0, show_progress=False)
             times.append(time.perf_counter() - t0)
     return Measurement(tl.duration / float(np.median(times)), n)
+
+
+def _demo_contractions(ids, fps: float = 25.0, duration_s: float = 3.0):
+    """Times (T,) s and contractions (T, M) over ``ids`` of a short performance: a smile
+    (zygomatici, with a little orbicularis oculi) rising and falling, a brow raise (frontalis)
+    inside it and the jaw opening towards its end."""
+    t = np.arange(int(round(duration_s * fps))) / fps
+
+    def bump(t0, t1):  # 0 -> 1 -> 0 between t0 and t1 (s), smooth
+        return np.sin(np.pi * np.clip((t - t0) / (t1 - t0), 0.0, 1.0)) ** 2
+
+    table = np.zeros((len(t), len(ids)))
+    for k, m in enumerate(ids):
+        if m.startswith("zygomaticus_major"):
+            table[:, k] = 0.8 * bump(0.2, 2.6)
+        elif m.startswith("orbicularis_oculi"):
+            table[:, k] = 0.25 * bump(0.2, 2.6)
+        elif m.startswith("frontalis"):
+            table[:, k] = 0.7 * bump(0.8, 2.2)
+        elif m == "jaw":
+            table[:, k] = 0.4 * bump(1.2, 2.8)
+    return t, table
+
+
+def write_demo_contractions_csv(path, model, fps: float = 25.0, duration_s: float = 3.0):
+    """Write :func:`_demo_contractions` for ``model`` as a ``contractions.csv`` in the format
+    ``myoface analyze`` writes (every frame measured, head still)."""
+    from myoface.analysis.pipeline import FrameMeasurement, write_contractions_csv
+
+    ids = list(model.ids)
+    times, table = _demo_contractions(ids, fps, duration_s)
+    frames = [
+        FrameMeasurement(k, float(t), "ok", row, np.zeros(2))
+        for k, (t, row) in enumerate(zip(times, table, strict=True))
+    ]
+    jaw_max = model.muscles.jaw.max_angle_rad if model.muscles.jaw is not None else 0.0
+    write_contractions_csv(path, ids, frames, jaw_max)
+
+
+@benchmark("synth.resynth_fps_512", "1/s", higher_is_better=True)
+def bench_resynth_fps_512(quick: bool) -> Measurement:
+    """Frames per second of ``myoface resynth`` at 512x512, end to end: a 3 s, 25 fps
+    contractions.csv (a smile rising and falling, a brow raise, the jaw opening) read, each
+    frame's tissue equilibrium (warm-started from the previous frame), its render (textured,
+    lit, anti-aliased) and its H.264 encoding to an MP4, through the command's own code
+    (``commands.resynth.resynthesize``); the model is built and the kernels compiled outside
+    the timed region. The detail splits a frame into physics, render and encode (medians; the
+    encoding runs in a background thread beside the next frame's physics and render)."""
+    import statistics
+
+    from myoface.analysis.pipeline import hold_last_measured, read_contractions_csv
+    from myoface.commands.resynth import resynthesize
+    from myoface.model import build_face_model
+
+    t0 = time.perf_counter()
+    fm = build_face_model()
+    build_s = time.perf_counter() - t0
+    stats = {"relax": [], "render": [], "encode": []}
+    with tempfile.TemporaryDirectory() as d:
+        csv = Path(d) / "contractions.csv"
+        write_demo_contractions_csv(csv, fm)
+
+        def one():
+            times, table, _ = read_contractions_csv(csv, list(fm.ids))
+            table = hold_last_measured(table)
+            fps = 1.0 / float(np.median(np.diff(times)))
+            out = Path(d) / "out.mp4"
+            syn = resynthesize(fm, times, table, out, fps, size=512, show_progress=False)
+            stats["relax"] += syn.stats.relax_ms
+            stats["render"] += syn.stats.render_ms
+            stats["encode"] += syn.stats.encode_ms
+            return len(table)
+
+        n_frames = one()  # JIT, factorisations
+        for v in stats.values():
+            v.clear()
+        n = 1 if quick else 5
+        per_run = time_median(one, n, warmup=0)
+    med = statistics.median
+    fps = n_frames / per_run
+    detail = {
+        "median": {
+            "physics (relax) per frame": {"ms": round(med(stats["relax"]), 2)},
+            "render per frame": {"ms": round(med(stats["render"]), 2)},
+            "encode per frame (background thread)": {"ms": round(med(stats["encode"]), 2)},
+            "wall per frame (1 / fps)": {"ms": round(1e3 / fps, 2)},
+            "model build (once per command, not timed)": {"ms": round(1e3 * build_s, 1)},
+        }
+    }
+    return Measurement(fps, n, detail=detail)

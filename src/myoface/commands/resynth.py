@@ -22,8 +22,6 @@ def run(args) -> int:
     import numpy as np
 
     from myoface.analysis.pipeline import hold_last_measured, read_contractions_csv
-    from myoface.render import Renderer, VideoWriter, progress
-    from myoface.synth import Synthesizer, make_camera
 
     if not args.output.lower().endswith((".mp4", ".mov", ".mkv", ".avi")):
         raise MyofaceValueError(f"-o must be a video file (.mp4); got {args.output}")
@@ -31,23 +29,66 @@ def run(args) -> int:
     times, table, quality = read_contractions_csv(args.csv, list(fm.ids))
     table = hold_last_measured(table)  # unmeasured frames hold the last measured contractions
     fps = 1.0 / np.median(np.diff(times)) if len(times) > 1 else 30.0
-    src = None
-    if args.side_by_side:
-        from myoface.analysis.video import open_video
-
-        src = iter(open_video(args.side_by_side))
-    h = int(args.size)
-    syn = Synthesizer(fm, Renderer(fm.face, make_camera(fm.face.vertices, "front", h, h)))
-    with VideoWriter(args.output, fps=fps) as vw:
-        for c in progress(table, total=len(table), desc="resynthesizing", enabled=not args.quiet):
-            img = syn.image(c)
-            if src is not None:
-                frame = next(src, None)
-                if frame is None:
-                    raise MyofaceValueError("the side-by-side video is shorter than the CSV")
-                from myoface.render.renderer import resize_nearest
-
-                img = np.concatenate([resize_nearest(frame, h), img], axis=1)
-            vw.write(img)
+    resynthesize(
+        fm,
+        times,
+        table,
+        args.output,
+        fps,
+        size=int(args.size),
+        side_by_side=args.side_by_side,
+        show_progress=not args.quiet,
+    )
     print(f"wrote {args.output} ({len(table)} frames at {fps:.1f} fps)")
     return 0
+
+
+def resynthesize(
+    model,
+    times,
+    table,
+    output,
+    fps: float,
+    *,
+    size: int = 360,
+    side_by_side=None,
+    show_progress: bool = True,
+):
+    """Render ``model`` driven by the contractions ``table`` (T, M) at ``times`` (T,) s to the
+    video ``output`` at ``fps``: one ``size`` x ``size`` frame per row (front view), each the
+    equilibrium of its row warm-started from the previous one, encoded while the next is made;
+    with the frames of the video ``side_by_side`` (scaled to ``size`` rows) on the left.
+
+    Returns the :class:`~myoface.synth.Synthesizer`, whose ``stats`` hold the per-frame times
+    of the physics, the rendering and the encoding.
+    """
+    import numpy as np
+
+    from myoface.render import Renderer
+    from myoface.render.renderer import resize_nearest
+    from myoface.synth import Synthesizer, make_camera
+
+    h = int(size)
+    syn = Synthesizer(model, Renderer(model.face, make_camera(model.face.vertices, "front", h, h)))
+    compose = None
+    if side_by_side:
+        from myoface.analysis.video import open_video
+
+        src = iter(open_video(side_by_side))
+
+        def compose(k, img):
+            frame = next(src, None)
+            if frame is None:
+                raise MyofaceValueError("the side-by-side video is shorter than the CSV")
+            return np.concatenate([resize_nearest(frame, h), img], axis=1)
+
+    syn.write_video(
+        table,
+        times,
+        output,
+        fps,
+        compose=compose,
+        show_progress=show_progress,
+        desc="resynthesizing",
+    )
+    return syn
