@@ -105,19 +105,117 @@ def bench_rk2(quick: bool) -> Measurement:
     return Measurement(steps / t, n)
 
 
-@benchmark("tissue.relax_ms", "ms", higher_is_better=False)
+#: the peer of the relax benchmarks: the L-BFGS solver it replaced, kept as ``method="lbfgs"``
+RELAX_PEER = "myoface L-BFGS (method='lbfgs', the reference)"
+#: the reference equilibria the benchmarks measure their distance to: L-BFGS to this step, mm
+RELAX_REFERENCE_TOL_MM = 1e-7
+
+
+def _timed_relax(tm, state, targets, n, **kw):
+    """Median wall time (s) and CPU time of the calling thread (s) of ``n`` relaxes, the iteration
+    count and the result (the last one)."""
+    from myoface.tissue import relax
+
+    relax(tm, state, targets, **kw)  # warm-up: JIT, cached factorisation
+    wall, cpu = [], []
+    for _ in range(n):
+        t0, c0 = time.perf_counter(), time.thread_time()
+        res = relax(tm, state, targets, **kw)
+        cpu.append(time.thread_time() - c0)
+        wall.append(time.perf_counter() - t0)
+        assert res.converged
+    return float(np.median(wall)), float(np.median(cpu)), res
+
+
+def _relax_detail(new, peer) -> dict:
+    """``{solver: {row: {column: value}}}`` for BENCHMARKS.md's detail table."""
+    return {
+        solver: {
+            "median wall": {"ms": d["wall"] * 1e3},
+            "median thread CPU": {"ms": d["cpu"] * 1e3},
+            "iterations": {"ms": d["iterations"]},
+            "max distance to the reference equilibrium, mm": {"ms": d["err_mm"]},
+        }
+        for solver, d in (("newton", new), ("lbfgs", peer))
+    }
+
+
+@benchmark("tissue.relax_ms", "ms", higher_is_better=False, peer=RELAX_PEER)
 def bench_relax(quick: bool) -> Measurement:
-    """From neutral, a step change of contractions to surprise, to equilibrium (implicit relax)."""
+    """From neutral (rest), a step change of contractions to surprise (intensity 1), to
+    equilibrium with the default solver (Newton, ``method="newton"``), default face; peer: the
+    L-BFGS reference (default tolerance) on the same step in the same run. The detail gives both
+    solvers' iterations, thread CPU time, and largest node distance to the equilibrium found by
+    L-BFGS to a 1e-7 mm step."""
     from myoface.control import expression_contractions
+    from myoface.tissue import relax
 
     fm = _default_face_model()
-    c = expression_contractions("surprise", 1.0, fm.ids)
-    fm.relax(c)  # warm-up: JIT and the cached factorisation
-    times = []
-    n = 3 if quick else 9
-    for _ in range(n):
-        t0 = time.perf_counter()
-        res = fm.relax(c, start="rest")
-        times.append(time.perf_counter() - t0)
-        assert res.converged
-    return Measurement(float(np.median(times)) * 1e3, n)
+    tm = fm.tissue
+    tg = fm.targets(expression_contractions("surprise", 1.0, fm.ids))
+    ref = relax(tm, None, tg, method="lbfgs", tol_mm=RELAX_REFERENCE_TOL_MM, max_iter=5000)
+    n = 3 if quick else 15
+    out = {}
+    for method in ("newton", "lbfgs"):
+        wall, cpu, res = _timed_relax(
+            tm, None, tg, n if method == "newton" else max(3, n // 3), method=method
+        )
+        out[method] = {
+            "wall": wall,
+            "cpu": cpu,
+            "iterations": res.iterations,
+            "err_mm": float(np.abs(res.state.x - ref.state.x).max()),
+        }
+    return Measurement(
+        out["newton"]["wall"] * 1e3,
+        n,
+        out["lbfgs"]["wall"] * 1e3,
+        detail=_relax_detail(out["newton"], out["lbfgs"]),
+    )
+
+
+@benchmark("tissue.relax_warm_ms", "ms", higher_is_better=False, peer=RELAX_PEER)
+def bench_relax_warm(quick: bool) -> Measurement:
+    """One frame of a 25 fps smile (AU12 = k/25, AU6 = k/50, k = 0..25: 0 -> 1 in 1 s), relaxed
+    from the previous frame's equilibrium, default solver, default face: median over the frames
+    (each timed as the median of repeats); peer: the L-BFGS reference on the same frames. The
+    detail gives both solvers' median iterations, thread CPU time and largest node distance to
+    the frame's equilibrium found by L-BFGS to a 1e-7 mm step."""
+    from myoface.control import au_contractions
+    from myoface.tissue import relax, rest_state
+
+    fm = _default_face_model()
+    tm = fm.tissue
+    frames = range(0, 25, 6) if quick else range(25)
+    reps = 3 if quick else 5
+    tgs = {k: fm.targets(au_contractions({12: k / 25, 6: k / 50}, fm.ids)) for k in range(26)}
+    # the start of each frame: the previous frame's equilibrium (the reference's, so both solvers
+    # start from the same state)
+    eq = {}
+    state = rest_state(tm)
+    for k in range(26):
+        state = relax(
+            tm, state, tgs[k], method="lbfgs", tol_mm=RELAX_REFERENCE_TOL_MM, max_iter=5000
+        ).state
+        eq[k] = state
+    out = {}
+    for method in ("newton", "lbfgs"):
+        walls, cpus, its, errs = [], [], [], []
+        for k in frames:
+            wall, cpu, res = _timed_relax(tm, eq[k], tgs[k + 1], reps, method=method)
+            walls.append(wall)
+            cpus.append(cpu)
+            its.append(res.iterations)
+            errs.append(float(np.abs(res.state.x - eq[k + 1].x).max()))
+        out[method] = {
+            "wall": float(np.median(walls)),
+            "cpu": float(np.median(cpus)),
+            "iterations": float(np.median(its)),
+            "err_mm": max(errs),
+        }
+    return Measurement(
+        out["newton"]["wall"] * 1e3,
+        len(frames) * reps,
+        out["lbfgs"]["wall"] * 1e3,
+        detail=_relax_detail(out["newton"], out["lbfgs"]),
+    )

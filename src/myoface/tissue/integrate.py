@@ -1,15 +1,20 @@
 """Time integration and equilibrium of the tissue lattice.
 
-Two integrators behind one API (:func:`relax`):
+Three solvers behind one API (:func:`relax`):
 
 * ``"rk2"`` — the paper's explicit second-order Runge-Kutta (midpoint) scheme on
   ``m x'' + gamma x' + g + q = 0`` (eq. 3-4), two force evaluations per step, run until the
   lattice is at rest;
-* ``"implicit"`` (default) — quasi-static: the equilibrium is the minimum of the lattice's
-  potential energy over the free nodes; L-BFGS with the sparse LU of a rest stiffness matrix as
-  its initial inverse Hessian (factorised once per model) and a backtracking line search finds
-  it. It lands on the same equilibrium as the dynamic scheme (tests check this) at a small
-  fraction of the cost.
+* ``"newton"`` (default; ``"implicit"`` is an alias) — quasi-static: the equilibrium is the
+  minimum of the lattice's potential energy over the free nodes, found by inexact Newton on the
+  exact Hessian with CG preconditioned by a factorisation of the rest stiffness kept per model,
+  from the linear response to the move of the kinematic nodes (:mod:`myoface.tissue.solver`);
+* ``"lbfgs"`` — the same minimum by L-BFGS with the sparse LU of a rest stiffness matrix as its
+  initial inverse Hessian and a backtracking line search: slower, kept as the reference the
+  Newton solver is tested and benchmarked against.
+
+Both quasi-static solvers land on the same equilibrium as the dynamic scheme (tests check this)
+at a small fraction of its cost.
 
 Kinematic nodes (bone, and fascia nodes driven by muscles, eq. 5) are set to their target
 positions; their velocities are zero.
@@ -35,9 +40,13 @@ from myoface.tissue.forces import (
 )
 from myoface.tissue.hessian import HessianPattern, assemble_hessian_numba
 from myoface.tissue.model import TissueModel
+from myoface.tissue.solver import NEWTON_TOL_MM, cached, relax_newton
 
-#: default equilibrium tolerance: largest node move in the last solver step, mm
+#: default equilibrium tolerance of "lbfgs" and "rk2": largest node move in the last solver step
+#: (time step), mm. (L-BFGS steps are short and its error is several times its last step.)
 RELAX_TOL_MM = 1e-4
+#: the solvers :func:`relax` accepts; "implicit" is an alias of "newton"
+RELAX_METHODS = ("newton", "lbfgs", "rk2", "implicit")
 
 
 class RelaxWarning(UserWarning):
@@ -64,7 +73,8 @@ class RelaxResult:
     ----------
     state : TissueState — the equilibrium (or the last iterate if not converged).
     converged : bool
-    iterations : int — Newton iterations (implicit) or time steps (rk2).
+    iterations : int — Newton iterations (newton), quasi-Newton iterations (lbfgs) or time
+        steps (rk2).
     residual_mm : float — the largest node move in the last iteration (step size for rk2:
         ``max |v| dt``).
     max_force : float — largest net internal force on a free node at the end, uN.
@@ -329,11 +339,11 @@ def step_rk2(
 
 
 def _pattern(model: TissueModel) -> HessianPattern:
-    pat = model.cache.get("hessian_pattern")
-    if pat is None:
-        pat = HessianPattern(model.n_nodes, model.free_index, model.spring_i, model.spring_j)
-        model.cache["hessian_pattern"] = pat
-    return pat
+    return cached(
+        model,
+        "hessian_pattern",
+        lambda: HessianPattern(model.n_nodes, model.free_index, model.spring_i, model.spring_j),
+    )
 
 
 def stiffness_matrix(model: TissueModel, x: np.ndarray):
@@ -355,21 +365,22 @@ def stiffness_matrix(model: TissueModel, x: np.ndarray):
 
 def _preconditioner(model: TissueModel):
     """Sparse LU of the rest stiffness with every spring at the geometric mean of its two phases,
-    sqrt(alpha beta): cached on the model, it serves as the initial inverse Hessian of L-BFGS."""
-    lu = model.cache.get("precond_lu")
-    if lu is None:
+    sqrt(alpha beta): cached on the model (built once, under a lock), it serves as the initial
+    inverse Hessian of L-BFGS. (SuperLU's solve only reads the factor.)"""
+
+    def build():
         g = np.sqrt(model.materials[:, 0] * model.materials[:, 1])
         mats = np.column_stack([g, g, model.materials[:, 2]])
         proxy = replace(model, materials=mats, cache={"hessian_pattern": _pattern(model)})
         a = stiffness_matrix(proxy, model.rest_positions).tocsc()
-        lu = splu(
+        return splu(
             a, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
         )
-        model.cache["precond_lu"] = lu
-    return lu
+
+    return cached(model, "precond_lu", build)
 
 
-def _relax_implicit(model, x, tol_mm, max_iter, memory=8):
+def _relax_lbfgs(model, x, tol_mm, max_iter, memory=8):
     """L-BFGS on the potential energy over the free nodes, initial inverse Hessian = the cached
     sparse LU of the rest stiffness (quasi-Newton in the sense of Liu, Bouaziz & Kavan 2017),
     Armijo backtracking with a safeguarded quadratic step (so an overshooting trial step is cut
@@ -390,7 +401,7 @@ def _relax_implicit(model, x, tol_mm, max_iter, memory=8):
     step = np.inf
     for it in range(1, max_iter + 1):
         if not np.isfinite(g).all():
-            raise MyofaceSimulationError(f"implicit relax: non-finite forces at iteration {it}")
+            raise MyofaceSimulationError(f"lbfgs relax: non-finite forces at iteration {it}")
         q = g.copy()
         coeffs = []
         for s_, y_ in zip(reversed(hist_s), reversed(hist_y), strict=True):
@@ -441,8 +452,8 @@ def relax(
     state: TissueState | None = None,
     targets=None,
     *,
-    method: str = "implicit",
-    tol_mm: float = RELAX_TOL_MM,
+    method: str = "newton",
+    tol_mm: float | None = None,
     max_iter: int | None = None,
     dt: float | None = None,
 ) -> RelaxResult:
@@ -452,15 +463,26 @@ def relax(
     ----------
     model : TissueModel
     state : TissueState, optional
-        Where to start (default: rest). Its velocities are ignored by ``"implicit"``.
+        Where to start (default: rest). Its velocities are ignored by ``"newton"`` and
+        ``"lbfgs"``. A nearby equilibrium (the previous frame's) makes a good start: the Newton
+        solver adds the free nodes' linear response to the move of the kinematic nodes from
+        where they are in ``state`` to ``targets``.
     targets : (K, 3) float ndarray, optional
         Positions (mm) of the kinematic nodes in ``model.kinematic_index`` order (default: rest).
-    method : {"implicit", "rk2"}
-    tol_mm : float
-        Converged when the largest node move of one iteration (implicit) or of one time step
-        (rk2, ``max |v| dt``) is below this, mm.
+    method : {"newton", "lbfgs", "rk2", "implicit"}
+        ``"implicit"`` is an alias of ``"newton"``; see the module docstring.
+    tol_mm : float, optional
+        Converged when the largest node move (mm) of
+
+        * ``"newton"``: the last Newton step (default :data:`~myoface.tissue.solver.NEWTON_TOL_MM`,
+          0.01 mm). The Newton step estimates the distance to the equilibrium; the step is taken,
+          and the error left after it is about a tenth of it or less (the CG's relative accuracy,
+          plus the quadratic term), so the default leaves about 1e-3 mm;
+        * ``"lbfgs"``: the last quasi-Newton step (default :data:`RELAX_TOL_MM`, 1e-4 mm);
+        * ``"rk2"``: one time step, ``max |v| dt`` (default :data:`RELAX_TOL_MM`).
     max_iter : int, optional
-        Quasi-Newton iterations (default 300) or RK2 steps (default 200,000).
+        Newton iterations (default 50), quasi-Newton iterations (default 300) or RK2 steps
+        (default 200,000).
     dt : float, optional
         RK2 time step, s (default :func:`stable_time_step`).
 
@@ -471,15 +493,25 @@ def relax(
 
     References: Terzopoulos & Waters 1993, eq. (3)-(5) and Section III.
     """
-    methods = ("implicit", "rk2")
-    if method not in methods:
-        raise MyofaceValueError(f"method must be one of {methods}; got {method!r}")
+    if method not in RELAX_METHODS:
+        raise MyofaceValueError(f"method must be one of {RELAX_METHODS}; got {method!r}")
+    method = "newton" if method == "implicit" else method
+    if tol_mm is None:
+        tol_mm = NEWTON_TOL_MM if method == "newton" else RELAX_TOL_MM
+    if not tol_mm > 0:
+        raise MyofaceValueError(f"tol_mm must be > 0 mm; got {tol_mm}")
     state = state if state is not None else rest_state(model)
     tg = _targets_array(model, targets)
     x = state.x.copy()
+    if not np.isfinite(x).all():
+        raise MyofaceValueError("the start state's positions must be finite")
+    x_kin_start = x[model.kinematic_index].copy()
     x[model.kinematic_index] = tg
-    if method == "implicit":
-        x, ok, it, res = _relax_implicit(model, x, tol_mm, max_iter or 300)
+    if method == "newton":
+        x, ok, it, res, _ = relax_newton(model, x, x_kin_start, tol_mm, max_iter or 50)
+        out = TissueState(x, np.zeros_like(x), state.t)
+    elif method == "lbfgs":
+        x, ok, it, res = _relax_lbfgs(model, x, tol_mm, max_iter or 300)
         out = TissueState(x, np.zeros_like(x), state.t)
     else:
         dt = stable_time_step(model) if dt is None else float(dt)

@@ -1,0 +1,200 @@
+"""The Newton equilibrium solver: kernels against references, equilibrium against the L-BFGS
+reference, warm starts, two threads sharing a model, bad input."""
+
+import threading
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.sparse.linalg import spsolve
+
+from myoface.errors import MyofaceValueError
+from myoface.tissue import internal_forces, potential_energy, relax, rest_state
+from myoface.tissue.solver import (
+    NEWTON_TOL_MM,
+    PRECOND_SHIFT,
+    assemble_block_hessian,
+    energy_gradient,
+    kernel_args,
+    newton_data,
+)
+
+#: the L-BFGS reference is run to this step tolerance (mm); its own error is then ~1e-6 mm,
+#: negligible beside the Newton tolerance it is compared with
+REFERENCE_TOL_MM = 1e-7
+
+
+@pytest.fixture(scope="module")
+def fm():
+    from myoface.model import build_face_model
+
+    return build_face_model()
+
+
+def _reference(tm, targets, state=None):
+    r = relax(tm, state, targets, method="lbfgs", tol_mm=REFERENCE_TOL_MM, max_iter=5000)
+    assert r.converged
+    return r.state.x
+
+
+def _perturbed(tm, scale_mm, seed=0):
+    rng = np.random.default_rng(seed)
+    x = tm.rest_positions.copy()
+    x[tm.free_index] += rng.normal(0, scale_mm, (len(tm.free_index), 3))
+    return x
+
+
+def test_energy_gradient_matches_the_reference_kernels(fm):
+    tm = fm.tissue
+    x = _perturbed(tm, 0.5)
+    grad = np.empty_like(x)
+    en = energy_gradient(x, *kernel_args(tm), grad)
+    assert en == pytest.approx(potential_energy(tm, x), rel=1e-12)
+    f = internal_forces(tm, x)
+    np.testing.assert_allclose(grad, -f, rtol=0, atol=1e-9 * np.abs(f).max())
+
+
+def test_hessian_is_the_jacobian_of_the_gradient(fm):
+    """The exact Hessian (unclipped geometric term, full volume term) against central
+    differences of the gradient, at a state far from rest (compressed and stretched springs)."""
+    tm = fm.tissue
+    data = newton_data(tm)
+    pat = data.pattern
+    x = _perturbed(tm, 0.5, seed=1)
+    bvals = np.empty(pat.nnzb * 9)
+    assemble_block_hessian(
+        x, *kernel_args(tm), pat.fmap, pat.spring_slots, pat.element_slots, bvals
+    )
+    h = pat.scalar_matrix(bvals)
+    assert abs(h - h.T).max() < 1e-10 * abs(h).max()
+    free = tm.free_index
+    v = np.random.default_rng(2).normal(size=3 * len(free))
+    eps = 1e-6  # mm: central differences have error O(eps^2) relative to the O(1) terms
+
+    def grad(xx):
+        g = np.empty_like(xx)
+        energy_gradient(xx, *kernel_args(tm), g)
+        return g[free].reshape(-1)
+
+    xp, xm = x.copy(), x.copy()
+    xp[free] += eps * v.reshape(-1, 3)
+    xm[free] -= eps * v.reshape(-1, 3)
+    fd = (grad(xp) - grad(xm)) / (2 * eps)
+    hv = h @ v
+    # the energy is piecewise smooth (biphasic springs): a spring within eps of its threshold
+    # would make the difference quotient meaningless; at a random state none is
+    assert np.abs(hv - fd).max() < 1e-6 * np.abs(fd).max()
+
+
+def test_rest_factor_solves_the_rest_stiffness(fm):
+    tm = fm.tissue
+    data = newton_data(tm)
+    pat = data.pattern
+    bvals = np.empty(pat.nnzb * 9)
+    assemble_block_hessian(
+        tm.rest_positions, *kernel_args(tm), pat.fmap, pat.spring_slots, pat.element_slots, bvals
+    )
+    k = pat.scalar_matrix(bvals)
+    # the factor is of K plus a tiny shift (see PRECOND_SHIFT)
+    k = (k + PRECOND_SHIFT * k.diagonal().mean() * sp.eye(k.shape[0])).tocsc()
+    b = np.random.default_rng(3).normal(size=k.shape[0])
+    z = data.precond.solve(b)
+    ref = spsolve(k, b)
+    # two direct solves of a matrix of condition ~1e5: they agree to ~1e-11 relative
+    np.testing.assert_allclose(z, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
+    assert sp.issparse(data.coupling) and data.coupling.shape == (
+        k.shape[0],
+        3 * tm.kinematic.sum(),
+    )
+
+
+@settings(max_examples=3, deadline=None, derandomize=True)
+@given(st.data())
+def test_newton_equals_the_lbfgs_reference(fm, draw):
+    ids = fm.ids
+    n_active = draw.draw(st.integers(1, len(ids)), label="active muscles")
+    seed = draw.draw(st.integers(0, 2**31 - 1), label="seed")
+    rng = np.random.default_rng(seed)
+    c = np.zeros(len(ids))
+    c[rng.choice(len(ids), n_active, replace=False)] = rng.uniform(0, 1, n_active)
+    tm = fm.tissue
+    tg = fm.targets(c)
+    r = relax(tm, None, tg)
+    assert r.converged and r.method == "newton"
+    ref = _reference(tm, tg)
+    # converged means the last Newton step - the estimate of the distance to the equilibrium,
+    # taken - moved no node by NEWTON_TOL_MM: the result is within that of the equilibrium
+    assert np.abs(r.state.x - ref).max() < NEWTON_TOL_MM
+    np.testing.assert_array_equal(r.state.x[tm.kinematic_index], tg)
+
+
+def test_warm_start_from_a_nearby_equilibrium_takes_few_iterations(fm):
+    from myoface.control import au_contractions
+
+    tm = fm.tissue
+    tg0 = fm.targets(au_contractions({12: 0.5, 6: 0.25}, fm.ids))
+    tg1 = fm.targets(au_contractions({12: 0.505, 6: 0.2525}, fm.ids))
+    start = relax(tm, None, tg0, tol_mm=1e-4).state
+    cold = relax(tm, None, tg1)
+    warm = relax(tm, start, tg1)
+    assert warm.converged and cold.converged
+    # a 0.5 % step of the smile moves the free nodes by ~0.06 mm, six times the tolerance: the
+    # linear response to the move of the targets plus a Newton step or two (the biphasic springs
+    # near their threshold slow it) reach it, and the test of the tolerance takes one more step;
+    # the cold start needs more than that to find the nonlinear regime
+    assert warm.iterations <= 4 and warm.iterations < cold.iterations
+    assert np.abs(warm.state.x - _reference(tm, tg1, start)).max() < NEWTON_TOL_MM
+
+
+def test_two_threads_sharing_a_model_get_the_single_thread_results(fm):
+    from myoface.control import expression_contractions
+
+    # a fresh copy of the model, so the two threads also race to build its cached factor
+    tm = fm.tissue.with_kinematic(fm.tissue.kinematic_index)
+    targets = [
+        fm.targets(expression_contractions("surprise", 1.0, fm.ids)),
+        fm.targets(expression_contractions("happiness", 1.0, fm.ids)),
+    ]
+    out = [None, None]
+    barrier = threading.Barrier(2)
+
+    def work(k):
+        barrier.wait()
+        for _ in range(3):
+            out[k] = relax(tm, None, targets[k]).state.x
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for k in range(2):
+        single = relax(fm.tissue, None, targets[k]).state.x
+        np.testing.assert_array_equal(out[k], single)
+
+
+def test_non_finite_targets_or_start_raise(fm):
+    tm = fm.tissue
+    tg = tm.rest_positions[tm.kinematic_index].copy()
+    for bad in (np.nan, np.inf):
+        t = tg.copy()
+        t[3, 1] = bad
+        with pytest.raises(MyofaceValueError, match="finite"):
+            relax(tm, None, t)
+    s = rest_state(tm)
+    s.x[tm.free_index[0], 0] = np.nan
+    with pytest.raises(MyofaceValueError, match="finite"):
+        relax(tm, s, tg)
+    with pytest.raises(MyofaceValueError, match="tol_mm"):
+        relax(tm, None, tg, tol_mm=0.0)
+
+
+def test_implicit_is_an_alias_of_newton(fm):
+    tm = fm.tissue
+    tg = fm.targets(np.full(len(fm.ids), 0.3))
+    a = relax(tm, None, tg, method="implicit")
+    b = relax(tm, None, tg, method="newton")
+    assert a.method == b.method == "newton"
+    np.testing.assert_array_equal(a.state.x, b.state.x)
