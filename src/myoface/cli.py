@@ -3,19 +3,23 @@
 Each subcommand lives in ``myoface.commands.<name>`` and defines ``NAME``, ``HELP``,
 ``add_arguments(parser)`` and ``run(args) -> int``. Exit codes (GUIDE §4): 0 success,
 2 usage error, 1 a :class:`~myoface.errors.MyofaceError` (one line on stderr; the traceback
-only with ``--debug``).
+only with ``--debug``). SIGINT, SIGTERM and SIGHUP stop a command cleanly (its temporary outputs
+removed, exit status 128 + the signal's number); warnings are one line each on stderr.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import pkgutil
+import signal
 import sys
+import warnings
 
 import myoface
 import myoface.commands
-from myoface.errors import MyofaceError
+from myoface.errors import MyofaceError, MyofaceWarning
 
 
 def _command_modules():
@@ -31,8 +35,56 @@ def _command_modules():
     return mods
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors in one line (exit status 2), pointing at ``--help``."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class Interrupted(KeyboardInterrupt):
+    """Raised in the main thread by SIGTERM / SIGHUP, as SIGINT raises KeyboardInterrupt, so the
+    same clean-up (temporary outputs removed) runs."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_interrupted(signum, frame):
+    raise Interrupted(signum)
+
+
+@contextlib.contextmanager
+def _stop_signals():
+    """SIGTERM and SIGHUP raise :class:`Interrupted` in the block (main thread only)."""
+    old = {}
+    for name in ("SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is None:
+            continue
+        try:
+            old[sig] = signal.signal(sig, _raise_interrupted)
+        except ValueError:  # not the main thread: leave the handlers alone
+            break
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+def _one_line_warnings(command: str):
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split())
+        kind = "warning" if issubclass(category, UserWarning) else category.__name__
+        print(f"myoface {command}: {kind}: {text}", file=sys.stderr, flush=True)
+
+    return show
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="myoface",
         description="Physics-based facial animation and face-video analysis "
         "(Terzopoulos & Waters 1993).",
@@ -57,20 +109,40 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
-    if getattr(args, "_run", None) is None:
-        parser.print_help()
-        return 2
     try:
-        return int(args._run(args) or 0)
-    except MyofaceError as exc:
-        if getattr(args, "debug", False):
-            raise
-        print(f"myoface {args.command}: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("myoface: interrupted", file=sys.stderr)
-        return 130
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version (0) or a usage error (2), already printed
+        return exc.code if isinstance(exc.code, int) else 2
+    if getattr(args, "_run", None) is None:
+        parser.print_help(sys.stderr)
+        return 2
+    debug = getattr(args, "debug", False)
+    with warnings.catch_warnings(), _stop_signals():
+        warnings.filterwarnings("default", category=MyofaceWarning)  # said, whatever -W says
+        if not debug:
+            warnings.showwarning = _one_line_warnings(args.command)
+        try:
+            return int(args._run(args) or 0)
+        except MyofaceError as exc:
+            if debug:
+                raise
+            print(f"myoface {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt as exc:
+            signum = getattr(exc, "signum", signal.SIGINT)
+            name = signal.Signals(signum).name
+            print(f"myoface {args.command}: interrupted ({name})", file=sys.stderr)
+            return 128 + int(signum)
+        except (OSError, MemoryError) as exc:  # the machine's, not the input's: no traceback
+            if debug:
+                raise
+            what = "out of memory" if isinstance(exc, MemoryError) else _one_line(exc)
+            print(f"myoface {args.command}: error: {what}", file=sys.stderr)
+            return 1
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -29,3 +29,8 @@ class MyofaceSimulationError(MyofaceError, RuntimeError):
 
 class MyofaceDependencyError(MyofaceError, ImportError):
     """An optional dependency needed by the requested feature is missing."""
+
+
+class MyofaceWarning(UserWarning):
+    """Input myoface accepts but doubts (e.g. a mesh far from millimetres, a cropped video
+    frame); the command line prints it as one line on stderr."""

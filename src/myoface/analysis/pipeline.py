@@ -36,7 +36,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
 from myoface.analysis.estimate import PAPER_ASSIGNMENT, ContractionEstimator, Fiducial
 from myoface.analysis.headframe import HeadTracker, Similarity, head_box
 from myoface.analysis.potentials import image_potential
@@ -162,13 +161,12 @@ def load_init(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Read an initial-contours file: ``{"contours": {section: [[x, y], ...], ...}}`` (pixels
     of the calibration frame, (x, y) = (column, row)); see :data:`SECTIONS` for the names and
     the node order. Sections may be left out."""
+    from myoface._io import parse_json, read_text
+
     p = Path(path)
     if not p.is_file():
         raise MyofaceFileNotFoundError(f"no such contour file: {p}")
-    try:
-        doc = json.loads(p.read_text())
-    except json.JSONDecodeError as exc:
-        raise MyofaceFormatError(f"{p}: not valid JSON: {exc}") from None
+    doc = parse_json(read_text(p, "contour file (JSON)"), str(p))
     cont = doc.get("contours") if isinstance(doc, dict) else None
     if not isinstance(cont, dict) or not cont:
         raise MyofaceFormatError(f'{p}: expected {{"contours": {{section: [[x, y], ...]}}}}')
@@ -180,7 +178,7 @@ def load_init(path: str | os.PathLike) -> dict[str, np.ndarray]:
             )
         try:
             a = np.asarray(pts, dtype=np.float64)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise MyofaceFormatError(f"{p}: section {name!r} must be a list of [x, y]") from None
         if a.ndim != 2 or a.shape[1] != 2 or len(a) < 2:
             raise MyofaceFormatError(
@@ -728,52 +726,115 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_ra
         tmp.write_text("\n".join(lines) + "\n")
 
 
-def read_contractions_csv(path, muscle_ids) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """(times (T,), contractions (T, M) over ``muscle_ids`` (missing columns = 0), quality).
+#: the columns of a contractions CSV that are not muscles (see :func:`write_contractions_csv`)
+CSV_OTHER_COLUMNS = (
+    "frame",
+    "time_s",
+    "time",
+    "quality",
+    "jaw_angle_rad",
+    "head_dx_px",
+    "head_dy_px",
+    "head_scale",
+    "head_rot_deg",
+)
 
-    Raises a clear error for a missing time column, a header without any known muscle, and
-    NaN or out-of-range values in measured ('ok') rows.
+
+def read_contractions_csv(path, muscle_ids) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """(times (T,), contractions (T, M) over ``muscle_ids``, quality).
+
+    A muscle of ``muscle_ids`` without a column stays at rest (0): the analysis estimates the
+    paper's 12 muscles and the jaw, fewer than a face model has. Columns that are neither a
+    muscle of ``muscle_ids`` nor one of :data:`CSV_OTHER_COLUMNS` are ignored with a
+    :class:`~myoface.errors.MyofaceWarning` that lists them (e.g. a CSV of another face
+    model's muscles).
+
+    Raises a clear :class:`~myoface.errors.MyofaceFormatError` for a file that is not UTF-8
+    CSV text, a missing time column, a header without any known muscle, a repeated column,
+    a row longer than the header, and NaN or out-of-range values in measured ('ok') rows.
     """
     import csv
+    import io
+    import warnings
+
+    from myoface._io import read_text
+    from myoface.errors import MyofaceWarning
 
     p = Path(path)
     if not p.is_file():
         raise MyofaceFileNotFoundError(f"no such CSV file: {p}")
-    with open(p, newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    text = read_text(p, "contractions CSV")
+    try:
+        rows = [r for r in csv.reader(io.StringIO(text, newline="")) if any(c.strip() for c in r)]
+    except csv.Error as exc:
+        raise MyofaceFormatError(f"{p}: not a CSV file: {exc}") from None
+    if not rows:
+        raise MyofaceFormatError(f"{p}: no header and no rows")
+    head = [c.strip() for c in rows[0]]
+    rows = rows[1:]
     if not rows:
         raise MyofaceFormatError(f"{p}: no rows")
-    head = list(rows[0].keys())
-    tcol = "time_s" if "time_s" in head else "time" if "time" in head else None
+    seen = set()
+    for c in head:
+        if c in seen:
+            raise MyofaceFormatError(f"{p}: column {c[:40]!r} appears twice in the header")
+        seen.add(c)
+    col = {c: i for i, c in enumerate(head)}
+    tcol = "time_s" if "time_s" in col else "time" if "time" in col else None
     if tcol is None:
         raise MyofaceFormatError(f"{p}: missing column 'time_s' (or 'time')")
-    known = [m for m in muscle_ids if m in head]
+    ids = list(muscle_ids)
+    known = [m for m in ids if m in col]
     if not known:
-        raise MyofaceFormatError(f"{p}: no column names a muscle of this face model")
+        raise MyofaceFormatError(
+            f"{p}: no column names a muscle of this face model (its muscles: "
+            f"{', '.join(ids[:6])}{', ...' if len(ids) > 6 else ''})"
+        )
+    unknown = [c for c in head if c not in CSV_OTHER_COLUMNS and c not in ids]
+    if unknown:
+        shown = ", ".join(repr(c[:40]) for c in unknown[:8]) + (", ..." if len(unknown) > 8 else "")
+        warnings.warn(
+            f"{p.name}: {len(unknown)} column(s) name no muscle of this face model and are "
+            f"ignored: {shown}; {len(ids) - len(known)} of its {len(ids)} muscles have no "
+            "column and stay at rest",
+            MyofaceWarning,
+            stacklevel=2,
+        )
     times = np.empty(len(rows))
-    table = np.zeros((len(rows), len(muscle_ids)))
+    table = np.zeros((len(rows), len(ids)))
     quality = []
+
+    def cell(r, name):
+        i = col.get(name)
+        return r[i].strip() if i is not None and i < len(r) else ""
+
     for k, r in enumerate(rows):
+        if len(r) > len(head):
+            raise MyofaceFormatError(
+                f"{p}: row {k + 2} has {len(r)} cells; the header has {len(head)}"
+            )
         try:
-            times[k] = float(r[tcol])
-        except (TypeError, ValueError):
-            raise MyofaceFormatError(f"{p}: row {k + 2}: bad time {r[tcol]!r}") from None
-        q = r.get("quality", "ok") or "ok"
+            times[k] = float(cell(r, tcol))
+        except ValueError:
+            raise MyofaceFormatError(f"{p}: row {k + 2}: bad time {cell(r, tcol)[:40]!r}") from None
+        q = cell(r, "quality") or "ok"
         quality.append(q)
         for m in known:
-            cell = (r.get(m) or "").strip()
-            if cell == "" and q != "ok":
-                table[k, muscle_ids.index(m)] = np.nan
+            c = cell(r, m)
+            if c == "" and q != "ok":
+                table[k, ids.index(m)] = np.nan
                 continue
             try:
-                v = float(cell)
+                v = float(c)
             except ValueError:
-                raise MyofaceFormatError(f"{p}: row {k + 2}: bad value {cell!r} for {m}") from None
+                raise MyofaceFormatError(
+                    f"{p}: row {k + 2}: bad value {c[:40]!r} for {m}"
+                ) from None
             if not np.isfinite(v) or not 0 <= v <= 1:
                 raise MyofaceFormatError(
-                    f"{p}: row {k + 2}: {m} must be a number in [0, 1]; got {cell!r}"
+                    f"{p}: row {k + 2}: {m} must be a number in [0, 1]; got {c[:40]!r}"
                 )
-            table[k, muscle_ids.index(m)] = v
+            table[k, ids.index(m)] = v
     if not np.isfinite(times).all() or np.any(np.diff(times) < 0):
         raise MyofaceFormatError(f"{p}: times must be finite and non-decreasing")
     return times, table, quality

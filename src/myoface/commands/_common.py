@@ -1,8 +1,114 @@
-"""Options and helpers shared by several subcommands."""
+"""Options and helpers shared by several subcommands.
+
+Limits on numbers the user gives (checked as the arguments are parsed, before any work; a
+value outside them is a usage error, exit status 2):
+
+- frame rates (``--fps``): in (0, :data:`MAX_FPS`] frames per second;
+- video lengths (``synth --duration``, a timeline's end): in (0, :data:`MAX_VIDEO_S`] s;
+- image sides (``--width``, ``--height``, ``--size``): :data:`IMAGE_SIDE` pixels;
+- cylindrical map sides (``face maps --size``): :data:`MAP_SIDE` cells, at most
+  :data:`MAX_MAP_CELLS` cells in all;
+- Gauss-Newton corrections (``analyze --refine``): 0 to :data:`MAX_REFINE`;
+- ports (``view --port``): 0 (any free port) to 65535.
+"""
 
 from __future__ import annotations
 
+import argparse
+import math
+import warnings
 from pathlib import Path
+
+#: the largest frame rate (frames per second) of a video the commands write
+MAX_FPS = 240.0
+#: the longest video (s) ``synth`` renders: one hour
+MAX_VIDEO_S = 3600.0
+#: smallest and largest side (pixels) of a rendered image or video frame
+IMAGE_SIDE = (16, 4096)
+#: smallest and largest side (cells) of a cylindrical map
+MAP_SIDE = (16, 8192)
+#: the most cells of a cylindrical map (8192 x 4096: about 2 GB of memory while it is made)
+MAX_MAP_CELLS = 8192 * 4096
+#: the most Gauss-Newton corrections per frame (``analyze --refine``)
+MAX_REFINE = 10
+#: a face (its mesh's largest extent, mm) outside this range is probably not in millimetres
+FACE_SIZE_MM = (50.0, 500.0)
+
+
+def number(lo: float, hi: float, *, lo_open: bool = False, unit: str = ""):
+    """An argparse ``type``: a finite float in [lo, hi] (or (lo, hi] with ``lo_open``)."""
+    interval = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            v = math.nan
+        ok = math.isfinite(v) and (lo < v if lo_open else lo <= v) and v <= hi
+        if not ok:
+            raise argparse.ArgumentTypeError(f"expected a number in {interval}{unit}; got {text!r}")
+        return v
+
+    parse.__name__ = "number"
+    return parse
+
+
+def integer(lo: int, hi: int | None = None, *, unit: str = ""):
+    """An argparse ``type``: an integer in [lo, hi] (no upper bound when ``hi`` is None)."""
+    interval = f"[{lo}, {hi}]" if hi is not None else f">= {lo}"
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text.strip())
+        except ValueError:
+            v = None
+        if v is None or v < lo or (hi is not None and v > hi):
+            what = f"an integer in {interval}" if hi is not None else f"an integer {interval}"
+            raise argparse.ArgumentTypeError(f"expected {what}{unit}; got {text!r}")
+        return v
+
+    parse.__name__ = "integer"
+    return parse
+
+
+fps_type = number(0.0, MAX_FPS, lo_open=True, unit=" frames per second")
+side_type = integer(*IMAGE_SIDE, unit=" pixels")
+
+
+def warn(message: str) -> None:
+    """A :class:`~myoface.errors.MyofaceWarning` (one line on stderr from the command line)."""
+    from myoface.errors import MyofaceWarning
+
+    warnings.warn(message, MyofaceWarning, stacklevel=2)
+
+
+def check_video_size(path, width: int, height: int) -> None:
+    """Say (a warning) that an H.264 video of an odd ``width`` or ``height`` loses its last
+    column or row: its frames need even sides."""
+    if width % 2 or height % 2:
+        warn(
+            f"H.264 needs even frame sizes: {Path(path).name} will be "
+            f"{width - width % 2}x{height - height % 2} pixels, not {width}x{height}"
+        )
+
+
+def check_face_scale(
+    vertices, source: str, hint: str = "", size_mm: tuple[float, float] = FACE_SIZE_MM
+) -> None:
+    """Warn when a mesh's largest extent is outside ``size_mm`` (default :data:`FACE_SIZE_MM`):
+    a mesh in metres, centimetres or micrometres rather than millimetres."""
+    import numpy as np
+
+    v = np.asarray(vertices, dtype=np.float64)
+    if v.ndim != 2 or len(v) == 0 or not np.isfinite(v).all():
+        return
+    size = float((v.max(axis=0) - v.min(axis=0)).max())
+    lo, hi = size_mm
+    if not lo <= size <= hi:
+        warn(
+            f"{source} is {size:.4g} mm across, not the {lo:g}-{hi:g} mm of a face: is it in "
+            f"millimetres?{' ' + hint if hint else ''}"
+        )
 
 
 def add_face_argument(p) -> None:
@@ -23,9 +129,18 @@ def add_face_argument(p) -> None:
 
 
 def load_model(args):
+    from myoface.errors import MyofaceValueError
     from myoface.model import load_face_model
 
-    return load_face_model(args.face, muscles=getattr(args, "muscles", None))
+    muscles = getattr(args, "muscles", None)
+    if muscles and args.face is None:
+        raise MyofaceValueError(
+            f"--muscles {muscles} needs --face (the bundled face has its own muscles)"
+        )
+    fm = load_face_model(args.face, muscles=muscles)
+    if args.face is not None:
+        check_face_scale(fm.face.vertices, f"--face {args.face}")
+    return fm
 
 
 def contact_sheet(images: dict, path: Path, title: str) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from myoface.commands._common import add_face_argument, load_model
+from myoface.commands._common import MAX_REFINE, add_face_argument, integer, load_model, number
 from myoface.errors import MyofaceValueError
 
 NAME = "analyze"
@@ -53,16 +53,16 @@ def add_arguments(p):
     )
     p.add_argument(
         "--calibration-frame",
-        type=int,
+        type=integer(0),
         default=0,
         metavar="N",
         help="the neutral frame to calibrate on; analysis starts there (default 0); with "
         "--init, the contours are on this frame",
     )
-    p.add_argument("--max-frames", type=int, help="analyse at most this many frames")
+    p.add_argument("--max-frames", type=integer(1), help="analyse at most this many frames")
     p.add_argument(
         "--sigma",
-        type=float,
+        type=number(0.0, 100.0, lo_open=True, unit=" px"),
         default=None,
         help="potential smoothing, px (default: 1.2 mm on the face, from its size in the frame)",
     )
@@ -75,8 +75,8 @@ def add_arguments(p):
     )
     p.add_argument(
         "--refine",
-        type=int,
-        help="Gauss-Newton corrections per frame through the model "
+        type=integer(0, MAX_REFINE),
+        help="Gauss-Newton corrections per frame through the model, 0-10 "
         "(default 1 for snakes, 0 for landmarks)",
     )
     p.add_argument("--quiet", action="store_true")
@@ -114,7 +114,6 @@ def plot_contractions(path, ids, times, table, quality):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
     from myoface._io import atomic_output
 
     groups = {}
@@ -141,16 +140,16 @@ def plot_contractions(path, ids, times, table, quality):
 
 
 def run(args) -> int:
-    import json
-    import shutil
 
-    import numpy as np
-
-    from myoface._io import atomic_output, ensure_output_dir
-    from myoface.analysis.pipeline import load_init, make_analyzer, write_contractions_csv
+    from myoface._io import atomic_output, check_output_dir, check_output_path, output_dir
+    from myoface.analysis.pipeline import load_init, make_analyzer
     from myoface.analysis.video import open_video
     from myoface.render import VideoWriter, progress, write_image
 
+    if args.check_init:
+        check_output_path(args.check_init, "--check-init")
+    elif args.output:
+        check_output_dir(args.output, "-o")
     video = open_video(args.video)
     if args.check_init:
         if not args.init:
@@ -164,10 +163,10 @@ def run(args) -> int:
         return 0
     if not args.output:
         raise MyofaceValueError("give an output folder with -o")
+    if args.init and args.tracker == "landmarks":
+        raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
+    init = load_init(args.init) if args.init else None  # a bad file fails before the model
     fm = load_model(args)
-    # (with the landmark tracker, make_analyzer refuses any --init before it is read)
-    init = args.init if args.tracker == "landmarks" else args.init and load_init(args.init)
-    init = init or None
     an, how, start = make_analyzer(
         fm,
         video,
@@ -180,16 +179,24 @@ def run(args) -> int:
     )
     if args.init:
         how = str(Path(args.init).resolve())
-    existed = Path(args.output).exists()
-    out = ensure_output_dir(args.output)
-    try:
-        frames = _analyze(args, video, an, out, start, progress, VideoWriter)
-    except BaseException:
-        if not existed:
-            shutil.rmtree(out, ignore_errors=True)
-        raise
-    finally:
-        an.close()
+    with output_dir(args.output, "-o") as out:  # a failure removes the folders it made
+        try:
+            frames = _analyze(args, video, an, out, start, progress, VideoWriter)
+        finally:
+            an.close()
+        _write_results(args, video, fm, an, out, frames, how, start, atomic_output)
+    ok = sum(f.quality == "ok" for f in frames)
+    print(f"analysed {len(frames)} frames ({ok} measured); output folder: {out.resolve()}")
+    return 0
+
+
+def _write_results(args, video, fm, an, out, frames, how, start, atomic_output) -> None:
+    """contractions.csv, contractions.png and analysis.json."""
+    import json
+
+    import numpy as np
+    from myoface.analysis.pipeline import write_contractions_csv
+
     jaw_max = fm.muscles.jaw.max_angle_rad if fm.muscles.jaw is not None else 0.0
     write_contractions_csv(out / "contractions.csv", an.ids, frames, jaw_max)
     table = np.array([f.contractions for f in frames])
@@ -219,9 +226,6 @@ def run(args) -> int:
         }
     with atomic_output(out / "analysis.json") as tmp:
         tmp.write_text(json.dumps(side, indent=1))
-    ok = sum(f.quality == "ok" for f in frames)
-    print(f"analysed {len(frames)} frames ({ok} measured); output folder: {out.resolve()}")
-    return 0
 
 
 def _analyze(args, video, an, out, start, progress, VideoWriter):

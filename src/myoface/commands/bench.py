@@ -35,7 +35,11 @@ def _fmt(v):
 
 def run(args) -> int:
     from myoface import bench
+    from myoface._io import check_output_path
 
+    if args.json:  # before the run, not after it
+        check_output_path(args.json, "--json")
+        check_output_path(detail_path(args.json), "--json")
     reg = bench.load_all()
     if args.list:
         for name in sorted(reg):

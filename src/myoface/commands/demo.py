@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from myoface.commands._common import fps_type, side_type
+
 NAME = "demo"
 HELP = "the whole loop on a sample face video, and the six expressions on the default face"
 DESCRIPTION = """Build the default face model (face mesh, layered tissue lattice, 29 muscles + jaw),
@@ -37,8 +39,10 @@ def add_arguments(p):
     p.add_argument(
         "-o", "--output", default="myoface-demo", help="output folder (default ./myoface-demo)"
     )
-    p.add_argument("--size", type=int, default=384, help="image size in pixels (default 384)")
-    p.add_argument("--fps", type=float, default=25.0)
+    p.add_argument(
+        "--size", type=side_type, default=384, help="image size in pixels, 16-4096 (default 384)"
+    )
+    p.add_argument("--fps", type=fps_type, default=25.0, help="frames per second, up to 240")
     p.add_argument("--no-video", action="store_true", help="skip the video (faster)")
     p.add_argument("--no-analysis", action="store_true", help="skip the analysis/resynthesis loop")
     p.add_argument(
@@ -52,7 +56,17 @@ def add_arguments(p):
 def run(args) -> int:
     import time
 
-    from myoface._io import ensure_output_dir
+    from myoface._io import check_output_dir, output_dir
+
+    check_output_dir(args.output, "-o")
+    t0 = time.perf_counter()
+    with output_dir(args.output, "-o") as out:
+        _run(args, out)
+    print(f"done in {time.perf_counter() - t0:.0f} s; output folder: {out.resolve()}")
+    return 0
+
+
+def _run(args, out: Path) -> None:
     from myoface.commands._common import contact_sheet
     from myoface.control import Timeline, expression_contractions, list_expressions
     from myoface.control.timeline import Event
@@ -60,8 +74,6 @@ def run(args) -> int:
     from myoface.render import Renderer, write_image
     from myoface.synth import Synthesizer, make_camera, muscle_segments
 
-    out = ensure_output_dir(args.output)
-    t0 = time.perf_counter()
     fm = build_face_model()
     print(f"face model: {fm.summary()}")
     cam = make_camera(fm.face.vertices, "front", args.size, args.size)
@@ -90,8 +102,6 @@ def run(args) -> int:
         print(f"wrote {out / 'expressions.mp4'} ({tl.duration:.1f} s)")
     if not args.no_analysis:
         analysis_loop(out / "analysis", args)
-    print(f"done in {time.perf_counter() - t0:.0f} s; output folder: {out.resolve()}")
-    return 0
 
 
 def _synthetic_video(folder: Path, fps: float) -> tuple[Path, Path]:

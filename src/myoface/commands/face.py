@@ -4,7 +4,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from myoface._io import check_output_path, sha256_file
+from myoface._io import OutputSet, check_output_dir, check_output_path, sha256_file
+from myoface.commands._common import (
+    MAP_SIDE,
+    MAX_MAP_CELLS,
+    check_face_scale,
+    integer,
+    number,
+)
 from myoface.errors import MyofaceFileNotFoundError, MyofaceValueError
 
 NAME = "face"
@@ -37,17 +44,19 @@ def add_arguments(p):
         metavar="IMAGE",
         help="texture image of the mesh (default: <stem>.jpg/.png beside it, if any)",
     )
-    s.add_argument("--scale-mm", type=float, default=1.0, help="mesh units in mm (10 for cm)")
+    s.add_argument("--scale-mm", type=_scale_type, default=1.0, help="mesh units in mm (10 for cm)")
     s.add_argument("--maps-out", metavar="PATH", help="also write the maps (.npz or a folder)")
     _common_outputs(s)
 
     ph = sub.add_parser("from-photo", help="build a face from one frontal photograph")
     ph.add_argument("photo", help="an image, or a video (its --frame) of one frontal face")
     ph.add_argument("-o", "--output", required=True, help="the face file to write (.myoface)")
-    ph.add_argument("--frame", type=int, default=0, help="frame of a video to use (default 0)")
+    ph.add_argument(
+        "--frame", type=integer(0), default=0, help="frame of a video to use (default 0)"
+    )
     ph.add_argument(
         "--depth-blend",
-        type=float,
+        type=number(0.0, 1.0),
         default=None,
         help="share of the generic face's depth mixed into the photo's (0..1, default 0.5)",
     )
@@ -58,8 +67,35 @@ def add_arguments(p):
     m.add_argument("-o", "--output", required=True, help=".npz file or a folder (PNG layout)")
     m.add_argument("--texture", metavar="IMAGE", help="texture image (default: beside the mesh)")
     m.add_argument("--landmarks", metavar="FILE", help="68 iBUG landmarks: orient the head")
-    m.add_argument("--scale-mm", type=float, default=1.0, help="mesh units in mm")
-    m.add_argument("--size", default="512x256", help="W x H cells (default the paper's 512x256)")
+    m.add_argument("--scale-mm", type=_scale_type, default=1.0, help="mesh units in mm")
+    m.add_argument(
+        "--size",
+        type=_map_size,
+        default=(512, 256),
+        help="W x H cells, each side 16-8192, at most 8192x4096 cells (default the paper's "
+        "512x256)",
+    )
+
+
+_scale_type = number(1e-6, 1e6, lo_open=True, unit=" mm per mesh unit")
+
+
+def _map_size(text: str) -> tuple[int, int]:
+    """``WxH`` -> (W, H) within :data:`MAP_SIDE` and :data:`MAX_MAP_CELLS`."""
+    import argparse
+
+    lo, hi = MAP_SIDE
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH, e.g. 512x256; got {text!r}") from None
+    if not (lo <= w <= hi and lo <= h <= hi):
+        raise argparse.ArgumentTypeError(f"expected each side in [{lo}, {hi}] cells; got {text!r}")
+    if w * h > MAX_MAP_CELLS:
+        raise argparse.ArgumentTypeError(
+            f"expected at most {MAX_MAP_CELLS} cells (8192x4096); got {text!r} ({w * h})"
+        )
+    return w, h
 
 
 def _common_outputs(p) -> None:
@@ -82,11 +118,21 @@ def run(args) -> int:
 # --------------------------------------------------------------------------- helpers
 
 
-def _check_output(path: str, suffix: str) -> Path:
+def _check_output(path: str, suffix: str, what: str = "-o") -> Path:
     out = Path(path)
     if out.suffix.lower() != suffix:
-        raise MyofaceValueError(f"-o must be a {suffix} file; got {out}")
-    return check_output_path(out)
+        raise MyofaceValueError(f"{what} must be a {suffix} file; got {out}")
+    return check_output_path(out, what)
+
+
+def _check_maps_output(path: str, what: str) -> Path:
+    """A .npz file, or a folder (no suffix) for the PNG layout."""
+    out = Path(path)
+    if out.suffix.lower() == ".npz":
+        return check_output_path(out, what)
+    if out.suffix:
+        raise MyofaceValueError(f"{what} must be a .npz file or a folder; got {out}")
+    return check_output_dir(out, what)
 
 
 def _load_scan(path: Path, texture: str | None, scale_mm: float):
@@ -96,6 +142,12 @@ def _load_scan(path: Path, texture: str | None, scale_mm: float):
     if not scale_mm > 0:
         raise MyofaceValueError(f"--scale-mm must be positive; got {scale_mm}")
     scan = load_mesh(path, scale_mm=scale_mm, split_uv_seams=True)
+    check_face_scale(
+        scan.vertices,
+        f"the scan {path} (at --scale-mm {scale_mm:g})",
+        "Give --scale-mm (10 for cm, 1000 for m).",
+        size_mm=(50.0, 1000.0),
+    )
     tex_path = Path(texture) if texture else None
     if tex_path is None:
         for sfx in (".jpg", ".jpeg", ".png"):
@@ -121,7 +173,7 @@ def _write_preview(face, path: str) -> None:
     from myoface.render import Renderer
     from myoface.synth import Synthesizer, make_camera
 
-    out = _check_output(path, ".png")
+    out = _check_output(path, ".png", "--preview")
     fm = build_face_model(face)
     images = {}
     for view in ("front", "three_quarter"):
@@ -167,6 +219,10 @@ def _from_scan(args) -> int:
     )
 
     out = _check_output(args.output, ".myoface")
+    if args.preview:
+        _check_output(args.preview, ".png", "--preview")
+    if args.maps_out:
+        _check_maps_output(args.maps_out, "--maps-out")
     src = Path(args.scan)
     if not src.exists():
         raise MyofaceFileNotFoundError(f"no such scan: {src}")
@@ -219,12 +275,13 @@ def _from_scan(args) -> int:
             f"{se['mesh_to_scan_max_mm']:.2f} mm max; scan to mesh "
             f"{se['scan_to_mesh_mean_mm']:.2f} mm mean"
         )
-    _save(conf.face, out, provenance)
-    if args.maps_out:
-        conf.maps.save(args.maps_out)
-        print(f"wrote {args.maps_out}")
-    if args.preview:
-        _write_preview(conf.face, args.preview)
+    with OutputSet() as outs:  # the face file last: a failure leaves none of them
+        if args.maps_out:
+            conf.maps.save(outs.add(args.maps_out))
+            print(f"wrote {args.maps_out}")
+        if args.preview:
+            _write_preview(conf.face, outs.add(args.preview))
+        _save(conf.face, out, provenance)
     return 0
 
 
@@ -260,6 +317,8 @@ def _from_photo(args) -> int:
     from myoface.face.personal import PHOTO_DEPTH_BLEND, face_from_photo
 
     out = _check_output(args.output, ".myoface")
+    if args.preview:
+        _check_output(args.preview, ".png", "--preview")
     src = Path(args.photo)
     img = _read_photo(src, args.frame)
     blend = PHOTO_DEPTH_BLEND if args.depth_blend is None else args.depth_blend
@@ -276,9 +335,10 @@ def _from_photo(args) -> int:
         "fit": info,
         "note": "one photograph has no absolute scale: the face has the generic face's size",
     }
-    _save(face, out, provenance)
-    if args.preview:
-        _write_preview(face, args.preview)
+    with OutputSet() as outs:  # the face file last: a failure leaves neither
+        if args.preview:
+            _write_preview(face, outs.add(args.preview))
+        _save(face, out, provenance)
     return 0
 
 
@@ -286,10 +346,8 @@ def _maps(args) -> int:
     from myoface.face.cylindrical import maps_from_mesh
     from myoface.face.personal import head_maps, read_landmarks
 
-    try:
-        w, h = (int(x) for x in args.size.lower().split("x"))
-    except ValueError:
-        raise MyofaceValueError(f"--size must be WxH, e.g. 512x256; got {args.size}") from None
+    w, h = args.size
+    out = _check_maps_output(args.output, "-o")
     src = Path(args.mesh)
     if not src.exists():
         raise MyofaceFileNotFoundError(f"no such mesh: {src}")
@@ -302,10 +360,8 @@ def _maps(args) -> int:
         print("oriented   the head by its landmarks (head frame: +y up, +z out of the face)")
     else:
         maps = maps_from_mesh(scan, (h, w))
-    out = Path(args.output)
-    if out.suffix and out.suffix.lower() != ".npz":
-        raise MyofaceValueError(f"-o must be a .npz file or a folder; got {out}")
-    maps.save(out)
+    with OutputSet() as outs:
+        maps.save(outs.add(out))
     print(
         f"wrote {out}: {w}x{h} cells, axis at x={maps.axis_x_mm:.1f} z={maps.axis_z_mm:.1f} mm, "
         f"{maps.holes.mean():.0%} holes"

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from myoface.commands._common import add_face_argument, load_model
-from myoface.errors import MyofaceValueError
+from pathlib import Path
+
+from myoface.commands._common import MAX_FPS, add_face_argument, load_model, side_type
+from myoface.errors import MyofaceFileNotFoundError, MyofaceValueError
 
 NAME = "resynth"
 HELP = "render the face model driven by a contractions.csv (from myoface analyze)"
@@ -13,7 +15,9 @@ def add_arguments(p):
     p.add_argument("csv", help="contractions.csv written by myoface analyze")
     p.add_argument("-o", "--output", required=True, help="output video (.mp4)")
     p.add_argument("--side-by-side", metavar="VIDEO", help="put the input video on the left")
-    p.add_argument("--size", type=int, default=360, help="rendered height in pixels")
+    p.add_argument(
+        "--size", type=side_type, default=360, help="rendered height in pixels (16-4096)"
+    )
     p.add_argument("--quiet", action="store_true")
     add_face_argument(p)
 
@@ -21,14 +25,24 @@ def add_arguments(p):
 def run(args) -> int:
     import numpy as np
 
+    from myoface._io import check_output_path
     from myoface.analysis.pipeline import hold_last_measured, read_contractions_csv
 
     if not args.output.lower().endswith((".mp4", ".mov", ".mkv", ".avi")):
         raise MyofaceValueError(f"-o must be a video file (.mp4); got {args.output}")
+    check_output_path(args.output, "-o")
+    if args.side_by_side and not Path(args.side_by_side).exists():
+        raise MyofaceFileNotFoundError(f"--side-by-side: no such video: {args.side_by_side}")
     fm = load_model(args)
     times, table, quality = read_contractions_csv(args.csv, list(fm.ids))
     table = hold_last_measured(table)  # unmeasured frames hold the last measured contractions
-    fps = 1.0 / np.median(np.diff(times)) if len(times) > 1 else 30.0
+    dt = float(np.median(np.diff(times))) if len(times) > 1 else 1.0 / 30
+    if not 1.0 / MAX_FPS <= dt <= 60.0:
+        raise MyofaceValueError(
+            f"{args.csv}: its rows are {dt:.3g} s apart (median); a video's frames are "
+            f"{1 / MAX_FPS:.3g} to 60 s apart"
+        )
+    fps = 1.0 / dt
     resynthesize(
         fm,
         times,

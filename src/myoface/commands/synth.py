@@ -5,8 +5,16 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from myoface.commands._common import add_face_argument, load_model
-from myoface.errors import MyofaceValueError
+from myoface.commands._common import (
+    MAX_VIDEO_S,
+    add_face_argument,
+    check_video_size,
+    fps_type,
+    load_model,
+    number,
+    side_type,
+)
+from myoface.errors import MyofaceFileNotFoundError, MyofaceValueError
 
 NAME = "synth"
 HELP = "render an expression / action units / muscles / a timeline to an image or a video"
@@ -27,8 +35,22 @@ def _pairs(items, what):
         if "=" not in it:
             raise MyofaceValueError(f"--{what} takes NAME=VALUE (e.g. 12=0.7); got {it!r}")
         k, v = it.split("=", 1)
+        if k.strip() in out:
+            raise MyofaceValueError(f"--{what} {k.strip()} is given twice")
         out[k.strip()] = v.strip()
     return out
+
+
+def _check_requests(args) -> None:
+    """The --au / --muscle requests' syntax, AU numbers and intensities, before the model is
+    built (the muscle names need the model)."""
+    from myoface.control.facs import parse_au, parse_intensity
+
+    for k, v in _pairs(args.au, "au").items():
+        parse_au(k)
+        parse_intensity(v, f"AU{k}")
+    for k, v in _pairs(args.muscle, "muscle").items():
+        parse_intensity(v, f"muscle {k}")
 
 
 def add_arguments(p):
@@ -40,7 +62,10 @@ def add_arguments(p):
         "--expression", metavar="NAME", help="anger, disgust, fear, happiness, sadness, surprise"
     )
     src.add_argument(
-        "--intensity", type=float, default=1.0, help="emphasis of --expression / --viseme in [0, 1]"
+        "--intensity",
+        type=number(0.0, 1.0),
+        default=1.0,
+        help="emphasis of --expression / --viseme in [0, 1]",
     )
     src.add_argument(
         "--au",
@@ -61,18 +86,32 @@ def add_arguments(p):
         "-o", "--output", required=True, help="output .png/.jpg (apex) or .mp4 (video)"
     )
     out.add_argument(
-        "--duration", type=float, default=1.5, help="event duration in s for videos (default 1.5)"
+        "--duration",
+        type=number(0.0, MAX_VIDEO_S, lo_open=True, unit=" s"),
+        default=1.5,
+        help="event duration in s for videos (default 1.5; at most 3600)",
     )
-    out.add_argument("--fps", type=float, default=30.0)
-    out.add_argument("--width", type=int, default=512)
-    out.add_argument("--height", type=int, default=512)
-    out.add_argument("--view", default="front", help="front, three_quarter or profile")
+    out.add_argument("--fps", type=fps_type, default=30.0, help="frames per second, up to 240")
+    out.add_argument("--width", type=side_type, default=512, help="pixels, 16-4096")
+    out.add_argument("--height", type=side_type, default=512, help="pixels, 16-4096")
     out.add_argument(
-        "--ssaa", type=int, default=2, help="anti-aliasing supersampling 1-4 (default 2)"
+        "--view", default="front", choices=("front", "three_quarter", "profile"), help="camera"
+    )
+    out.add_argument(
+        "--ssaa",
+        type=int,
+        choices=(1, 2, 3, 4),
+        default=2,
+        help="anti-aliasing supersampling 1-4 (default 2)",
     )
     out.add_argument("--texture", metavar="IMAGE", help="a texture image for the face's UVs")
     out.add_argument("--overlay", choices=["muscles"], help="draw the muscle vectors")
-    out.add_argument("--dynamics", default="quasistatic", help="quasistatic (default) or rk2")
+    out.add_argument(
+        "--dynamics",
+        default="quasistatic",
+        choices=("quasistatic", "rk2"),
+        help="quasistatic (default) or rk2",
+    )
     out.add_argument("--quiet", action="store_true", help="no progress bar")
     add_face_argument(p)
 
@@ -117,23 +156,34 @@ def _apex(args, fm):
 def run(args) -> int:
     import numpy as np
 
+    from myoface._io import check_output_path
     from myoface.control import load_timeline
     from myoface.render import Renderer, write_image
     from myoface.synth import Synthesizer, make_camera
 
-    out = Path(args.output)
+    out = check_output_path(args.output, "-o")
     suffix = out.suffix.lower()
     video = suffix in (".mp4", ".mov", ".mkv", ".avi")
     if not video and suffix not in (".png", ".jpg", ".jpeg"):
         raise MyofaceValueError(f"-o must end in .png, .jpg or .mp4; got {out.name}")
     if args.timeline and any((args.expression, args.au, args.muscle, args.viseme)):
         raise MyofaceValueError("--timeline cannot be combined with other event options")
-    if not (args.duration > 0 and np.isfinite(args.duration)):
-        raise MyofaceValueError(f"--duration must be > 0 s; got {args.duration}")
-    if not out.parent.is_dir():
-        raise MyofaceValueError(f"output folder does not exist: {out.parent}")
-    fm = load_model(args)
+    if args.texture and not Path(args.texture).is_file():
+        raise MyofaceFileNotFoundError(f"--texture: no such texture image: {args.texture}")
+    _check_requests(args)
+    if not args.timeline and not any((args.expression, args.au, args.muscle, args.viseme)):
+        raise MyofaceValueError(
+            "nothing to show: give --expression, --au, --muscle, --viseme or --timeline"
+        )
     timeline = load_timeline(args.timeline) if args.timeline else None
+    if video and timeline is not None and timeline.duration > MAX_VIDEO_S:
+        raise MyofaceValueError(
+            f"--timeline {args.timeline} lasts {timeline.duration:g} s; a video is at most "
+            f"{MAX_VIDEO_S:g} s"
+        )
+    if video:
+        check_video_size(out, args.width, args.height)
+    fm = load_model(args)
     apex = None if timeline else _apex(args, fm)
     cam = make_camera(fm.face.vertices, args.view, args.width, args.height)
     renderer = Renderer(fm.face, cam, texture=args.texture, ssaa=args.ssaa)

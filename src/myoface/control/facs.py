@@ -79,26 +79,41 @@ def list_visemes() -> list[str]:
     return list(_visemes())
 
 
+def _brief(value) -> str:
+    """``repr(value)``, at most 40 characters."""
+    try:
+        r = repr(value)
+    except ValueError:  # an int of more digits than Python prints
+        return "an integer of thousands of digits"
+    return r if len(r) <= 40 else r[:37] + "..."
+
+
 def parse_intensity(value, what: str) -> float:
     """A number in [0, 1] or a FACS letter A-E."""
     if isinstance(value, str) and value.strip().upper() in LETTERS:
         return LETTERS[value.strip().upper()]
     try:
         v = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise MyofaceValueError(
-            f"intensity of {what} must be a number in [0, 1] or a letter A-E; got {value!r}"
+            f"intensity of {what} must be a number in [0, 1] or a letter A-E; got {_brief(value)}"
         ) from None
     if not np.isfinite(v) or not 0.0 <= v <= 1.0:
-        raise MyofaceValueError(f"intensity of {what} must be in [0, 1]; got {value!r}")
+        raise MyofaceValueError(f"intensity of {what} must be in [0, 1]; got {_brief(value)}")
     return v
 
 
 def parse_au(key) -> tuple[int, str]:
     """AU key -> (number, side) with side "" (both), "l" or "r"."""
-    m = _AU_RE.match(str(key))
-    if not m or (m.group("pre") and m.group("post")):
-        raise MyofaceValueError(f"not an action unit: {key!r} (e.g. 12, 'AU12', 'L12', '12R')")
+    try:
+        text = key if isinstance(key, str) else str(key)
+    except ValueError:
+        text = ""
+    m = _AU_RE.match(text)
+    if not m or (m.group("pre") and m.group("post")) or len(m.group("num").lstrip("0")) > 4:
+        raise MyofaceValueError(
+            f"not an action unit: {_brief(key)} (e.g. 12, 'AU12', 'L12', '12R')"
+        )
     num = int(m.group("num"))
     table = au_table()
     if num not in table:

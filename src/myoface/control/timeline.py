@@ -13,7 +13,8 @@ A timeline file (TOML or JSON) holds events::
     onset = 0.3               # optional, s: rise time (default: the expression's, or duration/3)
     offset = 0.4              # optional, s: decay time
 
-JSON: ``{"duration": 4.0, "events": [{...}, ...]}``.
+JSON: ``{"duration": 4.0, "events": [{...}, ...]}``. Times are finite numbers of seconds, at
+most :data:`MAX_TIME_S` (a day); files are UTF-8.
 
 Each event contributes ``envelope(t) * intensity * (its apex contractions)``; the envelope rises
 with a raised cosine over ``onset``, holds 1 over the apex, and falls with a raised cosine over
@@ -27,7 +28,6 @@ from __future__ import annotations
 
 import json
 import os
-import tomllib
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -41,6 +41,8 @@ KINDS = ("expression", "au", "muscle", "viseme")
 _EVENT_KEYS = {"kind", "name", "start", "duration", "intensity", "onset", "offset"}
 #: default rise/decay of AU, muscle and viseme events, as a fraction of their duration
 DEFAULT_RAMP_FRACTION = 1.0 / 3.0
+#: the largest time (s) a timeline may name: a start, a duration, an onset or an offset
+MAX_TIME_S = 86400.0
 
 
 def envelope(t, start: float, onset: float, apex: float, offset: float) -> np.ndarray:
@@ -111,20 +113,37 @@ class Event:
         return facs.muscle_contractions({self.name: self.intensity}, muscle_ids)
 
 
+def _brief(v) -> str:
+    """``repr(v)``, at most 40 characters (an int too long to print says so)."""
+    try:
+        r = repr(v)
+    except ValueError:
+        return "an integer of thousands of digits"
+    return r if len(r) <= 40 else r[:37] + "..."
+
+
 def _number(ev: dict, key: str, where: str, default=None) -> float | None:
     if key not in ev:
         if default is None and key in ("start", "duration"):
             raise MyofaceFormatError(f"{where}: missing {key!r}")
         return default
     v = ev[key]
-    if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
-        raise MyofaceFormatError(f"{where}: {key} must be a finite number (s); got {v!r}")
-    return float(v)
+    try:
+        f = float(v) if isinstance(v, int | float) and not isinstance(v, bool) else np.nan
+    except OverflowError:  # an int beyond float
+        f = np.inf
+    if not np.isfinite(f):
+        raise MyofaceFormatError(f"{where}: {key} must be a finite number (s); got {_brief(v)}")
+    if abs(f) > MAX_TIME_S:
+        raise MyofaceFormatError(
+            f"{where}: {key} must be at most {MAX_TIME_S:g} s (a day); got {_brief(v)}"
+        )
+    return f
 
 
 def _event(ev, where: str) -> Event:
     if not isinstance(ev, dict):
-        raise MyofaceFormatError(f"{where}: an event must be a table; got {ev!r}")
+        raise MyofaceFormatError(f"{where}: an event must be a table; got {_brief(ev)}")
     unknown = set(ev) - _EVENT_KEYS
     if unknown:
         raise MyofaceFormatError(
@@ -132,10 +151,13 @@ def _event(ev, where: str) -> Event:
         )
     kind = ev.get("kind")
     if kind not in KINDS:
-        raise MyofaceFormatError(f"{where}: kind must be one of {KINDS}; got {kind!r}")
-    if not isinstance(ev.get("name"), str | int):
-        raise MyofaceFormatError(f"{where}: missing name")
-    name = str(ev["name"])
+        raise MyofaceFormatError(f"{where}: kind must be one of {KINDS}; got {_brief(kind)}")
+    raw = ev.get("name")
+    if isinstance(raw, bool) or not isinstance(raw, str | int):
+        raise MyofaceFormatError(f"{where}: missing name (a string, or an AU number)")
+    if isinstance(raw, int) and not 0 <= raw < 1000:
+        raise MyofaceFormatError(f"{where}: a numeric name must be an AU number in [0, 999]")
+    name = str(raw)
     start = _number(ev, "start", where)
     duration = _number(ev, "duration", where)
     if start < 0:
@@ -256,14 +278,13 @@ class Timeline:
 
 def load_timeline(path: str | os.PathLike) -> Timeline:
     """Read a timeline file (``.toml`` or ``.json``; see the module doc)."""
+    from myoface._io import parse_json, parse_toml, read_text
+
     p = Path(path)
     if not p.is_file():
         raise MyofaceFileNotFoundError(f"no such timeline file: {p}")
-    text = p.read_text()
-    try:
-        doc = json.loads(text) if p.suffix.lower() == ".json" else tomllib.loads(text)
-    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise MyofaceFormatError(f"{p}: cannot parse: {exc}") from None
+    text = read_text(p, "timeline file")
+    doc = parse_json(text, str(p)) if p.suffix.lower() == ".json" else parse_toml(text, str(p))
     return Timeline.from_dict(doc, str(p))
 
 

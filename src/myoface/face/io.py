@@ -190,11 +190,13 @@ def read_waters_geoface(folder: str | os.PathLike) -> FaceMesh:
     if not folder.is_dir():
         raise MyofaceFileNotFoundError(f"no such geoface folder: {folder}")
     fl, ix = _check_file(folder / "faceline.dat"), _check_file(folder / "index.dat")
+    from myoface._io import read_text
+
     try:
-        vt = fl.read_text().split()
+        vt = read_text(fl, "Waters faceline.dat").split()
         nv = int(vt[0])
         half = np.asarray(vt[1 : 1 + 3 * nv], float).reshape(nv, 3)
-        it = ix.read_text().split()
+        it = read_text(ix, "Waters index.dat").split()
         npoly = int(it[0])
         rows = np.asarray(it[1 : 1 + 4 * npoly], np.int64).reshape(npoly, 4)
     except (ValueError, IndexError) as exc:

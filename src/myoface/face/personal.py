@@ -17,8 +17,10 @@ default muscle set, the landmark groups and everything built on them carry over 
 
 from __future__ import annotations
 
+import io
 import json
 import os
+import warnings
 from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
@@ -26,7 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
-from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.errors import (
+    MyofaceError,
+    MyofaceFileNotFoundError,
+    MyofaceFormatError,
+    MyofaceValueError,
+)
 from myoface.face.cylindrical import CYBERWARE_SHAPE, CylindricalMaps, maps_from_mesh
 from myoface.face.mesh import FaceMesh, point_mesh_distance
 
@@ -82,17 +89,40 @@ def read_landmarks(path: str | os.PathLike) -> np.ndarray:
     p = Path(path)
     if not p.is_file():
         raise MyofaceFileNotFoundError(f"no such landmark file: {p}")
+    from myoface._io import parse_json, read_text
+
     try:
         if p.suffix.lower() == ".npy":
             pts = np.load(p, allow_pickle=False)
         elif p.suffix.lower() in (".json", ".ljson"):
-            doc = json.loads(p.read_text())
+            doc = parse_json(read_text(p, "landmark file (JSON)"), str(p))
             pts = _points_from_json(doc)
         else:
-            pts = np.loadtxt(p, delimiter="," if p.suffix.lower() == ".csv" else None)
-    except (OSError, ValueError, TypeError, KeyError, IndexError) as exc:
-        raise MyofaceFormatError(f"cannot read landmarks from {p}: {exc}") from None
-    pts = np.asarray(pts, dtype=np.float64)
+            text = read_text(p, "landmark file (text)")
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # "no data": the shape check below says it
+                pts = np.loadtxt(
+                    io.StringIO(text),
+                    delimiter="," if p.suffix.lower() == ".csv" else None,
+                    ndmin=2,
+                )
+        pts = np.asarray(pts, dtype=np.float64)
+    except MyofaceError:
+        raise
+    except (
+        OSError,
+        ValueError,
+        TypeError,
+        KeyError,
+        IndexError,
+        AttributeError,
+        EOFError,
+        SyntaxError,
+        OverflowError,
+        RecursionError,
+    ) as exc:  # numpy's and json's readers raise all of these on bad bytes
+        msg = " ".join(str(exc).split())[:200]
+        raise MyofaceFormatError(f"cannot read landmarks from {p}: {msg}") from None
     if pts.shape != (68, 3) or not np.isfinite(pts).all():
         raise MyofaceFormatError(
             f"{p}: expected 68 finite 3-D points (iBUG-68 order); got shape {pts.shape}"

@@ -305,10 +305,9 @@ def load_muscles(path: str | os.PathLike, face: FaceMesh) -> MuscleSet:
     path = Path(path)
     if not path.is_file():
         raise MyofaceFileNotFoundError(f"no such muscle file: {path}")
-    try:
-        doc = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise MyofaceFormatError(f"{path}: not a valid TOML file: {exc}") from None
+    from myoface._io import parse_toml, read_text
+
+    doc = parse_toml(read_text(path, "muscle file (TOML)"), str(path))
     return muscles_from_dict(doc, face, where=str(path))
 
 
@@ -373,8 +372,10 @@ def read_waters_muscles(path: str | os.PathLike) -> MuscleSet:
     clamp`` (Waters' units, scaled by ``WATERS_UNIT_MM``). No jaw. Ids are lower-case with the
     subject's side as suffix (see :func:`_waters_id`); ``source_name`` keeps Waters' name.
     """
+    from myoface._io import read_text
+
     p = _waters_file(path, "muscle.dat")
-    tok = p.read_text().split()
+    tok = read_text(p, "Waters muscle file").split()
     try:
         n = int(tok[0])
         muscles = []
@@ -414,7 +415,9 @@ def read_waters_expressions(path: str | os.PathLike, muscles: MuscleSet) -> dict
     """
     p = _waters_file(path, "expression-macros.dat")
     by_source = {m.source_name: i for i, m in enumerate(muscles.muscles) if m.kind == "waters"}
-    tok = p.read_text().split()
+    from myoface._io import read_text
+
+    tok = read_text(p, "Waters expression file").split()
     out: dict[str, np.ndarray] = {}
     try:
         n = int(tok[0])

@@ -22,6 +22,18 @@ def _unit(v, name) -> np.ndarray:
     return a / n
 
 
+def _check_size(width, height) -> None:
+    ok = all(isinstance(n, int | np.integer) and not isinstance(n, bool) for n in (width, height))
+    if not ok:
+        raise MyofaceValueError(
+            f"camera width and height must be integers (pixels); got {width!r}x{height!r}"
+        )
+    if not (1 <= width <= 16384 and 1 <= height <= 16384):
+        raise MyofaceValueError(
+            f"image size must be between 1 and 16384 pixels; got {width}x{height}"
+        )
+
+
 @dataclass(frozen=True)
 class Camera:
     """A pinhole (``fov_deg``) or orthographic (``ortho_height_mm``) camera.
@@ -49,14 +61,7 @@ class Camera:
             if a.shape != (3,) or not np.isfinite(a).all():
                 raise MyofaceValueError(f"camera {k} must be a finite 3-vector (mm)")
             object.__setattr__(self, k, a)
-        if not (
-            isinstance(self.width, int | np.integer) and isinstance(self.height, int | np.integer)
-        ):
-            raise MyofaceValueError("camera width and height must be integers (pixels)")
-        if not (1 <= self.width <= 16384 and 1 <= self.height <= 16384):
-            raise MyofaceValueError(
-                f"image size must be between 1 and 16384 pixels; got {self.width}x{self.height}"
-            )
+        _check_size(self.width, self.height)
         if self.fov_deg is not None and not 0.1 <= float(self.fov_deg) <= 170:
             raise MyofaceValueError(f"fov_deg must be in [0.1, 170]; got {self.fov_deg}")
         if self.fov_deg is None and not float(self.ortho_height_mm) > 0:
@@ -124,6 +129,7 @@ class Camera:
         margin: float = 1.12,
     ) -> Camera:
         """A camera on ``direction`` (from the mesh towards the camera) framing ``vertices``."""
+        _check_size(width, height)
         v = np.asarray(vertices, dtype=np.float64)
         lo, hi = v.min(axis=0), v.max(axis=0)
         center = 0.5 * (lo + hi)

@@ -76,8 +76,32 @@ def _check_vertices(v, n: int, what: str = "vertices") -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
+def _rgb01(t: np.ndarray) -> np.ndarray:
+    """An image as float (H, W, 3) sRGB in [0, 1]: grey (H, W) or (H, W, 1), grey + alpha,
+    RGB or RGBA; integers scaled by their type's range (8 or 16 bits), floats as they are."""
+    if t.ndim == 2:
+        t = t[:, :, None]
+    if t.ndim != 3 or t.shape[2] not in (1, 2, 3, 4) or t.shape[0] < 1 or t.shape[1] < 1:
+        raise MyofaceValueError(
+            f"a texture must be an (H, W) grey or (H, W, 3) colour image; got shape {t.shape}"
+        )
+    t = t[:, :, :1] if t.shape[2] <= 2 else t[:, :, :3]  # drop the alpha channel
+    if t.dtype == np.bool_:
+        t = t.astype(np.float64)
+    elif np.issubdtype(t.dtype, np.integer):
+        t = t.astype(np.float64) / float(np.iinfo(t.dtype).max)
+    elif np.issubdtype(t.dtype, np.floating):
+        t = t.astype(np.float64)
+    else:
+        raise MyofaceValueError(f"a texture must hold numbers; got {t.dtype}")
+    if not np.isfinite(t).all():
+        raise MyofaceValueError("a texture must hold finite values")
+    return np.repeat(t, 3, axis=2) if t.shape[2] == 1 else t
+
+
 def load_texture(texture) -> np.ndarray:
-    """A texture as float32 linear RGB (H, W, 3) from an image array (uint8/float) or a path."""
+    """A texture as float32 linear RGB (H, W, 3) from an image array or a path: grey or colour,
+    with or without alpha, 8 or 16 bits per channel (or floats in [0, 1])."""
     if isinstance(texture, str | os.PathLike):
         p = Path(texture)
         if not p.is_file():
@@ -88,13 +112,7 @@ def load_texture(texture) -> np.ndarray:
             texture = iio.imread(p)
         except Exception as exc:  # imageio raises many types for unreadable images
             raise MyofaceFormatError(f"cannot read texture image {p}: {exc}") from None
-    t = np.asarray(texture)
-    if t.ndim == 2:
-        t = np.repeat(t[:, :, None], 3, axis=2)
-    if t.ndim != 3 or t.shape[2] not in (3, 4) or t.shape[0] < 1 or t.shape[1] < 1:
-        raise MyofaceValueError(f"a texture must be an (H, W, 3) image; got shape {t.shape}")
-    t = t[:, :, :3]
-    t = t.astype(np.float64) / 255.0 if t.dtype == np.uint8 else t.astype(np.float64)
+    t = _rgb01(np.asarray(texture))
     t = np.clip(t, 0, 1)
     lin = np.where(t <= 0.04045, t / 12.92, ((t + 0.055) / 1.055) ** 2.4)
     return np.ascontiguousarray(lin, dtype=np.float32)

@@ -46,6 +46,53 @@ def _viser():
     return viser
 
 
+def check_address(host: str, port: int) -> str:
+    """Check that a server can listen on ``host``:``port`` before starting it; returns the
+    address ``host`` resolves to.
+
+    A clear :class:`~myoface.errors.MyofaceValueError` for a port outside 0-65535 (0: any free
+    port), a host name that does not resolve, an address that is not this machine's, and a port
+    that another program is listening on (the server would otherwise move to another port or,
+    for a host it cannot listen on, wait forever).
+    """
+    import errno
+    import socket
+
+    if isinstance(port, bool) or not isinstance(port, int | np.integer) or not 0 <= port <= 65535:
+        raise MyofaceValueError(
+            f"port must be an integer in [0, 65535] (0: any free); got {port!r}"
+        )
+    if not isinstance(host, str) or not host.strip():
+        raise MyofaceValueError(f"host must be a host name or an address; got {host!r}")
+    try:
+        infos = socket.getaddrinfo(
+            host, int(port), type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )
+    except (socket.gaierror, UnicodeError, OSError) as exc:
+        msg = getattr(exc, "strerror", None) or str(exc)
+        raise MyofaceValueError(f"host {host!r} does not resolve to an address: {msg}") from None
+    family, kind, proto, _, addr = infos[0]
+    with socket.socket(family, kind, proto) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server will
+        try:
+            sock.bind(addr)
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                raise MyofaceValueError(
+                    f"port {port} on {host} is in use by another program; choose another port "
+                    "(0: any free one)"
+                ) from None
+            if exc.errno == errno.EADDRNOTAVAIL:
+                shown = host if addr[0] == host else f"{host} ({addr[0]})"
+                raise MyofaceValueError(f"host {shown} is not an address of this machine") from None
+            if exc.errno == errno.EACCES:
+                raise MyofaceValueError(
+                    f"no permission to listen on port {port} (ports below 1024 need privileges)"
+                ) from None
+            raise MyofaceValueError(f"cannot listen on {host}:{port}: {exc.strerror}") from None
+    return str(addr[0])
+
+
 def _aspect(camera) -> float:
     """A browser camera's width / height (1 before the browser said)."""
     return float(getattr(camera, "aspect", 1.0) or 1.0)
@@ -70,6 +117,7 @@ class FaceViewer:
 
     def __init__(self, model, host: str = "127.0.0.1", port: int = 8080, texture=None):
         viser = _viser()
+        check_address(host, port)
         self.model = model
         self.state = ViewerState(model)
         self.renderer = Renderer(model.face, Camera.front(model.face.vertices), texture=texture)
@@ -77,6 +125,9 @@ class FaceViewer:
         self._texture8 = None if tex is None else to_srgb8(tex)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.host, self.port = host, self.server.get_port()
+        if port and self.port != port:  # taken since check_address: viser moved on
+            self.server.stop()
+            raise MyofaceValueError(f"port {port} on {host} is in use by another program")
         self.scene = FaceScene(self.server.scene, model, self.renderer)
         self.worker = PhysicsWorker(model, self._publish, self._notify)
         self.worker.start()

@@ -1,0 +1,266 @@
+"""Property tests of every parser of user input: whatever bytes, text or values come in, only a
+MyofaceError comes out (GUIDE §4), never a bare ValueError, TypeError, UnicodeDecodeError, ...
+
+Timelines, contractions CSVs, initial-contour JSON, landmark files, muscle files, AU keys,
+intensities and the ``--au`` / ``--muscle`` requests of ``myoface synth``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from myoface.errors import MyofaceError  # noqa: E402
+
+SETTINGS = settings(
+    max_examples=50,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+
+#: JSON-like values, with the awkward ones: NaN, infinities, huge integers, deep nesting
+scalars = (
+    st.none()
+    | st.booleans()
+    | st.integers()
+    | st.integers(min_value=10**300, max_value=10**400)
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=20)
+)
+values = st.recursive(
+    scalars,
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4)
+    ),
+    max_leaves=12,
+)
+
+
+def only_myoface_errors(fn, *args):
+    """Call ``fn``; any exception other than a MyofaceError fails the test."""
+    try:
+        fn(*args)
+    except MyofaceError:
+        pass
+
+
+@pytest.fixture(scope="module")
+def scratch(tmp_path_factory) -> Path:
+    """A folder for the examples' files (each example overwrites the last)."""
+    return tmp_path_factory.mktemp("prop")
+
+
+def _write(d: Path, data: bytes | str, suffix: str) -> Path:
+    p = d / f"input{suffix}"
+    if isinstance(data, str):
+        p.write_text(data, encoding="utf-8")
+    else:
+        p.write_bytes(data)
+    return p
+
+
+def _json_text(v) -> str:
+    return json.dumps(v, allow_nan=True)
+
+
+# ------------------------------------------------------------------------------- timelines
+
+EVENT_KEYS = ("kind", "name", "start", "duration", "intensity", "onset", "offset", "other")
+event_like = st.dictionaries(
+    st.sampled_from(EVENT_KEYS),
+    scalars | st.sampled_from(["au", "expression", "viseme", "muscle", "12", "L12", "happiness"]),
+    max_size=8,
+)
+timeline_like = st.fixed_dictionaries(
+    {},
+    optional={
+        "events": st.lists(event_like, max_size=4) | values,
+        "duration": scalars,
+        "title": scalars,
+    },
+)
+
+
+@SETTINGS
+@given(data=st.binary(max_size=300), suffix=st.sampled_from([".toml", ".json"]))
+def test_timeline_file_of_any_bytes(scratch, data, suffix):
+    from myoface.control import load_timeline
+
+    only_myoface_errors(load_timeline, _write(scratch, data, suffix))
+
+
+@SETTINGS
+@given(doc=timeline_like | values)
+def test_timeline_of_any_values(scratch, doc):
+    from myoface.control import load_timeline
+    from myoface.control.timeline import Timeline
+
+    only_myoface_errors(Timeline.from_dict, doc)
+    only_myoface_errors(load_timeline, _write(scratch, _json_text(doc), ".json"))
+
+
+# ---------------------------------------------------------------------- contractions CSV
+
+csv_text = st.lists(
+    st.lists(
+        st.sampled_from(
+            ["time_s", "time", "quality", "jaw", "zygomaticus_major_l", "frame", "ok", "lost"]
+        )
+        | st.sampled_from(["", "0", "0.5", "1", "1.5", "-1", "nan", "inf", "1e400", '"a,b"'])
+        | st.text(max_size=6),
+        min_size=0,
+        max_size=5,
+    ).map(",".join),
+    max_size=6,
+).map("\n".join)
+
+
+@SETTINGS
+@given(data=st.binary(max_size=300) | csv_text.map(str.encode))
+def test_contractions_csv_of_any_bytes(scratch, data):
+    import warnings
+
+    from myoface.analysis.pipeline import read_contractions_csv
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # unknown columns are a warning, not an error
+        only_myoface_errors(
+            read_contractions_csv, _write(scratch, data, ".csv"), ["jaw", "zygomaticus_major_l"]
+        )
+
+
+# ----------------------------------------------------------------------- init contours JSON
+
+SECTIONS = ["lips", "upper_lip", "chin", "brow_l", "nonsense"]
+
+
+@SETTINGS
+@given(
+    data=st.binary(max_size=300)
+    | values.map(_json_text).map(str.encode)
+    | st.dictionaries(st.sampled_from(SECTIONS), values, max_size=3)
+    .map(lambda c: {"contours": c})
+    .map(_json_text)
+    .map(str.encode)
+)
+def test_init_json_of_any_bytes(scratch, data):
+    from myoface.analysis.pipeline import load_init
+
+    only_myoface_errors(load_init, _write(scratch, data, ".json"))
+
+
+# ------------------------------------------------------------------------- landmark files
+
+
+@SETTINGS
+@given(
+    data=st.binary(max_size=400)
+    | st.binary(max_size=200).map(lambda b: b"\x93NUMPY\x01\x00" + b)
+    | values.map(_json_text).map(str.encode)
+    | st.lists(st.lists(st.floats(), min_size=3, max_size=3), max_size=70)
+    .map(lambda rows: "\n".join(" ".join(map(str, r)) for r in rows))
+    .map(str.encode),
+    suffix=st.sampled_from([".json", ".ljson", ".npy", ".txt", ".csv"]),
+)
+def test_landmark_file_of_any_bytes(scratch, data, suffix):
+    from myoface.face.personal import read_landmarks
+
+    only_myoface_errors(read_landmarks, _write(scratch, data, suffix))
+
+
+@SETTINGS
+@given(
+    groups=st.dictionaries(
+        st.text(max_size=6),
+        st.fixed_dictionaries(
+            {"landmarks": st.fixed_dictionaries({"points": values})},
+            optional={"labels": values},
+        )
+        | values,
+        max_size=2,
+    )
+)
+def test_ljson_groups_of_any_values(scratch, groups):
+    from myoface.face.personal import read_landmarks
+
+    only_myoface_errors(read_landmarks, _write(scratch, _json_text({"groups": groups}), ".ljson"))
+
+
+# ----------------------------------------------------------------------------- muscle files
+
+
+@pytest.fixture(scope="module")
+def default_face_and_ids():
+    from myoface.face import load_default_face
+    from myoface.muscles.io import load_default_muscles
+
+    face = load_default_face()
+    ms = load_default_muscles(face)
+    return face, [m.id for m in ms.muscles] + ["jaw"]
+
+
+@SETTINGS
+@given(data=st.binary(max_size=300))
+def test_muscle_file_of_any_bytes(scratch, default_face_and_ids, data):
+    from myoface.muscles.io import load_muscles
+
+    face, _ = default_face_and_ids
+    only_myoface_errors(load_muscles, _write(scratch, data, ".toml"), face)
+
+
+# --------------------------------------------------------------------- AUs and intensities
+
+
+@SETTINGS
+@given(key=st.text(max_size=12) | st.integers() | scalars | values)
+def test_parse_au_of_anything(key):
+    from myoface.control.facs import parse_au
+
+    only_myoface_errors(parse_au, key)
+
+
+@SETTINGS
+@given(value=st.text(max_size=12) | scalars | values)
+def test_parse_intensity_of_anything(value):
+    from myoface.control.facs import parse_intensity
+
+    try:
+        v = parse_intensity(value, "x")
+    except MyofaceError:
+        return
+    assert 0.0 <= v <= 1.0
+
+
+request = (
+    st.sampled_from(["12", "L12", "AU6", "6R", "zygomaticus_major", "jaw", "risorius_l", ""])
+    | st.text(max_size=10)
+).flatmap(
+    lambda k: (
+        st.sampled_from(["0.5", "1", "C", "nan", "-0", "2", "", "1e999", "=="]).map(
+            lambda v: f"{k}={v}"
+        )
+        | st.text(max_size=10).map(lambda v: f"{k}{v}")
+    )
+)
+
+
+@SETTINGS
+@given(aus=st.lists(request, max_size=4), muscles=st.lists(request, max_size=4))
+def test_synth_requests_of_any_text(default_face_and_ids, aus, muscles):
+    from myoface.commands.synth import _pairs
+    from myoface.control import au_contractions, muscle_contractions
+
+    _, ids = default_face_and_ids
+    try:
+        c = au_contractions(_pairs(aus, "au"), ids)
+        assert ((c >= 0) & (c <= 1)).all()
+        c = muscle_contractions(_pairs(muscles, "muscle"), ids)
+        assert ((c >= 0) & (c <= 1)).all()
+    except MyofaceError:
+        pass
