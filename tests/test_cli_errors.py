@@ -523,3 +523,20 @@ class _no_warnings:
 
     def __exit__(self, *exc):
         return self._cm.__exit__(*exc)
+
+
+def test_errors_name_the_subcommand(tmp_path, capsys):
+    (tmp_path / "m.npz").mkdir()
+    err = one_line_error(capsys, ["face", "maps", "x.obj", "-o", tmp_path / "m.npz"], "folder")
+    assert err.startswith("myoface face maps: error: -o: ")
+
+
+def test_16bit_grey_photo_is_read_as_8bit_rgb(tmp_path):
+    import imageio.v3 as iio
+
+    from myoface.commands.face import _read_photo
+
+    p = tmp_path / "grey16.png"
+    iio.imwrite(p, np.full((8, 8), 32896, np.uint16))
+    img = _read_photo(p, 0)
+    assert img.dtype == np.uint8 and img.shape == (8, 8, 3) and (img == 128).all()

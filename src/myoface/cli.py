@@ -74,11 +74,11 @@ def _stop_signals():
             signal.signal(sig, handler)
 
 
-def _one_line_warnings(command: str):
+def _one_line_warnings(prog: str):
     def show(message, category, filename, lineno, file=None, line=None):
         text = " ".join(str(message).split())
         kind = "warning" if issubclass(category, UserWarning) else category.__name__
-        print(f"myoface {command}: {kind}: {text}", file=sys.stderr, flush=True)
+        print(f"{prog}: {kind}: {text}", file=sys.stderr, flush=True)
 
     return show
 
@@ -104,7 +104,17 @@ def build_parser() -> argparse.ArgumentParser:
         )
         mod.add_arguments(p)
         p.set_defaults(_run=mod.run)
+        _name_subcommands(p)
     return parser
+
+
+def _name_subcommands(parser: argparse.ArgumentParser) -> None:
+    """Each (sub)parser records its name (``myoface face maps``) for the error messages."""
+    parser.set_defaults(_prog=parser.prog)
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                _name_subcommands(sub)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -117,27 +127,28 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return 2
     debug = getattr(args, "debug", False)
+    prog = getattr(args, "_prog", f"myoface {args.command}")
     with warnings.catch_warnings(), _stop_signals():
         warnings.filterwarnings("default", category=MyofaceWarning)  # said, whatever -W says
         if not debug:
-            warnings.showwarning = _one_line_warnings(args.command)
+            warnings.showwarning = _one_line_warnings(prog)
         try:
             return int(args._run(args) or 0)
         except MyofaceError as exc:
             if debug:
                 raise
-            print(f"myoface {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+            print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
             return 1
         except KeyboardInterrupt as exc:
             signum = getattr(exc, "signum", signal.SIGINT)
             name = signal.Signals(signum).name
-            print(f"myoface {args.command}: interrupted ({name})", file=sys.stderr)
+            print(f"{prog}: interrupted ({name})", file=sys.stderr)
             return 128 + int(signum)
         except (OSError, MemoryError) as exc:  # the machine's, not the input's: no traceback
             if debug:
                 raise
             what = "out of memory" if isinstance(exc, MemoryError) else _one_line(exc)
-            print(f"myoface {args.command}: error: {what}", file=sys.stderr)
+            print(f"{prog}: error: {what}", file=sys.stderr)
             return 1
 
 

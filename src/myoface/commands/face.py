@@ -305,11 +305,10 @@ def _read_photo(path: Path, frame: int):
         img = iio.imread(path)
     except Exception as exc:  # imageio raises many types for unreadable files
         raise MyofaceValueError(f"cannot read {path} as an image: {exc}") from None
-    if img.ndim == 2:
-        img = np.repeat(img[:, :, None], 3, axis=2)
-    if img.dtype != np.uint8:
-        raise MyofaceValueError(f"{path}: expected an 8-bit image; got {img.dtype}")
-    return img[:, :, :3]
+    from myoface.render.renderer import _rgb01
+
+    rgb = _rgb01(np.asarray(img), f"the photo {path}")  # grey or colour, 8 or 16 bits
+    return (np.clip(rgb, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
 def _from_photo(args) -> int:

@@ -76,14 +76,14 @@ def _check_vertices(v, n: int, what: str = "vertices") -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def _rgb01(t: np.ndarray) -> np.ndarray:
+def _rgb01(t: np.ndarray, what: str = "a texture") -> np.ndarray:
     """An image as float (H, W, 3) sRGB in [0, 1]: grey (H, W) or (H, W, 1), grey + alpha,
     RGB or RGBA; integers scaled by their type's range (8 or 16 bits), floats as they are."""
     if t.ndim == 2:
         t = t[:, :, None]
     if t.ndim != 3 or t.shape[2] not in (1, 2, 3, 4) or t.shape[0] < 1 or t.shape[1] < 1:
         raise MyofaceValueError(
-            f"a texture must be an (H, W) grey or (H, W, 3) colour image; got shape {t.shape}"
+            f"{what} must be an (H, W) grey or (H, W, 3) colour image; got shape {t.shape}"
         )
     t = t[:, :, :1] if t.shape[2] <= 2 else t[:, :, :3]  # drop the alpha channel
     if t.dtype == np.bool_:
@@ -93,9 +93,9 @@ def _rgb01(t: np.ndarray) -> np.ndarray:
     elif np.issubdtype(t.dtype, np.floating):
         t = t.astype(np.float64)
     else:
-        raise MyofaceValueError(f"a texture must hold numbers; got {t.dtype}")
+        raise MyofaceValueError(f"{what} must hold numbers; got {t.dtype}")
     if not np.isfinite(t).all():
-        raise MyofaceValueError("a texture must hold finite values")
+        raise MyofaceValueError(f"{what} must hold finite values")
     return np.repeat(t, 3, axis=2) if t.shape[2] == 1 else t
 
 
