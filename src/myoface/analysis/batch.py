@@ -1,0 +1,614 @@
+"""Many videos analysed at once, on this machine or on a Dask cluster (``myoface batch``).
+
+Each video gets a folder under the output folder, named from its stem (``clip``, then
+``clip-2``, ... when stems repeat), holding what ``myoface analyze`` writes
+(:func:`~myoface.analysis.outputs.analyze_to_folder`) and, written last, ``done.json``: the
+video's identity (path, size, modification time), the settings and the video's summary row.
+A folder whose ``done.json`` matches the video and the settings is complete: a second run
+skips it. A video that fails is recorded with its error and never stops the others; its
+folder is removed (or, if it existed, left without ``done.json``), so the next run tries it
+again.
+
+The output folder also gets ``summary.parquet`` and ``summary.csv``, one row per video of the
+run (:data:`SUMMARY_COLUMNS`, then ``mean_<muscle>`` columns), each written whole (a
+temporary file renamed).
+
+Engines:
+
+- ``"local"``: a pool of ``workers`` processes on this machine (plain calls in this process
+  when ``workers`` is 1 or there is one video to analyse);
+- ``"dask"``: a ``distributed.LocalCluster`` of ``workers`` single-threaded worker processes,
+  or the existing cluster whose scheduler is at ``scheduler`` (or a ``client`` you made),
+  e.g. one started on SLURM by dask-jobqueue or on Kubernetes by dask-kubernetes. Every
+  worker needs myoface installed and must see the videos and the output folder at the same
+  paths (a shared file system).
+
+A worker process builds the face model once (:func:`cached_model`) and keeps it for every
+video it analyses; the model is immutable and shared by the worker's threads.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import importlib
+import json
+import math
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from myoface.analysis.outputs import FolderResult, analyze_to_folder
+from myoface.errors import (
+    MyofaceDependencyError,
+    MyofaceError,
+    MyofaceFileNotFoundError,
+    MyofaceValueError,
+)
+
+__all__ = [
+    "ENGINES",
+    "FolderResult",
+    "SUMMARY_COLUMNS",
+    "analyze_to_folder",
+    "cached_model",
+    "expand_videos",
+    "local_pool",
+    "run_batch",
+    "warm_model",
+    "write_summary",
+]
+
+ENGINES = ("local", "dask")
+STATUSES = ("ok", "failed", "skipped")
+#: the marker of a complete result folder, written last
+DONE_FILE = "done.json"
+#: the summary's columns before the per-muscle means (``mean_<muscle id>``)
+SUMMARY_COLUMNS = (
+    "path",  # the video, resolved
+    "folder",  # its result folder, relative to the output folder
+    "status",  # ok / failed / skipped (complete from an earlier run)
+    "error",  # why it failed (empty otherwise)
+    "frames",  # frames analysed
+    "measured_fraction",  # the fraction of them measured (quality "ok")
+    "fps",  # frames analysed per second of wall time
+    "wall_time_s",  # the video's analysis and outputs, s (the worker's model set-up excluded)
+)
+#: how long (s) to wait for an existing Dask scheduler, and for it to have a worker
+SCHEDULER_TIMEOUT_S = 10.0
+_GLOB_CHARS = set("*?[")
+
+
+def _require(module: str, feature: str):
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise MyofaceDependencyError(
+            f'{feature} needs {module.split(".")[0]}: pip install "myoface[batch]"'
+        ) from None
+
+
+# ------------------------------------------------------------------------------ inputs
+
+
+def expand_videos(patterns, exclude: str | os.PathLike | None = None) -> list[Path]:
+    """The videos named by ``patterns``: paths (a movie file or a folder of images) and glob
+    patterns (``*``, ``?``, ``[...]``; ``**`` spans folders), resolved, in the order given
+    (a pattern's matches sorted), each once. Files inside ``exclude`` (the output folder, whose
+    overlay videos a pattern may match) are left out.
+
+    Raises
+    ------
+    MyofaceFileNotFoundError
+        For a path that does not exist, or a pattern that matches no file.
+    """
+    ex = Path(exclude).resolve() if exclude is not None else None
+    out: list[Path] = []
+    seen: set[Path] = set()
+    for pat in patterns:
+        pat = os.fspath(pat)
+        if _GLOB_CHARS & set(pat):
+            hits = sorted(glob.glob(os.path.expanduser(pat), recursive=True))
+            if not hits:
+                raise MyofaceFileNotFoundError(f"no file matches {pat!r}")
+        else:
+            if not Path(pat).exists():
+                raise MyofaceFileNotFoundError(f"no such video: {pat}")
+            hits = [pat]
+        for h in hits:
+            p = Path(h).resolve()
+            if ex is not None and (p == ex or ex in p.parents):
+                continue
+            if p not in seen:
+                seen.add(p)
+                out.append(p)
+    if not out:
+        raise MyofaceFileNotFoundError(
+            f"no video to analyse: every match of {' '.join(map(str, patterns))} is inside {ex}"
+        )
+    return out
+
+
+def _identity(video: Path) -> dict:
+    st = video.stat()
+    return {"video": str(video), "size": st.st_size, "mtime_ns": st.st_mtime_ns}
+
+
+def _read_done(folder: Path) -> dict | None:
+    try:
+        doc = json.loads((folder / DONE_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    return doc if isinstance(doc, dict) else None
+
+
+def _is_done(folder: Path, video: Path, settings: dict) -> dict | None:
+    """The summary row stored in ``folder``'s done.json when it holds this video's complete
+    result with these settings, else None."""
+    doc = _read_done(folder)
+    if doc is None or doc.get("settings") != settings:
+        return None
+    row = doc.get("row")
+    if not isinstance(row, dict) or not set(SUMMARY_COLUMNS) <= set(row):
+        return None
+    try:
+        same = {k: doc.get(k) for k in ("video", "size", "mtime_ns")} == _identity(video)
+    except OSError:
+        return None
+    return row if same else None
+
+
+def result_folders(videos: list[Path], out: Path) -> list[str]:
+    """A folder name under ``out`` for each video: its stem, or ``stem-2``, ``stem-3``, ...
+    when stems repeat. A name whose folder holds another video's complete result (its
+    done.json) is not reused, so names stay with their videos from run to run."""
+    names = []
+    taken: set[str] = set()
+    for v in videos:
+        stem = v.stem if v.is_file() else v.name
+        stem = stem or "video"
+        k = 1
+        while True:
+            name = stem if k == 1 else f"{stem}-{k}"
+            if name not in taken:
+                doc = _read_done(out / name)
+                if doc is None or doc.get("video") == str(v):
+                    break
+            k += 1
+        taken.add(name)
+        names.append(name)
+    return names
+
+
+# ------------------------------------------------------------------------------ the task
+
+_MODELS: dict = {}
+_MODELS_LOCK = threading.Lock()
+
+
+def cached_model(face: str | None = None, muscles: str | None = None):
+    """This process's face model for ``face`` (a path; None: the bundled face) and
+    ``muscles``, built on first use and kept (immutable, safe to share between threads)."""
+    key = (face, muscles)
+    with _MODELS_LOCK:
+        fm = _MODELS.get(key)
+        if fm is None:
+            from myoface.analysis.estimate import skin_response
+            from myoface.analysis.pipeline import PAPER_MUSCLES
+            from myoface.model import load_face_model
+
+            fm = load_face_model(face, muscles=muscles)
+            # the skin's responses to the estimated muscles (both trackers use them), memoised
+            # on the model: computed here once rather than in the worker's first analysis.
+            # A face without those muscles fails in the analysis itself, with its message.
+            with contextlib.suppress(MyofaceError, KeyError):
+                skin_response(fm, PAPER_MUSCLES)
+            _MODELS[key] = fm
+    return fm
+
+
+def warm_model(face: str | None = None, muscles: str | None = None) -> None:
+    """:func:`cached_model`, returning nothing (for ``client.run`` or a pool's initializer,
+    which would otherwise send the model back)."""
+    cached_model(face, muscles)
+
+
+@dataclass
+class _Job:
+    """One video's work, sent to a worker (small: paths, settings and the init contours)."""
+
+    video: str
+    out: str
+    folder: str
+    settings: dict
+    init: dict | None = field(default=None, repr=False)
+    single_thread: bool = False
+
+
+def _failed_row(job: _Job, error: str, wall_s: float = math.nan) -> dict:
+    return {
+        "path": job.video,
+        "folder": job.folder,
+        "status": "failed",
+        "error": error,
+        "frames": 0,
+        "measured_fraction": math.nan,
+        "fps": math.nan,
+        "wall_time_s": wall_s,
+        "means": {},
+    }
+
+
+def _error_text(exc: BaseException) -> str:
+    msg = " ".join(str(exc).split())
+    if isinstance(exc, MyofaceError):
+        return msg or type(exc).__name__
+    return f"{type(exc).__name__}: {msg}" if msg else type(exc).__name__
+
+
+def analyze_job(job: _Job) -> dict:
+    """Analyse one video into its folder and return its summary row; never raises for a bad
+    video (the row says why it failed). Runs on a worker."""
+    from myoface._io import atomic_output
+
+    if job.single_thread:
+        # one video per worker thread: the numba kernels use this thread only
+        import numba
+
+        numba.set_num_threads(1)
+    from myoface.analysis.video import open_video
+
+    s = job.settings
+    t0 = time.perf_counter()
+    try:
+        video = open_video(job.video)  # a broken file fails before the model is built
+        model = cached_model(s["face"], s["muscles"])
+        folder = Path(job.out) / job.folder
+        (folder / DONE_FILE).unlink(missing_ok=True)  # an older result is no longer complete
+        t0 = time.perf_counter()
+        res = analyze_to_folder(
+            video,
+            folder,
+            model=model,
+            tracker=s["tracker"],
+            init=job.init,
+            max_frames=s["max_frames"],
+            estimator=s["estimator"],
+            face=s["face"],
+        )
+        wall = time.perf_counter() - t0
+        row = {
+            "path": job.video,
+            "folder": job.folder,
+            "status": "ok",
+            "error": "",
+            "frames": len(res.frames),
+            "measured_fraction": res.measured_fraction,
+            "fps": len(res.frames) / wall if wall > 0 else math.nan,
+            "wall_time_s": wall,
+            "means": res.mean_contractions(),
+        }
+        doc = {**_identity(Path(job.video)), "settings": s, "row": row}
+        with atomic_output(folder / DONE_FILE) as tmp:
+            tmp.write_text(json.dumps(doc, indent=1))
+        return row
+    except Exception as exc:  # a bad video is recorded, never raised
+        return _failed_row(job, _error_text(exc), time.perf_counter() - t0)
+
+
+# ------------------------------------------------------------------------------ engines
+
+
+def local_pool(workers: int, initializer=None, initargs=()):
+    """A pool of ``workers`` processes for the local engine (spawned, not forked: this process
+    may hold numba's and OpenMP's threads); ``initializer(*initargs)`` runs in each as it
+    starts (e.g. :func:`warm_model`, to build the model before the first video)."""
+    import concurrent.futures as cf
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    return cf.ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=initializer, initargs=initargs
+    )
+
+
+def _run_local(jobs: list[_Job], workers: int, record, executor=None) -> None:
+    """Run ``jobs`` (on ``executor``, a pool of ``workers`` processes, or in this process
+    when that is 1), calling ``record(k, row)`` as job ``k`` finishes."""
+    import concurrent.futures as cf
+
+    if executor is None and (workers <= 1 or len(jobs) <= 1):
+        for k, job in enumerate(jobs):
+            record(k, analyze_job(job))
+        return
+    for job in jobs:
+        job.single_thread = True
+    with contextlib.ExitStack() as stack:
+        if executor is None:
+            executor = stack.enter_context(local_pool(min(workers, len(jobs))))
+        futs = {executor.submit(analyze_job, job): k for k, job in enumerate(jobs)}
+        try:
+            for fut in cf.as_completed(futs):
+                k = futs[fut]
+                try:
+                    row = fut.result()
+                except Exception as exc:  # the worker process died
+                    row = _failed_row(jobs[k], _error_text(exc))
+                record(k, row)
+        except BaseException:
+            for fut in futs:
+                fut.cancel()
+            raise
+
+
+def connect(scheduler: str, timeout: float = SCHEDULER_TIMEOUT_S):
+    """A ``distributed.Client`` of the scheduler at ``scheduler`` (e.g. ``tcp://host:8786``),
+    once it has at least one worker; a :class:`MyofaceValueError` after ``timeout`` s
+    rather than a hang."""
+    distributed = _require("distributed", "the dask engine")
+    try:
+        client = distributed.Client(scheduler, timeout=timeout)
+    except ValueError as exc:
+        raise MyofaceValueError(f"--scheduler: not a scheduler address: {exc}") from None
+    except (OSError, TimeoutError) as exc:
+        raise MyofaceValueError(
+            f"--scheduler: no Dask scheduler answered at {scheduler} within {timeout:g} s ({exc})"
+        ) from None
+    try:
+        client.wait_for_workers(1, timeout=timeout)
+    except (OSError, TimeoutError):
+        client.close()
+        raise MyofaceValueError(
+            f"--scheduler: the Dask scheduler at {scheduler} has no worker after {timeout:g} s"
+        ) from None
+    return client
+
+
+def start_local_cluster(workers: int):
+    """A ``distributed.LocalCluster`` of ``workers`` single-threaded worker processes (its
+    dashboard on a free port) and its client."""
+    import logging
+
+    distributed = _require("distributed", "the dask engine")
+    cluster = distributed.LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=":0",
+        silence_logs=logging.ERROR,
+    )
+    return cluster, distributed.Client(cluster)
+
+
+def _run_dask(jobs: list[_Job], client, record) -> None:
+    """Run ``jobs`` on the cluster of ``client``, calling ``record(k, row)`` as job ``k``
+    finishes."""
+    import uuid
+
+    from distributed import as_completed
+
+    for job in jobs:
+        job.single_thread = True
+    tag = uuid.uuid4().hex[:8]
+    futs = {
+        client.submit(analyze_job, job, key=f"myoface-batch-{tag}-{i}", pure=False, retries=0): i
+        for i, job in enumerate(jobs)
+    }
+    try:
+        for fut in as_completed(futs):
+            k = futs[fut]
+            if fut.status == "finished":
+                row = fut.result()
+            else:  # the worker died (KilledWorker), myoface is missing there, ...
+                try:
+                    exc = fut.exception()
+                except Exception as err:  # cancelled (e.g. by the cluster's owner)
+                    exc = err
+                row = _failed_row(jobs[k], _error_text(exc))
+            fut.release()
+            record(k, row)
+    except BaseException:
+        client.cancel(list(futs))
+        raise
+
+
+# ------------------------------------------------------------------------------ summary
+
+
+def _muscle_ids(rows: list[dict]) -> list[str]:
+    ids: list[str] = []
+    for r in rows:
+        for k in r.get("means", {}):
+            if k not in ids:
+                ids.append(k)
+    return ids
+
+
+def write_summary(rows: list[dict], out: str | os.PathLike) -> tuple[Path, Path]:
+    """``summary.parquet`` (pyarrow) and ``summary.csv`` in ``out``: one row per video,
+    :data:`SUMMARY_COLUMNS` then ``mean_<muscle>``; each file written whole (a temporary name
+    renamed). Returns their paths."""
+    import csv
+
+    pa = _require("pyarrow", "the batch summary")
+    pq = _require("pyarrow.parquet", "the batch summary")
+    from myoface._io import atomic_output
+
+    out = Path(out)
+    ids = _muscle_ids(rows)
+    cols: dict[str, list] = {c: [r[c] for r in rows] for c in SUMMARY_COLUMNS}
+    for k in ids:
+        cols[f"mean_{k}"] = [r.get("means", {}).get(k, math.nan) for r in rows]
+    types = {"frames": pa.int64()}
+    for c in ("path", "folder", "status", "error"):
+        types[c] = pa.string()
+    table = pa.table(
+        {c: pa.array(v, type=types.get(c, pa.float64())) for c, v in cols.items()},
+        metadata={"myoface": "batch summary: one row per video"},
+    )
+    pq_path, csv_path = out / "summary.parquet", out / "summary.csv"
+    with atomic_output(pq_path) as tmp:
+        pq.write_table(table, tmp)
+    with atomic_output(csv_path) as tmp:
+        with open(tmp, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(list(cols))
+            for j in range(len(rows)):
+                w.writerow([_csv_cell(cols[c][j]) for c in cols])
+    return pq_path, csv_path
+
+
+def _csv_cell(v) -> str:
+    if isinstance(v, float):
+        return "" if not math.isfinite(v) else f"{v:.6g}"
+    return str(v)
+
+
+# ------------------------------------------------------------------------------ the batch
+
+
+def run_batch(
+    videos,
+    out: str | os.PathLike,
+    *,
+    engine: str = "local",
+    workers: int | None = None,
+    scheduler: str | None = None,
+    client=None,
+    executor=None,
+    timeout: float = SCHEDULER_TIMEOUT_S,
+    tracker: str = "snakes",
+    init=None,
+    max_frames: int | None = None,
+    estimator: str = "curves",
+    face: str | os.PathLike | None = None,
+    muscles: str | os.PathLike | None = None,
+    show_progress: bool = False,
+) -> list[dict]:
+    """Analyse every video of ``videos`` (paths or glob patterns, see :func:`expand_videos`)
+    into its folder under ``out`` and write the summary (module docstring).
+
+    Parameters
+    ----------
+    engine : ``"local"`` or ``"dask"``.
+    workers : processes (local) or LocalCluster workers (dask); default: the cores of this
+        machine. Not used with ``scheduler`` or ``client``.
+    scheduler : the address of a running Dask scheduler (``tcp://host:8786``) to use instead
+        of a LocalCluster; ``timeout`` s to reach it and find a worker.
+    client : a ``distributed.Client`` to use (left open).
+    executor : for the local engine, a ``concurrent.futures`` executor to use (left open),
+        e.g. a :func:`local_pool` kept for several batches.
+    tracker, init, max_frames, estimator : as for ``myoface analyze`` (``init``: one contour
+        file or {section: (K, 2)} for every video, e.g. videos from one fixed camera).
+    face, muscles : the face model (default: the bundled one); paths the workers can read.
+    show_progress : a progress bar over the videos on stderr.
+
+    Returns
+    -------
+    list of dict — the summary rows, in the order of ``videos``: the keys of
+    :data:`SUMMARY_COLUMNS` and ``means`` ({muscle: mean contraction}).
+    """
+    from myoface._io import ensure_output_dir
+    from myoface.analysis.pipeline import ESTIMATORS, load_init
+    from myoface.render import progress
+
+    if engine not in ENGINES:
+        raise MyofaceValueError(f"engine must be one of {ENGINES}; got {engine!r}")
+    if tracker not in ("snakes", "landmarks"):
+        raise MyofaceValueError(f"tracker must be 'snakes' or 'landmarks'; got {tracker!r}")
+    if estimator not in ESTIMATORS:
+        raise MyofaceValueError(f"estimator must be one of {ESTIMATORS}; got {estimator!r}")
+    if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
+        raise MyofaceValueError(f"max_frames must be an integer >= 1; got {max_frames!r}")
+    if workers is None:
+        workers = os.cpu_count() or 1
+    if not (isinstance(workers, int) and workers >= 1):
+        raise MyofaceValueError(f"workers must be an integer >= 1; got {workers!r}")
+    if not (isinstance(timeout, int | float) and timeout > 0):
+        raise MyofaceValueError(f"timeout must be > 0 s; got {timeout!r}")
+    if (scheduler is not None or client is not None) and engine != "dask":
+        raise MyofaceValueError("a Dask scheduler or client needs engine='dask'")
+    if executor is not None and engine != "local":
+        raise MyofaceValueError("an executor is for engine='local'")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise MyofaceValueError(f"-o: {out} exists and is not a folder")
+    _require("pyarrow", "the batch summary")
+    if engine == "dask":
+        _require("distributed", "the dask engine")
+    if muscles is not None and face is None:
+        raise MyofaceValueError("muscles needs face (the bundled face has its own muscles)")
+    for what, p in (("face", face), ("muscles", muscles)):
+        if p is not None and str(p) != "default" and not Path(p).exists():
+            raise MyofaceFileNotFoundError(f"no such {what} file: {p}")
+    face_s = None if face is None or str(face) == "default" else str(Path(face).resolve())
+    muscles_s = None if muscles is None else str(Path(muscles).resolve())
+    init_sha = None
+    if init is not None:
+        if tracker == "landmarks":
+            raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
+        if isinstance(init, str | os.PathLike):
+            from myoface._io import sha256_file
+
+            init_sha = sha256_file(init) if Path(init).is_file() else None
+            init = load_init(init)
+        else:
+            import hashlib
+
+            import numpy as np
+
+            h = hashlib.sha256()
+            for k in sorted(init):
+                h.update(k.encode() + np.ascontiguousarray(init[k], dtype=np.float64).tobytes())
+            init_sha = h.hexdigest()
+    settings = {
+        "tracker": tracker,
+        "estimator": estimator,
+        "max_frames": max_frames,
+        "init_sha256": init_sha,
+        "face": face_s,
+        "muscles": muscles_s,
+    }
+
+    paths = expand_videos([videos] if isinstance(videos, str | os.PathLike) else videos, out)
+    own: list = []  # the client / cluster this call opened, closed at the end
+    if engine == "dask" and client is None and scheduler is not None:
+        client = connect(scheduler, timeout)  # fail before anything is written
+        own.append(client)
+    rows: dict[int, dict] = {}
+    try:
+        out = ensure_output_dir(out)
+        names = result_folders(paths, out)
+        todo: list[tuple[int, _Job]] = []
+        for i, (p, name) in enumerate(zip(paths, names, strict=True)):
+            done = _is_done(out / name, p, settings)
+            if done is not None:
+                rows[i] = {**done, "path": str(p), "folder": name, "status": "skipped"}
+            else:
+                todo.append((i, _Job(str(p), str(out), name, settings, init)))
+        bar = progress(None, len(paths), desc="videos", enabled=show_progress, unit="video")
+        bar.update(len(rows))  # the skipped ones
+
+        def record(k: int, row: dict) -> None:
+            rows[todo[k][0]] = row
+            bar.update()
+
+        try:
+            jobs = [j for _, j in todo]
+            if jobs and engine == "local":
+                _run_local(jobs, workers, record, executor)
+            elif jobs:
+                if client is None:
+                    cluster, client = start_local_cluster(min(workers, len(jobs)))
+                    own += [client, cluster]
+                _run_dask(jobs, client, record)
+        finally:
+            bar.close()
+            # what is known so far (all of it, unless interrupted)
+            write_summary([rows[i] for i in sorted(rows)], out)
+    finally:
+        for thing in own:
+            thing.close()
+    return [rows[i] for i in range(len(paths))]

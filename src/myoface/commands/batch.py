@@ -1,0 +1,137 @@
+"""``myoface batch``: many face videos analysed at once, here or on a Dask cluster."""
+
+from __future__ import annotations
+
+from myoface.commands._common import add_face_argument
+from myoface.errors import MyofaceValueError
+
+NAME = "batch"
+HELP = "analyse many videos (files or glob patterns), on this machine or on a Dask cluster"
+DESCRIPTION = """Analyse many face videos as `myoface analyze` does, one result folder per video
+under the output folder (named after the video; clip, clip-2, ... when names repeat), and
+summarise them in OUT/summary.parquet and OUT/summary.csv: per video its path, status
+(ok / failed / skipped), error, frames, measured fraction, frames per second, wall time and
+the mean contraction of each muscle.
+
+Resumable: a folder holding a complete result (its done.json, written last, names the same
+video and settings) is skipped. A video that fails is recorded with its error and the batch
+goes on; the exit status is then 1.
+
+Engines (pip install "myoface[batch]"):
+  local  a pool of --workers processes on this machine (default)
+  dask   a Dask LocalCluster of --workers single-threaded workers, or the running cluster
+         whose scheduler is at --scheduler (e.g. started on SLURM by dask-jobqueue or on
+         Kubernetes by dask-kubernetes; its workers need myoface and the same paths)
+
+Quote glob patterns so that myoface expands them ("videos/**/*.mp4" spans folders)."""
+
+
+def add_arguments(p):
+    import argparse
+
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
+    p.add_argument(
+        "videos",
+        nargs="+",
+        metavar="VIDEO_OR_GLOB",
+        help="video files, folders of images, or glob patterns",
+    )
+    p.add_argument("-o", "--output", required=True, help="output folder")
+    p.add_argument(
+        "--engine",
+        choices=("local", "dask"),
+        default=None,
+        help="where the videos are analysed (default: local; dask with --scheduler)",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="a running Dask scheduler to use (e.g. tcp://10.0.0.5:8786) instead of a LocalCluster",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="worker processes on this machine (default: the number of cores)",
+    )
+    p.add_argument(
+        "--timeout",
+        type=float,
+        default=None,
+        metavar="S",
+        help="seconds to wait for --scheduler and a worker of it (default 10)",
+    )
+    p.add_argument(
+        "--tracker",
+        choices=("snakes", "landmarks"),
+        default="snakes",
+        help="feature tracker (default: snakes, the paper's)",
+    )
+    p.add_argument(
+        "--init",
+        help="(snakes) initial contours (JSON) for every video, e.g. videos from one fixed "
+        "camera (default: found in each video with MediaPipe's face mesh)",
+    )
+    p.add_argument(
+        "--estimator",
+        choices=("curves", "fiducials"),
+        default="curves",
+        help="(snakes) how contractions are read off the contours (see myoface analyze)",
+    )
+    p.add_argument("--max-frames", type=int, metavar="N", help="analyse at most N frames a video")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_face_argument(p)
+
+
+def run(args) -> int:
+    import sys
+    from collections import Counter
+    from pathlib import Path
+
+    from myoface.analysis.batch import SCHEDULER_TIMEOUT_S, run_batch
+
+    engine = args.engine or ("dask" if args.scheduler else "local")
+    if args.scheduler and engine != "dask":
+        raise MyofaceValueError("--scheduler is for --engine dask")
+    if args.scheduler and args.workers is not None:
+        raise MyofaceValueError(
+            "--workers sizes the cluster batch starts; with --scheduler the cluster's own "
+            "workers are used"
+        )
+    if args.workers is not None and args.workers < 1:
+        raise MyofaceValueError(f"--workers must be >= 1; got {args.workers}")
+    if args.max_frames is not None and args.max_frames < 1:
+        raise MyofaceValueError(f"--max-frames must be >= 1; got {args.max_frames}")
+    timeout = SCHEDULER_TIMEOUT_S if args.timeout is None else args.timeout
+    if not timeout > 0:
+        raise MyofaceValueError(f"--timeout must be > 0 s; got {args.timeout}")
+    if args.timeout is not None and not args.scheduler:
+        raise MyofaceValueError("--timeout is for --scheduler")
+    if args.init and args.tracker == "landmarks":
+        raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
+    rows = run_batch(
+        args.videos,
+        args.output,
+        engine=engine,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        timeout=timeout,
+        tracker=args.tracker,
+        init=args.init,
+        max_frames=args.max_frames,
+        estimator=args.estimator,
+        face=args.face,
+        muscles=args.muscles,
+        show_progress=not args.quiet,
+    )
+    n = Counter(r["status"] for r in rows)
+    out = Path(args.output).resolve()
+    print(
+        f"{len(rows)} videos: {n['ok']} analysed, {n['skipped']} already done, "
+        f"{n['failed']} failed; summary: {out / 'summary.parquet'}"
+    )
+    for r in rows:
+        if r["status"] == "failed":
+            err = r["error"] if r["error"].startswith(r["path"]) else f"{r['path']}: {r['error']}"
+            print(f"myoface batch: failed: {err}", file=sys.stderr)
+    return 1 if n["failed"] else 0
