@@ -130,6 +130,20 @@ def test_batch_local_pool_records_each_failure(tmp_path, capsys):
     assert len(capsys.readouterr().err.strip().splitlines()) == 3
 
 
+def test_expand_videos(tmp_path):
+    from myoface.analysis.batch import expand_videos
+
+    for name in ("b.mp4", "a.mp4", "take[1].mp4", "out/a/overlay.mp4"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_bytes(b"x")
+    got = expand_videos(
+        [tmp_path / "take[1].mp4", str(tmp_path / "**" / "*.mp4"), tmp_path / "a.mp4"],
+        exclude=tmp_path / "out",
+    )
+    # a file name with glob characters is a file; matches sorted, each once; OUT left out
+    assert [p.name for p in got] == ["take[1].mp4", "a.mp4", "b.mp4"]
+
+
 def test_result_folders_keep_names_with_their_videos(tmp_path):
     from myoface.analysis.batch import DONE_FILE, result_folders
 

@@ -69,7 +69,7 @@ DONE_FILE = "done.json"
 SUMMARY_COLUMNS = (
     "path",  # the video, resolved
     "folder",  # its result folder, relative to the output folder
-    "status",  # ok / failed / skipped (complete from an earlier run)
+    "status",  # ok / failed / skipped (complete from an earlier run, whose numbers it keeps)
     "error",  # why it failed (empty otherwise)
     "frames",  # frames analysed
     "measured_fraction",  # the fraction of them measured (quality "ok")
@@ -109,14 +109,14 @@ def expand_videos(patterns, exclude: str | os.PathLike | None = None) -> list[Pa
     seen: set[Path] = set()
     for pat in patterns:
         pat = os.fspath(pat)
-        if _GLOB_CHARS & set(pat):
+        if Path(pat).exists():  # a file name may hold glob characters, e.g. "take[1].mp4"
+            hits = [pat]
+        elif _GLOB_CHARS & set(pat):
             hits = sorted(glob.glob(os.path.expanduser(pat), recursive=True))
             if not hits:
                 raise MyofaceFileNotFoundError(f"no file matches {pat!r}")
         else:
-            if not Path(pat).exists():
-                raise MyofaceFileNotFoundError(f"no such video: {pat}")
-            hits = [pat]
+            raise MyofaceFileNotFoundError(f"no such video: {pat}")
         for h in hits:
             p = Path(h).resolve()
             if ex is not None and (p == ex or ex in p.parents):
