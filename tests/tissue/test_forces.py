@@ -13,10 +13,12 @@ from myoface.tissue import (
 from myoface.tissue.forces import (
     element_volumes_numpy,
     make_thread_buffers,
+    prism_volume_forces_range,
     spring_energy_numpy,
     spring_forces_numba,
     spring_forces_numpy,
     spring_forces_parallel,
+    spring_forces_range,
     volume_energy_numpy,
     volume_forces_numba,
     volume_forces_numpy,
@@ -51,6 +53,28 @@ def test_volume_kernel_matches_numpy_reference(default_tissue):
     ref = volume_forces_numpy(x, m.elements, m.rest_volume, m.volume_weight, m.volume_sign)
     got = np.zeros_like(x)
     volume_forces_numba(x, m.elements, m.rest_volume, m.volume_weight, m.volume_sign, got)
+    np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-8 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("law", [LAW_CONTINUOUS, LAW_PAPER])
+def test_range_kernels_add_up_to_the_numpy_reference(default_tissue, law):
+    """The parallel RK2's kernels over ranges of springs and of prisms (each thread adds its
+    own ranges to its own buffer), over two ranges, give the reference forces."""
+    m = default_tissue
+    x = _perturbed(m, 1.0)
+    got = np.zeros_like(x)
+    half = m.n_springs // 2
+    spring_forces_range(x, *_spring_args(m), law, 0, half, got)
+    spring_forces_range(x, *_spring_args(m), law, half, m.n_springs, got)
+    ref = spring_forces_numpy(x, *_spring_args(m), law)
+    np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-8 * np.abs(ref).max())
+
+    args = (m.elements, m.rest_volume, m.volume_weight, m.volume_sign)
+    got = np.zeros_like(x)
+    half = m.n_elements // 2
+    prism_volume_forces_range(x, *args, 0, half, got)
+    prism_volume_forces_range(x, *args, half, m.n_elements, got)
+    ref = volume_forces_numpy(x, *args)
     np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-8 * np.abs(ref).max())
 
 

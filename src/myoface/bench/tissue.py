@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import time
 
-import numba
 import numpy as np
 
 from myoface.bench import Measurement, benchmark, time_median
@@ -50,9 +49,79 @@ def grid_lattice(n_springs_target: int):
     return pos, springs
 
 
-@benchmark("tissue.ns_per_spring_1m", "ns", higher_is_better=False)
+WARP_PEER = "NVIDIA Warp (warp-lang), device cpu"
+
+
+def _warp_spring_forces():
+    """The biphasic spring force of :func:`myoface.tissue.forces.spring_magnitude`
+    (``LAW_CONTINUOUS``) as a Warp kernel, float64, one thread per spring with atomic adds; or
+    None when warp-lang is not installed (``pip install "myoface[bench]"``)."""
+    try:
+        import warp as wp
+    except ImportError:
+        return None
+    wp.config.quiet = True
+    wp.init()
+
+    @wp.kernel
+    def spring_forces(
+        x: wp.array(dtype=wp.vec3d),
+        si: wp.array(dtype=wp.int64),
+        sj: wp.array(dtype=wp.int64),
+        rest: wp.array(dtype=wp.float64),
+        mat_id: wp.array(dtype=wp.int64),
+        mat: wp.array2d(dtype=wp.float64),
+        f: wp.array(dtype=wp.vec3d),
+    ):
+        k = wp.tid()
+        i = si[k]
+        j = sj[k]
+        r = x[j] - x[i]
+        d = wp.length(r)
+        if d < wp.float64(1.0e-12):  # MIN_SPRING_LENGTH
+            return
+        m = mat_id[k]
+        lk = rest[k]
+        e = d - lk
+        ec = mat[m, 2] * lk
+        mag = mat[m, 0] * e
+        if e > ec:
+            mag = mat[m, 0] * ec + mat[m, 1] * (e - ec)
+        s = r * (mag / d)
+        wp.atomic_add(f, i, s)
+        wp.atomic_sub(f, j, s)
+
+    def make(si, sj, rest, mat_id, mat, n_nodes):
+        dev = "cpu"
+        args = [
+            wp.array(si, dtype=wp.int64, device=dev),
+            wp.array(sj, dtype=wp.int64, device=dev),
+            wp.array(rest, dtype=wp.float64, device=dev),
+            wp.array(mat_id, dtype=wp.int64, device=dev),
+            wp.array(mat, dtype=wp.float64, device=dev),
+        ]
+        f = wp.zeros(n_nodes, dtype=wp.vec3d, device=dev)
+
+        def forces(x_wp):
+            f.zero_()
+            wp.launch(spring_forces, dim=len(si), inputs=[x_wp, *args, f], device=dev)
+            return f
+
+        def to_warp(x):
+            return wp.array(x, dtype=wp.vec3d, device=dev)
+
+        return forces, to_warp
+
+    return make
+
+
+@benchmark("tissue.ns_per_spring_1m", "ns", higher_is_better=False, peer=WARP_PEER)
 def bench_ns_per_spring(quick: bool) -> Measurement:
-    """One spring-force evaluation on a synthetic ~1,000,000-spring lattice, per spring, all cores."""
+    """One spring-force evaluation on a synthetic ~1,000,000-spring lattice, per spring, all cores
+    (per-thread force buffers). Peer: the same biphasic force (``LAW_CONTINUOUS``, float64) as an
+    NVIDIA Warp kernel on ``device="cpu"`` (one launch, atomic adds), on the same lattice and
+    positions in the same run, after checking that its forces equal ours; no peer without
+    warp-lang."""
     from myoface.tissue.forces import LAW_CONTINUOUS, make_thread_buffers, spring_forces_parallel
 
     pos, springs = grid_lattice(1_000_000)
@@ -71,7 +140,21 @@ def bench_ns_per_spring(quick: bool) -> Measurement:
 
     n = 5 if quick else 21
     t = time_median(run, n)
-    return Measurement(t / len(si) * 1e9, n)
+    peer = None
+    make_warp = _warp_spring_forces()
+    if make_warp is not None:
+        forces, to_warp = make_warp(si, sj, rest, mat_id, mat, len(x))
+        # the same forces first, on positions stretched enough that both phases of the law occur
+        xc = pos + rng.normal(0, 0.5, pos.shape)
+        ref = np.zeros_like(xc)
+        spring_forces_parallel(xc, si, sj, rest, mat_id, mat, LAW_CONTINUOUS, ref, buf)
+        got = forces(to_warp(xc)).numpy()
+        # float64 on both sides; only the order of the sums at a node differs
+        if not np.allclose(got, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max()):
+            raise AssertionError("Warp's spring forces differ from myoface's")
+        xw = to_warp(x)
+        peer = time_median(lambda: forces(xw), n) / len(si) * 1e9
+    return Measurement(t / len(si) * 1e9, n, peer)
 
 
 def _default_face_model():
@@ -80,29 +163,43 @@ def _default_face_model():
     return build_face_model()
 
 
-@benchmark("tissue.rk2_steps_per_s", "1/s", higher_is_better=True)
+RK2_PEER = "myoface's previous RK2 kernel (one thread)"
+
+
+@benchmark("tissue.rk2_steps_per_s", "1/s", higher_is_better=True, peer=RK2_PEER)
 def bench_rk2(quick: bool) -> Measurement:
-    """Paper RK2 steps per second on the default face model (muscles bound), one thread."""
+    """Paper RK2 steps per second on the default face model (muscles bound), at its stable time
+    step, all cores (the parallel kernel of ``myoface.tissue.rk2``). Peer: the previous
+    single-thread kernel (kept as the reference) on the same steps from the same state, timed
+    alternately with ours in the same run."""
     from myoface.tissue import rest_state, step_rk2
+    from myoface.tissue.rk2 import run_rk2_serial
 
     fm = _default_face_model()
-    model = fm.tissue
+    tm = fm.tissue
+    targets = fm.targets(fm.validate({}))
+    state = rest_state(tm)
+    dt = tm.stable_dt
     steps = 200 if quick else 1000
-    prev = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        state = rest_state(model)
-        targets = fm.targets(fm.muscles.validate({}))
-        dt = fm.stable_dt()
 
-        def run():
-            step_rk2(model, state, targets, dt, n_steps=steps)
+    def ours():
+        step_rk2(tm, state, targets, dt, n_steps=steps)
 
-        n = 3 if quick else 7
-        t = time_median(run, n)
-    finally:
-        numba.set_num_threads(prev)
-    return Measurement(steps / t, n)
+    def peer():
+        x, v = state.x.copy(), state.v.copy()
+        x[tm.kinematic_index] = targets
+        run_rk2_serial(tm, x, v, steps, dt)
+
+    ours()  # warm-up: JIT (or its cache) and the kernel's per-model arrays
+    peer()
+    n = 3 if quick else 7
+    t_ours, t_peer = [], []
+    for _ in range(n):  # alternate, so both see the same load on a shared machine
+        for fn, ts in ((ours, t_ours), (peer, t_peer)):
+            t0 = time.perf_counter()
+            fn()
+            ts.append(time.perf_counter() - t0)
+    return Measurement(steps / float(np.median(t_ours)), n, steps / float(np.median(t_peer)))
 
 
 #: the peer of the relax benchmarks: the L-BFGS solver it replaced, kept as ``method="lbfgs"``

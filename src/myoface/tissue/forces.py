@@ -82,7 +82,10 @@ def spring_magnitude(e, lk, m, mat, law):
 
 
 @njit(cache=True)
-def _spring_range(x, si, sj, rest, mat_id, mat, law, k0, k1, f):
+def spring_forces_range(x, si, sj, rest, mat_id, mat, law, k0, k1, f):
+    """Add the forces of springs ``k0 .. k1-1`` to ``f`` (N, 3): a spring pulls its node
+    ``si[k]`` by s_k (eq. 1) and ``sj[k]`` by -s_k, in spring order. See
+    :func:`spring_forces_numba` for the arguments."""
     for k in range(k0, k1):
         i = si[k]
         j = sj[k]
@@ -118,7 +121,7 @@ def spring_forces_numba(x, si, sj, rest, mat_id, mat, law, f):
     law : int — :data:`LAW_CONTINUOUS` or :data:`LAW_PAPER`.
     f : (N, 3) float64 — accumulated into (not zeroed).
     """
-    _spring_range(x, si, sj, rest, mat_id, mat, law, 0, len(si), f)
+    spring_forces_range(x, si, sj, rest, mat_id, mat, law, 0, len(si), f)
 
 
 @njit(cache=True, parallel=True)
@@ -136,7 +139,7 @@ def spring_forces_parallel(x, si, sj, rest, mat_id, mat, law, f, buffers):
             b[q, 2] = 0.0
         k0 = (ns * t) // nt
         k1 = (ns * (t + 1)) // nt
-        _spring_range(x, si, sj, rest, mat_id, mat, law, k0, k1, b)
+        spring_forces_range(x, si, sj, rest, mat_id, mat, law, k0, k1, b)
     # reduce over threads, parallel over nodes
     for q in prange(n):
         for t in range(nt):
@@ -261,6 +264,81 @@ def volume_forces_numba(x, elems, rest_vol, kv, sign, f):
                 for d in range(3):
                     f[iq, d] += coef * g[t, q, d]
                     f[i0, d] -= coef * g[t, q, d]
+
+
+@njit(cache=True, inline="always")
+def _tet_gradient(x, i0, i1, i2, i3):
+    """6 x the signed volume of tetrahedron (i0, i1, i2, i3) and its gradient with respect to
+    nodes i1, i2, i3 (b x c, c x a, a x b with a, b, c its edges from i0; that of i0 is minus
+    their sum)."""
+    ax = x[i1, 0] - x[i0, 0]
+    ay = x[i1, 1] - x[i0, 1]
+    az = x[i1, 2] - x[i0, 2]
+    bx = x[i2, 0] - x[i0, 0]
+    by = x[i2, 1] - x[i0, 1]
+    bz = x[i2, 2] - x[i0, 2]
+    cx = x[i3, 0] - x[i0, 0]
+    cy = x[i3, 1] - x[i0, 1]
+    cz = x[i3, 2] - x[i0, 2]
+    g1x = by * cz - bz * cy
+    g1y = bz * cx - bx * cz
+    g1z = bx * cy - by * cx
+    g2x = cy * az - cz * ay
+    g2y = cz * ax - cx * az
+    g2z = cx * ay - cy * ax
+    g3x = ay * bz - az * by
+    g3y = az * bx - ax * bz
+    g3z = ax * by - ay * bx
+    vol6 = ax * g1x + ay * g1y + az * g1z
+    return vol6, g1x, g1y, g1z, g2x, g2y, g2z, g3x, g3y, g3z
+
+
+@njit(cache=True)
+def prism_volume_forces_range(x, elems, rest_vol, kv, sign, e0, e1, f):
+    """Add -dQ_e/dx of prisms ``e0 .. e1-1`` to ``f`` (N, 3), in prism order: the kernel of the
+    parallel RK2 (:mod:`myoface.tissue.rk2`), where each thread adds a range of prisms to its own
+    buffer. Same value as :func:`volume_forces_numba`, which adds each tetrahedron's terms one by
+    one; here each node's gradient is summed over the prism's three tetrahedra (slots (0 1 2 3),
+    (1 2 3 4), (2 3 4 5) of :data:`PRISM_TETS`) in registers and added once, half the memory
+    traffic."""
+    for e in range(e0, e1):
+        n0 = elems[e, 0]
+        n1 = elems[e, 1]
+        n2 = elems[e, 2]
+        n3 = elems[e, 3]
+        n4 = elems[e, 4]
+        n5 = elems[e, 5]
+        v0, a1x, a1y, a1z, a2x, a2y, a2z, a3x, a3y, a3z = _tet_gradient(x, n0, n1, n2, n3)
+        v1, b1x, b1y, b1z, b2x, b2y, b2z, b3x, b3y, b3z = _tet_gradient(x, n1, n2, n3, n4)
+        v2, c1x, c1y, c1z, c2x, c2y, c2z, c3x, c3y, c3z = _tet_gradient(x, n2, n3, n4, n5)
+        dv = sign * ((v0 + v1) + v2) / 6.0 - rest_vol[e]
+        coef = -2.0 * kv[e] * dv * sign / 6.0
+        f[n0, 0] += coef * -((a1x + a2x) + a3x)
+        f[n0, 1] += coef * -((a1y + a2y) + a3y)
+        f[n0, 2] += coef * -((a1z + a2z) + a3z)
+        f[n1, 0] += coef * (a1x - ((b1x + b2x) + b3x))
+        f[n1, 1] += coef * (a1y - ((b1y + b2y) + b3y))
+        f[n1, 2] += coef * (a1z - ((b1z + b2z) + b3z))
+        f[n2, 0] += coef * ((a2x + b1x) - ((c1x + c2x) + c3x))
+        f[n2, 1] += coef * ((a2y + b1y) - ((c1y + c2y) + c3y))
+        f[n2, 2] += coef * ((a2z + b1z) - ((c1z + c2z) + c3z))
+        f[n3, 0] += coef * ((a3x + b2x) + c1x)
+        f[n3, 1] += coef * ((a3y + b2y) + c1y)
+        f[n3, 2] += coef * ((a3z + b2z) + c1z)
+        f[n4, 0] += coef * (b3x + c2x)
+        f[n4, 1] += coef * (b3y + c2y)
+        f[n4, 2] += coef * (b3z + c2z)
+        f[n5, 0] += coef * c3x
+        f[n5, 1] += coef * c3y
+        f[n5, 2] += coef * c3z
+
+
+@njit(cache=True)
+def internal_forces_numba(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, f):
+    """-(g + q) of eq. (3)-(4) on every node into ``f`` (N, 3) (zeroed first), one thread."""
+    f[:, :] = 0.0
+    spring_forces_numba(x, si, sj, rest, mat_id, mat, law, f)
+    volume_forces_numba(x, elems, rest_vol, kv, vsign, f)
 
 
 @njit(cache=True)

@@ -32,14 +32,11 @@ from numba import njit
 from scipy.sparse.linalg import splu
 
 from myoface.errors import MyofaceSimulationError, MyofaceValueError
-from myoface.tissue.forces import (
-    LAW_PAPER,
-    _prism_volume,
-    spring_forces_numba,
-    volume_forces_numba,
-)
+from myoface.tissue.forces import LAW_PAPER, _prism_volume
+from myoface.tissue.forces import internal_forces_numba as _forces
 from myoface.tissue.hessian import HessianPattern, assemble_hessian_numba
 from myoface.tissue.model import TissueModel
+from myoface.tissue.rk2 import run_rk2, stable_time_step, step_rk2  # noqa: F401 (re-exports)
 from myoface.tissue.solver import NEWTON_TOL_MM, cached, relax_newton
 
 #: default equilibrium tolerance of "lbfgs" and "rk2": largest node move in the last solver step
@@ -124,13 +121,6 @@ def _kargs(model: TissueModel) -> tuple:
     )
 
 
-@njit(cache=True)
-def _forces(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, f):
-    f[:, :] = 0.0
-    spring_forces_numba(x, si, sj, rest, mat_id, mat, law, f)
-    volume_forces_numba(x, elems, rest_vol, kv, vsign, f)
-
-
 def internal_forces(model: TissueModel, x: np.ndarray) -> np.ndarray:
     """-(g + q): the spring and volume forces on every node, (N, 3) uN (eq. 3-4)."""
     f = np.empty_like(x)
@@ -173,166 +163,6 @@ def _energy(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign):
         dv = _prism_volume(x, elems[q], vsign) - rest_vol[q]
         en += kv[q] * dv * dv
     return en
-
-
-# ----------------------------------------------------------------------------------- RK2 ----
-
-
-def stable_time_step(model: TissueModel, safety: float = 0.5) -> float:
-    """A time step (s) inside the explicit scheme's stability limit, from each free node's
-    stiffest local oscillator (beta springs) and its damping (see the comments for the two
-    limits: the oscillator's, and the slow growth of lightly damped modes under RK2)."""
-    stiff = np.zeros(model.n_nodes)
-    kb = model.materials[model.spring_material, 1]
-    np.add.at(stiff, model.spring_i, kb)
-    np.add.at(stiff, model.spring_j, kb)
-    free = ~model.kinematic
-    w = np.sqrt(stiff[free] / model.mass[free])
-    g = model.damping[free] / model.mass[free]
-    # for x'' + g x' + w^2 x = 0, midpoint RK2 is stable for dt below about 2 / (g/2 + w) ...
-    dt_osc = safety * np.min(2.0 / (0.5 * g + w))
-    # ... but its amplification factor on an undamped mode is sqrt(1 + (w dt)^4 / 4) > 1: the
-    # lightly damped high modes grow by about (w dt)^4 / 8 per step unless the damping takes away
-    # more (g dt / 2). Keep that growth to half the damping's decay: (w dt)^4 / 8 < g dt / 4.
-    dt_weak = np.min(np.cbrt(2.0 * g / w**4)) if np.all(g > 0) else np.inf
-    return float(min(dt_osc, dt_weak))
-
-
-@njit(cache=True)
-def _acc(
-    x, v, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m, damp, free, f, out
-):
-    _forces(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, f)
-    for i in range(x.shape[0]):
-        if free[i]:
-            for a in range(3):
-                out[i, a] = (f[i, a] - damp[i] * v[i, a]) * inv_m[i]
-        else:
-            for a in range(3):
-                out[i, a] = 0.0
-
-
-@njit(cache=True)
-def _rk2_run(
-    x,
-    v,
-    n_steps,
-    dt,
-    si,
-    sj,
-    rest,
-    mat_id,
-    mat,
-    law,
-    elems,
-    rest_vol,
-    kv,
-    vsign,
-    inv_m,
-    damp,
-    free,
-    tol_mm,
-):
-    """Midpoint RK2 for up to n_steps; stops early when max |v| dt < tol_mm (tol_mm > 0).
-    Returns (steps taken, last max |v| dt, step index of a non-finite value or -1)."""
-    n = x.shape[0]
-    f = np.zeros((n, 3))
-    a1 = np.zeros((n, 3))
-    a2 = np.zeros((n, 3))
-    xm = x.copy()
-    vm = v.copy()
-    h = 0.5 * dt
-    last = 0.0
-    for step in range(n_steps):
-        _acc(
-            x,
-            v,
-            si,
-            sj,
-            rest,
-            mat_id,
-            mat,
-            law,
-            elems,
-            rest_vol,
-            kv,
-            vsign,
-            inv_m,
-            damp,
-            free,
-            f,
-            a1,
-        )
-        for i in range(n):
-            for a in range(3):
-                xm[i, a] = x[i, a] + h * v[i, a]
-                vm[i, a] = v[i, a] + h * a1[i, a]
-        _acc(
-            xm,
-            vm,
-            si,
-            sj,
-            rest,
-            mat_id,
-            mat,
-            law,
-            elems,
-            rest_vol,
-            kv,
-            vsign,
-            inv_m,
-            damp,
-            free,
-            f,
-            a2,
-        )
-        vmax = 0.0
-        for i in range(n):
-            if free[i]:
-                for a in range(3):
-                    x[i, a] += dt * vm[i, a]
-                    v[i, a] += dt * a2[i, a]
-                    av = abs(v[i, a])
-                    if not av <= vmax:  # also catches NaN
-                        vmax = av
-        last = vmax * dt
-        if not np.isfinite(last):
-            return step + 1, last, step
-        if tol_mm > 0.0 and last < tol_mm:
-            return step + 1, last, -1
-    return n_steps, last, -1
-
-
-def _rk2_args(model: TissueModel):
-    return (*_kargs(model), 1.0 / model.mass, model.damping, ~model.kinematic)
-
-
-def step_rk2(
-    model: TissueModel, state: TissueState, targets=None, dt: float | None = None, n_steps: int = 1
-) -> TissueState:
-    """Advance ``n_steps`` paper RK2 steps of size ``dt`` (default :func:`stable_time_step`).
-
-    The kinematic nodes are first set to ``targets`` ((K, 3), the order of
-    ``model.kinematic_index``; default: their rest positions).
-
-    Raises
-    ------
-    MyofaceSimulationError
-        With the step index, if the state becomes NaN/Inf.
-    """
-    dt = stable_time_step(model) if dt is None else float(dt)
-    if not dt > 0:
-        raise MyofaceValueError(f"dt must be > 0 s; got {dt}")
-    s = state.copy()
-    s.x[model.kinematic_index] = _targets_array(model, targets)
-    s.v[model.kinematic_index] = 0.0
-    done, _, bad = _rk2_run(s.x, s.v, int(n_steps), dt, *_rk2_args(model), 0.0)
-    if bad >= 0:
-        raise MyofaceSimulationError(
-            f"RK2 produced NaN/Inf at step {bad} (dt = {dt:g} s); reduce dt"
-        )
-    s.t += done * dt
-    return s
 
 
 # ------------------------------------------------------------------------------ implicit ----
@@ -484,7 +314,7 @@ def relax(
         Newton iterations (default 50), quasi-Newton iterations (default 300) or RK2 steps
         (default 200,000).
     dt : float, optional
-        RK2 time step, s (default :func:`stable_time_step`).
+        RK2 time step, s (default ``model.stable_dt``, :func:`stable_time_step` once per model).
 
     Returns
     -------
@@ -514,11 +344,11 @@ def relax(
         x, ok, it, res = _relax_lbfgs(model, x, tol_mm, max_iter or 300)
         out = TissueState(x, np.zeros_like(x), state.t)
     else:
-        dt = stable_time_step(model) if dt is None else float(dt)
+        dt = model.stable_dt if dt is None else float(dt)
         v = state.v.copy()
         v[model.kinematic_index] = 0.0
         n = max_iter or 200_000
-        it, res, bad = _rk2_run(x, v, n, dt, *_rk2_args(model), tol_mm)
+        it, res, bad = run_rk2(model, x, v, n, dt, tol_mm)
         if bad >= 0:
             raise MyofaceSimulationError(f"RK2 produced NaN/Inf at step {bad} (dt = {dt:g} s)")
         ok = res < tol_mm

@@ -179,6 +179,15 @@ class TissueModel:
     def free_index(self) -> np.ndarray:
         return np.flatnonzero(~self.kinematic)
 
+    @cached_property
+    def stable_dt(self) -> float:
+        """The paper RK2's default time step, s: inside the explicit scheme's stability limit
+        (:func:`myoface.tissue.rk2.stable_time_step`), computed once per model. Two threads
+        asking at once may both compute it; they get the same value."""
+        from myoface.tissue.rk2 import stable_time_step  # rk2 imports this module
+
+        return stable_time_step(self)
+
     def layer_nodes(self, layer: int | str) -> np.ndarray:
         """Node indices of node layer ``layer`` (0-3 or a name in :data:`NODE_LAYERS`), in vertex order."""
         k = NODE_LAYERS.index(layer) if isinstance(layer, str) else int(layer)

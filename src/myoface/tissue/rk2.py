@@ -1,0 +1,526 @@
+"""The paper's explicit integrator: midpoint RK2 on ``m x'' + gamma x' + g + q = 0``, all cores.
+
+Two force evaluations per step (Terzopoulos & Waters 1993, Section III-B: explicit Euler was not
+stable enough). Each evaluation runs in two conflict-free parallel phases:
+
+1. *per element*: every spring that touches a free node writes its force s_k (eq. 1) to its own
+   row, every prism its -dQ/dx for each of its six node slots (volume preservation) — threads
+   own contiguous ranges of springs and prisms, no two write the same row;
+2. *per node*: every free node gathers the rows of its incident springs and prism slots (a CSR
+   adjacency built once per model) and, in the same pass, takes its midpoint or full RK2 update.
+
+So a step is four parallel loops over flat arrays, with no atomics, no per-thread force
+buffers, no allocation and no return to Python between steps. The gather order of each node is
+fixed, so the result does not depend on the number of threads.
+
+:func:`_rk2_run_serial` is the single-thread kernel this replaced (scatter over springs and
+elements, every node); it stays as the reference the tests hold the parallel one against and as
+the benchmark's peer.
+
+References: Terzopoulos & Waters 1993, eq. (1)-(4) and Section III-B.
+"""
+
+from __future__ import annotations
+
+import threading
+import weakref
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from myoface.errors import MyofaceSimulationError, MyofaceValueError
+from myoface.tissue.forces import (
+    internal_forces_numba,
+    prism_volume_forces_range,
+    spring_forces_range,
+)
+from myoface.tissue.model import TissueModel
+
+#: RK2 safety factor on the stability limit (see :func:`stable_time_step`)
+STABLE_DT_SAFETY = 0.5
+#: fewest free nodes per thread: below this a block's work (~0.1 ms a step) no longer pays for
+#: the two thread barriers of every step, so small lattices run on fewer threads (or one)
+MIN_NODES_PER_BLOCK = 256
+
+
+def stable_time_step(model: TissueModel, safety: float = STABLE_DT_SAFETY) -> float:
+    """A time step (s) inside the explicit scheme's stability limit, from each free node's
+    stiffest local oscillator (beta springs) and its damping (see the comments for the two
+    limits: the oscillator's, and the slow growth of lightly damped modes under RK2).
+
+    Computed afresh on every call; ``model.stable_dt`` holds the default one, computed once per
+    model."""
+    stiff = np.zeros(model.n_nodes)
+    kb = model.materials[model.spring_material, 1]
+    np.add.at(stiff, model.spring_i, kb)
+    np.add.at(stiff, model.spring_j, kb)
+    free = ~model.kinematic
+    w = np.sqrt(stiff[free] / model.mass[free])
+    g = model.damping[free] / model.mass[free]
+    # for x'' + g x' + w^2 x = 0, midpoint RK2 is stable for dt below about 2 / (g/2 + w) ...
+    dt_osc = safety * np.min(2.0 / (0.5 * g + w))
+    # ... but its amplification factor on an undamped mode is sqrt(1 + (w dt)^4 / 4) > 1: the
+    # lightly damped high modes grow by about (w dt)^4 / 8 per step unless the damping takes away
+    # more (g dt / 2). Keep that growth to half the damping's decay: (w dt)^4 / 8 < g dt / 4.
+    dt_weak = np.min(np.cbrt(2.0 * g / w**4)) if np.all(g > 0) else np.inf
+    return float(min(dt_osc, dt_weak))
+
+
+# ------------------------------------------------------------------------ the parallel kernel ----
+
+
+@dataclass(frozen=True)
+class Rk2Plan:
+    """The packed arrays of the parallel kernel for one model and one number of blocks, built
+    once by :func:`rk2_plan`.
+
+    The free nodes are cut into ``n_blocks`` slabs along the lattice's longest axis, one per
+    thread. Block b owns its nodes and a private copy of every spring and prism that touches
+    them (only those: springs with a free end, prisms with a free node and a volume weight; the
+    rest push on kinematic nodes only), so a thread adds up the forces on its nodes in a buffer
+    of its own, with no atomics and nothing shared, and updates them; the springs and prisms
+    that straddle the cut between two slabs are evaluated by both, the price of that.
+    Free nodes are numbered ``q = 0 .. F-1`` block by block (``free[q]`` is the node).
+
+    Attributes
+    ----------
+    free : (F,) int64 — node index of each free node.
+    inv_mass, damping : (F,) float64 — 1/m (1/g) and gamma (g/s) of each free node.
+    block_nodes, block_springs, block_prisms : (B+1,) int64 — where each block's nodes q, springs
+        and prisms start.
+    spring_i, spring_j, rest_length, spring_material : (S',) — the springs, block by block, in
+        model order within a block.
+    elements, rest_volume, volume_weight : (E', 6), (E',), (E',) — the prisms, likewise.
+
+    A node's force is summed over the same springs, then the same prisms, in the same order
+    whatever the number of blocks, so the trajectory does not depend on the number of threads.
+    """
+
+    free: np.ndarray
+    inv_mass: np.ndarray
+    damping: np.ndarray
+    block_nodes: np.ndarray
+    block_springs: np.ndarray
+    block_prisms: np.ndarray
+    spring_i: np.ndarray
+    spring_j: np.ndarray
+    rest_length: np.ndarray
+    spring_material: np.ndarray
+    elements: np.ndarray
+    rest_volume: np.ndarray
+    volume_weight: np.ndarray
+
+    @property
+    def n_blocks(self) -> int:
+        return len(self.block_nodes) - 1
+
+
+def _offsets(counts) -> np.ndarray:
+    return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
+    kin = model.kinematic
+    free = np.flatnonzero(~kin)
+    nf = len(free)
+    # slabs of equal node count along the principal axis of the free nodes
+    block = np.zeros(nf, np.int64)
+    if n_blocks > 1 and nf > 0:
+        p = model.rest_positions[free] - model.rest_positions[free].mean(axis=0)
+        axis = np.linalg.svd(p, full_matrices=False)[2][0]
+        rank = np.empty(nf, np.int64)
+        rank[np.argsort(p @ axis, kind="stable")] = np.arange(nf)
+        block = rank * n_blocks // nf
+    order = np.lexsort((free, block))
+    free, block = free[order].astype(np.int64), block[order]
+    node_block = np.full(model.n_nodes, -1, np.int64)
+    node_block[free] = block
+
+    si, sj, el = model.spring_i, model.spring_j, model.elements
+    keep_e = ~kin[el].all(axis=1) & (model.volume_weight != 0.0)
+    ks = [np.flatnonzero((node_block[si] == b) | (node_block[sj] == b)) for b in range(n_blocks)]
+    ke = [np.flatnonzero(keep_e & (node_block[el] == b).any(axis=1)) for b in range(n_blocks)]
+    k, e = np.concatenate(ks).astype(np.int64), np.concatenate(ke).astype(np.int64)
+
+    def c(a, dtype):
+        return np.ascontiguousarray(a, dtype=dtype)
+
+    return Rk2Plan(
+        free=free,
+        inv_mass=c(1.0 / model.mass[free], np.float64),
+        damping=c(model.damping[free], np.float64),
+        block_nodes=_offsets(np.bincount(block, minlength=n_blocks)),
+        block_springs=_offsets([len(a) for a in ks]),
+        block_prisms=_offsets([len(a) for a in ke]),
+        spring_i=c(si[k], np.int64),
+        spring_j=c(sj[k], np.int64),
+        rest_length=c(model.rest_length[k], np.float64),
+        spring_material=c(model.spring_material[k], np.int64),
+        elements=c(el[e], np.int64).reshape(-1, 6),
+        rest_volume=c(model.rest_volume[e], np.float64),
+        volume_weight=c(model.volume_weight[e], np.float64),
+    )
+
+
+_PLANS: weakref.WeakKeyDictionary[TissueModel, dict[int, Rk2Plan]] = weakref.WeakKeyDictionary()
+_PLANS_LOCK = threading.Lock()
+
+
+def rk2_plan(model: TissueModel, n_blocks: int | None = None) -> Rk2Plan:
+    """The kernel's packed arrays for ``model`` cut into ``n_blocks`` blocks (default: numba's
+    thread count), built on first use and kept as long as the model lives (keyed by the model
+    object: a model made with ``replace`` or ``with_kinematic`` gets its own). Safe to call from
+    several threads (at worst two build the same plan, and one is kept)."""
+    nb = numba.get_num_threads() if n_blocks is None else int(n_blocks)
+    if nb < 1:
+        raise MyofaceValueError(f"n_blocks must be >= 1; got {nb}")
+    plans = _PLANS.get(model)
+    plan = None if plans is None else plans.get(nb)
+    if plan is None:
+        plan = _build_plan(model, nb)
+        with _PLANS_LOCK:
+            plan = _PLANS.setdefault(model, {}).setdefault(nb, plan)
+    return plan
+
+
+@njit(cache=True, inline="always")
+def _block_forces(
+    x, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, s0, s1, e0, e1
+):
+    """Spring and volume forces of one block's springs s0..s1-1 and prisms e0..e1-1 at x, into
+    the block's own buffer ``fb`` (N, 3), zeroed first."""
+    for i in range(fb.shape[0]):
+        fb[i, 0] = 0.0
+        fb[i, 1] = 0.0
+        fb[i, 2] = 0.0
+    spring_forces_range(x, si, sj, rest, mat_id, mat, law, s0, s1, fb)
+    prism_volume_forces_range(x, elems, rest_vol, kv, vsign, e0, e1, fb)
+
+
+@njit(cache=True, parallel=True)
+def _rk2_run_parallel(
+    x,
+    v,
+    n_steps,
+    dt,
+    tol_mm,
+    free,
+    inv_m,
+    damp,
+    bnodes,
+    bsprings,
+    bprisms,
+    si,
+    sj,
+    rest,
+    mat_id,
+    mat,
+    law,
+    elems,
+    rest_vol,
+    kv,
+    vsign,
+):
+    """Midpoint RK2 for up to n_steps, one block of the plan per thread; stops early when
+    max |v| dt < tol_mm (tol_mm > 0). Returns (steps taken, last max |v| dt, step index of a
+    non-finite value or -1). ``x``, ``v`` (N, 3) are updated in place (free nodes only).
+
+    Two parallel loops per step: a block's midpoint needs only its own springs and prisms at x,
+    but its neighbours' midpoints before the second evaluation (and their new x before the next
+    step)."""
+    nb = bnodes.shape[0] - 1
+    buf = np.zeros((nb, x.shape[0], 3))
+    xm = x.copy()  # kinematic rows stay at x (their velocity is zero), free rows are written
+    vm = v.copy()
+    vblock = np.zeros(nb)
+    h = 0.5 * dt
+    last = 0.0
+    for step in range(n_steps):
+        # forces at (x, v), and the midpoint (x + dt/2 v, v + dt/2 a)
+        for b in prange(nb):
+            fb = buf[b]
+            _block_forces(
+                x, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
+                bsprings[b], bsprings[b + 1], bprisms[b], bprisms[b + 1],
+            )  # fmt: skip
+            for q in range(bnodes[b], bnodes[b + 1]):
+                i = free[q]
+                g = damp[q]
+                c = inv_m[q]
+                for a in range(3):
+                    xm[i, a] = x[i, a] + h * v[i, a]
+                    vm[i, a] = v[i, a] + h * ((fb[i, a] - g * v[i, a]) * c)
+        # forces at the midpoint, the full step with its slopes, and each block's largest |v|
+        for b in prange(nb):
+            fb = buf[b]
+            _block_forces(
+                xm, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
+                bsprings[b], bsprings[b + 1], bprisms[b], bprisms[b + 1],
+            )  # fmt: skip
+            vb = 0.0
+            for q in range(bnodes[b], bnodes[b + 1]):
+                i = free[q]
+                g = damp[q]
+                c = inv_m[q]
+                for a in range(3):
+                    x[i, a] += dt * vm[i, a]
+                    v[i, a] += dt * ((fb[i, a] - g * vm[i, a]) * c)
+                    av = abs(v[i, a])
+                    if av > vb:
+                        vb = av
+                    elif not av <= vb:  # NaN: mark the block as non-finite, for good
+                        vb = np.inf
+            vblock[b] = vb
+        vmax = 0.0
+        for b in range(nb):
+            vmax = max(vmax, vblock[b])
+        last = vmax * dt
+        if not np.isfinite(last):
+            return step + 1, last, step
+        if tol_mm > 0.0 and last < tol_mm:
+            return step + 1, last, -1
+    return n_steps, last, -1
+
+
+def run_rk2(
+    model: TissueModel,
+    x: np.ndarray,
+    v: np.ndarray,
+    n_steps: int,
+    dt: float,
+    tol_mm: float = 0.0,
+    *,
+    n_blocks: int | None = None,
+) -> tuple[int, float, int]:
+    """Run the parallel kernel on ``x``, ``v`` ((N, 3) float64, C-contiguous, updated in place;
+    the kinematic rows must already hold their targets and zero velocity).
+
+    ``n_blocks`` (default: numba's thread count, fewer for a small lattice, see
+    :data:`MIN_NODES_PER_BLOCK`) is the number of slabs the free nodes are cut into, one thread
+    each; the result is the same, bit for bit, for any number.
+
+    Returns (steps taken, last ``max |v| dt`` in mm, step index of the first non-finite value or
+    -1). Stops early once ``max |v| dt < tol_mm`` when ``tol_mm > 0``."""
+    threads = numba.get_num_threads()
+    if n_blocks is None:
+        n_blocks = max(1, min(threads, len(model.free_index) // MIN_NODES_PER_BLOCK))
+    p = rk2_plan(model, n_blocks)
+    if p.n_blocks < threads:
+        numba.set_num_threads(p.n_blocks)  # this thread only; no idle threads at the barriers
+    try:
+        done, last, bad = _rk2_kernel(p, model, x, v, n_steps, dt, tol_mm)
+    finally:
+        numba.set_num_threads(threads)
+    return int(done), float(last), int(bad)
+
+
+def _rk2_kernel(p: Rk2Plan, model: TissueModel, x, v, n_steps, dt, tol_mm):
+    return _rk2_run_parallel(
+        x,
+        v,
+        int(n_steps),
+        float(dt),
+        float(tol_mm),
+        p.free,
+        p.inv_mass,
+        p.damping,
+        p.block_nodes,
+        p.block_springs,
+        p.block_prisms,
+        p.spring_i,
+        p.spring_j,
+        p.rest_length,
+        p.spring_material,
+        model.materials,
+        model.spring_law,
+        p.elements,
+        p.rest_volume,
+        p.volume_weight,
+        model.volume_sign,
+    )
+
+
+# ------------------------------------------------------------- the serial reference kernel ----
+
+
+@njit(cache=True)
+def _acc_serial(
+    x, v, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, inv_m, damp, free, f, out
+):
+    internal_forces_numba(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, f)
+    for i in range(x.shape[0]):
+        if free[i]:
+            for a in range(3):
+                out[i, a] = (f[i, a] - damp[i] * v[i, a]) * inv_m[i]
+        else:
+            for a in range(3):
+                out[i, a] = 0.0
+
+
+@njit(cache=True)
+def _rk2_run_serial(
+    x,
+    v,
+    n_steps,
+    dt,
+    si,
+    sj,
+    rest,
+    mat_id,
+    mat,
+    law,
+    elems,
+    rest_vol,
+    kv,
+    vsign,
+    inv_m,
+    damp,
+    free,
+    tol_mm,
+):
+    """The previous, single-thread kernel (kept as the reference): midpoint RK2 for up to n_steps
+    with a scatter over every spring and element; stops early when max |v| dt < tol_mm
+    (tol_mm > 0). Returns (steps taken, last max |v| dt, step index of a non-finite value or -1)."""
+    n = x.shape[0]
+    f = np.zeros((n, 3))
+    a1 = np.zeros((n, 3))
+    a2 = np.zeros((n, 3))
+    xm = x.copy()
+    vm = v.copy()
+    h = 0.5 * dt
+    last = 0.0
+    for step in range(n_steps):
+        _acc_serial(
+            x,
+            v,
+            si,
+            sj,
+            rest,
+            mat_id,
+            mat,
+            law,
+            elems,
+            rest_vol,
+            kv,
+            vsign,
+            inv_m,
+            damp,
+            free,
+            f,
+            a1,
+        )
+        for i in range(n):
+            for a in range(3):
+                xm[i, a] = x[i, a] + h * v[i, a]
+                vm[i, a] = v[i, a] + h * a1[i, a]
+        _acc_serial(
+            xm,
+            vm,
+            si,
+            sj,
+            rest,
+            mat_id,
+            mat,
+            law,
+            elems,
+            rest_vol,
+            kv,
+            vsign,
+            inv_m,
+            damp,
+            free,
+            f,
+            a2,
+        )
+        vmax = 0.0
+        for i in range(n):
+            if free[i]:
+                for a in range(3):
+                    x[i, a] += dt * vm[i, a]
+                    v[i, a] += dt * a2[i, a]
+                    av = abs(v[i, a])
+                    if not av <= vmax:  # also catches NaN
+                        vmax = av
+        last = vmax * dt
+        if not np.isfinite(last):
+            return step + 1, last, step
+        if tol_mm > 0.0 and last < tol_mm:
+            return step + 1, last, -1
+    return n_steps, last, -1
+
+
+def run_rk2_serial(
+    model: TissueModel, x: np.ndarray, v: np.ndarray, n_steps: int, dt: float, tol_mm: float = 0.0
+) -> tuple[int, float, int]:
+    """:func:`run_rk2` with the previous single-thread kernel (the reference)."""
+    done, last, bad = _rk2_run_serial(
+        x,
+        v,
+        int(n_steps),
+        float(dt),
+        model.spring_i,
+        model.spring_j,
+        model.rest_length,
+        model.spring_material,
+        model.materials,
+        model.spring_law,
+        model.elements,
+        model.rest_volume,
+        model.volume_weight,
+        model.volume_sign,
+        1.0 / model.mass,
+        model.damping,
+        ~model.kinematic,
+        float(tol_mm),
+    )
+    return int(done), float(last), int(bad)
+
+
+# ------------------------------------------------------------------------------ public API ----
+
+
+def step_rk2(model: TissueModel, state, targets=None, dt: float | None = None, n_steps: int = 1):
+    """Advance ``n_steps`` paper RK2 steps of size ``dt`` on all cores.
+
+    Parameters
+    ----------
+    model : TissueModel
+    state : TissueState — where to start (not modified).
+    targets : (K, 3) float ndarray, optional
+        Positions (mm) of the kinematic nodes, in ``model.kinematic_index`` order (default: their
+        rest positions); set before the first step, velocities zero.
+    dt : float, optional
+        Time step, s (default ``model.stable_dt``, computed once per model).
+    n_steps : int
+
+    Returns
+    -------
+    TissueState — a new state, ``t`` advanced by ``n_steps * dt``.
+
+    Raises
+    ------
+    MyofaceSimulationError
+        With the step index, if the state becomes NaN/Inf.
+
+    References: Terzopoulos & Waters 1993, eq. (3)-(4) and Section III-B.
+    """
+    # integrate.py re-exports this module's API, so its helpers are imported here, not at the top
+    from myoface.tissue.integrate import _targets_array
+
+    dt = model.stable_dt if dt is None else float(dt)
+    if not dt > 0:
+        raise MyofaceValueError(f"dt must be > 0 s; got {dt}")
+    s = state.copy()
+    s.x = np.ascontiguousarray(s.x, dtype=np.float64)
+    s.v = np.ascontiguousarray(s.v, dtype=np.float64)
+    s.x[model.kinematic_index] = _targets_array(model, targets)
+    s.v[model.kinematic_index] = 0.0
+    done, _, bad = run_rk2(model, s.x, s.v, int(n_steps), dt)
+    if bad >= 0:
+        raise MyofaceSimulationError(
+            f"RK2 produced NaN/Inf at step {bad} (dt = {dt:g} s); reduce dt"
+        )
+    s.t += done * dt
+    return s

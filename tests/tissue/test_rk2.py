@@ -1,0 +1,174 @@
+"""The parallel RK2 kernel: held to the serial reference, thread-count invariance, the stable
+time step cached once per model, and the energy of a step change of the kinematic targets."""
+
+import threading
+
+import numpy as np
+import pytest
+
+from myoface.tissue import (
+    kinetic_energy,
+    make_lattice,
+    potential_energy,
+    relax,
+    rest_state,
+    step_rk2,
+)
+from myoface.tissue import rk2 as rk2_mod
+from myoface.tissue.rk2 import run_rk2, run_rk2_serial
+
+
+def _step_change(model, seed=0, radius_mm=25.0, amp_mm=4.0):
+    """Drive the fascia nodes within ``radius_mm`` of a random skin point by a smooth
+    displacement (cosine fall-off, as a muscle does, eq. 6): the model with those nodes kinematic,
+    and the (K, 3) targets."""
+    rng = np.random.default_rng(seed)
+    fas = model.layer_nodes("fascia")
+    centre = model.rest_positions[rng.integers(model.n_vertices)]
+    d = np.linalg.norm(model.rest_positions[fas] - centre, axis=1)
+    near = d < radius_mm
+    m2 = model.with_kinematic(fas[near])
+    tg = m2.rest_positions[m2.kinematic_index].copy()
+    rows = np.searchsorted(m2.kinematic_index, fas[near])
+    tg[rows] += np.cos(d[near] / radius_mm * np.pi / 2)[:, None] * rng.normal(0, amp_mm, 3)
+    return m2, tg
+
+
+def _start(model, targets, seed=0, v_scale=0.0):
+    s = rest_state(model)
+    s.x[model.kinematic_index] = targets
+    if v_scale:
+        rng = np.random.default_rng(seed)
+        s.v[model.free_index] = rng.normal(0, v_scale, (len(model.free_index), 3))
+    return s.x, s.v
+
+
+def test_parallel_kernel_follows_the_serial_reference(default_tissue):
+    m, tg = _step_change(default_tissue, seed=3)
+    x0, v0 = _start(m, tg, seed=3, v_scale=20.0)
+    xa, va, xb, vb = x0.copy(), v0.copy(), x0.copy(), v0.copy()
+    n = 300
+    ra = run_rk2(m, xa, va, n, m.stable_dt)
+    rb = run_rk2_serial(m, xb, vb, n, m.stable_dt)
+    assert ra[0] == rb[0] == n and ra[2] == rb[2] == -1
+    move = np.abs(xb - x0).max()
+    assert move > 1.0  # the lattice really moved
+    # Same arithmetic per spring and per tetrahedron, and the same order of the springs' terms at
+    # each node; what differs is the prisms': the parallel kernel sums each prism's gradient per
+    # node over its three tetrahedra before adding it, the serial one adds every term as it comes.
+    # That is a reassociation: a few ulps of a force per evaluation, ~1e-13 of the motion after n steps of
+    # this damped (contractive) system. 1e-9 of the motion leaves 4 orders of magnitude for it;
+    # any modelling slip (a spring or prism missed or counted twice, a wrong sign or midpoint)
+    # moves nodes by far more than 1e-9 mm.
+    np.testing.assert_allclose(xa, xb, rtol=0, atol=1e-9 * move)
+    np.testing.assert_allclose(va, vb, rtol=0, atol=1e-9 * np.abs(vb).max())
+
+
+def test_trajectory_does_not_depend_on_the_number_of_blocks(default_tissue):
+    # each node gathers the same terms in the same order whatever the cut: bit for bit
+    m, tg = _step_change(default_tissue, seed=1)
+    x0, v0 = _start(m, tg, seed=1, v_scale=20.0)
+    out = []
+    for nb in (1, 2, 5):
+        x, v = x0.copy(), v0.copy()
+        run_rk2(m, x, v, 50, m.stable_dt, n_blocks=nb)
+        out.append((x, v))
+    for x, v in out[1:]:
+        np.testing.assert_array_equal(x, out[0][0])
+        np.testing.assert_array_equal(v, out[0][1])
+
+
+def _prism_lattice(with_volume: bool):
+    """One prism, every node free, the paper's discontinuous law; stretched and moving."""
+    rng = np.random.default_rng(0)
+    pos = np.array([[0, 0, 0], [4, 0, 0], [0, 4, 0], [0, 0, 3], [4, 0, 3], [0, 4, 3]], float)
+    springs = [[0, 1], [1, 2], [2, 0], [3, 4], [4, 5], [5, 3], [0, 3], [1, 4], [2, 5], [0, 4]]
+    lat = make_lattice(
+        pos,
+        springs,
+        mass=0.02,
+        damping=0.5,
+        elements=[[0, 1, 2, 3, 4, 5]] if with_volume else None,
+        volume_weight=5.0,
+        biphasic="paper",
+    )
+    return lat, pos + rng.normal(0, 0.8, pos.shape), rng.normal(0, 5.0, pos.shape)
+
+
+def test_parallel_kernel_on_a_lattice_with_every_node_free():
+    # no kinematic node, so every spring and prism is kept
+    lat, x0, v0 = _prism_lattice(with_volume=True)
+    xa, va, xb, vb = x0.copy(), v0.copy(), x0.copy(), v0.copy()
+    run_rk2(lat, xa, va, 400, 1e-4, n_blocks=2)
+    run_rk2_serial(lat, xb, vb, 400, 1e-4)
+    # reassociation of the prism's terms only, as above
+    np.testing.assert_allclose(xa, xb, rtol=0, atol=1e-9 * np.abs(xb - x0).max())
+
+
+def test_springs_alone_follow_the_serial_reference_bit_for_bit():
+    # the springs' terms are added to each node in the same order, with the same arithmetic
+    lat, x0, v0 = _prism_lattice(with_volume=False)
+    xa, va, xb, vb = x0.copy(), v0.copy(), x0.copy(), v0.copy()
+    run_rk2(lat, xa, va, 400, 1e-4, n_blocks=2)
+    run_rk2_serial(lat, xb, vb, 400, 1e-4)
+    np.testing.assert_array_equal(xa, xb)
+    np.testing.assert_array_equal(va, vb)
+
+
+def test_stable_dt_is_computed_once_per_model(default_tissue, monkeypatch):
+    m, tg = _step_change(default_tissue, seed=2)  # a fresh model: nothing cached yet
+    calls = []
+    real = rk2_mod.stable_time_step
+
+    def counting(model, *args, **kw):
+        calls.append(model)
+        return real(model, *args, **kw)
+
+    monkeypatch.setattr(rk2_mod, "stable_time_step", counting)
+    dt = m.stable_dt
+    assert dt is m.stable_dt  # the cached value itself, not a recomputation
+    s = step_rk2(m, rest_state(m), tg)
+    step_rk2(m, s, tg, n_steps=3)
+    relax(m, s, tg, method="rk2", max_iter=5, tol_mm=1e6)
+    assert calls == [m]
+    assert s.t == pytest.approx(dt)
+    assert dt == real(m)  # the same value a fresh computation gives
+    assert 0 < dt < 1e-3
+
+
+def test_stable_dt_from_several_threads_is_one_value(default_tissue):
+    m, _ = _step_change(default_tissue, seed=4)
+    got = []
+    threads = [threading.Thread(target=lambda: got.append(m.stable_dt)) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(set(got)) == 1 and got[0] == m.stable_dt
+
+
+@pytest.mark.parametrize("seed", [0, 5])
+def test_step_change_energy_never_grows_and_motion_is_bounded(default_tissue, seed):
+    """After a step change of the kinematic targets (as when a muscle contracts at once) the
+    damped lattice only loses energy: E(t) = T + U never exceeds E(0) = U(x0) (v0 = 0), so every
+    free node's speed stays below sqrt(2 E(0) / m_i) and its travel below t sqrt(2 E(0) / m_i)."""
+    m, tg = _step_change(default_tissue, seed=seed)
+    x0, _ = _start(m, tg)
+    s = rest_state(m)
+    e0 = potential_energy(m, x0)
+    assert e0 > 0
+    energies = []
+    for _ in range(60):
+        s = step_rk2(m, s, tg, n_steps=5)
+        energies.append(potential_energy(m, s.x) + kinetic_energy(m, s.v))
+    e = np.array([e0, *energies])
+    # 1e-9 E(0): the rounding of the energy sums (~1e-12 relative), far below any real growth
+    assert np.all(np.diff(e) <= 1e-9 * e0)
+    assert e[-1] < e[0]
+    free = m.free_index
+    travel = np.linalg.norm(s.x[free] - x0[free], axis=1)
+    speed = np.linalg.norm(s.v[free], axis=1)
+    v_max = np.sqrt(2.0 * e0 / m.mass[free])
+    assert np.all(speed <= v_max)
+    assert np.all(travel <= s.t * v_max)
+    assert travel.max() > 0.1  # the skin did follow the targets
