@@ -1,0 +1,950 @@
+"""The 3-D fit of the whole face model to each frame's landmarks: head pose + every muscle.
+
+Beyond the paper. Terzopoulos & Waters (1993, Section V-C) read the face in a 2-D head frame
+because their subject faced the camera; a head that turns moves every feature by more than the
+muscles do. Here the face model itself is posed in 3-D in front of a pinhole camera and fitted
+to MediaPipe's 468 points (the topology of the default face: point i *is* vertex i).
+
+Unknowns per frame: the head's rotation (3) and translation (3) in the camera frame, and the
+contraction of every muscle of the model and the jaw (M), each in [0, 1]. The forward model is
+
+    skin(c) = neutral + identity + D(c),    D(c) ~ D(c0) + J (c - c0)
+
+with ``identity`` the person's own neutral (a smooth per-vertex offset fitted on the calibration
+frame, :meth:`ModelFit.calibrate`), ``D(c0)`` the tissue's displacement at the last contractions
+the tissue was relaxed at (the previous frame's), and ``J`` the skin's response to each unit
+contraction (:func:`~myoface.analysis.estimate.skin_response`, once per model), made exact along
+each step through the tissue by Broyden's update (as :mod:`~myoface.analysis.curvefit` does). A
+frame is solved by bounded Gauss-Newton (Levenberg's damping on a rejected step): each step is a
+bounded linear least-squares problem in (rotation, translation, contractions) with the
+contractions kept in [0, 1]; ``refine`` relaxes of the tissue at the estimate follow, each
+followed by Gauss-Newton steps with the corrected model. The fit owns its
+:class:`~myoface.model.FaceState`; the caller's model is never changed.
+
+The weights (:class:`FitSettings`) are those of a maximum a posteriori estimate with every term
+in units of its standard deviation:
+
+- landmark x, y: MediaPipe's scatter about the true vertex, in mm on the face (pixels times
+  depth over focal length), so that the priors weigh the same whatever the face's size in the
+  image; the face oval's points (which MediaPipe slides along the silhouette as the head turns)
+  and points turned away from the camera weigh less; a Huber weight takes out outliers;
+- landmark z: MediaPipe's relative depth, mean removed (it has no absolute depth), with a
+  larger deviation (monocular depth is its weakest coordinate);
+- temporal: each contraction and the pose may change from the previous frame by about a
+  plausible rate times the frame interval (the prior that makes an ill-posed frame, e.g. a
+  side view that hides one half of the face, well-posed);
+- magnitude: a weak Gaussian prior on each contraction, and a sparsity (L1) prior: a muscle
+  has to explain a little of the landmarks' motion before it is used. Between muscles whose
+  pulls nearly coincide (:func:`confounded_muscles`, e.g. risorius and buccinator) the L1
+  prior gives the motion to the one that produces it with the least contraction, and keeps
+  that choice from frame to frame; such muscles are judged by the skin they produce.
+
+Camera frame (:class:`HeadPose`): x right, y up, z towards the viewer (the head frame's axes
+when the face looks into the camera), the camera at the origin looking along -z; the head frame
+maps into it by ``P = R X + t``. Angles: ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (intrinsic y-x-z):
+yaw > 0 turns the face towards the subject's left (the image's right), pitch > 0 nods it down,
+roll > 0 tilts its top towards the subject's right (counter-clockwise in the image).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import sparse
+from scipy.optimize import lsq_linear
+from scipy.sparse.linalg import spsolve
+from scipy.spatial.transform import Rotation
+
+from myoface.errors import MyofaceValueError
+
+#: the vertical field of view assumed for a video whose camera is not known: a typical webcam
+#: or phone front camera (60-78 degrees diagonal) on a 16:9 or 4:3 frame
+DEFAULT_FOV_DEG = 45.0
+#: seconds at the start of a video searched for the most neutral frame to calibrate on
+CALIBRATION_WINDOW_S = 2.0
+#: rounds of (pose, identity) alternation when calibrating
+IDENTITY_ROUNDS = 4
+#: at most this many of the most neutral frames (the best one and its neighbours in time)
+#: calibrate together (their tracker noise averages out) ...
+CALIBRATION_FRAMES = 5
+#: ... those whose expression score is within this (mm RMS skin displacement) of the best's
+NEUTRAL_MARGIN_MM = 0.25
+#: Euler axis order of the head angles (scipy's: upper case = intrinsic)
+EULER_ORDER = "YXZ"
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """The fit's weights, each a standard deviation of the term it scales.
+
+    Attributes
+    ----------
+    landmark_sigma_mm : MediaPipe's scatter of a point about its vertex in the image plane, mm
+        on the face (measured on faces rendered by myoface: median 1.2 mm frontal, ~2 mm at
+        30 degrees of yaw).
+    depth_sigma_mm : the same for MediaPipe's relative depth z (measured: 1.3-2.2 mm about a
+        linear fit to the true depth; larger, because monocular).
+    oval_weight : weight of the face oval's points (the mesh's outer rim), which MediaPipe
+        puts on the face's silhouette, not on fixed skin, as the head turns.
+    rate_per_s : temporal prior: a contraction changes by about this much per second (1 sd);
+        a fast expression goes from 0 to 1 in a quarter of a second.
+    rotation_rate_deg_per_s, translation_rate_mm_per_s : the same for the head pose (weak: a
+        head turns fast; they only keep a frame with too few points well-posed).
+    magnitude_sigma : Gaussian prior on each contraction (about 0).
+    sparsity : L1 prior, in squared standard deviations of the landmarks per unit contraction:
+        a muscle must lower the landmark cost by this much per unit before it is used.
+    huber : a landmark residual beyond this many sigmas weighs less (Huber).
+    iterations : Gauss-Newton steps per frame (fewer when converged).
+    refine : relaxes of the tissue per frame at the estimate (0: the linear response only).
+    """
+
+    landmark_sigma_mm: float = 1.0
+    depth_sigma_mm: float = 3.0
+    oval_weight: float = 0.2
+    rate_per_s: float = 4.0
+    rotation_rate_deg_per_s: float = 180.0
+    translation_rate_mm_per_s: float = 300.0
+    magnitude_sigma: float = 1.0
+    sparsity: float = 4.0
+    huber: float = 3.0
+    iterations: int = 8
+    refine: int = 1
+    #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
+    #: sd) and the offset itself (mm, 1 sd)
+    identity_edge_sigma_mm: float = 1.0
+    identity_sigma_mm: float = 10.0
+
+
+# ------------------------------------------------------------------ camera and pose
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """A pinhole camera's intrinsics: focal length and principal point, pixels; image (x, y) =
+    (column, row)."""
+
+    focal_px: float
+    cx: float
+    cy: float
+
+    def __post_init__(self):
+        vals = (self.focal_px, self.cx, self.cy)
+        if not all(np.isfinite(v) for v in vals) or not self.focal_px > 0:
+            raise MyofaceValueError(
+                f"a camera needs a finite focal length > 0 px and principal point; got {vals}"
+            )
+
+    @classmethod
+    def for_image(cls, width: int, height: int, fov_deg: float = DEFAULT_FOV_DEG):
+        """The camera of a ``width`` x ``height`` image with vertical field of view
+        ``fov_deg`` and the principal point at the image's centre."""
+        if not 1 <= fov_deg <= 170:
+            raise MyofaceValueError(f"fov_deg must be in [1, 170]; got {fov_deg}")
+        f = 0.5 * height / np.tan(np.radians(fov_deg) / 2)
+        return cls(float(f), 0.5 * width, 0.5 * height)
+
+    @classmethod
+    def from_camera(cls, camera):
+        """The intrinsics of a (perspective) :class:`~myoface.render.Camera`."""
+        if camera.orthographic:
+            raise MyofaceValueError("the fit needs a perspective camera (fov_deg), not ortho")
+        return cls(float(camera.focal_px), 0.5 * camera.width, 0.5 * camera.height)
+
+    def project(self, p: np.ndarray) -> np.ndarray:
+        """Camera-frame points (N, 3) mm -> (N, 2) pixels (x, y)."""
+        d = np.maximum(-p[:, 2], 1e-6)
+        return np.column_stack(
+            [self.cx + self.focal_px * p[:, 0] / d, self.cy - self.focal_px * p[:, 1] / d]
+        )
+
+
+@dataclass(frozen=True)
+class HeadPose:
+    """The head frame in the camera frame: ``P = rotation @ X + translation_mm``."""
+
+    rotation: np.ndarray
+    translation_mm: np.ndarray
+
+    @classmethod
+    def from_euler(cls, yaw_deg=0.0, pitch_deg=0.0, roll_deg=0.0, translation_mm=(0, 0, -600)):
+        r = Rotation.from_euler(EULER_ORDER, [yaw_deg, pitch_deg, roll_deg], degrees=True)
+        return cls(r.as_matrix(), np.asarray(translation_mm, dtype=np.float64))
+
+    @property
+    def angles_deg(self) -> np.ndarray:
+        """(yaw, pitch, roll) degrees."""
+        return Rotation.from_matrix(self.rotation).as_euler(EULER_ORDER, degrees=True)
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        return np.asarray(x) @ self.rotation.T + self.translation_mm
+
+    def columns(self) -> dict[str, float]:
+        """The CSV's pose columns: angles (deg) and the head frame's origin in the camera frame
+        (x right, y up, mm; ``head_tz_mm`` its distance in front of the camera)."""
+        yaw, pitch, roll = self.angles_deg
+        tx, ty, tz = self.translation_mm
+        return {
+            "head_yaw_deg": float(yaw),
+            "head_pitch_deg": float(pitch),
+            "head_roll_deg": float(roll),
+            "head_tx_mm": float(tx),
+            "head_ty_mm": float(ty),
+            "head_tz_mm": float(-tz),
+        }
+
+    @classmethod
+    def from_columns(cls, row: dict) -> HeadPose:
+        """The inverse of :meth:`columns`."""
+        return cls.from_euler(
+            row["head_yaw_deg"],
+            row["head_pitch_deg"],
+            row["head_roll_deg"],
+            (row["head_tx_mm"], row["head_ty_mm"], -row["head_tz_mm"]),
+        )
+
+
+#: the CSV columns of a pose, in order
+POSE_COLUMNS = (
+    "head_yaw_deg",
+    "head_pitch_deg",
+    "head_roll_deg",
+    "head_tx_mm",
+    "head_ty_mm",
+    "head_tz_mm",
+)
+
+
+def _check_points(points, n: int) -> np.ndarray:
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[0] != n or p.shape[1] not in (2, 3) or not np.isfinite(p).all():
+        raise MyofaceValueError(
+            f"landmarks must be finite ({n}, 3) points (x, y px; z relative depth px); got "
+            f"shape {p.shape}"
+        )
+    if p.shape[1] == 2:
+        p = np.column_stack([p, np.full(n, np.nan)])
+    return p
+
+
+def initial_pose(shape: np.ndarray, points: np.ndarray, camera: PinholeCamera) -> HeadPose:
+    """A closed-form pose of ``shape`` (V, 3) mm, head frame, for ``points`` (V, 3) (x, y px,
+    z relative depth px): the weak-perspective similarity (Umeyama 1991) between the shape and
+    the points, its scale read as focal length over depth."""
+    from myoface.face.personal import fit_similarity_3d
+
+    p = np.asarray(points, dtype=np.float64)
+    z = p[:, 2] if np.isfinite(p[:, 2]).all() else np.zeros(len(p))
+    dst = np.column_stack([p[:, 0] - camera.cx, camera.cy - p[:, 1], -z])
+    s, r, t = fit_similarity_3d(shape, dst)
+    if not s > 0:
+        raise MyofaceValueError("degenerate landmarks: cannot place the head")
+    d = camera.focal_px / s
+    # the shape's centroid projects to where the points' centroid is, at depth d
+    c = shape.mean(axis=0)
+    pc = s * r @ c + t  # px, at the centroid
+    centroid_cam = np.array([pc[0] * d / camera.focal_px, pc[1] * d / camera.focal_px, -d])
+    return HeadPose(r, centroid_cam - r @ c)
+
+
+# ------------------------------------------------------------------ the model's structure
+
+
+def landmark_weights(face, oval_weight: float = FitSettings.oval_weight) -> np.ndarray:
+    """Per-vertex base weights (V,): 1, ``oval_weight`` on the face oval (the mesh's outer
+    boundary loop, which MediaPipe places on the silhouette)."""
+    w = np.ones(face.n_vertices)
+    loops = face.boundary_loops
+    if loops:
+        w[loops[0]] = oval_weight
+    return w
+
+
+def confounded_muscles(model, threshold: float = 0.95, ids=None) -> list[tuple[str, float, str]]:
+    """Muscles the skin alone cannot tell apart from the others: ``(muscle, R2, nearest)``, R2
+    the share of the muscle's skin response (every vertex, x, y, z) that the other muscles'
+    responses explain (a variance inflation of 1 / (1 - R2)), ``nearest`` the muscle whose
+    response is most like its own; sorted, most confounded first."""
+    from myoface.analysis.estimate import skin_response
+
+    ids = tuple(model.ids if ids is None else ids)
+    a = skin_response(model, ids).reshape(-1, len(ids))
+    g = a.T @ a
+    gi = np.linalg.pinv(g)
+    r2 = 1.0 - 1.0 / np.maximum(np.diag(g) * np.diag(gi), 1.0)
+    norm = np.linalg.norm(a, axis=0)
+    cos = g / np.maximum(np.outer(norm, norm), 1e-12)
+    np.fill_diagonal(cos, -np.inf)
+    out = [(ids[i], float(r2[i]), ids[int(np.argmax(cos[i]))]) for i in range(len(ids))]
+    return sorted([o for o in out if o[1] >= threshold], key=lambda o: -o[1])
+
+
+def _laplacian(face) -> sparse.csr_matrix:
+    """The mesh graph's Laplacian (V, V): sum over edges of (e_a - e_b)(e_a - e_b)^T."""
+    e = face.edges
+    n = face.n_vertices
+    rows = np.concatenate([e[:, 0], e[:, 1], e[:, 0], e[:, 1]])
+    cols = np.concatenate([e[:, 0], e[:, 1], e[:, 1], e[:, 0]])
+    vals = np.concatenate([np.ones(2 * len(e)), -np.ones(2 * len(e))])
+    return sparse.csr_matrix((vals, (rows, cols)), shape=(n, n))
+
+
+# ------------------------------------------------------------------ results
+
+
+@dataclass
+class FrameFit:
+    """One frame's fit.
+
+    Attributes
+    ----------
+    contractions : (M,) in [0, 1], over the model's ids (jaw last).
+    pose : HeadPose.
+    residual_mm : RMS distance (mm on the face, image plane) of the landmarks from the fitted
+        model's vertices.
+    iterations : Gauss-Newton steps taken.
+    converged : whether the last step was below tolerance.
+    """
+
+    contractions: np.ndarray
+    pose: HeadPose
+    residual_mm: float
+    iterations: int
+    converged: bool
+
+
+@dataclass
+class Calibration:
+    """What :meth:`ModelFit.calibrate` found.
+
+    Attributes
+    ----------
+    index : position (in the sequence given) of the calibration frame.
+    scores : (T,) per candidate frame, the RMS skin displacement (mm) of the contractions
+        fitted against the model's own neutral (NaN without a face); the lowest is chosen.
+    identity_mm : (V, 3) the person's neutral minus the model's, head frame.
+    pose : the calibration frame's head pose.
+    residual_mm : landmark RMS (mm) after the identity fit.
+    """
+
+    index: int
+    scores: np.ndarray
+    identity_mm: np.ndarray
+    pose: HeadPose
+    residual_mm: float
+    extra: dict = field(default_factory=dict)
+
+
+# ------------------------------------------------------------------ the fit
+
+
+class ModelFit:
+    """The face model fitted to landmark frames in 3-D (see the module's docstring).
+
+    Parameters
+    ----------
+    model : FaceModel in the default (MediaPipe) topology; never changed.
+    camera : PinholeCamera of the frames.
+    settings : FitSettings (default: the documented defaults).
+    fps : the video's frame rate (the temporal prior scales with the frame interval).
+
+    Use :meth:`calibrate` once (optional: without it the model's own neutral is the person's),
+    then :meth:`fit` on each frame in order; :meth:`lose_track` after frames without a face.
+    """
+
+    def __init__(self, model, camera: PinholeCamera, settings: FitSettings | None = None,
+                 fps: float = 30.0):  # fmt: skip
+        from myoface.analysis.estimate import skin_response
+
+        if model.face.n_vertices != 468:
+            raise MyofaceValueError(
+                "the 3-D fit needs a face model in MediaPipe's 468-point topology (the default "
+                f"face); this one has {model.face.n_vertices} vertices"
+            )
+        if not fps > 0:
+            raise MyofaceValueError(f"fps must be > 0; got {fps}")
+        self.model = model
+        self.camera = camera
+        self.settings = settings or FitSettings()
+        self.fps = float(fps)
+        self.ids = tuple(model.ids)
+        self.n_muscles = len(self.ids)
+        self.neutral = model.skin_vertices()
+        self.response = skin_response(model, self.ids)  # (V, 3, M) mm per unit contraction
+        self.base_weights = landmark_weights(model.face, self.settings.oval_weight)
+        self.identity_mm = np.zeros_like(self.neutral)
+        #: the fit's own state of the model's tissue (each relax starts from the last)
+        self.state = model.rest_state()
+        self._c0 = np.zeros(self.n_muscles)  # contractions the tissue was last relaxed at
+        self._d0 = np.zeros_like(self.neutral)  # ... and its skin displacement there
+        self._prev: FrameFit | None = None
+        self.calibration: Calibration | None = None
+
+    # -------------------------------------------------------------- public
+    def lose_track(self) -> None:
+        """Forget the previous frame (after frames without a face): the next fit starts from a
+        closed-form pose and no temporal prior."""
+        self._prev = None
+
+    def skin(self, contractions=None) -> np.ndarray:
+        """The person's skin (V, 3) mm, head frame, at ``contractions`` (default: neutral),
+        relaxed through the tissue from the fit's state."""
+        c = np.zeros(self.n_muscles) if contractions is None else np.asarray(contractions)
+        if np.any(c):
+            self.state = self.model.relax(c, self.state).state
+            disp = self.model.skin_vertices(self.state) - self.neutral
+        else:
+            disp = 0.0
+        return self.neutral + self.identity_mm + disp
+
+    def shape(self, contractions) -> np.ndarray:
+        """The fit's forward model (V, 3) mm, head frame, at ``contractions``: the person's
+        neutral plus the displacement at the tissue's last relax, continued linearly."""
+        c = np.asarray(contractions, dtype=np.float64)
+        return self.neutral + self.identity_mm + self._d0 + self.response @ (c - self._c0)
+
+    def fit(self, points) -> FrameFit:
+        """Fit one frame's landmarks (468, 3): x, y pixels (column, row), z MediaPipe's relative
+        depth (pixels; NaN or a (468, 2) array: not used). Warm-started from the previous
+        frame; the result becomes the next frame's prior."""
+        p = _check_points(points, len(self.neutral))
+        res = self._fit(p, self._prev, refine=self.settings.refine)
+        self._prev = res
+        return res
+
+    def calibrate(self, frames, index: int | None = None) -> Calibration:
+        """Measure the person's own neutral.
+
+        ``frames``: a sequence of landmark arrays (468, 3), or None where no face was found
+        (e.g. the first :data:`CALIBRATION_WINDOW_S` seconds of a video). ``index`` picks the
+        calibration frame; by default it is the most neutral one: the frame whose contractions,
+        fitted against the model's own neutral, less the least of each muscle over the frames
+        (the person's own shape, which reads as the same contractions in every frame),
+        displace the skin least (RMS over vertices). On that frame and its neighbours nearly as
+        neutral (:data:`CALIBRATION_FRAMES`, :data:`NEUTRAL_MARGIN_MM`) the head poses and a
+        per-vertex offset of the neutral (regularised to be smooth:
+        :attr:`FitSettings.identity_edge_sigma_mm`; the residual in the image plane then
+        added, so that the neutral reproduces them) are fitted with every contraction at zero;
+        later frames measure expression relative to it.
+        """
+        frames = list(frames)
+        if not frames:
+            raise MyofaceValueError("calibrate() needs at least one frame")
+        scores = np.full(len(frames), np.nan)
+        if index is None:
+            saved = self.identity_mm
+            self.identity_mm = np.zeros_like(self.neutral)
+            flat = self.response.reshape(-1, self.n_muscles)
+            fitted = np.full((len(frames), self.n_muscles), np.nan)
+            for k, pts in enumerate(frames):
+                if pts is not None:
+                    r = self._fit(_check_points(pts, len(self.neutral)), None, refine=0)
+                    fitted[k] = r.contractions
+            # the person's own shape also reads as contractions, the same in every frame; an
+            # expression adds to them: what a frame has beyond the least of each muscle over
+            # the frames is its expression
+            if np.isfinite(fitted).any():
+                excess = fitted - np.nanmin(fitted, axis=0)
+                for k in np.flatnonzero(np.isfinite(fitted).all(axis=1)):
+                    disp = (flat @ excess[k]).reshape(-1, 3)
+                    scores[k] = float(np.sqrt((disp**2).sum(1).mean()))
+            self.identity_mm = saved
+            if not np.isfinite(scores).any():
+                raise MyofaceValueError("no face in any of the calibration frames")
+            index = int(np.nanargmin(scores))
+        if not 0 <= index < len(frames) or frames[index] is None:
+            raise MyofaceValueError(f"calibration frame {index} has no face")
+        use = [index]
+        if np.isfinite(scores[index]):
+            # the frames nearly as neutral as the best one calibrate with it (their tracker
+            # noise averages out): within NEUTRAL_MARGIN_MM of its score, the closest first
+            near = [
+                k
+                for k in np.argsort(np.where(np.isfinite(scores), scores, np.inf))
+                if k != index
+                and abs(k - index) <= CALIBRATION_FRAMES // 2
+                and scores[k] <= scores[index] + NEUTRAL_MARGIN_MM
+            ]
+            use += [int(k) for k in near[: CALIBRATION_FRAMES - 1]]
+        pts = [_check_points(frames[k], len(self.neutral)) for k in use]
+        identity, poses, resid = self._fit_identity(pts)
+        pose = poses[0]
+        self.identity_mm = identity
+        self._prev = None
+        self.calibration = Calibration(index, scores, identity, pose, resid, {"frames": use})
+        return self.calibration
+
+    # -------------------------------------------------------------- internals
+    def _pixel_mm(self, pose: HeadPose) -> float:
+        """mm on the face per pixel at the head's depth."""
+        return float(max(-pose.translation_mm[2], 1.0) / self.camera.focal_px)
+
+    def _weights(self, pose: HeadPose, shape: np.ndarray) -> np.ndarray:
+        """Base weights times visibility: points whose surface turns away from the camera
+        weigh less (MediaPipe guesses them)."""
+        from myoface.face.mesh import vertex_normals
+
+        n = vertex_normals(shape, self.model.face.triangles) @ pose.rotation.T
+        p = pose.apply(shape)
+        view = -p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-9)
+        cos = (n * view).sum(1)
+        return self.base_weights * np.clip(cos / 0.3, 0.05, 1.0)
+
+    def _residuals(self, p, pose, shape, w, k):
+        """Weighted residuals (normalised by their sigmas): xy (V, 2), z (V,) and the points'
+        2-D distance in sigmas (V,) (for the Huber weights)."""
+        s = self.settings
+        cam = self.camera
+        pc = pose.apply(shape)
+        uv = cam.project(pc)
+        rxy = (uv - p[:, :2]) * (k / s.landmark_sigma_mm)
+        use_z = np.isfinite(p[:, 2]).all()
+        if use_z:
+            dz = -pc[:, 2] - k * p[:, 2]
+            dz = dz - (w * dz).sum() / w.sum()
+            rz = dz / s.depth_sigma_mm
+        else:
+            rz = np.zeros(len(p))
+        return rxy, rz, np.linalg.norm(rxy, axis=1), use_z
+
+    def _jacobians(self, pose, shape, dshape_dc, k, w, use_z):
+        """Rows of the weighted landmark residuals with respect to (omega (3), dt (3), dc)."""
+        s = self.settings
+        f = self.camera.focal_px
+        y = shape @ pose.rotation.T  # R X
+        pc = y + pose.translation_mm
+        d = np.maximum(-pc[:, 2], 1e-6)
+        # d(u, v)/dP (V, 2, 3)
+        dproj = np.zeros((len(pc), 2, 3))
+        dproj[:, 0, 0] = f / d
+        dproj[:, 0, 2] = f * pc[:, 0] / d**2
+        dproj[:, 1, 1] = -f / d
+        dproj[:, 1, 2] = -f * pc[:, 1] / d**2
+        # dP/dx (V, 3, 6 + K): omega -> -[y]_x, t -> I, c -> R J
+        nk = 0 if dshape_dc is None else dshape_dc.shape[2]
+        dp = np.zeros((len(pc), 3, 6 + nk))
+        dp[:, 0, 1], dp[:, 0, 2] = y[:, 2], -y[:, 1]
+        dp[:, 1, 0], dp[:, 1, 2] = -y[:, 2], y[:, 0]
+        dp[:, 2, 0], dp[:, 2, 1] = y[:, 1], -y[:, 0]
+        dp[:, :, 3:6] = np.eye(3)
+        if nk:
+            dp[:, :, 6:] = np.einsum("ij,vjk->vik", pose.rotation, dshape_dc)
+        sw = np.sqrt(w)
+        jxy = np.einsum("vij,vjk->vik", dproj, dp) * (k / s.landmark_sigma_mm)
+        jxy *= sw[:, None, None]
+        rows = [jxy.reshape(-1, 6 + nk)]
+        if use_z:
+            jz = -dp[:, 2, :] / s.depth_sigma_mm
+            jz = jz - (w[:, None] * jz).sum(0) / w.sum()
+            rows.append(jz * sw[:, None])
+        return np.vstack(rows)
+
+    def _fit(self, p, prev: FrameFit | None, refine: int) -> FrameFit:
+        """The bounded Gauss-Newton fit of one frame (see the module's docstring)."""
+        m = self.n_muscles
+        base = self.neutral + self.identity_mm
+        if prev is None:
+            pose = initial_pose(base, p, self.camera)
+            c = np.zeros(m)
+            c0, d0 = np.zeros(m), np.zeros_like(base)
+        else:
+            pose, c = prev.pose, prev.contractions.copy()
+            c0, d0 = self._c0, self._d0
+        jac = self.response.copy()
+        total_it, conv = 0, False
+        for rnd in range(int(refine) + 1):
+            if rnd > 0:
+                # through the tissue: relax at the estimate, Broyden-correct the response
+                self.state = self.model.relax(c, self.state).state
+                d_new = self.model.skin_vertices(self.state) - self.neutral
+                dc = c - c0
+                dd = float(dc @ dc)
+                if dd > 1e-10:
+                    miss = (d_new - d0) - jac @ dc
+                    jac += np.multiply.outer(miss, dc / dd)
+                c0, d0 = c.copy(), d_new
+                self._c0, self._d0 = c0, d0
+            pose, c, it, conv = self._gauss_newton(p, pose, c, c0, d0, jac, base, prev)
+            total_it += it
+        shape = base + d0 + jac @ (c - c0)
+        k = self._pixel_mm(pose)
+        uv = self.camera.project(pose.apply(shape))
+        resid = float(np.sqrt(((uv - p[:, :2]) ** 2).sum(1).mean()) * k)
+        return FrameFit(c, pose, resid, total_it, conv)
+
+    def _prior_rows(self, pose, c, prev, free):
+        """Prior rows (A, b) in the step (omega, dt, dc[free]) and the L1 gradient."""
+        s = self.settings
+        nf = len(free)
+        rows_a, rows_b = [], []
+        dt = 1.0 / self.fps
+        if prev is not None:
+            sig_r = np.radians(s.rotation_rate_deg_per_s) * dt
+            sig_t = s.translation_rate_mm_per_s * dt
+            rv = rotvec(pose.rotation @ prev.pose.rotation.T)
+            a = np.zeros((6, 6 + nf))
+            a[:3, :3] = np.eye(3) / sig_r
+            a[3:, 3:6] = np.eye(3) / sig_t
+            rows_a.append(a)
+            rows_b.append(
+                np.concatenate(
+                    [-rv / sig_r, -(pose.translation_mm - prev.pose.translation_mm) / sig_t]
+                )
+            )
+            if nf:
+                sig_c = s.rate_per_s * dt
+                a = np.zeros((nf, 6 + nf))
+                a[:, 6:] = np.eye(nf) / sig_c
+                rows_a.append(a)
+                rows_b.append(-(c[free] - prev.contractions[free]) / sig_c)
+        if nf:
+            a = np.zeros((nf, 6 + nf))
+            a[:, 6:] = np.eye(nf) / s.magnitude_sigma
+            rows_a.append(a)
+            rows_b.append(-c[free] / s.magnitude_sigma)
+        g = np.zeros(6 + nf)
+        g[6:] = s.sparsity
+        if not rows_a:
+            return np.zeros((0, 6 + nf)), np.zeros(0), g
+        return np.vstack(rows_a), np.concatenate(rows_b), g
+
+    def _cost(self, p, pose, c, shape, w, k, prev, free):
+        """The objective: Huber loss of the weighted landmark residuals + the priors."""
+        rxy, rz, dist, _ = self._residuals(p, pose, shape, w, k)
+        h = self.settings.huber
+        # Huber's loss of the 2-D distance (r^2 inside, 2 h r - h^2 beyond); z takes its weight
+        rho = np.where(dist <= h, dist**2, 2 * h * dist - h * h)
+        cost = float((w * rho).sum() + (w * self._huber(dist) * rz**2).sum())
+        _, b, g = self._prior_rows(pose, c, prev, free)
+        return cost + float((b**2).sum()) + float(g[6:] @ c[free])
+
+    def _huber(self, r):
+        h = self.settings.huber
+        return np.where(r > h, h / np.maximum(r, 1e-12), 1.0)
+
+    def _gauss_newton(self, p, pose, c, c0, d0, jac, base, prev, free=None):
+        """Bounded Gauss-Newton / Levenberg-Marquardt on one frame from ``pose``, ``c`` with
+        the forward model ``base + d0 + jac (c - c0)``; only the contractions ``free`` move.
+        Returns (pose, contractions, steps, converged)."""
+        s = self.settings
+        free = np.arange(self.n_muscles) if free is None else np.asarray(free)
+        c = c.copy()
+        lam = 1e-3
+        conv = False
+        it = 0
+        shape = base + d0 + jac @ (c - c0)
+        w0 = self._weights(pose, shape)  # (visibility from the frame's starting pose)
+        while it < s.iterations:
+            it += 1
+            shape = base + d0 + jac @ (c - c0)
+            k = self._pixel_mm(pose)
+            rxy, rz, dist, use_z = self._residuals(p, pose, shape, w0, k)
+            w = w0 * self._huber(dist)
+            a_lm = self._jacobians(pose, shape, jac[:, :, free], k, w, use_z)
+            sw = np.sqrt(w)
+            b_lm = -np.concatenate([(rxy * sw[:, None]).ravel()] + ([rz * sw] if use_z else []))
+            a_p, b_p, g = self._prior_rows(pose, c, prev, free)
+            # the normal equations (einsum's loops, not BLAS: a thousand rows do not pay for
+            # BLAS's threads, which cost more than the product on a busy machine)
+            hess = np.einsum("ij,ik->jk", a_lm, a_lm) + a_p.T @ a_p
+            rhs = np.einsum("ij,i->j", a_lm, b_lm) + a_p.T @ b_p - 0.5 * g
+            cost0 = self._cost(p, pose, c, shape, w0, k, prev, free)
+            lo = np.concatenate([np.full(6, -np.inf), -c[free]])
+            hi = np.concatenate([np.full(6, np.inf), 1.0 - c[free]])
+            dg = np.maximum(np.diag(hess), 1e-12)
+            for _ in range(6):
+                # Levenberg: damp each unknown in proportion to its curvature
+                step = _bounded_normal(hess + np.diag(lam * dg), rhs, lo, hi)
+                new_pose = HeadPose(
+                    rotmat(step[:3]) @ pose.rotation, pose.translation_mm + step[3:6]
+                )
+                new_c = c.copy()
+                new_c[free] = np.clip(c[free] + step[6:], 0.0, 1.0)
+                new_shape = base + d0 + jac @ (new_c - c0)
+                cost1 = self._cost(p, new_pose, new_c, new_shape, w0, k, prev, free)
+                if cost1 <= cost0 + 1e-9 * abs(cost0):
+                    lam = max(lam / 10, 1e-7)
+                    break
+                lam *= 10
+            else:
+                conv = True  # no step lowers the cost: at a minimum (to rounding)
+                break
+            pose, c = new_pose, new_c
+            small = (
+                np.abs(step[:3]).max() < 1e-5
+                and np.abs(step[3:6]).max() < 1e-3
+                and (len(free) == 0 or np.abs(step[6:]).max() < 1e-3)
+            )
+            if small:
+                conv = True
+                break
+        return pose, c, it, conv
+
+    def _fit_identity(self, frames):
+        """The poses and a smooth identity offset (V, 3) shared by the landmark ``frames``, every
+        contraction at zero; then what the offset left of the frames' mean residual (in the
+        image plane) is added to it, so that the neutral reproduces the calibration frames."""
+        s = self.settings
+        nv = len(self.neutral)
+        ident = np.zeros_like(self.neutral)
+        poses = [initial_pose(self.neutral, p, self.camera) for p in frames]
+        lap = _laplacian(self.model.face)
+        reg = sparse.kron(
+            lap / s.identity_edge_sigma_mm**2 + sparse.eye(nv) / s.identity_sigma_mm**2,
+            sparse.eye(3),
+        ).tocsr()
+        for _ in range(IDENTITY_ROUNDS):
+            base = self.neutral + ident
+            poses = [self._pose_only(p, q, base) for p, q in zip(frames, poses, strict=True)]
+            # the offset, poses fixed: a sparse linear least-squares problem (Gauss-Newton)
+            for _ in range(2):
+                base = self.neutral + ident
+                h, g = reg.copy(), -(reg @ ident.ravel())
+                for p, pose in zip(frames, poses, strict=True):
+                    k = self._pixel_mm(pose)
+                    w0 = self._weights(pose, base)
+                    rxy, rz, dist, use_z = self._residuals(p, pose, base, w0, k)
+                    w = w0 * self._huber(dist)
+                    blocks, rhs = self._offset_blocks(pose, base, k, w, rxy, rz, use_z)
+                    h = h + sparse.block_diag(blocks, format="csr")
+                    g = g + rhs
+                ident = ident + spsolve(h.tocsc(), g).reshape(-1, 3)
+        # the residual left in the image plane: into the offset, perpendicular to the view
+        base = self.neutral + ident
+        rest = np.zeros_like(ident)
+        for p, pose in zip(frames, poses, strict=True):
+            pc = pose.apply(base)
+            d = -pc[:, 2] / self.camera.focal_px
+            du = p[:, :2] - self.camera.project(pc)
+            rest += np.column_stack([du[:, 0] * d, -du[:, 1] * d, np.zeros(nv)]) @ pose.rotation
+        ident = ident + rest / len(frames)
+        base = self.neutral + ident
+        poses = [self._pose_only(p, q, base) for p, q in zip(frames, poses, strict=True)]
+        resid = []
+        for p, pose in zip(frames, poses, strict=True):
+            uv = self.camera.project(pose.apply(base))
+            resid.append(np.sqrt(((uv - p[:, :2]) ** 2).sum(1).mean()) * self._pixel_mm(pose))
+        return ident, poses, float(np.mean(resid))
+
+    def _pose_only(self, p, pose, base):
+        jac0 = np.zeros((len(base), 3, self.n_muscles))
+        zeros = np.zeros(self.n_muscles)
+        pose, _, _, _ = self._gauss_newton(
+            p, pose, zeros, zeros, np.zeros_like(base), jac0, base, None,
+            free=np.zeros(0, dtype=np.int64),
+        )  # fmt: skip
+        return pose
+
+    def _offset_blocks(self, pose, shape, k, w, rxy, rz, use_z):
+        """Per vertex, the 3x3 normal-equation block and right-hand side of the weighted
+        landmark residuals with respect to its offset (head frame)."""
+        s = self.settings
+        f = self.camera.focal_px
+        pc = pose.apply(shape)
+        d = np.maximum(-pc[:, 2], 1e-6)
+        dproj = np.zeros((len(pc), 2, 3))
+        dproj[:, 0, 0] = f / d
+        dproj[:, 0, 2] = f * pc[:, 0] / d**2
+        dproj[:, 1, 1] = -f / d
+        dproj[:, 1, 2] = -f * pc[:, 1] / d**2
+        jxy = np.einsum("vij,jk->vik", dproj, pose.rotation) * (k / s.landmark_sigma_mm)
+        h = np.einsum("vji,vjk->vik", jxy, jxy) * w[:, None, None]
+        g = -np.einsum("vji,vj->vi", jxy, rxy) * w[:, None]
+        if use_z:
+            # (the mean removal couples the points weakly; it is left out of the Jacobian)
+            jz = -pose.rotation[2] / s.depth_sigma_mm
+            h += w[:, None, None] * np.outer(jz, jz)[None]
+            g -= (w * rz)[:, None] * jz[None]
+        return list(h), g.ravel()
+
+
+def _bounded_normal(hess, rhs, lo, hi):
+    """``argmin x^T hess x / 2 - rhs . x`` (times 2: ``|r x - r^-T rhs|^2``, ``hess = r^T r``)
+    with ``lo <= x <= hi``: a bounded least-squares problem on the Cholesky factor."""
+    from scipy.linalg import cho_factor, solve_triangular
+
+    r, _ = cho_factor(hess, lower=False)
+    r = np.triu(r)
+    y = solve_triangular(r, rhs, trans="T")
+    return lsq_linear(r, y, bounds=(lo, hi), method="bvls").x
+
+
+def rotvec(rot: np.ndarray) -> np.ndarray:
+    """The rotation vector (3,) rad of a rotation matrix (the logarithm map)."""
+    cos = np.clip((np.trace(rot) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    axis = np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]])
+    if angle < 1e-6:
+        return 0.5 * axis
+    if angle > np.pi - 1e-6:
+        return Rotation.from_matrix(rot).as_rotvec()
+    return axis * (angle / (2.0 * np.sin(angle)))
+
+
+def rotmat(v: np.ndarray) -> np.ndarray:
+    """The rotation matrix of a rotation vector (Rodrigues' formula)."""
+    angle = float(np.linalg.norm(v))
+    k = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    if angle < 1e-9:
+        return np.eye(3) + k
+    k /= angle
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+# ------------------------------------------------------------------ the landmark tracker's analyzer
+
+#: how the landmark tracker's contractions are estimated: the 3-D fit (default) or the paper's
+#: 2-D head frame and 12 muscles (:class:`~myoface.analysis.landmarks.LandmarkAnalyzer`)
+LANDMARK_ESTIMATORS = ("fit", "paper")
+#: a frame whose landmarks stay farther than this (mm RMS) from the fitted model is not
+#: measured (``quality="misfit"``): MediaPipe lost the face, or the face is not the model's
+MISFIT_RMS_MM = 6.0
+
+
+@dataclass
+class FitMeasurement:
+    """One frame of the 3-D fit, in the shape of
+    :class:`~myoface.analysis.pipeline.FrameMeasurement` (index, time, quality, contractions
+    over the analyzer's ids, contours for the overlay) plus the head ``pose`` and the fit's
+    ``residual_mm``; :meth:`head_cells` gives its CSV columns (:data:`HEAD_COLUMNS`)."""
+
+    index: int
+    time_s: float
+    quality: str
+    contractions: np.ndarray
+    pose: HeadPose | None
+    residual_mm: float
+    contours: dict = field(repr=False, default_factory=dict)
+    iterations: int = 0
+
+    #: the CSV's columns after the muscles and the jaw angle
+    HEAD_COLUMNS = (*POSE_COLUMNS, "residual_mm")
+
+    @property
+    def head_shift_px(self) -> np.ndarray:  # (the 2-D head frame's fields: not measured)
+        return np.full(2, np.nan)
+
+    head_scale = float("nan")
+    head_rot_rad = float("nan")
+
+    def head_cells(self) -> list[str]:
+        """The values of :data:`HEAD_COLUMNS` as CSV cells (empty when not measured)."""
+        if self.pose is None:
+            return [""] * len(self.HEAD_COLUMNS)
+        vals = [*self.pose.columns().values(), self.residual_mm]
+        return ["" if not np.isfinite(v) else f"{v:.3f}" for v in vals]
+
+
+class FitAnalyzer:
+    """The landmark tracker with the 3-D fit: MediaPipe's face mesh (video mode) on every
+    frame, :class:`ModelFit` on its points. ``measure(frame, index, time_s)`` returns a
+    :class:`FitMeasurement`; frames without a face are ``quality="no_face"`` (the next face
+    starts the fit afresh).
+
+    Parameters
+    ----------
+    model : FaceModel in the default topology (never changed).
+    fps : the video's frame rate.
+    camera : PinholeCamera, or None: a vertical field of view of :data:`DEFAULT_FOV_DEG` on the
+        first frame's size.
+    settings : FitSettings.
+    detector : an object with ``detect(frame) -> (468, 3) | None`` and ``close()`` (default:
+        MediaPipe's face mesh in video mode).
+    """
+
+    tracker = "landmarks"
+    method = "fit"
+
+    def __init__(self, model, fps: float = 30.0, camera: PinholeCamera | None = None,
+                 settings: FitSettings | None = None, detector=None):  # fmt: skip
+        from myoface.analysis.pipeline import SECTIONS, section_vertices
+
+        if model.face.n_vertices != 468:
+            raise MyofaceValueError(
+                "the landmark tracker needs a face model with MediaPipe's 468-point topology "
+                f"(the default face); this one has {model.face.n_vertices} vertices"
+            )
+        self.model = model
+        self.ids = tuple(model.ids)
+        self.settings = settings or FitSettings()
+        self.refine = self.settings.refine
+        self.fps = float(fps)
+        self._camera = camera
+        self.fit: ModelFit | None = None
+        self._sections = {s: section_vertices(model.face, s) for s in SECTIONS}
+        if detector is None:
+            from myoface.analysis.landmarks import FaceMeshDetector
+
+            detector = FaceMeshDetector(video=True)
+        self.detector = detector
+        self.calibration: Calibration | None = None
+        self.calibration_frame: int | None = None
+
+    @property
+    def mm_per_px(self) -> float | None:
+        """mm on the face per pixel at the calibration frame's head distance."""
+        if self.calibration is None or self.fit is None:
+            return None
+        return self.fit._pixel_mm(self.calibration.pose)
+
+    def _ensure_fit(self, shape) -> ModelFit:
+        if self.fit is None:
+            h, w = shape[:2]
+            cam = self._camera or PinholeCamera.for_image(w, h)
+            self.fit = ModelFit(self.model, cam, self.settings, fps=self.fps)
+        return self.fit
+
+    def calibrate(self, frames, calibration_frame: int | None = None, first_index: int = 0):
+        """Calibrate on ``frames`` (an iterable of RGB frames: the first
+        :data:`CALIBRATION_WINDOW_S` s of the video, from its frame ``first_index``): the most
+        neutral one, or the frame ``calibration_frame`` (an index into the video). Runs its
+        own detector (image mode), so the analysis' tracking starts fresh. Returns the
+        calibration frame's index in the video."""
+        from myoface.analysis.landmarks import FaceMeshDetector
+
+        points = []
+        with FaceMeshDetector(video=False) as det:
+            for frame in frames:
+                self._ensure_fit(np.shape(frame))
+                points.append(det.detect(frame))
+        if not points:
+            raise MyofaceValueError("the video has no frames to calibrate on")
+        if calibration_frame is None:
+            idx = None
+        else:
+            idx = int(calibration_frame) - first_index
+            if not 0 <= idx < len(points):
+                raise MyofaceValueError(
+                    f"calibration frame {calibration_frame} is outside the frames given"
+                )
+            if points[idx] is None:
+                raise MyofaceValueError(f"no face found on calibration frame {calibration_frame}")
+        self.calibration = self.fit.calibrate(points, idx)
+        self.calibration_frame = first_index + self.calibration.index
+        return self.calibration_frame
+
+    def measure(self, frame, index: int = 0, time_s: float = 0.0) -> FitMeasurement:
+        fit = self._ensure_fit(np.shape(frame))
+        pts = self.detector.detect(frame)
+        nan = np.full(len(self.ids), np.nan)
+        if pts is None:
+            fit.lose_track()
+            return FitMeasurement(index, time_s, "no_face", nan, None, float("nan"))
+        try:
+            r = fit.fit(pts)
+        except (np.linalg.LinAlgError, MyofaceValueError):
+            fit.lose_track()
+            return FitMeasurement(index, time_s, "fit_failed", nan, None, float("nan"))
+        uv = fit.camera.project(r.pose.apply(fit.shape(r.contractions)))
+        contours = {s: uv[v] for s, v in self._sections.items()}
+        if not r.residual_mm <= MISFIT_RMS_MM:
+            fit.lose_track()
+            return FitMeasurement(
+                index, time_s, "misfit", nan, r.pose, r.residual_mm, contours, r.iterations
+            )
+        return FitMeasurement(
+            index, time_s, "ok", r.contractions, r.pose, r.residual_mm, contours, r.iterations
+        )
+
+    def close(self) -> None:
+        self.detector.close()

@@ -1,0 +1,249 @@
+"""The realistic closed loop: a person's face turning its head while it makes FACS expressions.
+
+A face is made from a real photograph (``face_from_photo`` on the first frame of the sample
+video ``single_face.mp4``; the default face with its skin texture when the video or MediaPipe is
+not there), driven through a programme of the six universal expressions (every muscle they
+use moves; overlapping expressions mix by the FACS rule), moved along a smooth 3-D head
+trajectory (yaw +-30 deg, pitch and roll +-15 deg, translation) in front of a perspective camera
+at 640x480, rendered, and analysed as a video would be: MediaPipe's face mesh (video mode) on
+every frame, then the 3-D fit of the model (:class:`~myoface.analysis.fit.ModelFit`), its
+calibration frame chosen automatically. The recovered contractions and head pose are compared
+with the truth; so is the skin the recovered contractions produce (head frame).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from myoface.analysis.pipeline import PAPER_MUSCLES
+
+#: the expression programme: (expression, apex frame as a fraction of the sequence, intensity)
+PROGRAMME = (
+    ("happiness", 0.18, 0.9),
+    ("surprise", 0.32, 0.8),
+    ("anger", 0.46, 0.9),
+    ("sadness", 0.60, 0.8),
+    ("disgust", 0.74, 0.9),
+    ("fear", 0.88, 0.8),
+)
+#: an expression's envelope (raised cosine) lasts this fraction of the sequence
+ENVELOPE = 0.2
+#: the camera: vertical field of view and the head's mean distance (mm), 640x480
+FOV_DEG = 40.0
+DISTANCE_MM = 500.0
+SIZE = (640, 480)
+
+
+def expression_programme(ids, n_frames: int) -> np.ndarray:
+    """Contractions (T, M) of :data:`PROGRAMME`: each expression's contractions times a raised
+    cosine envelope around its apex, mixed by the probabilistic OR; neutral at the start."""
+    from myoface.control import expression_contractions
+
+    t = np.linspace(0.0, 1.0, n_frames)
+    keep = np.ones((n_frames, len(ids)))
+    for name, apex, intensity in PROGRAMME:
+        c = expression_contractions(name, intensity, ids)
+        x = np.clip((t - apex) / (ENVELOPE / 2), -1.0, 1.0)
+        env = 0.5 * (1.0 + np.cos(np.pi * x))
+        keep *= 1.0 - env[:, None] * c[None, :]
+    return 1.0 - keep
+
+
+def head_trajectory(n_frames: int, still: bool = False):
+    """Head poses (:class:`~myoface.analysis.fit.HeadPose`) along a smooth trajectory: yaw +-30
+    deg, pitch and roll +-15 deg, +-20 mm across, +-10 mm up and down, +-40 mm in depth, about
+    :data:`DISTANCE_MM` from the camera; ``still``: frontal, at that distance."""
+    from myoface.analysis.fit import HeadPose
+
+    t = np.linspace(0.0, 1.0, n_frames)
+    out = []
+    for s in t:
+        if still:
+            out.append(HeadPose.from_euler(0, 0, 0, (0, 0, -DISTANCE_MM)))
+            continue
+        w = 2 * np.pi * s
+        out.append(
+            HeadPose.from_euler(
+                30 * np.sin(1.5 * w),
+                15 * np.sin(2.0 * w + 1.0),
+                15 * np.sin(1.2 * w + 2.0),
+                (
+                    20 * np.sin(w + 0.5),
+                    10 * np.sin(1.7 * w),
+                    -DISTANCE_MM + 40 * np.sin(0.8 * w + 1.3),
+                ),
+            )
+        )
+    return out
+
+
+def posed_renderer(face, pose, texture=None, size=SIZE, fov_deg=FOV_DEG):
+    """A renderer that shows ``face`` at head pose ``pose`` to a camera at the origin looking
+    along -z (the fit's camera frame), the lights fixed in the room: the camera and the lights
+    are moved into the head frame by the inverse pose, which is the same picture."""
+    from myoface.render import Camera, Renderer
+    from myoface.render.renderer import Light, default_lights
+
+    ri = pose.rotation.T
+    t = pose.translation_mm
+    cam = Camera(
+        eye=ri @ (-t),
+        target=ri @ (np.array([0.0, 0.0, -1.0]) - t),
+        up=ri @ np.array([0.0, 1.0, 0.0]),
+        width=size[0],
+        height=size[1],
+        fov_deg=fov_deg,
+    )
+    lights = [
+        Light(tuple(ri @ np.asarray(li.direction, float)), li.color, li.intensity)
+        for li in default_lights()
+    ]
+    return Renderer(face, cam, lights=lights, texture=texture)
+
+
+def personal_face():
+    """A face from a real photograph: ``face_from_photo`` on the sample video's first frame;
+    None when the video or MediaPipe is not available."""
+    from myoface.analysis.landmarks import mediapipe_available
+
+    if not mediapipe_available():
+        return None
+    try:
+        from myoface.analysis.sample import fetch_sample_video
+        from myoface.analysis.video import open_video
+
+        path = fetch_sample_video(quiet=True)
+        frame = next(iter(open_video(path)))
+    except Exception:  # no network / no cached sample: fall back to the default face
+        return None
+    from myoface.face.personal import face_from_photo
+
+    face, _ = face_from_photo(frame, name="sample person")
+    return face
+
+
+@dataclass
+class HeadMotionResult:
+    """Truth and estimates of one run (:func:`run_headmotion`)."""
+
+    ids: tuple
+    truth: np.ndarray  # (T, M)
+    estimate: np.ndarray  # (T, M), NaN rows where no face was found
+    angles_true: np.ndarray  # (T, 3) yaw, pitch, roll deg
+    angles_est: np.ndarray  # (T, 3)
+    skin_rms_mm: np.ndarray  # (T,) RMS over vertices of estimated vs true skin, head frame
+    residual_mm: np.ndarray  # (T,)
+    calibration_index: int
+    fit_seconds: np.ndarray  # (T,) wall time of the fit per frame
+
+    def rmse(self) -> np.ndarray:
+        return np.sqrt(np.nanmean((self.estimate - self.truth) ** 2, axis=0))
+
+    def corr(self) -> np.ndarray:
+        out = np.full(len(self.ids), np.nan)
+        for j in range(len(self.ids)):
+            a, b = self.estimate[:, j], self.truth[:, j]
+            ok = np.isfinite(a)
+            if a[ok].std() > 1e-9 and b[ok].std() > 1e-9:
+                out[j] = np.corrcoef(a[ok], b[ok])[0, 1]
+        return out
+
+    def summary(self, muscles=PAPER_MUSCLES) -> dict:
+        """The benchmark's numbers: worst RMSE and worst correlation over ``muscles`` (those
+        that move), median RMSE over every muscle, skin RMS mm, head angle RMS deg."""
+        sel = [self.ids.index(m) for m in muscles]
+        rmse, corr = self.rmse(), self.corr()
+        moving = [j for j in sel if np.ptp(self.truth[:, j]) > 0.05]
+        ok = np.isfinite(self.estimate).all(axis=1)
+        return {
+            "rmse_worst": float(np.nanmax(rmse[sel])),
+            "rmse_worst_muscle": self.ids[sel[int(np.nanargmax(rmse[sel]))]],
+            "corr_worst": float(np.nanmin(corr[moving])) if moving else float("nan"),
+            "rmse_median_all": float(np.nanmedian(rmse)),
+            "rmse_worst_all": float(np.nanmax(rmse)),
+            "skin_mm": float(np.sqrt(np.nanmean(self.skin_rms_mm[ok] ** 2))),
+            "pose_deg": float(np.sqrt(np.mean((self.angles_est[ok] - self.angles_true[ok]) ** 2))),
+            "residual_mm": float(np.nanmedian(self.residual_mm)),
+            "frames_fitted": int(ok.sum()),
+            "calibration_frame": int(self.calibration_index),
+        }
+
+    def table(self) -> str:
+        lines = [f"{'muscle':42s} {'rmse':>6s} {'corr':>6s} {'range':>6s}"]
+        for j, (k, r, c) in enumerate(zip(self.ids, self.rmse(), self.corr(), strict=True)):
+            lines.append(f"{k:42s} {r:6.3f} {c:6.2f} {np.ptp(self.truth[:, j]):6.2f}")
+        return "\n".join(lines)
+
+
+def make_sequence(model, n_frames: int = 90, still: bool = False):
+    """Truth of the loop: contractions (T, M), head poses and the skin (T, V, 3) head frame."""
+    truth = expression_programme(model.ids, n_frames)
+    poses = head_trajectory(n_frames, still)
+    state = model.rest_state()
+    skins = np.empty((n_frames, model.face.n_vertices, 3))
+    for k, c in enumerate(truth):
+        state = model.relax(c, state).state
+        skins[k] = model.skin_vertices(state)
+    return truth, poses, skins
+
+
+def render_sequence(face, poses, skins, texture=None) -> list[np.ndarray]:
+    """The frames (640x480 RGB uint8) of the sequence (``texture``: default the face's)."""
+    return [posed_renderer(face, p, texture).render(s) for p, s in zip(poses, skins, strict=True)]
+
+
+def detect_sequence(frames) -> tuple[list, np.ndarray]:
+    """MediaPipe's face mesh (video mode, as the analysis runs it) on every frame: the points
+    (None without a face) and the seconds each took."""
+    import time
+
+    from myoface.analysis.landmarks import FaceMeshDetector
+
+    points, secs = [], []
+    with FaceMeshDetector(video=True) as det:
+        for f in frames:
+            t0 = time.perf_counter()
+            points.append(det.detect(f))
+            secs.append(time.perf_counter() - t0)
+    return points, np.array(secs)
+
+
+def run_headmotion(model, points, truth, poses, skins, fps: float = 30.0, settings=None):
+    """Fit the model to the landmark ``points`` of each frame (the 3-D fit, calibration frame
+    chosen automatically in the first :data:`~myoface.analysis.fit.CALIBRATION_WINDOW_S` s)
+    and compare with the truth."""
+    import time
+
+    from myoface.analysis.fit import CALIBRATION_WINDOW_S, ModelFit, PinholeCamera
+
+    cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
+    fit = ModelFit(model, cam, settings, fps=fps)
+    window = max(1, int(round(CALIBRATION_WINDOW_S * fps)))
+    cal = fit.calibrate(points[:window])
+    n, m = len(points), model.n_muscles
+    est = np.full((n, m), np.nan)
+    ang = np.full((n, 3), np.nan)
+    resid = np.full(n, np.nan)
+    t_fit = np.zeros(n)
+    for k, p in enumerate(points):
+        if p is None:
+            fit.lose_track()
+            continue
+        t0 = time.perf_counter()
+        r = fit.fit(p)
+        t_fit[k] = time.perf_counter() - t0
+        est[k], ang[k], resid[k] = r.contractions, r.pose.angles_deg, r.residual_mm
+    # the skin the estimates produce, against the true skin (head frame, the model's own)
+    skin_err = np.full(n, np.nan)
+    state = model.rest_state()
+    for k in range(n):
+        if np.isfinite(est[k]).all():
+            state = model.relax(est[k], state).state
+            d = model.skin_vertices(state) - skins[k]
+            skin_err[k] = float(np.sqrt((d**2).sum(1).mean()))
+    true_ang = np.array([p.angles_deg for p in poses])
+    return HeadMotionResult(
+        tuple(model.ids), truth, est, true_ang, ang, skin_err, resid, cal.index, t_fit,
+    )  # fmt: skip

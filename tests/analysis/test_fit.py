@@ -1,0 +1,254 @@
+"""The 3-D fit of the face model to landmark frames (myoface.analysis.fit), on synthetic frames:
+the model's own vertices posed in front of a pinhole camera and projected, with MediaPipe's
+kind of relative depth (no tracker, so the fit's own accuracy is what is measured)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from myoface.analysis.fit import (
+    POSE_COLUMNS,
+    FitMeasurement,
+    FitSettings,
+    HeadPose,
+    ModelFit,
+    PinholeCamera,
+    confounded_muscles,
+    initial_pose,
+    rotmat,
+    rotvec,
+)
+
+CAMERA = PinholeCamera.for_image(640, 480, 40.0)
+#: exact landmarks: the fit is told they are 20 times more precise than MediaPipe's, so that
+#: its priors (which pull a weak muscle towards 0) cost at most this much contraction
+EXACT = FitSettings(landmark_sigma_mm=0.05)
+PRIOR_BIAS = 0.02
+
+
+@pytest.fixture(scope="module")
+def fm():
+    from myoface.model import build_face_model
+
+    return build_face_model()
+
+
+def landmarks(skin: np.ndarray, pose: HeadPose, camera=CAMERA) -> np.ndarray:
+    """(V, 3): pixels (x, y) and MediaPipe-like relative depth z (pixels, mean 0)."""
+    pc = pose.apply(skin)
+    uv = camera.project(pc)
+    depth = -pc[:, 2]
+    z = (depth - depth.mean()) * camera.focal_px / -pose.translation_mm[2]
+    return np.column_stack([uv, z])
+
+
+def test_rotation_helpers_invert():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        v = rng.normal(size=3)
+        v *= rng.uniform(0, 3.1) / np.linalg.norm(v)  # (a rotation vector is unique below pi)
+        np.testing.assert_allclose(rotvec(rotmat(v)), v, atol=1e-9)
+    r = rotmat(np.array([0.1, -0.2, 0.3]))
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+
+
+def test_pose_columns_round_trip():
+    pose = HeadPose.from_euler(25.0, -10.0, 5.0, (12.0, -3.0, -480.0))
+    cols = pose.columns()
+    assert tuple(cols) == POSE_COLUMNS
+    assert cols["head_yaw_deg"] == pytest.approx(25.0)
+    assert cols["head_tz_mm"] == pytest.approx(480.0)  # distance in front of the camera
+    back = HeadPose.from_columns(cols)
+    np.testing.assert_allclose(back.rotation, pose.rotation, atol=1e-12)
+    np.testing.assert_allclose(back.translation_mm, pose.translation_mm, atol=1e-12)
+
+
+def test_yaw_turns_the_face_to_the_subjects_left(fm):
+    """Sign conventions: yaw > 0 moves the nose tip to the image's right (the subject's left
+    in a frontal view), pitch > 0 moves it down."""
+    nose = fm.face.landmark("nose_tip")[0]
+    rest = CAMERA.project(HeadPose.from_euler().apply(fm.face.vertices))[nose]
+    yawed = CAMERA.project(HeadPose.from_euler(20.0).apply(fm.face.vertices))[nose]
+    pitched = CAMERA.project(HeadPose.from_euler(0.0, 15.0).apply(fm.face.vertices))[nose]
+    assert yawed[0] > rest[0] + 5
+    assert pitched[1] > rest[1] + 5  # image y points down
+
+
+@pytest.mark.parametrize(
+    "angles, shift",
+    [((0.0, 0.0, 0.0), (0.0, 0.0, -500.0)), ((30.0, -15.0, 15.0), (20.0, -10.0, -450.0)),
+     ((-30.0, 15.0, -15.0), (-15.0, 12.0, -560.0))],
+)  # fmt: skip
+def test_pose_recovered_from_a_neutral_face(fm, angles, shift):
+    truth = HeadPose.from_euler(*angles, shift)
+    fit = ModelFit(fm, CAMERA, FitSettings(refine=0))
+    r = fit.fit(landmarks(fm.skin_vertices(), truth))
+    np.testing.assert_allclose(r.pose.angles_deg, angles, atol=0.05)
+    np.testing.assert_allclose(r.pose.translation_mm, shift, atol=0.2)
+    assert r.contractions.max() < 0.01
+    assert r.residual_mm < 0.01
+
+
+def test_initial_pose_is_close(fm):
+    truth = HeadPose.from_euler(20.0, 10.0, -5.0, (10.0, 5.0, -500.0))
+    p = initial_pose(fm.face.vertices, landmarks(fm.face.vertices, truth), CAMERA)
+    np.testing.assert_allclose(p.angles_deg, truth.angles_deg, atol=3.0)
+    assert abs(p.translation_mm[2] - truth.translation_mm[2]) < 25
+
+
+def test_contractions_recovered_on_exact_skin(fm):
+    """A smile with the jaw open (the jaw x lips interaction is nonlinear) and a frown, under a
+    turned head: the fit through the tissue recovers them within the priors' bias."""
+    c = np.zeros(fm.n_muscles)
+    for mid, v in [("zygomaticus_major_l", 0.7), ("zygomaticus_major_r", 0.5), ("jaw", 0.5),
+                   ("corrugator_supercilii_l", 0.6), ("frontalis_inner_r", 0.4)]:  # fmt: skip
+        c[fm.ids.index(mid)] = v
+    skin = fm.skin_vertices(fm.relax(c).state)
+    truth = HeadPose.from_euler(-20.0, 10.0, 5.0, (5.0, 0.0, -500.0))
+    fit = ModelFit(fm, CAMERA, replace(EXACT, refine=2))
+    r = fit.fit(landmarks(skin, truth))
+    np.testing.assert_allclose(r.pose.angles_deg, truth.angles_deg, atol=0.2)
+    err = np.abs(r.contractions - c)
+    assert err.max() < PRIOR_BIAS + 0.02, dict(zip(fm.ids, np.round(err, 3), strict=True))
+    # the skin the estimate produces is the true skin
+    est = fm.skin_vertices(fm.relax(r.contractions).state)
+    assert np.sqrt(((est - skin) ** 2).sum(1).mean()) < 0.1
+
+
+@settings(
+    max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    noise_px=st.floats(0.0, 40.0),
+    yaw=st.floats(-60.0, 60.0),
+    gain=st.floats(0.0, 8.0),
+)
+def test_bounded_fit_never_leaves_the_unit_interval(fm, seed, noise_px, yaw, gain):
+    """Whatever the landmarks (noise, exaggerated expressions far beyond any contraction,
+    large turns), every contraction stays in [0, 1] and the pose stays finite."""
+    from myoface.analysis.estimate import skin_response
+
+    rng = np.random.default_rng(seed)
+    resp = skin_response(fm, fm.ids)
+    c = rng.uniform(0, 1, fm.n_muscles) * (rng.uniform(size=fm.n_muscles) < 0.3)
+    skin = fm.face.vertices + gain * (resp @ c)
+    pts = landmarks(skin, HeadPose.from_euler(yaw, 0.0, 0.0, (0.0, 0.0, -500.0)))
+    pts[:, :2] += rng.normal(0, noise_px, (len(pts), 2))
+    fit = ModelFit(fm, CAMERA, FitSettings(refine=0, iterations=6))
+    for _ in range(2):  # the second frame warm-started from the first, with the temporal prior
+        r = fit.fit(pts)
+        assert np.isfinite(r.contractions).all()
+        assert r.contractions.min() >= 0.0 and r.contractions.max() <= 1.0
+        assert np.isfinite(r.pose.rotation).all() and np.isfinite(r.pose.translation_mm).all()
+
+
+def test_calibration_picks_the_neutral_frame_and_measures_the_person(fm):
+    """A person whose neutral differs from the model's (a wider jaw, a longer nose): of five
+    frames (four with expressions, one neutral) the neutral one is chosen; after calibration
+    the neutral frame measures no contraction and an expression is measured relative to it."""
+    from myoface.analysis.estimate import skin_response
+
+    resp = skin_response(fm, fm.ids)
+    v = fm.face.vertices
+    nose = v[fm.face.landmark("nose_tip")[0]]
+    lower = 1.0 / (1.0 + np.exp(v[:, 1] / 15.0))  # ~1 below the nose, ~0 above
+    bump = np.exp(-((np.linalg.norm(v - nose, axis=1) / 20.0) ** 2))
+    person = v + np.column_stack([0.08 * v[:, 0] * lower, np.zeros(len(v)), 4.0 * bump])
+    exprs = [("zygomaticus_major_l", 0.8), ("frontalis_major_r", 0.9), ("jaw", 0.6),
+             (None, 0.0), ("depressor_anguli_oris_l", 0.9)]  # fmt: skip
+    frames, truth = [], []
+    for k, (mid, val) in enumerate(exprs):
+        c = np.zeros(fm.n_muscles)
+        if mid:
+            c[fm.ids.index(mid)] = val
+        pose = HeadPose.from_euler(5.0 * k - 10, 3.0, -2.0, (0.0, 0.0, -500.0 - 10 * k))
+        frames.append(landmarks(person + resp @ c, pose))
+        truth.append(c)
+    fit = ModelFit(fm, CAMERA, FitSettings(refine=0))
+    cal = fit.calibrate([None, *frames])  # a frame without a face is skipped
+    assert cal.index == 4
+    assert np.isnan(cal.scores[0])
+    assert np.nanargmin(cal.scores) == 4
+    assert np.sqrt((cal.identity_mm**2).sum(1).mean()) > 0.5  # the person is not the model
+    r = fit.fit(frames[3])
+    assert r.contractions.max() < 0.02
+    fit.lose_track()
+    r = fit.fit(frames[0])
+    assert r.contractions[fm.ids.index("zygomaticus_major_l")] == pytest.approx(0.8, abs=0.08)
+    assert np.delete(r.contractions, fm.ids.index("zygomaticus_major_l")).max() < 0.1
+
+
+def test_calibration_frame_given(fm):
+    frames = [landmarks(fm.face.vertices, HeadPose.from_euler(0, 0, 0, (0, 0, -500)))] * 3
+    fit = ModelFit(fm, CAMERA)
+    assert fit.calibrate(frames, index=2).index == 2
+    with pytest.raises(ValueError, match="no face"):
+        fit.calibrate([frames[0], None], index=1)
+
+
+def test_confounded_muscles_of_the_default_face(fm):
+    """The risorius and the buccinator pull the mouth corner nearly the same way."""
+    out = {m: partner for m, _, partner in confounded_muscles(fm, 0.95)}
+    for side in "lr":
+        assert out[f"risorius_{side}"] == f"buccinator_{side}"
+        assert out[f"buccinator_{side}"] == f"risorius_{side}"
+    assert "jaw" not in out or confounded_muscles(fm, 0.99)[-1][0] != "jaw"
+
+
+def test_csv_has_pose_and_residual_columns(tmp_path, fm):
+    from myoface.analysis.pipeline import read_contractions_csv, write_contractions_csv
+
+    ids = fm.ids
+    c = np.linspace(0, 1, len(ids))
+    frames = [
+        FitMeasurement(0, 0.0, "ok", c, HeadPose.from_euler(10, -5, 2, (1, 2, -500)), 0.8),
+        FitMeasurement(1, 1 / 30, "no_face", np.full(len(ids), np.nan), None, float("nan")),
+    ]
+    path = tmp_path / "contractions.csv"
+    write_contractions_csv(path, ids, frames, fm.muscles.jaw.max_angle_rad)
+    head = path.read_text().splitlines()[0].split(",")
+    assert head[:3] == ["frame", "time_s", "quality"]
+    assert head[3 : 3 + len(ids)] == list(ids)
+    for col in (*POSE_COLUMNS, "residual_mm", "jaw_angle_rad"):
+        assert col in head
+    row = dict(zip(head, path.read_text().splitlines()[1].split(","), strict=True))
+    assert float(row["head_yaw_deg"]) == pytest.approx(10.0, abs=1e-3)
+    assert float(row["head_tz_mm"]) == pytest.approx(500.0, abs=1e-3)
+    times, table, quality = read_contractions_csv(path, list(ids))  # no warning: known columns
+    np.testing.assert_allclose(table[0], np.round(c, 5))
+    assert quality == ["ok", "no_face"]
+
+
+def test_fit_analyzer_with_a_stand_in_detector(fm):
+    """The analyzer's measurements: ok frames with a pose and the model's sections for the
+    overlay, no_face frames empty (the next face starts afresh)."""
+    from myoface.analysis.fit import FitAnalyzer
+
+    pose = HeadPose.from_euler(10.0, 0.0, 0.0, (0.0, 0.0, -500.0))
+    pts = landmarks(fm.face.vertices, pose)
+
+    class Detector:
+        def __init__(self, seq):
+            self.seq = list(seq)
+
+        def detect(self, frame):
+            return self.seq.pop(0)
+
+        def close(self):
+            pass
+
+    frame = np.zeros((480, 640, 3), np.uint8)
+    an = FitAnalyzer(fm, camera=CAMERA, detector=Detector([pts, None, pts]))
+    ms = [an.measure(frame, k, k / 30) for k in range(3)]
+    assert [m.quality for m in ms] == ["ok", "no_face", "ok"]
+    assert ms[0].pose.angles_deg[0] == pytest.approx(10.0, abs=0.05)
+    assert np.isnan(ms[1].contractions).all() and ms[1].head_cells()[0] == ""
+    assert set(ms[0].contours) >= {"lips", "eyebrow_l"}
+    np.testing.assert_allclose(ms[2].contours["lips"], ms[0].contours["lips"], atol=0.05)
+    an.close()
