@@ -264,3 +264,48 @@ def test_synth_requests_of_any_text(default_face_and_ids, aus, muscles):
         assert ((c >= 0) & (c <= 1)).all()
     except MyofaceError:
         pass
+
+
+# ------------------------------------------------------------------- .myoface face files
+
+TINY_OBJ = b"v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 2 3\nf 1 3 4\n"
+face_meta = st.fixed_dictionaries(
+    {"format": st.just("myoface face")},
+    optional={
+        "version": scalars,
+        "name": scalars,
+        "landmarks": st.dictionaries(st.text(max_size=6), values, max_size=3) | values,
+    },
+)
+
+
+@st.composite
+def face_files(draw) -> bytes:
+    """A zip holding face.json / mesh.obj / texture.png of any content, or any bytes."""
+    import io
+    import zipfile
+
+    if draw(st.booleans()):
+        return draw(st.binary(max_size=200))
+    members = {
+        "face.json": draw((face_meta | values).map(_json_text).map(str.encode)),
+        "mesh.obj": draw(st.just(TINY_OBJ) | st.binary(max_size=100)),
+    }
+    if draw(st.booleans()):
+        members["texture.png"] = draw(st.binary(max_size=100))
+    if draw(st.booleans()):
+        members["muscles.toml"] = draw(st.binary(max_size=50))
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as z:
+        for name, data in members.items():
+            if draw(st.booleans()):
+                z.writestr(name, data)
+    return buf.getvalue()
+
+
+@SETTINGS
+@given(data=face_files())
+def test_face_file_of_any_content(scratch, data):
+    from myoface.face.facefile import read_face
+
+    only_myoface_errors(read_face, _write(scratch, data, ".myoface"))

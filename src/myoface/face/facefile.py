@@ -23,6 +23,7 @@ import json
 import os
 import tempfile
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -104,36 +105,60 @@ def read_face(path: str | os.PathLike) -> tuple[FaceMesh, str | None, dict]:
                 if need not in names:
                     raise MyofaceFormatError(f"{path}: not a myoface face file (no {need})")
             meta = json.loads(z.read("face.json"))
-            if meta.get("format") != FORMAT:
+            if not isinstance(meta, dict) or meta.get("format") != FORMAT:
                 raise MyofaceFormatError(f"{path}: face.json is not a {FORMAT!r} document")
-            if int(meta.get("version", 0)) > VERSION:
+            version = meta.get("version", 0)
+            if isinstance(version, bool) or not isinstance(version, int | float):
+                raise MyofaceFormatError(f"{path}: face.json: version must be a number")
+            if version > VERSION:
                 raise MyofaceFormatError(
-                    f"{path}: format version {meta['version']} is newer than this myoface "
+                    f"{path}: format version {version} is newer than this myoface "
                     f"reads ({VERSION}); upgrade myoface"
                 )
             with tempfile.TemporaryDirectory() as d:
                 obj = Path(d) / "mesh.obj"
                 obj.write_bytes(z.read("mesh.obj"))
-                mesh = load_mesh(obj)
+                try:
+                    mesh = load_mesh(obj)
+                except MyofaceFormatError as exc:
+                    raise MyofaceFormatError(f"{path}: mesh.obj: {exc}") from None
             texture = None
             if "texture.png" in names:
-                texture = iio.imread(z.read("texture.png"), extension=".png")
+                try:
+                    texture = iio.imread(z.read("texture.png"), extension=".png")
+                except Exception as exc:  # imageio raises many types for a bad image
+                    raise MyofaceFormatError(f"{path}: texture.png: {exc}") from None
                 if texture.ndim == 3 and texture.shape[2] == 4:
                     texture = texture[..., :3]
             muscles = z.read("muscles.toml").decode() if "muscles.toml" in names else None
+            groups = meta.get("landmarks", {})
+            if not isinstance(groups, dict):
+                raise MyofaceFormatError(f"{path}: face.json: landmarks must be an object")
+            landmarks = {str(k): np.asarray(v, dtype=np.int64) for k, v in groups.items()}
     except zipfile.BadZipFile:
         raise MyofaceFormatError(f"{path}: not a myoface face file (not a zip archive)") from None
-    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, ValueError) as exc:
+    except (
+        ValueError,
+        KeyError,
+        TypeError,
+        OverflowError,
+        RecursionError,
+        EOFError,
+        OSError,
+        NotImplementedError,
+        RuntimeError,
+        zlib.error,
+    ) as exc:  # json's, numpy's and zipfile's errors on damaged content
         if isinstance(exc, MyofaceFormatError):
             raise
-        raise MyofaceFormatError(f"{path}: damaged face file: {exc}") from None
-    landmarks = {k: np.asarray(v, dtype=np.int64) for k, v in meta.get("landmarks", {}).items()}
+        msg = " ".join(str(exc).split())[:200]
+        raise MyofaceFormatError(f"{path}: damaged face file: {msg}") from None
     face = FaceMesh(
         mesh.vertices,
         mesh.triangles,
         mesh.uv,
         texture,
         landmarks,
-        name=str(meta.get("name", path.stem)),
+        name=str(meta.get("name", path.stem))[:200],
     )
     return face, muscles, meta
