@@ -48,7 +48,7 @@ roll > 0 tilts its top towards the subject's right (counter-clockwise in the ima
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import sparse
@@ -70,6 +70,8 @@ IDENTITY_ROUNDS = 4
 CALIBRATION_FRAMES = 5
 #: ... those whose expression score is within this (mm RMS skin displacement) of the best's
 NEUTRAL_MARGIN_MM = 0.25
+#: a candidate calibration frame is compared with this many frames on either side of it
+STILL_FRAMES = 2
 #: Euler axis order of the head angles (scipy's: upper case = intrinsic)
 EULER_ORDER = "YXZ"
 
@@ -420,7 +422,9 @@ class ModelFit:
         calibration frame; by default it is the most neutral one: the frame whose contractions,
         fitted against the model's own neutral, less the least of each muscle over the frames
         (the person's own shape, which reads as the same contractions in every frame),
-        displace the skin least (RMS over vertices). On that frame and its neighbours nearly as
+        displace the skin least (RMS over vertices), plus the largest change of that
+        displacement to the :data:`STILL_FRAMES` frames on either side (a neutral face is a
+        held face, not the onset of an expression). On that frame and its neighbours nearly as
         neutral (:data:`CALIBRATION_FRAMES`, :data:`NEUTRAL_MARGIN_MM`) the head poses and a
         per-vertex offset of the neutral (regularised to be smooth:
         :attr:`FitSettings.identity_edge_sigma_mm`; the residual in the image plane then
@@ -434,7 +438,6 @@ class ModelFit:
         if index is None:
             saved = self.identity_mm
             self.identity_mm = np.zeros_like(self.neutral)
-            flat = self.response.reshape(-1, self.n_muscles)
             fitted = np.full((len(frames), self.n_muscles), np.nan)
             for k, pts in enumerate(frames):
                 if pts is not None:
@@ -443,11 +446,21 @@ class ModelFit:
             # the person's own shape also reads as contractions, the same in every frame; an
             # expression adds to them: what a frame has beyond the least of each muscle over
             # the frames is its expression
+            # A neutral face is also a held one: a frame that changes (the onset of a smile)
+            # scores its largest change to the frames around it as well
             if np.isfinite(fitted).any():
                 excess = fitted - np.nanmin(fitted, axis=0)
-                for k in np.flatnonzero(np.isfinite(fitted).all(axis=1)):
-                    disp = (flat @ excess[k]).reshape(-1, 3)
-                    scores[k] = float(np.sqrt((disp**2).sum(1).mean()))
+                disp = np.einsum("vdk,tk->tvd", self.response, np.nan_to_num(excess))
+
+                def rms(a):
+                    return float(np.sqrt((a**2).sum(-1).mean()))
+
+                ok = np.isfinite(fitted).all(axis=1)
+                for k in np.flatnonzero(ok):
+                    near = [j for j in range(k - STILL_FRAMES, k + STILL_FRAMES + 1)
+                            if j != k and 0 <= j < len(frames) and ok[j]]  # fmt: skip
+                    change = max((rms(disp[k] - disp[j]) for j in near), default=0.0)
+                    scores[k] = rms(disp[k]) + change
             self.identity_mm = saved
             if not np.isfinite(scores).any():
                 raise MyofaceValueError("no face in any of the calibration frames")
@@ -895,16 +908,19 @@ class FitAnalyzer:
         return self.fit
 
     def calibrate(self, frames, calibration_frame: int | None = None, first_index: int = 0):
-        """Calibrate on ``frames`` (an iterable of RGB frames: the first
-        :data:`CALIBRATION_WINDOW_S` s of the video, from its frame ``first_index``): the most
-        neutral one, or the frame ``calibration_frame`` (an index into the video). Runs its
-        own detector (image mode), so the analysis' tracking starts fresh. Returns the
-        calibration frame's index in the video."""
+        """Calibrate on ``frames`` (an iterable of RGB frames, or None for a frame without a
+        face: the first :data:`CALIBRATION_WINDOW_S` s of the video, from its frame
+        ``first_index``): the most neutral one, or the frame ``calibration_frame`` (an index
+        into the video). Runs its own detector (image mode), so the analysis' tracking starts
+        fresh. Returns the calibration frame's index in the video."""
         from myoface.analysis.landmarks import FaceMeshDetector
 
         points = []
         with FaceMeshDetector(video=False) as det:
             for frame in frames:
+                if frame is None:  # (a frame known to have no face)
+                    points.append(None)
+                    continue
                 self._ensure_fit(np.shape(frame))
                 points.append(det.detect(frame))
         if not points:
@@ -946,5 +962,94 @@ class FitAnalyzer:
             index, time_s, "ok", r.contractions, r.pose, r.residual_mm, contours, r.iterations
         )
 
+    def describe(self) -> dict:
+        """For analysis.json: the estimator, the calibration, the camera and the weights."""
+        from dataclasses import asdict
+
+        out = {"estimator": "fit", "fit_settings": asdict(self.settings)}
+        if self.fit is not None:
+            cam = self.fit.camera
+            out["camera"] = {"focal_px": cam.focal_px, "cx": cam.cx, "cy": cam.cy}
+        if self.calibration is not None:
+            cal = self.calibration
+            out["calibration_frame"] = self.calibration_frame
+            out["calibration"] = {
+                "scores_mm": [
+                    None if not np.isfinite(v) else round(float(v), 4) for v in cal.scores
+                ],  # fmt: skip
+                "frames_used": [
+                    self.calibration_frame - cal.index + k for k in cal.extra["frames"]
+                ],
+                "identity_rms_mm": float(np.sqrt((cal.identity_mm**2).sum(1).mean())),
+                "residual_mm": cal.residual_mm,
+                "pose": cal.pose.columns(),
+            }
+        return out
+
     def close(self) -> None:
         self.detector.close()
+
+
+def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine=None,
+                      settings: FitSettings | None = None):  # fmt: skip
+    """The :class:`FitAnalyzer` for ``video`` (a :class:`~myoface.analysis.video.Video`),
+    calibrated, how (text), and the frame the analysis starts on.
+
+    ``calibration_frame=None``: the most neutral frame of the first
+    :data:`CALIBRATION_WINDOW_S` s from the first frame with a face, and the analysis starts
+    at frame 0; a number: that frame, where the analysis then starts. ``refine``: relaxes of
+    the tissue per frame (default :attr:`FitSettings.refine`).
+    """
+    import itertools
+
+    settings = settings or FitSettings()
+    if refine is not None:
+        settings = replace(settings, refine=int(refine))
+    fps = float(video.fps) if video.fps and video.fps > 0 else 30.0
+    an = FitAnalyzer(model, fps=fps, settings=settings)
+    try:
+        if calibration_frame is None:
+            first, window = 0, max(1, int(round(CALIBRATION_WINDOW_S * fps)))
+            frames = _first_seconds(itertools.islice(video, 0, None), window)
+            cal = an.calibrate(frames)
+            start = 0
+            how = (
+                f"MediaPipe face mesh on every frame, the 3-D fit; calibrated on frame {cal}, "
+                f"the most neutral of the first {CALIBRATION_WINDOW_S:g} s"
+            )
+        else:
+            first = int(calibration_frame)
+            frames = list(itertools.islice(video, first, first + 1))
+            if not frames:
+                raise MyofaceValueError(f"the video has no frame {first}")
+            cal = an.calibrate(frames, first, first_index=first)
+            start = first
+            how = f"MediaPipe face mesh on every frame, the 3-D fit; calibrated on frame {cal}"
+    except BaseException:
+        an.close()
+        raise
+    return an, how, start
+
+
+def _first_seconds(frames, window: int) -> list:
+    """The frames up to ``window`` frames after the first that has a face (MediaPipe, image
+    mode; frames before it are None in the list, to keep the indices)."""
+    from myoface.analysis.landmarks import FaceMeshDetector
+
+    out: list = []
+    seen = None
+    with FaceMeshDetector(video=False) as det:
+        for k, frame in enumerate(frames):
+            if seen is None:
+                if det.detect(frame) is None:
+                    out.append(None)
+                    continue
+                seen = k
+            out.append(frame)
+            if k - seen + 1 >= window:
+                break
+    if seen is None:
+        raise MyofaceValueError(
+            f"no face found in the {len(out)} frames of the video (MediaPipe face mesh)"
+        )
+    return out

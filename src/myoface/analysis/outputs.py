@@ -138,7 +138,7 @@ def analyze_to_folder(
     model=None,
     tracker: str = "snakes",
     init=None,
-    calibration_frame: int = 0,
+    calibration_frame: int | None = None,
     max_frames: int | None = None,
     refine: int | None = None,
     sigma: float | None = None,
@@ -247,6 +247,8 @@ def _write_results(video, model, an, out, frames, how, start, tracker, face) -> 
             {"frame": f.index, "quality": f.quality, "iterations": f.iterations} for f in frames
         ],
     }
+    if hasattr(an, "describe"):  # the 3-D fit: its calibration, camera and weights
+        side.update(an.describe())
     if tracker == "snakes":
         side["sigma_px"] = an.sigma
         side["estimator"] = an.method

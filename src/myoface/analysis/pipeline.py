@@ -553,22 +553,38 @@ def make_analyzer(
     ``tracker="snakes"``: :class:`Analyzer` from ``init`` (contours on the calibration frame)
     or, when ``init`` is None, from MediaPipe's face mesh on the first frame with a face from
     ``calibration_frame`` on. ``tracker="landmarks"``:
-    :class:`~myoface.analysis.landmarks.LandmarkAnalyzer` (``init`` must be None).
-    ``refine`` defaults to 1 for the snakes and 0 for the landmarks; ``estimator`` is the
-    snakes' (see :class:`Analyzer`).
+    ``estimator`` ``"fit"`` (default): the 3-D fit of the whole model
+    (:func:`~myoface.analysis.fit.make_fit_analyzer`: head pose and every muscle, calibrated on
+    ``calibration_frame``, or when it is None on the most neutral frame of the first seconds,
+    the analysis then starting at frame 0); ``"paper"``: the paper's 12 muscles in a 2-D head
+    frame (:class:`~myoface.analysis.landmarks.LandmarkAnalyzer`). ``init`` must be None.
+    ``refine`` defaults to 1 for the snakes, 0 for the paper's landmark scheme and
+    :attr:`~myoface.analysis.fit.FitSettings.refine` for the fit; ``estimator`` for the
+    snakes: ``"curves"`` (default) or ``"fiducials"`` (see :class:`Analyzer`).
     """
     import itertools
 
-    first = int(calibration_frame)
+    first = 0 if calibration_frame is None else int(calibration_frame)
     if first < 0 or (video.n_frames is not None and first >= video.n_frames):
         raise MyofaceValueError(
             f"--calibration-frame must be in [0, {video.n_frames}); got {first}"
         )
     if tracker == "landmarks":
+        from myoface.analysis.fit import LANDMARK_ESTIMATORS, make_fit_analyzer
         from myoface.analysis.landmarks import LandmarkAnalyzer
 
         if init is not None:
             raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
+        # the landmarks' estimators: the 3-D fit ("fit"; also the snakes' default "curves",
+        # the model fitted) or the paper's 2-D scheme ("paper"; also "fiducials")
+        est = {None: "fit", "curves": "fit", "fiducials": "paper"}.get(estimator, estimator)
+        if est not in LANDMARK_ESTIMATORS:
+            raise MyofaceValueError(
+                f"the landmark tracker's estimator must be one of {LANDMARK_ESTIMATORS}; "
+                f"got {estimator!r}"
+            )
+        if est == "fit":
+            return make_fit_analyzer(model, video, calibration_frame, refine)
         an = LandmarkAnalyzer(model, refine=0 if refine is None else refine)
         return an, "MediaPipe face mesh on every frame", first
     if tracker != "snakes":
@@ -586,7 +602,11 @@ def make_analyzer(
         if (pts < 0).any() or (pts[:, 0] > w - 1).any() or (pts[:, 1] > h - 1).any():
             raise MyofaceValueError(f"contour {name!r} lies outside the frame")
     an = Analyzer(
-        model, init, refine=1 if refine is None else refine, sigma=sigma, estimator=estimator
+        model,
+        init,
+        refine=1 if refine is None else refine,
+        sigma=sigma,
+        estimator=estimator or "curves",
     )
     return an, how, start
 
@@ -687,41 +707,36 @@ def measure_frames(video, analyzer, start: int = 0, max_frames: int | None = Non
 
 def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_rad: float) -> None:
     """``frame,time_s,quality,<muscle ids...>,jaw_angle_rad,head_dx_px,head_dy_px,head_scale,
-    head_rot_deg`` (empty cells where a frame could not be measured)."""
+    head_rot_deg`` (empty cells where a frame could not be measured). With the 3-D fit's
+    measurements (:class:`~myoface.analysis.fit.FitMeasurement`) the head columns are the 3-D
+    pose and the fit's residual: ``head_yaw_deg, head_pitch_deg, head_roll_deg, head_tx_mm,
+    head_ty_mm, head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.fit.HeadPose`)."""
     from myoface._io import atomic_output
 
-    cols = [
-        "frame",
-        "time_s",
-        "quality",
-        *ids,
-        "jaw_angle_rad",
-        "head_dx_px",
-        "head_dy_px",
-        "head_scale",
-        "head_rot_deg",
-    ]
+    # measurements of the 3-D fit (myoface.analysis.fit) carry the head's 3-D pose instead
+    pose_cols = bool(frames) and all(hasattr(f, "head_cells") for f in frames)
+    head_cols = (
+        list(frames[0].HEAD_COLUMNS)
+        if pose_cols
+        else ["head_dx_px", "head_dy_px", "head_scale", "head_rot_deg"]
+    )
+    cols = ["frame", "time_s", "quality", *ids, "jaw_angle_rad", *head_cols]
     lines = [",".join(cols)]
     for f in frames:
         vals = ["" if not np.isfinite(v) else f"{v:.5f}" for v in f.contractions]
         jaw = ""
         if "jaw" in ids and np.isfinite(f.contractions[ids.index("jaw")]):
             jaw = f"{f.contractions[ids.index('jaw')] * jaw_max_rad:.5f}"
-        lines.append(
-            ",".join(
-                [
-                    str(f.index),
-                    f"{f.time_s:.4f}",
-                    f.quality,
-                    *vals,
-                    jaw,
-                    f"{f.head_shift_px[0]:.3f}",
-                    f"{f.head_shift_px[1]:.3f}",
-                    f"{f.head_scale:.5f}",
-                    f"{np.degrees(f.head_rot_rad):.3f}",
-                ]
-            )
-        )
+        if pose_cols:
+            head = f.head_cells()
+        else:
+            head = [
+                f"{f.head_shift_px[0]:.3f}",
+                f"{f.head_shift_px[1]:.3f}",
+                f"{f.head_scale:.5f}",
+                f"{np.degrees(f.head_rot_rad):.3f}",
+            ]
+        lines.append(",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw, *head]))
     with atomic_output(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
 
@@ -737,6 +752,14 @@ CSV_OTHER_COLUMNS = (
     "head_dy_px",
     "head_scale",
     "head_rot_deg",
+    # the 3-D fit's (myoface.analysis.fit.FitMeasurement.HEAD_COLUMNS)
+    "head_yaw_deg",
+    "head_pitch_deg",
+    "head_roll_deg",
+    "head_tx_mm",
+    "head_ty_mm",
+    "head_tz_mm",
+    "residual_mm",
 )
 
 

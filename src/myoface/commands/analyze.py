@@ -17,12 +17,16 @@ Trackers (--tracker):
              them on the first frame), or, without --init, from MediaPipe's face mesh on the
              first frame with a face (needs: pip install "myoface[mediapipe]").
   landmarks  MediaPipe's face mesh on every frame (same extra): its 468 points share the
-             default face's topology, so fiducials are read at the model's own vertices.
-             Robust on real video where faces are small; needs the default face.
+             default face's topology. By default the whole face model is fitted to them in
+             3-D (head pose, every muscle and the jaw), calibrated on the person's own
+             neutral (the most neutral frame of the first 2 s); --estimator paper reads the
+             paper's 12 muscles in a 2-D head frame instead. Needs the default topology.
 
 Writes into the output folder:
 
   contractions.csv   frame, time_s, quality, one column per muscle, jaw_angle_rad, head frame
+                     (the 3-D fit: head_yaw_deg, head_pitch_deg, head_roll_deg, head_tx_mm,
+                     head_ty_mm, head_tz_mm and the fit's residual_mm)
   analysis.json      settings, calibration and per-frame diagnostics
   contractions.png   the contractions over time (the paper's Fig. 8)
   overlay.mp4        the contours on the frames (the paper's Fig. 7a)
@@ -52,10 +56,11 @@ def add_arguments(p):
     p.add_argument(
         "--calibration-frame",
         type=int,
-        default=0,
+        default=None,
         metavar="N",
-        help="the neutral frame to calibrate on; analysis starts there (default 0); with "
-        "--init, the contours are on this frame",
+        help="the neutral frame to calibrate on; analysis starts there (default: 0; for the "
+        "landmarks' 3-D fit the most neutral frame of the first 2 s, and every frame is "
+        "analysed); with --init, the contours are on this frame",
     )
     p.add_argument("--max-frames", type=int, help="analyse at most this many frames")
     p.add_argument(
@@ -66,16 +71,18 @@ def add_arguments(p):
     )
     p.add_argument(
         "--estimator",
-        choices=("curves", "fiducials"),
-        default="curves",
-        help="(snakes) how contractions are read off the contours: the model's skin curves "
-        "fitted to the whole contours (default), or the paper's fiducial points",
+        choices=("curves", "fiducials", "fit", "paper"),
+        default=None,
+        help="how contractions are estimated. snakes: the model's skin curves fitted to the "
+        "whole contours (curves, default), or the paper's fiducial points (fiducials). "
+        "landmarks: the 3-D fit of the whole model, head pose and every muscle (fit, "
+        "default), or the paper's 12 muscles in a 2-D head frame (paper)",
     )
     p.add_argument(
         "--refine",
         type=int,
         help="Gauss-Newton corrections per frame through the model "
-        "(default 1 for snakes, 0 for landmarks)",
+        "(default 1 for snakes and the 3-D fit, 0 for landmarks --estimator paper)",
     )
     p.add_argument("--quiet", action="store_true")
     add_face_argument(p)
