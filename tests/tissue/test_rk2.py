@@ -78,6 +78,24 @@ def test_trajectory_does_not_depend_on_the_number_of_blocks(default_tissue):
         np.testing.assert_array_equal(v, out[0][1])
 
 
+def test_thread_count_chosen_by_measurement_gives_the_same_trajectory(default_tissue, monkeypatch):
+    # short calls and a probe of the other thread count at every call: still bit for bit
+    monkeypatch.setattr(rk2_mod, "CHUNK_STEPS", 7)
+    monkeypatch.setattr(rk2_mod, "PROBE_STEPS", 3)
+    monkeypatch.setattr(rk2_mod, "PROBE_EVERY_S", 0.0)
+    m, tg = _step_change(default_tissue, seed=6)
+    x0, v0 = _start(m, tg, seed=6, v_scale=20.0)
+    xa, va, xb, vb = x0.copy(), v0.copy(), x0.copy(), v0.copy()
+    assert run_rk2(m, xa, va, 60, m.stable_dt) == run_rk2(m, xb, vb, 60, m.stable_dt, n_blocks=1)
+    np.testing.assert_array_equal(xa, xb)
+    np.testing.assert_array_equal(va, vb)
+    # a blow-up is reported at the same step, counted from the start of the run
+    xa, va, xb, vb = x0.copy(), v0.copy(), x0.copy(), v0.copy()
+    ra = run_rk2(m, xa, va, 200, 12 * m.stable_dt)  # unstable: NaN after a few tens of steps
+    rb = run_rk2(m, xb, vb, 200, 12 * m.stable_dt, n_blocks=1)
+    assert ra[2] >= 7 and (ra[0], ra[2]) == (rb[0], rb[2])
+
+
 def _prism_lattice(with_volume: bool):
     """One prism, every node free, the paper's discontinuous law; stretched and moving."""
     rng = np.random.default_rng(0)

@@ -169,11 +169,15 @@ RK2_PEER = "myoface's previous RK2 kernel (one thread)"
 @benchmark("tissue.rk2_steps_per_s", "1/s", higher_is_better=True, peer=RK2_PEER)
 def bench_rk2(quick: bool) -> Measurement:
     """Paper RK2 steps per second on the default face model (muscles bound), at its stable time
-    step, all cores (the parallel kernel of ``myoface.tissue.rk2``). Peer: the previous
-    single-thread kernel (kept as the reference) on the same steps from the same state, timed
-    alternately with ours in the same run."""
+    step, all cores: the parallel kernel of ``myoface.tissue.rk2`` as ``step_rk2`` runs it (all
+    threads, or one when it measures one to be faster: on a machine busy with other work).
+    Peer: the previous single-thread kernel (kept as the reference) on the same steps from the
+    same state, timed alternately with ours in the same run. The detail gives the parallel kernel
+    with a fixed number of threads too."""
+    import numba
+
     from myoface.tissue import rest_state, step_rk2
-    from myoface.tissue.rk2 import run_rk2_serial
+    from myoface.tissue.rk2 import run_rk2, run_rk2_serial
 
     fm = _default_face_model()
     tm = fm.tissue
@@ -181,25 +185,31 @@ def bench_rk2(quick: bool) -> Measurement:
     state = rest_state(tm)
     dt = tm.stable_dt
     steps = 200 if quick else 1000
+    nt = numba.get_num_threads()
 
-    def ours():
-        step_rk2(tm, state, targets, dt, n_steps=steps)
-
-    def peer():
+    def start():
         x, v = state.x.copy(), state.v.copy()
         x[tm.kinematic_index] = targets
-        run_rk2_serial(tm, x, v, steps, dt)
+        return x, v
 
-    ours()  # warm-up: JIT (or its cache) and the kernel's per-model arrays
-    peer()
+    runs = {
+        "default (step_rk2)": lambda: step_rk2(tm, state, targets, dt, n_steps=steps),
+        f"{nt} threads": lambda: run_rk2(tm, *start(), steps, dt, n_blocks=nt),
+        "1 thread": lambda: run_rk2(tm, *start(), steps, dt, n_blocks=1),
+        "previous kernel (peer)": lambda: run_rk2_serial(tm, *start(), steps, dt),
+    }
+    for fn in runs.values():  # warm-up: JIT (or its cache) and the kernel's per-model arrays
+        fn()
     n = 3 if quick else 7
-    t_ours, t_peer = [], []
-    for _ in range(n):  # alternate, so both see the same load on a shared machine
-        for fn, ts in ((ours, t_ours), (peer, t_peer)):
+    times = {k: [] for k in runs}
+    for _ in range(n):  # alternate, so all see the same load on a shared machine
+        for k, fn in runs.items():
             t0 = time.perf_counter()
             fn()
-            ts.append(time.perf_counter() - t0)
-    return Measurement(steps / float(np.median(t_ours)), n, steps / float(np.median(t_peer)))
+            times[k].append(time.perf_counter() - t0)
+    rate = {k: steps / float(np.median(ts)) for k, ts in times.items()}
+    detail = {"steps/s": {k: {"median": r} for k, r in rate.items()}}
+    return Measurement(rate["default (step_rk2)"], n, rate["previous kernel (peer)"], detail)
 
 
 #: the peer of the relax benchmarks: the L-BFGS solver it replaced, kept as ``method="lbfgs"``
