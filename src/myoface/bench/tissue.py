@@ -60,7 +60,9 @@ def _warp_spring_forces():
         import warp as wp
     except ImportError:
         return None
-    wp.config.quiet = True
+    wp.config.quiet = True  # older warp-lang; newer ones have log levels instead
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
     wp.init()
 
     @wp.kernel
@@ -121,7 +123,9 @@ def bench_ns_per_spring(quick: bool) -> Measurement:
     (per-thread force buffers). Peer: the same biphasic force (``LAW_CONTINUOUS``, float64) as an
     NVIDIA Warp kernel on ``device="cpu"`` (one launch, atomic adds), on the same lattice and
     positions in the same run, after checking that its forces equal ours; no peer without
-    warp-lang."""
+    warp-lang. The detail gives ours on one thread too (a Warp CPU launch runs on one)."""
+    import numba
+
     from myoface.tissue.forces import LAW_CONTINUOUS, make_thread_buffers, spring_forces_parallel
 
     pos, springs = grid_lattice(1_000_000)
@@ -140,6 +144,18 @@ def bench_ns_per_spring(quick: bool) -> Measurement:
 
     n = 5 if quick else 21
     t = time_median(run, n)
+    # the same on one thread, for the detail (Warp's CPU backend runs a launch on one thread)
+    prev = numba.get_num_threads()
+    buf1 = np.zeros((1, *x.shape))
+    numba.set_num_threads(1)
+    try:
+        t1 = time_median(
+            lambda: spring_forces_parallel(x, si, sj, rest, mat_id, mat, LAW_CONTINUOUS, f, buf1),
+            n,
+        )
+    finally:
+        numba.set_num_threads(prev)
+    per = {f"myoface, {prev} threads": t, "myoface, 1 thread": t1}
     peer = None
     make_warp = _warp_spring_forces()
     if make_warp is not None:
@@ -153,8 +169,10 @@ def bench_ns_per_spring(quick: bool) -> Measurement:
         if not np.allclose(got, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max()):
             raise AssertionError("Warp's spring forces differ from myoface's")
         xw = to_warp(x)
-        peer = time_median(lambda: forces(xw), n) / len(si) * 1e9
-    return Measurement(t / len(si) * 1e9, n, peer)
+        per["NVIDIA Warp, cpu"] = time_median(lambda: forces(xw), n)
+        peer = per["NVIDIA Warp, cpu"] / len(si) * 1e9
+    detail = {"ns/spring": {k: {"median": v / len(si) * 1e9} for k, v in per.items()}}
+    return Measurement(t / len(si) * 1e9, n, peer, detail)
 
 
 def _default_face_model():
