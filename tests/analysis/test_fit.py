@@ -252,3 +252,58 @@ def test_fit_analyzer_with_a_stand_in_detector(fm):
     assert set(ms[0].contours) >= {"lips", "eyebrow_l"}
     np.testing.assert_allclose(ms[2].contours["lips"], ms[0].contours["lips"], atol=0.05)
     an.close()
+
+
+def test_resynth_reproduces_the_head_pose(tmp_path, fm):
+    """``myoface resynth --pose``: the CSV's head pose turns the rendered face (the nose moves
+    to the image's right with a positive yaw), and rows without a pose hold the last one."""
+    from myoface.analysis.fit import display_poses, read_head_poses
+    from myoface.analysis.pipeline import write_contractions_csv
+    from myoface.analysis.video import open_video
+    from myoface.commands.resynth import resynthesize
+
+    zero = np.zeros(fm.n_muscles)
+    yaws = [0.0, 30.0, None]
+    frames = [
+        FitMeasurement(k, k / 10, "ok" if y is not None else "no_face",
+                       zero if y is not None else np.full(fm.n_muscles, np.nan),
+                       None if y is None else HeadPose.from_euler(y, 0, 0, (0, 0, -500)), 0.5)
+        for k, y in enumerate(yaws)
+    ]  # fmt: skip
+    csv = tmp_path / "c.csv"
+    write_contractions_csv(csv, fm.ids, frames, fm.muscles.jaw.max_angle_rad)
+    poses = read_head_poses(csv)
+    assert poses[2] is None
+    shown = display_poses(poses)
+    np.testing.assert_allclose(shown[2][0], shown[1][0])  # held
+    out = tmp_path / "r.mp4"
+    table = np.zeros((3, fm.n_muscles))
+    resynthesize(fm, [0, 0.1, 0.2], table, out, 10.0, size=96, show_progress=False, poses=shown)
+    video = open_video(out).read_all()
+    assert len(video) == 3
+
+    from myoface.render import Renderer
+    from myoface.synth import make_camera
+
+    ren = Renderer(fm.face, make_camera(fm.face.vertices, "front", 96, 96))
+    still, turned = ren.render(), ren.render(pose=shown[1])
+
+    def diff(a, b):
+        return float(np.abs(a.astype(float) - b).mean())
+
+    assert diff(still, turned) > 5  # (a 30 degree turn is plain to see)
+    # each frame is its pose's render, to H.264's loss (well below the turn's difference)
+    assert diff(video[0], still) < 0.5 * diff(video[0], turned)
+    assert diff(video[1], turned) < 0.5 * diff(video[1], still)
+    assert diff(video[2], turned) < 0.5 * diff(video[2], still)
+
+
+def test_render_pose_identity_is_the_plain_render(fm):
+    from myoface.render import Renderer
+    from myoface.synth import make_camera
+
+    r = Renderer(fm.face, make_camera(fm.face.vertices, "front", 64, 64))
+    plain = r.render()
+    np.testing.assert_array_equal(r.render(pose=(np.eye(3), np.zeros(3))), plain)
+    with pytest.raises(ValueError, match="pose"):
+        r.render(pose=(np.ones((3, 3)), np.zeros(3)))

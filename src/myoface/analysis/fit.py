@@ -1053,3 +1053,54 @@ def _first_seconds(frames, window: int) -> list:
             f"no face found in the {len(out)} frames of the video (MediaPipe face mesh)"
         )
     return out
+
+
+def read_head_poses(path) -> list:
+    """The head poses of a contractions CSV written with the 3-D fit (its
+    :data:`POSE_COLUMNS`): one :class:`HeadPose` per row, None where the row has none (no face
+    found)."""
+    import csv
+    from pathlib import Path
+
+    from myoface._io import read_text
+    from myoface.errors import MyofaceFormatError
+
+    p = Path(path)
+    rows = list(csv.DictReader(read_text(p, "contractions CSV").splitlines()))
+    missing = [c for c in POSE_COLUMNS if not rows or c not in rows[0]]
+    if missing:
+        raise MyofaceFormatError(
+            f"{p}: no head pose columns ({', '.join(missing)}); they are written by "
+            "myoface analyze --tracker landmarks (the 3-D fit)"
+        )
+    out = []
+    for k, r in enumerate(rows):
+        cells = [(r.get(c) or "").strip() for c in POSE_COLUMNS]
+        if not all(cells):
+            out.append(None)
+            continue
+        try:
+            vals = {c: float(v) for c, v in zip(POSE_COLUMNS, cells, strict=True)}
+        except ValueError:
+            raise MyofaceFormatError(
+                f"{p}: row {k + 2}: a head pose cell is not a number"
+            ) from None
+        if not all(np.isfinite(v) for v in vals.values()):
+            raise MyofaceFormatError(f"{p}: row {k + 2}: a head pose cell is not finite")
+        out.append(HeadPose.from_columns(vals))
+    return out
+
+
+def display_poses(poses) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(rotation, translation mm)`` per row of ``poses`` (:func:`read_head_poses`) for
+    :meth:`~myoface.render.Renderer.render`: the head's orientation as the camera saw it, and
+    its translation from its median position (so that a renderer framing the face at rest
+    keeps it in view while it moves as in the video); rows without a pose hold the last one."""
+    known = [p for p in poses if p is not None]
+    ref = np.median([p.translation_mm for p in known], axis=0) if known else np.zeros(3)
+    out, last = [], (np.eye(3), np.zeros(3))
+    for p in poses:
+        if p is not None:
+            last = (p.rotation, p.translation_mm - ref)
+        out.append(last)
+    return out

@@ -79,28 +79,19 @@ def head_trajectory(n_frames: int, still: bool = False):
     return out
 
 
-def posed_renderer(face, pose, texture=None, size=SIZE, fov_deg=FOV_DEG):
-    """A renderer that shows ``face`` at head pose ``pose`` to a camera at the origin looking
-    along -z (the fit's camera frame), the lights fixed in the room: the camera and the lights
-    are moved into the head frame by the inverse pose, which is the same picture."""
+def camera_renderer(face, size=SIZE, fov_deg=FOV_DEG):
+    """A renderer of ``face`` with the fit's camera: at the origin, looking along -z, y up (the
+    head is placed in front of it by the pose given to ``render``; the lights stay put)."""
     from myoface.render import Camera, Renderer
-    from myoface.render.renderer import Light, default_lights
 
-    ri = pose.rotation.T
-    t = pose.translation_mm
     cam = Camera(
-        eye=ri @ (-t),
-        target=ri @ (np.array([0.0, 0.0, -1.0]) - t),
-        up=ri @ np.array([0.0, 1.0, 0.0]),
+        eye=np.zeros(3),
+        target=np.array([0.0, 0.0, -1.0]),
         width=size[0],
         height=size[1],
         fov_deg=fov_deg,
     )
-    lights = [
-        Light(tuple(ri @ np.asarray(li.direction, float)), li.color, li.intensity)
-        for li in default_lights()
-    ]
-    return Renderer(face, cam, lights=lights, texture=texture)
+    return Renderer(face, cam)
 
 
 def personal_face():
@@ -189,9 +180,13 @@ def make_sequence(model, n_frames: int = 90, still: bool = False):
     return truth, poses, skins
 
 
-def render_sequence(face, poses, skins, texture=None) -> list[np.ndarray]:
-    """The frames (640x480 RGB uint8) of the sequence (``texture``: default the face's)."""
-    return [posed_renderer(face, p, texture).render(s) for p, s in zip(poses, skins, strict=True)]
+def render_sequence(face, poses, skins) -> list[np.ndarray]:
+    """The frames (640x480 RGB uint8) of the sequence."""
+    ren = camera_renderer(face)
+    return [
+        ren.render(s, pose=(p.rotation, p.translation_mm))
+        for p, s in zip(poses, skins, strict=True)
+    ]
 
 
 def detect_sequence(frames) -> tuple[list, np.ndarray]:

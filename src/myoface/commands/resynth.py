@@ -18,6 +18,12 @@ def add_arguments(p):
     p.add_argument(
         "--size", type=side_type, default=360, help="rendered height in pixels (16-4096)"
     )
+    p.add_argument(
+        "--pose",
+        action="store_true",
+        help="reproduce the head pose of the CSV (its head_yaw_deg ... head_tz_mm columns, "
+        "written by the landmarks' 3-D fit): the face turns and moves as in the video",
+    )
     p.add_argument("--quiet", action="store_true")
     add_face_argument(p)
 
@@ -35,6 +41,11 @@ def run(args) -> int:
         raise MyofaceFileNotFoundError(f"--side-by-side: no such video: {args.side_by_side}")
     fm = load_model(args)
     times, table, quality = read_contractions_csv(args.csv, list(fm.ids))
+    poses = None
+    if args.pose:
+        from myoface.analysis.fit import display_poses, read_head_poses
+
+        poses = display_poses(read_head_poses(args.csv))
     table = hold_last_measured(table)  # unmeasured frames hold the last measured contractions
     dt = float(np.median(np.diff(times))) if len(times) > 1 else 1.0 / 30
     if not 1.0 / MAX_FPS <= dt <= 60.0:
@@ -52,6 +63,7 @@ def run(args) -> int:
         size=int(args.size),
         side_by_side=args.side_by_side,
         show_progress=not args.quiet,
+        poses=poses,
     )
     print(f"wrote {args.output} ({len(table)} frames at {fps:.1f} fps)")
     return 0
@@ -67,11 +79,14 @@ def resynthesize(
     size: int = 360,
     side_by_side=None,
     show_progress: bool = True,
+    poses=None,
 ):
     """Render ``model`` driven by the contractions ``table`` (T, M) at ``times`` (T,) s to the
     video ``output`` at ``fps``: one ``size`` x ``size`` frame per row (front view), each the
     equilibrium of its row warm-started from the previous one, encoded while the next is made;
     with the frames of the video ``side_by_side`` (scaled to ``size`` rows) on the left.
+    ``poses``: per row ``(rotation, translation mm)`` of the head
+    (:func:`~myoface.analysis.fit.display_poses`), or None for the still front view.
 
     Returns the :class:`~myoface.synth.Synthesizer`, whose ``stats`` hold the per-frame times
     of the physics, the rendering and the encoding.
@@ -83,7 +98,10 @@ def resynthesize(
     from myoface.synth import Synthesizer, make_camera
 
     h = int(size)
-    syn = Synthesizer(model, Renderer(model.face, make_camera(model.face.vertices, "front", h, h)))
+    renderer = Renderer(model.face, make_camera(model.face.vertices, "front", h, h))
+    if poses is not None:
+        renderer = _PosedRenderer(renderer, poses)
+    syn = Synthesizer(model, renderer)
     compose = None
     if side_by_side:
         from myoface.analysis.video import open_video
@@ -106,3 +124,15 @@ def resynthesize(
         desc="resynthesizing",
     )
     return syn
+
+
+class _PosedRenderer:
+    """A renderer whose successive renders take the successive head ``poses``."""
+
+    def __init__(self, renderer, poses):
+        self._renderer = renderer
+        self._poses = iter(poses)
+        self.camera = renderer.camera
+
+    def render(self, vertices=None):
+        return self._renderer.render(vertices, pose=next(self._poses))

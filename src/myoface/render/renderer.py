@@ -99,6 +99,22 @@ def _rgb01(t: np.ndarray, what: str = "a texture") -> np.ndarray:
     return np.repeat(t, 3, axis=2) if t.shape[2] == 1 else t
 
 
+def _check_pose(pose) -> tuple[np.ndarray, np.ndarray]:
+    """``(rotation (3, 3), translation (3,))`` as float arrays, checked."""
+    try:
+        rot, shift = (np.asarray(a, dtype=np.float64) for a in pose)
+    except (TypeError, ValueError):
+        raise MyofaceValueError("pose must be (rotation (3, 3), translation (3,) mm)") from None
+    if rot.shape != (3, 3) or shift.shape != (3,) or not np.isfinite(rot).all():
+        raise MyofaceValueError(
+            f"pose must be (rotation (3, 3), translation (3,) mm); got shapes {rot.shape}, "
+            f"{shift.shape}"
+        )
+    if not np.isfinite(shift).all() or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6):
+        raise MyofaceValueError("pose must be a finite rotation matrix and translation")
+    return rot, shift
+
+
 def load_texture(texture) -> np.ndarray:
     """A texture as float32 linear RGB (H, W, 3) from an image array or a path: grey or colour,
     with or without alpha, 8 or 16 bits per channel (or floats in [0, 1])."""
@@ -282,19 +298,24 @@ class Renderer:
         return pos
 
     # ------------------------------------------------------------------ render
-    def render_linear(self, vertices=None) -> np.ndarray:
-        """The image (H, W, 3) float32 in linear RGB (before tone mapping)."""
+    def render_linear(self, vertices=None, pose=None) -> np.ndarray:
+        """The image (H, W, 3) float32 in linear RGB (before tone mapping); ``pose`` as for
+        :meth:`render`."""
         out = np.empty((self.camera.height, self.camera.width, 3), np.float32)
-        self._draw(vertices, None, out)
+        self._draw(vertices, None, out, pose)
         return out
 
-    def render(self, vertices=None) -> np.ndarray:
-        """The image (H, W, 3) uint8 sRGB of the skin at ``vertices`` (default: rest)."""
+    def render(self, vertices=None, pose=None) -> np.ndarray:
+        """The image (H, W, 3) uint8 sRGB of the skin at ``vertices`` (default: rest).
+
+        ``pose``: None, or ``(rotation (3, 3), translation (3,) mm)``, a rigid motion of the
+        whole head (skin, eyes, mouth), ``x -> rotation @ x + translation``, before the camera
+        sees it; the lights stay where they are (a head that turns in a lit room)."""
         out = np.empty((self.camera.height, self.camera.width, 3), np.uint8)
-        self._draw(vertices, out, None)
+        self._draw(vertices, out, None, pose)
         return out
 
-    def _draw(self, vertices, out8, outf) -> None:
+    def _draw(self, vertices, out8, outf, pose=None) -> None:
         skin = (
             self.face.vertices
             if vertices is None
@@ -302,9 +323,13 @@ class Renderer:
         )
         sc = self.scene
         pos = self.positions(skin)
+        rot = None
+        if pose is not None:
+            rot, shift = _check_pose(pose)
+            pos = pos @ rot.T + shift
         normals = np.empty_like(pos)
         vertex_normals_numba(pos[: sc.n_dynamic], sc.dyn_tris, normals[: sc.n_dynamic])
-        normals[sc.n_dynamic :] = sc.normals_static
+        normals[sc.n_dynamic :] = sc.normals_static if rot is None else sc.normals_static @ rot.T
         cam = self._big
         scr = cam.project(pos)
         winv = np.ones(len(pos)) if cam.orthographic else 1.0 / np.maximum(scr[:, 2], 1e-9)
