@@ -12,11 +12,13 @@ from scipy.sparse.linalg import spsolve
 
 from myoface.errors import MyofaceValueError
 from myoface.tissue import internal_forces, potential_energy, relax, rest_state
+from myoface.tissue.hessian import BlockPattern, symmetric_matvec
 from myoface.tissue.solver import (
     NEWTON_TOL_MM,
     PRECOND_SHIFT,
     assemble_block_hessian,
     energy_gradient,
+    energy_gradient_free,
     kernel_args,
     newton_data,
 )
@@ -46,6 +48,13 @@ def _perturbed(tm, scale_mm, seed=0):
     return x
 
 
+def _free_energy_gradient(tm, x):
+    pat = newton_data(tm).pattern
+    g = np.empty((pat.n_free, 3))
+    en = energy_gradient_free(x, *pat.spring_args(), pat.sfi, pat.sfj, *pat.prism_args(), g, True)
+    return en, g.reshape(-1)
+
+
 def test_energy_gradient_matches_the_reference_kernels(fm):
     tm = fm.tissue
     x = _perturbed(tm, 0.5)
@@ -54,23 +63,43 @@ def test_energy_gradient_matches_the_reference_kernels(fm):
     assert en == pytest.approx(potential_energy(tm, x), rel=1e-12)
     f = internal_forces(tm, x)
     np.testing.assert_allclose(grad, -f, rtol=0, atol=1e-9 * np.abs(f).max())
+    # the Newton solver's kernel: the springs and prisms that touch a free node, so its energy
+    # is E less a constant (the same at every x with the same kinematic nodes), and its gradient
+    # is over the free nodes
+    en_free, g_free = _free_energy_gradient(tm, x)
+    np.testing.assert_allclose(
+        g_free, -f[tm.free_index].reshape(-1), rtol=0, atol=1e-9 * np.abs(f).max()
+    )
+    x2 = _perturbed(tm, 0.5, seed=7)
+    en2 = potential_energy(tm, x2)
+    en2_free, _ = _free_energy_gradient(tm, x2)
+    assert en_free - en2_free == pytest.approx(en - en2, rel=1e-9)
+    assert en_free < en  # the constant left out is the energy of the kinematic-only parts
 
 
 def test_hessian_is_the_jacobian_of_the_gradient(fm):
     """The exact Hessian (unclipped geometric term, full volume term) against central
-    differences of the gradient, at a state far from rest (compressed and stretched springs)."""
+    differences of the gradient, at a state far from rest (compressed and stretched springs);
+    the symmetric storage the solver assembles against the full block assembly."""
     tm = fm.tissue
-    data = newton_data(tm)
-    pat = data.pattern
+    pat = newton_data(tm).pattern
     x = _perturbed(tm, 0.5, seed=1)
-    bvals = np.empty(pat.nnzb * 9)
+    dvals, lvals = np.empty(9 * pat.n_free), np.empty(9 * pat.nl)
+    pat.assemble(x, dvals, lvals)
+    h = pat.matrix(dvals, lvals)
+    full = BlockPattern(tm.n_nodes, tm.free_index, tm.spring_i, tm.spring_j, tm.elements)
+    bvals = np.empty(full.nnzb * 9)
     assemble_block_hessian(
-        x, *kernel_args(tm), pat.fmap, pat.spring_slots, pat.element_slots, bvals
+        x, *kernel_args(tm), full.fmap, full.spring_slots, full.element_slots, bvals
     )
-    h = pat.scalar_matrix(bvals)
-    assert abs(h - h.T).max() < 1e-10 * abs(h).max()
+    ref = full.scalar_matrix(bvals)
+    assert abs(h - ref).max() < 1e-12 * abs(ref).max()
+    assert abs(ref - ref.T).max() < 1e-10 * abs(ref).max()
     free = tm.free_index
     v = np.random.default_rng(2).normal(size=3 * len(free))
+    hv = np.empty_like(v)
+    symmetric_matvec(pat.lptr, pat.lcol, dvals, lvals, v, hv)
+    np.testing.assert_allclose(hv, ref @ v, rtol=0, atol=1e-12 * np.abs(ref @ v).max())
     eps = 1e-6  # mm: central differences have error O(eps^2) relative to the O(1) terms
 
     def grad(xx):
@@ -82,7 +111,6 @@ def test_hessian_is_the_jacobian_of_the_gradient(fm):
     xp[free] += eps * v.reshape(-1, 3)
     xm[free] -= eps * v.reshape(-1, 3)
     fd = (grad(xp) - grad(xm)) / (2 * eps)
-    hv = h @ v
     # the energy is piecewise smooth (biphasic springs): a spring within eps of its threshold
     # would make the difference quotient meaningless; at a random state none is
     assert np.abs(hv - fd).max() < 1e-6 * np.abs(fd).max()
@@ -92,11 +120,9 @@ def test_rest_factor_solves_the_rest_stiffness(fm):
     tm = fm.tissue
     data = newton_data(tm)
     pat = data.pattern
-    bvals = np.empty(pat.nnzb * 9)
-    assemble_block_hessian(
-        tm.rest_positions, *kernel_args(tm), pat.fmap, pat.spring_slots, pat.element_slots, bvals
-    )
-    k = pat.scalar_matrix(bvals)
+    dvals, lvals = np.empty(9 * pat.n_free), np.empty(9 * pat.nl)
+    pat.assemble(tm.rest_positions, dvals, lvals)
+    k = pat.matrix(dvals, lvals)
     # the factor is of K plus a tiny shift (see PRECOND_SHIFT)
     k = (k + PRECOND_SHIFT * k.diagonal().mean() * sp.eye(k.shape[0])).tocsc()
     b = np.random.default_rng(3).normal(size=k.shape[0])

@@ -442,3 +442,368 @@ _PAIRS = np.array(
     [[1, 2, 0, 3], [2, 3, 0, 1], [3, 1, 0, 2], [1, 0, 3, 2], [2, 0, 1, 3], [3, 0, 2, 1]],
     dtype=np.int64,
 )
+
+
+# ---------------------------------------------------------------------------------------------
+# the exact Hessian, symmetric storage (the Newton solver's hot path)
+# ---------------------------------------------------------------------------------------------
+
+#: the 15 node pairs (a, b), a < b, of a prism, in row-major order
+PRISM_PAIRS = np.array([(a, b) for a in range(6) for b in range(a + 1, 6)], dtype=np.int64)
+
+
+def _prism_skew_table() -> np.ndarray:
+    """Rows (pair, sign, k, l), one per (tetrahedron t, vertex pair of :data:`_PAIRS`): the
+    second derivative of tetrahedron t's triple product with respect to the prism nodes of
+    :data:`PRISM_PAIRS` [pair] is ``sign [x_k - x_l]x`` (k, l prism nodes)."""
+    pid = -np.ones((6, 6), np.int64)
+    for q, (a, b) in enumerate(PRISM_PAIRS):
+        pid[a, b] = q
+    tab = np.empty((18, 4), np.int64)
+    for t in range(3):
+        for pr in range(6):
+            m, n, k, l = _PAIRS[pr]
+            a, b, sgn = t + m, t + n, 1
+            if a > b:
+                a, b, sgn = b, a, -1
+            tab[6 * t + pr] = (pid[a, b], sgn, t + k, t + l)
+    return tab
+
+
+PRISM_SKEW = _prism_skew_table()
+
+
+class SymmetricPattern:
+    """The free-node Hessian in symmetric 3x3-block storage, and the packed arrays of the springs
+    and prisms that touch a free node (the others add a constant to the energy and nothing to
+    its gradient or Hessian).
+
+    Storage: the diagonal blocks ``dvals`` (F*9,), and the strictly lower blocks ``lvals``
+    (nl*9,) in block CSR by row (``lptr`` (F+1,), ``lcol`` (nl,), columns sorted, each < its
+    row); blocks row-major. A spring's blocks are symmetric; a prism pair (a, b) whose nodes
+    are numbered the other way round (free number of a < that of b) adds the transpose of its
+    block H_ab, i.e. H_ba (``elem_first`` 1).
+
+    Attributes (besides the storage)
+    --------------------------------
+    n_free : int; fmap : (N,) int64 — free number of each node, -1 for a kinematic one.
+    si, sj, rest, alpha, beta, ec : (S',) — the active springs: ends, rest length l (mm),
+        stiffnesses (g/s^2), threshold extension e^c = strain_c l (mm);
+    sfi, sfj : (S',) int64 — free numbers of the ends; soff : (S',) int64 — lower block or -1.
+    elems : (E', 6) int64; efree : (E', 6) int64; eoff : (E', 15) int64; efirst : (E', 15)
+        int8; rest_volume, kv : (E',) — the active prisms (nonzero volume weight).
+    law : int; vsign : float — the model's.
+    """
+
+    def __init__(self, model):
+        n = model.n_nodes
+        free = np.flatnonzero(~np.asarray(model.kinematic))
+        fmap = -np.ones(n, np.int64)
+        fmap[free] = np.arange(len(free))
+        nf = len(free)
+        si_all = np.asarray(model.spring_i, np.int64)
+        sj_all = np.asarray(model.spring_j, np.int64)
+        act = (fmap[si_all] >= 0) | (fmap[sj_all] >= 0)
+        k = np.flatnonzero(act)
+        el_all = np.asarray(model.elements, np.int64).reshape(-1, 6)
+        eact = (fmap[el_all] >= 0).any(axis=1) & (np.asarray(model.volume_weight) != 0)
+        e = np.flatnonzero(eact)
+        fi, fj = fmap[si_all[k]], fmap[sj_all[k]]
+        fe = fmap[el_all[e]]
+        rows = [np.maximum(fi, fj)] + [np.maximum(fe[:, a], fe[:, b]) for a, b in PRISM_PAIRS]
+        cols = [np.minimum(fi, fj)] + [np.minimum(fe[:, a], fe[:, b]) for a, b in PRISM_PAIRS]
+        r, c = np.concatenate(rows), np.concatenate(cols)
+        ok = c >= 0
+        key = np.unique(r[ok] * nf + c[ok])
+
+        def slot(a, b):
+            out = -np.ones(len(a), np.int64)
+            both = (a >= 0) & (b >= 0)
+            out[both] = np.searchsorted(
+                key, np.maximum(a[both], b[both]) * nf + np.minimum(a[both], b[both])
+            )
+            return out
+
+        mat = np.asarray(model.materials)[np.asarray(model.spring_material)[k]]
+        rest = np.asarray(model.rest_length, np.float64)[k]
+        self.n_free = nf
+        self.fmap = fmap
+        self.lptr = np.searchsorted(key // max(nf, 1), np.arange(nf + 1)).astype(np.int64)
+        self.lcol = (key % max(nf, 1)).astype(np.int64)
+        self.nl = len(key)
+        self.si = si_all[k]
+        self.sj = sj_all[k]
+        self.rest = rest
+        self.alpha = mat[:, 0].copy()
+        self.beta = mat[:, 1].copy()
+        self.ec = mat[:, 2] * rest
+        self.sfi = fi
+        self.sfj = fj
+        self.soff = slot(fi, fj)
+        self.elems = el_all[e]
+        self.efree = fe
+        self.eoff = np.stack([slot(fe[:, a], fe[:, b]) for a, b in PRISM_PAIRS], axis=1).reshape(
+            -1, 15
+        )
+        self.efirst = (
+            np.stack([fe[:, a] < fe[:, b] for a, b in PRISM_PAIRS], axis=1)
+            .reshape(-1, 15)
+            .astype(np.int8)
+        )
+        self.rest_volume = np.asarray(model.rest_volume, np.float64)[e]
+        self.kv = np.asarray(model.volume_weight, np.float64)[e]
+        self.law = int(model.spring_law)
+        self.vsign = float(model.volume_sign)
+        for name, val in vars(self).items():
+            if isinstance(val, np.ndarray):
+                val = np.ascontiguousarray(val)
+                val.flags.writeable = False
+                setattr(self, name, val)
+
+    def spring_args(self) -> tuple:
+        """The springs' arrays in the kernels' argument order."""
+        return (self.si, self.sj, self.rest, self.alpha, self.beta, self.ec, self.law)
+
+    def prism_args(self) -> tuple:
+        """The prisms' arrays in the kernels' argument order."""
+        return (self.elems, self.efree, self.rest_volume, self.kv, self.vsign)
+
+    def assemble(self, x, dvals, lvals) -> None:
+        """Fill ``dvals``, ``lvals`` with the exact Hessian at ``x`` (N, 3) mm."""
+        assemble_symmetric_hessian(
+            x,
+            *self.spring_args(),
+            self.sfi,
+            self.sfj,
+            self.soff,
+            *self.prism_args(),
+            self.eoff,
+            self.efirst,
+            dvals,
+            lvals,
+        )
+
+    def matrix(self, dvals, lvals) -> sp.csr_matrix:
+        """The full (3F, 3F) scipy CSR matrix of the storage (a reference for tests)."""
+        nf = self.n_free
+        d = sp.bsr_matrix(
+            (np.asarray(dvals).reshape(-1, 3, 3), np.arange(nf), np.arange(nf + 1)),
+            shape=(3 * nf, 3 * nf),
+        )
+        lo = sp.bsr_matrix(
+            (np.asarray(lvals).reshape(-1, 3, 3), self.lcol, self.lptr), shape=(3 * nf, 3 * nf)
+        )
+        return (d + lo + lo.T).tocsr()
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _add_sym6(arr, slot, h0, h1, h2, h4, h5, h8):
+    """Add the symmetric block [[h0, h1, h2], [h1, h4, h5], [h2, h5, h8]] to block ``slot``
+    of ``arr`` (nothing if slot < 0)."""
+    if slot >= 0:
+        o = 9 * slot
+        arr[o] += h0
+        arr[o + 1] += h1
+        arr[o + 2] += h2
+        arr[o + 3] += h1
+        arr[o + 4] += h4
+        arr[o + 5] += h5
+        arr[o + 6] += h2
+        arr[o + 7] += h5
+        arr[o + 8] += h8
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def assemble_symmetric_hessian(
+    x,
+    si,
+    sj,
+    rest,
+    alpha,
+    beta,
+    ec,
+    law,
+    sfi,
+    sfj,
+    soff,
+    elems,
+    efree,
+    rest_vol,
+    kv,
+    vsign,
+    eoff,
+    efirst,
+    dvals,
+    lvals,
+):
+    """The exact Hessian of the potential energy over the free nodes at ``x`` (N, 3) mm into
+    the symmetric storage of :class:`SymmetricPattern` (``dvals``, ``lvals``); the same
+    matrix as :func:`assemble_block_hessian`, computed once per spring and per prism node pair.
+
+    Springs: ``(c - g) u u^T + g I`` (c the tangent stiffness, g = |s|/d, u the direction) on
+    both diagonal blocks, minus it on the off-diagonal one. Prisms: ``2 kv (dV/dx_a)(dV/dx_b)^T``
+    plus ``2 kv (V - V0) d2V/dx_a dx_b`` (a skew 3x3 block: zero on the diagonal).
+    """
+    dvals[:] = 0.0
+    lvals[:] = 0.0
+    for k in range(si.shape[0]):
+        i = si[k]
+        j = sj[k]
+        rx = x[j, 0] - x[i, 0]
+        ry = x[j, 1] - x[i, 1]
+        rz = x[j, 2] - x[i, 2]
+        d2 = rx * rx + ry * ry + rz * rz
+        if d2 < 1e-24:  # MIN_SPRING_LENGTH^2: no direction, no force
+            continue
+        d = np.sqrt(d2)
+        e = d - rest[k]
+        if e <= ec[k]:
+            c = alpha[k]
+            s = c * e
+        else:
+            c = beta[k]
+            s = alpha[k] * ec[k] + c * (e - ec[k]) if law == LAW_CONTINUOUS else c * e
+        inv = 1.0 / d
+        g = s * inv
+        w = (c - g) * inv * inv
+        h0 = w * rx * rx + g
+        h1 = w * rx * ry
+        h2 = w * rx * rz
+        h4 = w * ry * ry + g
+        h5 = w * ry * rz
+        h8 = w * rz * rz + g
+        _add_sym6(dvals, sfi[k], h0, h1, h2, h4, h5, h8)
+        _add_sym6(dvals, sfj[k], h0, h1, h2, h4, h5, h8)
+        _add_sym6(lvals, soff[k], -h0, -h1, -h2, -h4, -h5, -h8)
+    gr = np.empty((6, 3))
+    wv = np.empty((15, 3))
+    for q in range(elems.shape[0]):
+        el = elems[q]
+        for a in range(6):
+            gr[a, 0] = 0.0
+            gr[a, 1] = 0.0
+            gr[a, 2] = 0.0
+        vol = 0.0
+        for t in range(3):  # tetrahedron t: prism nodes t .. t+3 (PRISM_TETS)
+            i0 = el[t]
+            i1 = el[t + 1]
+            i2 = el[t + 2]
+            i3 = el[t + 3]
+            ax = x[i1, 0] - x[i0, 0]
+            ay = x[i1, 1] - x[i0, 1]
+            az = x[i1, 2] - x[i0, 2]
+            bx = x[i2, 0] - x[i0, 0]
+            by = x[i2, 1] - x[i0, 1]
+            bz = x[i2, 2] - x[i0, 2]
+            cx = x[i3, 0] - x[i0, 0]
+            cy = x[i3, 1] - x[i0, 1]
+            cz = x[i3, 2] - x[i0, 2]
+            g1x = by * cz - bz * cy
+            g1y = bz * cx - bx * cz
+            g1z = bx * cy - by * cx
+            g2x = cy * az - cz * ay
+            g2y = cz * ax - cx * az
+            g2z = cx * ay - cy * ax
+            g3x = ay * bz - az * by
+            g3y = az * bx - ax * bz
+            g3z = ax * by - ay * bx
+            vol += ax * g1x + ay * g1y + az * g1z
+            gr[t + 1, 0] += g1x
+            gr[t + 1, 1] += g1y
+            gr[t + 1, 2] += g1z
+            gr[t + 2, 0] += g2x
+            gr[t + 2, 1] += g2y
+            gr[t + 2, 2] += g2z
+            gr[t + 3, 0] += g3x
+            gr[t + 3, 1] += g3y
+            gr[t + 3, 2] += g3z
+            gr[t, 0] -= g1x + g2x + g3x
+            gr[t, 1] -= g1y + g2y + g3y
+            gr[t, 2] -= g1z + g2z + g3z
+        dv = vsign * vol / 6.0 - rest_vol[q]
+        # Gauss-Newton term 2 kv (vsign/6)^2 g_a g_b^T: scale the gradients by its square root
+        sw = np.sqrt(2.0 * kv[q]) * abs(vsign) / 6.0
+        fr = efree[q]
+        for a in range(6):
+            gr[a, 0] *= sw
+            gr[a, 1] *= sw
+            gr[a, 2] *= sw
+            fa = fr[a]
+            if fa >= 0:
+                o = 9 * fa
+                for r in range(3):
+                    for c3 in range(3):
+                        dvals[o + 3 * r + c3] += gr[a, r] * gr[a, c3]
+        eo = eoff[q]
+        for p in range(15):
+            wv[p, 0] = 0.0
+            wv[p, 1] = 0.0
+            wv[p, 2] = 0.0
+        for r in range(18):
+            p = PRISM_SKEW_NB[r, 0]
+            sg = PRISM_SKEW_NB[r, 1]
+            ik = el[PRISM_SKEW_NB[r, 2]]
+            il = el[PRISM_SKEW_NB[r, 3]]
+            wv[p, 0] += sg * (x[ik, 0] - x[il, 0])
+            wv[p, 1] += sg * (x[ik, 1] - x[il, 1])
+            wv[p, 2] += sg * (x[ik, 2] - x[il, 2])
+        w2 = 2.0 * kv[q] * dv * vsign / 6.0
+        for p in range(15):
+            so = eo[p]
+            if so < 0:
+                continue
+            a = PRISM_PAIRS_NB[p, 0]
+            b = PRISM_PAIRS_NB[p, 1]
+            sg = w2
+            if efirst[q, p] != 0:  # the stored block is H_ba = H_ab^T
+                a, b = b, a
+                sg = -w2
+            w0 = sg * wv[p, 0]
+            w1 = sg * wv[p, 1]
+            w2_ = sg * wv[p, 2]
+            o = 9 * so
+            # + [w]x = [[0, -w2, w1], [w2, 0, -w0], [-w1, w0, 0]]
+            lvals[o] += gr[a, 0] * gr[b, 0]
+            lvals[o + 1] += gr[a, 0] * gr[b, 1] - w2_
+            lvals[o + 2] += gr[a, 0] * gr[b, 2] + w1
+            lvals[o + 3] += gr[a, 1] * gr[b, 0] + w2_
+            lvals[o + 4] += gr[a, 1] * gr[b, 1]
+            lvals[o + 5] += gr[a, 1] * gr[b, 2] - w0
+            lvals[o + 6] += gr[a, 2] * gr[b, 0] - w1
+            lvals[o + 7] += gr[a, 2] * gr[b, 1] + w0
+            lvals[o + 8] += gr[a, 2] * gr[b, 2]
+
+
+PRISM_SKEW_NB = PRISM_SKEW  # module-level constants numba freezes into the compiled code
+PRISM_PAIRS_NB = PRISM_PAIRS
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def symmetric_matvec(lptr, lcol, dvals, lvals, v, out):
+    """``out = A v`` for A in the symmetric storage of :class:`SymmetricPattern`."""
+    nf = lptr.shape[0] - 1
+    for i in range(3 * nf):
+        out[i] = 0.0
+    for i in range(nf):
+        o = 9 * i
+        v0 = v[3 * i]
+        v1 = v[3 * i + 1]
+        v2 = v[3 * i + 2]
+        s0 = dvals[o] * v0 + dvals[o + 1] * v1 + dvals[o + 2] * v2
+        s1 = dvals[o + 3] * v0 + dvals[o + 4] * v1 + dvals[o + 5] * v2
+        s2 = dvals[o + 6] * v0 + dvals[o + 7] * v1 + dvals[o + 8] * v2
+        for k in range(lptr[i], lptr[i + 1]):
+            j = 3 * lcol[k]
+            o = 9 * k
+            u0 = v[j]
+            u1 = v[j + 1]
+            u2 = v[j + 2]
+            s0 += lvals[o] * u0 + lvals[o + 1] * u1 + lvals[o + 2] * u2
+            s1 += lvals[o + 3] * u0 + lvals[o + 4] * u1 + lvals[o + 5] * u2
+            s2 += lvals[o + 6] * u0 + lvals[o + 7] * u1 + lvals[o + 8] * u2
+            out[j] += lvals[o] * v0 + lvals[o + 3] * v1 + lvals[o + 6] * v2
+            out[j + 1] += lvals[o + 1] * v0 + lvals[o + 4] * v1 + lvals[o + 7] * v2
+            out[j + 2] += lvals[o + 2] * v0 + lvals[o + 5] * v1 + lvals[o + 8] * v2
+        out[3 * i] += s0
+        out[3 * i + 1] += s1
+        out[3 * i + 2] += s2

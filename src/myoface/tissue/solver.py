@@ -48,7 +48,12 @@ from scipy.sparse.linalg import splu
 
 from myoface.errors import MyofaceSimulationError
 from myoface.tissue.forces import MIN_SPRING_LENGTH, spring_magnitude
-from myoface.tissue.hessian import BlockPattern, assemble_block_hessian
+from myoface.tissue.hessian import (
+    BlockPattern,
+    SymmetricPattern,
+    assemble_block_hessian,
+    symmetric_matvec,
+)
 from myoface.tissue.model import TissueModel
 
 #: default equilibrium tolerance of the Newton solver: the largest node move of the last Newton
@@ -62,6 +67,10 @@ ETA_MAX = 0.5
 ETA_MIN = 0.1
 #: CG iterations per Newton system at most
 CG_MAX_ITER = 200
+#: a Newton step whose largest node move was below CHORD_RATIO * tol_mm is followed by a step
+#: with the same Hessian (no new assembly): near the equilibrium the Hessian hardly changes, and
+#: that step is most often the last one, which only has to show that the next move is < tol
+CHORD_RATIO = 10.0
 #: Armijo sufficient-decrease constant of the line search (Nocedal & Wright 2006, eq. 3.4)
 ARMIJO_C = 1e-4
 #: relative size of an energy change that is at the level of its rounding error: a Newton step
@@ -184,8 +193,19 @@ def energy_gradient(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsig
     return en
 
 
-@njit(cache=True, nogil=True)
-def _energy_only(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign):
+@njit(cache=True, nogil=True, fastmath=True)
+def energy_gradient_free(
+    x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, elems, efree, rest_vol, kv, vsign, grad, want
+):
+    """The Newton solver's energy and gradient: over the springs and prisms that touch a free
+    node only (the arrays of :class:`~myoface.tissue.hessian.SymmetricPattern`), so the energy
+    (nJ) is E less a constant (the parts between kinematic nodes), and, when ``want``, its
+    gradient dE/dx (uN) over the free nodes into ``grad`` (F, 3) in free-node order.
+
+    The same sums as :func:`energy_gradient`, in one pass, with the material table unpacked
+    per spring."""
+    if want:
+        grad[:, :] = 0.0
     en = 0.0
     for k in range(si.shape[0]):
         i = si[k]
@@ -193,21 +213,41 @@ def _energy_only(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign):
         rx = x[j, 0] - x[i, 0]
         ry = x[j, 1] - x[i, 1]
         rz = x[j, 2] - x[i, 2]
-        lk = rest[k]
-        e = np.sqrt(rx * rx + ry * ry + rz * rz) - lk
-        m = mat_id[k]
-        ec = mat[m, 2] * lk
-        a = mat[m, 0]
-        if e <= ec:
+        d = np.sqrt(rx * rx + ry * ry + rz * rz)
+        e = d - rest[k]
+        a = alpha[k]
+        c = ec[k]
+        if e <= c:
             en += 0.5 * a * e * e
-        elif law == 1:
-            en += 0.5 * a * ec * ec + 0.5 * mat[m, 1] * (e * e - ec * ec)
+            s = a * e
+        elif law == 1:  # LAW_PAPER
+            en += 0.5 * a * c * c + 0.5 * beta[k] * (e * e - c * c)
+            s = beta[k] * e
         else:
-            en += 0.5 * a * ec * ec + a * ec * (e - ec) + 0.5 * mat[m, 1] * (e - ec) ** 2
+            de = e - c
+            en += a * c * (0.5 * c + de) + 0.5 * beta[k] * de * de
+            s = a * c + beta[k] * de
+        if want and d >= MIN_SPRING_LENGTH:
+            s /= d
+            fi = sfi[k]
+            fj = sfj[k]
+            if fi >= 0:
+                grad[fi, 0] -= s * rx
+                grad[fi, 1] -= s * ry
+                grad[fi, 2] -= s * rz
+            if fj >= 0:
+                grad[fj, 0] += s * rx
+                grad[fj, 1] += s * ry
+                grad[fj, 2] += s * rz
+    gr = np.empty((6, 3))
     for q in range(elems.shape[0]):
         el = elems[q]
         vol = 0.0
-        for t in range(3):
+        for a in range(6):
+            gr[a, 0] = 0.0
+            gr[a, 1] = 0.0
+            gr[a, 2] = 0.0
+        for t in range(3):  # tetrahedron t of the prism is slots (t, t+1, t+2, t+3) (PRISM_TETS)
             i0 = el[t]
             i1 = el[t + 1]
             i2 = el[t + 2]
@@ -221,9 +261,40 @@ def _energy_only(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign):
             cx = x[i3, 0] - x[i0, 0]
             cy = x[i3, 1] - x[i0, 1]
             cz = x[i3, 2] - x[i0, 2]
-            vol += ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
+            g1x = by * cz - bz * cy
+            g1y = bz * cx - bx * cz
+            g1z = bx * cy - by * cx
+            vol += ax * g1x + ay * g1y + az * g1z
+            if want:
+                g2x = cy * az - cz * ay
+                g2y = cz * ax - cx * az
+                g2z = cx * ay - cy * ax
+                g3x = ay * bz - az * by
+                g3y = az * bx - ax * bz
+                g3z = ax * by - ay * bx
+                gr[t + 1, 0] += g1x
+                gr[t + 1, 1] += g1y
+                gr[t + 1, 2] += g1z
+                gr[t + 2, 0] += g2x
+                gr[t + 2, 1] += g2y
+                gr[t + 2, 2] += g2z
+                gr[t + 3, 0] += g3x
+                gr[t + 3, 1] += g3y
+                gr[t + 3, 2] += g3z
+                gr[t, 0] -= g1x + g2x + g3x
+                gr[t, 1] -= g1y + g2y + g3y
+                gr[t, 2] -= g1z + g2z + g3z
         dv = vsign * vol / 6.0 - rest_vol[q]
         en += kv[q] * dv * dv
+        if want:
+            coef = 2.0 * kv[q] * dv * vsign / 6.0
+            fr = efree[q]
+            for a in range(6):
+                fa = fr[a]
+                if fa >= 0:
+                    grad[fa, 0] += coef * gr[a, 0]
+                    grad[fa, 1] += coef * gr[a, 1]
+                    grad[fa, 2] += coef * gr[a, 2]
     return en
 
 
@@ -366,27 +437,6 @@ def ldl_solve(ptr, rows, vals, diag, dinv, perm, b, out, y):
 
 
 @njit(cache=True, nogil=True)
-def bsr_matvec(indptr, indices, bvals, v, out):
-    """``out = A v`` for A in block CSR with 3x3 blocks (``bvals`` (nnzb*9,), row-major)."""
-    for i in range(indptr.shape[0] - 1):
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
-        for k in range(indptr[i], indptr[i + 1]):
-            j = 3 * indices[k]
-            o = 9 * k
-            v0 = v[j]
-            v1 = v[j + 1]
-            v2 = v[j + 2]
-            s0 += bvals[o] * v0 + bvals[o + 1] * v1 + bvals[o + 2] * v2
-            s1 += bvals[o + 3] * v0 + bvals[o + 4] * v1 + bvals[o + 5] * v2
-            s2 += bvals[o + 6] * v0 + bvals[o + 7] * v1 + bvals[o + 8] * v2
-        out[3 * i] = s0
-        out[3 * i + 1] = s1
-        out[3 * i + 2] = s2
-
-
-@njit(cache=True, nogil=True)
 def _chol3(a, o, out):
     """Lower Cholesky factor of the symmetric 3x3 block ``a[o:o+9]`` into ``out`` (9,);
     False if the block is not positive definite."""
@@ -417,21 +467,15 @@ def _chol3(a, o, out):
 
 
 @njit(cache=True, nogil=True)
-def block_scaling(indptr, indices, bvals, rest_chol, scale):
+def block_scaling(dvals, rest_chol, scale):
     """Per free node the 3x3 matrix ``M_i = C_K,i C_H,i^-1`` (C: lower Cholesky factors of the
-    diagonal blocks of the rest stiffness K, given, and of the Hessian H, from ``bvals``) into
-    ``scale`` (F*9,): the preconditioner ``M^T K^-1 M`` then has exactly H's diagonal blocks.
-    Where H's block is not positive definite, M_i = C_K,i C_K,i^-1 = I."""
+    diagonal blocks of the rest stiffness K, given, and of the Hessian H, ``dvals`` (F*9,))
+    into ``scale`` (F*9,): the preconditioner ``M^T K^-1 M`` then has exactly H's diagonal
+    blocks. Where H's block is not positive definite, M_i = C_K,i C_K,i^-1 = I."""
     ch = np.empty(9)
-    for i in range(indptr.shape[0] - 1):
-        # the diagonal block of row i
-        d = -1
-        for k in range(indptr[i], indptr[i + 1]):
-            if indices[k] == i:
-                d = k
-                break
+    for i in range(dvals.shape[0] // 9):
         o = 9 * i
-        if d < 0 or not _chol3(bvals, 9 * d, ch):
+        if not _chol3(dvals, o, ch):
             for q in range(9):
                 scale[o + q] = 1.0 if q % 4 == 0 else 0.0
             continue
@@ -480,12 +524,14 @@ def _precond(ptr, rows, vals, diag, dinv, perm, scale, r, z, y, t):
 
 @njit(cache=True, nogil=True)
 def pcg(
-    indptr, indices, bvals, ptr, rows, vals, diag, dinv, perm, scale, b, eta, max_iter, x, work
+    lptr, lcol, dvals, lvals, ptr, rows, vals, diag, dinv, perm, scale, b, eta, max_iter, x, work
 ):
-    """Preconditioned CG on ``A x = b`` (A block CSR, preconditioner the block LDL^T), from 0,
-    until ``sqrt(r.z) <= eta sqrt(r0.z0)`` (z = M^-1 r). Stops early on a direction of negative
-    or zero curvature: x keeps the last iterate, or the preconditioned residual if that happens
-    at once (Steihaug 1983). ``work``: (6, n). Returns (iterations, 1 if it stopped on curvature)."""
+    """Preconditioned CG on ``A x = b`` (A in the symmetric storage of
+    :class:`~myoface.tissue.hessian.SymmetricPattern`, preconditioner the scaled block LDL^T),
+    from 0, until ``sqrt(r.z) <= eta sqrt(r0.z0)`` (z = M^-1 r). Stops early on a direction of
+    negative or zero curvature: x keeps the last iterate, or the preconditioned residual if that
+    happens at once (Steihaug 1983). ``work``: (6, n). Returns (iterations, 1 if it stopped on
+    curvature)."""
     n = b.shape[0]
     r = work[0]
     z = work[1]
@@ -503,7 +549,7 @@ def pcg(
         rz += r[i] * z[i]
     stop = eta * eta * rz
     for it in range(max_iter):
-        bsr_matvec(indptr, indices, bvals, p, q)
+        symmetric_matvec(lptr, lcol, dvals, lvals, p, q)
         pq = 0.0
         for i in range(n):
             pq += p[i] * q[i]
@@ -538,12 +584,14 @@ class NewtonData:
 
     Attributes
     ----------
-    pattern : BlockPattern — the block CSR pattern of the free-node Hessian.
+    pattern : SymmetricPattern — the free-node Hessian's storage and the active springs and
+        prisms.
     precond : BlockLDL — the rest stiffness over the free nodes, factorised.
     coupling : scipy CSR (3F x 3K) — the rest stiffness between free and kinematic dofs, K_fk.
+    rest_chol : (F*9,) — lower Cholesky factors of the rest stiffness's diagonal blocks.
     """
 
-    pattern: BlockPattern
+    pattern: SymmetricPattern
     precond: BlockLDL
     coupling: sp.csr_matrix
     rest_chol: np.ndarray
@@ -555,21 +603,18 @@ def newton_data(model: TissueModel) -> NewtonData:
 
 
 def _build_newton_data(model: TissueModel) -> NewtonData:
-    pat = BlockPattern(
-        model.n_nodes, model.free_index, model.spring_i, model.spring_j, model.elements
-    )
-    x0 = model.rest_positions
-    bvals = np.empty(pat.nnzb * 9)
-    assemble_block_hessian(
-        x0, *kernel_args(model), pat.fmap, pat.spring_slots, pat.element_slots, bvals
-    )
-    k = pat.scalar_matrix(bvals)
+    pat = SymmetricPattern(model)
     nf = pat.n_free
+    dvals = np.empty(9 * nf)
+    lvals = np.empty(9 * pat.nl)
+    pat.assemble(model.rest_positions, dvals, lvals)
+    k = pat.matrix(dvals, lvals)
     # a rest stiffness that is singular (a lattice with no kinematic node has rigid motions) is
     # made definite by a shift far below its stiffness; the factor only preconditions
     shift = PRECOND_SHIFT * float(np.abs(k.diagonal()).mean() or 1.0)
     k = (k + shift * sp.eye(3 * nf)).tocsc()
-    node_graph = sp.csr_matrix((np.ones(len(pat.indices)), pat.indices, pat.indptr), shape=(nf, nf))
+    lo = sp.csr_matrix((np.ones(pat.nl), pat.lcol, pat.lptr), shape=(nf, nf))
+    node_graph = (lo + lo.T + sp.eye(nf)).tocsr()
     precond = block_ldl(k, nf, node_graph)
     # K_fk at rest: the Hessian of a copy of the model in which every node is free
     allfree = replace(model, kinematic=np.zeros(model.n_nodes, bool), cache={})
@@ -578,7 +623,12 @@ def _build_newton_data(model: TissueModel) -> NewtonData:
     )
     ball = np.empty(pat_all.nnzb * 9)
     assemble_block_hessian(
-        x0, *kernel_args(allfree), pat_all.fmap, pat_all.spring_slots, pat_all.element_slots, ball
+        model.rest_positions,
+        *kernel_args(allfree),
+        pat_all.fmap,
+        pat_all.spring_slots,
+        pat_all.element_slots,
+        ball,
     )
     kall = pat_all.scalar_matrix(ball).tocsr()
     fd = (3 * model.free_index[:, None] + np.arange(3)).reshape(-1)
@@ -586,13 +636,71 @@ def _build_newton_data(model: TissueModel) -> NewtonData:
     coupling = kall[fd][:, kd].tocsr()
     coupling.data.flags.writeable = False
     rest_chol = np.empty(9 * nf)
-    ident = np.tile(np.eye(3).reshape(-1), nf)
-    block_scaling(pat.indptr, pat.indices, bvals, ident, rest_chol)  # C_K^-1
+    block_scaling(dvals, np.tile(np.eye(3).reshape(-1), nf), rest_chol)  # C_K^-1
     rest_chol = np.linalg.inv(rest_chol.reshape(nf, 3, 3)).reshape(-1)  # C_K
     return NewtonData(pat, precond, coupling, _ro(rest_chol))
 
 
 # -------------------------------------------------------------------------------- solver ----
+
+
+class _Newton:
+    """The work arrays and kernels of one Newton solve (one per call: solves share nothing)."""
+
+    def __init__(self, model: TissueModel, data: NewtonData):
+        pat = data.pattern
+        self.data = data
+        self.pat = pat
+        self.free = model.free_index
+        self.nf = pat.n_free
+        n = 3 * self.nf
+        self.dvals = np.empty(9 * self.nf)
+        self.lvals = np.empty(9 * pat.nl)
+        self.scale = np.empty(9 * self.nf)
+        self.work = np.empty((6, n))
+        self.step = np.empty(n)
+        self.grad = np.empty((self.nf, 3))
+        self.eargs = (
+            *pat.spring_args(),
+            pat.sfi,
+            pat.sfj,
+            *pat.prism_args(),
+        )
+        self.assemblies = 0
+        self.cg = 0
+
+    def energy(self, x, want_grad=True) -> float:
+        """E (less a constant) at x; with ``want_grad`` its gradient into ``self.grad``."""
+        return energy_gradient_free(x, *self.eargs, self.grad, want_grad)
+
+    def assemble(self, x) -> None:
+        self.pat.assemble(x, self.dvals, self.lvals)
+        block_scaling(self.dvals, self.data.rest_chol, self.scale)
+        self.assemblies += 1
+
+    def solve(self, b, eta) -> np.ndarray:
+        """An approximate solution of H s = b (H the last assembled Hessian) into ``self.step``."""
+        pat, pre = self.pat, self.data.precond
+        k, _ = pcg(
+            pat.lptr,
+            pat.lcol,
+            self.dvals,
+            self.lvals,
+            pre.ptr,
+            pre.rows,
+            pre.vals,
+            pre.diag,
+            pre.dinv,
+            pre.perm,
+            self.scale,
+            b,
+            eta,
+            CG_MAX_ITER,
+            self.step,
+            self.work,
+        )
+        self.cg += k
+        return self.step
 
 
 def relax_newton(
@@ -607,66 +715,42 @@ def relax_newton(
     linear response of the free nodes to that move).
 
     Returns (x, converged, Newton iterations, largest node move of the last step in mm,
-    CG iterations in all).
+    CG iterations in all). An iteration is one Newton step; the steps that reuse the last
+    Hessian (see :data:`CHORD_RATIO`) count as iterations too.
     """
     data = newton_data(model)
-    pat = data.pattern
-    pre = data.precond
     free = model.free_index
-    kin = model.kinematic_index
-    args = kernel_args(model)
-    nf = len(free)
     x = np.array(x, dtype=np.float64, order="C")
-    if nf == 0:
+    if len(free) == 0:
         return x, True, 0, 0.0, 0
-    n = 3 * nf
-    work = np.empty((6, n))
-    scale = np.empty(9 * nf)
-    step = np.empty(n)
-    bvals = np.empty(pat.nnzb * 9)
-    grad = np.empty_like(x)
+    nw = _Newton(model, data)
 
     # 1. the linear response of the free nodes to the move of the kinematic ones
-    dk = (x[kin] - x_kin_start).reshape(-1)
+    dk = (x[model.kinematic_index] - x_kin_start).reshape(-1)
     if np.any(dk):
-        x[free] += pre.solve(-(data.coupling @ dk)).reshape(-1, 3)
+        x[free] += data.precond.solve(-(data.coupling @ dk)).reshape(-1, 3)
 
-    energy = energy_gradient(x, *args, grad)
-    g = grad[free].reshape(-1)
+    energy = nw.energy(x)
+    g = nw.grad.reshape(-1).copy()
     gnorm_prev = float(np.sqrt(g @ g))
     eta = ETA_MAX
     move = np.inf
-    cg_total = 0
+    t = 1.0
     for it in range(1, max_iter + 1):
         if not (np.isfinite(energy) and np.isfinite(gnorm_prev)):
             raise MyofaceSimulationError(
                 f"newton relax: non-finite energy or forces at iteration {it}"
             )
-        # 2. the Newton system, solved to a relative accuracy eta
-        assemble_block_hessian(x, *args, pat.fmap, pat.spring_slots, pat.element_slots, bvals)
-        block_scaling(pat.indptr, pat.indices, bvals, data.rest_chol, scale)
-        k, _ = pcg(
-            pat.indptr,
-            pat.indices,
-            bvals,
-            pre.ptr,
-            pre.rows,
-            pre.vals,
-            pre.diag,
-            pre.dinv,
-            pre.perm,
-            scale,
-            -g,
-            eta,
-            CG_MAX_ITER,
-            step,
-            work,
-        )
-        cg_total += k
+        # 2. the Newton system, solved to a relative accuracy eta; close to the equilibrium (the
+        # last full step was short) the Hessian of the last step is kept: a step with it is
+        # nearly a Newton step, and most often the last one
+        chord = it > 1 and t == 1.0 and move < CHORD_RATIO * tol_mm
+        if not chord:
+            nw.assemble(x)
+        step = nw.solve(-g, ETA_MIN if chord else eta)
         slope = float(g @ step)
         if not slope < 0.0:  # cannot happen with an SPD preconditioner, unless g is ~0
-            move = 0.0
-            return x, True, it, move, cg_total
+            return x, True, it, 0.0, nw.cg
         move = float(np.abs(step).max())
         # 3. line search: Armijo backtracking with a safeguarded quadratic step
         t = 1.0
@@ -674,17 +758,18 @@ def relax_newton(
         while True:
             xn = x.copy()
             xn[free] += (t * step).reshape(-1, 3)
-            en = energy_gradient(xn, *args, grad)
+            en = nw.energy(xn)
             if small or en <= energy + ARMIJO_C * t * slope or t < 1e-4:
                 break
             curv = en - energy - slope * t
             tq = -slope * t * t / (2.0 * curv) if curv > 0 else 0.5 * t
             t = min(max(tq, 0.1 * t), 0.5 * t)
         x, energy = xn, en
-        g = grad[free].reshape(-1)
-        move *= t
-        if t == 1.0 and move < tol_mm:
-            return x, True, it, move, cg_total
+        g = nw.grad.reshape(-1).copy()
+        if move < tol_mm:  # the full step (the distance estimate) was below tol
+            return x, True, it, move * t, nw.cg
+        if chord:
+            move = np.inf  # the kept Hessian did not finish: assemble a new one next
         # forcing term, Eisenstat & Walker (1996) choice 2 with their safeguard
         gnorm = float(np.sqrt(g @ g))
         eta_new = 0.9 * (gnorm / gnorm_prev) ** 2
@@ -692,4 +777,4 @@ def relax_newton(
             eta_new = max(eta_new, 0.9 * eta * eta)
         eta = min(max(eta_new, ETA_MIN), ETA_MAX)
         gnorm_prev = gnorm
-    return x, False, max_iter, move, cg_total
+    return x, False, max_iter, move, nw.cg
