@@ -65,13 +65,15 @@ DEFAULT_FOV_DEG = 45.0
 CALIBRATION_WINDOW_S = 2.0
 #: rounds of (pose, identity) alternation when calibrating
 IDENTITY_ROUNDS = 4
-#: at most this many of the most neutral frames (the best one and its neighbours in time)
-#: calibrate together (their tracker noise averages out) ...
+#: a frame's expression score: this percentile of its vertices' displacement (mm) by the
+#: contractions fitted against the model's neutral (an expression moves a part of the face)
+NEUTRAL_PERCENTILE = 90
+#: the scores are known to within this (mm): MediaPipe's points on identical neutral frames
+#: (video mode) score up to ~1 mm apart. The earliest frame within it of the lowest score
+#: calibrates, with ...
+NEUTRAL_MARGIN_MM = 1.0
+#: ... at most this many frames around it (within the margin too): their noise averages out
 CALIBRATION_FRAMES = 5
-#: ... those whose expression score is within this (mm RMS skin displacement) of the best's
-NEUTRAL_MARGIN_MM = 0.25
-#: a candidate calibration frame is compared with this many frames on either side of it
-STILL_FRAMES = 2
 #: Euler axis order of the head angles (scipy's: upper case = intrinsic)
 EULER_ORDER = "YXZ"
 
@@ -420,16 +422,14 @@ class ModelFit:
         ``frames``: a sequence of landmark arrays (468, 3), or None where no face was found
         (e.g. the first :data:`CALIBRATION_WINDOW_S` seconds of a video). ``index`` picks the
         calibration frame; by default it is the most neutral one: the frame whose contractions,
-        fitted against the model's own neutral, less the least of each muscle over the frames
-        (the person's own shape, which reads as the same contractions in every frame),
-        displace the skin least (RMS over vertices), plus the largest change of that
-        displacement to the :data:`STILL_FRAMES` frames on either side (a neutral face is a
-        held face, not the onset of an expression). On that frame and its neighbours nearly as
-        neutral (:data:`CALIBRATION_FRAMES`, :data:`NEUTRAL_MARGIN_MM`) the head poses and a
-        per-vertex offset of the neutral (regularised to be smooth:
-        :attr:`FitSettings.identity_edge_sigma_mm`; the residual in the image plane then
-        added, so that the neutral reproduces them) are fitted with every contraction at zero;
-        later frames measure expression relative to it.
+        fitted against the model's own neutral, displace the skin least (the
+        :data:`NEUTRAL_PERCENTILE` th percentile over the vertices), or rather the earliest
+        whose score is within :data:`NEUTRAL_MARGIN_MM` of the least (the tracker's scatter;
+        a video starts neutral more often than not). On that frame and up to :data:`CALIBRATION_FRAMES` around it
+        within the margin too, the head poses and a per-vertex offset of the neutral
+        (regularised to be smooth: :attr:`FitSettings.identity_edge_sigma_mm`; the residual
+        in the image plane then added, so that the neutral reproduces them) are fitted with
+        every contraction at zero; later frames measure expression relative to it.
         """
         frames = list(frames)
         if not frames:
@@ -438,45 +438,31 @@ class ModelFit:
         if index is None:
             saved = self.identity_mm
             self.identity_mm = np.zeros_like(self.neutral)
-            fitted = np.full((len(frames), self.n_muscles), np.nan)
+            flat = self.response.reshape(-1, self.n_muscles)
             for k, pts in enumerate(frames):
                 if pts is not None:
                     r = self._fit(_check_points(pts, len(self.neutral)), None, refine=0)
-                    fitted[k] = r.contractions
-            # the person's own shape also reads as contractions, the same in every frame; an
-            # expression adds to them: what a frame has beyond the least of each muscle over
-            # the frames is its expression
-            # A neutral face is also a held one: a frame that changes (the onset of a smile)
-            # scores its largest change to the frames around it as well
-            if np.isfinite(fitted).any():
-                excess = fitted - np.nanmin(fitted, axis=0)
-                disp = np.einsum("vdk,tk->tvd", self.response, np.nan_to_num(excess))
-
-                def rms(a):
-                    return float(np.sqrt((a**2).sum(-1).mean()))
-
-                ok = np.isfinite(fitted).all(axis=1)
-                for k in np.flatnonzero(ok):
-                    near = [j for j in range(k - STILL_FRAMES, k + STILL_FRAMES + 1)
-                            if j != k and 0 <= j < len(frames) and ok[j]]  # fmt: skip
-                    change = max((rms(disp[k] - disp[j]) for j in near), default=0.0)
-                    scores[k] = rms(disp[k]) + change
+                    disp = np.linalg.norm((flat @ r.contractions).reshape(-1, 3), axis=1)
+                    scores[k] = float(np.percentile(disp, NEUTRAL_PERCENTILE))
             self.identity_mm = saved
             if not np.isfinite(scores).any():
                 raise MyofaceValueError("no face in any of the calibration frames")
-            index = int(np.nanargmin(scores))
+            # the scores are known to the tracker's scatter: of the frames within it of the
+            # lowest, the earliest (a video starts neutral more often than it ends so)
+            best = np.nanmin(scores)
+            index = int(np.flatnonzero(scores <= best + NEUTRAL_MARGIN_MM)[0])
         if not 0 <= index < len(frames) or frames[index] is None:
             raise MyofaceValueError(f"calibration frame {index} has no face")
         use = [index]
         if np.isfinite(scores[index]):
-            # the frames nearly as neutral as the best one calibrate with it (their tracker
-            # noise averages out): within NEUTRAL_MARGIN_MM of its score, the closest first
+            # the frames around it nearly as neutral calibrate with it (their tracker noise
+            # averages out): within NEUTRAL_MARGIN_MM of the lowest score, the lowest first
             near = [
                 k
                 for k in np.argsort(np.where(np.isfinite(scores), scores, np.inf))
                 if k != index
-                and abs(k - index) <= CALIBRATION_FRAMES // 2
-                and scores[k] <= scores[index] + NEUTRAL_MARGIN_MM
+                and abs(k - index) <= CALIBRATION_FRAMES - 1
+                and scores[k] <= np.nanmin(scores) + NEUTRAL_MARGIN_MM
             ]
             use += [int(k) for k in near[: CALIBRATION_FRAMES - 1]]
         pts = [_check_points(frames[k], len(self.neutral)) for k in use]
@@ -911,12 +897,13 @@ class FitAnalyzer:
         """Calibrate on ``frames`` (an iterable of RGB frames, or None for a frame without a
         face: the first :data:`CALIBRATION_WINDOW_S` s of the video, from its frame
         ``first_index``): the most neutral one, or the frame ``calibration_frame`` (an index
-        into the video). Runs its own detector (image mode), so the analysis' tracking starts
-        fresh. Returns the calibration frame's index in the video."""
+        into the video). Runs its own detector (video mode, as the analysis does: MediaPipe's
+        tracking mode places the points a little differently from its detection mode), so the
+        analysis' tracking starts fresh. Returns the calibration frame's index in the video."""
         from myoface.analysis.landmarks import FaceMeshDetector
 
         points = []
-        with FaceMeshDetector(video=False) as det:
+        with FaceMeshDetector(video=True) as det:
             for frame in frames:
                 if frame is None:  # (a frame known to have no face)
                     points.append(None)
