@@ -3,7 +3,12 @@
 import numpy as np
 import pytest
 
-from myoface.analysis.curvefit import CurveEstimator, closest_on_polyline
+from myoface.analysis.curvefit import (
+    CurveEstimator,
+    bounded_least_squares,
+    closest_on_polyline,
+    closest_on_polyline_numpy,
+)
 from myoface.analysis.pipeline import SECTIONS, section_vertices
 from myoface.analysis.snakes import resample_polyline
 from myoface.errors import MyofaceValueError
@@ -25,6 +30,38 @@ def test_closest_on_polyline_square():
     assert at_end.all()
     with pytest.raises(MyofaceValueError):
         closest_on_polyline(p, sq[:1], closed=False)
+
+
+@pytest.mark.parametrize("closed", [False, True])
+def test_compiled_closest_points_equal_the_numpy_reference(closed):
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=not closed)
+    q = np.column_stack([30 * np.cos(t), 20 * np.sin(t)]) + rng.normal(0, 0.5, (40, 2))
+    p = rng.uniform(-45, 45, (200, 2))
+    for a, b in zip(
+        closest_on_polyline(p, q, closed), closest_on_polyline_numpy(p, q, closed), strict=True
+    ):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+def test_bounded_least_squares_equals_scipys_bvls():
+    """The active-set solver against scipy's BVLS on random problems shaped like the curve
+    fit's (a few hundred rows, 13 unknowns, boxes [-c, 1 - c], a small ridge)."""
+    from scipy.optimize import lsq_linear
+
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        n, k = rng.integers(20, 300), 13
+        a = rng.normal(size=(n, k)) * rng.uniform(0.1, 3, k)
+        b = a @ rng.uniform(-1.5, 2.5, k) + rng.normal(0, 0.3, n)  # many bounds active
+        c = rng.uniform(0, 1, k)
+        lo, hi = -c, 1 - c
+        ridge = 1e-3
+        x = bounded_least_squares(a, b, lo, hi, ridge)
+        aug = np.vstack([a, np.sqrt(ridge) * np.eye(k)])
+        ref = lsq_linear(aug, np.concatenate([b, np.zeros(k)]), bounds=(lo, hi), method="bvls")
+        assert (x >= lo).all() and (x <= hi).all()
+        np.testing.assert_allclose(x, ref.x, atol=1e-8)
 
 
 @pytest.fixture(scope="module")

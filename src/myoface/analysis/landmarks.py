@@ -143,20 +143,47 @@ def contours_from_landmarks(face, points, sections=AUTO_SECTIONS) -> dict[str, n
     return {s: p[section_vertices(face, s), :2].copy() for s in sections}
 
 
-def auto_init(frames, face, max_search: int = 30):
-    """Find the first frame (of at most ``max_search``) with a face and return
-    ``(index, frame, contours, points)``; a clear error when no face is found."""
+def auto_init(
+    frames,
+    face,
+    max_search: int | None = None,
+    *,
+    show_progress: bool = False,
+    total: int | None = None,
+):
+    """Find the first frame (of at most ``max_search``; default: all of them) with a face
+    whose contours lie inside the frame, and return ``(index, frame, contours, points)``; a
+    clear error when no face is found. ``show_progress``: a progress bar on stderr while the
+    search goes on (``total``: the number of frames, when known)."""
+    from myoface.render import progress
+
     seen = 0
     with FaceMeshDetector(video=False) as det:
-        for k, frame in enumerate(frames):
-            if k >= max_search:
-                break
-            seen += 1
-            pts = det.detect(frame)
-            if pts is not None:
-                return k, frame, contours_from_landmarks(face, pts), pts
+        bar = progress(
+            None, total=total, desc="searching for a face", enabled=show_progress, unit="frame"
+        )
+        try:
+            for k, frame in enumerate(frames):
+                if max_search is not None and k >= max_search:
+                    break
+                seen += 1
+                bar.update(1)
+                pts = det.detect(frame)
+                if pts is None:
+                    continue
+                conts = contours_from_landmarks(face, pts)
+                h, w = np.shape(frame)[:2]
+                allp = np.concatenate(list(conts.values()))
+                if (
+                    (allp >= 0).all()
+                    and (allp[:, 0] <= w - 1).all()
+                    and (allp[:, 1] <= h - 1).all()
+                ):
+                    return k, frame, conts, pts
+        finally:
+            bar.close()
     raise MyofaceValueError(
-        f"no face found in the first {seen} frames of the video (MediaPipe face mesh); "
+        f"no face found in the {seen} frames of the video searched (MediaPipe face mesh); "
         "is there a frontal face in it?"
     )
 

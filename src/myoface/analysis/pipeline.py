@@ -36,9 +36,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
 from myoface.analysis.estimate import PAPER_ASSIGNMENT, ContractionEstimator, Fiducial
 from myoface.analysis.headframe import HeadTracker, Similarity, head_box
-from myoface.analysis.potentials import image_potential
+from myoface.analysis.potentials import PotentialField, potential_field
 from myoface.analysis.snakes import SnakeParams, Snakes, make_contours, resample_polyline
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 
@@ -152,6 +153,22 @@ PAPER_MUSCLES = tuple(PAPER_ASSIGNMENT)
 ESCAPE_LIMIT = 0.5
 #: ... or when its strongest edges are weaker than this fraction of the calibration frame's
 LOW_CONTRAST = 0.35
+#: ... or when a contour lies farther (RMS across it, mm on the face) from the model's curve at
+#: the fitted contractions than any shape the model takes explains: the contour is on something
+#: else (an occluding hand, the inside of the mouth)
+MISFIT_MM = 6.0
+#: ... or when the head turned about its vertical axis from the calibration frame's pose so far
+#: that the registered eye-and-nose region is narrower, relative to its height, than this
+#: (:attr:`~myoface.analysis.headframe.HeadTracker.foreshortening`): the 2-D analysis reads
+#: the turned face as muscle action. Measured on the model rendered turned while smiling:
+#: 0.997 / 0.978 / 0.951 / 0.924 at 4 / 8 / 12 / 16 degrees, with the far side's zygomatic
+#: major already 0.15 / 0.18 / 0.23 / - off; the sample video's smile raises it to 1.0-1.15
+#: (the eyes narrow), so a smile is not taken for a turn. About 10 degrees:
+HEAD_TURN_FORESHORTENING = 0.965
+#: the potentials are computed on a window around the contours: their bounding box grown by
+#: this fraction of its size, plus WINDOW_PAD_PX (room for the contours to move in one frame)
+WINDOW_MARGIN = 0.15
+WINDOW_PAD_PX = 8.0
 
 
 # ------------------------------------------------------------------------------ init files
@@ -364,6 +381,16 @@ class Analyzer:
         self.mm_per_px = None
         self._init = {k: np.asarray(v, dtype=np.float64) for k, v in init.items()}
         self._contrast0 = None
+        self._frame_shape = None
+        self._field = None  # this frame's potentials (PotentialField)
+        self._cal_nodes = None  # the contours on the calibration frame
+        self._model_map = None  # (matrix, offset): the model's image-like mm -> calibration px
+        self._c_last = None  # the last measured contractions
+        self._lost = set()  # sections lost on the last frame, re-initialised on this one
+        self._shift = np.zeros(2)  # the last head shift (head_frame="contours")
+        self._face_lost = False
+        self._detector = None  # MediaPipe's face mesh, made when a lost face is searched for
+        self.last_residuals_mm = {}  # the last frame's fit residual per section (diagnostic)
         if synthesis is not None and estimator != "curves":
             raise MyofaceValueError("synthesis needs estimator='curves'")
         if not (isinstance(synthesis_rounds, int | np.integer) and synthesis_rounds >= 0):
@@ -372,14 +399,62 @@ class Analyzer:
         self.synthesis_rounds = int(synthesis_rounds)
         self._synth = None  # FrameSynthesizer, made on the calibration frame
 
-    def _potentials(self, frame: np.ndarray) -> np.ndarray:
-        """The stack (L, H, W) of potentials the contours move in: ``potential``, then the
-        line potential when some section is tracked as a line."""
-        pot = image_potential(frame, sigma=self.sigma, method=self.potential)
-        if any(self.layers):
-            return np.stack([pot, image_potential(frame, sigma=self.sigma, method="line")])
-        return pot[None]
+    # ------------------------------------------------------------ potentials
+    def _methods(self) -> tuple:
+        return (self.potential, "line") if any(self.layers) else (self.potential,)
 
+    def _field_for(self, frame: np.ndarray, nodes: np.ndarray) -> PotentialField:
+        """The potentials of ``frame`` (``potential``, then ``"line"`` when some section is
+        tracked as a line) on a window around ``nodes`` ((N, 2) image (x, y) px): the
+        contours' box grown by :data:`WINDOW_MARGIN` of its size and :data:`WINDOW_PAD_PX`;
+        the line layer only around the contours that move in it, the same way."""
+        q = np.asarray(nodes, dtype=np.float64)
+        box, pad = self._box(frame, q, None)
+        layer_windows = None
+        if any(self.layers):
+            line = self.snakes.node_layer == 1
+            layer_windows = [None, self._box(frame, q[line], pad)[0]]
+        return potential_field(frame, self.sigma, self._methods(), box, layer_windows)
+
+    @staticmethod
+    def _box(frame, q: np.ndarray, pad: float | None):
+        """The box around points ``q`` grown by ``pad`` (default: :data:`WINDOW_MARGIN` of
+        its size and :data:`WINDOW_PAD_PX`), and the pad."""
+        h, w = np.shape(frame)[:2]
+        lo = np.clip(q.min(axis=0), 0, (w - 1, h - 1))
+        hi = np.clip(q.max(axis=0), 0, (w - 1, h - 1))
+        if pad is None:
+            pad = WINDOW_MARGIN * float((hi - lo).max()) + WINDOW_PAD_PX
+        return (lo[0] - pad, lo[1] - pad, hi[0] + pad, hi[1] + pad), pad
+
+    def _covers(self, fld: PotentialField, nodes: np.ndarray) -> bool:
+        """Whether this frame's potentials ``fld`` hold the contours ``nodes`` (each in its
+        layer's window)."""
+        m = WINDOW_PAD_PX / 2
+        if not fld.covers(nodes, m):
+            return False
+        line = self.snakes.node_layer == 1
+        return not line.any() or fld.covers(nodes[line], m, layer=1)
+
+    def _relax(self, frame: np.ndarray, fld: PotentialField | None):
+        """Relax the snakes on ``frame``; ``fld`` (this frame's potentials) is reused when its
+        windows hold the contours."""
+        nodes = self.snakes.contours.nodes
+        if fld is None or not self._covers(fld, nodes):
+            fld = self._field_for(frame, nodes)
+        self._field = fld
+        return self.snakes.relax(fld), fld
+
+    @property
+    def last_potential(self) -> np.ndarray:
+        """The last frame's potential (H, W) (its first layer; 0 outside the window it was
+        computed on, and everywhere when the face was lost): the overlay of the paper's
+        Fig. 7b."""
+        if self._field is None:
+            return np.zeros(self._frame_shape or (1, 1))
+        return self._field.full_layer(0)
+
+    # ------------------------------------------------------------ contours and the head
     def _features(self, conts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         allpts = np.concatenate(conts)
         named = dict(zip(self.sections, conts, strict=True))
@@ -399,121 +474,283 @@ class Analyzer:
             return [self._sim.inverse_apply(c) for c in conts]
         return conts
 
+    def _head_shift(self, conts_cal: list[np.ndarray]) -> np.ndarray:
+        """``head_frame="contours"``: the head reference sections' shift from the calibration
+        frame (px); zero with the registered head frame (already removed)."""
+        if self.head_frame == "register" or not self.head_reference:
+            return np.zeros(2)
+        named = dict(zip(self.sections, conts_cal, strict=True))
+        return np.concatenate([named[s] for s in self.head_reference]).mean(axis=0) - self._ref0
+
     def _fit_curves(self, conts_cal: list[np.ndarray], shift: np.ndarray) -> np.ndarray:
         named = {s: q - shift for s, q in zip(self.sections, conts_cal, strict=True)}
         return self.curves.estimate(named, refine=self.refine)
 
-    def measure(self, frame: np.ndarray, index: int = 0, time_s: float = 0.0) -> FrameMeasurement:
-        """Track the contours into ``frame`` and estimate its contractions. The first frame
-        measured is the neutral calibration frame."""
-        if self.head_frame == "register":
-            if self.head is None:
-                self.head = HeadTracker(frame, head_box(self._init, np.shape(frame)))
-                self._sim = self.head.current
-            else:
-                sim = self.head.track(frame)
-                a, b = sim.relative_to(self._sim)
-                self.snakes.transform(a, b)
-                self._sim = sim
-        stack = self._potentials(frame)
-        pot = stack[0]
-        self.last_potential = pot  # for the overlay on the potential (the paper's Fig. 7b)
-        # contrast: the strongest edges of the frame (99th percentile of |P|)
-        contrast = float(np.percentile(-pot, 99))
-        if self._contrast0 is None:
-            self._contrast0 = contrast
-        low = contrast < LOW_CONTRAST * self._contrast0
-        res = self.snakes.relax(stack)
-        conts = res.split()
-        conts_cal = self._to_calibration(conts)
-        pts, ref = self._features(conts_cal)
+    def _escaped(self, res) -> list[str]:
+        """Sections of which more than :data:`ESCAPE_LIMIT` of the nodes lost their edge or
+        left the image."""
         sizes = np.diff(self.contours.offsets)
-        bad = [
+        return [
             s
             for s, e, n in zip(self.sections, res.escaped, sizes, strict=True)
             if e > ESCAPE_LIMIT * n
         ]
-        if self._p0 is None:
-            self._p0, self._ref0 = pts, ref
-            self._calibration_index = index
-            model_xy = self.estimator.positions(self.model.face.vertices)
-            rms_mm = np.sqrt(((model_xy - model_xy.mean(0)) ** 2).sum(1).mean())
-            rms_px = np.sqrt(((pts - pts.mean(0)) ** 2).sum(1).mean())
-            if rms_px < 5:
-                raise MyofaceValueError("the initial contours are too small (under 5 px)")
-            self.mm_per_px = rms_mm / rms_px
-            if self.curves is not None:
-                from myoface.analysis.landmarks import similarity_affine
 
-                # the model (image-like mm) onto the calibration frame (px)
-                mat, off = similarity_affine(model_xy * np.array([1.0, -1.0]), pts)
-                self.curves.calibrate(dict(zip(self.sections, conts_cal, strict=True)), mat, off)
-                self.mm_per_px = self.curves.mm_per_px
-                if self.synthesis_camera is not None:
-                    self._start_synthesis(frame, conts_cal)
-        if self.head_frame == "register":
-            shift = np.zeros(2)
-            head_t = np.asarray(self._sim.t, dtype=np.float64)
-        else:
-            shift = ref - self._ref0
-            head_t = shift
-        hs = (self._sim.s, self._sim.theta)
-        d_mm = (pts - self._p0 - shift) * self.mm_per_px * np.array([1.0, -1.0])
-        named = dict(zip(self.sections, conts, strict=True))
-        if low or bad:
-            return FrameMeasurement(
-                index,
-                time_s,
-                "low_contrast" if low else "escaped:" + "+".join(bad),
-                np.full(len(self.ids), np.nan),
-                head_t,
-                named,
-                res.iterations,
-                *hs,
-            )
-        if self.curves is None:
-            c = self.estimator.estimate(d_mm, refine=self.refine)
-            return FrameMeasurement(index, time_s, "ok", c, head_t, named, res.iterations, *hs)
-        c = self._fit_curves(conts_cal, shift)
-        if self.reseed and index != self._calibration_index:
-            # analysis by synthesis: put the contours where the model, at this estimate, says
-            # the skin went, let them settle on the frame's edges again and re-estimate. A
-            # contour that stopped on a nearer edge (the lower lip on the mouth's inner edge as
-            # the jaw drops) is moved past it.
-            if self.refine > 0:
-                pred = self.curves.predicted(self.model.skin_vertices(self.curves.state))
-            else:
-                pred = self.curves.p0 + self.curves.jac @ c
-            pred = pred + shift
-            if self.head_frame == "register":
-                pred = self._sim.apply(pred)
-            nodes = self.snakes.contours.nodes
-            off = self.contours.offsets
+    def _predicted_sections(self, c, shift) -> dict[str, np.ndarray]:
+        """Where the model puts each section's nodes on the current frame: the curve fit's
+        prediction for contractions ``c`` (sections it fits; the calibration contours for
+        the others, or for every section when ``c`` is None), moved by the current head
+        pose (the registered similarity, or ``shift``)."""
+        out = {}
+        if self.curves is not None and c is not None and np.isfinite(c).all():
+            pred = self.curves.predict(c)
+            sizes = dict(zip(self.sections, np.diff(self.contours.offsets), strict=True))
             k = 0
             for name in self.curves.names:
-                j = self.sections.index(name)
-                n = off[j + 1] - off[j]
-                nodes[off[j] : off[j + 1]] = pred[k : k + n]
-                k += n
-            res = self.snakes.relax(stack)
-            conts = res.split()
-            named = dict(zip(self.sections, conts, strict=True))
-            conts_cal = self._to_calibration(conts)
-            c = self._fit_curves(conts_cal, shift)
-        if self._synth is not None and index != self._calibration_index:
+                out[name] = pred[k : k + sizes[name]]
+                k += sizes[name]
+        for j, s in enumerate(self.sections):
+            if s not in out:
+                out[s] = self._cal_nodes[j]
+        for s, q in out.items():
+            q = q + shift
+            out[s] = self._sim.apply(q) if self.head_frame == "register" else q
+        return out
+
+    def _reset_sections(self, names, c, shift, rest: bool = True) -> None:
+        """Put the sections ``names`` where the model predicts them (see
+        :meth:`_predicted_sections`); ``rest``: their rest lengths too (a lost contour
+        re-initialised), else only their nodes (the second pass from the first estimate)."""
+        pred = self._predicted_sections(c, shift)
+        off = self.contours.offsets
+        for j, s in enumerate(self.sections):
+            if s not in names:
+                continue
+            if rest:
+                self.snakes.reset_contour(j, pred[s])
+            else:
+                self.snakes.contours.nodes[off[j] : off[j + 1]] = pred[s]
+
+    def _follow_head(self, frame: np.ndarray) -> str | None:
+        """Register the head on ``frame`` and carry the contours with it. When the
+        registration does not hold the face (:meth:`HeadTracker.lost`), the frame is searched
+        for it (:meth:`HeadTracker.search`, then MediaPipe's face mesh when installed); a face
+        found again after it was lost gets every contour re-initialised from the model's
+        prediction at the new head pose. Returns ``"face_lost"`` when no face holds."""
+        head = self.head
+        if not self._face_lost:
+            sim = head.track(frame)
+            if head.lost() is None:
+                a, b = sim.relative_to(self._sim)
+                self.snakes.transform(a, b)
+                self._sim = sim
+                return None
+        head.current = self._sim
+        sim = head.search(frame)
+        if sim is None:
+            sim = self._detect_head(frame)
+        if sim is None:
+            head.current = self._sim
+            self._face_lost = True
+            return "face_lost"
+        a, b = sim.relative_to(self._sim)
+        self.snakes.transform(a, b)
+        self._sim = sim
+        if self._face_lost:
+            self._face_lost = False
+            self._lost = set()
+            self._reset_sections(self.sections, self._c_last, np.zeros(2))
+        return None
+
+    def _detect_head(self, frame: np.ndarray):
+        """The head's similarity from MediaPipe's face mesh on ``frame`` (the model's rigid
+        vertices mapped to the detected points, composed with the model's map onto the
+        calibration frame), refined by the registration; None without MediaPipe, a face, or
+        a registration that holds it."""
+        if self._detector is False or self.model.face.n_vertices != 468:
+            return None
+        from myoface.analysis.landmarks import (
+            FaceMeshDetector,
+            rigid_vertices,
+            similarity_affine,
+        )
+        from myoface.errors import MyofaceDependencyError
+
+        if self._detector is None:
+            try:
+                self._detector = FaceMeshDetector(video=False)
+            except MyofaceDependencyError:
+                self._detector = False
+                return None
+        pts = self._detector.detect(frame)
+        if pts is None:
+            return None
+        rigid = rigid_vertices(self.model)
+        model_xy = self.model.face.vertices[rigid, :2] * np.array([1.0, -1.0])
+        m2, o2 = similarity_affine(model_xy, pts[rigid, :2])
+        m1, o1 = self._model_map
+        a = m2 @ np.linalg.inv(m1)
+        b = o2 - a @ o1
+        c = np.asarray(self.head.c)
+        t = a @ c + b - c
+        start = Similarity(
+            float(np.sqrt(abs(np.linalg.det(a)))),
+            float(np.arctan2(a[1, 0], a[0, 0])),
+            (float(t[0]), float(t[1])),
+            tuple(c),
+        )
+        sim = self.head.track(frame, start)
+        return sim if self.head.lost() is None else None
+
+    # ------------------------------------------------------------ measuring
+    def _unmeasured(self, index, time_s, why, contours=None, head=None) -> FrameMeasurement:
+        """A frame with empty contractions and the reason; ``head`` = (head shift (2,) px,
+        iterations, head scale, head rotation rad), unknown (NaN) by default."""
+        nan = np.full(len(self.ids), np.nan)
+        t, it, s, th = (np.full(2, np.nan), 0, np.nan, np.nan) if head is None else head
+        return FrameMeasurement(index, time_s, why, nan, t, contours or {}, it, s, th)
+
+    def _calibrate(self, frame: np.ndarray, index: int, time_s: float) -> FrameMeasurement:
+        """The first frame: the contours settle from their initial place, and what they are
+        there becomes the neutral reference."""
+        from myoface.analysis.landmarks import similarity_affine
+
+        self._frame_shape = frame.shape[:2]
+        if self.head_frame == "register":
+            self.head = HeadTracker(frame, head_box(self._init, np.shape(frame)))
+            self._sim = self.head.current
+        res, fld = self._relax(frame, None)
+        self._contrast0 = _contrast(fld)
+        conts = res.split()
+        pts, ref = self._features(conts)
+        self._p0, self._ref0 = pts, ref
+        self._calibration_index = index
+        self._cal_nodes = [q.copy() for q in conts]
+        model_xy = self.estimator.positions(self.model.face.vertices)
+        rms_mm = np.sqrt(((model_xy - model_xy.mean(0)) ** 2).sum(1).mean())
+        rms_px = np.sqrt(((pts - pts.mean(0)) ** 2).sum(1).mean())
+        if rms_px < 5:
+            raise MyofaceValueError("the initial contours are too small (under 5 px)")
+        self.mm_per_px = rms_mm / rms_px
+        # the model (image-like mm) onto the calibration frame (px)
+        self._model_map = similarity_affine(model_xy * np.array([1.0, -1.0]), pts)
+        named = dict(zip(self.sections, conts, strict=True))
+        if self.curves is not None:
+            self.curves.calibrate(named, *self._model_map)
+            self.mm_per_px = self.curves.mm_per_px
+            if self.synthesis_camera is not None:
+                self._start_synthesis(frame, conts)
+        head_t = np.asarray(self._sim.t, dtype=np.float64)
+        hs = (head_t, res.iterations, self._sim.s, self._sim.theta)
+        bad = self._escaped(res)
+        self._lost = set(bad)
+        if bad:
+            return self._unmeasured(index, time_s, "escaped:" + "+".join(bad), named, hs)
+        if self.curves is None:
+            c = self.estimator.estimate(np.zeros_like(pts), refine=self.refine)
+        else:
+            c = self._fit_curves(conts, np.zeros(2))
+        self._c_last = c
+        return FrameMeasurement(index, time_s, "ok", c, hs[0], named, *hs[1:])
+
+    def measure(self, frame: np.ndarray, index: int = 0, time_s: float = 0.0) -> FrameMeasurement:
+        """Track the contours into ``frame`` and estimate its contractions. The first frame
+        measured is the neutral calibration frame.
+
+        A frame that cannot be measured gets empty (NaN) contractions and says why in
+        ``quality``: ``face_lost`` (the head registration lost the face and no search found
+        it; the contours wait where they were), ``low_contrast``, ``escaped:<sections>``
+        (more than :data:`ESCAPE_LIMIT` of a contour's nodes off its edge or out of the
+        frame), ``misfit:<sections>`` (a contour farther than :data:`MISFIT_MM` from any
+        shape the model can take: e.g. on an occluding hand), ``head_turned`` (turned about
+        the vertical from the calibration frame's pose past
+        :data:`HEAD_TURN_FORESHORTENING`). Lost sections are
+        re-initialised from the model's prediction at the current head pose (the first
+        estimate's, or the last measured frame's); a face found again, from the calibration
+        contours mapped by its new pose."""
+        frame = np.asarray(frame)
+        if self._p0 is None:
+            return self._calibrate(frame, index, time_s)
+        if frame.shape[:2] != self._frame_shape:
+            raise MyofaceValueError(
+                f"frame {index} is {frame.shape[1]}x{frame.shape[0]} px; the calibration frame "
+                f"was {self._frame_shape[1]}x{self._frame_shape[0]}"
+            )
+        self._field = None
+        if self.head_frame == "register":
+            why = self._follow_head(frame)
+            if why is not None:
+                return self._unmeasured(index, time_s, why)
+        if self._lost:
+            self._reset_sections(self._lost, self._c_last, self._shift)
+        res, fld = self._relax(frame, None)
+        low = _contrast(fld) < LOW_CONTRAST * self._contrast0
+        bad = self._escaped(res)
+        conts_cal = self._to_calibration(res.split())
+        shift = self._head_shift(conts_cal)
+        if self.curves is not None and self.reseed and not low:
+            # analysis by synthesis: put the contours where the model, at a first estimate
+            # from the sections that held, says the skin went (lost sections too), let them
+            # settle on the frame's edges again and re-estimate. A contour that stopped on a
+            # nearer edge (the lower lip on the mouth's inner edge as the jaw drops) is moved
+            # past it.
+            held = {
+                s: q - shift for s, q in zip(self.sections, conts_cal, strict=True) if s not in bad
+            }
+            c1 = self.curves.estimate(held, refine=0) if held else self._c_last
+            if not np.isfinite(c1).all():
+                c1 = self._c_last
+            self._reset_sections(self.curves.names, c1, shift, rest=False)
+            self._reset_sections([s for s in bad if s not in self.curves.names], c1, shift)
+            res, fld = self._relax(frame, fld)
+            bad = self._escaped(res)
+            conts_cal = self._to_calibration(res.split())
+        elif bad and not low:
+            self._reset_sections(bad, self._c_last, shift)
+            res, fld = self._relax(frame, fld)
+            bad = self._escaped(res)
+            conts_cal = self._to_calibration(res.split())
+        self._shift = shift
+        named = dict(zip(self.sections, res.split(), strict=True))
+        head_t = (
+            np.asarray(self._sim.t, dtype=np.float64) if self.head_frame == "register" else shift
+        )
+        hs = (head_t, res.iterations, self._sim.s, self._sim.theta)
+        self._lost = set(bad)
+        if low:
+            return self._unmeasured(index, time_s, "low_contrast", named, hs)
+        if bad:
+            return self._unmeasured(index, time_s, "escaped:" + "+".join(bad), named, hs)
+        if self.curves is None:
+            pts, _ = self._features(conts_cal)
+            d_mm = (pts - self._p0 - shift) * self.mm_per_px * np.array([1.0, -1.0])
+            c = self.estimator.estimate(d_mm, refine=self.refine)
+        else:
+            cal = {s: q - shift for s, q in zip(self.sections, conts_cal, strict=True)}
+            c = self.curves.estimate(cal, refine=self.refine)
+            resid = self.curves.section_residuals(cal, c)
+            misfit = [s for s, r in resid.items() if r > MISFIT_MM]
+            self.last_residuals_mm = resid
+            if misfit:
+                self._lost = set(misfit)
+                return self._unmeasured(index, time_s, "misfit:" + "+".join(misfit), named, hs)
+        if self.head_frame == "register" and self.head.foreshortening < HEAD_TURN_FORESHORTENING:
+            return self._unmeasured(index, time_s, "head_turned", named, hs)
+        if self._synth is not None:
             c = self._by_synthesis(c, conts_cal, shift)
-        return FrameMeasurement(index, time_s, "ok", c, head_t, named, res.iterations, *hs)
+        self._c_last = c
+        return FrameMeasurement(index, time_s, "ok", c, hs[0], named, *hs[1:])
 
     # ------------------------------------------------------------ analysis by synthesis
     def _track_synthetic(self, skin: np.ndarray, start: list[np.ndarray]) -> dict:
         """The contours tracked on the model rendered at ``skin``, from the nodes ``start``
         (calibration coordinates), with the video tracker's rest lengths and parameters."""
-        pot = self._potentials(self._synth.render(skin))
         sn = self._synth_snakes
         sn.contours.nodes[:] = np.concatenate(start)
         sn.rest[:] = self.snakes.rest / (self._sim.s if self.head_frame == "register" else 1.0)
         sn.reference = self.snakes.reference
-        return dict(zip(self.sections, sn.relax(pot).split(), strict=True))
+        fld = self._field_for(self._synth.render(skin), sn.contours.nodes)
+        return dict(zip(self.sections, sn.relax(fld).split(), strict=True))
 
     def _start_synthesis(self, frame: np.ndarray, conts_cal: list[np.ndarray]) -> None:
         from myoface.analysis.synthesis import FrameSynthesizer
@@ -530,11 +767,23 @@ class Analyzer:
             skin = self.curves.relaxed_skin(c)
             synth = self._track_synthetic(skin, start)
             pred = self.curves.predicted(skin)
+            self.curves.relinearise(c, pred)
             c = self.curves.synthesis_step(c, pred, video, synth, self._synth_bias)
         return c
 
     def close(self) -> None:
-        """Nothing to release (the landmark tracker's detector has to be closed)."""
+        """Release the face detector, if a lost face was searched for with it."""
+        if self._detector:
+            self._detector.close()
+        self._detector = None
+
+
+def _contrast(fld: PotentialField) -> float:
+    """The strongest edges of a frame: the 99th percentile of -P (first layer) in the
+    window."""
+    v = -fld.potential[0].ravel()
+    k = int(0.99 * (len(v) - 1))
+    return float(np.partition(v, k)[k])
 
 
 def make_analyzer(
@@ -546,13 +795,15 @@ def make_analyzer(
     refine=None,
     sigma: float | None = None,
     estimator: str = "curves",
+    show_progress: bool | None = None,
 ):
     """The analyzer for ``video`` (a :class:`~myoface.analysis.video.Video`), how it was
     initialised (text) and the calibration frame's index.
 
     ``tracker="snakes"``: :class:`Analyzer` from ``init`` (contours on the calibration frame)
     or, when ``init`` is None, from MediaPipe's face mesh on the first frame with a face from
-    ``calibration_frame`` on. ``tracker="landmarks"``:
+    ``calibration_frame`` on (the whole video is searched if need be; ``show_progress``: with
+    a progress bar on stderr; default: when stderr is a terminal). ``tracker="landmarks"``:
     ``estimator`` ``"fit"`` (default): the 3-D fit of the whole model
     (:func:`~myoface.analysis.fit.make_fit_analyzer`: head pose and every muscle, calibrated on
     ``calibration_frame``, or when it is None on the most neutral frame of the first seconds,
@@ -592,9 +843,18 @@ def make_analyzer(
     if init is not None:
         how, start = "contours given", first
     else:
+        import sys
+
         from myoface.analysis.landmarks import auto_init
 
-        k, _, init, _ = auto_init(itertools.islice(video, first, None), model.face)
+        if show_progress is None:
+            show_progress = sys.stderr.isatty()
+        k, _, init, _ = auto_init(
+            itertools.islice(video, first, None),
+            model.face,
+            show_progress=show_progress,
+            total=None if video.n_frames is None else video.n_frames - first,
+        )
         start = first + k
         how = f"automatic: MediaPipe face mesh on frame {start}"
     w, h = video.size

@@ -9,12 +9,17 @@ meaning. Colour frames are reduced to intensity with the Rec. 601 luma weights
 
 from __future__ import annotations
 
+import types
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit, prange
 
 from myoface.errors import MyofaceValueError
 
 LUMA_601 = (0.299, 0.587, 0.114)
+#: images up to this many pixels are filtered on one thread (see _blur_separable_1)
+SERIAL_PIXELS = 200_000
 METHODS = ("gaussian", "paper", "line+edge", "line")
 
 
@@ -45,8 +50,7 @@ def to_intensity(image) -> np.ndarray:
     return a_f
 
 
-@njit(cache=True, parallel=True)
-def _blur_separable(img, kernel, out, tmp):
+def _blur_separable_py(img, kernel, out, tmp):
     """Separable correlation with ``kernel`` (odd length), edges replicated."""
     h, w = img.shape
     r = kernel.shape[0] // 2
@@ -76,14 +80,30 @@ def _blur_separable(img, kernel, out, tmp):
                 out[y, x] = s
 
 
-@njit(cache=True, parallel=True)
-def _neg_grad_mag_central(img, out):
+def _neg_grad_mag_central_py(img, out):
     h, w = img.shape
     for y in prange(h):
         for x in range(w):
             gx = 0.5 * (img[y, min(x + 1, w - 1)] - img[y, max(x - 1, 0)])
             gy = 0.5 * (img[min(y + 1, h - 1), x] - img[max(y - 1, 0), x])
             out[y, x] = -np.sqrt(gx * gx + gy * gy)
+
+
+def _two_builds(fn):
+    """``fn`` compiled twice: threads over its rows (``prange``) for whole frames, and on one
+    thread for the small windows around a face's contours, where the threads' start-up and,
+    on a busy machine, their waiting for each other cost more than the work (measured: 7x
+    on a 200 x 240 window). The one-thread build gets its own name, so that numba's on-disk
+    cache keeps the two apart."""
+    one = types.FunctionType(
+        fn.__code__, fn.__globals__, fn.__name__ + "_1", fn.__defaults__, fn.__closure__
+    )
+    one.__qualname__ = fn.__qualname__ + "_1"
+    return njit(cache=True, parallel=True)(fn), njit(cache=True)(one)
+
+
+_blur_separable, _blur_separable_1 = _two_builds(_blur_separable_py)
+_neg_grad_mag_central, _neg_grad_mag_central_1 = _two_builds(_neg_grad_mag_central_py)
 
 
 @njit(cache=True)
@@ -153,6 +173,195 @@ def image_potential(image, sigma: float = 2.0, method: str = "gaussian") -> np.n
     return out
 
 
+def _kernel_reach(sigma: float, methods) -> int:
+    """How far (px) the potentials ``methods`` at ``sigma`` look from a pixel (their widest
+    Gaussian's radius, plus the two central differences of the edge potential and of its
+    gradient)."""
+    widest = 4.0 * sigma if "line" in methods else sigma
+    return len(gaussian_kernel(float(widest))) // 2 + 2
+
+
+@dataclass
+class PotentialField:
+    """Potential layers over a window of an image, and their gradients: what the contours
+    move in (:meth:`~myoface.analysis.snakes.Snakes.relax`).
+
+    Attributes
+    ----------
+    potential : (L, h, w) float64 — layer ``l`` at window pixel ``[row, col]``.
+    gx, gy : (L, h, w) float64 — its central-difference gradient (one-sided at the window's
+        border).
+    origin : (x0, y0) int — the image pixel (column, row) of the window's ``[0, 0]``.
+    image_size : (W, H) — the whole image's size, pixels.
+    layer_boxes : per layer, None or the box (x0, y0, x1, y1), image pixels, outside which
+        that layer was not computed (see :func:`potential_field`).
+    """
+
+    potential: np.ndarray
+    gx: np.ndarray
+    gy: np.ndarray
+    origin: tuple = (0, 0)
+    image_size: tuple | None = None
+    layer_boxes: tuple | None = None
+
+    @classmethod
+    def from_potential(cls, potential, origin=(0, 0), image_size=None) -> PotentialField:
+        """The field of a potential (H, W) or stack (L, H, W), validated; by default the whole
+        image."""
+        pot = np.ascontiguousarray(potential, dtype=np.float64)
+        if pot.ndim == 2:
+            pot = pot[None]
+        if pot.ndim != 3 or min(pot.shape[1:]) < 3:
+            raise MyofaceValueError(
+                f"the potential must be a 2-D image (or a stack of them); got shape {pot.shape}"
+            )
+        if not np.isfinite(pot).all():
+            raise MyofaceValueError("the potential contains NaN or Inf")
+        gx = np.empty_like(pot)
+        gy = np.empty_like(pot)
+        gradient = potential_gradient if pot[0].size > SERIAL_PIXELS else _potential_gradient_1
+        for q in range(len(pot)):
+            gradient(pot[q], gx[q], gy[q])
+        size = (pot.shape[2], pot.shape[1]) if image_size is None else tuple(image_size)
+        return cls(pot, gx, gy, (int(origin[0]), int(origin[1])), size)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(h, w) of the window."""
+        return self.potential.shape[1:]
+
+    @property
+    def box(self) -> tuple[int, int, int, int]:
+        """(x0, y0, x1, y1): the window's first and last pixel, image coordinates."""
+        h, w = self.shape
+        return (self.origin[0], self.origin[1], self.origin[0] + w - 1, self.origin[1] + h - 1)
+
+    def covers(self, nodes: np.ndarray, margin_px: float = 0.0, layer: int | None = None) -> bool:
+        """Whether the (x, y) ``nodes`` lie inside the window (``layer``'s box, when it has
+        one), ``margin_px`` from its sides (sides on the image's border need no margin:
+        nothing lies beyond them)."""
+        x0, y0, x1, y1 = self.box
+        if layer is not None and self.layer_boxes and self.layer_boxes[layer] is not None:
+            x0, y0, x1, y1 = self.layer_boxes[layer]
+        wi, hi = self.image_size
+        lo = np.array([x0 + (margin_px if x0 > 0 else 0), y0 + (margin_px if y0 > 0 else 0)])
+        hi_ = np.array(
+            [x1 - (margin_px if x1 < wi - 1 else 0), y1 - (margin_px if y1 < hi - 1 else 0)]
+        )
+        return bool(((nodes >= lo) & (nodes <= hi_)).all())
+
+    def full_layer(self, layer: int = 0, fill: float = 0.0) -> np.ndarray:
+        """Layer ``layer`` as a whole image (H, W), ``fill`` outside the window."""
+        wi, hi = self.image_size
+        out = np.full((hi, wi), fill)
+        x0, y0, x1, y1 = self.box
+        out[y0 : y1 + 1, x0 : x1 + 1] = self.potential[layer]
+        return out
+
+
+def _clip_box(box, w: int, h: int):
+    """(x0, y0, x1, y1) integers inside a w x h image, or None when less than 3 px wide."""
+    x0, y0 = max(int(np.floor(box[0])), 0), max(int(np.floor(box[1])), 0)
+    x1, y1 = min(int(np.ceil(box[2])), w - 1), min(int(np.ceil(box[3])), h - 1)
+    return None if x1 - x0 < 2 or y1 - y0 < 2 else (x0, y0, x1, y1)
+
+
+def _box_potentials(a: np.ndarray, sigma: float, methods, box):
+    """The potentials ``methods`` of image ``a`` and their gradients on ``box`` (x0, y0, x1,
+    y1), each (L, y1 - y0 + 1, x1 - x0 + 1): filtered on the box grown by the blur's reach,
+    so that they equal the whole image's inside it."""
+    h, w = a.shape[:2]
+    x0, y0, x1, y1 = box
+    smooth = [m for m in methods if m != "paper"]
+    reach = max(_kernel_reach(float(sigma), methods) if smooth else 0, 4)  # "paper": 2 + 2
+    cx0, cy0 = max(x0 - reach, 0), max(y0 - reach, 0)
+    cx1, cy1 = min(x1 + reach, w - 1), min(y1 + reach, h - 1)
+    img = np.ascontiguousarray(to_intensity(a[cy0 : cy1 + 1, cx0 : cx1 + 1]))
+    tmp = np.empty_like(img)
+    threads = img.size > SERIAL_PIXELS
+    blur = _blur_separable if threads else _blur_separable_1
+    grad_mag = _neg_grad_mag_central if threads else _neg_grad_mag_central_1
+    gradient = potential_gradient if threads else _potential_gradient_1
+    blurred = None
+    layers = []
+    for m in methods:
+        out = np.empty_like(img)
+        if m == "paper":
+            _paper_potential(img, out, tmp)
+        else:
+            if blurred is None:
+                blurred = np.empty_like(img)
+                blur(img, gaussian_kernel(float(sigma)), blurred, tmp)
+            if m == "line":
+                wide = np.empty_like(img)
+                blur(img, gaussian_kernel(4.0 * float(sigma)), wide, tmp)
+                np.subtract(blurred, wide, out=out)
+            else:
+                grad_mag(blurred, out)
+                if m == "line+edge":
+                    out += blurred
+        layers.append(out)
+    pot = np.stack(layers)
+    gx = np.empty_like(pot)
+    gy = np.empty_like(pot)
+    for q in range(len(pot)):
+        gradient(pot[q], gx[q], gy[q])
+    sl = (slice(None), slice(y0 - cy0, y1 - cy0 + 1), slice(x0 - cx0, x1 - cx0 + 1))
+    return pot[sl], gx[sl], gy[sl]
+
+
+def potential_field(
+    image, sigma: float = 2.0, methods=("gaussian",), window=None, layer_windows=None
+) -> PotentialField:
+    """The potentials ``methods`` (one layer each, see :func:`image_potential`) of ``image``
+    (H, W[, 3]) over ``window`` = (x0, y0, x1, y1) pixels (inclusive; clipped to the image;
+    default: the whole image), with their gradients.
+
+    Only the window, grown by the blur's reach, is read and filtered, so the values inside
+    the window equal those of :func:`image_potential` on the whole image; a window around
+    the contours costs a fraction of the frame. The Gaussian blur is shared by the layers.
+
+    ``layer_windows``: one entry per method, None or a smaller window (x0, y0, x1, y1): that
+    layer is computed only there and is 0 elsewhere (with a 0 gradient), e.g. the "line"
+    layer, whose wide blur costs most, around the few contours that move in it. Its values
+    inside its window are again those of the whole image.
+    """
+    for m in methods:
+        if m not in METHODS:
+            raise MyofaceValueError(f"method must be one of {METHODS}; got {m!r}")
+    a = np.asarray(image)
+    if a.ndim < 2:
+        raise MyofaceValueError(f"an image must be (H, W) or (H, W, 3); got shape {a.shape}")
+    h, w = a.shape[:2]
+    box = (0, 0, w - 1, h - 1) if window is None else _clip_box(window, w, h)
+    if box is None:
+        raise MyofaceValueError(f"the window {tuple(window)} lies outside the {w}x{h} image")
+    if any(m != "paper" for m in methods) and not (np.isfinite(sigma) and sigma > 0):
+        raise MyofaceValueError(f"sigma must be > 0 pixels; got {sigma}")
+    sub = [None] * len(methods) if layer_windows is None else list(layer_windows)
+    if len(sub) != len(methods):
+        raise MyofaceValueError("layer_windows must have one entry (or None) per method")
+    x0, y0, x1, y1 = box
+    whole = [j for j, lw in enumerate(sub) if lw is None]
+    shape = (len(methods), y1 - y0 + 1, x1 - x0 + 1)
+    pot, gx, gy = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+    if whole:
+        p, u, v = _box_potentials(a, sigma, [methods[j] for j in whole], box)
+        pot[whole], gx[whole], gy[whole] = p, u, v
+    boxes = [None] * len(methods)
+    for j, lw in enumerate(sub):
+        if lw is None:
+            continue
+        b = _clip_box((max(lw[0], x0), max(lw[1], y0), min(lw[2], x1), min(lw[3], y1)), w, h)
+        boxes[j] = b if b is not None else (x0, y0, x0, y0)
+        if b is None:
+            continue
+        p, u, v = _box_potentials(a, sigma, [methods[j]], b)
+        sl = (slice(b[1] - y0, b[3] - y0 + 1), slice(b[0] - x0, b[2] - x0 + 1))
+        pot[j][sl], gx[j][sl], gy[j][sl] = p[0], u[0], v[0]
+    return PotentialField(pot, gx, gy, (x0, y0), (w, h), tuple(boxes))
+
+
 def image_potential_numpy(image, sigma: float = 2.0) -> np.ndarray:
     """Reference for the ``"gaussian"`` potential with scipy.ndimage (for tests)."""
     from scipy.ndimage import correlate1d
@@ -164,8 +373,7 @@ def image_potential_numpy(image, sigma: float = 2.0) -> np.ndarray:
     return -np.hypot(gx, gy)
 
 
-@njit(cache=True, parallel=True)
-def potential_gradient(pot, gx, gy):
+def _potential_gradient_py(pot, gx, gy):
     """Central-difference gradient of the potential (one-sided at the borders)."""
     h, w = pot.shape
     for y in prange(h):
@@ -174,6 +382,9 @@ def potential_gradient(pot, gx, gy):
             y0, y1 = max(y - 1, 0), min(y + 1, h - 1)
             gx[y, x] = (pot[y, x1] - pot[y, x0]) / max(x1 - x0, 1)
             gy[y, x] = (pot[y1, x] - pot[y0, x]) / max(y1 - y0, 1)
+
+
+potential_gradient, _potential_gradient_1 = _two_builds(_potential_gradient_py)
 
 
 @njit(cache=True, inline="always")

@@ -22,10 +22,17 @@ step costs one forward and one backward substitution.
 Time: ``dt`` is one iteration with gamma = 1, so gamma/dt = ``gamma_over_dt`` and eq. (8)
 advances rest lengths by ``nu e / gamma_over_dt`` per iteration.
 
-Equilibrium: the contours are at rest when no node moved more than ``tol_px`` over the last
-``WINDOW`` (10) iterations; :func:`relax_contours` stops there (``converged=True``) or after
-``max_iter``. (A per-iteration test would stop a contour that creeps slowly towards a distant
-edge.)
+Equilibrium: the contours are at rest when no node moved more than ``tol_px`` across its
+contour (along the contour's normal) over the last ``WINDOW`` (10) iterations; the relaxation
+stops there (``converged=True``) or after ``max_iter``. (A per-iteration test would stop a
+contour that creeps slowly towards a distant edge. Motion along the contour is left out: nodes
+slide along the edge they sit on for many iterations after the contour has found it, and where
+they sit along it changes neither the contour's shape nor what is read off it.)
+
+Nodes that leave the image (or the window of it the potential was computed on, see
+:class:`~myoface.analysis.potentials.PotentialField`) are held on its border and reported lost
+(:attr:`SnakeResult.lost`), so that a tracker can re-initialise their contour; only
+:func:`relax_contours`, which starts from contours a user gave, refuses nodes outside.
 
 Parameter defaults are the paper's (Section V-E): gamma/dt = 0.5, a = 1.0, b = 0.5, nu = 0.2,
 p = 0.001, nodes about 1 pixel apart.
@@ -40,10 +47,10 @@ import numpy as np
 from numba import njit
 
 from myoface.analysis.potentials import (
+    PotentialField,
     bilinear,
     bilinear2,
     image_potential,
-    potential_gradient,
 )
 from myoface.errors import MyofaceValueError
 
@@ -61,7 +68,7 @@ class SnakeParams:
     gamma_over_dt: float = 0.5  # T&W 1993 §V-E: damping / time step
     p: float = 0.001  # T&W 1993 §V-E: image force strength (8-bit grey levels)
     max_iter: int = 300
-    tol_px: float = 0.1  # equilibrium: largest node move over WINDOW iterations, pixels
+    tol_px: float = 0.1  # equilibrium: largest node move across its contour over WINDOW its, px
     escape_ratio: float = 0.25  # a node has escaped when |P| < this x the contour's reference
 
     def __post_init__(self):
@@ -257,6 +264,18 @@ class SnakeSystem:
         self.contours = contours
         si, sj, a_s, nu_s, rows, b_r = _topology(contours, self.params)
         self.si, self.sj, self.a_s, self.nu_s = si, sj, a_s, nu_s
+        # each node's neighbours along its contour (an open end: itself), for its normal
+        prv, nxt = [], []
+        for k in range(contours.n_contours):
+            idx = np.arange(contours.offsets[k], contours.offsets[k + 1])
+            if contours.closed[k]:
+                prv.append(np.roll(idx, 1))
+                nxt.append(np.roll(idx, -1))
+            else:
+                prv.append(np.concatenate([idx[:1], idx[:-1]]))
+                nxt.append(np.concatenate([idx[1:], idx[-1:]]))
+        self.prev = np.concatenate(prv).astype(np.int64)
+        self.next = np.concatenate(nxt).astype(np.int64)
         perm = []
         for k in range(contours.n_contours):
             o0, o1 = contours.offsets[k], contours.offsets[k + 1]
@@ -300,11 +319,32 @@ class SnakeSystem:
 
 #: iterations over which the equilibrium test measures the motion
 WINDOW = 10
+#: a node this close to the image's (or the potential window's) border is on it: lost (nodes held
+#: there by the clamped interpolation creep a little way in and out)
+BORDER_PX = 0.5
 
 
 @njit(cache=True)
 def _iterate(
-    x, rest, si, sj, a_s, nu_s, layer, gx, gy, p, user, g_dt, max_iter, tol, perm, band, bw
+    x,
+    rest,
+    si,
+    sj,
+    a_s,
+    nu_s,
+    layer,
+    gx,
+    gy,
+    p,
+    user,
+    g_dt,
+    max_iter,
+    tol,
+    perm,
+    band,
+    bw,
+    prv,
+    nxt,
 ):
     n = x.shape[0]
     f = np.empty((n, 2))
@@ -342,7 +382,16 @@ def _iterate(
         if (it + 1) % WINDOW == 0:
             moved = 0.0
             for i in range(n):
-                d = max(abs(x[i, 0] - ref[i, 0]), abs(x[i, 1] - ref[i, 1]))
+                # the move across the contour: along the normal of its neighbours' chord
+                tx = x[nxt[i], 0] - x[prv[i], 0]
+                ty = x[nxt[i], 1] - x[prv[i], 1]
+                tl = np.sqrt(tx * tx + ty * ty)
+                dx = x[i, 0] - ref[i, 0]
+                dy = x[i, 1] - ref[i, 1]
+                if tl > 1e-9:
+                    d = abs(dx * ty - dy * tx) / tl
+                else:
+                    d = max(abs(dx), abs(dy))
                 if not d <= moved:  # also catches NaN
                     moved = d
                 ref[i, 0] = x[i, 0]
@@ -368,11 +417,12 @@ class SnakeResult:
     ----------
     contours : Contours — with the equilibrium nodes.
     rest_lengths : (S,) — the springs' rest lengths after the relaxation (eq. 8).
-    converged : bool; iterations : int; residual_px : float — the largest node move over the
-        last WINDOW iterations.
+    converged : bool; iterations : int; residual_px : float — the largest node move across
+        its contour over the last WINDOW iterations.
     mean_potential : (K,) — mean P under each contour (more negative: on stronger edges).
     escaped : (K,) int — nodes per contour whose |P| fell below ``escape_ratio`` x the
-        contour's reference level, or that left the image.
+        contour's reference level, or that left the image (or the potential's window).
+    lost : (N,) bool — those nodes.
     """
 
     contours: Contours
@@ -383,6 +433,7 @@ class SnakeResult:
     mean_potential: np.ndarray
     escaped: np.ndarray
     node_potential: np.ndarray = field(repr=False, default=None)
+    lost: np.ndarray = field(repr=False, default=None)
 
     @property
     def nodes(self) -> np.ndarray:
@@ -438,24 +489,51 @@ class Snakes:
         x[:] = x @ a.T + b
         self.rest *= np.sqrt(abs(np.linalg.det(a)))
 
-    def relax(self, potential: np.ndarray, user_forces: np.ndarray | None = None) -> SnakeResult:
-        """Let the contours settle in ``potential`` (H, W), or (L, H, W) with the layers
-        given at construction, from where they are now."""
-        pot = np.ascontiguousarray(potential, dtype=np.float64)
-        if pot.ndim == 2:
-            pot = pot[None]
-        if pot.ndim != 3 or min(pot.shape[1:]) < 3:
-            raise MyofaceValueError(
-                f"the potential must be a 2-D image (or a stack of them); got shape {pot.shape}"
-            )
+    def reset_contour(self, k: int, nodes: np.ndarray) -> None:
+        """Put contour ``k`` at ``nodes`` ((K_k, 2) pixels, its node count) with their spacings
+        as rest lengths: a lost contour re-initialised (e.g. from a model's prediction)."""
+        c = self.contours
+        o0, o1 = c.offsets[k], c.offsets[k + 1]
+        q = np.asarray(nodes, dtype=np.float64)
+        if q.shape != (o1 - o0, 2) or not np.isfinite(q).all():
+            raise MyofaceValueError(f"contour {k} needs {o1 - o0} finite (x, y) nodes")
+        c.nodes[o0:o1] = q
+        s = self.system
+        m = (s.si >= o0) & (s.si < o1)
+        self.rest[m] = np.linalg.norm(c.nodes[s.sj[m]] - c.nodes[s.si[m]], axis=1)
+
+    def relax(
+        self,
+        potential,
+        user_forces: np.ndarray | None = None,
+        *,
+        outside: str = "clip",
+    ) -> SnakeResult:
+        """Let the contours settle in ``potential`` from where they are now: a
+        :class:`~myoface.analysis.potentials.PotentialField` (a window of an image, its
+        gradients computed once for several relaxations), or an array (H, W), or (L, H, W)
+        with the layers given at construction, over the whole image.
+
+        ``outside``: what to do with nodes outside the image (or the field's window) at the
+        start: ``"clip"`` (default; a tracker's contours may leave the frame with the face)
+        moves them onto its border, where they count as lost; ``"raise"`` refuses them.
+        """
+        if outside not in ("clip", "raise"):
+            raise MyofaceValueError(f"outside must be 'clip' or 'raise'; got {outside!r}")
+        fld = (
+            potential
+            if isinstance(potential, PotentialField)
+            else PotentialField.from_potential(potential)
+        )
+        pot = fld.potential
         if self.layers.max() >= len(pot):
             raise MyofaceValueError(
                 f"the contours use potential layer {self.layers.max()}; got {len(pot)} layer(s)"
             )
-        if not np.isfinite(pot).all():
-            raise MyofaceValueError("the potential contains NaN or Inf")
         c = self.contours
-        _check_inside(c.nodes, pot.shape[1:], c.names, c.offsets)
+        wi, hi = fld.image_size
+        if outside == "raise":
+            _check_inside(c.nodes, (hi, wi), c.names, c.offsets)
         n = len(c.nodes)
         if user_forces is None:
             user = np.zeros((n, 2))
@@ -463,12 +541,13 @@ class Snakes:
             user = np.asarray(user_forces, dtype=np.float64)
             if user.shape != (n, 2) or not np.isfinite(user).all():
                 raise MyofaceValueError(f"user_forces must be a finite ({n}, 2) array")
-        gx = np.empty_like(pot)
-        gy = np.empty_like(pot)
-        for q in range(len(pot)):
-            potential_gradient(pot[q], gx[q], gy[q])
         s, p = self.system, self.params
+        h, w = pot.shape[1:]
+        ox, oy = fld.origin
         x = c.nodes
+        x -= (ox, oy)  # window coordinates
+        np.clip(x[:, 0], 0, w - 1, out=x[:, 0])
+        np.clip(x[:, 1], 0, h - 1, out=x[:, 1])
         it, moved = _iterate(
             x,
             self.rest,
@@ -477,8 +556,8 @@ class Snakes:
             s.a_s,
             s.nu_s,
             self.node_layer,
-            gx,
-            gy,
+            fld.gx,
+            fld.gy,
             float(p.p),
             user,
             float(p.gamma_over_dt),
@@ -487,26 +566,28 @@ class Snakes:
             s.perm,
             s.band,
             s.bw,
+            s.prev,
+            s.next,
         )
         if not np.isfinite(moved):
+            x += (ox, oy)
             raise MyofaceValueError(
                 "the contours diverged (NaN); reduce p or increase gamma_over_dt"
             )
-        h, w = pot.shape[1:]
         np.clip(x[:, 0], 0, w - 1, out=x[:, 0])
         np.clip(x[:, 1], 0, h - 1, out=x[:, 1])
         vals = np.empty(n)
         _sample(pot, self.node_layer, x, vals)
+        e = BORDER_PX
+        border = (x[:, 0] <= e) | (x[:, 0] >= w - 1 - e) | (x[:, 1] <= e) | (x[:, 1] >= h - 1 - e)
+        x += (ox, oy)  # back to image coordinates
         k = c.n_contours
         mean = np.array([vals[c.offsets[j] : c.offsets[j + 1]].mean() for j in range(k)])
         if self.reference is None:
             self.reference = np.abs(mean)
-        edge = np.concatenate(
-            [np.full(c.offsets[j + 1] - c.offsets[j], self.reference[j]) for j in range(k)]
-        )
-        border = (x[:, 0] <= 0) | (x[:, 0] >= w - 1) | (x[:, 1] <= 0) | (x[:, 1] >= h - 1)
+        edge = np.repeat(self.reference, np.diff(c.offsets))
         lost = (np.abs(vals) < p.escape_ratio * edge) | border
-        escaped = np.array([int(lost[c.offsets[j] : c.offsets[j + 1]].sum()) for j in range(k)])
+        escaped = np.add.reduceat(lost.astype(np.int64), c.offsets[:-1])
         return SnakeResult(
             c.with_nodes(x),
             self.rest.copy(),
@@ -516,6 +597,7 @@ class Snakes:
             mean,
             escaped,
             vals,
+            lost,
         )
 
 
@@ -526,8 +608,8 @@ def relax_contours(
     user_forces: np.ndarray | None = None,
 ) -> SnakeResult:
     """Relax ``contours`` in ``potential`` (H, W) to equilibrium (one-shot; see :class:`Snakes`
-    to keep the viscoelastic state across frames)."""
-    return Snakes(contours, params).relax(potential, user_forces)
+    to keep the viscoelastic state across frames). Nodes outside the image are refused."""
+    return Snakes(contours, params).relax(potential, user_forces, outside="raise")
 
 
 @dataclass
