@@ -482,7 +482,7 @@ def run_batch(
     tracker: str = "snakes",
     init=None,
     max_frames: int | None = None,
-    estimator: str = "curves",
+    estimator: str | None = None,
     face: str | os.PathLike | None = None,
     muscles: str | os.PathLike | None = None,
     show_progress: bool = False,
@@ -518,8 +518,16 @@ def run_batch(
         raise MyofaceValueError(f"engine must be one of {ENGINES}; got {engine!r}")
     if tracker not in ("snakes", "landmarks"):
         raise MyofaceValueError(f"tracker must be 'snakes' or 'landmarks'; got {tracker!r}")
-    if estimator not in ESTIMATORS:
-        raise MyofaceValueError(f"estimator must be one of {ESTIMATORS}; got {estimator!r}")
+    if tracker == "snakes":
+        allowed = ESTIMATORS
+    else:  # the landmarks' own, or the snakes' names for their counterparts
+        from myoface.analysis.fit import LANDMARK_ESTIMATORS
+
+        allowed = (*LANDMARK_ESTIMATORS, *ESTIMATORS)
+    if estimator is not None and estimator not in allowed:
+        raise MyofaceValueError(
+            f"the {tracker} tracker's estimator must be one of {allowed}; got {estimator!r}"
+        )
     if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
         raise MyofaceValueError(f"max_frames must be an integer >= 1; got {max_frames!r}")
     if workers is None:

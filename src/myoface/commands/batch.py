@@ -74,9 +74,10 @@ def add_arguments(p):
     )
     p.add_argument(
         "--estimator",
-        choices=("curves", "fiducials"),
-        default="curves",
-        help="(snakes) how contractions are read off the contours (see myoface analyze)",
+        choices=("curves", "fiducials", "fit", "paper"),
+        default=None,
+        help="how contractions are estimated, as in myoface analyze (snakes: curves, the "
+        "default, or fiducials; landmarks: fit, the default, or paper)",
     )
     p.add_argument("--max-frames", type=int, metavar="N", help="analyse at most N frames a video")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
