@@ -7,8 +7,9 @@ Three solvers behind one API (:func:`relax`):
   lattice is at rest;
 * ``"newton"`` (default; ``"implicit"`` is an alias) — quasi-static: the equilibrium is the
   minimum of the lattice's potential energy over the free nodes, found by inexact Newton on the
-  exact Hessian with CG preconditioned by a factorisation of the rest stiffness kept per model,
-  from the linear response to the move of the kinematic nodes (:mod:`myoface.tissue.solver`);
+  exact Hessian with CG preconditioned by a symmetric block Gauss-Seidel sweep of that Hessian,
+  from the linear response to the move of the kinematic nodes (a factorisation of the rest
+  stiffness kept per model) (:mod:`myoface.tissue.solver`);
 * ``"lbfgs"`` — the same minimum by L-BFGS with the sparse LU of a rest stiffness matrix as its
   initial inverse Hessian and a backtracking line search: slower, kept as the reference the
   Newton solver is tested and benchmarked against.
