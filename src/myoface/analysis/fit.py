@@ -87,8 +87,10 @@ class FitSettings:
     landmark_sigma_mm : MediaPipe's scatter of a point about its vertex in the image plane, mm
         on the face (measured on faces rendered by myoface: median 1.2 mm frontal, ~2 mm at
         30 degrees of yaw).
-    depth_sigma_mm : the same for MediaPipe's relative depth z (measured: 1.3-2.2 mm about a
-        linear fit to the true depth; larger, because monocular).
+    depth_sigma_mm : the same for MediaPipe's relative depth z: about a linear fit to the true
+        depth it scatters by 1.3-2.2 mm, but it follows a turning head less than x and y do
+        (on the closed loop, weighing it like x, y / 3 made the skin error 1.5 mm, like
+        x, y / 10 1.1 mm), so it only keeps the depth of the pose from being ill-posed.
     oval_weight : weight of the face oval's points (the mesh's outer rim), which MediaPipe
         puts on the face's silhouette, not on fixed skin, as the head turns.
     rate_per_s : temporal prior: a contraction changes by about this much per second (1 sd);
@@ -101,10 +103,12 @@ class FitSettings:
     huber : a landmark residual beyond this many sigmas weighs less (Huber).
     iterations : Gauss-Newton steps per frame (fewer when converged).
     refine : relaxes of the tissue per frame at the estimate (0: the linear response only).
+    synthesis_rounds : rounds of analysis by synthesis per frame (and at calibration) when the
+        fit is given a :class:`LandmarkSynthesis`.
     """
 
     landmark_sigma_mm: float = 1.0
-    depth_sigma_mm: float = 3.0
+    depth_sigma_mm: float = 10.0
     oval_weight: float = 0.2
     rate_per_s: float = 4.0
     rotation_rate_deg_per_s: float = 180.0
@@ -114,6 +118,8 @@ class FitSettings:
     huber: float = 3.0
     iterations: int = 8
     refine: int = 1
+    #: with a :class:`LandmarkSynthesis`: rounds of analysis by synthesis per frame
+    synthesis_rounds: int = 2
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
     identity_edge_sigma_mm: float = 1.0
@@ -407,16 +413,30 @@ class ModelFit:
         c = np.asarray(contractions, dtype=np.float64)
         return self.neutral + self.identity_mm + self._d0 + self.response @ (c - self._c0)
 
-    def fit(self, points) -> FrameFit:
+    def fit(self, points, synthesis: LandmarkSynthesis | None = None) -> FrameFit:
         """Fit one frame's landmarks (468, 3): x, y pixels (column, row), z MediaPipe's relative
         depth (pixels; NaN or a (468, 2) array: not used). Warm-started from the previous
-        frame; the result becomes the next frame's prior."""
+        frame; the result becomes the next frame's prior.
+
+        ``synthesis``: analysis by synthesis (:class:`LandmarkSynthesis`):
+        :attr:`FitSettings.synthesis_rounds` times, the model is rendered at the estimate, the
+        tracker run on the render, and its error there (what it reports less where the model's
+        vertices are) taken off the landmarks before they are fitted again."""
         p = _check_points(points, len(self.neutral))
-        res = self._fit(p, self._prev, refine=self.settings.refine)
+        prev = self._prev
+        res = self._fit(p, prev, refine=self.settings.refine)
+        if synthesis is not None:
+            for _ in range(self.settings.synthesis_rounds):
+                err = synthesis.tracker_error(self.shape(res.contractions), res.pose)
+                if err is None:
+                    break
+                res = self._fit(p - err, prev, refine=0, start=res)
         self._prev = res
         return res
 
-    def calibrate(self, frames, index: int | None = None) -> Calibration:
+    def calibrate(
+        self, frames, index: int | None = None, synthesis: LandmarkSynthesis | None = None
+    ) -> Calibration:
         """Measure the person's own neutral.
 
         ``frames``: a sequence of landmark arrays (468, 3), or None where no face was found
@@ -467,6 +487,15 @@ class ModelFit:
             use += [int(k) for k in near[: CALIBRATION_FRAMES - 1]]
         pts = [_check_points(frames[k], len(self.neutral)) for k in use]
         identity, poses, resid = self._fit_identity(pts)
+        if synthesis is not None:
+            # the tracker's own error on the neutral, rendered, is not the person's shape
+            for _ in range(self.settings.synthesis_rounds):
+                errs = [synthesis.tracker_error(self.neutral + identity, q) for q in poses]
+                if any(e is None for e in errs):
+                    break
+                identity, poses, resid = self._fit_identity(
+                    [p - e for p, e in zip(pts, errs, strict=True)]
+                )
         pose = poses[0]
         self.identity_mm = identity
         self._prev = None
@@ -538,16 +567,18 @@ class ModelFit:
             rows.append(jz * sw[:, None])
         return np.vstack(rows)
 
-    def _fit(self, p, prev: FrameFit | None, refine: int) -> FrameFit:
-        """The bounded Gauss-Newton fit of one frame (see the module's docstring)."""
+    def _fit(self, p, prev: FrameFit | None, refine: int, start: FrameFit | None = None):
+        """The bounded Gauss-Newton fit of one frame (see the module's docstring), with the
+        temporal prior to ``prev``, started from ``start`` (default: ``prev``)."""
         m = self.n_muscles
         base = self.neutral + self.identity_mm
-        if prev is None:
+        start = prev if start is None else start
+        if start is None:
             pose = initial_pose(base, p, self.camera)
             c = np.zeros(m)
             c0, d0 = np.zeros(m), np.zeros_like(base)
         else:
-            pose, c = prev.pose, prev.contractions.copy()
+            pose, c = start.pose, start.contractions.copy()
             c0, d0 = self._c0, self._d0
         jac = self.response.copy()
         total_it, conv = 0, False
@@ -790,11 +821,83 @@ def rotmat(v: np.ndarray) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
 
 
+# ------------------------------------------------------------------ analysis by synthesis
+
+
+class LandmarkSynthesis:
+    """The tracker's own error, measured on the model: the person's face rendered at the fit's
+    estimate (head pose and skin) by the fit's camera, and MediaPipe run on the render; what it
+    reports there less where the model's vertices are is its error at that configuration
+    (MediaPipe under-reads expressions and turns of the head), taken off the real frame's
+    landmarks (:meth:`ModelFit.fit`). At the truth the correction is exact up to how well the
+    render looks like the frame; the fit then converges to where the tracker sees the model as
+    it sees the video.
+
+    Parameters
+    ----------
+    face : FaceMesh with the person's texture (e.g. ``face from-photo``'s, or
+        :meth:`from_frame`), in the default topology.
+    camera : PinholeCamera of the frames, principal point at the image's centre.
+    size : (width, height) of the frames, pixels.
+    detector : as for :class:`FitAnalyzer` (default: MediaPipe's face mesh, video mode: the
+        synthetic frames are tracked like the real ones).
+    """
+
+    def __init__(self, face, camera: PinholeCamera, size, detector=None):
+        from myoface.render import Camera, Renderer
+
+        w, h = (int(v) for v in size)
+        if abs(camera.cx - 0.5 * w) > 1 or abs(camera.cy - 0.5 * h) > 1:
+            raise MyofaceValueError("synthesis needs the principal point at the image's centre")
+        fov = float(np.degrees(2 * np.arctan(0.5 * h / camera.focal_px)))
+        cam = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), width=w, height=h, fov_deg=fov)
+        self.camera = camera
+        self.renderer = Renderer(face, cam)
+        if detector is None:
+            from myoface.analysis.landmarks import FaceMeshDetector
+
+            detector = FaceMeshDetector(video=True)
+        self.detector = detector
+
+    @classmethod
+    def from_frame(cls, face, camera: PinholeCamera, frame, shape, pose: HeadPose, **kw):
+        """With ``frame`` (H, W, 3) as the texture: each vertex of ``shape`` (V, 3) mm, head
+        frame, where ``pose`` puts it in the frame (for a face without a texture of the
+        person, e.g. the default face: the calibration frame, shading and all)."""
+        from myoface.face import FaceMesh
+
+        img = np.asarray(frame)
+        h, w = img.shape[:2]
+        uv = camera.project(pose.apply(shape))
+        uv = np.column_stack([uv[:, 0] / w, 1.0 - uv[:, 1] / h])
+        textured = FaceMesh(face.vertices, face.triangles, uv, img, face.landmarks, name=face.name)
+        return cls(textured, camera, (w, h), **kw)
+
+    def tracker_error(self, skin: np.ndarray, pose: HeadPose) -> np.ndarray | None:
+        """(V, 3): the tracker's points on the model rendered with ``skin`` (V, 3) mm, head
+        frame, at ``pose``, less the model's own (x, y pixels; z relative depth, pixels, up to
+        a constant); None when the tracker finds no face in the render."""
+        img = self.renderer.render(skin, pose=(pose.rotation, pose.translation_mm))
+        q = self.detector.detect(img)
+        if q is None:
+            return None
+        pc = pose.apply(skin)
+        uv = self.camera.project(pc)
+        z = -pc[:, 2] * self.camera.focal_px / max(-pose.translation_mm[2], 1.0)
+        err = np.column_stack([q[:, :2] - uv, q[:, 2] - z])
+        err[:, 2] -= err[:, 2].mean()
+        return err
+
+    def close(self) -> None:
+        self.detector.close()
+
+
 # ------------------------------------------------------------------ the landmark tracker's analyzer
 
-#: how the landmark tracker's contractions are estimated: the 3-D fit (default) or the paper's
-#: 2-D head frame and 12 muscles (:class:`~myoface.analysis.landmarks.LandmarkAnalyzer`)
-LANDMARK_ESTIMATORS = ("fit", "paper")
+#: how the landmark tracker's contractions are estimated: the 3-D fit (default), the 3-D fit
+#: with analysis by synthesis (:class:`LandmarkSynthesis`), or the paper's 2-D head frame and
+#: 12 muscles (:class:`~myoface.analysis.landmarks.LandmarkAnalyzer`)
+LANDMARK_ESTIMATORS = ("fit", "fit-synthesis", "paper")
 #: a frame whose landmarks stay farther than this (mm RMS) from the fitted model is not
 #: measured (``quality="misfit"``): MediaPipe lost the face, or the face is not the model's
 MISFIT_RMS_MM = 6.0
@@ -849,13 +952,17 @@ class FitAnalyzer:
     settings : FitSettings.
     detector : an object with ``detect(frame) -> (468, 3) | None`` and ``close()`` (default:
         MediaPipe's face mesh in video mode).
+    synthesis : analysis by synthesis (:class:`LandmarkSynthesis`, made at calibration): the
+        face model's own texture if it has one (e.g. ``face from-photo``), else the
+        calibration frame.
     """
 
     tracker = "landmarks"
     method = "fit"
 
     def __init__(self, model, fps: float = 30.0, camera: PinholeCamera | None = None,
-                 settings: FitSettings | None = None, detector=None):  # fmt: skip
+                 settings: FitSettings | None = None, detector=None,
+                 synthesis: bool = False):  # fmt: skip
         from myoface.analysis.pipeline import SECTIONS, section_vertices
 
         if model.face.n_vertices != 468:
@@ -878,6 +985,8 @@ class FitAnalyzer:
         self.detector = detector
         self.calibration: Calibration | None = None
         self.calibration_frame: int | None = None
+        self.use_synthesis = bool(synthesis)
+        self.synthesis: LandmarkSynthesis | None = None
 
     @property
     def mm_per_px(self) -> float | None:
@@ -902,9 +1011,10 @@ class FitAnalyzer:
         analysis' tracking starts fresh. Returns the calibration frame's index in the video."""
         from myoface.analysis.landmarks import FaceMeshDetector
 
-        points = []
+        points, images = [], []
         with FaceMeshDetector(video=True) as det:
             for frame in frames:
+                images.append(frame)
                 if frame is None:  # (a frame known to have no face)
                     points.append(None)
                     continue
@@ -923,6 +1033,20 @@ class FitAnalyzer:
             if points[idx] is None:
                 raise MyofaceValueError(f"no face found on calibration frame {calibration_frame}")
         self.calibration = self.fit.calibrate(points, idx)
+        if self.use_synthesis:
+            cal = self.calibration
+            fit = self.fit
+            frame = images[cal.index]
+            size = (np.shape(frame)[1], np.shape(frame)[0])
+            if self.model.face.texture is not None:
+                self.synthesis = LandmarkSynthesis(self.model.face, fit.camera, size)
+            else:
+                shape = fit.neutral + fit.identity_mm
+                self.synthesis = LandmarkSynthesis.from_frame(
+                    self.model.face, fit.camera, frame, shape, cal.pose
+                )
+            self.calibration = fit.calibrate(points, cal.index, synthesis=self.synthesis)
+            self.calibration.scores = cal.scores
         self.calibration_frame = first_index + self.calibration.index
         return self.calibration_frame
 
@@ -934,7 +1058,7 @@ class FitAnalyzer:
             fit.lose_track()
             return FitMeasurement(index, time_s, "no_face", nan, None, float("nan"))
         try:
-            r = fit.fit(pts)
+            r = fit.fit(pts, self.synthesis)
         except (np.linalg.LinAlgError, MyofaceValueError):
             fit.lose_track()
             return FitMeasurement(index, time_s, "fit_failed", nan, None, float("nan"))
@@ -953,7 +1077,10 @@ class FitAnalyzer:
         """For analysis.json: the estimator, the calibration, the camera and the weights."""
         from dataclasses import asdict
 
-        out = {"estimator": "fit", "fit_settings": asdict(self.settings)}
+        out = {
+            "estimator": "fit-synthesis" if self.use_synthesis else "fit",
+            "fit_settings": asdict(self.settings),
+        }
         if self.fit is not None:
             cam = self.fit.camera
             out["camera"] = {"focal_px": cam.focal_px, "cx": cam.cx, "cy": cam.cy}
@@ -975,17 +1102,20 @@ class FitAnalyzer:
 
     def close(self) -> None:
         self.detector.close()
+        if self.synthesis is not None:
+            self.synthesis.close()
 
 
 def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine=None,
-                      settings: FitSettings | None = None):  # fmt: skip
+                      settings: FitSettings | None = None, synthesis: bool = False):  # fmt: skip
     """The :class:`FitAnalyzer` for ``video`` (a :class:`~myoface.analysis.video.Video`),
     calibrated, how (text), and the frame the analysis starts on.
 
     ``calibration_frame=None``: the most neutral frame of the first
     :data:`CALIBRATION_WINDOW_S` s from the first frame with a face, and the analysis starts
     at frame 0; a number: that frame, where the analysis then starts. ``refine``: relaxes of
-    the tissue per frame (default :attr:`FitSettings.refine`).
+    the tissue per frame (default :attr:`FitSettings.refine`). ``synthesis``: analysis by
+    synthesis (see :class:`FitAnalyzer`).
     """
     import itertools
 
@@ -993,7 +1123,8 @@ def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine
     if refine is not None:
         settings = replace(settings, refine=int(refine))
     fps = float(video.fps) if video.fps and video.fps > 0 else 30.0
-    an = FitAnalyzer(model, fps=fps, settings=settings)
+    an = FitAnalyzer(model, fps=fps, settings=settings, synthesis=synthesis)
+    what = "the 3-D fit" + (" with analysis by synthesis" if synthesis else "")
     try:
         if calibration_frame is None:
             first, window = 0, max(1, int(round(CALIBRATION_WINDOW_S * fps)))
@@ -1001,7 +1132,7 @@ def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine
             cal = an.calibrate(frames)
             start = 0
             how = (
-                f"MediaPipe face mesh on every frame, the 3-D fit; calibrated on frame {cal}, "
+                f"MediaPipe face mesh on every frame, {what}; calibrated on frame {cal}, "
                 f"the most neutral of the first {CALIBRATION_WINDOW_S:g} s"
             )
         else:
@@ -1011,7 +1142,7 @@ def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine
                 raise MyofaceValueError(f"the video has no frame {first}")
             cal = an.calibrate(frames, first, first_index=first)
             start = first
-            how = f"MediaPipe face mesh on every frame, the 3-D fit; calibrated on frame {cal}"
+            how = f"MediaPipe face mesh on every frame, {what}; calibrated on frame {cal}"
     except BaseException:
         an.close()
         raise

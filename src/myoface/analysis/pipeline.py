@@ -834,8 +834,9 @@ def make_analyzer(
                 f"the landmark tracker's estimator must be one of {LANDMARK_ESTIMATORS}; "
                 f"got {estimator!r}"
             )
-        if est == "fit":
-            return make_fit_analyzer(model, video, calibration_frame, refine)
+        if est != "paper":
+            synthesis = est == "fit-synthesis"
+            return make_fit_analyzer(model, video, calibration_frame, refine, synthesis=synthesis)
         an = LandmarkAnalyzer(model, refine=0 if refine is None else refine)
         return an, "MediaPipe face mesh on every frame", first
     if tracker != "snakes":

@@ -206,18 +206,27 @@ def detect_sequence(frames) -> tuple[list, np.ndarray]:
     return points, np.array(secs)
 
 
-def run_headmotion(model, points, truth, poses, skins, fps: float = 30.0, settings=None):
+def run_headmotion(
+    model, points, truth, poses, skins, fps: float = 30.0, settings=None, synthesis=False
+):
     """Fit the model to the landmark ``points`` of each frame (the 3-D fit, calibration frame
     chosen automatically in the first :data:`~myoface.analysis.fit.CALIBRATION_WINDOW_S` s)
-    and compare with the truth."""
+    and compare with the truth. ``synthesis``: with analysis by synthesis
+    (:class:`~myoface.analysis.fit.LandmarkSynthesis`: the model's face, its own texture)."""
     import time
 
-    from myoface.analysis.fit import CALIBRATION_WINDOW_S, ModelFit, PinholeCamera
+    from myoface.analysis.fit import (
+        CALIBRATION_WINDOW_S,
+        LandmarkSynthesis,
+        ModelFit,
+        PinholeCamera,
+    )
 
     cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
     fit = ModelFit(model, cam, settings, fps=fps)
+    syn = LandmarkSynthesis(model.face, cam, SIZE) if synthesis else None
     window = max(1, int(round(CALIBRATION_WINDOW_S * fps)))
-    cal = fit.calibrate(points[:window])
+    cal = fit.calibrate(points[:window], synthesis=syn)
     n, m = len(points), model.n_muscles
     est = np.full((n, m), np.nan)
     ang = np.full((n, 3), np.nan)
@@ -228,7 +237,7 @@ def run_headmotion(model, points, truth, poses, skins, fps: float = 30.0, settin
             fit.lose_track()
             continue
         t0 = time.perf_counter()
-        r = fit.fit(p)
+        r = fit.fit(p, syn)
         t_fit[k] = time.perf_counter() - t0
         est[k], ang[k], resid[k] = r.contractions, r.pose.angles_deg, r.residual_mm
     # the skin the estimates produce, against the true skin (head frame, the model's own)

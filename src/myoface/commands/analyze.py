@@ -71,12 +71,14 @@ def add_arguments(p):
     )
     p.add_argument(
         "--estimator",
-        choices=("curves", "fiducials", "fit", "paper"),
+        choices=("curves", "fiducials", "fit", "fit-synthesis", "paper"),
         default=None,
         help="how contractions are estimated. snakes: the model's skin curves fitted to the "
         "whole contours (curves, default), or the paper's fiducial points (fiducials). "
         "landmarks: the 3-D fit of the whole model, head pose and every muscle (fit, "
-        "default), or the paper's 12 muscles in a 2-D head frame (paper)",
+        "default), the same with analysis by synthesis (fit-synthesis: the face rendered at "
+        "each estimate and tracked too, which takes out MediaPipe's own error; slower), or "
+        "the paper's 12 muscles in a 2-D head frame (paper)",
     )
     p.add_argument(
         "--refine",
