@@ -389,6 +389,8 @@ class ModelFit:
         self._d0 = np.zeros_like(self.neutral)  # ... and its skin displacement there
         self._prev: FrameFit | None = None
         self.calibration: Calibration | None = None
+        #: tissue relaxes that did not converge (see :meth:`_relax`)
+        self.unconverged_relaxes = 0
 
     # -------------------------------------------------------------- public
     def lose_track(self) -> None:
@@ -400,12 +402,24 @@ class ModelFit:
         """The person's skin (V, 3) mm, head frame, at ``contractions`` (default: neutral),
         relaxed through the tissue from the fit's state."""
         c = np.zeros(self.n_muscles) if contractions is None else np.asarray(contractions)
-        if np.any(c):
-            self.state = self.model.relax(c, self.state).state
-            disp = self.model.skin_vertices(self.state) - self.neutral
-        else:
-            disp = 0.0
+        disp = self._relax(c) if np.any(c) else 0.0
         return self.neutral + self.identity_mm + disp
+
+    def _relax(self, c) -> np.ndarray:
+        """Relax the fit's state at ``c``; the skin's displacement (V, 3) mm. A relax that
+        does not converge is counted (:attr:`unconverged_relaxes`), not raised: the fit
+        corrects its linear model with whatever the tissue reached."""
+        import warnings
+
+        from myoface.tissue import RelaxWarning
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RelaxWarning)
+            res = self.model.relax(c, self.state)
+        if not res.converged or any(issubclass(w.category, RelaxWarning) for w in caught):
+            self.unconverged_relaxes += 1
+        self.state = res.state
+        return self.model.skin_vertices(self.state) - self.neutral
 
     def shape(self, contractions) -> np.ndarray:
         """The fit's forward model (V, 3) mm, head frame, at ``contractions``: the person's
@@ -584,9 +598,10 @@ class ModelFit:
         total_it, conv = 0, False
         for rnd in range(int(refine) + 1):
             if rnd > 0:
+                if np.abs(c - c0).max() < 1e-6:
+                    break  # the tissue is already relaxed at the estimate
                 # through the tissue: relax at the estimate, Broyden-correct the response
-                self.state = self.model.relax(c, self.state).state
-                d_new = self.model.skin_vertices(self.state) - self.neutral
+                d_new = self._relax(c)
                 dc = c - c0
                 dd = float(dc @ dc)
                 if dd > 1e-10:
@@ -1084,6 +1099,7 @@ class FitAnalyzer:
         if self.fit is not None:
             cam = self.fit.camera
             out["camera"] = {"focal_px": cam.focal_px, "cx": cam.cx, "cy": cam.cy}
+            out["unconverged_relaxes"] = self.fit.unconverged_relaxes
         if self.calibration is not None:
             cal = self.calibration
             out["calibration_frame"] = self.calibration_frame
