@@ -82,7 +82,8 @@ def test_thread_count_chosen_by_measurement_gives_the_same_trajectory(default_ti
     # short calls and a probe of the other thread count at every call: still bit for bit
     monkeypatch.setattr(rk2_mod, "CHUNK_STEPS", 7)
     monkeypatch.setattr(rk2_mod, "PROBE_STEPS", 3)
-    monkeypatch.setattr(rk2_mod, "PROBE_EVERY_S", 0.0)
+    monkeypatch.setattr(rk2_mod, "PROBE_MIN_S", 0.0)
+    monkeypatch.setattr(rk2_mod, "PROBE_MAX_S", 0.0)
     m, tg = _step_change(default_tissue, seed=6)
     x0, v0 = _start(m, tg, seed=6, v_scale=20.0)
     xa, va, xb, vb = x0.copy(), v0.copy(), x0.copy(), v0.copy()

@@ -49,9 +49,11 @@ MIN_NODES_PER_BLOCK = 256
 #: steps per kernel call when :func:`run_rk2` picks the thread count by measurement (~10 ms: the
 #: return to Python between calls costs well under 1 % of that)
 CHUNK_STEPS = 64
-#: every PROBE_EVERY_S seconds a short run (PROBE_STEPS) tries the thread count not in use
-PROBE_EVERY_S = 5.0
-PROBE_STEPS = 8
+#: a short run (PROBE_STEPS) tries the thread count not in use, first after PROBE_MIN_S seconds,
+#: then, while it keeps losing, after twice as long each time, up to PROBE_MAX_S
+PROBE_STEPS = 4
+PROBE_MIN_S = 1.0
+PROBE_MAX_S = 60.0
 
 
 def stable_time_step(model: TissueModel, safety: float = STABLE_DT_SAFETY) -> float:
@@ -294,9 +296,11 @@ def _rk2_run_parallel(
 
 
 class _Pace:
-    """Measured seconds per step of one model's kernel with each thread count tried (latest
-    measurement each), and when to try the other one next. Shared by the threads that step the
-    model; their races only mix up timings."""
+    """Measured seconds per step of one model's kernel with each thread count tried (the latest
+    measurement of each), and when to try the one not in use. Switching away from a choice that
+    has become slow is immediate (its own timings show it); trying the other costs a few steps,
+    so it backs off while it loses. Shared by the threads that step the model: their races only
+    mix up timings."""
 
     #: whether the kernel has run in this process (its first call may compile or load it)
     kernel_loaded = False
@@ -304,21 +308,33 @@ class _Pace:
     def __init__(self):
         self.sec_per_step: dict[int, float] = {}
         self.next_probe = 0.0
+        self.interval = PROBE_MIN_S
+        self.probe: int | None = None
 
     def choose(self, n_max: int, remaining: int) -> tuple[int, int]:
         known = self.sec_per_step
-        best = min(known, key=known.get) if n_max in known and 1 in known else n_max
-        now = time.monotonic()
-        if n_max in known and now >= self.next_probe:
-            self.next_probe = now + PROBE_EVERY_S
-            return (1 if best == n_max else n_max), min(remaining, PROBE_STEPS)
+        if n_max not in known:
+            return n_max, min(remaining, CHUNK_STEPS)
+        best = min(known, key=known.get) if 1 in known else n_max
+        if time.monotonic() >= self.next_probe:
+            self.probe = 1 if best == n_max else n_max
+            return self.probe, min(remaining, PROBE_STEPS)
         return best, min(remaining, CHUNK_STEPS)
 
     def record(self, n: int, seconds: float, steps: int) -> None:
         if not _Pace.kernel_loaded:
             _Pace.kernel_loaded = True
-        elif steps > 0:
-            self.sec_per_step[n] = seconds / steps
+            return
+        if steps <= 0:
+            return
+        sec = seconds / steps
+        self.sec_per_step[n] = sec
+        if self.probe == n:
+            self.probe = None
+            others = [t for m, t in self.sec_per_step.items() if m != n]
+            won = bool(others) and sec < min(others)
+            self.interval = PROBE_MIN_S if won else min(2.0 * self.interval, PROBE_MAX_S)
+            self.next_probe = time.monotonic() + self.interval
 
 
 _PACES: weakref.WeakKeyDictionary[TissueModel, _Pace] = weakref.WeakKeyDictionary()
@@ -340,8 +356,8 @@ def run_rk2(
     ``n_blocks`` is the number of slabs the free nodes are cut into, one thread each; the result
     is the same, bit for bit, for any number. By default it is numba's thread count (fewer for a
     small lattice, see :data:`MIN_NODES_PER_BLOCK`) or one, whichever the kernel measures to be
-    faster: the steps run in calls of :data:`CHUNK_STEPS`, and every :data:`PROBE_EVERY_S`
-    seconds a few steps try the other choice. Threads waiting for each other at every step only
+    faster: the steps run in calls of :data:`CHUNK_STEPS`, and now and then a few steps try the
+    other choice (see :data:`PROBE_MIN_S`). Threads waiting for each other at every step only
     pay while the cores are free; on a machine busy with other work one thread is faster.
 
     Returns (steps taken, last ``max |v| dt`` in mm, step index of the first non-finite value or
