@@ -17,10 +17,12 @@ from myoface.tissue.solver import (
     NEWTON_TOL_MM,
     PRECOND_SHIFT,
     assemble_block_hessian,
+    diagonal_blocks,
     energy_gradient,
     energy_gradient_free,
     kernel_args,
     newton_data,
+    sgs_precond,
 )
 
 #: the L-BFGS reference is run to this step tolerance (mm); its own error is then ~1e-6 mm,
@@ -154,6 +156,66 @@ def test_newton_equals_the_lbfgs_reference(fm, draw):
     # taken - moved no node by NEWTON_TOL_MM: the result is within that of the equilibrium
     assert np.abs(r.state.x - ref).max() < NEWTON_TOL_MM
     np.testing.assert_array_equal(r.state.x[tm.kinematic_index], tg)
+    # the solver reports the force at its last iterate, the one it returns
+    f = np.abs(internal_forces(tm, r.state.x)[tm.free_index]).max()
+    assert r.max_force == pytest.approx(f, rel=1e-9, abs=1e-9 * np.abs(tg).max())
+
+
+@settings(max_examples=3, deadline=None, derandomize=True)
+@given(st.data())
+def test_newton_from_a_random_equilibrium_equals_the_lbfgs_reference(fm, draw):
+    """Warm starts: from the equilibrium of random contractions to a random change of them (a
+    frame of an animation or a jump), the same equilibrium as the reference from that start."""
+    ids = fm.ids
+    seed = draw.draw(st.integers(0, 2**31 - 1), label="seed")
+    step = draw.draw(st.sampled_from([0.02, 0.1, 0.5]), label="largest change")
+    rng = np.random.default_rng(seed)
+    c0 = rng.uniform(0, 1, len(ids)) * (rng.uniform(size=len(ids)) < 0.3)
+    c1 = np.clip(c0 + rng.uniform(-step, step, len(ids)), 0, 1)
+    tm = fm.tissue
+    start = relax(tm, None, fm.targets(c0)).state
+    tg = fm.targets(c1)
+    r = relax(tm, start, tg)
+    assert r.converged
+    assert np.abs(r.state.x - _reference(tm, tg, start)).max() < NEWTON_TOL_MM
+
+
+def test_gauss_seidel_preconditioner_is_the_symmetric_sweep(fm):
+    """z = (D + L^T)^-1 D (D + L)^-1 r with the Hessian's blocks, against dense triangular
+    solves; symmetric positive definite; the rest stiffness's diagonal block where the
+    Hessian's is not positive definite."""
+    tm = fm.tissue
+    data = newton_data(tm)
+    pat = data.pattern
+    nf = pat.n_free
+    dvals, lvals = np.empty(9 * nf), np.empty(9 * pat.nl)
+    pat.assemble(_perturbed(tm, 0.5, seed=4), dvals, lvals)
+    dvals[9 * 5 : 9 * 6] *= -1.0  # node 5's block made negative definite
+    dused, dinv = np.empty(9 * nf), np.empty(9 * nf)
+    diagonal_blocks(dvals, data.rest_diag, dused, dinv)
+    np.testing.assert_array_equal(dused[9 * 5 : 9 * 6], data.rest_diag[9 * 5 : 9 * 6])
+    np.testing.assert_array_equal(dused[: 9 * 5], dvals[: 9 * 5])
+    d = sp.block_diag(dused.reshape(-1, 3, 3)).toarray()
+    np.testing.assert_allclose(
+        sp.block_diag(dinv.reshape(-1, 3, 3)).toarray() @ d, np.eye(3 * nf), atol=1e-9
+    )
+    lo = sp.bsr_matrix(
+        (lvals.reshape(-1, 3, 3), pat.lcol, pat.lptr), shape=(3 * nf, 3 * nf)
+    ).toarray()
+    rng = np.random.default_rng(5)
+    r, v = rng.normal(size=3 * nf), rng.normal(size=3 * nf)
+
+    def apply(b):
+        z, w = np.empty(3 * nf), np.empty(3 * nf)
+        sgs_precond(pat.lptr, pat.lcol, dused, lvals, dinv, b, z, w)
+        return z
+
+    # block triangular (full 3x3 diagonal blocks): general dense solves
+    ref = np.linalg.solve(d + lo.T, d @ np.linalg.solve(d + lo, r))
+    z = apply(r)
+    np.testing.assert_allclose(z, ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+    assert v @ z == pytest.approx(r @ apply(v), rel=1e-10)
+    assert r @ z > 0
 
 
 def test_warm_start_from_a_nearby_equilibrium_takes_few_iterations(fm):

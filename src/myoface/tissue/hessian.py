@@ -482,7 +482,7 @@ class SymmetricPattern:
     (nl*9,) in block CSR by row (``lptr`` (F+1,), ``lcol`` (nl,), columns sorted, each < its
     row); blocks row-major. A spring's blocks are symmetric; a prism pair (a, b) whose nodes
     are numbered the other way round (free number of a < that of b) adds the transpose of its
-    block H_ab, i.e. H_ba (``elem_first`` 1).
+    block H_ab, i.e. H_ba.
 
     Attributes (besides the storage)
     --------------------------------
@@ -490,8 +490,12 @@ class SymmetricPattern:
     si, sj, rest, alpha, beta, ec : (S',) — the active springs: ends, rest length l (mm),
         stiffnesses (g/s^2), threshold extension e^c = strain_c l (mm);
     sfi, sfj : (S',) int64 — free numbers of the ends; soff : (S',) int64 — lower block or -1.
-    elems : (E', 6) int64; efree : (E', 6) int64; eoff : (E', 15) int64; efirst : (E', 15)
-        int8; rest_volume, kv : (E',) — the active prisms (nonzero volume weight).
+    elems : (E', 6) int64; efree : (E', 6) int64; rest_volume, kv : (E',) — the active prisms
+        (nonzero volume weight);
+    epairs : (E', 15, 5) int64 — per prism its node pairs with a stored block, first
+        (``enpairs`` (E',) of them): [block, a, b, pair, sign], the block being H_ab (a, b prism
+        nodes 0-5), ``pair`` the row of :data:`PRISM_PAIRS` and ``sign`` -1 when (a, b) is that
+        pair reversed.
     law : int; vsign : float — the model's.
     """
 
@@ -542,14 +546,25 @@ class SymmetricPattern:
         self.soff = slot(fi, fj)
         self.elems = el_all[e]
         self.efree = fe
-        self.eoff = np.stack([slot(fe[:, a], fe[:, b]) for a, b in PRISM_PAIRS], axis=1).reshape(
-            -1, 15
-        )
-        self.efirst = (
-            np.stack([fe[:, a] < fe[:, b] for a, b in PRISM_PAIRS], axis=1)
-            .reshape(-1, 15)
-            .astype(np.int8)
-        )
+        off = np.stack([slot(fe[:, a], fe[:, b]) for a, b in PRISM_PAIRS], axis=1).reshape(-1, 15)
+        epairs = np.zeros((len(e), 15, 5), np.int64)
+        enpairs = np.zeros(len(e), np.int64)
+        for p, (a, b) in enumerate(PRISM_PAIRS):
+            q = np.flatnonzero(off[:, p] >= 0)
+            rev = fe[q, a] < fe[q, b]  # stored block (row > col) is H_ba
+            epairs[q, enpairs[q]] = np.stack(
+                [
+                    off[q, p],
+                    np.where(rev, b, a),
+                    np.where(rev, a, b),
+                    np.full(len(q), p),
+                    np.where(rev, -1, 1),
+                ],
+                axis=1,
+            )
+            enpairs[q] += 1
+        self.epairs = epairs
+        self.enpairs = enpairs
         self.rest_volume = np.asarray(model.rest_volume, np.float64)[e]
         self.kv = np.asarray(model.volume_weight, np.float64)[e]
         self.law = int(model.spring_law)
@@ -577,8 +592,8 @@ class SymmetricPattern:
             self.sfj,
             self.soff,
             *self.prism_args(),
-            self.eoff,
-            self.efirst,
+            self.epairs,
+            self.enpairs,
             dvals,
             lvals,
         )
@@ -631,8 +646,8 @@ def assemble_symmetric_hessian(
     rest_vol,
     kv,
     vsign,
-    eoff,
-    efirst,
+    epairs,
+    enpairs,
     dvals,
     lvals,
 ):
@@ -734,7 +749,6 @@ def assemble_symmetric_hessian(
                 for r in range(3):
                     for c3 in range(3):
                         dvals[o + 3 * r + c3] += gr[a, r] * gr[a, c3]
-        eo = eoff[q]
         for p in range(15):
             wv[p, 0] = 0.0
             wv[p, 1] = 0.0
@@ -748,30 +762,32 @@ def assemble_symmetric_hessian(
             wv[p, 1] += sg * (x[ik, 1] - x[il, 1])
             wv[p, 2] += sg * (x[ik, 2] - x[il, 2])
         w2 = 2.0 * kv[q] * dv * vsign / 6.0
-        for p in range(15):
-            so = eo[p]
-            if so < 0:
-                continue
-            a = PRISM_PAIRS_NB[p, 0]
-            b = PRISM_PAIRS_NB[p, 1]
-            sg = w2
-            if efirst[q, p] != 0:  # the stored block is H_ba = H_ab^T
-                a, b = b, a
-                sg = -w2
+        ep = epairs[q]
+        for k in range(enpairs[q]):
+            a = ep[k, 1]
+            b = ep[k, 2]
+            p = ep[k, 3]
+            sg = w2 * ep[k, 4]  # the skew part changes sign with the order of the pair
             w0 = sg * wv[p, 0]
             w1 = sg * wv[p, 1]
             w2_ = sg * wv[p, 2]
-            o = 9 * so
+            o = 9 * ep[k, 0]
+            ga0 = gr[a, 0]
+            ga1 = gr[a, 1]
+            ga2 = gr[a, 2]
+            gb0 = gr[b, 0]
+            gb1 = gr[b, 1]
+            gb2 = gr[b, 2]
             # + [w]x = [[0, -w2, w1], [w2, 0, -w0], [-w1, w0, 0]]
-            lvals[o] += gr[a, 0] * gr[b, 0]
-            lvals[o + 1] += gr[a, 0] * gr[b, 1] - w2_
-            lvals[o + 2] += gr[a, 0] * gr[b, 2] + w1
-            lvals[o + 3] += gr[a, 1] * gr[b, 0] + w2_
-            lvals[o + 4] += gr[a, 1] * gr[b, 1]
-            lvals[o + 5] += gr[a, 1] * gr[b, 2] - w0
-            lvals[o + 6] += gr[a, 2] * gr[b, 0] - w1
-            lvals[o + 7] += gr[a, 2] * gr[b, 1] + w0
-            lvals[o + 8] += gr[a, 2] * gr[b, 2]
+            lvals[o] += ga0 * gb0
+            lvals[o + 1] += ga0 * gb1 - w2_
+            lvals[o + 2] += ga0 * gb2 + w1
+            lvals[o + 3] += ga1 * gb0 + w2_
+            lvals[o + 4] += ga1 * gb1
+            lvals[o + 5] += ga1 * gb2 - w0
+            lvals[o + 6] += ga2 * gb0 - w1
+            lvals[o + 7] += ga2 * gb1 + w0
+            lvals[o + 8] += ga2 * gb2
 
 
 PRISM_SKEW_NB = PRISM_SKEW  # module-level constants numba freezes into the compiled code

@@ -339,7 +339,7 @@ def relax(
     x_kin_start = x[model.kinematic_index].copy()
     x[model.kinematic_index] = tg
     if method == "newton":
-        x, ok, it, res, _ = relax_newton(model, x, x_kin_start, tol_mm, max_iter or 50)
+        x, ok, it, res, _, fmax = relax_newton(model, x, x_kin_start, tol_mm, max_iter or 50)
         out = TissueState(x, np.zeros_like(x), state.t)
     elif method == "lbfgs":
         x, ok, it, res = _relax_lbfgs(model, x, tol_mm, max_iter or 300)
@@ -354,7 +354,8 @@ def relax(
             raise MyofaceSimulationError(f"RK2 produced NaN/Inf at step {bad} (dt = {dt:g} s)")
         ok = res < tol_mm
         out = TissueState(x, v, state.t + it * dt)
-    fmax = float(np.abs(internal_forces(model, out.x)[model.free_index]).max())
+    if method != "newton":  # the Newton solver has the forces at its last iterate
+        fmax = float(np.abs(internal_forces(model, out.x)[model.free_index]).max())
     if not ok:
         warnings.warn(
             f"tissue relax ({method}) did not converge in {it} iterations "
