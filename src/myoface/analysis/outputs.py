@@ -15,10 +15,7 @@ Image coordinates are (x, y) = (column, row) pixels.
 
 from __future__ import annotations
 
-import contextlib
 import os
-import shutil
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -172,6 +169,7 @@ def analyze_to_folder(
     MyofaceError
         On bad input, a video without frames, or when no frame could be measured.
     """
+    from myoface._io import output_dir
     from myoface.analysis.pipeline import load_init, make_analyzer
     from myoface.analysis.video import Video, open_video
 
@@ -190,34 +188,13 @@ def analyze_to_folder(
     an, how, start = make_analyzer(
         model, video, tracker, init or None, calibration_frame, refine, sigma, estimator=estimator
     )
-    with _output_folder(out) as folder:
+    with output_dir(out) as folder:
         try:
             frames = _measure_into(video, an, folder, start, max_frames, tracker, show_progress)
         finally:
             an.close()
         _write_results(video, model, an, folder, frames, how_init or how, start, tracker, face)
     return FolderResult(folder, Path(video.path), tuple(an.ids), frames, start)
-
-
-@contextlib.contextmanager
-def _output_folder(path) -> Iterator[Path]:
-    """Create the folder ``path`` (and missing parents) for the block; if the block fails,
-    remove the folders this created, with their content."""
-    from myoface._io import ensure_output_dir
-
-    path = Path(path)
-    top = None  # the outermost folder that does not exist yet
-    for p in (path.absolute(), *path.absolute().parents):
-        if p.exists():
-            break
-        top = p
-    folder = ensure_output_dir(path)
-    try:
-        yield folder
-    except BaseException:
-        if top is not None:
-            shutil.rmtree(top, ignore_errors=True)
-        raise
 
 
 def _write_results(video, model, an, out, frames, how, start, tracker, face) -> None:
