@@ -110,3 +110,28 @@ def test_resynth_side_by_side_too_short(model, tmp_path, capsys):
     assert main([*argv, "--side-by-side", str(short)]) == 1
     assert "shorter than the CSV" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_held_contractions_need_no_physics(model):
+    """A row that repeats its predecessor (a held or neutral stretch) keeps the relaxed state;
+    a state that is not known to be an equilibrium is relaxed even for the same row."""
+    from myoface.render import Renderer
+    from myoface.synth import Synthesizer, make_camera
+
+    syn = Synthesizer(
+        model, Renderer(model.face, make_camera(model.face.vertices, "front", 48, 48))
+    )
+    rest = syn.state
+    syn.image(np.zeros(model.n_muscles))
+    assert syn.state is rest  # the rest state is the equilibrium of no contraction
+    c = _table(model)[3]
+    first = syn.image(c)
+    relaxed = syn.state
+    assert relaxed is not rest and np.array_equal(relaxed.contractions, c)
+    np.testing.assert_array_equal(syn.image(c), first)
+    assert syn.state is relaxed and syn.stats.unconverged == 0
+    syn.state = model.step(relaxed, c, n_steps=3)  # moved by dynamics: not an equilibrium
+    syn.image(c)
+    assert syn.state is not relaxed
+    skin = model.skin_vertices
+    assert np.abs(skin(syn.state) - skin(relaxed)).max() < 0.05  # mm, the same equilibrium

@@ -70,7 +70,8 @@ def bench_synth(quick: bool) -> Measurement:
 def _demo_contractions(ids, fps: float = 25.0, duration_s: float = 3.0):
     """Times (T,) s and contractions (T, M) over ``ids`` of a short performance: a smile
     (zygomatici, with a little orbicularis oculi) rising and falling, a brow raise (frontalis)
-    inside it and the jaw opening towards its end."""
+    inside it and the jaw opening towards its end. The face moves in every frame after the
+    first (no frame repeats its predecessor's contractions, which would need no physics)."""
     t = np.arange(int(round(duration_s * fps))) / fps
 
     def bump(t0, t1):  # 0 -> 1 -> 0 between t0 and t1 (s), smooth
@@ -79,13 +80,13 @@ def _demo_contractions(ids, fps: float = 25.0, duration_s: float = 3.0):
     table = np.zeros((len(t), len(ids)))
     for k, m in enumerate(ids):
         if m.startswith("zygomaticus_major"):
-            table[:, k] = 0.8 * bump(0.2, 2.6)
+            table[:, k] = 0.8 * bump(0.0, 2.6)
         elif m.startswith("orbicularis_oculi"):
-            table[:, k] = 0.25 * bump(0.2, 2.6)
+            table[:, k] = 0.25 * bump(0.0, 2.6)
         elif m.startswith("frontalis"):
             table[:, k] = 0.7 * bump(0.8, 2.2)
         elif m == "jaw":
-            table[:, k] = 0.4 * bump(1.2, 2.8)
+            table[:, k] = 0.4 * bump(1.2, duration_s)
     return t, table
 
 
