@@ -22,6 +22,7 @@ from myoface.tissue.solver import (
     energy_gradient_free,
     kernel_args,
     newton_data,
+    pcg,
     sgs_precond,
 )
 
@@ -286,3 +287,66 @@ def test_implicit_is_an_alias_of_newton(fm):
     b = relax(tm, None, tg, method="newton")
     assert a.method == b.method == "newton"
     np.testing.assert_array_equal(a.state.x, b.state.x)
+
+
+def test_pcg_in_eisenstats_form_is_the_preconditioned_cg(fm):
+    """The solver's CG (no product with H, Eisenstat's form) against the textbook preconditioned
+    CG with the Gauss-Seidel sweep and the Hessian's product: the same iterates, iteration
+    count and solution, on a Newton system."""
+    tm = fm.tissue
+    data = newton_data(tm)
+    pat = data.pattern
+    nf = pat.n_free
+    # a Newton system near an equilibrium: a smile's, with the targets of a stronger one
+    x = relax(tm, None, fm.targets(np.full(len(fm.ids), 0.3))).state.x
+    x[tm.kinematic_index] = fm.targets(np.full(len(fm.ids), 0.35))
+    dvals, lvals = np.empty(9 * nf), np.empty(9 * pat.nl)
+    pat.assemble(x, dvals, lvals)
+    dused, dinv = np.empty(9 * nf), np.empty(9 * nf)
+    diagonal_blocks(dvals, data.rest_diag, dused, dinv)
+    _, b = _free_energy_gradient(tm, x)
+    b = -b
+    eta = 0.05
+    out = np.empty(3 * nf)
+    k, curved = pcg(
+        pat.lptr,
+        pat.lcol,
+        dused,
+        lvals,
+        dinv,
+        2 * dused - dvals,
+        b,
+        eta,
+        200,
+        out,
+        np.empty((7, 3 * nf)),
+    )
+
+    def precond(r):
+        z, w = np.empty(3 * nf), np.empty(3 * nf)
+        sgs_precond(pat.lptr, pat.lcol, dused, lvals, dinv, r, z, w)
+        return z
+
+    def hess(v):
+        o = np.empty(3 * nf)
+        symmetric_matvec(pat.lptr, pat.lcol, dvals, lvals, v, o)
+        return o
+
+    ref, r = np.zeros(3 * nf), b.copy()
+    z = precond(r)
+    p, rz = z.copy(), r @ z
+    stop = eta * eta * rz
+    it = 0
+    while it < 200:
+        it += 1
+        q = hess(p)
+        assert p @ q > 0  # no negative curvature on this system
+        a = rz / (p @ q)
+        ref += a * p
+        r -= a * q
+        z = precond(r)
+        if r @ z <= stop:
+            break
+        rz, p = r @ z, z + (r @ z) / rz * p
+    assert (k, curved) == (it, 0)
+    np.testing.assert_allclose(out, ref, rtol=0, atol=1e-9 * np.abs(ref).max())

@@ -628,7 +628,7 @@ def _add_sym6(arr, slot, h0, h1, h2, h4, h5, h8):
         arr[o + 8] += h8
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True)
 def assemble_symmetric_hessian(
     x,
     si,
@@ -653,14 +653,19 @@ def assemble_symmetric_hessian(
 ):
     """The exact Hessian of the potential energy over the free nodes at ``x`` (N, 3) mm into
     the symmetric storage of :class:`SymmetricPattern` (``dvals``, ``lvals``); the same
-    matrix as :func:`assemble_block_hessian`, computed once per spring and per prism node pair.
-
-    Springs: ``(c - g) u u^T + g I`` (c the tangent stiffness, g = |s|/d, u the direction) on
-    both diagonal blocks, minus it on the off-diagonal one. Prisms: ``2 kv (dV/dx_a)(dV/dx_b)^T``
-    plus ``2 kv (V - V0) d2V/dx_a dx_b`` (a skew 3x3 block: zero on the diagonal).
-    """
+    matrix as :func:`assemble_block_hessian`, computed once per spring and per prism node pair:
+    :func:`add_spring_hessian` plus :func:`add_prism_hessian`."""
     dvals[:] = 0.0
     lvals[:] = 0.0
+    add_spring_hessian(x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff, dvals, lvals)
+    add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, epairs, enpairs, dvals, lvals)
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def add_spring_hessian(x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff, dvals, lvals):
+    """Add the springs' Hessian at ``x`` to the symmetric storage: ``(c - g) u u^T + g I`` (c the
+    tangent stiffness, g = |s|/d, u the direction) on both diagonal blocks, minus it on the
+    off-diagonal one."""
     for k in range(si.shape[0]):
         i = si[k]
         j = sj[k]
@@ -690,6 +695,13 @@ def assemble_symmetric_hessian(
         _add_sym6(dvals, sfi[k], h0, h1, h2, h4, h5, h8)
         _add_sym6(dvals, sfj[k], h0, h1, h2, h4, h5, h8)
         _add_sym6(lvals, soff[k], -h0, -h1, -h2, -h4, -h5, -h8)
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, epairs, enpairs, dvals, lvals):
+    """Add the volume penalty's Hessian at ``x`` to the symmetric storage: per prism
+    ``2 kv (dV/dx_a)(dV/dx_b)^T`` plus ``2 kv (V - V0) d2V/dx_a dx_b`` (a skew 3x3 block, zero
+    on the diagonal)."""
     gr = np.empty((6, 3))
     wv = np.empty((15, 3))
     for q in range(elems.shape[0]):

@@ -12,7 +12,8 @@ module finds it by Newton's method on the *exact* Hessian of E, each Newton syst
 2. **Newton steps** — the Hessian (springs with their tangent stiffness and unclipped geometric
    term, the volume penalty with its second-derivative term) assembled in symmetric 3x3-block
    storage over the springs and prisms that touch a free node (one pass per spring and per
-   prism node pair); CG on it preconditioned by a symmetric block Gauss-Seidel sweep of the
+   prism node pair; the prisms' part, two thirds of the cost, is kept from step to step until a
+   node has moved by PRISM_LAG_MM); CG on it preconditioned by a symmetric block Gauss-Seidel sweep of the
    Hessian itself, to a relative accuracy eta that tightens as the gradient falls (Eisenstat &
    Walker 1996, choice 2, between ETA_MIN and ETA_MAX); a direction of negative curvature ends
    the CG early (Steihaug 1983); an Armijo backtracking line search on E keeps every step a
@@ -20,8 +21,8 @@ module finds it by Newton's method on the *exact* Hessian of E, each Newton syst
 3. **the last step** — once a Newton step is short (< CHORD_RATIO * tol) and cut the gradient
    as a Newton step does where the Hessian hardly changes (by CHORD_RATE), the next step reuses
    that Hessian (no new assembly): it is nearly a Newton step, and most often the last one.
-   Converged when an accurate step (CG to ETA_MIN, not stopped by curvature) moves no node by
-   more than tol: the step estimates the distance left, and is taken.
+   Converged when a step (CG to ETA_MAX = 0.1 or better, not stopped by curvature) moves no
+   node by more than tol: the step estimates the distance left, and is taken.
 
 Why Gauss-Seidel on H rather than the rest factor: the rest stiffness is a poor match where
 springs have switched to their stiffer phase (beta = 10 alpha) or are compressed (a negative
@@ -30,6 +31,17 @@ block Gauss-Seidel sweep of H sees those changes exactly and halves the CG itera
 third of the cost of a triangular solve with the factor (measured on the default face: 143 vs
 287 iterations over the Newton systems of a cold and seven warm relaxes, 0.07 vs 0.21 ms per
 application). The Hessian assembly is then the largest cost of a Newton step.
+
+What did not pay (measured on the default face, surprise and a 25 fps smile): a reduced basis of
+the free nodes' displacements trained on 85 relaxes (each muscle at 0.5 and 1, five
+expressions, twenty random mixtures) — its singular values fall slowly (1e-2 of the largest at
+r = 30, 1e-4 at 85), it leaves 0.25-0.8 mm of a held-out equilibrium outside its span (0.07 of
+a 0.46 mm frame-to-frame move), and as a coarse space it lowers the condition number of the
+rest-factor-preconditioned Hessian only from 53 to 36 (r = 60) for a product H U of r
+matrix-vector products per Newton step; a rest stiffness with each spring at its mean training
+stiffness as the factor (condition 50 instead of 53); the rest factor combined with the
+Gauss-Seidel sweeps (fewer iterations, dearer ones); float32 triangular solves (no faster: the
+sweeps are bound by their dependencies, not by memory).
 
 The exact Hessian matters: with the compressive geometric term clipped (a positive
 semi-definite "projected" Hessian) Newton converges only linearly here, since thousands of
@@ -58,8 +70,9 @@ from myoface.tissue.forces import MIN_SPRING_LENGTH, spring_magnitude
 from myoface.tissue.hessian import (
     BlockPattern,
     SymmetricPattern,
+    add_prism_hessian,
+    add_spring_hessian,
     assemble_block_hessian,
-    symmetric_matvec,
 )
 from myoface.tissue.model import TissueModel
 
@@ -85,6 +98,13 @@ CHORD_RATIO = 10.0
 #: cross their threshold during the steps the Hessian changes, and a step with the old one
 #: underestimates the distance left
 CHORD_RATE = 0.1
+#: the volume penalty's part of the Hessian is kept until a node has moved by this much (mm)
+#: since it was assembled: it changes with the prisms' shape, slowly (a 0.3 mm move changes
+#: a prism's edges, 2-10 mm long, by a few per cent), while the springs' part, which switches
+#: with their phase, is assembled at every Newton step. (On the default face this leaves the
+#: Newton iterations as they are and skips one or two of the prisms' assemblies, two thirds of
+#: the cost of one, per relax; at 1 mm, cold starts take more Newton steps.)
+PRISM_LAG_MM = 0.3
 #: Armijo sufficient-decrease constant of the line search (Nocedal & Wright 2006, eq. 3.4)
 ARMIJO_C = 1e-4
 #: relative size of an energy change that is at the level of its rounding error: a Newton step
@@ -566,52 +586,127 @@ def sgs_precond(lptr, lcol, dused, lvals, dinv, r, z, w):
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def pcg(lptr, lcol, dvals, lvals, dused, dinv, b, eta, max_iter, x, work):
-    """Preconditioned CG on ``A x = b`` (A in the symmetric storage of
-    :class:`~myoface.tissue.hessian.SymmetricPattern`, preconditioner :func:`sgs_precond`),
-    from 0, until ``sqrt(r.z) <= eta sqrt(r0.z0)`` (z = M^-1 r). Stops early on a direction of
-    negative or zero curvature: x keeps the last iterate, or the preconditioned residual if that
-    happens at once (Steihaug 1983). ``work``: (5, n). Returns (iterations, 1 if it stopped on
-    curvature)."""
+def _lower_solve(lptr, lcol, lvals, dinv, r, y):
+    """``y = (D + L)^-1 r`` (block forward substitution; ``dinv``: the inverses of D's blocks)."""
+    nf = lptr.shape[0] - 1
+    for i in range(nf):
+        s0 = r[3 * i]
+        s1 = r[3 * i + 1]
+        s2 = r[3 * i + 2]
+        for k in range(lptr[i], lptr[i + 1]):
+            j = 3 * lcol[k]
+            o = 9 * k
+            y0 = y[j]
+            y1 = y[j + 1]
+            y2 = y[j + 2]
+            s0 -= lvals[o] * y0 + lvals[o + 1] * y1 + lvals[o + 2] * y2
+            s1 -= lvals[o + 3] * y0 + lvals[o + 4] * y1 + lvals[o + 5] * y2
+            s2 -= lvals[o + 6] * y0 + lvals[o + 7] * y1 + lvals[o + 8] * y2
+        o = 9 * i
+        y[3 * i] = dinv[o] * s0 + dinv[o + 1] * s1 + dinv[o + 2] * s2
+        y[3 * i + 1] = dinv[o + 3] * s0 + dinv[o + 4] * s1 + dinv[o + 5] * s2
+        y[3 * i + 2] = dinv[o + 6] * s0 + dinv[o + 7] * s1 + dinv[o + 8] * s2
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _upper_solve(lptr, lcol, lvals, dinv, r, z, w):
+    """``z = (D + L^T)^-1 r`` (block back substitution, scattering each row's lower blocks
+    transposed); ``w``: work (3F,)."""
+    nf = lptr.shape[0] - 1
+    for i in range(3 * nf):
+        w[i] = r[i]
+    for i in range(nf - 1, -1, -1):
+        o = 9 * i
+        s0 = w[3 * i]
+        s1 = w[3 * i + 1]
+        s2 = w[3 * i + 2]
+        z0 = dinv[o] * s0 + dinv[o + 1] * s1 + dinv[o + 2] * s2
+        z1 = dinv[o + 3] * s0 + dinv[o + 4] * s1 + dinv[o + 5] * s2
+        z2 = dinv[o + 6] * s0 + dinv[o + 7] * s1 + dinv[o + 8] * s2
+        z[3 * i] = z0
+        z[3 * i + 1] = z1
+        z[3 * i + 2] = z2
+        for k in range(lptr[i], lptr[i + 1]):
+            j = 3 * lcol[k]
+            o = 9 * k
+            w[j] -= lvals[o] * z0 + lvals[o + 3] * z1 + lvals[o + 6] * z2
+            w[j + 1] -= lvals[o + 1] * z0 + lvals[o + 4] * z1 + lvals[o + 7] * z2
+            w[j + 2] -= lvals[o + 2] * z0 + lvals[o + 5] * z1 + lvals[o + 8] * z2
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _block_mul(blocks, v, out):
+    """``out = B v`` for B block diagonal (``blocks`` (F*9,))."""
+    for i in range(v.shape[0] // 3):
+        o = 9 * i
+        v0 = v[3 * i]
+        v1 = v[3 * i + 1]
+        v2 = v[3 * i + 2]
+        out[3 * i] = blocks[o] * v0 + blocks[o + 1] * v1 + blocks[o + 2] * v2
+        out[3 * i + 1] = blocks[o + 3] * v0 + blocks[o + 4] * v1 + blocks[o + 5] * v2
+        out[3 * i + 2] = blocks[o + 6] * v0 + blocks[o + 7] * v1 + blocks[o + 8] * v2
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def pcg(lptr, lcol, dused, lvals, dinv, emat, b, eta, max_iter, x, work):
+    """CG on ``H x = b`` preconditioned by :func:`sgs_precond`, ``M = A D^-1 A^T`` with
+    ``A = D + L``, in Eisenstat's form (Eisenstat 1981): CG on ``A^-1 H A^-T y = A^-1 b``
+    preconditioned by D, ``x = A^-T y``, whose operator is
+    ``A^-1 H A^-T v = t + A^-1 (v - E t)``, ``t = A^-T v``, ``E = 2 D - D_H`` (``emat``; D_H
+    the Hessian's diagonal blocks, D the ones the preconditioner uses): one forward and one back
+    substitution per iteration and no product with H. The iterates, residual norms
+    ``r.M^-1 r`` and curvatures are those of the plain preconditioned CG.
+
+    From x = 0, until ``sqrt(r.z) <= eta sqrt(r0.z0)`` (z = M^-1 r). Stops early on a direction
+    of negative or zero curvature: x keeps the last iterate, or the preconditioned residual if
+    that happens at once (Steihaug 1983). ``work``: (7, n). Returns (iterations, 1 if it stopped
+    on curvature)."""
     n = b.shape[0]
     r = work[0]
     z = work[1]
     p = work[2]
     q = work[3]
-    w = work[4]
-    for i in range(n):
-        x[i] = 0.0
-        r[i] = b[i]
-    sgs_precond(lptr, lcol, dused, lvals, dinv, r, z, w)
+    t = work[4]
+    w = work[5]
+    y = work[6]
+    _lower_solve(lptr, lcol, lvals, dinv, b, r)
+    _block_mul(dused, r, z)
     rz = 0.0
     for i in range(n):
+        y[i] = 0.0
         p[i] = z[i]
         rz += r[i] * z[i]
     stop = eta * eta * rz
     for it in range(max_iter):
-        symmetric_matvec(lptr, lcol, dvals, lvals, p, q)
+        _upper_solve(lptr, lcol, lvals, dinv, p, t, w)
+        _block_mul(emat, t, q)
+        for i in range(n):
+            w[i] = p[i] - q[i]
+        _lower_solve(lptr, lcol, lvals, dinv, w, q)
         pq = 0.0
         for i in range(n):
+            q[i] += t[i]
             pq += p[i] * q[i]
         if not pq > 0.0:
-            if it == 0:
-                for i in range(n):
-                    x[i] = z[i]
+            # x = M^-1 b at once, else the last iterate
+            _upper_solve(lptr, lcol, lvals, dinv, z if it == 0 else y, x, w)
             return it + 1, 1
         a = rz / pq
         for i in range(n):
-            x[i] += a * p[i]
+            y[i] += a * p[i]
             r[i] -= a * q[i]
-        sgs_precond(lptr, lcol, dused, lvals, dinv, r, z, w)
+        _block_mul(dused, r, z)
         rz_new = 0.0
         for i in range(n):
             rz_new += r[i] * z[i]
         if rz_new <= stop:
+            _upper_solve(lptr, lcol, lvals, dinv, y, x, w)
             return it + 1, 0
         beta = rz_new / rz
         rz = rz_new
         for i in range(n):
             p[i] = z[i] + beta * p[i]
+    _upper_solve(lptr, lcol, lvals, dinv, y, x, w)
     return max_iter, 0
 
 
@@ -695,7 +790,8 @@ class _Newton:
         self.lvals = np.empty(9 * pat.nl)
         self.dused = np.empty(9 * self.nf)
         self.dinv = np.empty(9 * self.nf)
-        self.work = np.empty((5, n))
+        self.emat = np.empty(9 * self.nf)
+        self.work = np.empty((7, n))
         self.step = np.empty(n)
         self.grad = np.empty((self.nf, 3))
         self.eargs = (
@@ -704,6 +800,9 @@ class _Newton:
             pat.sfj,
             *pat.prism_args(),
         )
+        self.dprism = np.empty(9 * self.nf)
+        self.lprism = np.empty(9 * pat.nl)
+        self.x_prism = None  # where the volume penalty's Hessian was last assembled
         self.assemblies = 0
         self.cg = 0
         self.curved = False
@@ -713,8 +812,24 @@ class _Newton:
         return energy_gradient_free(x, *self.eargs, self.grad, want_grad)
 
     def assemble(self, x) -> None:
-        self.pat.assemble(x, self.dvals, self.lvals)
+        """The Hessian at ``x``: the springs' part always, the volume penalty's part (two thirds
+        of the cost) when no node has moved by PRISM_LAG_MM since it was last assembled."""
+        pat = self.pat
+        free = self.free
+        if self.x_prism is None or np.abs(x[free] - self.x_prism).max() > PRISM_LAG_MM:
+            self.dprism[:] = 0.0
+            self.lprism[:] = 0.0
+            add_prism_hessian(
+                x, *pat.prism_args(), pat.epairs, pat.enpairs, self.dprism, self.lprism
+            )
+            self.x_prism = x[free]
+        self.dvals[:] = self.dprism
+        self.lvals[:] = self.lprism
+        add_spring_hessian(
+            x, *pat.spring_args(), pat.sfi, pat.sfj, pat.soff, self.dvals, self.lvals
+        )
         diagonal_blocks(self.dvals, self.data.rest_diag, self.dused, self.dinv)
+        np.subtract(2.0 * self.dused, self.dvals, out=self.emat)
         self.assemblies += 1
 
     def solve(self, b, eta) -> np.ndarray:
@@ -723,10 +838,10 @@ class _Newton:
         k, curved = pcg(
             pat.lptr,
             pat.lcol,
-            self.dvals,
-            self.lvals,
             self.dused,
+            self.lvals,
             self.dinv,
+            self.emat,
             b,
             eta,
             CG_MAX_ITER,
