@@ -1,15 +1,21 @@
 """Closed loop on a short synthetic sequence: render known contractions, analyse, compare.
 
-Tolerances. With the default analysis (snakes, curve fit, a second tracking pass from the
-model's prediction) the errors measured on this 16-frame sequence when this test was written
-were: frontalis bellies RMSE 0.009-0.013, zygomatic majors 0.019-0.020, levator labii
-superioris alaeque nasi 0.022-0.040, depressor labii inferioris 0.071-0.082, jaw 0.004;
-correlation at least 0.94 for every muscle. The bounds below sit about 1.5-2.5x above those,
-because the tracking moves by fractions of a pixel with floating-point-level changes (in the
-renderer, the tissue solver) and the depressors, whose signature beyond the jaw's is a
-sub-pixel change of the lower lip's outline at 256 x 256, amplify that. They are a regression
-floor; the issue's targets (RMSE <= 0.05, correlation >= 0.9 for every muscle) are measured on
-the 48-frame sequence by ``myoface bench --only analysis.closed_loop`` (see BENCHMARKS.md).
+Tolerances. Every muscle moves in the sequence (``truth_sequence``: smooth curves of amplitude
+0.3-0.8), so a constant guess of each muscle's mean contraction already scores an RMSE of the
+truth's standard deviation, 0.11-0.27 here: an absolute bound near 0.2 says nothing. Each
+estimate must therefore beat that baseline by a stated factor (``BASELINE_FRACTION``: RMSE
+< 0.3 of it, i.e. at least 91% of the variance explained), as well as meet absolute bounds.
+The absolute bounds start from the issue's targets (RMSE <= 0.05, correlation >= 0.9 for every
+muscle; measured on the 48-frame sequence by ``myoface bench --only analysis.closed_loop``, see
+BENCHMARKS.md), which the full analysis (with analysis by synthesis) meets; the plain analysis
+leaves the tracker's sub-pixel bias in the muscles whose signature is smallest, and the bounds
+say by how much it may.
+
+With the default analysis (snakes, curve fit, a second tracking pass from the model's
+prediction) the errors measured on this 16-frame sequence were: frontalis bellies RMSE
+0.009-0.019, zygomatic majors 0.019-0.022, levator labii superioris alaeque nasi 0.016-0.040,
+depressor labii inferioris 0.058-0.082, jaw 0.004; at most 0.18 of the constant guess's RMSE
+except the depressors (0.22-0.38).
 """
 
 import numpy as np
@@ -17,6 +23,15 @@ import pytest
 
 from myoface.analysis.closed_loop import run_closed_loop
 from myoface.model import build_face_model
+
+#: an estimate's RMSE must be below this fraction of a constant guess's (each muscle's mean
+#: truth, whose RMSE is the truth's standard deviation): at least 91% of the variance explained
+BASELINE_FRACTION = 0.3
+
+
+def baseline_rmse(res) -> np.ndarray:
+    """Per muscle, the RMSE of guessing its mean true contraction in every frame."""
+    return res.truth.std(axis=0)
 
 
 @pytest.fixture(scope="module")
@@ -33,12 +48,23 @@ def test_closed_loop_recovers_every_muscle(plain):
         dict(zip(res.ids, res.rmse(), strict=True)),
         dict(zip(res.ids, res.corr(), strict=True)),
     )
+    base = dict(zip(res.ids, baseline_rmse(res), strict=True))
     table = res.table()
     assert rmse["jaw"] < 0.02 and corr["jaw"] > 0.99, table
     for m in res.ids:
-        bound = 0.2 if m.startswith("depressor") else 0.08 if m.startswith("levator") else 0.04
-        assert rmse[m] < bound, table
-        assert corr[m] > 0.85, table
+        if m.startswith("depressor"):
+            # The depressors' signature beyond the jaw's is a sub-pixel change of the lower
+            # lip's outline at 256 x 256, where the tracker's bias (which analysis by synthesis
+            # removes, see below) stays: twice the issue's target RMSE (0.05), and at least
+            # 75% of the variance explained (under half the constant guess's RMSE).
+            assert rmse[m] < 0.1 and rmse[m] < 0.5 * base[m], (m, base[m], table)
+        else:
+            # the issue's target 0.05 for the frontalis and the zygomatics (at most 0.04:
+            # their outlines move by pixels); the levators' by up to 1.6x (their nasolabial
+            # contours are short), and 91% of the variance explained
+            bound = 0.08 if m.startswith("levator") else 0.04
+            assert rmse[m] < bound and rmse[m] < BASELINE_FRACTION * base[m], (m, table)
+        assert corr[m] > 0.9, table  # the issue's target
     # every frame is measured and in range
     assert np.isfinite(res.estimate).all() and res.estimate.min() >= 0 and res.estimate.max() <= 1
 
@@ -56,6 +82,7 @@ def test_analysis_by_synthesis_removes_the_trackers_bias(plain):
     rmse, table = dict(zip(res.ids, res.rmse(), strict=True)), res.table()
     base = dict(zip(plain.ids, plain.rmse(), strict=True))
     assert max(rmse.values()) < 0.07, table
+    assert (res.rmse() < BASELINE_FRACTION * baseline_rmse(res)).all(), table
     assert res.corr().min() > 0.95, table
     for s in "lr":
         m = f"depressor_labii_inferioris_{s}"
@@ -69,22 +96,48 @@ def test_synthesis_is_refused_without_snakes():
         run_closed_loop(build_face_model(), n_frames=2, tracker="oracle", synthesis=True)
 
 
-@pytest.mark.slow
-def test_the_papers_fiducial_scheme_is_still_available():
-    """``estimator="fiducials"``: fiducial points read off the contours (Section V-F). Less
-    accurate than the curve fit (its worst muscles were at RMSE 0.3-0.4 when the curve fit
-    replaced it), but the jaw and the zygomatic majors are recovered (measured when written:
-    jaw RMSE 0.072 with correlation 0.98, zygomatic majors 0.075-0.164 with 0.82-0.89)."""
-    res = run_closed_loop(
+@pytest.fixture(scope="module")
+def fiducials():
+    """``estimator="fiducials"``: fiducial points read off the contours (Section V-F), on the
+    same 16-frame sequence."""
+    return run_closed_loop(
         build_face_model(), n_frames=16, size=256, estimator="fiducials", reseed=False
     )
-    ids = list(res.ids)
-    rmse, corr = res.rmse(), res.corr()
-    j = ids.index("jaw")
-    assert rmse[j] < 0.15 and corr[j] > 0.9, res.table()
+
+
+def _recovered(res, muscle, fraction=0.5, min_corr=0.9):
+    """(ok, message): ``muscle``'s RMSE under ``fraction`` of the constant guess's (0.5: at
+    least 75% of the variance explained) and its correlation above ``min_corr``."""
+    j = list(res.ids).index(muscle)
+    rmse, base, corr = res.rmse()[j], baseline_rmse(res)[j], res.corr()[j]
+    msg = f"{muscle}: rmse {rmse:.3f} (constant guess {base:.3f}), corr {corr:.3f}\n{res.table()}"
+    return rmse < fraction * base and corr > min_corr, msg
+
+
+@pytest.mark.slow
+def test_the_papers_fiducial_scheme_recovers_the_jaw(fiducials):
+    """The paper's scheme is less accurate than the curve fit, and no target is set for it;
+    "recovered" here means at least 75% of the variance explained (RMSE under half a constant
+    guess's) with correlation above 0.9. Measured: jaw RMSE 0.072-0.083 against a constant
+    guess's 0.194 (0.37-0.43 of it), correlation 0.98."""
+    ok, msg = _recovered(fiducials, "jaw")
+    assert ok, msg
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="known defect: the paper's fiducial scheme does not recover the zygomatic majors "
+    "(RMSE 0.17-0.20 on the left, 1.0-1.3x a constant guess's 0.16; 0.075-0.079 on the right, "
+    "0.62-0.65x of 0.12); the curve fit (the default) does",
+)
+def test_the_papers_fiducial_scheme_recovers_the_zygomatic_majors(fiducials):
+    """As for the jaw: each zygomatic major's RMSE under half a constant guess's, correlation
+    above 0.9."""
     for s in "lr":
-        z = ids.index(f"zygomaticus_major_{s}")
-        assert rmse[z] < 0.25 and corr[z] > 0.7, res.table()
+        ok, msg = _recovered(fiducials, f"zygomaticus_major_{s}")
+        assert ok, msg
 
 
 def test_the_estimator_alone_converges_on_true_curves():
