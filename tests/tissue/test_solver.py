@@ -193,7 +193,7 @@ def test_gauss_seidel_preconditioner_is_the_symmetric_sweep(fm):
     pat.assemble(_perturbed(tm, 0.5, seed=4), dvals, lvals)
     dvals[9 * 5 : 9 * 6] *= -1.0  # node 5's block made negative definite
     dused, dinv = np.empty(9 * nf), np.empty(9 * nf)
-    diagonal_blocks(dvals, data.rest_diag, dused, dinv)
+    diagonal_blocks(dvals, data.rest_diag, dused, dinv, np.empty(9 * nf))
     np.testing.assert_array_equal(dused[9 * 5 : 9 * 6], data.rest_diag[9 * 5 : 9 * 6])
     np.testing.assert_array_equal(dused[: 9 * 5], dvals[: 9 * 5])
     d = sp.block_diag(dused.reshape(-1, 3, 3)).toarray()
@@ -303,7 +303,7 @@ def test_pcg_in_eisenstats_form_is_the_preconditioned_cg(fm):
     dvals, lvals = np.empty(9 * nf), np.empty(9 * pat.nl)
     pat.assemble(x, dvals, lvals)
     dused, dinv = np.empty(9 * nf), np.empty(9 * nf)
-    diagonal_blocks(dvals, data.rest_diag, dused, dinv)
+    diagonal_blocks(dvals, data.rest_diag, dused, dinv, np.empty(9 * nf))
     _, b = _free_energy_gradient(tm, x)
     b = -b
     eta = 0.05

@@ -501,11 +501,11 @@ def _chol3(a, o, out):
 
 
 @njit(cache=True, nogil=True)
-def diagonal_blocks(dvals, fallback, dused, dinv):
-    """The diagonal blocks the Gauss-Seidel preconditioner uses, into ``dused`` (F*9,), and
-    their inverses into ``dinv``: the Hessian's ``dvals`` where a block is positive definite,
-    else the rest stiffness's block ``fallback`` (always positive definite), so that the
-    preconditioner is SPD whatever the Hessian."""
+def diagonal_blocks(dvals, fallback, dused, dinv, emat):
+    """The diagonal blocks the Gauss-Seidel preconditioner uses, into ``dused`` (F*9,), their
+    inverses into ``dinv``, and ``emat = 2 dused - dvals`` (for :func:`pcg`): the Hessian's
+    ``dvals`` where a block is positive definite, else the rest stiffness's block ``fallback``
+    (always positive definite), so that the preconditioner is SPD whatever the Hessian."""
     ch = np.empty(9)
     for i in range(dvals.shape[0] // 9):
         o = 9 * i
@@ -514,6 +514,7 @@ def diagonal_blocks(dvals, fallback, dused, dinv):
             _chol3(fallback, o, ch)
         for q in range(9):
             dused[o + q] = src[o + q]
+            emat[o + q] = 2.0 * src[o + q] - dvals[o + q]
         # inverse of L L^T from the inverse of the lower factor L
         i00 = 1.0 / ch[0]
         i11 = 1.0 / ch[4]
@@ -776,154 +777,241 @@ def _build_newton_data(model: TissueModel) -> NewtonData:
 # -------------------------------------------------------------------------------- solver ----
 
 
-class _Newton:
-    """The work arrays and kernels of one Newton solve (one per call: solves share nothing)."""
-
-    def __init__(self, model: TissueModel, data: NewtonData):
-        pat = data.pattern
-        self.data = data
-        self.pat = pat
-        self.free = model.free_index
-        self.nf = pat.n_free
-        n = 3 * self.nf
-        self.dvals = np.empty(9 * self.nf)
-        self.lvals = np.empty(9 * pat.nl)
-        self.dused = np.empty(9 * self.nf)
-        self.dinv = np.empty(9 * self.nf)
-        self.emat = np.empty(9 * self.nf)
-        self.work = np.empty((7, n))
-        self.step = np.empty(n)
-        self.grad = np.empty((self.nf, 3))
-        self.eargs = (
-            *pat.spring_args(),
-            pat.sfi,
-            pat.sfj,
-            *pat.prism_args(),
-        )
-        self.dprism = np.empty(9 * self.nf)
-        self.lprism = np.empty(9 * pat.nl)
-        self.x_prism = None  # where the volume penalty's Hessian was last assembled
-        self.assemblies = 0
-        self.cg = 0
-        self.curved = False
-
-    def energy(self, x, want_grad=True) -> float:
-        """E (less a constant) at x; with ``want_grad`` its gradient into ``self.grad``."""
-        return energy_gradient_free(x, *self.eargs, self.grad, want_grad)
-
-    def assemble(self, x) -> None:
-        """The Hessian at ``x``: the springs' part always, the volume penalty's part (two thirds
-        of the cost) when no node has moved by PRISM_LAG_MM since it was last assembled."""
-        pat = self.pat
-        free = self.free
-        if self.x_prism is None or np.abs(x[free] - self.x_prism).max() > PRISM_LAG_MM:
-            self.dprism[:] = 0.0
-            self.lprism[:] = 0.0
-            add_prism_hessian(
-                x, *pat.prism_args(), pat.epairs, pat.enpairs, self.dprism, self.lprism
-            )
-            self.x_prism = x[free]
-        self.dvals[:] = self.dprism
-        self.lvals[:] = self.lprism
-        add_spring_hessian(
-            x, *pat.spring_args(), pat.sfi, pat.sfj, pat.soff, self.dvals, self.lvals
-        )
-        diagonal_blocks(self.dvals, self.data.rest_diag, self.dused, self.dinv)
-        np.subtract(2.0 * self.dused, self.dvals, out=self.emat)
-        self.assemblies += 1
-
-    def solve(self, b, eta) -> np.ndarray:
-        """An approximate solution of H s = b (H the last assembled Hessian) into ``self.step``."""
-        pat = self.pat
-        k, curved = pcg(
-            pat.lptr,
-            pat.lcol,
-            self.dused,
-            self.lvals,
-            self.dinv,
-            self.emat,
-            b,
-            eta,
-            CG_MAX_ITER,
-            self.step,
-            self.work,
-        )
-        self.cg += k
-        self.curved = bool(curved)
-        return self.step
-
-
 def relax_newton(
     model: TissueModel,
     x: np.ndarray,
     x_kin_start: np.ndarray,
     tol_mm: float,
     max_iter: int,
+    stats: np.ndarray | None = None,
 ) -> tuple[np.ndarray, bool, int, float, int, float]:
     """Newton-CG from ``x`` (N, 3) mm, whose kinematic nodes are already at their targets;
     ``x_kin_start`` (K, 3) is where they were in the start state (the initial guess adds the
     linear response of the free nodes to that move).
 
     Returns (x, converged, Newton iterations, largest node move of the last step in mm,
-    CG iterations in all, largest net internal force on a free node at x in uN). An iteration is one Newton step; the steps that reuse the last
-    Hessian (see :data:`CHORD_RATIO`) count as iterations too.
+    CG iterations in all, largest net internal force on a free node at x in uN). An iteration
+    is one Newton step; the steps that reuse the last Hessian (see :data:`CHORD_RATIO`) count
+    as iterations too. ``stats`` (9,), if given, receives the counts of :func:`_newton`.
     """
     data = newton_data(model)
+    pat = data.pattern
     free = model.free_index
     x = np.array(x, dtype=np.float64, order="C")
     if len(free) == 0:
         return x, True, 0, 0.0, 0, 0.0
-    nw = _Newton(model, data)
 
     # 1. the linear response of the free nodes to the move of the kinematic ones
     dk = (x[model.kinematic_index] - x_kin_start).reshape(-1)
     if np.any(dk):
         x[free] += data.precond.solve(-(data.coupling @ dk)).reshape(-1, 3)
 
-    energy = nw.energy(x)
-    g = nw.grad.reshape(-1).copy()
-    gnorm_prev = float(np.sqrt(g @ g))
-    eta = ETA_MAX
+    # 2. Newton steps (one compiled loop: no Python between the kernels)
+    out = np.zeros(9) if stats is None else stats
+    params = np.array(
+        [
+            ETA_MAX,
+            ETA_MIN,
+            CHORD_RATIO,
+            CHORD_RATE,
+            PRISM_LAG_MM,
+            ARMIJO_C,
+            ENERGY_ROUNDOFF,
+            CG_MAX_ITER,
+        ],
+        dtype=np.float64,
+    )
+    _newton(
+        x,
+        free,
+        *pat.spring_args(),
+        pat.sfi,
+        pat.sfj,
+        pat.soff,
+        *pat.prism_args(),
+        pat.epairs,
+        pat.enpairs,
+        pat.lptr,
+        pat.lcol,
+        data.rest_diag,
+        float(tol_mm),
+        int(max_iter),
+        params,
+        out,
+    )
+    it, ok, move, cg = int(out[0]), bool(out[1]), float(out[2]), int(out[3])
+    if out[7] < 0:
+        raise MyofaceSimulationError(f"newton relax: non-finite energy or forces at iteration {it}")
+    return x, ok, it, move, cg, float(out[8])
+
+
+@njit(cache=True, nogil=True)
+def _newton(
+    x,
+    free,
+    si,
+    sj,
+    rest,
+    alpha,
+    beta,
+    ec,
+    law,
+    sfi,
+    sfj,
+    soff,
+    elems,
+    efree,
+    rest_vol,
+    kv,
+    vsign,
+    epairs,
+    enpairs,
+    lptr,
+    lcol,
+    rest_diag,
+    tol,
+    max_iter,
+    params,
+    stats,
+):
+    """The Newton iterations of :func:`relax_newton` on ``x`` (N, 3) mm, in place (see the
+    module docstring). ``params``: [ETA_MAX, ETA_MIN, CHORD_RATIO, CHORD_RATE, PRISM_LAG_MM,
+    ARMIJO_C, ENERGY_ROUNDOFF, CG_MAX_ITER]. ``stats`` (9,) receives [iterations, converged,
+    last move (mm), CG iterations, Hessian assemblies, of which with the prisms' part, energy
+    evaluations, status (-1: non-finite energy or forces), largest force on a free node (uN)]."""
+    eta_max = params[0]
+    eta_min = params[1]
+    chord_ratio = params[2]
+    chord_rate = params[3]
+    prism_lag = params[4]
+    armijo_c = params[5]
+    roundoff = params[6]
+    cg_max = int(params[7])
+    nf = free.shape[0]
+    n = 3 * nf
+    nl = lcol.shape[0]
+    dvals = np.empty(9 * nf)
+    lvals = np.empty(9 * nl)
+    dprism = np.zeros(9 * nf)
+    lprism = np.zeros(9 * nl)
+    dused = np.empty(9 * nf)
+    dinv = np.empty(9 * nf)
+    emat = np.empty(9 * nf)
+    work = np.empty((7, n))
+    step = np.empty(n)
+    rhs = np.empty(n)
+    grad = np.empty((nf, 3))
+    g = np.empty(n)
+    xn = np.empty_like(x)
+    x_prism = np.empty_like(x)
+    have_prism = False
+    energy = energy_gradient_free(
+        x,
+        si,
+        sj,
+        rest,
+        alpha,
+        beta,
+        ec,
+        law,
+        sfi,
+        sfj,
+        elems,
+        efree,
+        rest_vol,
+        kv,
+        vsign,
+        grad,
+        True,
+    )
+    _flatten(grad, g)
+    gnorm_prev = np.sqrt(g @ g)
+    eta = eta_max
     move = np.inf
     t = 1.0
     rate = 1.0  # the last full step's gradient reduction, |g_new| / |g_old|
-    for it in range(1, max_iter + 1):
+    cg = 0
+    n_asm = 0
+    n_prism = 0
+    n_energy = 1
+    converged = False
+    it = 0
+    while it < max_iter:
+        it += 1
         if not (np.isfinite(energy) and np.isfinite(gnorm_prev)):
-            raise MyofaceSimulationError(
-                f"newton relax: non-finite energy or forces at iteration {it}"
-            )
-        # 2. the Newton system, solved to a relative accuracy eta; close to the equilibrium (the
+            stats[7] = -1.0
+            break
+        # the Newton system, solved to a relative accuracy eta; close to the equilibrium (the
         # last full step was short and cut the gradient as a Newton step does where the Hessian
         # hardly changes) the Hessian of the last step is kept: a step with it is nearly a
         # Newton step, and most often the last one
-        chord = it > 1 and t == 1.0 and move < CHORD_RATIO * tol_mm and rate < CHORD_RATE
+        chord = it > 1 and t == 1.0 and move < chord_ratio * tol and rate < chord_rate
         if not chord:
-            nw.assemble(x)
-        eta_k = ETA_MIN if chord else eta
-        step = nw.solve(-g, eta_k)
-        slope = float(g @ step)
+            if not have_prism or _largest_move(x, free, x_prism) > prism_lag:
+                dprism[:] = 0.0
+                lprism[:] = 0.0
+                add_prism_hessian(
+                    x, elems, efree, rest_vol, kv, vsign, epairs, enpairs, dprism, lprism
+                )
+                x_prism[:, :] = x
+                have_prism = True
+                n_prism += 1
+            dvals[:] = dprism
+            lvals[:] = lprism
+            add_spring_hessian(x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff, dvals, lvals)
+            diagonal_blocks(dvals, rest_diag, dused, dinv, emat)
+            n_asm += 1
+        for i in range(n):
+            rhs[i] = -g[i]
+        eta_k = eta_min if chord else eta
+        k, curved = pcg(lptr, lcol, dused, lvals, dinv, emat, rhs, eta_k, cg_max, step, work)
+        cg += k
+        slope = g @ step
         if not slope < 0.0:  # cannot happen with an SPD preconditioner, unless g is ~0
-            return x, True, it, 0.0, nw.cg, _max_force(g)
-        move = float(np.abs(step).max())
-        # 3. line search: Armijo backtracking with a safeguarded quadratic step
+            move = 0.0
+            converged = True
+            break
+        move = np.abs(step).max()
+        # line search: Armijo backtracking with a safeguarded quadratic step
         t = 1.0
-        small = -slope <= ENERGY_ROUNDOFF * max(abs(energy), 1.0)
+        small = -slope <= roundoff * max(abs(energy), 1.0)
         while True:
-            xn = x.copy()
-            xn[free] += (t * step).reshape(-1, 3)
-            en = nw.energy(xn)
-            if small or en <= energy + ARMIJO_C * t * slope or t < 1e-4:
+            _moved(x, free, step, t, xn)
+            en = energy_gradient_free(
+                xn,
+                si,
+                sj,
+                rest,
+                alpha,
+                beta,
+                ec,
+                law,
+                sfi,
+                sfj,
+                elems,
+                efree,
+                rest_vol,
+                kv,
+                vsign,
+                grad,
+                True,
+            )
+            n_energy += 1
+            if small or en <= energy + armijo_c * t * slope or t < 1e-4:
                 break
             curv = en - energy - slope * t
             tq = -slope * t * t / (2.0 * curv) if curv > 0 else 0.5 * t
             t = min(max(tq, 0.1 * t), 0.5 * t)
-        x, energy = xn, en
-        g = nw.grad.reshape(-1).copy()
+        x[:, :] = xn
+        energy = en
+        _flatten(grad, g)
         # the step (to a relative accuracy of ETA_MAX or better, not cut short by negative
         # curvature) estimates the distance left
-        if move < tol_mm and not nw.curved:
-            return x, True, it, move * t, nw.cg, _max_force(g)
-        gnorm = float(np.sqrt(g @ g))
+        if move < tol and curved == 0:
+            move *= t
+            converged = True
+            break
+        gnorm = np.sqrt(g @ g)
         if chord:
             move = np.inf  # the kept Hessian did not finish: assemble a new one next
         else:
@@ -932,11 +1020,44 @@ def relax_newton(
         eta_new = 0.9 * (gnorm / gnorm_prev) ** 2
         if 0.9 * eta * eta > 0.1:
             eta_new = max(eta_new, 0.9 * eta * eta)
-        eta = min(max(eta_new, ETA_MIN), ETA_MAX)
+        eta = min(max(eta_new, eta_min), eta_max)
         gnorm_prev = gnorm
-    return x, False, max_iter, move, nw.cg, _max_force(g)
+    stats[0] = it
+    stats[1] = 1.0 if converged else 0.0
+    stats[2] = move
+    stats[3] = cg
+    stats[4] = n_asm
+    stats[5] = n_prism
+    stats[6] = n_energy
+    stats[8] = np.abs(g).max() if n > 0 else 0.0
 
 
-def _max_force(g: np.ndarray) -> float:
-    """The largest net internal force (uN) on a free node: the gradient is minus the force."""
-    return float(np.abs(g).max()) if len(g) else 0.0
+@njit(cache=True, nogil=True)
+def _flatten(a, out):
+    """``out`` (3F,) = ``a`` (F, 3)."""
+    for i in range(a.shape[0]):
+        out[3 * i] = a[i, 0]
+        out[3 * i + 1] = a[i, 1]
+        out[3 * i + 2] = a[i, 2]
+
+
+@njit(cache=True, nogil=True)
+def _moved(x, free, step, t, out):
+    """``out`` = ``x`` (N, 3) with the free nodes moved by ``t * step`` ((3F,), free order)."""
+    out[:, :] = x
+    for a in range(free.shape[0]):
+        i = free[a]
+        out[i, 0] += t * step[3 * a]
+        out[i, 1] += t * step[3 * a + 1]
+        out[i, 2] += t * step[3 * a + 2]
+
+
+@njit(cache=True, nogil=True)
+def _largest_move(x, free, x0):
+    """The largest coordinate change of a free node between ``x0`` and ``x`` (N, 3), mm."""
+    m = 0.0
+    for a in range(free.shape[0]):
+        i = free[a]
+        for c in range(3):
+            m = max(m, abs(x[i, c] - x0[i, c]))
+    return m
