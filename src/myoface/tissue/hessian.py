@@ -704,27 +704,27 @@ def add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, epairs, enpairs, dva
     on the diagonal)."""
     gr = np.empty((6, 3))
     wv = np.empty((15, 3))
+    pts = np.empty((6, 3))
     for q in range(elems.shape[0]):
         el = elems[q]
-        for a in range(6):
+        for a in range(6):  # the prism's nodes, loaded once
+            pts[a, 0] = x[el[a], 0]
+            pts[a, 1] = x[el[a], 1]
+            pts[a, 2] = x[el[a], 2]
             gr[a, 0] = 0.0
             gr[a, 1] = 0.0
             gr[a, 2] = 0.0
         vol = 0.0
         for t in range(3):  # tetrahedron t: prism nodes t .. t+3 (PRISM_TETS)
-            i0 = el[t]
-            i1 = el[t + 1]
-            i2 = el[t + 2]
-            i3 = el[t + 3]
-            ax = x[i1, 0] - x[i0, 0]
-            ay = x[i1, 1] - x[i0, 1]
-            az = x[i1, 2] - x[i0, 2]
-            bx = x[i2, 0] - x[i0, 0]
-            by = x[i2, 1] - x[i0, 1]
-            bz = x[i2, 2] - x[i0, 2]
-            cx = x[i3, 0] - x[i0, 0]
-            cy = x[i3, 1] - x[i0, 1]
-            cz = x[i3, 2] - x[i0, 2]
+            ax = pts[t + 1, 0] - pts[t, 0]
+            ay = pts[t + 1, 1] - pts[t, 1]
+            az = pts[t + 1, 2] - pts[t, 2]
+            bx = pts[t + 2, 0] - pts[t, 0]
+            by = pts[t + 2, 1] - pts[t, 1]
+            bz = pts[t + 2, 2] - pts[t, 2]
+            cx = pts[t + 3, 0] - pts[t, 0]
+            cy = pts[t + 3, 1] - pts[t, 1]
+            cz = pts[t + 3, 2] - pts[t, 2]
             g1x = by * cz - bz * cy
             g1y = bz * cx - bx * cz
             g1z = bx * cy - by * cx
@@ -768,11 +768,11 @@ def add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, epairs, enpairs, dva
         for r in range(18):
             p = PRISM_SKEW_NB[r, 0]
             sg = PRISM_SKEW_NB[r, 1]
-            ik = el[PRISM_SKEW_NB[r, 2]]
-            il = el[PRISM_SKEW_NB[r, 3]]
-            wv[p, 0] += sg * (x[ik, 0] - x[il, 0])
-            wv[p, 1] += sg * (x[ik, 1] - x[il, 1])
-            wv[p, 2] += sg * (x[ik, 2] - x[il, 2])
+            ik = PRISM_SKEW_NB[r, 2]
+            il = PRISM_SKEW_NB[r, 3]
+            wv[p, 0] += sg * (pts[ik, 0] - pts[il, 0])
+            wv[p, 1] += sg * (pts[ik, 1] - pts[il, 1])
+            wv[p, 2] += sg * (pts[ik, 2] - pts[il, 2])
         w2 = 2.0 * kv[q] * dv * vsign / 6.0
         ep = epairs[q]
         for k in range(enpairs[q]):
