@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from myoface.commands._common import add_face_argument, load_model
+from myoface.commands._common import MAX_REFINE, add_face_argument, integer, load_model, number
 from myoface.errors import MyofaceValueError
 
 NAME = "analyze"
@@ -55,17 +55,17 @@ def add_arguments(p):
     )
     p.add_argument(
         "--calibration-frame",
-        type=int,
+        type=integer(0),
         default=None,
         metavar="N",
         help="the neutral frame to calibrate on; analysis starts there (default: 0; for the "
         "landmarks' 3-D fit the most neutral frame of the first 2 s, and every frame is "
         "analysed); with --init, the contours are on this frame",
     )
-    p.add_argument("--max-frames", type=int, help="analyse at most this many frames")
+    p.add_argument("--max-frames", type=integer(1), help="analyse at most this many frames")
     p.add_argument(
         "--sigma",
-        type=float,
+        type=number(0.0, 100.0, lo_open=True, unit=" px"),
         default=None,
         help="potential smoothing, px (default: 1.2 mm on the face, from its size in the frame)",
     )
@@ -82,8 +82,8 @@ def add_arguments(p):
     )
     p.add_argument(
         "--refine",
-        type=int,
-        help="Gauss-Newton corrections per frame through the model "
+        type=integer(0, MAX_REFINE),
+        help="Gauss-Newton corrections per frame through the model, 0-10 "
         "(default 1 for snakes and the 3-D fit, 0 for landmarks --estimator paper)",
     )
     p.add_argument("--quiet", action="store_true")
@@ -91,11 +91,16 @@ def add_arguments(p):
 
 
 def run(args) -> int:
+    from myoface._io import check_output_dir, check_output_path
     from myoface.analysis.outputs import analyze_to_folder, draw_contours
     from myoface.analysis.pipeline import load_init
     from myoface.analysis.video import open_video
     from myoface.render import write_image
 
+    if args.check_init:
+        check_output_path(args.check_init, "--check-init")
+    elif args.output:
+        check_output_dir(args.output, "-o")
     video = open_video(args.video)
     if args.check_init:
         if not args.init:
@@ -109,6 +114,10 @@ def run(args) -> int:
         return 0
     if not args.output:
         raise MyofaceValueError("give an output folder with -o")
+    if args.init and args.tracker == "landmarks":
+        raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
+    if args.init:
+        load_init(args.init)  # a bad file fails before the model is built
     fm = load_model(args)
     # the library function myoface batch runs for each video
     res = analyze_to_folder(
