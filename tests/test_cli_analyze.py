@@ -116,14 +116,15 @@ def test_analyze_then_resynth(smile_video, tmp_path, capsys):
         assert np.abs(ov - fr).mean(axis=2)[~marks].mean() < CODEC_MAD_LEVELS, k
         if SMILE[k] == 0:  # neutral: the contours are the initial ones, relaxed onto the edges
             yx = np.argwhere(marks)[:, ::-1]
-            # within 3 px of them: the snakes settle within ~1 px of the make-up's edges, are
-            # drawn at the nearest pixel (0.7 px) and the colour bleeds 1 px (4:2:0)
+            # within 4 px of them: the snakes settle on the make-up's edges within ~1.5 px of
+            # the projected model curves they start on, are drawn at the nearest pixel
+            # (0.7 px), and the colour bleeds into the next 2 x 2 colour sample (1.4 px)
             d = tree.query(yx)[0]
-            assert np.quantile(d, 0.99) < 3.0, (k, np.quantile(d, 0.99))
+            assert np.quantile(d, 0.99) < 4.0, (k, np.quantile(d, 0.99))
             marked = cKDTree(yx)
             for name, pts in dense.items():
                 if name != "nose":  # drawn over the nostrils' shadow, where yellow is faint
-                    covered = (marked.query(pts)[0] < 3.0).mean()
+                    covered = (marked.query(pts)[0] < 4.0).mean()
                     assert covered > 0.9, (k, name, covered)
     # the contours are drawn on every frame, in yellow (every frame was measured)
     assert min(n_marks) > 0.8 * n_marks[0], n_marks

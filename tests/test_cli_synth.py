@@ -49,6 +49,22 @@ def _box(model, size, *groups, pad=1.0):
     return slice(int(y0), int(y1) + 1), slice(int(x0), int(x1) + 1)
 
 
+def _codec_mad(img, tmp_path) -> float:
+    """What H.264 (the writer's settings) alone changes ``img`` by, on average: the tolerance of
+    a video frame against its direct render is this plus a level (rounding of the rest state's
+    shading). Small faces have more edge per pixel, so it grows as the size shrinks."""
+    import imageio.v3 as iio
+
+    from myoface.render import VideoWriter
+
+    path = tmp_path / f"codec_{img.shape[0]}.mp4"
+    with VideoWriter(path, fps=10) as vw:
+        for _ in range(3):
+            vw.write(img.astype(np.uint8))
+    coded = iio.imread(path, plugin="pyav").astype(int)
+    return float(np.abs(coded - img.astype(int)).mean(axis=(1, 2, 3)).max())
+
+
 def _background_rows(height):
     """The renderer's background: a vertical gradient between two linear colours, in sRGB."""
     from myoface.render import to_srgb8
@@ -108,7 +124,8 @@ def test_synth_video_expression_and_timeline(model, tmp_path, capsys):
     neutral = _neutral(model, 64).astype(int)
     mad = np.abs(frames - neutral).mean(axis=(1, 2, 3))
     # at rest before and after the event: the neutral face, within the codec's tolerance
-    assert mad[0] < CODEC_MAD_LEVELS and mad[-1] < CODEC_MAD_LEVELS, mad
+    tol = _codec_mad(neutral, tmp_path) + 1
+    assert mad[0] < tol and mad[-1] < tol, (mad, tol)
     # at the apex (t = 0.5 s, in the hold) the brows rise and the jaw drops: around them the
     # frame differs from the neutral face by more than twice what the codec changes there
     apex = len(frames) // 2
@@ -126,7 +143,8 @@ def test_synth_video_expression_and_timeline(model, tmp_path, capsys):
     assert frames.shape == (int(round(load_timeline(talk).duration * 5)) + 1, 48, 48, 3)
     neutral = _neutral(model, 48).astype(int)
     # nothing happens before the first event (0.2 s): the neutral face
-    assert np.abs(frames[0] - neutral).mean() < CODEC_MAD_LEVELS
+    tol = _codec_mad(neutral, tmp_path) + 1
+    assert np.abs(frames[0] - neutral).mean() < tol, tol
     # then the mouth speaks: around the lips, some frame differs from the neutral face by more
     # than twice what the codec changes there in the first
     rows, cols = _box(model, 48, "lip_upper_outer", "lip_lower_outer")
