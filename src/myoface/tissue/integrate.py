@@ -339,7 +339,19 @@ def relax(
     x_kin_start = x[model.kinematic_index].copy()
     x[model.kinematic_index] = tg
     if method == "newton":
-        x, ok, it, res, _, fmax = relax_newton(model, x, x_kin_start, tol_mm, max_iter or 50)
+        x0 = x
+        try:
+            x, ok, it, res, _, fmax = relax_newton(model, x0, x_kin_start, tol_mm, max_iter or 50)
+        except MyofaceSimulationError:
+            ok = False
+        if not ok and not np.array_equal(x_kin_start, model.rest_positions[model.kinematic_index]):
+            # a warm start far from the new targets (a jump between distant expressions) can
+            # leave Newton's basin; the linear response from rest is a start that always works
+            x = model.rest_positions.copy()
+            x[model.kinematic_index] = tg
+            x, ok, it, res, _, fmax = relax_newton(
+                model, x, model.rest_positions[model.kinematic_index], tol_mm, max_iter or 50
+            )
         out = TissueState(x, np.zeros_like(x), state.t)
     elif method == "lbfgs":
         x, ok, it, res = _relax_lbfgs(model, x, tol_mm, max_iter or 300)
