@@ -340,11 +340,14 @@ def relax(
     x[model.kinematic_index] = tg
     if method == "newton":
         x0 = x
+        from_rest = np.array_equal(x_kin_start, model.rest_positions[model.kinematic_index])
         try:
             x, ok, it, res, _, fmax = relax_newton(model, x0, x_kin_start, tol_mm, max_iter or 50)
         except MyofaceSimulationError:
+            if from_rest:  # nothing to fall back on
+                raise
             ok = False
-        if not ok and not np.array_equal(x_kin_start, model.rest_positions[model.kinematic_index]):
+        if not ok and not from_rest:
             # a warm start far from the new targets (a jump between distant expressions) can
             # leave Newton's basin; the linear response from rest is a start that always works
             x = model.rest_positions.copy()
