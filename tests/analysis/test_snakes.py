@@ -250,6 +250,14 @@ def test_a_windowed_field_equals_the_whole_images_potentials(methods):
         assert f.full_layer(0).shape == (96, 96)
     with pytest.raises(MyofaceValueError, match="outside"):
         potential_field(img, 1.5, ("gaussian",), (200, 200, 300, 300))
+    # a layer computed only in a smaller window: the whole image's values there, 0 elsewhere
+    line = image_potential(img, sigma=1.5, method="line")
+    f = potential_field(img, 1.5, ("gaussian", "line"), (10, 10, 90, 90), [None, (40, 30, 70, 60)])
+    assert f.layer_boxes == (None, (40, 30, 70, 60))
+    np.testing.assert_allclose(f.potential[1][21:50, 31:60], line[31:60, 41:70], atol=1e-9)
+    assert (f.potential[1][:19] == 0).all() and (f.gx[1][:, :29] == 0).all()
+    inside = np.array([[50.0, 40.0], [60.0, 50.0]])
+    assert f.covers(inside, 2, layer=1) and not f.covers(inside + 15, 2, layer=1)
 
 
 def test_a_contour_leaving_the_image_is_held_on_its_border_and_lost():

@@ -20,49 +20,92 @@ import numpy as np
 from numba import njit
 
 from myoface.analysis.estimate import RIDGE, skin_response
-from myoface.errors import MyofaceValueError
+from myoface.errors import MyofaceSimulationError, MyofaceValueError
 
 #: closest-point / least-squares rounds per estimate (the feet move little after two)
 ICP_ROUNDS = 3
 #: a residual beyond this (mm) is down-weighted (Huber), so that a snake that lost part of its
 #: feature pulls the fit less
 HUBER_MM = 0.75
+#: ``estimate(deferred=True)`` relaxes the tissue on the worker thread only when the estimate is
+#: within this (contraction, every muscle) of the last relaxed point; a larger step is
+#: corrected through the tissue at once. The lag costs accuracy where the tissue stiffens:
+#: measured on ramps (tests/analysis/test_curvefit.py), errors up to 0.03 at 0.07 per frame
+#: and 0.08 at 0.15 per frame (0.01 relaxing at once); on the sample video the less
+#: determined muscles (depressor, levator) jump by 0.1-0.2 between frames, so a smaller
+#: threshold would relax on the main thread on most frames
+DEFER_STEP = 0.25
 #: a round through the tissue is skipped when the estimate is within this (contraction, every
 #: muscle) of the contractions the tissue was last relaxed at: the model linearised there (a
 #: secant Jacobian, kept from frame to frame) is then exact to about 1e-3 mm
 RELAX_STEP = 0.02
 
 
-@njit(cache=True)
-def _closest_kernel(p, q, closed, foot, seg, t, normal, at_end):
-    n, m = p.shape[0], q.shape[0]
+@njit(cache=True, nogil=True, inline="always")
+def _closest_one(px, py, q, lo, hi, closed):
+    """The segment (index into ``q``) and parameter of the point of polyline ``q[lo:hi]``
+    nearest to (px, py)."""
+    m = hi - lo
     ns = m if closed else m - 1
-    for i in range(n):
-        best = np.inf
-        bk = 0
-        bt = 0.0
-        for k in range(ns):
-            k1 = k + 1 if k + 1 < m else 0
-            ax, ay = q[k, 0], q[k, 1]
-            bx, by = q[k1, 0] - ax, q[k1, 1] - ay
-            l2 = max(bx * bx + by * by, 1e-18)
-            tk = ((p[i, 0] - ax) * bx + (p[i, 1] - ay) * by) / l2
-            tk = min(max(tk, 0.0), 1.0)
-            dx = p[i, 0] - (ax + tk * bx)
-            dy = p[i, 1] - (ay + tk * by)
-            d2 = dx * dx + dy * dy
-            if d2 < best:
-                best, bk, bt = d2, k, tk
-        k1 = bk + 1 if bk + 1 < m else 0
-        bx, by = q[k1, 0] - q[bk, 0], q[k1, 1] - q[bk, 1]
-        ln = np.sqrt(max(bx * bx + by * by, 1e-18))
-        foot[i, 0] = q[bk, 0] + bt * bx
-        foot[i, 1] = q[bk, 1] + bt * by
-        seg[i] = bk
-        t[i] = bt
-        normal[i, 0] = -by / ln
-        normal[i, 1] = bx / ln
-        at_end[i] = (not closed) and ((bk == 0 and bt <= 0.0) or (bk == ns - 1 and bt >= 1.0))
+    best = np.inf
+    bk = 0
+    bt = 0.0
+    for k in range(ns):
+        k1 = k + 1 if k + 1 < m else 0
+        ax, ay = q[lo + k, 0], q[lo + k, 1]
+        bx, by = q[lo + k1, 0] - ax, q[lo + k1, 1] - ay
+        l2 = max(bx * bx + by * by, 1e-18)
+        tk = ((px - ax) * bx + (py - ay) * by) / l2
+        tk = min(max(tk, 0.0), 1.0)
+        dx = px - (ax + tk * bx)
+        dy = py - (ay + tk * by)
+        d2 = dx * dx + dy * dy
+        if d2 < best:
+            best, bk, bt = d2, k, tk
+    return bk, bt
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _foot(q, lo, hi, closed, bk, bt):
+    """The foot, the unit normal and whether it is an open polyline's end."""
+    m = hi - lo
+    ns = m if closed else m - 1
+    k1 = bk + 1 if bk + 1 < m else 0
+    bx, by = q[lo + k1, 0] - q[lo + bk, 0], q[lo + k1, 1] - q[lo + bk, 1]
+    ln = np.sqrt(max(bx * bx + by * by, 1e-18))
+    fx = q[lo + bk, 0] + bt * bx
+    fy = q[lo + bk, 1] + bt * by
+    end = (not closed) and ((bk == 0 and bt <= 0.0) or (bk == ns - 1 and bt >= 1.0))
+    return fx, fy, -by / ln, bx / ln, end
+
+
+@njit(cache=True, nogil=True)
+def _closest_kernel(p, q, closed, foot, seg, t, normal, at_end):
+    for i in range(p.shape[0]):
+        bk, bt = _closest_one(p[i, 0], p[i, 1], q, 0, q.shape[0], closed)
+        fx, fy, nx, ny, end = _foot(q, 0, q.shape[0], closed, bk, bt)
+        foot[i, 0], foot[i, 1] = fx, fy
+        normal[i, 0], normal[i, 1] = nx, ny
+        seg[i], t[i], at_end[i] = bk, bt, end
+
+
+@njit(cache=True, nogil=True)
+def _signed_distances(p, sec, q, off, closed, present, normal, dist, at_end):
+    """For each point ``p[i]`` of section ``sec[i]``: the normal of that section's polyline
+    ``q[off[s]:off[s + 1]]`` at the nearest point, the signed distance to it along the normal,
+    and whether it is an open end (sections not ``present``: at_end True, 0 elsewhere)."""
+    for i in range(p.shape[0]):
+        s = sec[i]
+        if not present[s]:
+            normal[i, 0] = normal[i, 1] = dist[i] = 0.0
+            at_end[i] = True
+            continue
+        lo, hi = off[s], off[s + 1]
+        bk, bt = _closest_one(p[i, 0], p[i, 1], q, lo, hi, closed[s])
+        fx, fy, nx, ny, end = _foot(q, lo, hi, closed[s], bk, bt)
+        normal[i, 0], normal[i, 1] = nx, ny
+        dist[i] = (fx - p[i, 0]) * nx + (fy - p[i, 1]) * ny
+        at_end[i] = end
 
 
 def closest_on_polyline(p: np.ndarray, q: np.ndarray, closed: bool):
@@ -115,16 +158,34 @@ def bounded_least_squares(a: np.ndarray, b: np.ndarray, lo, hi, ridge: float = 0
     ``b`` (N,); ``lo <= 0 <= hi``): the primal active-set method on the normal equations
     (Nocedal & Wright 2006, Algorithm 16.3), exact after finitely many steps. For the few
     unknowns here (K ~ 13) it takes microseconds where scipy's BVLS takes milliseconds; the
-    tests hold it against ``scipy.optimize.lsq_linear``."""
+    tests hold it against ``scipy.optimize.lsq_linear``, which it falls back to should the
+    normal equations be too ill-conditioned for it (a non-finite result)."""
     a = np.asarray(a, dtype=np.float64)
-    h = a.T @ a + ridge * np.eye(a.shape[1])
-    g = a.T @ np.asarray(b, dtype=np.float64)
-    lo = np.ascontiguousarray(np.broadcast_to(np.asarray(lo, dtype=np.float64), g.shape))
-    hi = np.ascontiguousarray(np.broadcast_to(np.asarray(hi, dtype=np.float64), g.shape))
-    return _box_qp(np.ascontiguousarray(h), g, lo, hi)
+    b = np.asarray(b, dtype=np.float64)
+    k = a.shape[1]
+    h = a.T @ a + ridge * np.eye(k)
+    g = a.T @ b
+    lo = np.broadcast_to(np.asarray(lo, dtype=np.float64), g.shape)
+    hi = np.broadcast_to(np.asarray(hi, dtype=np.float64), g.shape)
+    # Jacobi scaling (x = s y): unknowns whose columns differ in size by orders of magnitude
+    # condition the normal equations no worse than their correlation does
+    s = 1.0 / np.sqrt(np.maximum(np.diag(h), 1e-300))
+    y = _box_qp(
+        np.ascontiguousarray(h * np.outer(s, s)),
+        g * s,
+        np.ascontiguousarray(lo / s),
+        np.ascontiguousarray(hi / s),
+    )
+    x = np.clip(y * s, lo, hi)
+    if not np.isfinite(x).all():
+        from scipy.optimize import lsq_linear
+
+        aug = np.vstack([a, np.sqrt(ridge) * np.eye(k)])
+        x = lsq_linear(aug, np.concatenate([b, np.zeros(k)]), (lo, hi), method="bvls").x
+    return x
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cholesky_solve(a, b):
     """Solve a x = b for a small symmetric positive definite ``a`` (in place of ``a``)."""
     n = a.shape[0]
@@ -151,7 +212,7 @@ def _cholesky_solve(a, b):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _box_qp(h, g, lo, hi):
     """Minimise 0.5 x'Hx - g'x on lo <= x <= hi (H symmetric positive definite)."""
     k = g.shape[0]
@@ -250,6 +311,11 @@ class CurveEstimator:
         #: the model linearised where the tissue was last relaxed: (contractions, the attached
         #: nodes predicted there (N, 2) px, secant Jacobian (N, 2, K) px per contraction)
         self.linearisation = None
+        self.warm = True
+        self._worker = None  # a thread for deferred relaxes (estimate(deferred=True))
+        self._pending = None  # the relax under way on it
+        #: {section: RMS distance (mm) across it from the model's curve} of the last estimate
+        self.last_residuals = {}
 
     def calibrate(self, curves: dict, matrix: np.ndarray, offset: np.ndarray) -> None:
         """Attach the nodes of the calibration frame's ``curves`` ({name: (N, 2) px}) to the
@@ -287,13 +353,16 @@ class CurveEstimator:
         self.p0 = np.concatenate(p0)
         self.jac = np.concatenate(jac)  # (N, 2, K) px per unit contraction
         self.ia, self.ib, self.ta = np.concatenate(ia), np.concatenate(ib), np.concatenate(ta)
-        self.section_of = np.concatenate(sec)
+        self.section_of = np.concatenate(sec).astype(np.int64)
         self.node_weight = np.concatenate(w)
+        self._closed = np.array([self.sections[n][1] for n in self.names], dtype=np.bool_)
+        self._column_norms = np.linalg.norm(self.jac, axis=(0, 1)) + 1e-9
         self.linearisation = (np.zeros(len(self.ids)), self.p0.copy(), self.jac.copy())
 
     def predict(self, c) -> np.ndarray:
         """The attached nodes (N, 2) px for contractions ``c`` by the model linearised where
         the tissue was last relaxed (no relax)."""
+        self._collect()
         c_r, p_r, jac = self.linearisation
         return p_r + jac @ (np.asarray(c, dtype=np.float64) - c_r)
 
@@ -308,19 +377,30 @@ class CurveEstimator:
         distance n . (foot - pred) in mm from ``pred`` (the nodes, (N, 2) px) along it, and the
         weight (0 where a contour is missing or the node is past an open contour's end)."""
         n = len(pred)
+        qs, off, present = [], [0], np.zeros(len(self.names), dtype=np.bool_)
+        for s, name in enumerate(self.names):
+            cur = curves.get(name)
+            if cur is not None and len(cur) >= 2 and np.isfinite(cur).all():
+                qs.append(np.asarray(cur, dtype=np.float64))
+                present[s] = True
+            off.append(off[-1] + (len(qs[-1]) if present[s] else 0))
         normal = np.zeros((n, 2))
         res = np.zeros(n)
-        w = np.zeros(n)
-        for s, name in enumerate(self.names):
-            m = self.section_of == s
-            cur = curves.get(name)
-            if cur is None or not np.isfinite(cur).all():
-                continue
-            _, closed = self.sections[name]
-            foot, _, _, nrm, at_end = closest_on_polyline(pred[m], cur, closed)
-            normal[m] = nrm
-            res[m] = ((foot - pred[m]) * nrm).sum(1) * self.mm_per_px
-            w[m] = np.where(at_end, 0.0, self.node_weight[m])
+        at_end = np.ones(n, dtype=np.bool_)
+        if qs:
+            _signed_distances(
+                np.ascontiguousarray(pred, dtype=np.float64),
+                self.section_of,
+                np.ascontiguousarray(np.concatenate(qs)),
+                np.asarray(off, dtype=np.int64),
+                self._closed,
+                present,
+                normal,
+                res,
+                at_end,
+            )
+        res *= self.mm_per_px
+        w = np.where(at_end, 0.0, self.node_weight)
         return normal, res, w
 
     def _solve(self, normal, res, w, lo, hi, jac=None):
@@ -331,7 +411,9 @@ class CurveEstimator:
         sw = np.sqrt(w * hub)
         return bounded_least_squares(a * sw[:, None], res * sw, lo, hi, RIDGE)
 
-    def estimate(self, curves: dict, refine: int = 0) -> np.ndarray:
+    def estimate(
+        self, curves: dict, refine: int = 0, deferred: bool = False, rounds: int = ICP_ROUNDS
+    ) -> np.ndarray:
         """Contractions (K,) from the tracked ``curves`` ({name: (N, 2)} px, in the calibration
         frame's coordinates: the head's motion removed).
 
@@ -340,19 +422,38 @@ class CurveEstimator:
         ``refine`` rounds through the tissue follow (one relax each, and Broyden's update of
         the Jacobian along the step, Nocedal & Wright 2006, eq. 11.27, so that the stiffening
         tissue's smaller response is not overshot again); a round is skipped once the
-        estimate is within :data:`RELAX_STEP` of where the tissue was relaxed."""
+        estimate is within :data:`RELAX_STEP` of where the tissue was relaxed.
+
+        ``deferred=True`` (a video, frame after frame): when the estimate is within
+        :data:`DEFER_STEP` of where the tissue was last relaxed, it is the fit of the model
+        linearised there, and the tissue is relaxed at it (when ``refine`` > 0 and it moved
+        by more than :data:`RELAX_STEP`) on a second thread while the caller goes on tracking
+        the next frame; the next call starts from there. A larger step is refined at once. The
+        relax is awaited before anything that needs it, so the results do not depend on
+        timing. ``rounds``: closest-point / least-squares rounds of the linear fit."""
         if self.p0 is None:
             raise MyofaceValueError("calibrate() first")
+        self._collect()
         k = len(self.ids)
+        if not self.warm:
+            self.linearisation = (np.zeros(k), self.p0.copy(), self.jac.copy())
         c_r, p_r, jac = self.linearisation
         c = c_r.copy()
-        for _ in range(ICP_ROUNDS):
+        for _ in range(max(int(rounds), 1)):
             pred = p_r + jac @ (c - c_r)
             normal, res, w = self.residuals(curves, pred)
             if w.sum() <= 0:
                 return np.full(k, np.nan)
+            c_before = c
             step = self._solve(normal, res, w, -c, 1.0 - c, jac)
             c = np.clip(c + step, 0.0, 1.0)
+        if deferred and np.abs(c - c_r).max() <= DEFER_STEP:
+            # the residuals after the last step, with its feet and normals (the linear model)
+            moved = np.einsum("nd,ndk,k->n", normal, jac, c - c_before) * self.mm_per_px
+            self.last_residuals = self._rms_by_section(res - moved, w)
+            if int(refine) > 0 and np.abs(c - c_r).max() > RELAX_STEP:
+                self._relax_later(c)
+            return c
         for _ in range(int(refine)):
             if np.abs(c - self.linearisation[0]).max() <= RELAX_STEP:
                 break
@@ -361,6 +462,7 @@ class CurveEstimator:
             normal, res, w = self.residuals(curves, pred)
             step = self._solve(normal, res, w, -c, 1.0 - c, self.linearisation[2])
             c = np.clip(c + step, 0.0, 1.0)
+        self.last_residuals = self._section_rms(curves, self.predict(c))
         return c
 
     def relinearise(self, c, pred: np.ndarray) -> None:
@@ -371,30 +473,80 @@ class CurveEstimator:
         half of :data:`RELAX_STEP` leave it as it is (the relax's tolerance would dominate
         the difference)."""
         c = np.array(c, dtype=np.float64)
+        pred = np.asarray(pred, dtype=np.float64)
         c_r, p_r, jac = self.linearisation
         dc = c - c_r
         if np.abs(dc).max() > 0.5 * RELAX_STEP:
             jac = jac + np.multiply.outer((pred - p_r) - jac @ dc, dc / float(dc @ dc))
-        self.linearisation = (c, np.asarray(pred, dtype=np.float64), jac)
+            # the tissue stiffens: a muscle's response never grows far beyond the one at rest.
+            # A secant that says otherwise (a relax that found another equilibrium) is
+            # dropped for the response at rest
+            if (
+                not np.isfinite(jac).all()
+                or (np.linalg.norm(jac, axis=(0, 1)) > 3.0 * self._column_norms).any()
+            ):
+                jac = self.jac.copy()
+        self.linearisation = (c, pred, jac)
 
     def section_residuals(self, curves: dict, c) -> dict:
         """RMS distance (mm) across each tracked contour of ``curves`` from the nodes the model
-        predicts for ``c`` (:meth:`predict`): how well the model explains it."""
-        _, res, w = self.residuals(curves, self.predict(c))
+        predicts for ``c`` (:meth:`predict`): how well the model explains it. (The last
+        estimate's are in :attr:`last_residuals`.)"""
+        return self._section_rms(curves, self.predict(c))
+
+    def _section_rms(self, curves: dict, pred: np.ndarray) -> dict:
+        _, res, w = self.residuals(curves, pred)
+        return self._rms_by_section(res, w)
+
+    def _rms_by_section(self, res: np.ndarray, w: np.ndarray) -> dict:
         out = {}
         for s, name in enumerate(self.names):
             m = (self.section_of == s) & (w > 0)
-            if m.any() and name in curves:
+            if m.any():  # (w is 0 on the sections missing from the curves)
                 out[name] = float(np.sqrt(np.average(res[m] ** 2, weights=w[m])))
         return out
+
+    def _relax_later(self, c) -> None:
+        """Relax the tissue at ``c`` on the worker thread; :meth:`_collect` moves the
+        linearisation there."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        if self._worker is None:
+            self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="myoface-relax")
+        c = np.array(c, dtype=np.float64)
+        self._pending = self._worker.submit(lambda: (c, self.predicted(self._relaxed(c))))
+
+    def _collect(self) -> None:
+        """Wait for the relax on the worker thread, if any, and move the linearisation to it."""
+        if self._pending is not None:
+            fut, self._pending = self._pending, None
+            self.relinearise(*fut.result())
+
+    def close(self) -> None:
+        """Wait for any relax under way and stop the worker thread."""
+        try:
+            self._collect()
+        finally:
+            if self._worker is not None:
+                self._worker.shutdown()
+                self._worker = None
 
     def relaxed_skin(self, c) -> np.ndarray:
         """The model's skin vertices (V, 3) relaxed (from its current state) at contractions
         ``c`` of the estimated muscles, every other muscle at rest."""
+        self._collect()
+        return self._relaxed(c)
+
+    def _relaxed(self, c) -> np.ndarray:
         fm = self.model
         full = np.zeros(len(fm.ids))
         full[[fm.ids.index(i) for i in self.ids]] = c
-        self.state = fm.relax(full, self.state).state
+        try:
+            self.state = fm.relax(full, self.state).state
+        except MyofaceSimulationError:
+            # a start far from the new equilibrium (a jump of the estimate) can defeat the
+            # solver where the rest state does not: start again from there
+            self.state = fm.relax(full, fm.rest_state()).state
         return fm.skin_vertices(self.state)
 
     def synthesis_step(self, c, pred, video: dict, synth: dict, synth_rest) -> np.ndarray:
@@ -403,6 +555,7 @@ class CurveEstimator:
         ``c``; ``video`` and ``synth`` the contours tracked on the real frame and on the model
         rendered at ``c``; ``synth_rest`` the residuals (mm, per node) of the contours tracked
         on the model rendered at rest (the tracker's bias on the calibration frame)."""
+        self._collect()
         normal, r_video, w = self.residuals(video, pred)
         _, r_synth, w_synth = self.residuals(synth, pred)
         res = r_video - (r_synth - np.asarray(synth_rest))

@@ -161,10 +161,21 @@ MISFIT_MM = 6.0
 #: that the registered eye-and-nose region is narrower, relative to its height, than this
 #: (:attr:`~myoface.analysis.headframe.HeadTracker.foreshortening`): the 2-D analysis reads
 #: the turned face as muscle action. Measured on the model rendered turned while smiling:
-#: 0.997 / 0.978 / 0.951 / 0.924 at 4 / 8 / 12 / 16 degrees, with the far side's zygomatic
-#: major already 0.15 / 0.18 / 0.23 / - off; the sample video's smile raises it to 1.0-1.15
-#: (the eyes narrow), so a smile is not taken for a turn. About 10 degrees:
+#: 1.000 / 0.978 / 0.959 / 0.938 at 4 / 8 / 12 / 16 degrees, with the far side's zygomatic
+#: major already 0.21 / 0.18 too high at 4 / 8 degrees; the sample video's smile raises it to
+#: 1.0-1.09 (the eyes narrow), so a smile is not taken for a turn. About 10 degrees:
 HEAD_TURN_FORESHORTENING = 0.965
+#: the video tracker's contours are at rest when no node moved by more than this across its
+#: contour over the last 10 iterations (px; SnakeParams' default 0.1 is for contours settling
+#: once). Creeping slower than 0.02 px per iteration, they stop there and go on from there on
+#: the next frame: on the sample video the relaxations end after ~100 iterations instead of
+#: running to 300, and follow the smile's onset as closely (measured: the zygomatic majors'
+#: mean over the smile 1.0 either way)
+TRACK_TOL_PX = 0.1
+#: the second pass from the model's prediction is left out when the first estimate is within
+#: this (contraction, every muscle) of the last frame's and every contour held: the contours
+#: are then where the last frame's second pass put them
+RESEED_STEP = 0.05
 #: the potentials are computed on a window around the contours: their bounding box grown by
 #: this fraction of its size, plus WINDOW_PAD_PX (room for the contours to move in one frame)
 WINDOW_MARGIN = 0.15
@@ -309,6 +320,14 @@ class Analyzer:
         tracked like the video, and ``synthesis_rounds`` Gauss-Newton steps remove the
         tracker's own bias (:mod:`myoface.analysis.synthesis`; one render, one tissue relax
         and one tracking per round).
+    deferred_relax : with ``estimator="curves"`` and without ``synthesis``: True, each
+        frame's estimate is the fit of the model as the tissue was last relaxed (a frame
+        earlier: :attr:`~myoface.analysis.curvefit.CurveEstimator.linearisation`; at once
+        after a step beyond :data:`~myoface.analysis.curvefit.DEFER_STEP`), and the
+        ``refine`` relax at it runs on a second thread while the next frame is tracked (what
+        :func:`make_analyzer` chooses for a video: about 1.3x the frame rate on two cores,
+        for an error up to 0.01 larger on the closed loop). False (default): the relax
+        corrects the frame's own estimate first.
     """
 
     def __init__(
@@ -328,6 +347,7 @@ class Analyzer:
         reseed: bool = True,
         synthesis=None,
         synthesis_rounds: int = 3,
+        deferred_relax: bool = False,
     ):
         if estimator not in ESTIMATORS:
             raise MyofaceValueError(f"estimator must be one of {ESTIMATORS}; got {estimator!r}")
@@ -358,7 +378,7 @@ class Analyzer:
             polys.append(resample_polyline(init[sec], spacing_px, closed=SECTIONS[sec][1]))
             closed.append(SECTIONS[sec][1])
         self.contours = make_contours(polys, closed=closed, names=self.sections)
-        self.params = params or SnakeParams(p=0.01)
+        self.params = params or SnakeParams(p=0.01, tol_px=TRACK_TOL_PX)
         self.layers = [1 if s in line_sections else 0 for s in self.sections]
         self.snakes = Snakes(self.contours, self.params, layers=self.layers)
         all_fids = {f.name: f for f in model_fiducials(model.face)}
@@ -397,6 +417,7 @@ class Analyzer:
             raise MyofaceValueError(f"synthesis_rounds must be an int >= 0; got {synthesis_rounds}")
         self.synthesis_camera = synthesis
         self.synthesis_rounds = int(synthesis_rounds)
+        self.deferred_relax = bool(deferred_relax)
         self._synth = None  # FrameSynthesizer, made on the calibration frame
 
     # ------------------------------------------------------------ potentials
@@ -407,13 +428,14 @@ class Analyzer:
         """The potentials of ``frame`` (``potential``, then ``"line"`` when some section is
         tracked as a line) on a window around ``nodes`` ((N, 2) image (x, y) px): the
         contours' box grown by :data:`WINDOW_MARGIN` of its size and :data:`WINDOW_PAD_PX`;
-        the line layer only around the contours that move in it, the same way."""
+        the line layer (whose wide blur costs most) only around the contours that move in
+        it, the same way."""
         q = np.asarray(nodes, dtype=np.float64)
-        box, pad = self._box(frame, q, None)
+        box, _ = self._box(frame, q, None)
         layer_windows = None
         if any(self.layers):
             line = self.snakes.node_layer == 1
-            layer_windows = [None, self._box(frame, q[line], pad)[0]]
+            layer_windows = [None, self._box(frame, q[line], None)[0]]
         return potential_field(frame, self.sigma, self._methods(), box, layer_windows)
 
     @staticmethod
@@ -471,7 +493,7 @@ class Analyzer:
         """Contours in the calibration frame's coordinates (the registered head motion
         removed; with ``head_frame="contours"`` the shift is removed later)."""
         if self.head_frame == "register":
-            return [self._sim.inverse_apply(c) for c in conts]
+            return self.contours.split(self._sim.inverse_apply(np.concatenate(conts)))
         return conts
 
     def _head_shift(self, conts_cal: list[np.ndarray]) -> np.ndarray:
@@ -616,6 +638,7 @@ class Analyzer:
         from myoface.analysis.landmarks import similarity_affine
 
         self._frame_shape = frame.shape[:2]
+        self._c_last = np.zeros(len(self.ids))  # the neutral frame, until it is measured
         if self.head_frame == "register":
             self.head = HeadTracker(frame, head_box(self._init, np.shape(frame)))
             self._sim = self.head.current
@@ -650,7 +673,8 @@ class Analyzer:
             c = self.estimator.estimate(np.zeros_like(pts), refine=self.refine)
         else:
             c = self._fit_curves(conts, np.zeros(2))
-        self._c_last = c
+        if np.isfinite(c).all():
+            self._c_last = c
         return FrameMeasurement(index, time_s, "ok", c, hs[0], named, *hs[1:])
 
     def measure(self, frame: np.ndarray, index: int = 0, time_s: float = 0.0) -> FrameMeasurement:
@@ -664,10 +688,10 @@ class Analyzer:
         frame), ``misfit:<sections>`` (a contour farther than :data:`MISFIT_MM` from any
         shape the model can take: e.g. on an occluding hand), ``head_turned`` (turned about
         the vertical from the calibration frame's pose past
-        :data:`HEAD_TURN_FORESHORTENING`). Lost sections are
-        re-initialised from the model's prediction at the current head pose (the first
-        estimate's, or the last measured frame's); a face found again, from the calibration
-        contours mapped by its new pose."""
+        :data:`HEAD_TURN_FORESHORTENING`), ``no_fit`` (no contour left to fit the model to).
+        Lost sections are re-initialised from the model's prediction at the current head pose
+        (the first estimate's, or the last measured frame's); a face found again, from the
+        calibration contours mapped by its new pose."""
         frame = np.asarray(frame)
         if self._p0 is None:
             return self._calibrate(frame, index, time_s)
@@ -697,14 +721,19 @@ class Analyzer:
             held = {
                 s: q - shift for s, q in zip(self.sections, conts_cal, strict=True) if s not in bad
             }
-            c1 = self.curves.estimate(held, refine=0) if held else self._c_last
+            # (two rounds: it only has to bring the contours near their features)
+            c1 = self.curves.estimate(held, refine=0, rounds=2) if held else self._c_last
             if not np.isfinite(c1).all():
                 c1 = self._c_last
-            self._reset_sections(self.curves.names, c1, shift, rest=False)
-            self._reset_sections([s for s in bad if s not in self.curves.names], c1, shift)
-            res, fld = self._relax(frame, fld)
-            bad = self._escaped(res)
-            conts_cal = self._to_calibration(res.split())
+            # (the expression did not change since the last frame measured, and every contour
+            # held: they are where the model puts them, tracked from there)
+            still = not bad and np.abs(c1 - self._c_last).max() < RESEED_STEP
+            if not still:
+                self._reset_sections(self.curves.names, c1, shift, rest=False)
+                self._reset_sections([s for s in bad if s not in self.curves.names], c1, shift)
+                res, fld = self._relax(frame, fld)
+                bad = self._escaped(res)
+                conts_cal = self._to_calibration(res.split())
         elif bad and not low:
             self._reset_sections(bad, self._c_last, shift)
             res, fld = self._relax(frame, fld)
@@ -727,8 +756,9 @@ class Analyzer:
             c = self.estimator.estimate(d_mm, refine=self.refine)
         else:
             cal = {s: q - shift for s, q in zip(self.sections, conts_cal, strict=True)}
-            c = self.curves.estimate(cal, refine=self.refine)
-            resid = self.curves.section_residuals(cal, c)
+            deferred = self.deferred_relax and self._synth is None
+            c = self.curves.estimate(cal, refine=self.refine, deferred=deferred)
+            resid = self.curves.last_residuals
             misfit = [s for s, r in resid.items() if r > MISFIT_MM]
             self.last_residuals_mm = resid
             if misfit:
@@ -738,6 +768,8 @@ class Analyzer:
             return self._unmeasured(index, time_s, "head_turned", named, hs)
         if self._synth is not None:
             c = self._by_synthesis(c, conts_cal, shift)
+        if not np.isfinite(c).all():  # no contour the model could be fitted to
+            return self._unmeasured(index, time_s, "no_fit", named, hs)
         self._c_last = c
         return FrameMeasurement(index, time_s, "ok", c, hs[0], named, *hs[1:])
 
@@ -772,7 +804,10 @@ class Analyzer:
         return c
 
     def close(self) -> None:
-        """Release the face detector, if a lost face was searched for with it."""
+        """Stop the curve fit's relax thread, and release the face detector if a lost face
+        was searched for with it."""
+        if self.curves is not None:
+            self.curves.close()
         if self._detector:
             self._detector.close()
         self._detector = None
@@ -868,6 +903,7 @@ def make_analyzer(
         refine=1 if refine is None else refine,
         sigma=sigma,
         estimator=estimator or "curves",
+        deferred_relax=True,  # a video: the tissue relaxed on a second thread
     )
     return an, how, start
 

@@ -99,14 +99,14 @@ def _two_builds(fn):
         fn.__code__, fn.__globals__, fn.__name__ + "_1", fn.__defaults__, fn.__closure__
     )
     one.__qualname__ = fn.__qualname__ + "_1"
-    return njit(cache=True, parallel=True)(fn), njit(cache=True)(one)
+    return njit(cache=True, parallel=True)(fn), njit(cache=True, nogil=True)(one)
 
 
 _blur_separable, _blur_separable_1 = _two_builds(_blur_separable_py)
 _neg_grad_mag_central, _neg_grad_mag_central_1 = _two_builds(_neg_grad_mag_central_py)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _paper_potential(img, out, tmp):
     """Two passes of 4-neighbour averaging, then -|forward-difference gradient|."""
     h, w = img.shape

@@ -49,7 +49,6 @@ from numba import njit
 from myoface.analysis.potentials import (
     PotentialField,
     bilinear,
-    bilinear2,
     image_potential,
 )
 from myoface.errors import MyofaceValueError
@@ -217,7 +216,7 @@ def _interleave(m: int) -> np.ndarray:
     return order
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _band_cholesky(a_band, bw):
     """In-place banded Cholesky: a_band[i, k] holds A[i, i - k] (k = 0..bw) on input, L[i, i-k]
     on output (A = L L^T)."""
@@ -239,7 +238,7 @@ def _band_cholesky(a_band, bw):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _band_solve(lb, bw, rhs, out):
     """Solve L L^T x = rhs (columns solved together; rhs (n, c)) into ``out``."""
     n, c = rhs.shape
@@ -324,7 +323,35 @@ WINDOW = 10
 BORDER_PX = 0.5
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True, inline="always")
+def _gradient_at(gx, gy, lay, x, y):
+    """Bilinear samples of layer ``lay`` of the gradient stacks (L, H, W) at (x, y)."""
+    h, w = gx.shape[1], gx.shape[2]
+    x = min(max(x, 0.0), w - 1.0)
+    y = min(max(y, 0.0), h - 1.0)
+    x0 = min(int(x), w - 2)
+    y0 = min(int(y), h - 2)
+    fx, fy = x - x0, y - y0
+    w00 = (1 - fx) * (1 - fy)
+    w01 = fx * (1 - fy)
+    w10 = (1 - fx) * fy
+    w11 = fx * fy
+    a = (
+        w00 * gx[lay, y0, x0]
+        + w01 * gx[lay, y0, x0 + 1]
+        + w10 * gx[lay, y0 + 1, x0]
+        + w11 * gx[lay, y0 + 1, x0 + 1]
+    )
+    b = (
+        w00 * gy[lay, y0, x0]
+        + w01 * gy[lay, y0, x0 + 1]
+        + w10 * gy[lay, y0 + 1, x0]
+        + w11 * gy[lay, y0 + 1, x0 + 1]
+    )
+    return a, b
+
+
+@njit(cache=True, nogil=True)
 def _iterate(
     x,
     rest,
@@ -346,21 +373,49 @@ def _iterate(
     prv,
     nxt,
 ):
+    """Eq. (11) iterated: the nodes ``x`` (N, 2) and rest lengths ``rest`` in place; returns
+    (iterations, the largest move across the contours over the last WINDOW of them). Works in
+    the band's node order (``perm``: position -> node) so that the solve needs no copies."""
     n = x.shape[0]
+    pos = np.empty(n, np.int64)
+    for q in range(n):
+        pos[perm[q]] = q
+    xp = np.empty((n, 2))
+    lay = np.empty(n, np.int64)
+    up = np.empty((n, 2))
+    prvp = np.empty(n, np.int64)
+    nxtp = np.empty(n, np.int64)
+    inv = np.empty(n)
+    for q in range(n):
+        i = perm[q]
+        xp[q, 0] = x[i, 0]
+        xp[q, 1] = x[i, 1]
+        lay[q] = layer[i]
+        up[q, 0] = user[i, 0]
+        up[q, 1] = user[i, 1]
+        prvp[q] = pos[prv[i]]
+        nxtp[q] = pos[nxt[i]]
+        inv[q] = 1.0 / band[q, 0]
+    ns = si.shape[0]
+    sip = np.empty(ns, np.int64)
+    sjp = np.empty(ns, np.int64)
+    for s in range(ns):
+        sip[s] = pos[si[s]]
+        sjp[s] = pos[sj[s]]
     f = np.empty((n, 2))
-    rhs = np.empty((n, 2))
-    sol = np.empty((n, 2))
-    ref = x.copy()  # positions WINDOW iterations ago
+    ref = xp.copy()  # positions WINDOW iterations ago
     moved = 0.0
+    done = max_iter
     for it in range(max_iter):
-        for i in range(n):
-            sx, sy = bilinear2(gx[layer[i]], gy[layer[i]], x[i, 0], x[i, 1])
-            f[i, 0] = -p * sx + user[i, 0]
-            f[i, 1] = -p * sy + user[i, 1]
-        for s in range(si.shape[0]):
-            i, j = si[s], sj[s]
-            rx = x[j, 0] - x[i, 0]
-            ry = x[j, 1] - x[i, 1]
+        # right-hand side of eq. (11): (gamma/dt) x + image forces (eq. 12) + tension (eq. 7)
+        for q in range(n):
+            sx, sy = _gradient_at(gx, gy, lay[q], xp[q, 0], xp[q, 1])
+            f[q, 0] = g_dt * xp[q, 0] - p * sx + up[q, 0]
+            f[q, 1] = g_dt * xp[q, 1] - p * sy + up[q, 1]
+        for s in range(ns):
+            i, j = sip[s], sjp[s]
+            rx = xp[j, 0] - xp[i, 0]
+            ry = xp[j, 1] - xp[i, 1]
             d = np.sqrt(rx * rx + ry * ry)
             e = d - rest[s]
             if d > 1e-12 and a_s[s] != 0.0:
@@ -370,40 +425,55 @@ def _iterate(
                 f[j, 0] -= c * rx
                 f[j, 1] -= c * ry
             rest[s] += nu_s[s] * e / g_dt  # eq. (8), dt = 1 / (gamma/dt) with gamma = 1
+        # (gamma/dt + K) x' = f: forward and backward substitution with the band factor
+        for i in range(n):
+            s0 = f[i, 0]
+            s1 = f[i, 1]
+            for k in range(1, min(i, bw) + 1):
+                lk = band[i, k]
+                s0 -= lk * f[i - k, 0]
+                s1 -= lk * f[i - k, 1]
+            f[i, 0] = s0 * inv[i]
+            f[i, 1] = s1 * inv[i]
+        for i in range(n - 1, -1, -1):
+            s0 = f[i, 0]
+            s1 = f[i, 1]
+            for k in range(1, min(n - 1 - i, bw) + 1):
+                lk = band[i + k, k]
+                s0 -= lk * f[i + k, 0]
+                s1 -= lk * f[i + k, 1]
+            f[i, 0] = s0 * inv[i]
+            f[i, 1] = s1 * inv[i]
         for q in range(n):
-            i = perm[q]
-            rhs[q, 0] = g_dt * x[i, 0] + f[i, 0]
-            rhs[q, 1] = g_dt * x[i, 1] + f[i, 1]
-        _band_solve(band, bw, rhs, sol)
-        for q in range(n):
-            i = perm[q]
-            x[i, 0] = sol[q, 0]
-            x[i, 1] = sol[q, 1]
+            xp[q, 0] = f[q, 0]
+            xp[q, 1] = f[q, 1]
         if (it + 1) % WINDOW == 0:
             moved = 0.0
-            for i in range(n):
+            for q in range(n):
                 # the move across the contour: along the normal of its neighbours' chord
-                tx = x[nxt[i], 0] - x[prv[i], 0]
-                ty = x[nxt[i], 1] - x[prv[i], 1]
+                tx = xp[nxtp[q], 0] - xp[prvp[q], 0]
+                ty = xp[nxtp[q], 1] - xp[prvp[q], 1]
                 tl = np.sqrt(tx * tx + ty * ty)
-                dx = x[i, 0] - ref[i, 0]
-                dy = x[i, 1] - ref[i, 1]
+                dx = xp[q, 0] - ref[q, 0]
+                dy = xp[q, 1] - ref[q, 1]
                 if tl > 1e-9:
                     d = abs(dx * ty - dy * tx) / tl
                 else:
                     d = max(abs(dx), abs(dy))
                 if not d <= moved:  # also catches NaN
                     moved = d
-                ref[i, 0] = x[i, 0]
-                ref[i, 1] = x[i, 1]
-            if not np.isfinite(moved):
-                return it + 1, moved
-            if moved < tol:
-                return it + 1, moved
-    return max_iter, moved
+                ref[q, 0] = xp[q, 0]
+                ref[q, 1] = xp[q, 1]
+            if not np.isfinite(moved) or moved < tol:
+                done = it + 1
+                break
+    for q in range(n):
+        x[perm[q], 0] = xp[q, 0]
+        x[perm[q], 1] = xp[q, 1]
+    return done, moved
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sample(pot, layer, x, out):
     for i in range(x.shape[0]):
         out[i] = bilinear(pot[layer[i]], x[i, 0], x[i, 1])

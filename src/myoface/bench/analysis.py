@@ -152,9 +152,11 @@ def bench_analysis_fps(quick: bool) -> Measurement:
 @benchmark("analysis.fps_snakes", "1/s", higher_is_better=True, peer="mediapipe face_mesh 0.10.14")
 def bench_analysis_fps_snakes(quick: bool) -> Measurement:
     """The same with the paper's tracker: snakes on nine contours (automatic initialisation
-    from MediaPipe on the first frame), registered head frame, the curve fit with one
-    correction through the tissue, and each frame tracked twice (the second pass from the
-    model's prediction). Peer as for ``analysis.fps``."""
+    from MediaPipe on the first frame), registered head frame, potentials on windows around
+    the contours, the curve fit with one correction through the tissue (relaxed on a second
+    thread while the next frame is tracked, or at once after a step of more than 0.1), and
+    each frame tracked twice (the second pass from the model's prediction). Peer as for
+    ``analysis.fps``."""
     path = _sample_video()
     m = None if not quick else 12
     ours, n = _fps(lambda: _analysis_pass(path, "snakes", m), quick)
