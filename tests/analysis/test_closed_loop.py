@@ -73,10 +73,11 @@ def test_closed_loop_recovers_every_muscle(plain):
 def test_analysis_by_synthesis_removes_the_trackers_bias(plain):
     """``synthesis=True``: the model, textured from the first frame and deformed by each
     estimate, is tracked like the video and the difference drives the fit. Measured when
-    written, 16 frames, 3 rounds: worst RMSE 0.044 (depressors 0.032-0.044, levators
-    0.029-0.039, frontalis at most 0.015) against 0.082 without. The bounds allow the same
+    written, 16 frames, 3 rounds: worst RMSE 0.048 (depressors 0.037-0.048, levators
+    0.027-0.035, frontalis at most 0.011) against 0.062 without (depressors 0.056-0.062;
+    0.082 before the contours stopped one by one, issue 21). The bounds allow the same
     sub-pixel jitter as the test above; the depressors, whose error is the tracker's bias this
-    removes, must come out at most 0.75 of the plain run's."""
+    removes, must each come out below the plain run's, and together at most 0.8 of it."""
     res = run_closed_loop(build_face_model(), n_frames=16, size=256, synthesis=True)
     assert all(q == "ok" for q in res.quality)
     rmse, table = dict(zip(res.ids, res.rmse(), strict=True)), res.table()
@@ -84,9 +85,10 @@ def test_analysis_by_synthesis_removes_the_trackers_bias(plain):
     assert max(rmse.values()) < 0.07, table
     assert (res.rmse() < BASELINE_FRACTION * baseline_rmse(res)).all(), table
     assert res.corr().min() > 0.95, table
-    for s in "lr":
-        m = f"depressor_labii_inferioris_{s}"
-        assert rmse[m] < 0.75 * base[m], (table, plain.table())
+    dep = [f"depressor_labii_inferioris_{s}" for s in "lr"]
+    for m in dep:
+        assert rmse[m] < base[m], (table, plain.table())
+    assert sum(rmse[m] for m in dep) < 0.8 * sum(base[m] for m in dep), (table, plain.table())
 
 
 def test_synthesis_is_refused_without_snakes():

@@ -22,9 +22,10 @@ step costs one forward and one backward substitution.
 Time: ``dt`` is one iteration with gamma = 1, so gamma/dt = ``gamma_over_dt`` and eq. (8)
 advances rest lengths by ``nu e / gamma_over_dt`` per iteration.
 
-Equilibrium: the contours are at rest when no node moved more than ``tol_px`` across its
-contour (along the contour's normal) over the last ``WINDOW`` (10) iterations; the relaxation
-stops there (``converged=True``) or after ``max_iter``. (A per-iteration test would stop a
+Equilibrium: a contour is at rest when none of its nodes moved more than ``tol_px`` across it
+(along the contour's normal) over the last ``WINDOW`` (10) iterations, and stays there while
+the others go on; the relaxation stops when all are at rest (``converged=True``) or after
+``max_iter``. (A per-iteration test would stop a
 contour that creeps slowly towards a distant edge. Motion along the contour is left out: nodes
 slide along the edge they sit on for many iterations after the contour has found it, and where
 they sit along it changes neither the contour's shape nor what is read off it.)
@@ -275,6 +276,8 @@ class SnakeSystem:
                 nxt.append(np.concatenate([idx[1:], idx[-1:]]))
         self.prev = np.concatenate(prv).astype(np.int64)
         self.next = np.concatenate(nxt).astype(np.int64)
+        # contour k's springs are si[spring_offsets[k]:spring_offsets[k + 1]] (si ascending)
+        self.spring_offsets = np.searchsorted(si, contours.offsets).astype(np.int64)
         perm = []
         for k in range(contours.n_contours):
             o0, o1 = contours.offsets[k], contours.offsets[k + 1]
@@ -372,11 +375,17 @@ def _iterate(
     bw,
     prv,
     nxt,
+    offsets,
+    spring_offsets,
 ):
     """Eq. (11) iterated: the nodes ``x`` (N, 2) and rest lengths ``rest`` in place; returns
     (iterations, the largest move across the contours over the last WINDOW of them). Works in
-    the band's node order (``perm``: position -> node) so that the solve needs no copies."""
+    the band's node order (``perm``: position -> node; contour k at positions ``offsets[k]``
+    to ``offsets[k + 1]``, its springs ``spring_offsets[k]`` to ``spring_offsets[k + 1]``),
+    so that the solve needs no copies. The matrix is block-diagonal, one block per contour
+    (breaks between contours), so a contour at rest stops while the others go on."""
     n = x.shape[0]
+    nc = offsets.shape[0] - 1
     pos = np.empty(n, np.int64)
     for q in range(n):
         pos[perm[q]] = q
@@ -399,78 +408,102 @@ def _iterate(
     ns = si.shape[0]
     sip = np.empty(ns, np.int64)
     sjp = np.empty(ns, np.int64)
-    for s in range(ns):
-        sip[s] = pos[si[s]]
-        sjp[s] = pos[sj[s]]
+    for m in range(ns):
+        sip[m] = pos[si[m]]
+        sjp[m] = pos[sj[m]]
     f = np.empty((n, 2))
     ref = xp.copy()  # positions WINDOW iterations ago
-    moved = 0.0
+    active = np.ones(nc, np.bool_)
+    last = np.zeros(nc)  # each contour's last move across it over a WINDOW
     done = max_iter
     for it in range(max_iter):
-        # right-hand side of eq. (11): (gamma/dt) x + image forces (eq. 12) + tension (eq. 7)
-        for q in range(n):
-            sx, sy = _gradient_at(gx, gy, lay[q], xp[q, 0], xp[q, 1])
-            f[q, 0] = g_dt * xp[q, 0] - p * sx + up[q, 0]
-            f[q, 1] = g_dt * xp[q, 1] - p * sy + up[q, 1]
-        for s in range(ns):
-            i, j = sip[s], sjp[s]
-            rx = xp[j, 0] - xp[i, 0]
-            ry = xp[j, 1] - xp[i, 1]
-            d = np.sqrt(rx * rx + ry * ry)
-            e = d - rest[s]
-            if d > 1e-12 and a_s[s] != 0.0:
-                c = a_s[s] * e / d
-                f[i, 0] += c * rx
-                f[i, 1] += c * ry
-                f[j, 0] -= c * rx
-                f[j, 1] -= c * ry
-            rest[s] += nu_s[s] * e / g_dt  # eq. (8), dt = 1 / (gamma/dt) with gamma = 1
-        # (gamma/dt + K) x' = f: forward and backward substitution with the band factor
-        for i in range(n):
-            s0 = f[i, 0]
-            s1 = f[i, 1]
-            for k in range(1, min(i, bw) + 1):
-                lk = band[i, k]
-                s0 -= lk * f[i - k, 0]
-                s1 -= lk * f[i - k, 1]
-            f[i, 0] = s0 * inv[i]
-            f[i, 1] = s1 * inv[i]
-        for i in range(n - 1, -1, -1):
-            s0 = f[i, 0]
-            s1 = f[i, 1]
-            for k in range(1, min(n - 1 - i, bw) + 1):
-                lk = band[i + k, k]
-                s0 -= lk * f[i + k, 0]
-                s1 -= lk * f[i + k, 1]
-            f[i, 0] = s0 * inv[i]
-            f[i, 1] = s1 * inv[i]
-        for q in range(n):
-            xp[q, 0] = f[q, 0]
-            xp[q, 1] = f[q, 1]
+        for k in range(nc):
+            if not active[k]:
+                continue
+            o0, o1 = offsets[k], offsets[k + 1]
+            # right-hand side of eq. (11): (gamma/dt) x + image forces (eq. 12) + tension
+            # (eq. 7)
+            for q in range(o0, o1):
+                sx, sy = _gradient_at(gx, gy, lay[q], xp[q, 0], xp[q, 1])
+                f[q, 0] = g_dt * xp[q, 0] - p * sx + up[q, 0]
+                f[q, 1] = g_dt * xp[q, 1] - p * sy + up[q, 1]
+            for m in range(spring_offsets[k], spring_offsets[k + 1]):
+                i, j = sip[m], sjp[m]
+                rx = xp[j, 0] - xp[i, 0]
+                ry = xp[j, 1] - xp[i, 1]
+                d = np.sqrt(rx * rx + ry * ry)
+                e = d - rest[m]
+                if d > 1e-12 and a_s[m] != 0.0:
+                    c = a_s[m] * e / d
+                    f[i, 0] += c * rx
+                    f[i, 1] += c * ry
+                    f[j, 0] -= c * rx
+                    f[j, 1] -= c * ry
+                rest[m] += nu_s[m] * e / g_dt  # eq. (8), dt = 1 / (gamma/dt), gamma = 1
+            # (gamma/dt + K) x' = f on this contour's block: forward and backward
+            # substitution with the band factor
+            for i in range(o0, o1):
+                s0 = f[i, 0]
+                s1 = f[i, 1]
+                for kk in range(1, min(i - o0, bw) + 1):
+                    lk = band[i, kk]
+                    s0 -= lk * f[i - kk, 0]
+                    s1 -= lk * f[i - kk, 1]
+                f[i, 0] = s0 * inv[i]
+                f[i, 1] = s1 * inv[i]
+            for i in range(o1 - 1, o0 - 1, -1):
+                s0 = f[i, 0]
+                s1 = f[i, 1]
+                for kk in range(1, min(o1 - 1 - i, bw) + 1):
+                    lk = band[i + kk, kk]
+                    s0 -= lk * f[i + kk, 0]
+                    s1 -= lk * f[i + kk, 1]
+                f[i, 0] = s0 * inv[i]
+                f[i, 1] = s1 * inv[i]
+            for q in range(o0, o1):
+                xp[q, 0] = f[q, 0]
+                xp[q, 1] = f[q, 1]
         if (it + 1) % WINDOW == 0:
-            moved = 0.0
-            for q in range(n):
-                # the move across the contour: along the normal of its neighbours' chord
-                tx = xp[nxtp[q], 0] - xp[prvp[q], 0]
-                ty = xp[nxtp[q], 1] - xp[prvp[q], 1]
-                tl = np.sqrt(tx * tx + ty * ty)
-                dx = xp[q, 0] - ref[q, 0]
-                dy = xp[q, 1] - ref[q, 1]
-                if tl > 1e-9:
-                    d = abs(dx * ty - dy * tx) / tl
+            still = True
+            for k in range(nc):
+                if not active[k]:
+                    continue
+                moved = 0.0
+                for q in range(offsets[k], offsets[k + 1]):
+                    # the move across the contour: along the normal of its neighbours' chord
+                    tx = xp[nxtp[q], 0] - xp[prvp[q], 0]
+                    ty = xp[nxtp[q], 1] - xp[prvp[q], 1]
+                    tl = np.sqrt(tx * tx + ty * ty)
+                    dx = xp[q, 0] - ref[q, 0]
+                    dy = xp[q, 1] - ref[q, 1]
+                    if tl > 1e-9:
+                        d = abs(dx * ty - dy * tx) / tl
+                    else:
+                        d = max(abs(dx), abs(dy))
+                    if not d <= moved:  # also catches NaN
+                        moved = d
+                    ref[q, 0] = xp[q, 0]
+                    ref[q, 1] = xp[q, 1]
+                last[k] = moved
+                if not np.isfinite(moved):
+                    for q in range(n):
+                        x[perm[q], 0] = xp[q, 0]
+                        x[perm[q], 1] = xp[q, 1]
+                    return it + 1, moved
+                if moved < tol:
+                    active[k] = False  # at rest: it stays where it is
                 else:
-                    d = max(abs(dx), abs(dy))
-                if not d <= moved:  # also catches NaN
-                    moved = d
-                ref[q, 0] = xp[q, 0]
-                ref[q, 1] = xp[q, 1]
-            if not np.isfinite(moved) or moved < tol:
+                    still = False
+            if still:
                 done = it + 1
                 break
     for q in range(n):
         x[perm[q], 0] = xp[q, 0]
         x[perm[q], 1] = xp[q, 1]
-    return done, moved
+    worst = 0.0
+    for k in range(nc):
+        worst = max(worst, last[k])
+    return done, worst
 
 
 @njit(cache=True, nogil=True)
@@ -638,6 +671,8 @@ class Snakes:
             s.bw,
             s.prev,
             s.next,
+            c.offsets,
+            s.spring_offsets,
         )
         if not np.isfinite(moved):
             x += (ox, oy)
