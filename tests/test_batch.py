@@ -102,14 +102,18 @@ def test_batch_dask_then_resume_then_local(clips, tmp_path, capsys):
     assert {n: (out / n / DONE_FILE).stat().st_mtime_ns for n in stamp} == stamp
 
     # the local engine (here in this process, with the fixture's model) measures the same
-    # contractions as the dask engine
+    # contractions as the dask engine. Not to the last digit: Dask's workers run BLAS on one
+    # thread (its nanny sets OMP_NUM_THREADS=1) and this process on every core, so sums are
+    # added in another order, and the tissue relax, which stops within its tolerance (0.01 mm),
+    # carries the last bits to a few 1e-5 of a contraction (4e-5 seen on a many-core CI
+    # machine); 1e-4 is still 500 times finer than the analysis' accuracy target (0.05)
     loc = tmp_path / "local"
     good = [str(clips / "smile.mp4"), str(clips / "brows.mp4")]
     init = str(clips / "init.json")
     assert main(["batch", *good, "--init", init, "-o", str(loc), "--workers", "1"]) == 0
     for name in ("smile", "brows"):
         a, b = _table(out / name / "contractions.csv"), _table(loc / name / "contractions.csv")
-        np.testing.assert_allclose(a, b, atol=1.5e-5)  # the CSV's 5 decimals
+        np.testing.assert_allclose(a, b, atol=1e-4)
     side = json.loads((loc / "smile" / "analysis.json").read_text())
     assert side["video"] == str((clips / "smile.mp4").resolve()) and side["tracker"] == "snakes"
 

@@ -1007,10 +1007,11 @@ def measure_frames(video, analyzer, start: int = 0, max_frames: int | None = Non
 
 def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_rad: float) -> None:
     """``frame,time_s,quality,<muscle ids...>,jaw_angle_rad,head_dx_px,head_dy_px,head_scale,
-    head_rot_deg`` (empty cells where a frame could not be measured). With the 3-D fit's
-    measurements (:class:`~myoface.analysis.fit.FitMeasurement`) the head columns are the 3-D
-    pose and the fit's residual: ``head_yaw_deg, head_pitch_deg, head_roll_deg, head_tx_mm,
-    head_ty_mm, head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.fit.HeadPose`)."""
+    head_rot_deg`` (empty cells where a frame could not be measured, and head cells where the
+    face was not found). With the 3-D fit's measurements
+    (:class:`~myoface.analysis.fit.FitMeasurement`) the head columns are the 3-D pose and the
+    fit's residual: ``head_yaw_deg, head_pitch_deg, head_roll_deg, head_tx_mm, head_ty_mm,
+    head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.fit.HeadPose`)."""
     from myoface._io import atomic_output
 
     # measurements of the 3-D fit (myoface.analysis.fit) carry the head's 3-D pose instead
@@ -1031,10 +1032,14 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_ra
             head = f.head_cells()
         else:
             head = [
-                f"{f.head_shift_px[0]:.3f}",
-                f"{f.head_shift_px[1]:.3f}",
-                f"{f.head_scale:.5f}",
-                f"{np.degrees(f.head_rot_rad):.3f}",
+                f.head_shift_px[0],
+                f.head_shift_px[1],
+                f.head_scale,
+                np.degrees(f.head_rot_rad),
+            ]
+            head = [
+                "" if not np.isfinite(v) else f"{v:.{d}f}"
+                for v, d in zip(head, (3, 3, 5, 3), strict=True)
             ]
         lines.append(",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw, *head]))
     with atomic_output(path) as tmp:
