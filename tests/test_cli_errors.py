@@ -380,7 +380,7 @@ def test_signal_during_synth_removes_the_partial_video(tmp_path, signum):
 
 def test_sigterm_handler_is_restored_after_main(tmp_path, capsys):
     before = signal.getsignal(signal.SIGTERM)
-    main(["synth", "-o", str(tmp_path / "x.png")])  # an error: nothing to show
+    main(["synth", "--au", "3=0.5", "-o", str(tmp_path / "x.png")])  # an error: unknown AU
     capsys.readouterr()
     assert signal.getsignal(signal.SIGTERM) is before
 

@@ -143,10 +143,8 @@ def _apex(args, fm):
         parts.append(muscle_contractions(_pairs(args.muscle, "muscle"), ids))
     if args.viseme:
         parts.append(viseme_contractions(args.viseme, args.intensity, ids))
-    if not parts:
-        raise MyofaceValueError(
-            "nothing to show: give --expression, --au, --muscle, --viseme or --timeline"
-        )
+    if not parts:  # no control: the neutral face
+        return np.zeros(len(ids))
     keep = np.ones(len(ids))
     for c in parts:
         keep *= 1 - c
@@ -171,10 +169,6 @@ def run(args) -> int:
     if args.texture and not Path(args.texture).is_file():
         raise MyofaceFileNotFoundError(f"--texture: no such texture image: {args.texture}")
     _check_requests(args)
-    if not args.timeline and not any((args.expression, args.au, args.muscle, args.viseme)):
-        raise MyofaceValueError(
-            "nothing to show: give --expression, --au, --muscle, --viseme or --timeline"
-        )
     timeline = load_timeline(args.timeline) if args.timeline else None
     if video and timeline is not None and timeline.duration > MAX_VIDEO_S:
         raise MyofaceValueError(
