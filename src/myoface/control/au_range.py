@@ -130,6 +130,18 @@ def _check(au: int, cond: bool, what: str) -> None:
 def au_ranges() -> tuple[AURange, ...]:
     """The reference table ``data/au_range.toml``, checked, in file order."""
     doc = tomllib.loads((resources.files("myoface") / "data" / "au_range.toml").read_text())
+    return parse_au_ranges(doc)
+
+
+def parse_au_ranges(doc: dict) -> tuple[AURange, ...]:
+    """Check and convert a parsed ``au_range.toml`` (``{"points": ..., "au": [...]}``).
+
+    Raises
+    ------
+    MyofaceValueError
+        Naming the AU and what is wrong (unknown AU or point, a range without a source, neither
+        a range nor a note saying why there is none, ...).
+    """
     points = {str(k): int(v) for k, v in doc["points"].items()}
     table = au_table()
     out = []
