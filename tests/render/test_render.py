@@ -203,3 +203,55 @@ def test_antialiased_edge_pixel_is_the_coverage_weighted_mean():
     background = img[:, 40]  # same row, no geometry
     np.testing.assert_allclose(img[:, 10], 0.5 * (1.0 + background), atol=1e-6)
     assert (background < 0.1).all()
+
+
+def _holed_grid(holes, half=40.0, n=41):
+    """A flat z = 0 grid face (x, y in [-half, half] mm) without landmarks, with the triangles
+    whose centroids fall in each (cx, cy, rx, ry) ellipse removed."""
+    from myoface.face.mesh import FaceMesh
+
+    g = np.linspace(-half, half, n)
+    xx, yy = np.meshgrid(g, g)
+    v = np.column_stack([xx.ravel(), yy.ravel(), np.zeros(n * n)])
+    i = np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]
+    a, b, c, d = i.ravel(), i.ravel() + 1, i.ravel() + n, i.ravel() + n + 1
+    tris = np.concatenate([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
+    cen = v[tris].mean(axis=1)
+    keep = np.ones(len(tris), bool)
+    for cx, cy, rx, ry in holes:
+        keep &= ((cen[:, 0] - cx) / rx) ** 2 + ((cen[:, 1] - cy) / ry) ** 2 > 1
+    return FaceMesh(v, tris[keep], name="grid")
+
+
+def test_openings_found_by_shape_without_landmarks():
+    """A face without landmark groups (Waters' face) gets its eyes and mouth from its holes: the
+    highest mirrored pair are the eyes (the subject's left on +x), the midline hole below
+    them the mouth; an off-midline hole is neither."""
+    from myoface.render.dressing import find_openings
+
+    eyes_mouth = [(15, 12, 7, 4), (-15, 12, 7, 4), (0, -18, 12, 4)]
+    face = _holed_grid([*eyes_mouth, (28, -25, 4, 4)])
+    ops = {op.name: face.vertices[op.loop].mean(axis=0) for op in find_openings(face)}
+    assert sorted(ops) == ["eye_l", "eye_r", "mouth"]
+    np.testing.assert_allclose(ops["eye_l"][:2], [15, 12], atol=1.0)
+    np.testing.assert_allclose(ops["eye_r"][:2], [-15, 12], atol=1.0)
+    np.testing.assert_allclose(ops["mouth"][:2], [0, -18], atol=1.0)
+    # holes that are not a mirrored pair are not eyes
+    assert find_openings(_holed_grid([(15, 12, 7, 4), (-15, -20, 7, 4)])) == []
+
+
+def test_waters_face_gets_eyes():
+    """Waters' face (no landmarks) rendered with eyeballs behind its eye holes: a dark iris
+    and bright sclera where the background showed through before."""
+    from myoface.face.io import read_waters_geoface
+    from tests.conftest import shared_path
+
+    face = read_waters_geoface(shared_path("waters-geoface"))
+    cam = Camera.front(face.vertices, width=128, height=128)
+    img = Renderer(face, cam).render()
+    eyes = [lp for lp in face.boundary_loops if len(lp) == 13]  # 13 vertices each
+    assert len(eyes) == 2
+    for lp in eyes:
+        x, y = cam.project(face.vertices[lp])[:, :2].mean(axis=0)
+        region = img[int(y) - 2 : int(y) + 3, int(x) - 5 : int(x) + 6].astype(int).sum(axis=2)
+        assert region.min() < 200 and region.max() > 350, region

@@ -94,8 +94,53 @@ class Opening:
     color: tuple
 
 
+#: a hole with fewer boundary vertices than this is a crack in the mesh, not an opening
+MIN_OPENING_LOOP = 6
+
+
+def _openings_by_shape(face, inner) -> dict:
+    """{name: loop} for a face without eye/mouth landmarks (e.g. Waters' face): the eyes are
+    the pair of holes mirrored across the midline (x = 0, the face's axes: x lateral, y up, z
+    forward) that lies highest, the mouth the hole on the midline below them. Empty when no
+    such pair is found."""
+    v = face.vertices
+    holes = [lp for lp in inner if len(lp) >= MIN_OPENING_LOOP]
+    if len(holes) < 2:
+        return {}
+    width = float(np.ptp(v[:, 0]))
+    cen = np.array([v[lp].mean(axis=0) for lp in holes])
+    size = np.array([np.ptp(v[lp][:, 0]) for lp in holes])
+    best, found = None, {}
+    for i in range(len(holes)):
+        for j in range(len(holes)):
+            a, b = cen[i], cen[j]
+            # a mirrored pair: opposite sides, at mirrored x, the same height, similar size
+            if not (a[0] > 0.05 * width and b[0] < -0.05 * width):
+                continue
+            tol = 0.25 * max(size[i], size[j])
+            if abs(a[0] + b[0]) > tol or abs(a[1] - b[1]) > tol or abs(a[2] - b[2]) > tol:
+                continue
+            if best is None or a[1] + b[1] > best[0]:
+                best = (a[1] + b[1], i, j)
+    if best is None:
+        return {}
+    _, i, j = best
+    # the subject's left eye is on +x (the face looks down +z)
+    found["eye_l"], found["eye_r"] = holes[i], holes[j]
+    eye_y = min(cen[i][1], cen[j][1])
+    mouth = [
+        k
+        for k in range(len(holes))
+        if k not in (i, j) and abs(cen[k][0]) < 0.1 * width and cen[k][1] < eye_y
+    ]
+    if mouth:
+        found["mouth"] = holes[max(mouth, key=lambda k: len(holes[k]))]
+    return found
+
+
 def find_openings(face) -> list[Opening]:
-    """The eye and mouth openings of a face with the default landmark groups (else none)."""
+    """The eye and mouth openings of a face: from the default landmark groups, or for a face
+    without them, from the shape of its holes (:func:`_openings_by_shape`); else none."""
     out = []
     loops = face.boundary_loops
     if not loops:
@@ -103,6 +148,16 @@ def find_openings(face) -> list[Opening]:
     rim = max(loops, key=len)
     inner = [lp for lp in loops if lp is not rim]
     lm = face.landmarks
+    if not any(k in lm for k in ("eye_l", "eye_r", "lip_upper_inner")):
+        by_shape = _openings_by_shape(face, inner)
+        for name, depth, col in (
+            ("eye_l", 9.0, SOCKET),
+            ("eye_r", 9.0, SOCKET),
+            ("mouth", 16.0, MOUTH),
+        ):
+            if name in by_shape:
+                out.append(Opening(name, by_shape[name], depth, col))
+        return out
     for name, key, depth, col in (
         ("eye_l", "eye_l", 9.0, SOCKET),
         ("eye_r", "eye_r", 9.0, SOCKET),
