@@ -1,0 +1,316 @@
+"""The analysis as an OpenFace-2.2-compatible CSV: head pose and action-unit intensities.
+
+Many tools and scripts read the CSV that OpenFace 2.2's ``FeatureExtraction`` writes (its
+successor, 3.0, dropped the head pose and all but 8 AUs). :func:`write_openface_csv` turns a
+``contractions.csv`` of ``myoface analyze`` into that format (``myoface analyze ... --format
+openface`` writes it as ``openface.csv`` beside ``contractions.csv``). Only the columns that
+myoface measures are written, in OpenFace's order (no gaze, no 2-D/3-D landmarks, no shape
+parameters, no ``AUxx_c`` occurrence columns)::
+
+    frame,face_id,timestamp,confidence,success,pose_Tx,pose_Ty,pose_Tz,pose_Rx,pose_Ry,pose_Rz,
+    AU01_r,AU02_r,AU04_r,AU05_r,AU06_r,AU07_r,AU09_r,AU10_r,AU12_r,AU14_r,AU15_r,AU17_r,
+    AU20_r,AU23_r,AU25_r,AU26_r,AU45_r
+
+Sources for the format (facts only): OpenFace's wiki page "Output Format" and its
+``lib/local/Utilities/src/RecorderCSV.cpp`` (the header has no spaces; the regression AUs are
+sorted by name; numbers are written with 3 decimals for the timestamp, 2 for the confidence
+and the AUs, 1 for the translation and 3 for the angles) and ``RotationHelpers.h`` (Euler
+angles ``R = Rx * Ry * Rz``).
+
+Columns (see also the README):
+
+- ``frame``: OpenFace counts frames from 1: myoface's frame 0 is frame 1.
+- ``face_id``: always 0 (one face per video).
+- ``timestamp``: the frame's time in the video, s.
+- ``confidence``: 1.0 for a measured frame, 0.0 otherwise. It is *not* a probability: myoface
+  has no calibrated confidence (the fit's residual is in ``contractions.csv``).
+- ``success``: 1 when the frame was measured (``quality`` "ok"), 0 otherwise. As OpenFace does,
+  an unmeasured frame has 0 in every other column.
+- ``pose_Tx, pose_Ty, pose_Tz``: the origin of myoface's head frame in OpenFace's camera frame
+  (OpenCV's: x right, y down, z away from the camera; mm). myoface's head-frame origin is on the
+  face's midline about 75 mm behind the nose tip (OpenFace's is its own model's centre), and the
+  distance rests on the fit's assumed field of view and the face model's size (one video has
+  no absolute scale), so compare movements, not absolute positions, between tools.
+- ``pose_Rx, pose_Ry, pose_Rz``: the head's rotation in that camera frame, radians, as Euler
+  angles with ``R = Rx Ry Rz``: pitch, yaw, roll (OpenFace's convention). A frontal face is
+  0, 0, 0. Empty cells when the CSV has no 3-D pose (the snakes' 2-D head frame).
+- ``AUxx_r``: intensities on OpenFace's 0-5 scale (0 absent, 1 trace ... 5 maximum; FACS's
+  A-E are 1-5), from the fitted contractions through the project's AU table
+  (``data/facs_action_units.toml``, :func:`au_intensities`); bilateral AUs are the mean of the
+  two sides. ``AU07_r`` and ``AU45_r`` are empty (see :data:`UNMEASURED_AUS`), as is an AU whose
+  principal muscles are not in the CSV (e.g. AU04 from the snakes, which do not estimate the
+  corrugators).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from myoface.errors import MyofaceFormatError
+
+#: OpenFace 2.2's AU intensity (regression) outputs, in its column order
+OPENFACE_AUS = (1, 2, 4, 5, 6, 7, 9, 10, 12, 14, 15, 17, 20, 23, 25, 26, 45)
+#: the columns of the OpenFace CSV written by :func:`write_openface_csv`, in order
+OPENFACE_COLUMNS = (
+    "frame",
+    "face_id",
+    "timestamp",
+    "confidence",
+    "success",
+    "pose_Tx",
+    "pose_Ty",
+    "pose_Tz",
+    "pose_Rx",
+    "pose_Ry",
+    "pose_Rz",
+    *(f"AU{n:02d}_r" for n in OPENFACE_AUS),
+)
+#: OpenFace AUs that myoface does not measure, always empty, and why
+UNMEASURED_AUS = {
+    7: "lid tightener: the model's one orbicularis oculi stands for both its orbital part "
+    "(AU6) and its palpebral part (AU7), so the two cannot be told apart; its contraction is "
+    "reported as AU6",
+    45: "blink: the model has no eyelids",
+}
+#: AU intensity scale: OpenFace's maximum (FACS's E) for an AU at intensity 1 in the AU table
+OPENFACE_SCALE = 5.0
+#: OpenFace's camera frame (x right, y down, z away from the camera) from myoface's (x right,
+#: y up, z towards the viewer); also the head frame's axes when the face looks at the camera
+_FLIP = np.diag([1.0, -1.0, -1.0])
+
+
+def _expand(base: str, side: str, muscle_ids) -> list[str]:
+    """The muscle ids ``base`` stands for (as :mod:`myoface.control.facs` expands them)."""
+    if base in muscle_ids and not side:
+        return [base]
+    return [f"{base}_{s}" for s in ([side] if side else ["l", "r"])]
+
+
+@dataclass(frozen=True)
+class AUBasis:
+    """The AU table as a linear map from AU intensities to contractions.
+
+    Attributes
+    ----------
+    muscles : tuple of str — the contraction columns (muscle ids and ``"jaw"``), M.
+    units : tuple of (int, str) — the unknowns: (AU number, side), side "l", "r" or "" (an AU
+        FACS scores on the whole face), K.
+    weights : (M, K) ndarray — the contraction each unknown asks of each muscle at intensity 1
+        (the AU table's weights).
+    aus : tuple of int — the OpenFace AUs these units measure.
+    """
+
+    muscles: tuple
+    units: tuple
+    weights: np.ndarray
+    aus: tuple
+
+
+def au_basis(muscle_ids, aus=OPENFACE_AUS) -> AUBasis:
+    """The unknowns of :func:`au_intensities` over the contraction columns ``muscle_ids``.
+
+    An AU of ``aus`` is measured when it is in the AU table, not in :data:`UNMEASURED_AUS`, and
+    every muscle it drives with its largest weight is in ``muscle_ids`` (its lesser muscles that
+    are missing are left out). FACS's unilateral AUs (``sides`` in the table) have one unknown
+    per side.
+    """
+    from myoface.control.facs import au_table
+
+    ids = list(muscle_ids)
+    index = {k: i for i, k in enumerate(ids)}
+    table = au_table()
+    units, cols, measured = [], [], []
+    for n in aus:
+        if n in UNMEASURED_AUS or n not in table:
+            continue
+        au = table[n]
+        top = max(au.muscles.values())
+        principal = [b for b, w in au.muscles.items() if w == top]
+        if not all(m in index for b in principal for m in _expand(b, "", ids)):
+            continue
+        measured.append(n)
+        for side in ("l", "r") if au.sides else ("",):
+            col = np.zeros(len(ids))
+            for base, w in au.muscles.items():
+                for m in _expand(base, side, ids):
+                    if m in index:
+                        col[index[m]] = w
+            units.append((n, side))
+            cols.append(col)
+    w = np.column_stack(cols) if cols else np.zeros((len(ids), 0))
+    return AUBasis(tuple(ids), tuple(units), w, tuple(measured))
+
+
+def _mix(w: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """The AU table's mixing rule: contractions ``1 - prod_k (1 - w[:, k] a_k)``."""
+    return 1.0 - np.prod(1.0 - w * a[None, :], axis=1)
+
+
+def _mix_jacobian(w: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """d contractions / d a (M, K) of :func:`_mix`: ``w[:, k]`` times the product of the other
+    units' ``1 - w a``."""
+    p = 1.0 - w * a[None, :]
+    jac = np.empty_like(w)
+    for k in range(w.shape[1]):
+        jac[:, k] = w[:, k] * np.prod(np.delete(p, k, axis=1), axis=1)
+    return jac
+
+
+def fit_units(contractions: np.ndarray, basis: AUBasis) -> np.ndarray:
+    """Intensities (K,) in [0, 1] of ``basis.units`` whose contractions (the AU table's mixing
+    rule, probabilistic OR) are closest, in least squares, to ``contractions`` (M,).
+
+    Bounded least squares: a linear fit (``scipy.optimize.lsq_linear``, the mixing rule's
+    first-order form, exact for a single AU) refined through the mixing rule itself
+    (``scipy.optimize.least_squares``, trust region reflective). The basis of the OpenFace AUs
+    over the default face's muscles has full column rank, so the answer is unique.
+    """
+    from scipy.optimize import least_squares, lsq_linear
+
+    c = np.asarray(contractions, dtype=np.float64)
+    w = basis.weights
+    k = w.shape[1]
+    if k == 0:
+        return np.zeros(0)
+    if not np.any(c > 0):
+        return np.zeros(k)
+    a0 = lsq_linear(w, c, bounds=(0.0, 1.0), method="bvls").x
+    res = least_squares(
+        lambda a: _mix(w, a) - c,
+        np.clip(a0, 0.0, 1.0),
+        jac=lambda a: _mix_jacobian(w, a),
+        bounds=(0.0, 1.0),
+        method="trf",
+    )
+    return np.clip(res.x, 0.0, 1.0)
+
+
+def au_intensities(contractions, muscle_ids, aus=OPENFACE_AUS) -> np.ndarray:
+    """OpenFace-style AU intensities (T, len(aus)) on 0-5 from contractions (T, M) over
+    ``muscle_ids`` (or one frame, (M,) -> (len(aus),)).
+
+    Per frame, the intensities of the AUs (per side for FACS's unilateral AUs) are fitted to the
+    contraction vector through the AU table (:func:`fit_units`); an AU's intensity is the mean
+    of its two sides' (for an AU of the whole face, its one value) times
+    :data:`OPENFACE_SCALE`. A contraction vector made by a single AU at intensity i gives that
+    AU 5 i and the others 0.
+
+    Limits: the AU table's muscles are the model's, so an AU is only as distinct as its muscles
+    are. AU7 shares AU6's orbicularis oculi and is not measured (:data:`UNMEASURED_AUS`); AU25
+    (lips part) is read from the depressor labii inferioris and the jaw together with AU26; a
+    contraction of a muscle that only AUs outside OpenFace's list drive (e.g. the zygomaticus
+    minor of AU11) is explained by the listed AUs as well as they can, or left unexplained.
+    NaN for an AU that is not measured (:func:`au_basis`) and for a frame whose contractions
+    are not all finite.
+    """
+    c = np.asarray(contractions, dtype=np.float64)
+    one = c.ndim == 1
+    c = np.atleast_2d(c)
+    ids = list(muscle_ids)
+    if c.shape[1] != len(ids):
+        raise MyofaceFormatError(
+            f"contractions must be (T, {len(ids)}) over muscle_ids; got shape {c.shape}"
+        )
+    basis = au_basis(ids, aus)
+    out = np.full((len(c), len(aus)), np.nan)
+    col = {n: j for j, n in enumerate(aus)}
+    for t, row in enumerate(c):
+        if not np.isfinite(row).all():
+            continue
+        a = fit_units(np.clip(row, 0.0, 1.0), basis)
+        for n in basis.aus:
+            vals = [a[k] for k, (m, _) in enumerate(basis.units) if m == n]
+            out[t, col[n]] = OPENFACE_SCALE * float(np.mean(vals))
+    return out[0] if one else out
+
+
+def openface_pose(pose) -> tuple[float, float, float, float, float, float]:
+    """(pose_Tx, pose_Ty, pose_Tz mm, pose_Rx, pose_Ry, pose_Rz rad) of a
+    :class:`~myoface.analysis.fit.HeadPose` in OpenFace's convention: camera frame x right, y
+    down, z away from the camera; ``R = Rx(pitch) Ry(yaw) Rz(roll)`` maps the head's own axes
+    (OpenFace's: x to the image's right, y down, z away from the camera when it faces the
+    camera) into the camera frame."""
+    from scipy.spatial.transform import Rotation
+
+    r = _FLIP @ np.asarray(pose.rotation, dtype=np.float64) @ _FLIP
+    t = _FLIP @ np.asarray(pose.translation_mm, dtype=np.float64)
+    rx, ry, rz = Rotation.from_matrix(r).as_euler("XYZ")  # intrinsic X-Y-Z: R = Rx Ry Rz
+    return (float(t[0]), float(t[1]), float(t[2]), float(rx), float(ry), float(rz))
+
+
+def _muscle_columns(header) -> list[str]:
+    """The contraction columns of a contractions.csv header (muscles and the jaw)."""
+    from myoface.analysis.fit import POSE_COLUMNS
+    from myoface.analysis.pipeline import CSV_OTHER_COLUMNS
+
+    other = set(CSV_OTHER_COLUMNS) | set(POSE_COLUMNS) | {"residual_mm"}
+    return [c for c in header if c and c not in other]
+
+
+def read_for_openface(path):
+    """(frames (T,) int, times (T,) s, quality (T,), contractions (T, M), muscle ids, poses or
+    None) of a ``contractions.csv``."""
+    import csv
+
+    from myoface._io import read_text
+    from myoface.analysis.pipeline import read_contractions_csv
+
+    p = Path(path)
+    text = read_text(p, "contractions CSV")
+    rows = list(csv.reader(text.splitlines()))
+    if not rows:
+        raise MyofaceFormatError(f"{p}: no header and no rows")
+    header = [c.strip() for c in rows[0]]
+    if "frame" not in header:
+        raise MyofaceFormatError(f"{p}: no 'frame' column (is it a contractions.csv?)")
+    ids = _muscle_columns(header)
+    times, table, quality = read_contractions_csv(p, ids)
+    fcol = header.index("frame")
+    try:
+        frames = np.array([int(r[fcol]) for r in rows[1:] if any(c.strip() for c in r)])
+    except (ValueError, IndexError):
+        raise MyofaceFormatError(f"{p}: a 'frame' cell is not a whole number") from None
+    poses = None
+    from myoface.analysis.fit import POSE_COLUMNS, read_head_poses
+
+    if all(c in header for c in POSE_COLUMNS):
+        poses = read_head_poses(p)
+    return frames, times, list(quality), table, ids, poses
+
+
+def openface_rows(frames, times, quality, table, ids, poses=None) -> list[list[str]]:
+    """The OpenFace CSV's rows (cells as text, :data:`OPENFACE_COLUMNS`) of an analysis."""
+    aus = au_intensities(table, ids)
+    out = []
+    for k, (f, t, q) in enumerate(zip(frames, times, quality, strict=True)):
+        ok = q == "ok" and np.isfinite(table[k]).all()
+        head = [str(int(f) + 1), "0", f"{t:.3f}"]
+        if not ok:  # OpenFace's row for a frame it could not track: zeros, success 0
+            out.append([*head, "0.00", "0", *(["0.0"] * 3), *(["0.000"] * 3), *(["0.00"] * 17)])
+            continue
+        pose = poses[k] if poses is not None else None
+        if pose is None:
+            pcells = [""] * 6
+        else:
+            v = openface_pose(pose)
+            pcells = [f"{x:.1f}" for x in v[:3]] + [f"{x:.3f}" for x in v[3:]]
+        acells = ["" if not np.isfinite(a) else f"{a:.2f}" for a in aus[k]]
+        out.append([*head, "1.00", "1", *pcells, *acells])
+    return out
+
+
+def write_openface_csv(contractions_csv, path: str | os.PathLike) -> Path:
+    """Write the OpenFace-2.2-compatible CSV (:data:`OPENFACE_COLUMNS`; see the module's
+    docstring) of the analysis in ``contractions_csv`` to ``path`` (replaced whole); returns
+    ``path``."""
+    from myoface._io import atomic_output
+
+    rows = openface_rows(*read_for_openface(contractions_csv))
+    lines = [",".join(OPENFACE_COLUMNS), *(",".join(r) for r in rows)]
+    with atomic_output(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return Path(path)

@@ -1,0 +1,185 @@
+"""The OpenFace-2.2-compatible CSV (``myoface.analysis.openface``)."""
+
+import csv
+
+import numpy as np
+import pytest
+
+from myoface.analysis.fit import FitMeasurement, HeadPose, PinholeCamera
+from myoface.analysis.openface import (
+    OPENFACE_AUS,
+    OPENFACE_COLUMNS,
+    UNMEASURED_AUS,
+    au_basis,
+    au_intensities,
+    openface_pose,
+    write_openface_csv,
+)
+from myoface.control.facs import au_contractions
+
+
+@pytest.fixture(scope="module")
+def ids():
+    from myoface.muscles.io import load_default_muscles
+
+    return list(load_default_muscles().ids)
+
+
+#: the AUs myoface measures in the OpenFace list
+MEASURED = [n for n in OPENFACE_AUS if n not in UNMEASURED_AUS]
+
+
+def test_columns_and_their_order():
+    """OpenFace 2.2's sequence header (RecorderCSV.cpp: frame,face_id,timestamp,confidence,
+    success, then the pose, then the AU intensities sorted by name), without the columns
+    myoface does not measure."""
+    aus = "01 02 04 05 06 07 09 10 12 14 15 17 20 23 25 26 45".split()
+    expected = ["frame", "face_id", "timestamp", "confidence", "success"]
+    expected += [f"pose_{a}" for a in ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")]
+    expected += [f"AU{a}_r" for a in aus]
+    assert list(OPENFACE_COLUMNS) == expected
+    assert sorted(OPENFACE_COLUMNS[11:]) == list(OPENFACE_COLUMNS[11:])
+
+
+def test_the_basis_has_full_rank(ids):
+    """Every measured AU (per side) asks the default face's muscles for a different pattern:
+    the fit's answer is unique."""
+    b = au_basis(ids)
+    assert b.aus == tuple(MEASURED)
+    assert np.linalg.matrix_rank(b.weights) == b.weights.shape[1]
+
+
+@pytest.mark.parametrize("au", MEASURED)
+@pytest.mark.parametrize("intensity", [0.3, 1.0])
+def test_a_single_au_gives_its_intensity_back(ids, au, intensity):
+    c = au_contractions({au: intensity}, ids)
+    out = au_intensities(c, ids)
+    col = OPENFACE_AUS.index(au)
+    assert out[col] == pytest.approx(5 * intensity, abs=1e-3)
+    others = [j for j, n in enumerate(OPENFACE_AUS) if n != au and n not in UNMEASURED_AUS]
+    np.testing.assert_allclose(out[others], 0.0, atol=1e-3)
+    assert np.isnan(out[[OPENFACE_AUS.index(n) for n in UNMEASURED_AUS]]).all()
+
+
+def test_one_side_of_a_bilateral_au_is_half_its_intensity(ids):
+    out = au_intensities(au_contractions({"L12": 0.8}, ids), ids)
+    assert out[OPENFACE_AUS.index(12)] == pytest.approx(0.5 * 5 * 0.8, abs=1e-3)
+
+
+def test_mixed_aus_through_the_mixing_rule(ids):
+    """AUs that share muscles (1, 2 and 5 on the frontalis; 25 and 26 on the jaw) mix by the
+    probabilistic OR: the fit through that rule recovers each of them."""
+    aus = {1: 0.6, 2: 0.4, 5: 0.5, 12: 0.9, 25: 0.7, 26: 0.5, 4: 0.3, 9: 0.6}
+    out = au_intensities(au_contractions(aus, ids), ids)
+    for n in MEASURED:
+        assert out[OPENFACE_AUS.index(n)] == pytest.approx(5 * aus.get(n, 0.0), abs=2e-3), n
+
+
+def test_rows_and_nan(ids):
+    rng = np.random.default_rng(0)
+    table = np.vstack([au_contractions({6: 0.5}, ids), np.full(len(ids), np.nan)])
+    out = au_intensities(table, ids)
+    assert out.shape == (2, len(OPENFACE_AUS))
+    assert out[0, OPENFACE_AUS.index(6)] == pytest.approx(2.5, abs=1e-3)
+    assert np.isnan(out[1]).all()
+    out = au_intensities(rng.uniform(0, 1, (3, len(ids))), ids)  # any vector: on the scale
+    ok = np.isfinite(out)
+    assert ((out[ok] >= 0) & (out[ok] <= 5)).all()
+
+
+def _openface_rotation(rx, ry, rz):
+    """OpenFace's Euler2RotationMatrix: R = Rx Ry Rz, right-handed matrices."""
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    mx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    my = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    mz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return mx @ my @ mz
+
+
+@pytest.mark.parametrize(
+    "angles, shift",
+    [((0, 0, 0), (0, 0, -500)), ((25, -10, 5), (12, -3, -480)), ((-30, 15, -12), (-20, 8, -600))],
+)
+def test_pose_in_openfaces_camera_frame(default_face, angles, shift):
+    """A face point placed by the OpenFace pose (its head axes: x right, y down, z away from
+    the camera; OpenCV's pinhole projection) lands on the pixel where myoface's pose puts it."""
+    pose = HeadPose.from_euler(*angles, shift)
+    tx, ty, tz, rx, ry, rz = openface_pose(pose)
+    assert tz > 0  # in front of the camera, z away from it
+    cam = PinholeCamera.for_image(640, 480)
+    v = default_face.vertices
+    ours = cam.project(pose.apply(v))
+    p = (v * [1, -1, -1]) @ _openface_rotation(rx, ry, rz).T + [tx, ty, tz]
+    theirs = np.column_stack(
+        [cam.focal_px * p[:, 0] / p[:, 2] + cam.cx, cam.focal_px * p[:, 1] / p[:, 2] + cam.cy]
+    )
+    np.testing.assert_allclose(theirs, ours, atol=1e-6)
+
+
+def test_pose_signs():
+    """OpenFace's pitch is Rx (nodding down is positive: y points down), yaw Ry (a face turned
+    to the image's right is negative: z points away), roll Rz."""
+    assert openface_pose(HeadPose.from_euler(0, 10, 0))[3] == pytest.approx(np.radians(10))
+    assert openface_pose(HeadPose.from_euler(20, 0, 0))[4] == pytest.approx(-np.radians(20))
+    assert openface_pose(HeadPose.from_euler(0, 0, 5))[5] == pytest.approx(-np.radians(5))
+    assert openface_pose(HeadPose.from_euler(0, 0, 0, (10, 20, -400)))[:3] == pytest.approx(
+        (10, -20, 400)
+    )
+
+
+def _read(path):
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    return rows[0], rows[1:]
+
+
+def test_write_openface_csv_from_the_3d_fit(tmp_path, ids):
+    from myoface.analysis.pipeline import write_contractions_csv
+
+    smile = au_contractions({12: 0.8, 6: 0.4}, ids)
+    pose = HeadPose.from_euler(10, -5, 2, (1, 2, -500))
+    frames = [
+        FitMeasurement(0, 0.0, "ok", np.zeros(len(ids)), pose, 0.3),
+        FitMeasurement(1, 0.04, "no_face", np.full(len(ids), np.nan), None, float("nan")),
+        FitMeasurement(2, 0.08, "ok", smile, pose, 0.4),
+    ]
+    src = tmp_path / "contractions.csv"
+    write_contractions_csv(src, ids, frames, 0.3)
+    out = write_openface_csv(src, tmp_path / "openface.csv")
+    head, rows = _read(out)
+    assert head == list(OPENFACE_COLUMNS)
+    assert [r[0] for r in rows] == ["1", "2", "3"]  # OpenFace counts frames from 1
+    assert [r[4] for r in rows] == ["1", "0", "1"]  # success
+    assert [float(r[3]) for r in rows] == [1.0, 0.0, 1.0]
+    assert [float(r[2]) for r in rows] == [0.0, 0.04, 0.08]
+    # a frame that could not be measured: zeros, as OpenFace writes them
+    assert rows[1][1] == "0" and all(float(x) == 0.0 for x in rows[1][3:])
+    row = dict(zip(head, rows[2], strict=True))
+    assert float(row["AU12_r"]) == pytest.approx(4.0, abs=0.01)
+    assert float(row["AU06_r"]) == pytest.approx(2.0, abs=0.01)
+    assert float(row["AU01_r"]) == pytest.approx(0.0, abs=0.01)
+    assert row["AU07_r"] == "" and row["AU45_r"] == ""
+    want = openface_pose(pose)
+    got = [float(row[c]) for c in OPENFACE_COLUMNS[5:11]]
+    np.testing.assert_allclose(got[:3], want[:3], atol=0.06)  # mm, 1 decimal
+    np.testing.assert_allclose(got[3:], want[3:], atol=6e-4)  # rad, 3 decimals
+
+
+def test_write_openface_csv_without_a_3d_pose(tmp_path, ids):
+    """The snakes' CSV: the paper's 12 muscles + jaw and a 2-D head frame. The pose cells are
+    empty, and AUs whose principal muscles were not estimated (AU4: the corrugators) too."""
+    from myoface.analysis.pipeline import PAPER_MUSCLES
+
+    cols = list(PAPER_MUSCLES)
+    c = au_contractions({12: 0.6}, ids)
+    vals = [f"{c[ids.index(m)]:.5f}" for m in cols]
+    text = ",".join(["frame", "time_s", "quality", *cols, "head_dx_px"]) + "\n"
+    text += ",".join(["0", "0.0", "ok", *vals, "0.5"]) + "\n"
+    src = tmp_path / "contractions.csv"
+    src.write_text(text)
+    head, rows = _read(write_openface_csv(src, tmp_path / "openface.csv"))
+    row = dict(zip(head, rows[0], strict=True))
+    assert all(row[c] == "" for c in OPENFACE_COLUMNS[5:11])
+    assert row["AU04_r"] == "" and row["AU06_r"] == ""
+    assert float(row["AU12_r"]) == pytest.approx(3.0, abs=0.01)
+    assert float(row["AU01_r"]) == pytest.approx(0.0, abs=0.01)
