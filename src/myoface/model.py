@@ -32,13 +32,16 @@ import numpy as np
 
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 from myoface.face import FaceMesh, load_default_face, load_mesh, read_waters_geoface
+from myoface.face.teeth import fit_dentition, lip_contact
 from myoface.muscles import (
     MuscleSet,
     load_default_muscles,
     load_muscles,
     read_waters_expressions,
     read_waters_muscles,
+    rotate_about_axis,
 )
+from myoface.muscles.lids import build_eyelids
 from myoface.tissue import (
     RelaxResult,
     TissueModel,
@@ -70,24 +73,30 @@ class FaceState:
     v : (N, 3) float ndarray — velocities, mm/s.
     contractions : (M,) float ndarray — the contractions the kinematic nodes were set to.
     t : float — time, s.
+    previous_x : (N, 3) float ndarray or None — the positions a :func:`relax` started from
+        (None for a state made otherwise): the next relax repeats that move in its initial
+        guess, a warm start for the next frame of a video.
     """
 
     x: np.ndarray
     v: np.ndarray
     contractions: np.ndarray
     t: float = 0.0
+    previous_x: np.ndarray | None = None
 
     def __post_init__(self):
         for name in ("x", "v", "contractions"):
             object.__setattr__(self, name, _frozen(getattr(self, name)))
+        if self.previous_x is not None:
+            object.__setattr__(self, "previous_x", _frozen(self.previous_x))
 
     @classmethod
-    def _from_tissue(cls, s: TissueState, contractions) -> FaceState:
-        return cls(s.x, s.v, contractions, float(s.t))
+    def _from_tissue(cls, s: TissueState, contractions, previous_x=None) -> FaceState:
+        return cls(s.x, s.v, contractions, float(s.t), previous_x)
 
     def tissue_state(self) -> TissueState:
         """A (mutable) copy for the tissue level's functions."""
-        return TissueState(self.x.copy(), self.v.copy(), self.t)
+        return TissueState(self.x.copy(), self.v.copy(), self.t, self.previous_x)
 
 
 class FaceModel:
@@ -149,6 +158,10 @@ class FaceModel:
         )
         s("_memo", {})
         s("_memo_lock", threading.Lock())
+        #: the eyelids moved by the lid muscles (None without lid muscles or eye openings)
+        s("eyelids", build_eyelids(face, muscles))
+        #: the teeth behind the lips (None for a face without the lip landmark groups)
+        s("dentition", fit_dentition(face))
 
     def __setattr__(self, name, value):
         raise AttributeError(f"FaceModel is immutable: cannot set {name!r}")
@@ -208,9 +221,30 @@ class FaceModel:
 
     # ------------------------------------------------------------------ outputs
     def skin_vertices(self, state: FaceState | None = None) -> np.ndarray:
-        """Positions (V, 3) mm of the skin (epidermal) nodes of ``state`` (default: rest)."""
+        """Positions (V, 3) mm of the skin (epidermal) nodes of ``state`` (default: rest), with
+        the lips kept out of the teeth and from passing through each other
+        (:func:`myoface.face.teeth.lip_contact`; no change where they do not touch)."""
         s = self._rest if state is None else state
-        return np.array(s.x[: self.face.n_vertices])
+        skin = np.array(s.x[: self.face.n_vertices])
+        if self.eyelids is not None and s is not self._rest:
+            # the eyelids placed over the eyeballs by the lid muscles (myoface.muscles.lids)
+            skin = self.eyelids.apply(skin, s.contractions)
+        if self.dentition is None or s is self._rest:
+            return skin
+        return lip_contact(skin, self.dentition, self.jaw_pose(s))
+
+    def jaw_pose(self, state: FaceState | None = None):
+        """The mandible's rigid motion from rest in ``state`` (default: rest): ``(rotation
+        (3, 3), translation (3,) mm)``, ``x -> rotation @ x + translation``, the jaw's full
+        rotation about its hinge (what the lower teeth follow); the identity without a jaw."""
+        s = self._rest if state is None else state
+        j = self.muscles.jaw_index
+        if j is None:
+            return np.eye(3), np.zeros(3)
+        jaw = self.muscles.jaw
+        angle = float(s.contractions[j]) * jaw.max_angle_rad
+        rot = rotate_about_axis(np.eye(3), np.zeros(3), jaw.hinge_axis, angle).T  # rows -> R
+        return rot, jaw.hinge_point - rot @ jaw.hinge_point
 
     def skin_mesh(self, state: FaceState | None = None) -> FaceMesh:
         """The skin of ``state`` (default: rest) as a FaceMesh (same topology, UVs, texture,
@@ -270,7 +304,7 @@ def relax(
         if v is not None
     }
     res = relax_tissue(model.tissue, s0, model.targets(c), **kw)
-    return replace(res, state=FaceState._from_tissue(res.state, c))
+    return replace(res, state=FaceState._from_tissue(res.state, c, res.state.previous_x))
 
 
 def step(

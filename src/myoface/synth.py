@@ -62,7 +62,8 @@ def render_face(
     own), with eyes and mouth, seen from a camera preset ``view`` (:data:`VIEWS`) that frames
     the rest face."""
     cam = make_camera(model.face.vertices, view, width, height)
-    return Renderer(model.face, cam, texture=texture).render(model.skin_vertices(state))
+    r = Renderer(model.face, cam, texture=texture)
+    return r.render(model.skin_vertices(state), jaw=model.jaw_pose(state))
 
 
 @dataclass
@@ -123,7 +124,9 @@ class Synthesizer:
     def frame(self) -> np.ndarray:
         """Render the model's current skin (uint8 RGB)."""
         t0 = time.perf_counter()
-        img = self.renderer.render(self.model.skin_vertices(self.state))
+        img = self.renderer.render(
+            self.model.skin_vertices(self.state), jaw=self.model.jaw_pose(self.state)
+        )
         if self.overlay == "muscles":
             ins, org = muscle_segments(self.model)
             img = overlay_segments(img, self.renderer.camera, ins, org)

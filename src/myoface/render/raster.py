@@ -284,10 +284,22 @@ def _plane(planes, f, j, cx, cy):
     return planes[f, 3 * j] * cx + planes[f, 3 * j + 1] * cy + planes[f, 3 * j + 2]
 
 
+#: columns of a wrinkled triangle's row in ``wplanes`` (see :func:`_shade`): the planes of the
+#: perspective-correct numerators of the 6 vertex fields of :mod:`myoface.render.wrinkles`
+#: (rest x, rest y, fold distance, A_x, A_y, A_n), then the world gradients (3 x 3) of the first 3
+W_COLS = 6 * 3 + 9
+#: the nasolabial groove's half-width (mm), as :data:`myoface.render.wrinkles.FOLD_WIDTH_MM`
+_FOLD_W = 2.5
+
+
 @njit(cache=True, fastmath=True, inline="always", error_model="numpy")
-def _shade(f, cx, cy, planes, tex, tri_tex, light_dir, light_col, ambient, ks, shininess):
+def _shade(
+    f, cx, cy, planes, tex, tri_tex, light_dir, light_col, ambient, ks, shininess,
+    wplanes, wflag, wk, spec,
+):  # fmt: skip
     """Linear RGB of triangle ``f`` at screen point (cx, cy): perspective-correct attributes,
-    normal flipped towards the viewer, Blinn-Phong with every light."""
+    normal flipped towards the viewer and tilted by the wrinkle height field where
+    ``wflag[f]`` (n' = n - grad h), Blinn-Phong with every light (specular x ``spec[f]``)."""
     inv = 1.0 / _plane(planes, f, 0, cx, cy)
     nx = _plane(planes, f, 1, cx, cy)  # (scaled by D > 0; normalized below)
     ny = _plane(planes, f, 2, cx, cy)
@@ -296,6 +308,30 @@ def _shade(f, cx, cy, planes, tex, tri_tex, light_dir, light_col, ambient, ks, s
     nx *= nn
     ny *= nn
     nz *= nn
+    if f < wflag.shape[0] and wflag[f]:
+        wx = _plane(wplanes, f, 0, cx, cy) * inv
+        wy = _plane(wplanes, f, 1, cx, cy) * inv
+        ws = _plane(wplanes, f, 2, cx, cy) * inv
+        amx = _plane(wplanes, f, 3, cx, cy) * inv
+        amy = _plane(wplanes, f, 4, cx, cy) * inv
+        amn = _plane(wplanes, f, 5, cx, cy) * inv
+        # dh/dX, dh/dY, dh/ds of h = A_y sin(k Y) + A_x sin(k X) - A_n exp(-(s / w)^2)
+        hx = amx * wk * np.cos(wk * wx)
+        hy = amy * wk * np.cos(wk * wy)
+        q = ws / _FOLD_W
+        hs = amn * 2.0 * q / _FOLD_W * np.exp(-q * q)
+        g = 18
+        gx = hx * wplanes[f, g] + hy * wplanes[f, g + 3] + hs * wplanes[f, g + 6]
+        gy = hx * wplanes[f, g + 1] + hy * wplanes[f, g + 4] + hs * wplanes[f, g + 7]
+        gz = hx * wplanes[f, g + 2] + hy * wplanes[f, g + 5] + hs * wplanes[f, g + 8]
+        nx -= gx
+        ny -= gy
+        nz -= gz
+        nn = 1.0 / (np.sqrt(nx * nx + ny * ny + nz * nz) + 1e-30)
+        nx *= nn
+        ny *= nn
+        nz *= nn
+    ks = ks * spec[f]
     o = 3 * N_PLANES
     vx, vy, vz = planes[f, o], planes[f, o + 1], planes[f, o + 2]
     if nx * vx + ny * vy + nz * vz < 0.0:  # the back of an open surface
@@ -352,6 +388,10 @@ def shade_resolve(
     out8,
     outf,
     nt,  # threads (rows are interleaved between them)
+    wplanes,  # (F_w, W_COLS) wrinkle planes of the first F_w triangles (see _shade)
+    wflag,  # (F_w,) bool: triangle is wrinkled
+    wk,  # furrow wave number (rad / mm)
+    spec,  # (F,) specular scale per triangle
 ):
     """Shade and resolve to the output size, like multisample anti-aliasing: each output pixel
     looks at its fct x fct samples and shades every distinct triangle among them once, at the
@@ -416,6 +456,7 @@ def shade_resolve(
                         r, g, b = _shade(
                             t0, (x + 0.5) * fct, (y + 0.5) * fct, planes, tex, tri_tex,
                             light_dir, light_col, ambient, ks, shininess,
+                            wplanes, wflag, wk, spec,
                         )  # fmt: skip
                 else:
                     for s in range(nss):
@@ -456,6 +497,7 @@ def shade_resolve(
                         cr, cg, cb = _shade(
                             t, mx / cnt, my / cnt, planes, tex, tri_tex,
                             light_dir, light_col, ambient, ks, shininess,
+                            wplanes, wflag, wk, spec,
                         )  # fmt: skip
                         r += cr * cnt
                         g += cg * cnt

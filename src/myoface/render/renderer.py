@@ -17,10 +17,13 @@ import numba
 import numpy as np
 
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
-from myoface.render import dressing
+from myoface.face.eyes import eyeball_center
+from myoface.face.teeth import fit_dentition
+from myoface.render import dressing, mouth
 from myoface.render.camera import Camera
 from myoface.render.raster import (
     SETUP_COLS,
+    W_COLS,
     attribute_planes,
     planes_columns,
     setup_triangles,
@@ -29,6 +32,7 @@ from myoface.render.raster import (
     vertex_normals_numba,
     visibility,
 )
+from myoface.render.wrinkles import WrinkleField
 
 _SRGB_LUT = srgb_lut()
 _NO_U8 = np.zeros((1, 1, 3), np.uint8)  # placeholders for the output shade_resolve does not use
@@ -99,19 +103,19 @@ def _rgb01(t: np.ndarray, what: str = "a texture") -> np.ndarray:
     return np.repeat(t, 3, axis=2) if t.shape[2] == 1 else t
 
 
-def _check_pose(pose) -> tuple[np.ndarray, np.ndarray]:
+def _check_pose(pose, what: str = "pose") -> tuple[np.ndarray, np.ndarray]:
     """``(rotation (3, 3), translation (3,))`` as float arrays, checked."""
     try:
         rot, shift = (np.asarray(a, dtype=np.float64) for a in pose)
     except (TypeError, ValueError):
-        raise MyofaceValueError("pose must be (rotation (3, 3), translation (3,) mm)") from None
+        raise MyofaceValueError(f"{what} must be (rotation (3, 3), translation (3,) mm)") from None
     if rot.shape != (3, 3) or shift.shape != (3,) or not np.isfinite(rot).all():
         raise MyofaceValueError(
-            f"pose must be (rotation (3, 3), translation (3,) mm); got shapes {rot.shape}, "
+            f"{what} must be (rotation (3, 3), translation (3,) mm); got shapes {rot.shape}, "
             f"{shift.shape}"
         )
     if not np.isfinite(shift).all() or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6):
-        raise MyofaceValueError("pose must be a finite rotation matrix and translation")
+        raise MyofaceValueError(f"{what} must be a finite rotation matrix and translation")
     return rot, shift
 
 
@@ -154,6 +158,10 @@ class _Scene:
     fans: list = field(default_factory=list)  # (loop, first copy index, center index, depth)
     n_dynamic: int = 0  # face vertices + fan vertices (normals computed per frame)
     dyn_tris: np.ndarray | None = None
+    #: the mouth cavity behind the teeth: (lip margin loop, first vertex), or None
+    cavity: tuple | None = None
+    #: vertices from this index on (lower teeth, tongue) follow the jaw
+    n_jaw_first: int = 0
 
 
 class Renderer:
@@ -172,6 +180,10 @@ class Renderer:
         face with the default landmarks gets :func:`dressing.default_skin_texture`.
     ssaa : int — supersampling factor per axis (anti-aliasing; 1 = off).
     dress : bool — add eyeballs, sockets and the mouth cavity (faces with eye/mouth landmarks).
+    teeth : bool — with ``dress``, teeth, gums, tongue and a shaded cavity in the mouth of a
+        face with the lip landmark groups (:func:`myoface.face.teeth.fit_dentition`); else a
+        dark fan closes the mouth.
+    wrinkles : bool — shade furrows where the skin is compressed (:mod:`.wrinkles`).
     """
 
     def __init__(
@@ -183,6 +195,8 @@ class Renderer:
         texture=None,
         ssaa: int = 2,
         dress: bool = True,
+        teeth: bool = True,
+        wrinkles: bool = True,
     ):
         if not isinstance(ssaa, int | np.integer) or not 1 <= ssaa <= 4:
             raise MyofaceValueError(f"ssaa must be an integer in 1..4; got {ssaa!r}")
@@ -199,6 +213,7 @@ class Renderer:
             self.texture = dressing.default_skin_texture(face)
         else:
             self.texture = None
+        self.dentition = fit_dentition(face) if dress and teeth else None
         self.scene = self._build_scene(dress)
         self._big = camera.with_size(camera.width * self.ssaa, camera.height * self.ssaa)
         h, w = self._big.height, self._big.width
@@ -219,6 +234,15 @@ class Renderer:
         self._light_col = np.array(
             [np.asarray(li.color, float) * li.intensity for li in self.lights]
         ).reshape(-1, 3)
+        nf = face.n_triangles
+        self.wrinkles = WrinkleField(face) if wrinkles and nf > 0 else None
+        self._wplanes = np.zeros((nf if self.wrinkles else 0, W_COLS))
+        self._wflag = np.zeros(nf if self.wrinkles else 0, bool)
+        self._spec = np.ones(n_tris)
+        if self.scene.cavity is not None:  # the inside of the mouth is wet but in shadow
+            k = len(self.scene.cavity[0])
+            first_cavity = len(self.scene.dyn_tris) - 3 * k
+            self._spec[first_cavity : len(self.scene.dyn_tris)] = 0.0
 
     # ------------------------------------------------------------------ scene
     def _build_scene(self, dress: bool) -> _Scene:
@@ -233,8 +257,12 @@ class Renderer:
         fans = []
         n = nv
         openings = dressing.find_openings(f) if dress else []
+        cavity_op = None
         for op in openings:
             k = len(op.loop)
+            if op.name == "mouth" and self.dentition is not None:
+                cavity_op = op  # drawn below, after the fans
+                continue
             first, center = n, n + k
             ring = np.arange(k)
             fan = np.column_stack([first + ring, first + (ring + 1) % k, np.full(k, center)])
@@ -249,6 +277,16 @@ class Renderer:
             vcol.append(np.tile(op.color, (k + 1, 1)))
             fans.append((op.loop, first, center, op.depth_mm))
             n += k + 1
+        cavity = None
+        if cavity_op is not None:
+            k = len(cavity_op.loop)
+            tris.append(mouth.cavity_triangles(k, n))
+            tri_tex.append(np.zeros(3 * k, bool))
+            tri_cull.append(np.zeros(3 * k, bool))
+            uv.append(np.zeros((2 * k + 1, 2)))
+            vcol.append(mouth.cavity_colors(k))
+            cavity = (cavity_op.loop, n)
+            n += 2 * k + 1
         n_dynamic = n
         dyn_tris = np.concatenate(tris).astype(np.int64)
         static_normals = []
@@ -256,9 +294,7 @@ class Renderer:
         for op in openings:
             if not op.name.startswith("eye"):
                 continue
-            pts = f.vertices[op.loop]
-            rim_c = pts.mean(axis=0)
-            center = rim_c - np.array([0, 0, dressing.EYE_RADIUS_MM - 3.5])
+            center = eyeball_center(f.vertices, op.loop)  # where the eyelids slide
             v, t, nrm, col = dressing.eyeball(center, np.array([0, 0, 1.0]), dressing.EYE_RADIUS_MM)
             tris.append(t + n)
             tri_tex.append(np.zeros(len(t), bool))
@@ -268,6 +304,20 @@ class Renderer:
             static_pos.append(v)
             static_normals.append(nrm)
             n += len(v)
+        jaw_first = n
+        if cavity is not None:
+            meshes = mouth.mouth_meshes(self.dentition)
+            for v, t, nrm, col in (meshes.upper, meshes.lower):
+                if v is meshes.lower[0]:
+                    jaw_first = n
+                tris.append(t + n)
+                tri_tex.append(np.zeros(len(t), bool))
+                tri_cull.append(np.ones(len(t), bool))
+                uv.append(np.zeros((len(v), 2)))
+                vcol.append(col)
+                static_pos.append(v)
+                static_normals.append(nrm)
+                n += len(v)
         scene = _Scene(
             np.ascontiguousarray(np.concatenate(tris), dtype=np.int64),
             np.concatenate(tri_tex),
@@ -279,14 +329,17 @@ class Renderer:
             fans,
             n_dynamic,
             dyn_tris,
+            cavity,
+            jaw_first,
         )
         self._static_pos = np.concatenate(static_pos) if static_pos else np.zeros((0, 3))
         self._n_total = n
         return scene
 
-    def positions(self, skin: np.ndarray) -> np.ndarray:
-        """Positions (N, 3) mm of every drawn vertex (skin, dressing fans, eyeballs) for the
-        skin vertices ``skin``, in the order of :attr:`scene`."""
+    def positions(self, skin: np.ndarray, jaw=None) -> np.ndarray:
+        """Positions (N, 3) mm of every drawn vertex (skin, dressing fans, eyeballs, teeth) for
+        the skin vertices ``skin`` and the jaw's rigid motion ``jaw`` (see :meth:`render`), in
+        the order of :attr:`scene`."""
         sc = self.scene
         pos = np.empty((self._n_total, 3))
         pos[: sc.n_face] = skin
@@ -294,42 +347,56 @@ class Renderer:
             pts = skin[loop]
             pos[first : first + len(loop)] = pts
             pos[center] = pts.mean(axis=0) - np.array([0.0, 0.0, depth])
+        if sc.cavity is not None:
+            loop, first = sc.cavity
+            mouth.cavity_positions(skin[loop], pos[first : first + 2 * len(loop) + 1])
         pos[sc.n_dynamic :] = self._static_pos
+        if jaw is not None:
+            rot, shift = _check_pose(jaw, "jaw")
+            pos[sc.n_jaw_first :] = pos[sc.n_jaw_first :] @ rot.T + shift
         return pos
 
     # ------------------------------------------------------------------ render
-    def render_linear(self, vertices=None, pose=None) -> np.ndarray:
-        """The image (H, W, 3) float32 in linear RGB (before tone mapping); ``pose`` as for
-        :meth:`render`."""
+    def render_linear(self, vertices=None, pose=None, jaw=None) -> np.ndarray:
+        """The image (H, W, 3) float32 in linear RGB (before tone mapping); ``pose`` and
+        ``jaw`` as for :meth:`render`."""
         out = np.empty((self.camera.height, self.camera.width, 3), np.float32)
-        self._draw(vertices, None, out, pose)
+        self._draw(vertices, None, out, pose, jaw)
         return out
 
-    def render(self, vertices=None, pose=None) -> np.ndarray:
+    def render(self, vertices=None, pose=None, jaw=None) -> np.ndarray:
         """The image (H, W, 3) uint8 sRGB of the skin at ``vertices`` (default: rest).
 
         ``pose``: None, or ``(rotation (3, 3), translation (3,) mm)``, a rigid motion of the
         whole head (skin, eyes, mouth), ``x -> rotation @ x + translation``, before the camera
-        sees it; the lights stay where they are (a head that turns in a lit room)."""
+        sees it; the lights stay where they are (a head that turns in a lit room).
+        ``jaw``: None (closed), or the mandible's rigid motion from rest in the head frame, the
+        same form (:meth:`myoface.model.FaceModel.jaw_pose`): the lower teeth and the tongue
+        follow it."""
         out = np.empty((self.camera.height, self.camera.width, 3), np.uint8)
-        self._draw(vertices, out, None, pose)
+        self._draw(vertices, out, None, pose, jaw)
         return out
 
-    def _draw(self, vertices, out8, outf, pose=None) -> None:
+    def _draw(self, vertices, out8, outf, pose=None, jaw=None) -> None:
         skin = (
             self.face.vertices
             if vertices is None
             else _check_vertices(vertices, self.face.n_vertices)
         )
         sc = self.scene
-        pos = self.positions(skin)
+        pos = self.positions(skin, jaw)
         rot = None
         if pose is not None:
             rot, shift = _check_pose(pose)
             pos = pos @ rot.T + shift
         normals = np.empty_like(pos)
         vertex_normals_numba(pos[: sc.n_dynamic], sc.dyn_tris, normals[: sc.n_dynamic])
-        normals[sc.n_dynamic :] = sc.normals_static if rot is None else sc.normals_static @ rot.T
+        normals[sc.n_dynamic :] = sc.normals_static
+        if jaw is not None:
+            jrot = np.asarray(jaw[0], dtype=np.float64)
+            normals[sc.n_jaw_first :] = normals[sc.n_jaw_first :] @ jrot.T
+        if rot is not None:
+            normals[sc.n_dynamic :] = normals[sc.n_dynamic :] @ rot.T
         cam = self._big
         scr = cam.project(pos)
         winv = np.ones(len(pos)) if cam.orthographic else 1.0 / np.maximum(scr[:, 2], 1e-9)
@@ -338,6 +405,7 @@ class Renderer:
             self._setup, self._tbox, self._bbox,
         )  # fmt: skip
         nt = numba.get_num_threads()
+        self._wrinkle_planes(skin, pos[: sc.n_face], winv)
         visibility(self._setup, self._tbox, self._bbox, self._zbuf, self._tid, nt)
         attribute_planes(
             self._setup, self._tbox, sc.tris, winv, normals, pos, sc.vcol, sc.uv,
@@ -364,7 +432,39 @@ class Renderer:
             out8 if srgb else _NO_U8,
             _NO_F32 if srgb else outf,
             nt,
+            self._wplanes,
+            self._wflag,
+            self.wrinkles.k if self.wrinkles is not None else 0.0,
+            self._spec,
         )
+
+    def _wrinkle_planes(self, skin, world_skin, winv) -> None:
+        """The wrinkled skin triangles' planes for :func:`raster._shade` (after the set-up)."""
+        if self.wrinkles is None:
+            return
+        wf = self.wrinkles
+        fields = wf.vertex_fields(skin)
+        tris = self.face.triangles
+        amp = fields[:, 3:].max(axis=1)
+        flag = amp[tris].max(axis=1) > 0.0
+        self._wflag[:] = flag
+        f = np.flatnonzero(flag)
+        if len(f) == 0:
+            return
+        st = self._setup[f]
+        a0, b0, c0 = st[:, 0], st[:, 1], st[:, 2]
+        a1, b1, c1 = st[:, 3], st[:, 4], st[:, 5]
+        a2, b2, c2 = -a0 - a1, -b0 - b1, 1.0 - c0 - c1
+        t = tris[f]
+        val = fields[t] * winv[t][:, :, None]  # (F, 3 vertices, 6 fields)
+        wp = self._wplanes
+        for j in range(6):
+            v0, v1, v2 = val[:, 0, j], val[:, 1, j], val[:, 2, j]
+            wp[f, 3 * j] = a0 * v0 + a1 * v1 + a2 * v2
+            wp[f, 3 * j + 1] = b0 * v0 + b1 * v1 + b2 * v2
+            wp[f, 3 * j + 2] = c0 * v0 + c1 * v1 + c2 * v2
+        g = wf.gradients(world_skin)[f]  # (F, 3 fields, 3 xyz)
+        wp[f, 18:] = g.reshape(len(f), 9)
 
     def triangle_ids(self) -> np.ndarray:
         """Per-pixel triangle index of the last render at supersampled size (-1: background);

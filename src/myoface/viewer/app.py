@@ -219,7 +219,8 @@ class FaceViewer:
         """The current face rendered on the CPU (textured, lit, dressed) as uint8 RGB."""
         camera = camera or self.renderer.camera
         r = Renderer(self.model.face, camera, texture=self._texture8)
-        return r.render(self.model.skin_vertices(self.worker.current))
+        st = self.worker.current
+        return r.render(self.model.skin_vertices(st), jaw=self.model.jaw_pose(st))
 
     def playback_video(
         self, path, camera: Camera | None = None, fps: float = VIDEO_FPS, on_frame=None
