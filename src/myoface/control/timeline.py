@@ -5,13 +5,18 @@ A timeline file (TOML or JSON) holds events::
     duration = 4.0            # optional: total length in s (default: the end of the last event)
 
     [[event]]
-    kind = "expression"       # expression | au | muscle | viseme
+    kind = "expression"       # expression | au | muscle | viseme | blink
     name = "happiness"        # expression / viseme name, AU key ("12", "L12"), or muscle id
     start = 0.5               # s
     duration = 2.0            # s, onset + apex + offset
     intensity = 0.8           # [0, 1] (or a FACS letter A-E)
     onset = 0.3               # optional, s: rise time (default: the expression's, or duration/3)
     offset = 0.4              # optional, s: decay time
+
+A blink is an event of its own: ``kind = "blink"`` with only ``start`` needed; ``name`` is
+``"both"`` (default), ``"L"`` or ``"R"`` (the subject's side), ``duration`` defaults to
+:data:`BLINK_DURATION_S` and the ramps to :data:`BLINK_ONSET_FRACTION` /
+:data:`BLINK_OFFSET_FRACTION` of it (the lids close faster than they open); it drives AU45.
 
 JSON: ``{"duration": 4.0, "events": [{...}, ...]}``. Times are finite numbers of seconds, at
 most :data:`MAX_TIME_S` (a day); files are UTF-8.
@@ -37,7 +42,18 @@ import numpy as np
 from myoface.control import facs
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 
-KINDS = ("expression", "au", "muscle", "viseme")
+KINDS = ("expression", "au", "muscle", "viseme", "blink")
+#: a blink's default length (s) and its closing and reopening ramps (fractions of it): a
+#: spontaneous blink lasts a few tenths of a second and the lid goes down faster than it comes
+#: up (Evinger, Manning & Sibony, "Eyelid movements: mechanisms and normal data", Invest.
+#: Ophthalmol. Vis. Sci. 32, 1991; VanderWerf et al., "Eyelid movements: behavioral studies of
+#: blinking in humans under different stimulus conditions", J. Neurophysiol. 89, 2003); the
+#: values are our choice within that, the rest of the duration is the pause shut
+BLINK_DURATION_S = 0.25
+BLINK_ONSET_FRACTION = 0.3
+BLINK_OFFSET_FRACTION = 0.6
+#: blink sides (``name`` of a blink event) -> the AU45 key
+BLINK_SIDES = {"both": "45", "l": "L45", "r": "R45"}
 _EVENT_KEYS = {"kind", "name", "start", "duration", "intensity", "onset", "offset"}
 #: default rise/decay of AU, muscle and viseme events, as a fraction of their duration
 DEFAULT_RAMP_FRACTION = 1.0 / 3.0
@@ -82,6 +98,9 @@ class Event:
             a, o = facs.expression_envelope(self.name)
             scale = min(1.0, self.duration / (a + o)) if a + o > 0 else 1.0
             a, o = a * scale, o * scale
+        elif self.kind == "blink":
+            a = self.duration * BLINK_ONSET_FRACTION
+            o = self.duration * BLINK_OFFSET_FRACTION
         else:
             a = o = self.duration * DEFAULT_RAMP_FRACTION
         return (self.onset if self.onset is not None else a), (
@@ -110,6 +129,9 @@ class Event:
             return facs.au_contractions({self.name: self.intensity}, muscle_ids, strict=strict)
         if self.kind == "viseme":
             return facs.viseme_contractions(self.name, self.intensity, muscle_ids, strict=strict)
+        if self.kind == "blink":
+            au = BLINK_SIDES[self.name.lower()]
+            return facs.au_contractions({au: self.intensity}, muscle_ids, strict=strict)
         return facs.muscle_contractions({self.name: self.intensity}, muscle_ids)
 
 
@@ -152,13 +174,19 @@ def _event(ev, where: str) -> Event:
     kind = ev.get("kind")
     if kind not in KINDS:
         raise MyofaceFormatError(f"{where}: kind must be one of {KINDS}; got {_brief(kind)}")
-    raw = ev.get("name")
+    raw = ev.get("name", "both" if kind == "blink" else None)
     if isinstance(raw, bool) or not isinstance(raw, str | int):
         raise MyofaceFormatError(f"{where}: missing name (a string, or an AU number)")
     if isinstance(raw, int) and not 0 <= raw < 1000:
         raise MyofaceFormatError(f"{where}: a numeric name must be an AU number in [0, 999]")
     name = str(raw)
+    if kind == "blink" and name.lower() not in BLINK_SIDES:
+        raise MyofaceFormatError(
+            f"{where}: a blink's name must be one of both, L, R; got {_brief(raw)}"
+        )
     start = _number(ev, "start", where)
+    if kind == "blink" and "duration" not in ev:
+        ev = {**ev, "duration": BLINK_DURATION_S}
     duration = _number(ev, "duration", where)
     if start < 0:
         raise MyofaceFormatError(f"{where}: start must be >= 0 s; got {start}")

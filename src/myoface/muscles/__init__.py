@@ -1,4 +1,5 @@
-"""Muscle level: linear, sheet and sphincter muscles, Waters' muscles, the jaw, and ``MuscleSet``.
+"""Muscle level: linear, sheet and sphincter muscles, Waters' muscles, the jaw, the eyelids and
+``MuscleSet``.
 
 A contraction vector c (M,) in [0, 1] displaces the fascia nodes it reaches (Terzopoulos &
 Waters 1993, eq. (5)); the jaw rotates the lower face about its hinge.
@@ -12,6 +13,7 @@ from myoface.muscles.io import (
     read_waters_muscles,
 )
 from myoface.muscles.jaw import Jaw, harmonic_weights, rotate_about_axis
+from myoface.muscles.lids import Eyelids, LidMuscle, build_eyelids
 from myoface.muscles.muscleset import JAW_ID, MuscleSet
 from myoface.muscles.types import (
     LinearMuscle,
@@ -23,12 +25,15 @@ from myoface.muscles.types import (
 
 __all__ = [
     "JAW_ID",
+    "Eyelids",
     "Jaw",
+    "LidMuscle",
     "LinearMuscle",
     "MuscleSet",
     "SheetMuscle",
     "SphincterMuscle",
     "WatersMuscle",
+    "build_eyelids",
     "cosine_falloff",
     "harmonic_weights",
     "load_default_muscles",

@@ -31,6 +31,9 @@ Types and their keys:
 - ``sphincter``: center, semi_axes_mm = [a, b], falloff, max_contraction_mm, protrusion_mm,
   optional axis_u (default [1, 0, 0]) and normal (default: the mean surface normal at center).
 - ``waters``: skin, bone, fall_start_mm, fall_end_mm, zone_deg, clamp.
+- ``lid``: eye (the landmark group of the eye opening), action (``raise``: levator palpebrae
+  superioris; ``close``: orbicularis oculi pars palpebralis), origin, insertion, optional
+  angle_deg (see :mod:`myoface.muscles.lids`): moves the eyelid skin, not the tissue.
 
 An optional ``[jaw]`` table: ``hinge`` (a point), ``axis`` (default [1, 0, 0]),
 ``max_angle_rad``, and the harmonic weight constraints ``lower`` / ``upper`` (lists of landmark
@@ -52,11 +55,12 @@ from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, Myoface
 from myoface.face.io import WATERS_UNIT_MM
 from myoface.face.mesh import FaceMesh
 from myoface.muscles.jaw import Jaw, harmonic_weights
+from myoface.muscles.lids import LidMuscle
 from myoface.muscles.muscleset import MuscleSet
 from myoface.muscles.types import LinearMuscle, SheetMuscle, SphincterMuscle, WatersMuscle
 
 DEFAULT_MUSCLES_FILE = "default_muscles.toml"
-TYPES = ("linear", "sheet", "sphincter", "waters")
+TYPES = ("linear", "sheet", "sphincter", "waters", "lid")
 SIDES = ("lr", "mid")
 _COMMON_KEYS = {"id", "sides", "type", "region", "note"}
 _KEYS = {
@@ -72,8 +76,9 @@ _KEYS = {
         "normal",
     },
     "waters": {"skin", "bone", "fall_start_mm", "fall_end_mm", "zone_deg", "clamp"},
+    "lid": {"eye", "action", "origin", "insertion", "angle_deg"},
 }
-_OPTIONAL = {"sphincter": {"axis_u", "normal", "protrusion_mm"}}
+_OPTIONAL = {"sphincter": {"axis_u", "normal", "protrusion_mm"}, "lid": {"angle_deg"}}
 
 
 class _Placer:
@@ -208,6 +213,20 @@ def _build(entry: dict, placer: _Placer, ctx: str):
             _number(entry, "max_contraction_mm", ctx),
             float(entry.get("protrusion_mm", 0.0)),
             region,
+        )
+    if kind == "lid":
+        eye = entry["eye"]
+        if not isinstance(eye, str) or eye not in placer.face.landmarks:
+            raise MyofaceFormatError(
+                f"{ctx}: eye must name a landmark group of the face; got {eye!r}"
+            )
+        return LidMuscle(
+            mid,
+            eye,
+            entry["action"],
+            placer.point(entry["origin"], f"{ctx}.origin"),
+            placer.point(entry["insertion"], f"{ctx}.insertion"),
+            float(entry["angle_deg"]) if "angle_deg" in entry else 0.0,
         )
     return WatersMuscle(
         mid,

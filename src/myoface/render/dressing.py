@@ -12,14 +12,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from myoface.face.eyes import EYE_RADIUS_MM as _EYE_RADIUS_MM
+
 #: colours (linear RGB)
 SCLERA = (0.78, 0.74, 0.70)
 IRIS = (0.10, 0.055, 0.030)
 PUPIL = (0.005, 0.005, 0.005)
 SOCKET = (0.05, 0.025, 0.022)
 MOUTH = (0.09, 0.015, 0.015)
-#: eye geometry (mm, degrees): eyeball radius; angular radii of iris and pupil
-EYE_RADIUS_MM = 12.0
+#: eye geometry (mm, degrees): eyeball radius (see myoface.face.eyes); angular radii of iris
+#: and pupil
+EYE_RADIUS_MM = _EYE_RADIUS_MM
 IRIS_DEG = 24.0
 PUPIL_DEG = 10.0
 
@@ -151,16 +154,16 @@ def find_openings(face) -> list[Opening]:
     if not any(k in lm for k in ("eye_l", "eye_r", "lip_upper_inner")):
         by_shape = _openings_by_shape(face, inner)
         for name, depth, col in (
-            ("eye_l", 9.0, SOCKET),
-            ("eye_r", 9.0, SOCKET),
+            ("eye_l", EYE_RADIUS_MM, SOCKET),
+            ("eye_r", EYE_RADIUS_MM, SOCKET),
             ("mouth", 16.0, MOUTH),
         ):
             if name in by_shape:
                 out.append(Opening(name, by_shape[name], depth, col))
         return out
     for name, key, depth, col in (
-        ("eye_l", "eye_l", 9.0, SOCKET),
-        ("eye_r", "eye_r", 9.0, SOCKET),
+        ("eye_l", "eye_l", EYE_RADIUS_MM, SOCKET),
+        ("eye_r", "eye_r", EYE_RADIUS_MM, SOCKET),
         ("mouth", "lip_upper_inner", 16.0, MOUTH),
     ):
         if key not in lm:
