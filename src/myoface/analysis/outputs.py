@@ -86,6 +86,65 @@ def plot_contractions(path, ids, times, table, quality) -> None:
     plt.close(fig)
 
 
+class FrameLog:
+    """What :func:`analyze_to_folder` keeps of each frame while it streams the rows to the
+    CSV: index, time, quality, tracking iterations and contractions (float32), packed in
+    growing arrays (about 100 bytes a frame for the 3-D fit's 40 contractions), so an hour of
+    video costs a few MB. ``len()`` is the number of frames."""
+
+    def __init__(self, n_ids: int):
+        import array
+
+        self.n_ids = int(n_ids)
+        self._index = array.array("q")
+        self._time = array.array("d")
+        self._iterations = array.array("l")
+        self._contractions = array.array("f")
+        self._quality: list[str] = []
+        self._names: dict[str, str] = {}  # one string object per distinct quality
+
+    def append(self, m) -> None:
+        """Record the measurement ``m`` (a :class:`~myoface.analysis.pipeline.FrameMeasurement`
+        or the 3-D fit's)."""
+        self._index.append(int(m.index))
+        self._time.append(float(m.time_s))
+        self._iterations.append(int(m.iterations))
+        c = np.asarray(m.contractions, dtype=np.float32).reshape(-1)
+        if c.size != self.n_ids:
+            raise MyofaceValueError(f"expected {self.n_ids} contractions; got {c.size}")
+        self._contractions.frombytes(c.tobytes())
+        self._quality.append(self._names.setdefault(m.quality, m.quality))
+
+    def __len__(self) -> int:
+        return len(self._index)
+
+    @property
+    def index(self) -> np.ndarray:
+        """(T,) the frames' indices in the video."""
+        return np.frombuffer(self._index, dtype=np.int64).copy()
+
+    @property
+    def times(self) -> np.ndarray:
+        """(T,) s."""
+        return np.frombuffer(self._time, dtype=np.float64).copy()
+
+    @property
+    def iterations(self) -> np.ndarray:
+        """(T,) the tracker's iterations per frame."""
+        return np.array(self._iterations, dtype=np.int64)
+
+    @property
+    def quality(self) -> list[str]:
+        """Per frame ``"ok"`` or why it could not be measured."""
+        return list(self._quality)
+
+    @property
+    def contractions(self) -> np.ndarray:
+        """(T, K) float64 in [0, 1]; NaN rows where a frame could not be measured."""
+        c = np.frombuffer(self._contractions, dtype=np.float32)
+        return c.reshape(-1, self.n_ids).astype(np.float64)
+
+
 @dataclass
 class FolderResult:
     """What :func:`analyze_to_folder` measured and where it wrote it.
@@ -95,34 +154,35 @@ class FolderResult:
     folder : Path — the output folder.
     video : Path — the analysed video.
     ids : tuple of str — the estimated muscles (and ``"jaw"``).
-    frames : list of :class:`~myoface.analysis.pipeline.FrameMeasurement`, in order.
+    frames : :class:`FrameLog` — each analysed frame's index, time, quality and contractions,
+        in order (``len(frames)`` frames).
     calibration_frame : int — the index of the neutral frame the analysis started on.
     """
 
     folder: Path
     video: Path
     ids: tuple
-    frames: list
+    frames: FrameLog
     calibration_frame: int
 
     @property
     def n_measured(self) -> int:
         """Frames whose quality is "ok"."""
-        return sum(f.quality == "ok" for f in self.frames)
+        return sum(q == "ok" for q in self.frames.quality)
 
     @property
     def measured_fraction(self) -> float:
-        return self.n_measured / len(self.frames) if self.frames else 0.0
+        return self.n_measured / len(self.frames) if len(self.frames) else 0.0
 
     @property
     def contractions(self) -> np.ndarray:
         """(T, K) in [0, 1]; NaN rows where a frame could not be measured."""
-        return np.array([f.contractions for f in self.frames]).reshape(-1, len(self.ids))
+        return self.frames.contractions
 
     def mean_contractions(self) -> dict[str, float]:
         """{id: mean contraction over the measured frames} (NaN when none was measured)."""
-        ok = [f.quality == "ok" for f in self.frames]
-        table = self.contractions[np.array(ok, dtype=bool)]
+        ok = np.array([q == "ok" for q in self.frames.quality], dtype=bool)
+        table = self.contractions[ok]
         if not len(table):
             return {k: float("nan") for k in self.ids}
         return {k: float(v) for k, v in zip(self.ids, np.nanmean(table, axis=0), strict=True)}
@@ -142,16 +202,33 @@ def analyze_to_folder(
     estimator: str = "curves",
     face: str | None = None,
     show_progress: bool = False,
+    finish=None,
 ) -> FolderResult:
     """Analyse ``video`` and write the analysis into the folder ``out`` (see the module's
     table); the code path of ``myoface analyze``.
+
+    The analysis streams: each frame is decoded, tracked and fitted, and its row appended to
+    contractions.csv (flushed at once; see
+    :class:`~myoface.analysis.pipeline.ContractionsCsvWriter`) and its picture to the overlay
+    videos before the next frame is read; of each frame only a compact record is kept
+    (:class:`FrameLog`, for the plot and analysis.json), so memory does not grow with the
+    video's length. The overlay videos are written under temporary names (``.overlay.*.part.mp4``)
+    and renamed when they are closed.
+
+    An interruption (Ctrl-C, or SIGTERM / SIGHUP under ``myoface``: a
+    :class:`KeyboardInterrupt`) after the first frame keeps what was measured: the CSV with
+    every measured row, the overlay videos closed as they stand, analysis.json (with
+    ``"interrupted": true``) and the plot of those frames; no temporary file is left, and the
+    :class:`KeyboardInterrupt` is raised again with a note saying how many frames were kept
+    (``myoface`` prints it in its one line). An interruption before the first frame, or an
+    error, removes what this call wrote.
 
     Parameters
     ----------
     video : path or :class:`~myoface.analysis.video.Video`.
     out : the output folder; created with its parents if missing. If the analysis fails, the
-        folders this call created are removed again (a folder that existed is left, and the
-        files in it are only ever replaced whole).
+        folders this call created are removed again (a folder that existed is left, and an
+        older contractions.csv in it is replaced when the first row is measured).
     model : the :class:`~myoface.model.FaceModel` (never changed; may be shared with other
         threads); default: loaded from ``face``.
     tracker, calibration_frame, refine, sigma, estimator : as in
@@ -163,11 +240,17 @@ def analyze_to_folder(
     face : the face model's file (``None``: the bundled face); recorded in analysis.json, and
         loaded when ``model`` is None.
     show_progress : a progress bar over the frames on stderr.
+    finish : ``finish(folder, result)`` is called once the analysis' files are written, inside
+        the folder's clean-up (if it fails, the folders this call created are removed): extra
+        outputs such as ``myoface analyze``'s ``--format openface`` and ``--report``. Not
+        called after an interruption.
 
     Raises
     ------
     MyofaceError
         On bad input, a video without frames, or when no frame could be measured.
+    KeyboardInterrupt
+        When interrupted (see above).
     """
     from myoface._io import output_dir
     from myoface.analysis.pipeline import load_init, make_analyzer
@@ -188,27 +271,40 @@ def analyze_to_folder(
     an, how, start = make_analyzer(
         model, video, tracker, init or None, calibration_frame, refine, sigma, estimator=estimator
     )
-    with output_dir(out) as folder:
-        try:
-            frames = _measure_into(video, an, folder, start, max_frames, tracker, show_progress)
-        finally:
-            an.close()
-        _write_results(video, model, an, folder, frames, how_init or how, start, tracker, face)
-    return FolderResult(folder, Path(video.path), tuple(an.ids), frames, start)
+    release = None
+    try:
+        with output_dir(out) as folder:
+            try:
+                log, interrupted, release = _measure_into(
+                    video, an, model, folder, start, max_frames, tracker, show_progress
+                )
+            finally:
+                an.close()
+            _write_results(
+                video, an, folder, log, how_init or how, start, tracker, face, interrupted
+            )
+            result = FolderResult(folder, Path(video.path), tuple(an.ids), log, start)
+            if finish is not None and interrupted is None:
+                finish(folder, result)
+    finally:
+        if release is not None:
+            release()
+    if interrupted is not None:
+        n_ok = result.n_measured
+        interrupted.add_note(
+            f"kept the {len(log)} frames analysed ({n_ok} measured) in {folder}"
+            f"{os.sep}contractions.csv"
+        )
+        raise interrupted
+    return result
 
 
-def _write_results(video, model, an, out, frames, how, start, tracker, face) -> None:
-    """contractions.csv, contractions.png and analysis.json."""
+def _write_results(video, an, out, log, how, start, tracker, face, interrupted) -> None:
+    """analysis.json and contractions.png (contractions.csv is written as the frames are)."""
     import json
 
     from myoface._io import atomic_output
-    from myoface.analysis.pipeline import write_contractions_csv
 
-    jaw_max = model.muscles.jaw.max_angle_rad if model.muscles.jaw is not None else 0.0
-    write_contractions_csv(out / "contractions.csv", an.ids, frames, jaw_max)
-    table = np.array([f.contractions for f in frames])
-    times = np.array([f.time_s for f in frames])
-    plot_contractions(out / "contractions.png", an.ids, times, table, [f.quality for f in frames])
     side = {
         "video": str(Path(video.path).resolve()),
         "fps": video.fps,
@@ -220,10 +316,13 @@ def _write_results(video, model, an, out, frames, how, start, tracker, face) -> 
         "muscles": list(an.ids),
         "mm_per_px": an.mm_per_px,
         "refine": an.refine,
-        "frames": [
-            {"frame": f.index, "quality": f.quality, "iterations": f.iterations} for f in frames
-        ],
     }
+    if interrupted is not None:
+        side["interrupted"] = True
+    side["frames"] = [
+        {"frame": int(k), "quality": q, "iterations": int(it)}
+        for k, q, it in zip(log.index, log.quality, log.iterations, strict=True)
+    ]
     if hasattr(an, "describe"):  # the 3-D fit: its calibration, camera and weights
         side.update(an.describe())
     if tracker == "snakes":
@@ -234,37 +333,94 @@ def _write_results(video, model, an, out, frames, how, start, tracker, face) -> 
             for k, v in vars(an.params).items()
         }
     with atomic_output(out / "analysis.json") as tmp:
-        tmp.write_text(json.dumps(side, indent=1))
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(side, fh, indent=1)
+    plot_contractions(out / "contractions.png", an.ids, log.times, log.contractions, log.quality)
 
 
-def _measure_into(video, an, out, start, max_frames, tracker, show_progress) -> list:
-    """Measure every frame from ``start`` on, writing the overlay videos; a clear error when
-    nothing could be measured."""
+def _measure_into(video, an, model, out, start, max_frames, tracker, show_progress):
+    """Measure every frame from ``start`` on, streaming each frame's CSV row and overlay
+    pictures; ``(FrameLog, None)``, or ``(FrameLog, the KeyboardInterrupt)`` when interrupted
+    after the first frame (the CSV and the videos then closed with the frames so far). A clear
+    error when nothing could be measured (and then no file is left)."""
     import contextlib
 
-    from myoface.analysis.pipeline import measure_frames
+    from myoface.analysis.pipeline import ContractionsCsvWriter, measure_frames
     from myoface.render import VideoWriter, progress
 
-    frames = []
+    log = FrameLog(len(an.ids))
+    release = lambda: None  # noqa: E731
     n = video.n_frames
     if n is not None:
         n -= start
     if max_frames is not None:
         n = max_frames if n is None else min(n, max_frames)
-    with contextlib.ExitStack() as stack:
-        vw = stack.enter_context(VideoWriter(out / "overlay.mp4", fps=video.fps))
-        pw = None
-        if tracker == "snakes":
-            pw = stack.enter_context(VideoWriter(out / "potential.mp4", fps=video.fps))
-        measured = measure_frames(video, an, start, max_frames)
-        for frame, m in progress(measured, total=n, desc="analyzing", enabled=show_progress):
-            frames.append(m)
-            color = (255, 215, 0) if m.quality == "ok" else (230, 40, 40)
-            vw.write(draw_contours(frame, m.contours, color))
-            if pw is not None:
-                pw.write(draw_contours(potential_image(an.last_potential), m.contours, color))
-        if not frames:
-            raise MyofaceValueError(f"{video.path}: the video has no frames")
-        if not any(f.quality == "ok" for f in frames):
-            raise MyofaceValueError(f"{video.path}: no frame could be measured (no face found?)")
-    return frames
+    jaw_max = model.muscles.jaw.max_angle_rad if model.muscles.jaw is not None else 0.0
+    csv = ContractionsCsvWriter(out / "contractions.csv", an.ids, jaw_max)
+    interrupted = None
+    try:
+        with contextlib.ExitStack() as stack:
+            vw = stack.enter_context(VideoWriter(out / "overlay.mp4", fps=video.fps))
+            pw = None
+            if tracker == "snakes":
+                pw = stack.enter_context(VideoWriter(out / "potential.mp4", fps=video.fps))
+            measured = stack.enter_context(
+                contextlib.closing(measure_frames(video, an, start, max_frames))
+            )
+            bar = stack.enter_context(
+                progress(None, total=n, desc="analyzing", enabled=show_progress)
+            )
+            try:
+                for frame, m in measured:
+                    # the row first: what the CSV holds was measured, whatever stops the run
+                    csv.write(m)
+                    log.append(m)
+                    color = (255, 215, 0) if m.quality == "ok" else (230, 40, 40)
+                    vw.write(draw_contours(frame, m.contours, color))
+                    if pw is not None:
+                        pw.write(
+                            draw_contours(potential_image(an.last_potential), m.contours, color)
+                        )
+                    bar.update()
+            except KeyboardInterrupt as exc:
+                if not len(log) or not vw.n_frames:
+                    raise  # nothing kept: as an error, nothing is left
+                interrupted = exc  # the writers close and keep the frames so far
+                release = _hold_signals()  # while they do, a second signal waits
+            if not len(log):
+                raise MyofaceValueError(f"{video.path}: the video has no frames")
+            if interrupted is None and not any(q == "ok" for q in log.quality):
+                raise MyofaceValueError(
+                    f"{video.path}: no frame could be measured (no face found?)"
+                )
+    except BaseException:
+        if interrupted is None:
+            csv.discard()
+        release()
+        raise
+    finally:
+        csv.close()
+    return log, interrupted, release
+
+
+def _hold_signals():
+    """Ignore SIGINT, SIGTERM and SIGHUP (main thread only) until the returned function is
+    called, which restores their handlers: after a first interruption, the kept frames are
+    written whole even when the user presses Ctrl-C again (the run is stopping anyway)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    old = {}
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is not None:
+            old[sig] = signal.signal(sig, signal.SIG_IGN)
+
+    def release() -> None:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        old.clear()
+
+    return release

@@ -30,7 +30,11 @@ Writes into the output folder:
   analysis.json      settings, calibration and per-frame diagnostics
   contractions.png   the contractions over time (the paper's Fig. 8)
   overlay.mp4        the contours on the frames (the paper's Fig. 7a)
-  potential.mp4      (snakes) the contours on the image potential (the paper's Fig. 7b)"""
+  potential.mp4      (snakes) the contours on the image potential (the paper's Fig. 7b)
+  openface.csv       (--format openface) the same as OpenFace 2.2's CSV: frame, face_id,
+                     timestamp, confidence, success, pose_Tx..pose_Rz, AU01_r..AU45_r
+  fidelity.json/png  (--report) how much of the input's expression motion the resynthesis
+                     reproduces, per region (MediaPipe's face mesh on both)"""
 
 
 def add_arguments(p):
@@ -86,6 +90,21 @@ def add_arguments(p):
         help="Gauss-Newton corrections per frame through the model, 0-10 "
         "(default 1 for snakes and the 3-D fit, 0 for landmarks --estimator paper)",
     )
+    p.add_argument(
+        "--format",
+        choices=("myoface", "openface"),
+        default="myoface",
+        help="openface: also write openface.csv, OpenFace 2.2's columns (head pose in mm and "
+        "radians, AU intensities 0-5 from the contractions through the AU table); "
+        "contractions.csv is always written",
+    )
+    p.add_argument(
+        "--report",
+        action="store_true",
+        help="also measure the fidelity: MediaPipe's face mesh on the input and on the "
+        "resynthesis (the person's face made from the calibration frame, or --face), "
+        "fidelity.json and fidelity.png (needs the mediapipe extra)",
+    )
     p.add_argument("--quiet", action="store_true")
     add_face_argument(p)
 
@@ -118,6 +137,14 @@ def run(args) -> int:
         raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
     if args.init:
         load_init(args.init)  # a bad file fails before the model is built
+    if args.report:
+        from myoface.analysis.landmarks import PIP_HINT, mediapipe_available
+        from myoface.errors import MyofaceDependencyError
+
+        if not mediapipe_available():  # fail before the analysis, not after it
+            raise MyofaceDependencyError(
+                f"--report runs MediaPipe's face mesh, which is not installed; {PIP_HINT}"
+            )
     fm = load_model(args)
     # the library function myoface batch runs for each video
     res = analyze_to_folder(
@@ -133,9 +160,34 @@ def run(args) -> int:
         estimator=args.estimator,
         face=args.face,
         show_progress=not args.quiet,
+        finish=lambda folder, res: _extra_outputs(args, fm, folder),
     )
     print(
         f"analysed {len(res.frames)} frames ({res.n_measured} measured); "
         f"output folder: {res.folder.resolve()}"
     )
     return 0
+
+
+def _extra_outputs(args, model, folder) -> None:
+    """openface.csv (``--format openface``) and the fidelity report (``--report``), made from
+    the analysis' finished files in ``folder``."""
+    if args.format == "openface":
+        from myoface.analysis.openface import write_openface_csv
+
+        write_openface_csv(folder / "contractions.csv", folder / "openface.csv")
+    if args.report:
+        from myoface.analysis.fidelity import write_fidelity_report
+
+        # the person's own face from the calibration frame, unless a face was given
+        res = write_fidelity_report(
+            folder,
+            args.video,
+            model=model if args.face else None,
+            show_progress=not args.quiet,
+        )
+        o = res.overall
+        print(
+            f"fidelity: {o.explained:.2f} of the input's expression motion explained "
+            f"(gain {o.gain:.2f}, correlation {o.corr:.2f}); {folder / 'fidelity.json'}"
+        )
