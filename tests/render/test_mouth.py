@@ -1,0 +1,116 @@
+"""Teeth in the mouth: visible in a broad smile, hidden at rest, the lower ones with the jaw; the
+lips never pass through the teeth or each other (hypothesis, relaxed tissue)."""
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import myoface as mf
+from myoface.face.teeth import contact_violations
+from myoface.render import Renderer
+from myoface.synth import make_camera
+
+#: a pixel is tooth-bright when its mean sRGB level is above this (the lips and skin around
+#: the mouth are pink-red with a low green channel; the cavity is below 40)
+BRIGHT_GREEN = 150
+
+
+@pytest.fixture(scope="module")
+def fm():
+    return mf.build_face_model()
+
+
+@pytest.fixture(scope="module")
+def renderer(fm):
+    return Renderer(fm.face, make_camera(fm.face.vertices, "front", 256, 256))
+
+
+def _teeth_pixels(renderer, fm, state) -> int:
+    """Bright, nearly grey pixels inside the mouth's box (the teeth; skin and lips are
+    reddish: their green channel is well below their red)."""
+    img = renderer.render(fm.skin_vertices(state), jaw=fm.jaw_pose(state))
+    lips = np.r_[fm.face.landmarks["lip_upper_outer"], fm.face.landmarks["lip_lower_outer"]]
+    xy = renderer.camera.project(fm.skin_vertices(state)[lips])[:, :2]
+    x0, y0 = np.floor(xy.min(axis=0)).astype(int)
+    x1, y1 = np.ceil(xy.max(axis=0)).astype(int)
+    box = img[y0:y1, x0:x1].astype(int)
+    r, g = box[..., 0], box[..., 1]
+    return int(((g > BRIGHT_GREEN) & (r - g < 30)).sum())
+
+
+def test_teeth_hidden_at_rest(fm, renderer):
+    assert _teeth_pixels(renderer, fm, fm.rest_state()) == 0
+
+
+def test_teeth_visible_in_a_broad_smile(fm, renderer):
+    c = mf.au_contractions({12: 1.0, 6: 0.6, 25: 0.6}, fm.ids)
+    assert _teeth_pixels(renderer, fm, fm.relax(c).state) >= 10
+
+
+def test_no_teeth_without_dressing(fm):
+    r = Renderer(fm.face, make_camera(fm.face.vertices, "front", 64, 64), teeth=False)
+    assert r.dentition is None and r.scene.cavity is None
+
+
+def test_lower_teeth_follow_the_jaw(fm, renderer):
+    c = mf.au_contractions({26: 1.0}, fm.ids)
+    st = fm.relax(c).state
+    rot, shift = fm.jaw_pose(st)
+    sc = renderer.scene
+    rest = renderer.positions(fm.skin_vertices(st))
+    moved = renderer.positions(fm.skin_vertices(st), jaw=(rot, shift))
+    lower = slice(sc.n_jaw_first, None)
+    upper = slice(sc.n_dynamic, sc.n_jaw_first)
+    np.testing.assert_allclose(moved[lower], rest[lower] @ rot.T + shift, atol=1e-9)
+    np.testing.assert_array_equal(moved[upper], rest[upper])  # the skull's teeth stay
+    assert sc.n_jaw_first < len(moved)
+    # the jaw opened: the lower incisors went down (mm)
+    assert (rest[lower][:, 1] - moved[lower][:, 1]).max() > 3.0
+    # and the jaw's rigid motion is the one that moved the tissue's bone nodes
+    kin = fm.tissue.kinematic_index
+    jaw_w = fm.muscles.jaw.weights[kin % fm.face.n_vertices]
+    full = np.flatnonzero(jaw_w == 1.0)
+    x0 = fm.tissue.rest_positions[kin[full]]
+    j = fm.muscles.jaw_index
+    np.testing.assert_allclose(
+        fm.muscles.jaw.rotate(x0, np.ones(len(x0)), c[j]), x0 @ rot.T + shift, atol=1e-9
+    )
+
+
+def test_rest_skin_untouched_by_the_contact(fm):
+    d = fm.dentition
+    v = fm.face.vertices
+    assert contact_violations(v, d) == {"in_upper": 0, "in_lower": 0, "lip_cross_mm": 0.0}
+    from myoface.face.teeth import lip_contact
+
+    np.testing.assert_array_equal(lip_contact(v, d), v)
+
+
+@settings(
+    max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    st.lists(st.floats(0.0, 1.0), min_size=48, max_size=48),
+    st.lists(st.booleans(), min_size=48, max_size=48),
+)
+def test_lips_never_pass_through_the_teeth_or_each_other(fm, values, on):
+    assert fm.n_muscles <= 48
+    c = np.where(on[: fm.n_muscles], values[: fm.n_muscles], 0.0)
+    st_ = fm.relax(c).state
+    v = contact_violations(fm.skin_vertices(st_), fm.dentition, fm.jaw_pose(st_))
+    assert v == {"in_upper": 0, "in_lower": 0, "lip_cross_mm": 0.0}
+
+
+def test_contact_acts_where_the_tissue_alone_interpenetrates(fm):
+    """The relaxed tissue alone lets the lips through in some of these (lip press, chin
+    raise, broad smile): the contact is what keeps them apart."""
+    clean = {"in_upper": 0, "in_lower": 0, "lip_cross_mm": 0.0}
+    n_through = 0
+    for aus in ({24: 1.0}, {17: 1.0}, {12: 1.0, 6: 0.6, 25: 0.6}):
+        st_ = fm.relax(mf.au_contractions(aus, fm.ids)).state
+        raw = np.array(st_.x[: fm.face.n_vertices])
+        pose = fm.jaw_pose(st_)
+        n_through += contact_violations(raw, fm.dentition, pose) != clean
+        assert contact_violations(fm.skin_vertices(st_), fm.dentition, pose) == clean
+    assert n_through >= 1
