@@ -492,10 +492,9 @@ class SymmetricPattern:
     sfi, sfj : (S',) int64 — free numbers of the ends; soff : (S',) int64 — lower block or -1.
     elems : (E', 6) int64; efree : (E', 6) int64; rest_volume, kv : (E',) — the active prisms
         (nonzero volume weight);
-    epairs : (E', 15, 5) int64 — per prism its node pairs with a stored block, first
-        (``enpairs`` (E',) of them): [block, a, b, pair, sign], the block being H_ab (a, b prism
-        nodes 0-5), ``pair`` the row of :data:`PRISM_PAIRS` and ``sign`` -1 when (a, b) is that
-        pair reversed.
+    pslots : (E', 15) int32 — per prism and node pair (a, b) of :data:`PRISM_PAIRS`, its lower
+        block, or -1 when a node of the pair is kinematic; prev : (E',) int32 — bit p set when
+        pair p's nodes are numbered the other way round (the stored block is then H_ba).
     law : int; vsign : float — the model's.
     """
 
@@ -544,27 +543,16 @@ class SymmetricPattern:
         self.sfi = fi
         self.sfj = fj
         self.soff = slot(fi, fj)
-        self.elems = el_all[e]
-        self.efree = fe
-        off = np.stack([slot(fe[:, a], fe[:, b]) for a, b in PRISM_PAIRS], axis=1).reshape(-1, 15)
-        epairs = np.zeros((len(e), 15, 5), np.int64)
-        enpairs = np.zeros(len(e), np.int64)
+        self.elems = el_all[e].astype(np.int32)
+        self.efree = fe.astype(np.int32)
+        pslots = np.stack([slot(fe[:, a], fe[:, b]) for a, b in PRISM_PAIRS], axis=1)
+        prev = np.zeros(len(e), np.int64)
         for p, (a, b) in enumerate(PRISM_PAIRS):
-            q = np.flatnonzero(off[:, p] >= 0)
-            rev = fe[q, a] < fe[q, b]  # stored block (row > col) is H_ba
-            epairs[q, enpairs[q]] = np.stack(
-                [
-                    off[q, p],
-                    np.where(rev, b, a),
-                    np.where(rev, a, b),
-                    np.full(len(q), p),
-                    np.where(rev, -1, 1),
-                ],
-                axis=1,
-            )
-            enpairs[q] += 1
-        self.epairs = epairs
-        self.enpairs = enpairs
+            rev = (pslots[:, p] >= 0) & (fe[:, a] < fe[:, b])  # stored block (row > col) is H_ba
+            prev |= rev.astype(np.int64) << p
+        # 32-bit indices: the tables are streamed at every assembly (a smaller cache footprint)
+        self.pslots = pslots.astype(np.int32)
+        self.prev = prev.astype(np.int32)
         self.rest_volume = np.asarray(model.rest_volume, np.float64)[e]
         self.kv = np.asarray(model.volume_weight, np.float64)[e]
         self.law = int(model.spring_law)
@@ -592,8 +580,8 @@ class SymmetricPattern:
             self.sfj,
             self.soff,
             *self.prism_args(),
-            self.epairs,
-            self.enpairs,
+            self.pslots,
+            self.prev,
             dvals,
             lvals,
         )
@@ -646,8 +634,8 @@ def assemble_symmetric_hessian(
     rest_vol,
     kv,
     vsign,
-    epairs,
-    enpairs,
+    pslots,
+    prev,
     dvals,
     lvals,
 ):
@@ -658,7 +646,7 @@ def assemble_symmetric_hessian(
     dvals[:] = 0.0
     lvals[:] = 0.0
     add_spring_hessian(x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff, dvals, lvals)
-    add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, epairs, enpairs, dvals, lvals)
+    add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, pslots, prev, dvals, lvals)
 
 
 @njit(cache=True, nogil=True, fastmath=True)
@@ -698,7 +686,7 @@ def add_spring_hessian(x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff, dv
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, epairs, enpairs, dvals, lvals):
+def add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, pslots, prev, dvals, lvals):
     """Add the volume penalty's Hessian at ``x`` to the symmetric storage: per prism
     ``2 kv (dV/dx_a)(dV/dx_b)^T`` plus ``2 kv (V - V0) d2V/dx_a dx_b`` (a skew 3x3 block, zero
     on the diagonal)."""
@@ -774,16 +762,24 @@ def add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, epairs, enpairs, dva
             wv[p, 1] += sg * (pts[ik, 1] - pts[il, 1])
             wv[p, 2] += sg * (pts[ik, 2] - pts[il, 2])
         w2 = 2.0 * kv[q] * dv * vsign / 6.0
-        ep = epairs[q]
-        for k in range(enpairs[q]):
-            a = ep[k, 1]
-            b = ep[k, 2]
-            p = ep[k, 3]
-            sg = w2 * ep[k, 4]  # the skew part changes sign with the order of the pair
+        sl = pslots[q]
+        rv = prev[q]
+        for p in range(15):
+            o = sl[p]
+            if o < 0:
+                continue
+            o *= 9
+            if (rv >> p) & 1:  # the stored block is H_ba: its skew part changes sign
+                a = PRISM_PAIRS_NB[p, 1]
+                b = PRISM_PAIRS_NB[p, 0]
+                sg = -w2
+            else:
+                a = PRISM_PAIRS_NB[p, 0]
+                b = PRISM_PAIRS_NB[p, 1]
+                sg = w2
             w0 = sg * wv[p, 0]
             w1 = sg * wv[p, 1]
             w2_ = sg * wv[p, 2]
-            o = 9 * ep[k, 0]
             ga0 = gr[a, 0]
             ga1 = gr[a, 1]
             ga2 = gr[a, 2]

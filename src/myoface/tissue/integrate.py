@@ -53,14 +53,19 @@ class RelaxWarning(UserWarning):
 
 @dataclass
 class TissueState:
-    """Positions ``x`` (N, 3) mm and velocities ``v`` (N, 3) mm/s of every node, at time ``t`` s."""
+    """Positions ``x`` (N, 3) mm and velocities ``v`` (N, 3) mm/s of every node, at time ``t`` s.
+
+    ``previous_x`` (N, 3) mm, optional: the positions the state was relaxed from (set by
+    :func:`relax`); the Newton solver repeats that move in the next relax's initial guess
+    (:func:`myoface.tissue.solver.extrapolated_start`)."""
 
     x: np.ndarray
     v: np.ndarray
     t: float = 0.0
+    previous_x: np.ndarray | None = None
 
     def copy(self) -> TissueState:
-        return TissueState(self.x.copy(), self.v.copy(), self.t)
+        return TissueState(self.x.copy(), self.v.copy(), self.t, self.previous_x)
 
 
 @dataclass
@@ -342,7 +347,9 @@ def relax(
         x0 = x
         from_rest = np.array_equal(x_kin_start, model.rest_positions[model.kinematic_index])
         try:
-            x, ok, it, res, _, fmax = relax_newton(model, x0, x_kin_start, tol_mm, max_iter or 50)
+            x, ok, it, res, _, fmax = relax_newton(
+                model, x0, x_kin_start, tol_mm, max_iter or 50, previous_x=state.previous_x
+            )
         except MyofaceSimulationError:
             if from_rest:  # nothing to fall back on
                 raise
@@ -378,4 +385,5 @@ def relax(
             RelaxWarning,
             stacklevel=2,
         )
+    out.previous_x = state.x.copy()
     return RelaxResult(out, bool(ok), int(it), float(res), fmax, method)
