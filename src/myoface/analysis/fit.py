@@ -654,7 +654,8 @@ class ModelFit:
         return np.vstack(rows_a), np.concatenate(rows_b), g
 
     def _cost(self, p, pose, c, shape, w, k, prev, free):
-        """The objective: Huber loss of the weighted landmark residuals + the priors."""
+        """The objective: Huber loss of the weighted landmark residuals + the priors (the
+        reference; the fit evaluates the same with :meth:`_fast_cost`)."""
         rxy, rz, dist, _ = self._residuals(p, pose, shape, w, k)
         h = self.settings.huber
         # Huber's loss of the 2-D distance (r^2 inside, 2 h r - h^2 beyond); z takes its weight
@@ -662,6 +663,52 @@ class ModelFit:
         cost = float((w * rho).sum() + (w * self._huber(dist) * rz**2).sum())
         _, b, g = self._prior_rows(pose, c, prev, free)
         return cost + float((b**2).sum()) + float(g[6:] @ c[free])
+
+    def _kernel_args(self, p, pose, shape, w, k):
+        """The arguments the compiled kernels (:mod:`myoface.analysis._fitkernels`) share."""
+        s, cam = self.settings, self.camera
+        use_z = bool(np.isfinite(p[:, 2]).all())
+        return (
+            np.ascontiguousarray(pose.rotation),
+            np.ascontiguousarray(pose.translation_mm, dtype=np.float64),
+            shape,
+            float(cam.focal_px),
+            float(cam.cx),
+            float(cam.cy),
+            p,
+            use_z,
+            w,
+            k / s.landmark_sigma_mm,
+            1.0 / s.depth_sigma_mm,
+            k,
+            float(s.huber),
+        )
+
+    def _fast_cost(self, p, pose, c, shape, w, k, prev, free):
+        """:meth:`_cost`, its landmark part compiled and its prior part without the rows."""
+        from myoface.analysis._fitkernels import landmark_cost
+
+        cost = landmark_cost(*self._kernel_args(p, pose, shape, w, k))
+        return cost + self._prior_cost(pose, c, prev, free)
+
+    def _prior_cost(self, pose, c, prev, free) -> float:
+        """``|b|^2 + g . c[free]`` of :meth:`_prior_rows` without forming its rows."""
+        s = self.settings
+        cost = 0.0
+        if prev is not None:
+            dt = 1.0 / self.fps
+            sig_r = np.radians(s.rotation_rate_deg_per_s) * dt
+            sig_t = s.translation_rate_mm_per_s * dt
+            rv = rotvec(pose.rotation @ prev.pose.rotation.T)
+            dtr = pose.translation_mm - prev.pose.translation_mm
+            cost += float(rv @ rv) / sig_r**2 + float(dtr @ dtr) / sig_t**2
+            if len(free):
+                dc = c[free] - prev.contractions[free]
+                cost += float(dc @ dc) / (s.rate_per_s * dt) ** 2
+        if len(free):
+            cf = c[free]
+            cost += float(cf @ cf) / s.magnitude_sigma**2 + s.sparsity * float(cf.sum())
+        return cost
 
     def _huber(self, r):
         h = self.settings.huber
@@ -671,8 +718,11 @@ class ModelFit:
         """Bounded Gauss-Newton / Levenberg-Marquardt on one frame from ``pose``, ``c`` with
         the forward model ``base + d0 + jac (c - c0)``; only the contractions ``free`` move.
         Returns (pose, contractions, steps, converged)."""
+        from myoface.analysis._fitkernels import box_qp, normal_equations
+
         s = self.settings
-        free = np.arange(self.n_muscles) if free is None else np.asarray(free)
+        free = np.arange(self.n_muscles) if free is None else np.asarray(free, dtype=np.int64)
+        jac = np.ascontiguousarray(jac)
         c = c.copy()
         lam = 1e-3
         conv = False
@@ -683,30 +733,28 @@ class ModelFit:
             it += 1
             shape = base + d0 + jac @ (c - c0)
             k = self._pixel_mm(pose)
-            rxy, rz, dist, use_z = self._residuals(p, pose, shape, w0, k)
-            w = w0 * self._huber(dist)
-            a_lm = self._jacobians(pose, shape, jac[:, :, free], k, w, use_z)
-            sw = np.sqrt(w)
-            b_lm = -np.concatenate([(rxy * sw[:, None]).ravel()] + ([rz * sw] if use_z else []))
+            # the normal equations of the Huber-reweighted landmark rows (what
+            # _residuals and _jacobians define), accumulated vertex by vertex, compiled
+            ka = self._kernel_args(p, pose, shape, w0, k)
+            h_lm, b_lm = normal_equations(*ka[:3], jac, free, *ka[3:])
             a_p, b_p, g = self._prior_rows(pose, c, prev, free)
-            # the normal equations (einsum's loops, not BLAS: a thousand rows do not pay for
-            # BLAS's threads, which cost more than the product on a busy machine)
-            hess = np.einsum("ij,ik->jk", a_lm, a_lm) + a_p.T @ a_p
-            rhs = np.einsum("ij,i->j", a_lm, b_lm) + a_p.T @ b_p - 0.5 * g
-            cost0 = self._cost(p, pose, c, shape, w0, k, prev, free)
+            hess = h_lm + a_p.T @ a_p
+            rhs = b_lm + a_p.T @ b_p - 0.5 * g
+            cost0 = self._fast_cost(p, pose, c, shape, w0, k, prev, free)
             lo = np.concatenate([np.full(6, -np.inf), -c[free]])
             hi = np.concatenate([np.full(6, np.inf), 1.0 - c[free]])
             dg = np.maximum(np.diag(hess), 1e-12)
             for _ in range(6):
-                # Levenberg: damp each unknown in proportion to its curvature
-                step = _bounded_normal(hess + np.diag(lam * dg), rhs, lo, hi)
+                # Levenberg: damp each unknown in proportion to its curvature; the bounded
+                # step by the active-set method (the reference: _bounded_normal's BVLS)
+                step = box_qp(hess + np.diag(lam * dg), rhs, lo, hi)
                 new_pose = HeadPose(
                     rotmat(step[:3]) @ pose.rotation, pose.translation_mm + step[3:6]
                 )
                 new_c = c.copy()
                 new_c[free] = np.clip(c[free] + step[6:], 0.0, 1.0)
                 new_shape = base + d0 + jac @ (new_c - c0)
-                cost1 = self._cost(p, new_pose, new_c, new_shape, w0, k, prev, free)
+                cost1 = self._fast_cost(p, new_pose, new_c, new_shape, w0, k, prev, free)
                 if cost1 <= cost0 + 1e-9 * abs(cost0):
                     lam = max(lam / 10, 1e-7)
                     break
@@ -868,6 +916,7 @@ class LandmarkSynthesis:
         cam = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), width=w, height=h, fov_deg=fov)
         self.camera = camera
         self.renderer = Renderer(face, cam)
+        self._own_detector = detector is None
         if detector is None:
             from myoface.analysis.landmarks import FaceMeshDetector
 
@@ -993,11 +1042,14 @@ class FitAnalyzer:
         self._camera = camera
         self.fit: ModelFit | None = None
         self._sections = {s: section_vertices(model.face, s) for s in SECTIONS}
+        self._own_detector = detector is None
         if detector is None:
             from myoface.analysis.landmarks import FaceMeshDetector
 
             detector = FaceMeshDetector(video=True)
         self.detector = detector
+        #: {frame index: landmarks or None} of the calibration frames, taken by measure()
+        self._detected: dict = {}
         self.calibration: Calibration | None = None
         self.calibration_frame: int | None = None
         self.use_synthesis = bool(synthesis)
@@ -1021,13 +1073,16 @@ class FitAnalyzer:
         """Calibrate on ``frames`` (an iterable of RGB frames, or None for a frame without a
         face: the first :data:`CALIBRATION_WINDOW_S` s of the video, from its frame
         ``first_index``): the most neutral one, or the frame ``calibration_frame`` (an index
-        into the video). Runs its own detector (video mode, as the analysis does: MediaPipe's
-        tracking mode places the points a little differently from its detection mode), so the
-        analysis' tracking starts fresh. Returns the calibration frame's index in the video."""
+        into the video). Runs MediaPipe in video mode, as the analysis does (its tracking mode
+        places the points a little differently from its detection mode); with the analyzer's
+        own detector, the analysis then goes on with this one and takes these frames' points
+        from the calibration instead of detecting them again (it starts on the first of
+        them). Returns the calibration frame's index in the video."""
         from myoface.analysis.landmarks import FaceMeshDetector
 
         points, images = [], []
-        with FaceMeshDetector(video=True) as det:
+        det = FaceMeshDetector(video=True)
+        try:
             for frame in frames:
                 images.append(frame)
                 if frame is None:  # (a frame known to have no face)
@@ -1035,8 +1090,20 @@ class FitAnalyzer:
                     continue
                 self._ensure_fit(np.shape(frame))
                 points.append(det.detect(frame))
-        if not points:
-            raise MyofaceValueError("the video has no frames to calibrate on")
+            if not points:
+                raise MyofaceValueError("the video has no frames to calibrate on")
+        except BaseException:
+            det.close()
+            raise
+        # the analysis goes on with this detector, and takes the calibration frames' points
+        # from it rather than detecting them twice: the same points a detector tracking from
+        # the first of these frames gives (the analysis starts there)
+        if self._own_detector:
+            self.detector.close()
+            self.detector = det
+            self._detected = {first_index + k: pts for k, pts in enumerate(points)}
+        else:
+            det.close()
         if calibration_frame is None:
             idx = None
         else:
@@ -1065,9 +1132,16 @@ class FitAnalyzer:
         self.calibration_frame = first_index + self.calibration.index
         return self.calibration_frame
 
+    def _points(self, frame, index: int):
+        """The frame's landmarks: the calibration's (frames it detected), else detected."""
+        if index in self._detected:
+            return self._detected.pop(index)
+        self._detected.clear()  # (past the calibration frames: the detector tracks from here)
+        return self.detector.detect(frame)
+
     def measure(self, frame, index: int = 0, time_s: float = 0.0) -> FitMeasurement:
         fit = self._ensure_fit(np.shape(frame))
-        pts = self.detector.detect(frame)
+        pts = self._points(frame, index)
         nan = np.full(len(self.ids), np.nan)
         if pts is None:
             fit.lose_track()
