@@ -21,20 +21,41 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
-#: (comparison, value) targets set by the project's issues, for the "target" column
+#: targets set by the project's issues, for the "target" column: (comparison, value) on the
+#: value, ("ratio", comparison, value) on the ratio to the peer, or ("in", low, high)
 TARGETS = {
-    "tissue.rk2_steps_per_s": (">=", 5000),
-    "tissue.relax_ms": ("<", 10),
-    "tissue.ns_per_spring_1m": ("<=", 5),
-    "render.fps_640x480": (">=", 300),
-    "synth.realtime_factor": (">", 1),
-    "synth.resynth_fps_512": (">=", 30),
-    "snakes.track_fps_9x40_256": (">=", 500),
-    "analysis.fps": (">=", 100),
-    "analysis.closed_loop_rmse": ("<=", 0.05),
-    "analysis.closed_loop_corr": (">=", 0.9),
-    "viewer.update_ms": ("<", 100),
-    "viewer.drag_updates_per_s": (">=", 30),
+    "tissue.rk2_steps_per_s": [(">=", 5000), ("ratio", ">=", 1.5)],
+    "tissue.relax_ms": [("<=", 10)],
+    "tissue.relax_warm_ms": [("<=", 2)],
+    "tissue.ns_per_spring_1m": [("<=", 5)],
+    "render.fps_640x480": [(">=", 300)],
+    "synth.realtime_factor": [(">", 1)],
+    "synth.resynth_fps_512": [(">=", 30)],
+    "synth.au_range_within": [(">=", 1.0)],
+    "synth.smile_gain": [("in", 0.85, 1.15)],
+    "snakes.track_fps_9x40_256": [(">=", 500)],
+    "analysis.fps": [(">=", 100), ("ratio", ">=", 0.8)],
+    "analysis.fps_snakes": [(">=", 25)],
+    "analysis.rss_mb_growth_per_1000_frames": [("<", 20)],
+    "analysis.fidelity": [(">=", 0.85)],
+    "analysis.closed_loop_rmse": [("<=", 0.05)],
+    "analysis.closed_loop_corr": [(">=", 0.9)],
+    "analysis.headmotion_rmse_worst": [("<=", 0.08)],
+    "analysis.headmotion_rmse_median": [("<=", 0.06)],
+    "analysis.headmotion_corr": [(">=", 0.85)],
+    "analysis.headmotion_skin_mm": [("<=", 0.5)],
+    "analysis.headmotion_pose_deg": [("<=", 2)],
+    "analysis.headmotion_still_rmse_median": [("<=", 0.06)],
+    "analysis.headmotion_still_skin_mm": [("<=", 0.5)],
+    "viewer.update_ms": [("<", 100)],
+    "viewer.drag_updates_per_s": [(">=", 30)],
+}
+
+_OPS = {
+    ">=": lambda v, t: v >= t,
+    ">": lambda v, t: v > t,
+    "<=": lambda v, t: v <= t,
+    "<": lambda v, t: v < t,
 }
 
 
@@ -46,17 +67,19 @@ def _fmt(v) -> str:
     return f"{v:.3g}"
 
 
-def _meets(name: str, value: float) -> str:
-    if name not in TARGETS:
-        return ""
-    op, t = TARGETS[name]
-    ok = {
-        ">=": value >= t,
-        ">": value > t,
-        "<=": value <= t,
-        "<": value < t,
-    }[op]
-    return f"{op} {t:g} {'(met)' if ok else '(**not met**)'}"
+def _meets(name: str, value: float, ratio: float | None = None) -> str:
+    """The target column: each target of ``name`` and whether this run met it."""
+    out = []
+    for t in TARGETS.get(name, []):
+        if t[0] == "in":
+            ok, text = t[1] <= value <= t[2], f"in [{t[1]:g}, {t[2]:g}]"
+        elif t[0] == "ratio":
+            ok = ratio is not None and _OPS[t[1]](ratio, t[2])
+            text = f"ratio {t[1]} {t[2]:g}"
+        else:
+            ok, text = _OPS[t[0]](value, t[1]), f"{t[0]} {t[1]:g}"
+        out.append(f"{text} {'(met)' if ok else '(**not met**)'}")
+    return "; ".join(out)
 
 
 def _detail_table(r: dict) -> list[str]:
@@ -111,7 +134,7 @@ def render(records: list[dict], command: str, date: str, docs: dict[str, str]) -
         lines.append(
             f"| `{r['name']}` | {_fmt(r['value'])} | {r['unit']} | {r['peer'] or '–'} | "
             f"{_fmt(r['peer_value'])} | {_fmt(ratio) + '×' if ratio else '–'} | {r['n']} | "
-            f"{_meets(r['name'], r['value'])} |"
+            f"{_meets(r['name'], r['value'], ratio)} |"
         )
     for r in records:
         lines += _detail_table(r)
