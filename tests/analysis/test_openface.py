@@ -61,6 +61,15 @@ def test_a_single_au_gives_its_intensity_back(ids, au, intensity):
     assert np.isnan(out[[OPENFACE_AUS.index(n) for n in UNMEASURED_AUS]]).all()
 
 
+def test_au7_is_reported_as_the_aus_of_its_muscles(ids):
+    """AU7's muscles are AU6's orbital sphincter (0.5) and AU45's palpebral part (0.3): its
+    contractions read as AU6 at 0.5 / 0.9 and AU45 at 0.3 of its intensity, AU07 empty."""
+    out = au_intensities(au_contractions({7: 0.9}, ids), ids)
+    assert np.isnan(out[OPENFACE_AUS.index(7)])
+    assert out[OPENFACE_AUS.index(6)] == pytest.approx(5 * 0.9 * 0.5 / 0.9, abs=1e-3)
+    assert out[OPENFACE_AUS.index(45)] == pytest.approx(5 * 0.9 * 0.3, abs=1e-3)
+
+
 def test_one_side_of_a_bilateral_au_is_half_its_intensity(ids):
     out = au_intensities(au_contractions({"L12": 0.8}, ids), ids)
     assert out[OPENFACE_AUS.index(12)] == pytest.approx(0.5 * 5 * 0.8, abs=1e-3)
@@ -158,7 +167,7 @@ def test_write_openface_csv_from_the_3d_fit(tmp_path, ids):
     assert float(row["AU12_r"]) == pytest.approx(4.0, abs=0.01)
     assert float(row["AU06_r"]) == pytest.approx(2.0, abs=0.01)
     assert float(row["AU01_r"]) == pytest.approx(0.0, abs=0.01)
-    assert row["AU07_r"] == "" and row["AU45_r"] == ""
+    assert row["AU07_r"] == "" and float(row["AU45_r"]) == pytest.approx(0.0, abs=0.01)
     want = openface_pose(pose)
     got = [float(row[c]) for c in OPENFACE_COLUMNS[5:11]]
     np.testing.assert_allclose(got[:3], want[:3], atol=0.06)  # mm, 1 decimal
@@ -180,6 +189,6 @@ def test_write_openface_csv_without_a_3d_pose(tmp_path, ids):
     head, rows = _read(write_openface_csv(src, tmp_path / "openface.csv"))
     row = dict(zip(head, rows[0], strict=True))
     assert all(row[c] == "" for c in OPENFACE_COLUMNS[5:11])
-    assert row["AU04_r"] == "" and row["AU06_r"] == ""
+    assert row["AU04_r"] == "" and row["AU06_r"] == "" and row["AU45_r"] == ""
     assert float(row["AU12_r"]) == pytest.approx(3.0, abs=0.01)
     assert float(row["AU01_r"]) == pytest.approx(0.0, abs=0.01)

@@ -37,8 +37,8 @@ Columns (see also the README):
 - ``AUxx_r``: intensities on OpenFace's 0-5 scale (0 absent, 1 trace ... 5 maximum; FACS's
   A-E are 1-5), from the fitted contractions through the project's AU table
   (``data/facs_action_units.toml``, :func:`au_intensities`); bilateral AUs are the mean of the
-  two sides. ``AU07_r`` and ``AU45_r`` are empty (see :data:`UNMEASURED_AUS`), as is an AU whose
-  principal muscles are not in the CSV (e.g. AU04 from the snakes, which do not estimate the
+  two sides. ``AU07_r`` is empty (see :data:`UNMEASURED_AUS`), as is an AU whose principal
+  muscles are not in the CSV (e.g. AU04 from the snakes, which do not estimate the
   corrugators).
 """
 
@@ -71,10 +71,10 @@ OPENFACE_COLUMNS = (
 )
 #: OpenFace AUs that myoface does not measure, always empty, and why
 UNMEASURED_AUS = {
-    7: "lid tightener: the model's one orbicularis oculi stands for both its orbital part "
-    "(AU6) and its palpebral part (AU7), so the two cannot be told apart; its contraction is "
-    "reported as AU6",
-    45: "blink: the model has no eyelids",
+    7: "lid tightener: in the AU table it is the orbital sphincter (orbicularis oculi, 0.5) "
+    "with the lid's palpebral part (0.3), a mix of the muscles of AU6 (the sphincter) and "
+    "AU45 (the palpebral part), so the contractions cannot tell it from AU6 + AU45; it is "
+    "reported as those two",
 }
 #: AU intensity scale: OpenFace's maximum (FACS's E) for an AU at intensity 1 in the AU table
 OPENFACE_SCALE = 5.0
@@ -200,7 +200,8 @@ def au_intensities(contractions, muscle_ids, aus=OPENFACE_AUS) -> np.ndarray:
     AU 5 i and the others 0.
 
     Limits: the AU table's muscles are the model's, so an AU is only as distinct as its muscles
-    are. AU7 shares AU6's orbicularis oculi and is not measured (:data:`UNMEASURED_AUS`); AU25
+    are. AU7's muscles are AU6's and AU45's, and it is not measured (:data:`UNMEASURED_AUS`);
+    AU25
     (lips part) is read from the depressor labii inferioris and the jaw together with AU26; a
     contraction of a muscle that only AUs outside OpenFace's list drive (e.g. the zygomaticus
     minor of AU11) is explained by the listed AUs as well as they can, or left unexplained.
