@@ -31,8 +31,8 @@ import scipy.sparse as sp
 COMPRESSION_DEAD_ZONE = 0.02
 #: furrow spacing (mm): forehead lines and crow's feet lie some 5-10 mm apart
 WAVELENGTH_MM = 6.0
-#: furrow height (mm) per unit compression (a 10 % compression: 0.12 mm, slopes ~0.12)
-FURROW_GAIN_MM = 1.2
+#: furrow height (mm) per unit compression (a 10 % compression: 0.4 mm, slopes ~0.4)
+FURROW_GAIN_MM = 4.0
 #: the nasolabial groove: half-width (mm) and depth (mm) per unit compression
 FOLD_WIDTH_MM = 2.5
 FOLD_GAIN_MM = 6.0
