@@ -162,3 +162,55 @@ def bench_analysis_fps_snakes(quick: bool) -> Measurement:
     ours, n = _fps(lambda: _analysis_pass(path, "snakes", m), quick)
     peer, _ = _fps(lambda: _mediapipe_pass(path, m), quick)
     return Measurement(ours, n, peer)
+
+
+#: issue 18's targets for analysis.fidelity: overall and in every region
+FIDELITY_TARGET = {"overall": 0.85, "region": 0.7}
+
+
+@benchmark("analysis.fidelity", "-", higher_is_better=True)
+def bench_analysis_fidelity(quick: bool) -> Measurement:
+    """How much of the sample video's expression motion the resynthesis reproduces (issue 18
+    item 4, :mod:`myoface.analysis.fidelity`): ``single_face.mp4`` (72 frames, neutral ->
+    smile -> neutral; 36 with ``quick``) analysed as ``myoface analyze --tracker landmarks``
+    does (the 3-D fit), the contractions resynthesized on the person's own face (made with
+    ``face_from_photo`` from the calibration frame) front on, and MediaPipe's face mesh run
+    on the input and on the resynthesis; each frame aligned to its reference frame by a 3-D
+    similarity on the eye corners and nose bridge, the displacements of the mouth corners,
+    lip centres, brows, eyelids and chin over the inter-ocular distance compared. Value: the
+    explained fraction over every expressive point, 1 - sum|d_in - d_out|^2 / sum|d_in|^2
+    (1: the same motion, 0: no better than a still face). The detail gives every region's
+    explained fraction, gain (< 1: the model moves less than the face) and correlation, and
+    the issue's targets (0.85 overall, 0.7 per region)."""
+    import json
+    import tempfile
+    from pathlib import Path
+
+    from myoface.analysis.fidelity import write_fidelity_report
+    from myoface.analysis.outputs import analyze_to_folder
+    from myoface.model import build_face_model
+
+    path = _sample_video()
+    fm = _cache.get("model")
+    if fm is None:
+        fm = _cache["model"] = build_face_model()
+    with tempfile.TemporaryDirectory() as tmp:
+        res = analyze_to_folder(
+            path, Path(tmp) / "analysis", model=fm, tracker="landmarks",
+            max_frames=36 if quick else None,
+        )  # fmt: skip
+        fid = write_fidelity_report(res.folder, path)
+        doc = json.loads((res.folder / "fidelity.json").read_text())
+    regions = {k: v.explained for k, v in fid.regions.items()}
+    detail = {
+        "regions": doc["regions"],
+        "overall": doc["overall"],
+        "face": doc["face"],
+        "frames_compared": doc["frames_compared"],
+        "target": FIDELITY_TARGET,
+        "target_met": bool(
+            fid.overall.explained >= FIDELITY_TARGET["overall"]
+            and all(v >= FIDELITY_TARGET["region"] for v in regions.values())
+        ),
+    }
+    return Measurement(float(fid.overall.explained), fid.n_frames, detail=detail)
