@@ -344,6 +344,7 @@ def fidelity_of_analysis(
     contractions_csv,
     *,
     model=None,
+    fallback_model=None,
     calibration_frame: int = 0,
     size: int | None = None,
     dims: int = 2,
@@ -352,8 +353,10 @@ def fidelity_of_analysis(
     """The fidelity measure of an analysis: MediaPipe on the frames of ``video_path`` that
     ``contractions_csv`` measured (its ``frame`` column; "ok" rows) and on the resynthesis of
     those rows by ``model`` (default: the person's own face made from ``calibration_frame``,
-    :func:`person_model`), rendered front on at ``size`` pixels (default: the video's height,
-    at least 256). Returns the result and a dict of how it was measured (for fidelity.json)."""
+    :func:`person_model`; if no face is found there, ``fallback_model``, e.g. the analysis'
+    own, and the reason in the returned dict), rendered front on at ``size`` pixels
+    (default: the video's height, at least 256). Returns the result and a dict of how it was
+    measured (for fidelity.json)."""
     import csv
     import time
 
@@ -365,7 +368,13 @@ def fidelity_of_analysis(
     t0 = time.perf_counter()
     how = {}
     if model is None:
-        model, how["face"] = person_model(video_path, calibration_frame)
+        try:
+            model, how["face"] = person_model(video_path, calibration_frame)
+        except MyofaceValueError as exc:
+            if fallback_model is None:
+                raise
+            model = fallback_model
+            how["face"] = f"the analysis' face model ({model.face.name}): {exc}"
     else:
         how["face"] = f"the analysis' face model ({model.face.name})"
     times, table, quality = read_contractions_csv(contractions_csv, list(model.ids))
@@ -420,6 +429,7 @@ def write_fidelity_report(
     video_path,
     *,
     model=None,
+    fallback_model=None,
     calibration_frame: int | None = None,
     show_progress: bool = False,
 ) -> FidelityResult:
@@ -438,6 +448,7 @@ def write_fidelity_report(
         video_path,
         folder / "contractions.csv",
         model=model,
+        fallback_model=fallback_model,
         calibration_frame=calibration_frame,
         show_progress=show_progress,
     )

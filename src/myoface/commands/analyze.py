@@ -184,6 +184,7 @@ def _extra_outputs(args, model, folder) -> None:
             folder,
             args.video,
             model=model if args.face else None,
+            fallback_model=model,  # when no face is found on the calibration frame
             show_progress=not args.quiet,
         )
         o = res.overall
