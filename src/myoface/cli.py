@@ -142,7 +142,9 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt as exc:
             signum = getattr(exc, "signum", signal.SIGINT)
             name = signal.Signals(signum).name
-            print(f"{prog}: interrupted ({name})", file=sys.stderr)
+            # what the command kept, if it says (e.g. analyze's measured rows)
+            kept = "".join(f"; {_one_line(n)}" for n in getattr(exc, "__notes__", ()))
+            print(f"{prog}: interrupted ({name}){kept}", file=sys.stderr)
             return 128 + int(signum)
         except (OSError, MemoryError) as exc:  # the machine's, not the input's: no traceback
             if debug:

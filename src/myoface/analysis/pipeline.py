@@ -1005,45 +1005,148 @@ def measure_frames(video, analyzer, start: int = 0, max_frames: int | None = Non
         yield frame, analyzer.measure(frame, k, k / video.fps)
 
 
+#: the head columns of the snakes' (2-D head frame) rows in a contractions CSV
+HEAD_2D_COLUMNS = ("head_dx_px", "head_dy_px", "head_scale", "head_rot_deg")
+
+
+def contractions_csv_header(ids, first) -> list[str]:
+    """The columns of a contractions CSV whose first measurement is ``first`` (see
+    :func:`write_contractions_csv`): the 3-D fit's measurements carry their own head
+    columns (``HEAD_COLUMNS``), the others the 2-D head frame's."""
+    head = list(first.HEAD_COLUMNS) if hasattr(first, "head_cells") else list(HEAD_2D_COLUMNS)
+    return ["frame", "time_s", "quality", *ids, "jaw_angle_rad", *head]
+
+
+def contractions_csv_row(f, ids, jaw_max_rad: float, pose_cols: bool) -> str:
+    """One measurement ``f`` as a line of a contractions CSV (no newline); ``pose_cols``: the
+    header has the 3-D fit's head columns."""
+    vals = ["" if not np.isfinite(v) else f"{v:.5f}" for v in f.contractions]
+    jaw = ""
+    if "jaw" in ids and np.isfinite(f.contractions[ids.index("jaw")]):
+        jaw = f"{f.contractions[ids.index('jaw')] * jaw_max_rad:.5f}"
+    if pose_cols:
+        head = f.head_cells()
+    else:
+        head = [f.head_shift_px[0], f.head_shift_px[1], f.head_scale, np.degrees(f.head_rot_rad)]
+        head = [
+            "" if not np.isfinite(v) else f"{v:.{d}f}"
+            for v, d in zip(head, (3, 3, 5, 3), strict=True)
+        ]
+    return ",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw, *head])
+
+
 def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_rad: float) -> None:
     """``frame,time_s,quality,<muscle ids...>,jaw_angle_rad,head_dx_px,head_dy_px,head_scale,
     head_rot_deg`` (empty cells where a frame could not be measured, and head cells where the
     face was not found). With the 3-D fit's measurements
     (:class:`~myoface.analysis.fit.FitMeasurement`) the head columns are the 3-D pose and the
     fit's residual: ``head_yaw_deg, head_pitch_deg, head_roll_deg, head_tx_mm, head_ty_mm,
-    head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.fit.HeadPose`)."""
+    head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.fit.HeadPose`). Written whole
+    (atomically); :class:`ContractionsCsvWriter` writes the same rows one by one."""
     from myoface._io import atomic_output
 
+    ids = list(ids)
     # measurements of the 3-D fit (myoface.analysis.fit) carry the head's 3-D pose instead
     pose_cols = bool(frames) and all(hasattr(f, "head_cells") for f in frames)
-    head_cols = (
-        list(frames[0].HEAD_COLUMNS)
-        if pose_cols
-        else ["head_dx_px", "head_dy_px", "head_scale", "head_rot_deg"]
-    )
-    cols = ["frame", "time_s", "quality", *ids, "jaw_angle_rad", *head_cols]
+    cols = contractions_csv_header(ids, frames[0] if pose_cols else None)
     lines = [",".join(cols)]
-    for f in frames:
-        vals = ["" if not np.isfinite(v) else f"{v:.5f}" for v in f.contractions]
-        jaw = ""
-        if "jaw" in ids and np.isfinite(f.contractions[ids.index("jaw")]):
-            jaw = f"{f.contractions[ids.index('jaw')] * jaw_max_rad:.5f}"
-        if pose_cols:
-            head = f.head_cells()
-        else:
-            head = [
-                f.head_shift_px[0],
-                f.head_shift_px[1],
-                f.head_scale,
-                np.degrees(f.head_rot_rad),
-            ]
-            head = [
-                "" if not np.isfinite(v) else f"{v:.{d}f}"
-                for v, d in zip(head, (3, 3, 5, 3), strict=True)
-            ]
-        lines.append(",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw, *head]))
+    lines += [contractions_csv_row(f, ids, jaw_max_rad, pose_cols) for f in frames]
     with atomic_output(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
+
+
+class ContractionsCsvWriter:
+    """A contractions CSV (:func:`write_contractions_csv`'s columns) written row by row as the
+    frames are measured, each row flushed to the file at once: whenever the run stops, the
+    file holds the header and every row measured so far, each complete.
+
+    The file appears under its final name with the header and the first row (written to a
+    temporary name beside it, then renamed over any older file, so a reader never sees a
+    half file); the following rows are appended to it. Before the first row there is no
+    file (and an older one is left as it was).
+
+    >>> with ContractionsCsvWriter("out/contractions.csv", ids, jaw_max) as w:  # doctest: +SKIP
+    ...     for m in measurements:
+    ...         w.write(m)
+
+    Parameters
+    ----------
+    path : the CSV file; its folder must exist.
+    ids : the measurements' contraction ids (``Analyzer.ids``).
+    jaw_max_rad : the jaw's largest angle (rad), for the ``jaw_angle_rad`` column.
+
+    Attributes
+    ----------
+    n_rows : int -- rows written so far.
+    """
+
+    def __init__(self, path, ids, jaw_max_rad: float):
+        from myoface._io import check_output_path
+
+        self.path = check_output_path(path)
+        self.ids = list(ids)
+        self.jaw_max_rad = float(jaw_max_rad)
+        self.n_rows = 0
+        self._fh = None
+        self._pose_cols = False
+
+    def write(self, m) -> None:
+        """Append the row of measurement ``m`` and flush it to the file."""
+        if self._fh is None:  # the first row says which head columns the file has
+            self._pose_cols = hasattr(m, "head_cells")
+        row = contractions_csv_row(m, self.ids, self.jaw_max_rad, self._pose_cols)
+        if self._fh is None:
+            head = ",".join(contractions_csv_header(self.ids, m))
+            self._fh = self._publish(head + "\n" + row + "\n")
+        else:
+            self._fh.write(row + "\n")  # one write: a stop between rows, never inside one
+            self._fh.flush()
+        self.n_rows += 1
+
+    def _publish(self, text: str):
+        """The file opened for appending, holding ``text``, renamed to :attr:`path`."""
+        import tempfile
+
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{self.path.stem}.", suffix=".part.csv", dir=self.path.parent
+        )
+        try:
+            umask = os.umask(0)
+            os.umask(umask)
+            os.fchmod(fd, 0o666 & ~umask)  # mkstemp's 0600 -> the usual permissions
+            fh = os.fdopen(fd, "a", encoding="utf-8", newline="")
+        except BaseException:
+            os.close(fd)
+            os.unlink(tmp)
+            raise
+        try:
+            fh.write(text)
+            fh.flush()
+            os.replace(tmp, self.path)
+        except BaseException:
+            fh.close()
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return fh
+
+    def close(self) -> None:
+        """Close the file (it stays, with the rows written)."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def discard(self) -> None:
+        """Close and remove the file (a run that measured nothing worth keeping)."""
+        had = self._fh is not None
+        self.close()
+        if had:
+            self.path.unlink(missing_ok=True)
+
+    def __enter__(self) -> ContractionsCsvWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 #: the columns of a contractions CSV that are not muscles (see :func:`write_contractions_csv`)

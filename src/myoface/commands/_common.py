@@ -83,12 +83,15 @@ def warn(message: str) -> None:
 
 
 def check_video_size(path, width: int, height: int) -> None:
-    """Say (a warning) that an H.264 video of an odd ``width`` or ``height`` loses its last
-    column or row: its frames need even sides."""
+    """Say (a warning) that an H.264 video of an odd ``width`` or ``height`` is padded by a
+    copy of its last column or row (:class:`~myoface.render.VideoWriter`): its frames need
+    even sides."""
     if width % 2 or height % 2:
         warn(
             f"H.264 needs even frame sizes: {Path(path).name} will be "
-            f"{width - width % 2}x{height - height % 2} pixels, not {width}x{height}"
+            f"{width + width % 2}x{height + height % 2} pixels, not {width}x{height} (the last "
+            f"{'column' if width % 2 else 'row'}{' and row' if width % 2 and height % 2 else ''}"
+            " repeated)"
         )
 
 

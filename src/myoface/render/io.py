@@ -56,6 +56,29 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> Path:
     return p
 
 
+def encoded_size(width: int, height: int) -> tuple[int, int]:
+    """The (width, height) :class:`VideoWriter` encodes frames of this size at: the next even
+    numbers (H.264 in yuv420p subsamples the colour 2 x 2)."""
+    return _even_size(width, height)
+
+
+def _even_size(w: int, h: int) -> tuple[int, int]:
+    return (w + w % 2, h + h % 2)
+
+
+def _pad_even(img: np.ndarray) -> np.ndarray:
+    """``img`` (H, W, 3), contiguous, its last column and row repeated where W or H is odd."""
+    h, w = img.shape[:2]
+    if not (w % 2 or h % 2):
+        return np.ascontiguousarray(img)
+    ew, eh = _even_size(w, h)
+    out = np.empty((eh, ew, 3), np.uint8)
+    out[:h, :w] = img
+    out[:h, w:] = img[:, -1:]
+    out[h:] = out[h - 1 : h]
+    return out
+
+
 class VideoWriter:
     """Write frames to an MP4 (H.264 via PyAV) as a context manager; the file appears only when
     the block completes without error.
@@ -78,9 +101,14 @@ class VideoWriter:
         most :data:`QUEUE_FRAMES` frames wait. An encoder error is raised by the next
         :meth:`write` or on leaving the block.
 
+    H.264 (yuv420p) needs an even width and height: a frame of odd width or height is padded
+    to the next even size by repeating its last column or row (nothing is cut off; the file
+    is then one pixel wider or taller than the frames, :func:`encoded_size`).
+
     Attributes
     ----------
     n_frames : int — frames written so far.
+    frame_size : (width, height) of the frames written (None before the first).
     encode_ms : list of float — per frame, the wall time (ms) its conversion to YUV and
         encoding took (in the background thread when ``background``).
     wait_ms : float — how long (ms) :meth:`write` waited for the background encoder in all
@@ -120,6 +148,7 @@ class VideoWriter:
         self._container = None
         self._stream = None
         self._size = None
+        self.frame_size = None
         self._queue = None
         self._thread = None
         self._error: BaseException | None = None
@@ -132,10 +161,10 @@ class VideoWriter:
     def _open(self, w: int, h: int) -> None:
         import av
 
-        # H.264 in yuv420p needs even sizes
-        self._size = (w - w % 2, h - h % 2)
-        if min(self._size) < 2:
+        if min(w, h) < 2:
             raise MyofaceValueError(f"frames must be at least 2x2 pixels; got {w}x{h}")
+        self.frame_size = (w, h)
+        self._size = _even_size(w, h)
         from fractions import Fraction
 
         self._container = av.open(str(self._tmp), mode="w")
@@ -186,14 +215,14 @@ class VideoWriter:
         h, w = img.shape[:2]
         if self._container is None:
             self._open(w, h)
-        elif (w - w % 2, h - h % 2) != self._size:
+        elif (w, h) != self.frame_size:
+            fw, fh = self.frame_size
             raise MyofaceValueError(
-                f"all frames must have the same size; got {w}x{h} after {self._size}"
+                f"all frames must have the same size; got {w}x{h} after {fw}x{fh}"
             )
         self._raise_encoder_error()
-        sw, sh = self._size
         # from_ndarray copies the pixels: the caller may reuse its array
-        vf = av.VideoFrame.from_ndarray(np.ascontiguousarray(img[:sh, :sw]), format="rgb24")
+        vf = av.VideoFrame.from_ndarray(_pad_even(img), format="rgb24")
         if self._queue is None:
             self._encode(vf)
         else:

@@ -1,0 +1,258 @@
+"""``myoface analyze`` streams (issue 21, items 2 and 5): each frame's CSV row is in the file
+before the next frame is read, an interrupted run keeps its rows in a valid CSV and leaves no
+temporary file, what it keeps is a few bytes a frame, and odd frame sizes are padded, not cut."""
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from myoface.analysis.video import Video, open_video
+
+SIZE = 128  # px: the snakes find every contour of the rendered face (tests/test_batch.py)
+FPS = 10.0
+
+
+@pytest.fixture(scope="module")
+def face_clip(tmp_path_factory):
+    """Three renders of the default face (rest, smile, rest) and the contours' init file (the
+    model's sections projected by the known camera: no MediaPipe needed)."""
+    from myoface.analysis.pipeline import project_sections, save_init
+    from myoface.model import build_face_model
+    from myoface.render import Camera, Renderer, to_srgb8
+    from myoface.render.dressing import default_skin_texture
+
+    fm = build_face_model()
+    cam = Camera.front(fm.face.vertices, width=SIZE, height=SIZE, fov_deg=None)
+    r = Renderer(fm.face, cam, texture=to_srgb8(default_skin_texture(fm.face, 256, makeup=True)))
+    rest = fm.rest_state()
+    smile = {"zygomaticus_major_l": 0.7, "zygomaticus_major_r": 0.7}
+    frames = [r.render(fm.skin_vertices(s)) for s in (rest, fm.relax(smile, rest).state, rest)]
+    d = tmp_path_factory.mktemp("stream")
+    save_init(d / "init.json", project_sections(fm, cam))
+    return fm, frames, d / "init.json"
+
+
+class _WatchedVideo(Video):
+    """A video made of ``frames`` (looped to ``n`` frames) that, as each frame is asked for,
+    counts the rows the analysis has written to ``csv_path`` so far."""
+
+    def __init__(self, frames, n, csv_path):
+        super().__init__(Path("watched.mp4"), FPS, (SIZE, SIZE), n)
+        self.frames, self.csv_path, self.rows_seen = frames, Path(csv_path), []
+
+    def __iter__(self):
+        for k in range(self.n_frames):
+            rows = 0
+            if self.csv_path.exists():
+                with open(self.csv_path, newline="") as fh:
+                    rows = len(list(csv.reader(fh))) - 1  # the header
+            self.rows_seen.append(rows)
+            yield self.frames[k % len(self.frames)]
+
+
+def test_each_row_is_in_the_csv_before_the_next_frame_is_read(face_clip, tmp_path):
+    from myoface.analysis.outputs import analyze_to_folder
+    from myoface.analysis.pipeline import read_contractions_csv
+
+    fm, frames, init = face_clip
+    out = tmp_path / "out"
+    n = 9
+    video = _WatchedVideo(frames, n, out / "contractions.csv")
+    res = analyze_to_folder(video, out, model=fm, init=init)
+    # frame k is read once the k frames before it are measured and their rows written
+    assert video.rows_seen == list(range(n))
+    times, table, quality = read_contractions_csv(out / "contractions.csv", fm.muscles.ids)
+    assert len(times) == len(res.frames) == n
+    # the compact record the result keeps holds what the CSV says (5 decimals in the CSV)
+    cols = [list(fm.muscles.ids).index(k) for k in res.ids if k != "jaw"]
+    ok = np.array([q == "ok" for q in quality])
+    assert ok.any()
+    got = res.contractions[:, [i for i, k in enumerate(res.ids) if k != "jaw"]]
+    np.testing.assert_allclose(got[ok], table[ok][:, cols], atol=1e-5)
+    assert res.frames.quality == quality
+    assert not list(out.glob(".*part*"))
+
+
+def test_the_record_kept_per_frame_is_small(face_clip):
+    """What the streaming analysis keeps of a frame is its row's numbers, not the frame, its
+    contours or its measurement: a bound on the bytes per frame, independent of the frame."""
+    from myoface.analysis.outputs import FrameLog
+    from myoface.analysis.pipeline import FrameMeasurement
+
+    ids = 40  # about the 3-D fit's count (every muscle of the default model and the jaw)
+    log = FrameLog(ids)
+    contours = {"lips": np.zeros((400, 2))}
+    n = 20000
+    for k in range(n):
+        c = np.full(ids, np.nan) if k % 7 == 0 else np.full(ids, 0.25)
+        q = "face_lost" if k % 7 == 0 else "ok"
+        log.append(FrameMeasurement(k, k / 30, q, c, np.zeros(2), contours, iterations=3))
+    assert len(log) == n
+    per_frame = (
+        sum(a.buffer_info()[1] * a.itemsize for a in (log._index, log._time, log._iterations))
+        + log._contractions.buffer_info()[1] * log._contractions.itemsize
+        + 8 * len(log._quality)
+    ) / n
+    # 8 + 8 + 8 bytes of index, time and iterations, 4 per contraction, a pointer per quality
+    assert per_frame <= 24 + 4 * ids + 8 + 1e-9
+    assert len(log._names) == 2  # one string per distinct quality, not per frame
+    np.testing.assert_array_equal(log.index, np.arange(n))
+    assert np.isnan(log.contractions[::7]).all() and (log.contractions[1] == 0.25).all()
+
+
+def _write_clip(frames, path, n):
+    from myoface.render import VideoWriter
+
+    with VideoWriter(path, fps=FPS, preset="ultrafast") as vw:
+        for k in range(n):
+            vw.write(frames[k % len(frames)])
+
+
+def _rows(path) -> int:
+    try:
+        with open(path, newline="") as fh:
+            return len(list(csv.reader(fh))) - 1
+    except FileNotFoundError:
+        return 0
+
+
+@pytest.mark.parametrize("signame", ["SIGTERM", "SIGINT"])
+def test_an_interrupted_analysis_keeps_its_rows_and_leaves_no_part_file(
+    face_clip, tmp_path, signame
+):
+    """A ``myoface analyze`` process stopped by a signal part-way: the CSV has the header and
+    every measured row (pandas-style readers read it), the overlay is a finished video of
+    those frames, nothing temporary is left, and stderr is one line that says what was kept."""
+    from myoface.analysis.pipeline import read_contractions_csv
+
+    fm, frames, init = face_clip
+    clip = tmp_path / "long.mp4"
+    _write_clip(frames, clip, 3000)  # far longer than the test waits
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "myoface", "analyze", str(clip), "--init", str(init)]
+    cmd += ["-o", str(out), "--quiet"]
+    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    try:
+        deadline = time.monotonic() + 240
+        # rows appear while the run goes on
+        while _rows(out / "contractions.csv") < 5 and proc.poll() is None:
+            assert time.monotonic() < deadline, "no rows after 240 s"
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.stderr.read().decode()
+        seen = _rows(out / "contractions.csv")
+        proc.send_signal(getattr(signal, signame))
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    sig = getattr(signal, signame)
+    assert proc.returncode == 128 + int(sig)
+    lines = stderr.decode().strip().splitlines()
+    assert len(lines) == 1, lines
+    assert f"interrupted ({signame})" in lines[0] and "kept the" in lines[0]
+    assert "Traceback" not in stderr.decode()
+
+    times, table, quality = read_contractions_csv(out / "contractions.csv", fm.muscles.ids)
+    n = len(times)
+    assert seen <= n < 3000
+    assert f"kept the {n} frames" in lines[0]
+    assert quality.count("ok") >= 1
+    with open(out / "contractions.csv", newline="") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0][:3] == ["frame", "time_s", "quality"]
+    assert all(len(r) == len(rows[0]) for r in rows)  # every row complete
+    assert [int(r[0]) for r in rows[1:]] == list(range(n))
+    # the overlays are closed, finished videos of the frames measured (the signal may have
+    # come between a frame's row and its picture)
+    for name in ("overlay.mp4", "potential.mp4"):
+        got = sum(1 for _ in open_video(out / name))
+        assert n - 1 <= got <= n, name
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["analysis.json", "contractions.csv", "contractions.png", "overlay.mp4", "potential.mp4"]
+    )
+    import json
+
+    side = json.loads((out / "analysis.json").read_text())
+    assert side["interrupted"] is True and len(side["frames"]) == n
+
+
+def test_an_interruption_before_the_first_frame_leaves_nothing(face_clip, tmp_path):
+    """Interrupted before a frame was measured there is nothing to keep: the folder the call
+    made is removed, as after an error."""
+    from myoface.analysis.outputs import analyze_to_folder
+
+    fm, frames, init = face_clip
+
+    class Stopped(Video):
+        def __iter__(self):
+            raise KeyboardInterrupt
+            yield
+
+    out = tmp_path / "new" / "out"
+    with pytest.raises(KeyboardInterrupt) as info:
+        analyze_to_folder(Stopped(Path("x.mp4"), FPS, (SIZE, SIZE), 5), out, model=fm, init=init)
+    assert not getattr(info.value, "__notes__", None)
+    assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.parametrize("size", [(33, 20), (32, 21), (31, 17)])
+def test_odd_frame_sizes_are_padded_not_cropped(tmp_path, size):
+    """H.264 needs even sizes: the writer pads an odd width or height with a copy of the last
+    column or row, so every pixel of the frame is in the file."""
+    from myoface.render import VideoWriter
+    from myoface.render.io import encoded_size
+
+    w, h = size
+    rng = np.random.default_rng(0)
+    # grey blocks (no colour for 4:2:0 to blur; crf 0 keeps the grey levels), the last
+    # column white and the last row black
+    img = np.kron(rng.integers(60, 200, (h // 8 + 1, w // 8 + 1, 1)), np.ones((8, 8, 3)))
+    img = img[:h, :w].astype(np.uint8)
+    img[:, -1] = 250
+    img[-1, :] = 10
+    with VideoWriter(tmp_path / "odd.mp4", fps=10, quality_crf=0) as vw:
+        for _ in range(3):
+            vw.write(img)
+        assert vw.frame_size == (w, h)
+    got = open_video(tmp_path / "odd.mp4").read_all()
+    ew, eh = encoded_size(w, h)
+    assert (ew, eh) == (w + w % 2, h + h % 2)
+    assert got.shape == (3, eh, ew, 3)
+    # every pixel of the frame, its last row and column included, within the RGB <-> YUV
+    # rounding of a grey level (2 levels), and the padding a copy of them
+    np.testing.assert_allclose(got[0, :h, :w], img, atol=2)
+    np.testing.assert_allclose(got[0, :h, ew - 1], img[:, -1], atol=2)
+    np.testing.assert_allclose(got[0, eh - 1, :w], img[-1], atol=2)
+
+
+def test_odd_size_video_is_analysed_with_every_pixel_in_the_overlay(face_clip, tmp_path):
+    """``myoface analyze`` on a 129x127 video: the overlay keeps the frames' full size
+    (padded to 130x128), the analysis sees the frames as they are."""
+    from myoface.cli import main
+
+    fm, frames, init = face_clip
+    odd = [np.pad(f, ((0, 1), (0, 0), (0, 0)), mode="edge")[: SIZE - 1] for f in frames]
+    odd = [np.pad(f, ((0, 0), (0, 1), (0, 0)), mode="edge") for f in odd]
+    assert odd[0].shape == (SIZE - 1, SIZE + 1, 3)
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    from myoface.render import write_image
+
+    for k in range(4):
+        write_image(folder / f"{k:03d}.png", odd[k % len(odd)])
+    out = tmp_path / "out"
+    assert main(["analyze", str(folder), "--init", str(init), "-o", str(out), "--quiet"]) == 0
+    ov = open_video(out / "overlay.mp4")
+    assert ov.size == (SIZE + 2, SIZE)
+    first = next(iter(ov))
+    # the frame's last column (x = 128) is there, and repeated in the padding
+    assert np.abs(first[: SIZE - 1, SIZE].astype(int) - odd[0][:, SIZE]).mean() < 12
