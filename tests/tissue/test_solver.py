@@ -155,7 +155,17 @@ def test_newton_equals_the_lbfgs_reference(fm, draw):
     ref = _reference(tm, tg)
     # converged means the last Newton step - the estimate of the distance to the equilibrium,
     # taken - moved no node by NEWTON_TOL_MM: the result is within that of the equilibrium
-    assert np.abs(r.state.x - ref).max() < NEWTON_TOL_MM
+    if np.abs(r.state.x - ref).max() >= NEWTON_TOL_MM:
+        # the energy is not convex (compressed springs, the volume penalty): for some
+        # contractions there is more than one equilibrium (e.g. 25 muscles, seed 141 with the
+        # working tree's muscle set of 2026-11-30: two minima 0.81 mm apart, 480 nJ apart),
+        # and the two solvers may find different ones. Then the Newton result must be one (the
+        # reference started there stays within the tolerance) and no higher than the reference's
+        there = relax(
+            tm, r.state, tg, method="lbfgs", tol_mm=REFERENCE_TOL_MM, max_iter=5000
+        ).state.x
+        assert np.abs(r.state.x - there).max() < NEWTON_TOL_MM
+        assert potential_energy(tm, there) <= potential_energy(tm, ref)
     np.testing.assert_array_equal(r.state.x[tm.kinematic_index], tg)
     # the solver reports the force at its last iterate, the one it returns
     f = np.abs(internal_forces(tm, r.state.x)[tm.free_index]).max()
@@ -350,3 +360,87 @@ def test_pcg_in_eisenstats_form_is_the_preconditioned_cg(fm):
         rz, p = r @ z, z + (r @ z) / rz * p
     assert (k, curved) == (it, 0)
     np.testing.assert_allclose(out, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
+
+
+def test_extrapolated_start_repeats_the_last_move_along_the_new_one(fm):
+    """The start state's last move is repeated for the part of the new kinematic move along
+    its own, and only that part is left for the linear response; an unrelated move (orthogonal
+    to the last) changes nothing; a reversed move returns the free nodes to where they were."""
+    from myoface.tissue.solver import extrapolated_start
+
+    tm = fm.tissue
+    kin, free = tm.kinematic_index, tm.free_index
+    rng = np.random.default_rng(6)
+    previous = tm.rest_positions.copy()
+    start = previous.copy()
+    start[kin] += rng.normal(0, 0.3, (len(kin), 3))
+    start[free] += rng.normal(0, 0.3, (len(free), 3))
+    last = start - previous
+    for a in (1.0, 0.5, -1.0):
+        x = start.copy()
+        x[kin] = start[kin] + a * last[kin]
+        rest_of_move = extrapolated_start(tm, x, start[kin], previous)
+        np.testing.assert_allclose(x[free], start[free] + a * last[free], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(rest_of_move, 0.0, rtol=0, atol=1e-12)
+    # a new move orthogonal to the last one (over the kinematic nodes): no extrapolation
+    other = rng.normal(0, 0.3, (len(kin), 3))
+    other -= np.vdot(other, last[kin]) / np.vdot(last[kin], last[kin]) * last[kin]
+    x = start.copy()
+    x[kin] = start[kin] + other
+    rest_of_move = extrapolated_start(tm, x, start[kin], previous)
+    np.testing.assert_allclose(x[free], start[free], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(rest_of_move, other, rtol=0, atol=1e-12)
+
+
+def test_relaxed_states_carry_where_they_came_from(fm):
+    """A relax's state records the positions it started from (the next relax extrapolates that
+    move); a state made by RK2 steps records none; a smile relaxed frame by frame from those
+    states lands on the reference's equilibria."""
+    from myoface.control import au_contractions
+
+    s0 = fm.rest_state()
+    r1 = fm.relax(au_contractions({12: 0.2, 6: 0.1}, fm.ids), s0)
+    np.testing.assert_array_equal(r1.state.previous_x, s0.x)
+    assert not r1.state.previous_x.flags.writeable
+    assert fm.step(r1.state, r1.state.contractions).previous_x is None
+    tm = fm.tissue
+    state = r1.state
+    for k in (1, 2, 3):
+        c = au_contractions({12: 0.2 + 0.04 * k, 6: 0.1 + 0.02 * k}, fm.ids)
+        start = state
+        r = fm.relax(c, start)
+        assert r.converged
+        ref = _reference(tm, fm.targets(c), start.tissue_state())
+        assert np.abs(r.state.x - ref).max() < NEWTON_TOL_MM
+        state = r.state
+
+
+def test_energy_gradient_hessian_in_one_pass_equals_the_separate_kernels(fm):
+    """The Newton loop's fused pass (energy, gradient and the springs' Hessian) against the
+    energy-gradient kernel and the springs' Hessian assembly, at a state far from rest."""
+    from myoface.tissue.hessian import add_prism_hessian, add_spring_hessian
+    from myoface.tissue.solver import energy_gradient_hessian_free
+
+    tm = fm.tissue
+    pat = newton_data(tm).pattern
+    nf = pat.n_free
+    x = _perturbed(tm, 0.5, seed=8)
+    en, g = _free_energy_gradient(tm, x)
+    d0, l0 = np.zeros(9 * nf), np.zeros(9 * pat.nl)
+    add_prism_hessian(x, *pat.prism_args(), pat.pslots, pat.prev, d0, l0)
+    d1, l1 = d0.copy(), l0.copy()
+    add_spring_hessian(x, *pat.spring_args(), pat.sfi, pat.sfj, pat.soff, d1, l1)
+    d2, l2 = d0.copy(), l0.copy()
+    g2 = np.empty((nf, 3))
+    en2 = energy_gradient_hessian_free(
+        x, *pat.spring_args(), pat.sfi, pat.sfj, pat.soff, *pat.prism_args(), g2, True, True, d2, l2
+    )
+    # the same sums in the same order (fastmath may contract them differently)
+    assert en2 == pytest.approx(en, rel=1e-12)
+    np.testing.assert_allclose(g2.reshape(-1), g, rtol=0, atol=1e-10 * np.abs(g).max())
+    np.testing.assert_allclose(d2, d1, rtol=0, atol=1e-10 * np.abs(d1).max())
+    np.testing.assert_allclose(l2, l1, rtol=0, atol=1e-10 * np.abs(l1).max())
+    # and the full Hessian is the reference assembly's
+    dref, lref = np.empty(9 * nf), np.empty(9 * pat.nl)
+    pat.assemble(x, dref, lref)
+    np.testing.assert_allclose(d2, dref, rtol=0, atol=1e-10 * np.abs(dref).max())

@@ -306,7 +306,8 @@ def bench_relax(quick: bool) -> Measurement:
 @benchmark("tissue.relax_warm_ms", "ms", higher_is_better=False, peer=RELAX_PEER)
 def bench_relax_warm(quick: bool) -> Measurement:
     """One frame of a 25 fps smile (AU12 = k/25, AU6 = k/50, k = 0..25: 0 -> 1 in 1 s), relaxed
-    from the previous frame's equilibrium, default solver, default face: median over the frames
+    from the previous frame's equilibrium (a relaxed state, so it records the frame before:
+    the Newton solver repeats that move), default solver, default face: median over the frames
     (each timed as the median of repeats); peer: the L-BFGS reference on the same frames. The
     detail gives both solvers' median iterations, thread CPU time and largest node distance to
     the frame's equilibrium found by L-BFGS to a 1e-7 mm step. The two solvers are timed in
@@ -320,7 +321,8 @@ def bench_relax_warm(quick: bool) -> Measurement:
     reps = 3 if quick else 5
     tgs = {k: fm.targets(au_contractions({12: k / 25, 6: k / 50}, fm.ids)) for k in range(26)}
     # the start of each frame: the previous frame's equilibrium (the reference's, so both solvers
-    # start from the same state)
+    # start from the same state); like every relaxed state it records the positions it was
+    # relaxed from (previous_x), whose move the Newton solver repeats in its initial guess
     eq = {}
     state = rest_state(tm)
     for k in range(26):

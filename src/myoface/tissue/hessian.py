@@ -479,18 +479,19 @@ class SymmetricPattern:
     its gradient or Hessian).
 
     Storage: the diagonal blocks ``dvals`` (F*9,), and the strictly lower blocks ``lvals``
-    (nl*9,) in block CSR by row (``lptr`` (F+1,), ``lcol`` (nl,), columns sorted, each < its
-    row); blocks row-major. A spring's blocks are symmetric; a prism pair (a, b) whose nodes
+    (nl*9,) in block CSR by row (``lptr`` (F+1,), ``lcol`` (nl,), int32, columns sorted, each <
+    its row); blocks row-major. (Every index table is 32-bit: they are streamed at every
+    assembly and CG sweep, and the smaller footprint measured faster.) A spring's blocks are symmetric; a prism pair (a, b) whose nodes
     are numbered the other way round (free number of a < that of b) adds the transpose of its
     block H_ab, i.e. H_ba.
 
     Attributes (besides the storage)
     --------------------------------
     n_free : int; fmap : (N,) int64 — free number of each node, -1 for a kinematic one.
-    si, sj, rest, alpha, beta, ec : (S',) — the active springs: ends, rest length l (mm),
-        stiffnesses (g/s^2), threshold extension e^c = strain_c l (mm);
-    sfi, sfj : (S',) int64 — free numbers of the ends; soff : (S',) int64 — lower block or -1.
-    elems : (E', 6) int64; efree : (E', 6) int64; rest_volume, kv : (E',) — the active prisms
+    si, sj, rest, alpha, beta, ec : (S',) — the active springs: ends (int32), rest length l
+        (mm), stiffnesses (g/s^2), threshold extension e^c = strain_c l (mm);
+    sfi, sfj : (S',) int32 — free numbers of the ends; soff : (S',) int32 — lower block or -1.
+    elems : (E', 6) int32; efree : (E', 6) int32; rest_volume, kv : (E',) — the active prisms
         (nonzero volume weight);
     pslots : (E', 15) int32 — per prism and node pair (a, b) of :data:`PRISM_PAIRS`, its lower
         block, or -1 when a node of the pair is kinematic; prev : (E',) int32 — bit p set when
@@ -531,18 +532,19 @@ class SymmetricPattern:
         rest = np.asarray(model.rest_length, np.float64)[k]
         self.n_free = nf
         self.fmap = fmap
-        self.lptr = np.searchsorted(key // max(nf, 1), np.arange(nf + 1)).astype(np.int64)
-        self.lcol = (key % max(nf, 1)).astype(np.int64)
+        # 32-bit indices throughout: the tables are streamed at every assembly and CG sweep
+        self.lptr = np.searchsorted(key // max(nf, 1), np.arange(nf + 1)).astype(np.int32)
+        self.lcol = (key % max(nf, 1)).astype(np.int32)
         self.nl = len(key)
-        self.si = si_all[k]
-        self.sj = sj_all[k]
+        self.si = si_all[k].astype(np.int32)
+        self.sj = sj_all[k].astype(np.int32)
         self.rest = rest
         self.alpha = mat[:, 0].copy()
         self.beta = mat[:, 1].copy()
         self.ec = mat[:, 2] * rest
-        self.sfi = fi
-        self.sfj = fj
-        self.soff = slot(fi, fj)
+        self.sfi = fi.astype(np.int32)
+        self.sfj = fj.astype(np.int32)
+        self.soff = slot(fi, fj).astype(np.int32)
         self.elems = el_all[e].astype(np.int32)
         self.efree = fe.astype(np.int32)
         pslots = np.stack([slot(fe[:, a], fe[:, b]) for a, b in PRISM_PAIRS], axis=1)
@@ -550,7 +552,6 @@ class SymmetricPattern:
         for p, (a, b) in enumerate(PRISM_PAIRS):
             rev = (pslots[:, p] >= 0) & (fe[:, a] < fe[:, b])  # stored block (row > col) is H_ba
             prev |= rev.astype(np.int64) << p
-        # 32-bit indices: the tables are streamed at every assembly (a smaller cache footprint)
         self.pslots = pslots.astype(np.int32)
         self.prev = prev.astype(np.int32)
         self.rest_volume = np.asarray(model.rest_volume, np.float64)[e]

@@ -5,15 +5,21 @@ potential energy E (springs, eq. 1-2, plus the volume penalty Q) over the free n
 module finds it by Newton's method on the *exact* Hessian of E, each Newton system
 ``H s = -grad E`` solved inexactly by preconditioned conjugate gradients:
 
-1. **initial guess** — the free nodes' linear response to the move of the kinematic nodes
-   (static condensation: ``dx_f = -K_ff^-1 K_fk dx_k``, K the rest stiffness, factorised once
-   per model as a block LDL^T). From rest this is the small-strain solution; from a previous
-   equilibrium it is the linear correction for the change of targets;
+1. **initial guess** — from a state made by a relax (it records the positions it was relaxed
+   from, ``previous_x``), the part of the kinematic nodes' new move along their last move
+   repeats the free nodes' last move (:func:`extrapolated_start`: the secant of the last
+   frame, which knows which springs turned stiff on the way); for the rest of the move, the
+   free nodes' linear response (static condensation: ``dx_f = -K_ff^-1 K_fk dx_k``, K the rest
+   stiffness, factorised once per model as a block LDL^T). From rest this is the small-strain
+   solution; in a video it leaves 0.03-0.1 mm to Newton instead of 0.06-0.36 mm (a 25 fps
+   smile, frames moving 0.41-0.51 mm);
 2. **Newton steps** — the Hessian (springs with their tangent stiffness and unclipped geometric
    term, the volume penalty with its second-derivative term) assembled in symmetric 3x3-block
    storage over the springs and prisms that touch a free node (one pass per spring and per
-   prism node pair; the prisms' part, two thirds of the cost, is kept from step to step until a
-   node has moved by PRISM_LAG_MM); CG on it preconditioned by a symmetric block Gauss-Seidel sweep of the
+   prism node pair; the springs' part in the same pass as the energy and gradient at the
+   point, when the step that reached it was too long for the next one to keep the Hessian;
+   the prisms' part, two thirds of the cost, is kept from step to step until a node has moved
+   by PRISM_LAG_MM); CG on it preconditioned by a symmetric block Gauss-Seidel sweep of the
    Hessian itself, to a relative accuracy eta that tightens as the gradient falls (Eisenstat &
    Walker 1996, choice 2, between ETA_MIN and ETA_MAX); a direction of negative curvature ends
    the CG early (Steihaug 1983); an Armijo backtracking line search on E keeps every step a
@@ -43,6 +49,18 @@ stiffness as the factor (condition 50 instead of 53); the rest factor combined w
 Gauss-Seidel sweeps (fewer iterations, dearer ones); float32 triangular solves (no faster: the
 sweeps are bound by their dependencies, not by memory).
 
+Measured for the warm start and did not pay: a factorisation of a recent Hessian carried with
+the state, for chord or quasi-Newton steps (a numeric block LDL^T in the rest factor's
+symbolic pattern, 27,449 blocks, costs about 6.7 ms, a solve with it 0.3 ms; but even the
+exact Hessian of the previous frame's equilibrium is a poor model of the next one: the
+quasi-Newton steps from it shrink only by 0.35-0.4 each (springs cross their threshold in
+every frame), and from one three frames old they diverge without a line search); the
+tangent linear response as the guess (the first Newton step from the previous equilibrium
+leaves 0.4-0.6 mm, the secant 0.03-0.1 mm); relaxing only the nodes that move (70 % of the
+free nodes move more than 0.01 mm in a frame of the smile); CHOLMOD (scikit-sparse has no wheel
+for this machine); tighter or looser forcing terms for warm starts (eta 0.01-0.1: fewer
+assemblies for more CG iterations, the same cost within the noise).
+
 The exact Hessian matters: with the compressive geometric term clipped (a positive
 semi-definite "projected" Hessian) Newton converges only linearly here, since thousands of
 springs are compressed in an expression; with it, quadratically.
@@ -70,6 +88,7 @@ from myoface.tissue.forces import MIN_SPRING_LENGTH, spring_magnitude
 from myoface.tissue.hessian import (
     BlockPattern,
     SymmetricPattern,
+    _add_sym6,
     add_prism_hessian,
     add_spring_hessian,
     assemble_block_hessian,
@@ -238,6 +257,59 @@ def energy_gradient_free(
 
     The same sums as :func:`energy_gradient`, in one pass, with the material table unpacked
     per spring."""
+    none = np.empty(0)
+    return energy_gradient_hessian_free(
+        x,
+        si,
+        sj,
+        rest,
+        alpha,
+        beta,
+        ec,
+        law,
+        sfi,
+        sfj,
+        sfi,
+        elems,
+        efree,
+        rest_vol,
+        kv,
+        vsign,
+        grad,
+        want,
+        False,
+        none,
+        none,
+    )
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def energy_gradient_hessian_free(
+    x,
+    si,
+    sj,
+    rest,
+    alpha,
+    beta,
+    ec,
+    law,
+    sfi,
+    sfj,
+    soff,
+    elems,
+    efree,
+    rest_vol,
+    kv,
+    vsign,
+    grad,
+    want,
+    want_h,
+    dvals,
+    lvals,
+):
+    """:func:`energy_gradient_free`, and, when ``want_h``, the springs' Hessian
+    (:func:`~myoface.tissue.hessian.add_spring_hessian`) added to ``dvals``, ``lvals`` in the
+    same pass over the springs (their lengths and phases computed once for both)."""
     if want:
         grad[:, :] = 0.0
     en = 0.0
@@ -247,32 +319,49 @@ def energy_gradient_free(
         rx = x[j, 0] - x[i, 0]
         ry = x[j, 1] - x[i, 1]
         rz = x[j, 2] - x[i, 2]
-        d = np.sqrt(rx * rx + ry * ry + rz * rz)
+        d2 = rx * rx + ry * ry + rz * rz
+        d = np.sqrt(d2)
         e = d - rest[k]
         a = alpha[k]
         c = ec[k]
         if e <= c:
             en += 0.5 * a * e * e
             s = a * e
+            cs = a
         elif law == 1:  # LAW_PAPER
             en += 0.5 * a * c * c + 0.5 * beta[k] * (e * e - c * c)
             s = beta[k] * e
+            cs = beta[k]
         else:
             de = e - c
             en += a * c * (0.5 * c + de) + 0.5 * beta[k] * de * de
             s = a * c + beta[k] * de
+            cs = beta[k]
         if want and d >= MIN_SPRING_LENGTH:
-            s /= d
+            inv = 1.0 / d
+            g = s * inv
             fi = sfi[k]
             fj = sfj[k]
             if fi >= 0:
-                grad[fi, 0] -= s * rx
-                grad[fi, 1] -= s * ry
-                grad[fi, 2] -= s * rz
+                grad[fi, 0] -= g * rx
+                grad[fi, 1] -= g * ry
+                grad[fi, 2] -= g * rz
             if fj >= 0:
-                grad[fj, 0] += s * rx
-                grad[fj, 1] += s * ry
-                grad[fj, 2] += s * rz
+                grad[fj, 0] += g * rx
+                grad[fj, 1] += g * ry
+                grad[fj, 2] += g * rz
+            if want_h:
+                # (c - g) u u^T + g I, as add_spring_hessian
+                w = (cs - g) * inv * inv
+                h0 = w * rx * rx + g
+                h1 = w * rx * ry
+                h2 = w * rx * rz
+                h4 = w * ry * ry + g
+                h5 = w * ry * rz
+                h8 = w * rz * rz + g
+                _add_sym6(dvals, fi, h0, h1, h2, h4, h5, h8)
+                _add_sym6(dvals, fj, h0, h1, h2, h4, h5, h8)
+                _add_sym6(lvals, soff[k], -h0, -h1, -h2, -h4, -h5, -h8)
     gr = np.empty((6, 3))
     for q in range(elems.shape[0]):
         el = elems[q]
@@ -948,8 +1037,28 @@ def _newton(
     g = np.empty(n)
     xn = np.empty_like(x)
     x_prism = np.empty_like(x)
-    have_prism = False
-    energy = energy_gradient_free(
+    # the Hessian at x, assembled with the energy and gradient there (the first one, and at a
+    # point where the last step was too long for the next one to keep the Hessian)
+    n_prism = _prism_part(
+        x,
+        free,
+        x_prism,
+        False,
+        prism_lag,
+        elems,
+        efree,
+        rest_vol,
+        kv,
+        vsign,
+        pslots,
+        prev,
+        dprism,
+        lprism,
+    )
+    have_prism = True
+    dvals[:] = dprism
+    lvals[:] = lprism
+    energy = energy_gradient_hessian_free(
         x,
         si,
         sj,
@@ -960,6 +1069,7 @@ def _newton(
         law,
         sfi,
         sfj,
+        soff,
         elems,
         efree,
         rest_vol,
@@ -967,7 +1077,11 @@ def _newton(
         vsign,
         grad,
         True,
+        True,
+        dvals,
+        lvals,
     )
+    have_h = True
     _flatten(grad, g)
     gnorm_prev = np.sqrt(g @ g)
     eta = eta_max
@@ -976,7 +1090,6 @@ def _newton(
     rate = 1.0  # the last full step's gradient reduction, |g_new| / |g_old|
     cg = 0
     n_asm = 0
-    n_prism = 0
     n_energy = 1
     converged = False
     it = 0
@@ -991,20 +1104,32 @@ def _newton(
         # Newton step, and most often the last one
         chord = it > 1 and t == 1.0 and move < chord_ratio * tol and rate < chord_rate
         if not chord:
-            if not have_prism or _largest_move(x, free, x_prism) > prism_lag:
-                dprism[:] = 0.0
-                lprism[:] = 0.0
-                add_prism_hessian(
-                    x, elems, efree, rest_vol, kv, vsign, pslots, prev, dprism, lprism
+            if not have_h:
+                n_prism += _prism_part(
+                    x,
+                    free,
+                    x_prism,
+                    have_prism,
+                    prism_lag,
+                    elems,
+                    efree,
+                    rest_vol,
+                    kv,
+                    vsign,
+                    pslots,
+                    prev,
+                    dprism,
+                    lprism,
                 )
-                x_prism[:, :] = x
                 have_prism = True
-                n_prism += 1
-            dvals[:] = dprism
-            lvals[:] = lprism
-            add_spring_hessian(x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff, dvals, lvals)
+                dvals[:] = dprism
+                lvals[:] = lprism
+                add_spring_hessian(
+                    x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff, dvals, lvals
+                )
             diagonal_blocks(dvals, rest_diag, dused, dinv, emat)
             n_asm += 1
+        have_h = False
         for i in range(n):
             rhs[i] = -g[i]
         eta_k = eta_min if chord else eta
@@ -1016,12 +1141,35 @@ def _newton(
             converged = True
             break
         move = np.abs(step).max()
+        # a step too long for the next one to keep this Hessian (see CHORD_RATIO) needs the
+        # Hessian at its end: assembled with the energy there, in the same pass
+        want_h = move >= chord_ratio * tol
         # line search: Armijo backtracking with a safeguarded quadratic step
         t = 1.0
         small = -slope <= roundoff * max(abs(energy), 1.0)
         while True:
             _moved(x, free, step, t, xn)
-            en = energy_gradient_free(
+            if want_h and t == 1.0:
+                n_prism += _prism_part(
+                    xn,
+                    free,
+                    x_prism,
+                    have_prism,
+                    prism_lag,
+                    elems,
+                    efree,
+                    rest_vol,
+                    kv,
+                    vsign,
+                    pslots,
+                    prev,
+                    dprism,
+                    lprism,
+                )
+                have_prism = True
+                dvals[:] = dprism
+                lvals[:] = lprism
+            en = energy_gradient_hessian_free(
                 xn,
                 si,
                 sj,
@@ -1032,6 +1180,7 @@ def _newton(
                 law,
                 sfi,
                 sfj,
+                soff,
                 elems,
                 efree,
                 rest_vol,
@@ -1039,9 +1188,13 @@ def _newton(
                 vsign,
                 grad,
                 True,
+                want_h and t == 1.0,
+                dvals,
+                lvals,
             )
             n_energy += 1
             if small or en <= energy + armijo_c * t * slope or t < 1e-4:
+                have_h = want_h and t == 1.0
                 break
             curv = en - energy - slope * t
             tq = -slope * t * t / (2.0 * curv) if curv > 0 else 0.5 * t
@@ -1074,6 +1227,22 @@ def _newton(
     stats[5] = n_prism
     stats[6] = n_energy
     stats[8] = np.abs(g).max() if n > 0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def _prism_part(
+    x, free, x_prism, have, lag, elems, efree, rest_vol, kv, vsign, pslots, prev, dprism, lprism
+):
+    """The prisms' part of the Hessian at ``x`` into ``dprism``, ``lprism`` (and ``x`` into
+    ``x_prism``) unless ``have`` one assembled where no free node was more than ``lag`` mm
+    away (see :data:`PRISM_LAG_MM`). Returns 1 if it assembled, else 0."""
+    if have and _largest_move(x, free, x_prism) <= lag:
+        return 0
+    dprism[:] = 0.0
+    lprism[:] = 0.0
+    add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, pslots, prev, dprism, lprism)
+    x_prism[:, :] = x
+    return 1
 
 
 @njit(cache=True, nogil=True)
