@@ -97,3 +97,52 @@ def test_box_qp_finds_the_bounded_minimum(seed, n_muscles, conditioning):
     inside = (x > lo) & (x < hi)
     assert np.abs(g[inside]).max(initial=0) < tol
     assert (g[x == lo] >= -tol).all() and (g[x == hi] <= tol).all()
+
+
+def _ramp_fits(fm, deferred: bool):
+    """A smile with the jaw opening, rising by 0.07 per frame at 25 fps, under a turned head,
+    exact landmarks: per frame the fit, the true contractions and the true skin."""
+    from dataclasses import replace
+
+    from tests.analysis.test_fit import EXACT
+
+    apex = np.zeros(fm.n_muscles)
+    for mid, v in [("zygomaticus_major_l", 0.7), ("zygomaticus_major_r", 0.6), ("jaw", 0.4)]:
+        apex[fm.ids.index(mid)] = v
+    truth = HeadPose.from_euler(-15.0, 5.0, 3.0, (0.0, 0.0, -500.0))
+    fit = ModelFit(fm, CAMERA, replace(EXACT, refine=1), fps=25.0)
+    out, state = [], fm.rest_state()
+    for k in range(7):
+        c = apex * k / 10
+        state = fm.relax(c, state).state
+        skin = fm.skin_vertices(state)
+        out.append((fit.fit(landmarks(skin, truth), deferred=deferred), c, skin))
+    fit.close()
+    return out
+
+
+def test_deferred_relax_is_deterministic_and_lags_little():
+    """``fit(deferred=True)``: the tissue relaxed on a second thread a frame behind. The next
+    fit waits for it, so two runs agree bit for bit (nothing depends on timing). Linearised a
+    frame behind on a 0.07-per-frame ramp with the jaw opening (the tissue's most nonlinear
+    interaction), the estimates are judged as issue 18 judges a fit, by the skin they
+    produce: within its target (0.5 mm RMS) of the true skin on every frame, as the
+    immediate fit's are. (Measured when written: 0.11 mm deferred, 0.013 mm immediate; single
+    contractions differ more, up to 0.13 on the mentalis, which the jaw's pull on the lower
+    lip confounds.)"""
+    from myoface.model import build_face_model
+
+    fm = build_face_model()
+    a, b = _ramp_fits(fm, True), _ramp_fits(fm, True)
+    for (ra, _, _), (rb, _, _) in zip(a, b, strict=True):
+        np.testing.assert_array_equal(ra.contractions, rb.contractions)
+
+    def skin_rms(res):
+        return max(
+            np.sqrt(((fm.skin_vertices(fm.relax(r.contractions).state) - skin) ** 2).sum(1).mean())
+            for r, _, skin in res
+        )
+
+    imm = skin_rms(_ramp_fits(fm, False))
+    deferred = skin_rms(a)
+    assert imm < 0.5 and deferred < 0.5, (deferred, imm)

@@ -388,6 +388,11 @@ class ModelFit:
         self._c0 = np.zeros(self.n_muscles)  # contractions the tissue was last relaxed at
         self._d0 = np.zeros_like(self.neutral)  # ... and its skin displacement there
         self._prev: FrameFit | None = None
+        #: deferred relaxes (``fit(deferred=True)``): the response Broyden-corrected at the
+        #: last relax, the relax running on the worker thread (contractions, future)
+        self._jac: np.ndarray | None = None
+        self._pending = None
+        self._worker = None
         self.calibration: Calibration | None = None
         #: tissue relaxes that did not converge (see :meth:`_relax`)
         self.unconverged_relaxes = 0
@@ -402,6 +407,7 @@ class ModelFit:
         """The person's skin (V, 3) mm, head frame, at ``contractions`` (default: neutral),
         relaxed through the tissue from the fit's state."""
         c = np.zeros(self.n_muscles) if contractions is None else np.asarray(contractions)
+        self._collect()
         disp = self._relax(c) if np.any(c) else 0.0
         return self.neutral + self.identity_mm + disp
 
@@ -425,9 +431,44 @@ class ModelFit:
         """The fit's forward model (V, 3) mm, head frame, at ``contractions``: the person's
         neutral plus the displacement at the tissue's last relax, continued linearly."""
         c = np.asarray(contractions, dtype=np.float64)
-        return self.neutral + self.identity_mm + self._d0 + self.response @ (c - self._c0)
+        jac = self.response if self._jac is None else self._jac
+        return self.neutral + self.identity_mm + self._d0 + jac @ (c - self._c0)
 
-    def fit(self, points, synthesis: LandmarkSynthesis | None = None) -> FrameFit:
+    def _relax_later(self, c) -> None:
+        """Relax the tissue at ``c`` on the worker thread (:meth:`_collect` takes it up)."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        if self._worker is None:
+            self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="myoface-fit")
+        c = np.array(c, dtype=np.float64)
+        self._pending = (c, self._worker.submit(self._relax, c))
+
+    def _collect(self) -> None:
+        """Wait for the deferred relax, if any, and move the linearisation there: the response
+        at rest Broyden-corrected along the step from the last relaxed point (as the second
+        round of an immediate fit does)."""
+        if self._pending is None:
+            return
+        c, fut = self._pending
+        self._pending = None
+        d_new = fut.result()
+        jac = self.response.copy()
+        dc = c - self._c0
+        dd = float(dc @ dc)
+        if dd > 1e-10:
+            jac += np.multiply.outer((d_new - self._d0) - jac @ dc, dc / dd)
+        self._c0, self._d0, self._jac = c, d_new, jac
+
+    def close(self) -> None:
+        """Finish the deferred relax and stop its thread."""
+        if self._worker is not None:
+            self._collect()
+            self._worker.shutdown()
+            self._worker = None
+
+    def fit(
+        self, points, synthesis: LandmarkSynthesis | None = None, deferred: bool = False
+    ) -> FrameFit:
         """Fit one frame's landmarks (468, 3): x, y pixels (column, row), z MediaPipe's relative
         depth (pixels; NaN or a (468, 2) array: not used). Warm-started from the previous
         frame; the result becomes the next frame's prior.
@@ -435,16 +476,30 @@ class ModelFit:
         ``synthesis``: analysis by synthesis (:class:`LandmarkSynthesis`):
         :attr:`FitSettings.synthesis_rounds` times, the model is rendered at the estimate, the
         tracker run on the render, and its error there (what it reports less where the model's
-        vertices are) taken off the landmarks before they are fitted again."""
+        vertices are) taken off the landmarks before they are fitted again.
+
+        ``deferred=True`` (a video, frame after frame): no round through the tissue in this
+        call; the frame is fitted with the model linearised where the tissue was last relaxed
+        (the previous frame's estimate), and the tissue is relaxed at this frame's estimate
+        on a second thread while the caller goes on (e.g. runs the detector on the next
+        frame). The next call waits for it first, so the results do not depend on timing."""
         p = _check_points(points, len(self.neutral))
         prev = self._prev
-        res = self._fit(p, prev, refine=self.settings.refine)
+        self._collect()
+        refine = 0 if deferred else self.settings.refine
+        res = self._fit(p, prev, refine=refine)
         if synthesis is not None:
             for _ in range(self.settings.synthesis_rounds):
                 err = synthesis.tracker_error(self.shape(res.contractions), res.pose)
                 if err is None:
                     break
                 res = self._fit(p - err, prev, refine=0, start=res)
+        if (
+            deferred
+            and self.settings.refine > 0
+            and np.abs(res.contractions - self._c0).max() > 1e-6
+        ):
+            self._relax_later(res.contractions)
         self._prev = res
         return res
 
@@ -591,10 +646,11 @@ class ModelFit:
             pose = initial_pose(base, p, self.camera)
             c = np.zeros(m)
             c0, d0 = np.zeros(m), np.zeros_like(base)
+            jac = self.response.copy()
         else:
             pose, c = start.pose, start.contractions.copy()
             c0, d0 = self._c0, self._d0
-        jac = self.response.copy()
+            jac = (self.response if self._jac is None else self._jac).copy()
         total_it, conv = 0, False
         for rnd in range(int(refine) + 1):
             if rnd > 0:
@@ -608,7 +664,7 @@ class ModelFit:
                     miss = (d_new - d0) - jac @ dc
                     jac += np.multiply.outer(miss, dc / dd)
                 c0, d0 = c.copy(), d_new
-                self._c0, self._d0 = c0, d0
+                self._c0, self._d0, self._jac = c0, d0, None
             pose, c, it, conv = self._gauss_newton(p, pose, c, c0, d0, jac, base, prev)
             total_it += it
         shape = base + d0 + jac @ (c - c0)
@@ -1019,6 +1075,9 @@ class FitAnalyzer:
     synthesis : analysis by synthesis (:class:`LandmarkSynthesis`, made at calibration): the
         face model's own texture if it has one (e.g. ``face from-photo``), else the
         calibration frame.
+    deferred_relax : relax the tissue at each frame's estimate on a second thread while the
+        next frame is detected (:meth:`ModelFit.fit` ``deferred=True``; what a video analysis
+        does, :func:`make_fit_analyzer`), instead of a second fitting round through it.
     """
 
     tracker = "landmarks"
@@ -1026,7 +1085,7 @@ class FitAnalyzer:
 
     def __init__(self, model, fps: float = 30.0, camera: PinholeCamera | None = None,
                  settings: FitSettings | None = None, detector=None,
-                 synthesis: bool = False):  # fmt: skip
+                 synthesis: bool = False, deferred_relax: bool = False):  # fmt: skip
         from myoface.analysis.pipeline import SECTIONS, section_vertices
 
         if model.face.n_vertices != 468:
@@ -1050,6 +1109,9 @@ class FitAnalyzer:
         self.detector = detector
         #: {frame index: landmarks or None} of the calibration frames, taken by measure()
         self._detected: dict = {}
+        #: relax the tissue on a second thread while the next frame is detected
+        #: (:meth:`ModelFit.fit`'s ``deferred``; the tissue then lags the estimate a frame)
+        self.deferred_relax = bool(deferred_relax)
         self.calibration: Calibration | None = None
         self.calibration_frame: int | None = None
         self.use_synthesis = bool(synthesis)
@@ -1147,7 +1209,7 @@ class FitAnalyzer:
             fit.lose_track()
             return FitMeasurement(index, time_s, "no_face", nan, None, float("nan"))
         try:
-            r = fit.fit(pts, self.synthesis)
+            r = fit.fit(pts, self.synthesis, deferred=self.deferred_relax)
         except (np.linalg.LinAlgError, MyofaceValueError):
             fit.lose_track()
             return FitMeasurement(index, time_s, "fit_failed", nan, None, float("nan"))
@@ -1191,6 +1253,8 @@ class FitAnalyzer:
         return out
 
     def close(self) -> None:
+        if self.fit is not None:
+            self.fit.close()
         self.detector.close()
         if self.synthesis is not None:
             self.synthesis.close()
@@ -1213,7 +1277,7 @@ def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine
     if refine is not None:
         settings = replace(settings, refine=int(refine))
     fps = float(video.fps) if video.fps and video.fps > 0 else 30.0
-    an = FitAnalyzer(model, fps=fps, settings=settings, synthesis=synthesis)
+    an = FitAnalyzer(model, fps=fps, settings=settings, synthesis=synthesis, deferred_relax=True)
     what = "the 3-D fit" + (" with analysis by synthesis" if synthesis else "")
     try:
         if calibration_frame is None:
