@@ -8,7 +8,7 @@ from myoface.commands._common import fps_type, side_type
 
 NAME = "demo"
 HELP = "the whole loop on a sample face video, and the six expressions on the default face"
-DESCRIPTION = """Build the default face model (face mesh, layered tissue lattice, 29 muscles + jaw),
+DESCRIPTION = """Build the default face model (face mesh, layered tissue lattice, its muscles and jaw),
 drive it through the six universal expressions (FACS action units -> muscles -> tissue physics),
 render them, and write into the output folder:
 
@@ -29,7 +29,9 @@ and says so. Into OUT/analysis/:
 and, for the real video, the person's own face built from the calibration frame (myoface face
 from-photo) driven by the same contractions:
 
-  person.myoface, person.png, resynth_person.mp4"""
+  person.myoface, person.png, resynth_person.mp4
+  fidelity.json, fidelity.png   how much of the video's expression motion the person's
+                    resynthesis reproduces, per region (myoface analyze --report)"""
 
 
 def add_arguments(p):
@@ -85,7 +87,8 @@ def _run(args, out: Path) -> None:
     contact_sheet(
         apex,
         out / "expressions.png",
-        "myoface: FACS action units -> 29 muscles + jaw -> layered tissue physics -> render",
+        f"myoface: FACS action units -> {len(fm.muscles.muscles)} muscles"
+        f"{' + jaw' if fm.muscles.jaw is not None else ''} -> layered tissue physics -> render",
     )
     print(f"wrote {out / 'expressions.png'}")
     from myoface.render import overlay_segments
@@ -159,7 +162,8 @@ def analysis_loop(folder: Path, args) -> None:
     real = video is not None
     if real:
         print(f"analysing the sample face video {video} (MediaPipe face mesh tracker)")
-        argv = ["analyze", str(video), "-o", str(folder), "--tracker", "landmarks", *quiet]
+        argv = ["analyze", str(video), "-o", str(folder), "--tracker", "landmarks", "--report"]
+        argv += quiet
     else:
         video, init = _synthetic_video(folder, args.fps)
         print(f"analysing the synthetic video {video} (snakes)")
