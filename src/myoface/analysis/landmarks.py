@@ -67,6 +67,12 @@ def _import_mediapipe():
             f"automatic initialisation needs MediaPipe's face mesh, which is not installed "
             f"({exc}); install it with: {PIP_HINT}, or give the contours with --init"
         ) from None
+    # MediaPipe 0.10 calls a protobuf API that protobuf deprecates, on every frame. The
+    # per-call catch_warnings of FaceMeshDetector.detect does not hold while other threads
+    # (decoding ahead, the deferred relax) change the warning filters: filter it for good
+    warnings.filterwarnings(
+        "ignore", message=r"SymbolDatabase\.GetPrototype\(\) is deprecated", category=UserWarning
+    )
     return mp, face_mesh
 
 
