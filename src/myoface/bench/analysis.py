@@ -214,3 +214,116 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
         ),
     }
     return Measurement(float(fid.overall.explained), fid.n_frames, detail=detail)
+
+
+def _looped_video(src, path, n_frames: int) -> None:
+    """``src`` played over and over into ``path``, ``n_frames`` frames (H.264, fastest preset;
+    the sample starts and ends neutral, so the loop's seams are small head moves)."""
+    from myoface.analysis.video import open_video
+    from myoface.render import VideoWriter
+
+    video = open_video(src)
+    frames = video.read_all()
+    with VideoWriter(path, fps=video.fps, preset="ultrafast") as vw:
+        for k in range(n_frames):
+            vw.write(frames[k % len(frames)])
+
+
+def _rss_mb(pid: int) -> float | None:
+    """The resident memory (MB) of process ``pid`` (Linux /proc, else psutil), None when it
+    has ended."""
+    try:
+        with open(f"/proc/{pid}/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024
+        return None
+    except FileNotFoundError:
+        try:
+            import psutil
+        except ImportError:
+            return None
+        try:
+            return psutil.Process(pid).memory_info().rss / 2**20
+        except psutil.Error:
+            return None
+    except OSError:
+        return None
+
+
+def _rss_per_frame(video, out, tracker: str, n_frames: int) -> dict:
+    """Run ``myoface analyze video -o out --tracker tracker`` in a subprocess and sample its
+    resident memory every 0.1 s against the rows its contractions.csv holds then (the
+    analysis streams them); the growth of the peak resident memory per 1000 frames is the
+    least-squares slope after the warm-up (the first quarter of the frames, at least 100:
+    the model's set-up, the first compilations and the encoders' buffers)."""
+    import subprocess
+    import sys
+    import time
+
+    cmd = [sys.executable, "-m", "myoface", "analyze", str(video), "-o", str(out)]
+    cmd += ["--tracker", tracker, "--quiet"]
+    csv_path = out / "contractions.csv"
+    samples, rows, offset, peak = [], -1, 0, 0.0  # rows: without the header
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        while proc.poll() is None:
+            rss = _rss_mb(proc.pid)
+            if csv_path.exists():
+                with open(csv_path, "rb") as fh:
+                    fh.seek(offset)
+                    new = fh.read()
+                rows += new.count(b"\n")
+                offset += len(new)
+            if rss is not None:
+                peak = max(peak, rss)
+                if 0 <= rows < n_frames:  # the frames' loop (not the plot after it)
+                    samples.append((rows, peak))
+            time.sleep(0.1)
+        err = proc.stderr.read().decode(errors="replace").strip()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"myoface analyze failed: {err.splitlines()[-1:] or proc.returncode}")
+    f, mb = np.array(samples, dtype=float).T
+    warm = f >= max(100, n_frames // 4)
+    slope = np.polyfit(f[warm], mb[warm], 1)[0] if np.ptp(f[warm]) > 0 else float("nan")
+    return {
+        "mb_per_1000_frames": float(slope * 1000),
+        "frames": int(n_frames),
+        "peak_rss_mb": float(peak),
+        "rss_mb_after_warmup": float(mb[warm][0]),
+        "fps": n_frames / wall,
+    }
+
+
+@benchmark("analysis.rss_mb_growth_per_1000_frames", "MB", higher_is_better=False)
+def bench_rss_growth(quick: bool) -> Measurement:
+    """Growth of ``myoface analyze``'s peak resident memory per 1000 frames: the sample video
+    looped to a long video (1440 frames, 48 s at 640x360; quick: 300) and analysed in a
+    subprocess with the default tracker (snakes; CSV, overlay and potential videos streamed),
+    its memory sampled against the rows written; the slope of a line fitted after the
+    warm-up (:func:`_rss_per_frame`). 0 is flat: what is kept of a frame is its row's numbers
+    (about 100 bytes). The detail gives the fit's numbers, and (full run) the same for the
+    landmark tracker with the 3-D fit over 600 frames."""
+    import tempfile
+    from pathlib import Path
+
+    n = 300 if quick else 1440
+    with tempfile.TemporaryDirectory(prefix="myoface-bench-") as tmp:
+        tmp = Path(tmp)
+        _looped_video(_sample_video(), tmp / "looped.mp4", n)
+        snakes = _rss_per_frame(tmp / "looped.mp4", tmp / "snakes", "snakes", n)
+        detail = {"snakes": snakes}
+        from myoface.analysis.landmarks import mediapipe_available
+
+        if not quick and mediapipe_available():
+            _looped_video(_sample_video(), tmp / "looped600.mp4", 600)
+            detail["landmarks"] = _rss_per_frame(
+                tmp / "looped600.mp4", tmp / "landmarks", "landmarks", 600
+            )
+    return Measurement(snakes["mb_per_1000_frames"], 1, detail=detail)
