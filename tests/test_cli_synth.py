@@ -233,6 +233,7 @@ def _check_demo_images(model, out):
 def test_demo_real_video(model, tmp_path, monkeypatch, capsys):
     """The demo's real-video branch, on the sample video from ../shared/data (put in a fresh
     cache folder, so that --offline finds it; MediaPipe tracks it)."""
+    import json
     import shutil
 
     import imageio.v3 as iio
@@ -284,6 +285,9 @@ def test_demo_real_video(model, tmp_path, monkeypatch, capsys):
     assert np.abs(person.face.vertices - model.face.vertices).max() > 1.0
     preview = iio.imread(ana / "person.png")
     assert preview.ndim == 3 and preview[..., :3].std() > 10
+    # --report: the fidelity of the person's resynthesis, every frame compared
+    fid = json.loads((ana / "fidelity.json").read_text())
+    assert fid["frames_compared"] == len(video) and "face_from_photo" in fid["face"]
 
 
 @pytest.mark.slow
