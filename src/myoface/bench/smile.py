@@ -1,0 +1,85 @@
+"""``synth.smile_gain``: does the person's own face, driven by what the analysis measured, smile
+as widely as the person did (issue 19, "What must be shown")?"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from myoface.bench import Measurement, benchmark
+
+#: frames whose input mouth-corner displacement is at least this fraction of its largest are
+#: the smile's apex (the plateau of a held smile, not one frame's jitter)
+APEX_FRACTION = 0.9
+
+
+def smile_gain(d_in: np.ndarray, d_out: np.ndarray, apex_fraction: float = APEX_FRACTION):
+    """The mouth corners' displacement ratio at the smile's apex, from the displacements of the
+    two corners (T, 2, dims) in the input and in the resynthesis (units of the inter-ocular
+    distance, as :func:`myoface.analysis.fidelity.displacements` gives them; NaN frames are
+    left out).
+
+    The apex: the frames where the input's corners (mean displacement of the two) move at
+    least ``apex_fraction`` of their largest. Returns (ratio, detail): the median over the
+    apex frames of |d_out| / |d_in| (mean over the corners), 1 when the model's corners
+    travel as far as the person's; the detail gives the apex frames, both displacements and
+    the cosine between their directions."""
+    a = np.asarray(d_in, dtype=np.float64)
+    b = np.asarray(d_out, dtype=np.float64)
+    if a.shape != b.shape or a.ndim != 3:
+        raise ValueError(f"d_in and d_out must be (T, P, dims) alike; got {a.shape}, {b.shape}")
+    ok = np.isfinite(a).all(axis=(1, 2)) & np.isfinite(b).all(axis=(1, 2))
+    if not ok.any():
+        raise ValueError("no frame has the mouth corners in both sequences")
+    m_in = np.linalg.norm(a, axis=2).mean(axis=1)
+    m_out = np.linalg.norm(b, axis=2).mean(axis=1)
+    m_in[~ok] = np.nan
+    peak = float(np.nanmax(m_in))
+    if not peak > 0:
+        raise ValueError("the input's mouth corners do not move")
+    apex = np.flatnonzero(ok & (m_in >= apex_fraction * peak))
+    ratio = float(np.median(m_out[apex] / m_in[apex]))
+    va, vb = a[apex].reshape(-1), b[apex].reshape(-1)
+    cos = float(va @ vb / max(np.linalg.norm(va) * np.linalg.norm(vb), 1e-300))
+    detail = {
+        "apex_frames": [int(k) for k in apex],
+        "input_iod": round(float(np.median(m_in[apex])), 4),
+        "resynthesis_iod": round(float(np.median(m_out[apex])), 4),
+        "direction_cosine": round(cos, 3),
+    }
+    return ratio, detail
+
+
+#: issue 19's target range for the ratio
+SMILE_GAIN_TARGET = (0.85, 1.15)
+
+
+@benchmark("synth.smile_gain", "-", higher_is_better=True)
+def bench_smile_gain(quick: bool) -> Measurement:
+    """The person's own face (``face_from_photo`` on the calibration frame of
+    ``single_face.mp4``) driven by the contractions the analysis measures on that video (the
+    3-D fit, ``myoface analyze --tracker landmarks``), rendered front on, and MediaPipe's face
+    mesh on the render and on the video: each frame aligned to the first by a 3-D similarity
+    on rigid points, the mouth corners' displacement over the inter-ocular distance
+    (:mod:`myoface.analysis.fidelity`). Value: the median over the smile's apex frames (the
+    input's corners at 90 % or more of their largest displacement) of the resynthesis'
+    displacement over the video's: 1 when the model smiles as widely as the person. Target
+    (issue 19): within [0.85, 1.15]. The detail: the apex frames, both displacements, the
+    cosine between their directions."""
+    import tempfile
+    from pathlib import Path
+
+    from myoface.analysis.fidelity import write_fidelity_report
+    from myoface.analysis.outputs import analyze_to_folder
+    from myoface.analysis.sample import fetch_sample_video
+    from myoface.model import build_face_model
+
+    path = fetch_sample_video(quiet=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        res = analyze_to_folder(
+            path, Path(tmp) / "analysis", model=build_face_model(), tracker="landmarks",
+            max_frames=48 if quick else None,
+        )  # fmt: skip
+        fid = write_fidelity_report(res.folder, path)  # (the calibration frame's face)
+    ratio, detail = smile_gain(fid.d_in["mouth_corners"], fid.d_out["mouth_corners"])
+    detail["target"] = list(SMILE_GAIN_TARGET)
+    return Measurement(ratio, len(detail["apex_frames"]), detail=detail)
