@@ -127,10 +127,12 @@ def spring_forces_numba(x, si, sj, rest, mat_id, mat, law, f):
 @njit(cache=True, parallel=True)
 def spring_forces_parallel(x, si, sj, rest, mat_id, mat, law, f, buffers):
     """Like :func:`spring_forces_numba` on all cores: each thread owns a contiguous range of
-    springs and a private force buffer (``buffers``: (T, N, 3)), summed at the end."""
+    springs and a private force buffer (``buffers``: (T, N, 3)), summed at the end; each range
+    through :func:`spring_forces_split` (the coefficients four springs at a time)."""
     nt = buffers.shape[0]
     n = x.shape[0]
     ns = si.shape[0]
+    work = np.empty((nt, SPRING_WORK * SPRING_CHUNK))
     for t in prange(nt):
         b = buffers[t]
         for q in range(n):
@@ -139,7 +141,7 @@ def spring_forces_parallel(x, si, sj, rest, mat_id, mat, law, f, buffers):
             b[q, 2] = 0.0
         k0 = (ns * t) // nt
         k1 = (ns * (t + 1)) // nt
-        spring_forces_range(x, si, sj, rest, mat_id, mat, law, k0, k1, b)
+        spring_forces_split(x, si, sj, rest, mat_id, mat, law, k0, k1, b, work[t])
     # reduce over threads, parallel over nodes
     for q in prange(n):
         for t in range(nt):
@@ -345,3 +347,182 @@ def internal_forces_numba(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv
 def element_volumes_numba(x, elems, sign, out):
     for e in range(elems.shape[0]):
         out[e] = _prism_volume(x, elems[e], sign)
+
+
+# ---------------------------------------------------------------------------------------------
+# the RK2 kernels' form of the same forces (:mod:`myoface.tissue.rk2`): the arithmetic is split
+# so that the compiler vectorises it (four float64 at a time), with no change to any value —
+# square roots and divisions are correctly rounded four at a time too, and no product is fused
+# into an add (numba does not contract without fastmath). ``error_model="numpy"``: a division by
+# zero gives inf/NaN (then discarded) instead of a Python exception, whose test in the loop would
+# stop the vectorisation.
+# ---------------------------------------------------------------------------------------------
+
+
+#: springs per chunk of :func:`spring_forces_split` (its scratch, SPRING_WORK rows of this many
+#: float64, ~16 kB, stays in the L1 cache)
+SPRING_CHUNK = 256
+#: rows of that scratch: r_k (3), l_k, alpha_k, beta_k, e^c_k, c_k
+SPRING_WORK = 8
+
+
+@njit(cache=True, error_model="numpy")
+def _spring_chunk_coefficients(w, law):
+    """c_k = |s_k| / |r_k| (eq. 1-2) for a chunk of SPRING_CHUNK springs, lane by lane, from
+    rows 0-2 (r_k), 3 (l_k), 4 (alpha), 5 (beta), 6 (e^c) of ``w`` into row 7. A branch-free
+    loop over one array at constant offsets: vectorised, with no run-time overlap test."""
+    c = SPRING_CHUNK
+    for q in range(c):
+        rx = w[q]
+        ry = w[c + q]
+        rz = w[2 * c + q]
+        d = np.sqrt(rx * rx + ry * ry + rz * rz)
+        e = d - w[3 * c + q]
+        a = w[4 * c + q]
+        ec = w[6 * c + q]
+        lo = a * e
+        if law == LAW_PAPER:
+            hi = w[5 * c + q] * e
+        else:
+            hi = a * ec + w[5 * c + q] * (e - ec)
+        m = lo if e <= ec else hi
+        g = m / d
+        w[7 * c + q] = g if d >= MIN_SPRING_LENGTH else 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def spring_forces_split(x, si, sj, rest, mat_id, mat, law, k0, k1, f, work):
+    """Add the forces of springs ``k0 .. k1-1`` to ``f`` (N, 3): the same values, added in the
+    same order, as :func:`spring_forces_range`, a chunk of :data:`SPRING_CHUNK` springs at a
+    time: their vectors r_k and constants gathered into ``work``
+    ((SPRING_WORK * SPRING_CHUNK,) float64 scratch), their coefficients c_k = |s_k| / |r_k|
+    computed there four at a time (the square root and the division are most of a spring's
+    cost), then s_k = c_k r_k added to both ends. A spring shorter than
+    :data:`MIN_SPRING_LENGTH` adds nothing."""
+    c = SPRING_CHUNK
+    for c0 in range(k0, k1, c):
+        n = min(c, k1 - c0)
+        for q in range(n):
+            k = c0 + q
+            i = si[k]
+            j = sj[k]
+            m = mat_id[k]
+            lk = rest[k]
+            work[q] = x[j, 0] - x[i, 0]
+            work[c + q] = x[j, 1] - x[i, 1]
+            work[2 * c + q] = x[j, 2] - x[i, 2]
+            work[3 * c + q] = lk
+            work[4 * c + q] = mat[m, 0]
+            work[5 * c + q] = mat[m, 1]
+            work[6 * c + q] = mat[m, 2] * lk  # e^c as spring_magnitude forms it
+        _spring_chunk_coefficients(work, law)  # the lanes past n compute on stale data, unused
+        for q in range(n):
+            k = c0 + q
+            g = work[7 * c + q]
+            i = si[k]
+            j = sj[k]
+            fx = g * work[q]
+            fy = g * work[c + q]
+            fz = g * work[2 * c + q]
+            f[i, 0] += fx
+            f[i, 1] += fy
+            f[i, 2] += fz
+            f[j, 0] -= fx
+            f[j, 1] -= fy
+            f[j, 2] -= fz
+
+
+#: prisms per chunk of :func:`prism_volume_forces_split` (its scratch, PRISM_WORK rows of this
+#: many float64, ~20 kB, stays in the L1 cache)
+PRISM_CHUNK = 64
+#: rows of that scratch: 18 coordinates, rest volume, weight, 18 force components
+PRISM_WORK = 38
+
+
+@njit(cache=True, inline="always")
+def _chunk_tet(w, q, o0, o1, o2, o3):
+    """:func:`_tet_gradient` of the tetrahedron whose nodes' coordinates sit in rows
+    3 o0 .. 3 o3 + 2 of the chunk ``w``, lane q."""
+    c = PRISM_CHUNK
+    ax = w[(3 * o1) * c + q] - w[(3 * o0) * c + q]
+    ay = w[(3 * o1 + 1) * c + q] - w[(3 * o0 + 1) * c + q]
+    az = w[(3 * o1 + 2) * c + q] - w[(3 * o0 + 2) * c + q]
+    bx = w[(3 * o2) * c + q] - w[(3 * o0) * c + q]
+    by = w[(3 * o2 + 1) * c + q] - w[(3 * o0 + 1) * c + q]
+    bz = w[(3 * o2 + 2) * c + q] - w[(3 * o0 + 2) * c + q]
+    cx = w[(3 * o3) * c + q] - w[(3 * o0) * c + q]
+    cy = w[(3 * o3 + 1) * c + q] - w[(3 * o0 + 1) * c + q]
+    cz = w[(3 * o3 + 2) * c + q] - w[(3 * o0 + 2) * c + q]
+    g1x = by * cz - bz * cy
+    g1y = bz * cx - bx * cz
+    g1z = bx * cy - by * cx
+    g2x = cy * az - cz * ay
+    g2y = cz * ax - cx * az
+    g2z = cx * ay - cy * ax
+    g3x = ay * bz - az * by
+    g3y = az * bx - ax * bz
+    g3z = ax * by - ay * bx
+    vol6 = ax * g1x + ay * g1y + az * g1z
+    return vol6, g1x, g1y, g1z, g2x, g2y, g2z, g3x, g3y, g3z
+
+
+@njit(cache=True, error_model="numpy")
+def _prism_chunk_forces(w, sign):
+    """The volume force terms of a chunk of PRISM_CHUNK prisms, lane by lane: rows 0..17 of
+    ``w`` (the six nodes' coordinates), 18 (rest volume), 19 (weight) in, rows 20..37 (the six
+    nodes' force terms) out. One array, rows at constant offsets: the compiler sees that the
+    lanes are independent and vectorises the loop with no run-time overlap test."""
+    c = PRISM_CHUNK
+    for q in range(c):
+        v0, a1x, a1y, a1z, a2x, a2y, a2z, a3x, a3y, a3z = _chunk_tet(w, q, 0, 1, 2, 3)
+        v1, b1x, b1y, b1z, b2x, b2y, b2z, b3x, b3y, b3z = _chunk_tet(w, q, 1, 2, 3, 4)
+        v2, c1x, c1y, c1z, c2x, c2y, c2z, c3x, c3y, c3z = _chunk_tet(w, q, 2, 3, 4, 5)
+        dv = sign * ((v0 + v1) + v2) / 6.0 - w[18 * c + q]
+        coef = -2.0 * w[19 * c + q] * dv * sign / 6.0
+        w[20 * c + q] = coef * -((a1x + a2x) + a3x)
+        w[21 * c + q] = coef * -((a1y + a2y) + a3y)
+        w[22 * c + q] = coef * -((a1z + a2z) + a3z)
+        w[23 * c + q] = coef * (a1x - ((b1x + b2x) + b3x))
+        w[24 * c + q] = coef * (a1y - ((b1y + b2y) + b3y))
+        w[25 * c + q] = coef * (a1z - ((b1z + b2z) + b3z))
+        w[26 * c + q] = coef * ((a2x + b1x) - ((c1x + c2x) + c3x))
+        w[27 * c + q] = coef * ((a2y + b1y) - ((c1y + c2y) + c3y))
+        w[28 * c + q] = coef * ((a2z + b1z) - ((c1z + c2z) + c3z))
+        w[29 * c + q] = coef * ((a3x + b2x) + c1x)
+        w[30 * c + q] = coef * ((a3y + b2y) + c1y)
+        w[31 * c + q] = coef * ((a3z + b2z) + c1z)
+        w[32 * c + q] = coef * (b3x + c2x)
+        w[33 * c + q] = coef * (b3y + c2y)
+        w[34 * c + q] = coef * (b3z + c2z)
+        w[35 * c + q] = coef * c3x
+        w[36 * c + q] = coef * c3y
+        w[37 * c + q] = coef * c3z
+
+
+@njit(cache=True, error_model="numpy")
+def prism_volume_forces_split(x, elems, rest_vol, kv, sign, e0, e1, f, work):
+    """Add -dQ_e/dx of prisms ``e0 .. e1-1`` to ``f`` (N, 3): the same values, added in the same
+    order, as :func:`prism_volume_forces_range`, a chunk of :data:`PRISM_CHUNK` prisms at a time:
+    their nodes' coordinates gathered into ``work`` ((PRISM_WORK * PRISM_CHUNK,) float64
+    scratch), their force terms computed there four prisms at a time
+    (:func:`_prism_chunk_forces`), then added to the nodes."""
+    c = PRISM_CHUNK
+    for c0 in range(e0, e1, c):
+        n = min(c, e1 - c0)
+        for q in range(n):
+            e = c0 + q
+            for s in range(6):
+                m = elems[e, s]
+                work[(3 * s) * c + q] = x[m, 0]
+                work[(3 * s + 1) * c + q] = x[m, 1]
+                work[(3 * s + 2) * c + q] = x[m, 2]
+            work[18 * c + q] = rest_vol[e]
+            work[19 * c + q] = kv[e]
+        _prism_chunk_forces(work, sign)  # the lanes past n compute on stale data, unused
+        for q in range(n):
+            e = c0 + q
+            for s in range(6):
+                m = elems[e, s]
+                f[m, 0] += work[(20 + 3 * s) * c + q]
+                f[m, 1] += work[(21 + 3 * s) * c + q]
+                f[m, 2] += work[(22 + 3 * s) * c + q]

@@ -31,13 +31,20 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from numba import njit, prange
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from myoface.errors import MyofaceSimulationError, MyofaceValueError
 from myoface.tissue.forces import (
+    PRISM_CHUNK,
+    PRISM_WORK,
+    SPRING_CHUNK,
+    SPRING_WORK,
     internal_forces_numba,
-    prism_volume_forces_range,
-    spring_forces_range,
+    prism_volume_forces_split,
+    spring_forces_split,
 )
 from myoface.tissue.model import TissueModel
 
@@ -77,6 +84,98 @@ def stable_time_step(model: TissueModel, safety: float = STABLE_DT_SAFETY) -> fl
     # more (g dt / 2). Keep that growth to half the damping's decay: (w dt)^4 / 8 < g dt / 4.
     dt_weak = np.min(np.cbrt(2.0 * g / w**4)) if np.all(g > 0) else np.inf
     return float(min(dt_osc, dt_weak))
+
+
+# ------------------------------------------------- atomics for the persistent team of threads ----
+# numba has no atomics on the CPU; these four intrinsics emit LLVM's own instructions.
+
+
+def _item_pointer(context, builder, aryty, ary, idx, idxty):
+    a = context.make_array(aryty)(context, builder, ary)
+    i = context.cast(builder, idx, idxty, types.intp)
+    return cgutils.get_item_pointer(context, builder, aryty, a, [i])
+
+
+def _is_int64_vector(arr) -> bool:
+    return isinstance(arr, types.Array) and arr.dtype == types.int64 and arr.ndim == 1
+
+
+@intrinsic
+def _atomic_add(typingctx, arr, idx, val):
+    """``arr[idx] += val`` as one atomic read-modify-write (sequentially consistent: every
+    write before it is seen by a thread that sees its result); returns the old value."""
+    if not _is_int64_vector(arr):
+        return None
+    sig = types.int64(arr, idx, val)
+
+    def codegen(context, builder, sig, args):
+        ptr = _item_pointer(context, builder, sig.args[0], args[0], args[1], sig.args[1])
+        v = context.cast(builder, args[2], sig.args[2], types.int64)
+        return builder.atomic_rmw("add", ptr, v, "seq_cst")
+
+    return sig, codegen
+
+
+@intrinsic
+def _atomic_load(typingctx, arr, idx):
+    """``arr[idx]`` read with acquire order (what another thread wrote before its atomic add
+    of this value is visible after it)."""
+    if not _is_int64_vector(arr):
+        return None
+    sig = types.int64(arr, idx)
+
+    def codegen(context, builder, sig, args):
+        ptr = _item_pointer(context, builder, sig.args[0], args[0], args[1], sig.args[1])
+        return builder.load_atomic(ptr, "acquire", 8)
+
+    return sig, codegen
+
+
+@intrinsic
+def _spin_pause(typingctx):
+    """The x86 ``pause`` hint of a spin loop."""
+    sig = types.void()
+
+    def codegen(context, builder, sig, args):
+        fnty = ir.FunctionType(ir.VoidType(), [])
+        builder.call(
+            cgutils.get_or_insert_function(builder.module, fnty, "llvm.x86.sse2.pause"), []
+        )
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def _os_yield(typingctx):
+    """``sched_yield()``: give the core to another runnable thread (POSIX)."""
+    sig = types.void()
+
+    def codegen(context, builder, sig, args):
+        fnty = ir.FunctionType(ir.IntType(32), [])
+        builder.call(cgutils.get_or_insert_function(builder.module, fnty, "sched_yield"), [])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+#: spins of a waiting thread before it starts to yield its core (~1 us of ``pause``)
+SPINS_BEFORE_YIELD = 200
+_CLAIMED = 0  # slot of the task counter in the team's counters (its own cache line) ...
+_DONE = 8  # ... and of the count of tasks done
+
+
+@njit(cache=True)
+def _wait_done(counters, target):
+    """Wait until ``target`` tasks are done: spin a little, then yield the core while waiting
+    (on a busy machine the thread we wait for may need it)."""
+    n = 0
+    while _atomic_load(counters, _DONE) < target:
+        n += 1
+        if n < SPINS_BEFORE_YIELD:
+            _spin_pause()
+        else:
+            _os_yield()
 
 
 # ------------------------------------------------------------------------ the parallel kernel ----
@@ -196,102 +295,126 @@ def rk2_plan(model: TissueModel, n_blocks: int | None = None) -> Rk2Plan:
     return plan
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _block_forces(
-    x, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, s0, s1, e0, e1
-):
+    x, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, s0, s1, e0, e1, work,
+):  # fmt: skip
     """Spring and volume forces of one block's springs s0..s1-1 and prisms e0..e1-1 at x, into
     the block's own buffer ``fb`` (N, 3), zeroed first."""
     for i in range(fb.shape[0]):
         fb[i, 0] = 0.0
         fb[i, 1] = 0.0
         fb[i, 2] = 0.0
-    spring_forces_range(x, si, sj, rest, mat_id, mat, law, s0, s1, fb)
-    prism_volume_forces_range(x, elems, rest_vol, kv, vsign, e0, e1, fb)
+    spring_forces_split(x, si, sj, rest, mat_id, mat, law, s0, s1, fb, work)
+    prism_volume_forces_split(x, elems, rest_vol, kv, vsign, e0, e1, fb, work)
+
+
+@njit(cache=True)
+def _rk2_task(
+    phase, b, x, v, xm, vm, buf, vblock, dt, free, inv_m, damp, bnodes, bsprings, bprisms,
+    si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, work,
+):  # fmt: skip
+    """One block's half of an RK2 step: ``phase`` 0 evaluates the forces at (x, v) and writes
+    the block's midpoint (x + dt/2 v, v + dt/2 a) into ``xm, vm``; ``phase`` 1 evaluates them at
+    the midpoint, takes the full step with its slopes, and writes the block's largest |v|."""
+    fb = buf[b]
+    xe = x if phase == 0 else xm
+    _block_forces(
+        xe, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
+        bsprings[b], bsprings[b + 1], bprisms[b], bprisms[b + 1], work[b],
+    )  # fmt: skip
+    if phase == 0:
+        h = 0.5 * dt
+        for q in range(bnodes[b], bnodes[b + 1]):
+            i = free[q]
+            g = damp[q]
+            c = inv_m[q]
+            for a in range(3):
+                xm[i, a] = x[i, a] + h * v[i, a]
+                vm[i, a] = v[i, a] + h * ((fb[i, a] - g * v[i, a]) * c)
+        return
+    vb = 0.0
+    for q in range(bnodes[b], bnodes[b + 1]):
+        i = free[q]
+        g = damp[q]
+        c = inv_m[q]
+        for a in range(3):
+            x[i, a] += dt * vm[i, a]
+            v[i, a] += dt * ((fb[i, a] - g * vm[i, a]) * c)
+            av = abs(v[i, a])
+            if av > vb:
+                vb = av
+            elif not av <= vb:  # NaN: mark the block as non-finite, for good
+                vb = np.inf
+    vblock[b] = vb
+
+
+@njit(cache=True)
+def _largest(a):
+    m = 0.0
+    for i in range(a.shape[0]):
+        m = max(m, a[i])
+    return m
 
 
 @njit(cache=True, parallel=True)
-def _rk2_run_parallel(
-    x,
-    v,
-    n_steps,
-    dt,
-    tol_mm,
-    free,
-    inv_m,
-    damp,
-    bnodes,
-    bsprings,
-    bprisms,
-    si,
-    sj,
-    rest,
-    mat_id,
-    mat,
-    law,
-    elems,
-    rest_vol,
-    kv,
-    vsign,
-):
-    """Midpoint RK2 for up to n_steps, one block of the plan per thread; stops early when
-    max |v| dt < tol_mm (tol_mm > 0). Returns (steps taken, last max |v| dt, step index of a
-    non-finite value or -1). ``x``, ``v`` (N, 3) are updated in place (free nodes only).
+def _rk2_run_team(
+    x, v, n_steps, dt, tol_mm, n_workers, free, inv_m, damp, bnodes, bsprings, bprisms,
+    si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
+):  # fmt: skip
+    """Midpoint RK2 for up to n_steps, the plan's blocks shared by a team of ``n_workers``
+    threads started once for the whole run; stops early when max |v| dt < tol_mm (tol_mm > 0).
+    Returns (steps taken, last max |v| dt, step index of a non-finite value or -1). ``x``, ``v``
+    (N, 3) are updated in place (free nodes only).
 
-    Two parallel loops per step: a block's midpoint needs only its own springs and prisms at x,
-    but its neighbours' midpoints before the second evaluation (and their new x before the next
-    step)."""
+    The run is a sequence of tasks, numbered step by step, half-step (phase) by half-step,
+    block by block; a thread takes the next number from a shared counter, waits until every task
+    of the earlier half-steps is done (a half-step needs its neighbours' midpoints, or their new
+    positions), runs it and counts it done. No thread launch per step, no fixed owner of a block:
+    any thread may run any task, and each task computes the same numbers whoever runs it. A team
+    with fewer threads than asked (or one) still runs every task, in order."""
     nb = bnodes.shape[0] - 1
     buf = np.zeros((nb, x.shape[0], 3))
     xm = x.copy()  # kinematic rows stay at x (their velocity is zero), free rows are written
     vm = v.copy()
     vblock = np.zeros(nb)
-    h = 0.5 * dt
-    last = 0.0
-    for step in range(n_steps):
-        # forces at (x, v), and the midpoint (x + dt/2 v, v + dt/2 a)
-        for b in prange(nb):
-            fb = buf[b]
-            _block_forces(
-                x, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
-                bsprings[b], bsprings[b + 1], bprisms[b], bprisms[b + 1],
+    # each block's scratch for its chunks of springs and prisms
+    work = np.zeros((nb, max(SPRING_WORK * SPRING_CHUNK, PRISM_WORK * PRISM_CHUNK)))
+    counters = np.zeros(16, np.int64)  # [_CLAIMED], [_DONE] on cache lines of their own
+    stop = np.full(3, -1.0)  # the step the run stopped at, its max |v| dt, non-finite step
+    n_tasks = 2 * n_steps * nb
+    for _w in prange(n_workers):
+        while True:
+            t = _atomic_add(counters, _CLAIMED, 1)
+            if t >= n_tasks:
+                break
+            half = t // nb
+            b = t - half * nb
+            _wait_done(counters, half * nb)
+            if stop[0] >= 0.0:  # the run stopped at an earlier half-step
+                _atomic_add(counters, _DONE, 1)
+                break
+            step = half // 2
+            if half % 2 == 0 and step > 0:
+                # the previous step is complete: test it (each task of this half-step computes
+                # the same answer from the same numbers)
+                last = _largest(vblock) * dt
+                if not np.isfinite(last) or (tol_mm > 0.0 and last < tol_mm):
+                    stop[1] = last
+                    stop[2] = step - 1 if not np.isfinite(last) else -1.0
+                    stop[0] = step
+                    _atomic_add(counters, _DONE, 1)
+                    break
+            _rk2_task(
+                half % 2, b, x, v, xm, vm, buf, vblock, dt, free, inv_m, damp, bnodes, bsprings,
+                bprisms, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, work,
             )  # fmt: skip
-            for q in range(bnodes[b], bnodes[b + 1]):
-                i = free[q]
-                g = damp[q]
-                c = inv_m[q]
-                for a in range(3):
-                    xm[i, a] = x[i, a] + h * v[i, a]
-                    vm[i, a] = v[i, a] + h * ((fb[i, a] - g * v[i, a]) * c)
-        # forces at the midpoint, the full step with its slopes, and each block's largest |v|
-        for b in prange(nb):
-            fb = buf[b]
-            _block_forces(
-                xm, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
-                bsprings[b], bsprings[b + 1], bprisms[b], bprisms[b + 1],
-            )  # fmt: skip
-            vb = 0.0
-            for q in range(bnodes[b], bnodes[b + 1]):
-                i = free[q]
-                g = damp[q]
-                c = inv_m[q]
-                for a in range(3):
-                    x[i, a] += dt * vm[i, a]
-                    v[i, a] += dt * ((fb[i, a] - g * vm[i, a]) * c)
-                    av = abs(v[i, a])
-                    if av > vb:
-                        vb = av
-                    elif not av <= vb:  # NaN: mark the block as non-finite, for good
-                        vb = np.inf
-            vblock[b] = vb
-        vmax = 0.0
-        for b in range(nb):
-            vmax = max(vmax, vblock[b])
-        last = vmax * dt
-        if not np.isfinite(last):
-            return step + 1, last, step
-        if tol_mm > 0.0 and last < tol_mm:
-            return step + 1, last, -1
+            _atomic_add(counters, _DONE, 1)
+    if stop[0] >= 0.0:
+        return int(stop[0]), stop[1], int(stop[2])
+    last = _largest(vblock) * dt
+    if not np.isfinite(last):
+        return n_steps, last, n_steps - 1
     return n_steps, last, -1
 
 
@@ -388,22 +511,24 @@ def run_rk2(
 def _run_blocks(model, x, v, n_steps, dt, tol_mm, n_blocks) -> tuple[int, float, int]:
     threads = numba.get_num_threads()
     p = rk2_plan(model, n_blocks)
-    if p.n_blocks < threads:
-        numba.set_num_threads(p.n_blocks)  # this thread only; no idle threads at the barriers
+    workers = min(threads, p.n_blocks)
+    if workers < threads:
+        numba.set_num_threads(workers)  # this thread only; no idle threads in the team
     try:
-        done, last, bad = _rk2_kernel(p, model, x, v, n_steps, dt, tol_mm)
+        done, last, bad = _rk2_kernel(p, model, x, v, n_steps, dt, tol_mm, workers)
     finally:
         numba.set_num_threads(threads)
     return int(done), float(last), int(bad)
 
 
-def _rk2_kernel(p: Rk2Plan, model: TissueModel, x, v, n_steps, dt, tol_mm):
-    return _rk2_run_parallel(
+def _rk2_kernel(p: Rk2Plan, model: TissueModel, x, v, n_steps, dt, tol_mm, workers):
+    return _rk2_run_team(
         x,
         v,
         int(n_steps),
         float(dt),
         float(tol_mm),
+        int(workers),
         p.free,
         p.inv_mass,
         p.damping,
