@@ -23,7 +23,7 @@ from myoface.errors import MyofaceError, MyofaceValueError
 from myoface.synth import SYNTH_TOL_MM
 
 REGIONS = {
-    "brows and eyes": ("frontalis", "corrugator", "orbicularis_oculi"),
+    "brows and eyes": ("frontalis", "corrugator", "orbicularis_oculi", "levator_palpebrae"),
     "nose and upper lip": ("levator", "zygomaticus_minor"),
     "mouth corners": ("zygomaticus_major", "risorius", "buccinator", "depressor_anguli"),
     "lower lip and chin": ("depressor_labii", "mentalis", "orbicularis_oris"),
@@ -249,7 +249,9 @@ class PhysicsWorker(threading.Thread):
                     warnings.simplefilter("ignore")
                     state = self.model.relax(c, self.current, tol_mm=SYNTH_TOL_MM).state
                 self.current = state
-                self.publish(state.x)
+                x = np.array(state.x)  # the skin as drawn: with the eyelids and the lip contact
+                x[: self.model.face.n_vertices] = self.model.skin_vertices(state)
+                self.publish(x)
             except MyofaceError as exc:  # reported, the worker keeps running
                 if self.on_error:
                     self.on_error(str(exc))
