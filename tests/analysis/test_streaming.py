@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from myoface.analysis.video import Video, open_video
+from tests.conftest import needs_mediapipe, shared_path
 
 SIZE = 128  # px: the snakes find every contour of the rendered face (tests/test_batch.py)
 FPS = 10.0
@@ -44,7 +45,8 @@ class _WatchedVideo(Video):
     counts the rows the analysis has written to ``csv_path`` so far."""
 
     def __init__(self, frames, n, csv_path):
-        super().__init__(Path("watched.mp4"), FPS, (SIZE, SIZE), n)
+        h, w = frames[0].shape[:2]
+        super().__init__(Path("watched.mp4"), FPS, (w, h), n)
         self.frames, self.csv_path, self.rows_seen = frames, Path(csv_path), []
 
     def __iter__(self):
@@ -78,6 +80,29 @@ def test_each_row_is_in_the_csv_before_the_next_frame_is_read(face_clip, tmp_pat
     np.testing.assert_allclose(got[ok], table[ok][:, cols], atol=1e-5)
     assert res.frames.quality == quality
     assert not list(out.glob(".*part*"))
+
+
+@needs_mediapipe
+def test_the_landmark_fit_streams_its_rows_too(tmp_path):
+    """The landmark tracker with the 3-D fit (the default estimator) on the sample video:
+    after its calibration pass over the first 2 s, frame k of the analysis is read once the k
+    rows before it are in the CSV, with the fit's head columns."""
+    from myoface.analysis.outputs import analyze_to_folder
+
+    path = shared_path("video", "single_face.mp4")
+    if not path.exists():
+        pytest.skip("../shared/data/video/single_face.mp4 is not here")
+    frames = list(open_video(path).read_all())
+    out = tmp_path / "out"
+    n = len(frames)
+    video = _WatchedVideo(frames, n, out / "contractions.csv")
+    res = analyze_to_folder(video, out, tracker="landmarks", max_frames=6)
+    assert len(res.frames) == 6
+    # the last pass over the video is the analysis' (the calibration's came before it)
+    assert video.rows_seen[-7:] == list(range(7))  # the 7th frame is read, then not measured
+    with open(out / "contractions.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 6 and rows[0]["head_yaw_deg"] != "" and rows[0]["residual_mm"] != ""
 
 
 def test_the_record_kept_per_frame_is_small(face_clip):

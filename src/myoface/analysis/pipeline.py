@@ -959,6 +959,10 @@ def analyze_video(
     state). ``tracker``, ``init`` (contours on the calibration frame; default: found with
     MediaPipe), ``calibration_frame`` and ``estimator`` are as in :func:`make_analyzer`.
     The command ``myoface analyze`` does the same and also writes the CSV, plot and overlays.
+
+    Every frame's measurement is kept (its contours too: a few kB a frame); for a long video,
+    :func:`measure_frames` yields them one at a time, and
+    :func:`~myoface.analysis.outputs.analyze_to_folder` streams them to files in flat memory.
     """
     from myoface.analysis.video import Video, open_video
     from myoface.render import progress
