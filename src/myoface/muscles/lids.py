@@ -29,6 +29,12 @@ the lid by the rest gap (the lid's arc is kept) and times ``1 - k`` (closing win
 closer than :data:`TOUCH_RAD` in angle count as closing (the lids touch and stay together), and
 margins the tissue has crossed meet half way: the upper lid never passes below the lower one.
 
+Before that, the lids slide on the eyeball: every lid vertex is brought back towards its rest
+distance from the eyeball centre (fully on the margin, by its weight around it), and the upper lid
+keeps only ``1 - UPPER_HOLD`` of the tissue's rotation of it about the eyeball's axis (its tarsus
+hangs from the levator: a brow raise lifts the skin above the lid, not the margin, so AU1+2
+alone does not open the eye as AU5 does, and the two stay apart for the analysis).
+
 Skin around the margins follows its lid: a vertex within :data:`UPPER_FALLOFF_MM` (upper lid) or
 :data:`LOWER_FALLOFF_MM` (lower lid) of its margin rotates about the eyeball's axis by the
 margin's rotation at its x times a raised-cosine weight of that distance. A rotation about an
@@ -63,6 +69,10 @@ LOWER_FALLOFF_MM = 5.0
 #: margins nearer than this in elevation (rad, about 1.5 degrees: 0.3 mm at the margin's 12 mm
 #: from the eyeball's axis) are touching: drawn together, so a nearly closed eye closes
 TOUCH_RAD = np.deg2rad(1.5)
+#: the share of the tissue's rotation of the upper lid about the eyeball that the lid does not
+#: follow: its tarsus hangs from the levator, which holds it, so a brow raise lifts the lid skin
+#: above it but the margin little (our choice)
+UPPER_HOLD = 0.7
 #: the least distance (mm) a lid vertex keeps from the eyeball's surface under contact
 CONTACT_MM = 0.25
 
@@ -187,6 +197,10 @@ class _Eye:
         self.slide = np.r_[loop, self.rings[True][0], self.rings[False][0]]
         self.slide_w = np.r_[np.ones(len(loop)), self.rings[True][2], self.rings[False][2]]
         self.slide_mm = np.linalg.norm(rest[self.slide] - self.center, axis=1)
+        up_ring, _, up_w = self.rings[True]
+        hold = np.r_[self.upper[1:-1], up_ring]
+        self.hold = (hold, np.r_[np.ones(len(self.upper) - 2), up_w])
+        self.hold_phi = rest_cyl[hold, 2]
 
     def apply(self, skin: np.ndarray, contractions: np.ndarray, out: np.ndarray) -> None:
         """Write the lids of ``skin`` (V, 3) mm for ``contractions`` (M,) into ``out``."""
@@ -197,8 +211,12 @@ class _Eye:
         dist = np.linalg.norm(r, axis=1)
         skin = np.array(skin)
         skin[self.slide] = c + r * (1.0 + self.slide_w * (self.slide_mm / dist - 1.0))[:, None]
-        out[self.slide] = skin[self.slide]
         cyl = _cylindrical(skin, c)
+        if UPPER_HOLD > 0:  # the upper tarsus held by the levator: the tissue moves it less
+            idx, w = self.hold
+            cyl[idx, 2] -= UPPER_HOLD * w * (cyl[idx, 2] - self.hold_phi)
+            skin[idx] = _cartesian(cyl[idx], c)
+        out[self.slide] = skin[self.slide]
         chains = {True: (self.upper, self.s_upper), False: (self.lower, self.s_lower)}
         dphi = {}
         for is_up in (True, False):
