@@ -261,3 +261,19 @@ def test_lid_muscle_file_checks():
     with pytest.raises(MyofaceFormatError, match="action"):
         muscles_from_dict({"muscle": [{**base, "action": "wink"}]}, face)
     assert load_default_muscles(face)["levator_palpebrae_superioris_l"].kind == "lid"
+
+
+def test_a_face_saved_before_the_eyelids_gets_them(tmp_path):
+    from importlib import resources
+
+    from myoface.face.facefile import save_face
+
+    text = (resources.files("myoface") / "data" / "default_muscles.toml").read_text()
+    old = text[: text.index('[[muscle]]\nid = "levator_palpebrae_superioris"')]
+    assert 'type = "lid"' not in old
+    path = save_face(tmp_path / "old.myoface", load_default_face(), muscles_toml=old)
+    fm = mf.load_face_model(path)
+    assert "orbicularis_oculi_palpebralis_l" in fm.ids
+    skin = fm.skin_vertices(fm.relax(mf.au_contractions({45: 1.0}, fm.ids)).state)
+    for eye in fm.eyelids.eyes.values():
+        assert opening_area_mm2(skin, eye) < 0.01

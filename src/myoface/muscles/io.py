@@ -336,6 +336,20 @@ def _default_doc() -> dict:
     return tomllib.loads(text)
 
 
+def with_default_lids(doc: dict) -> dict:
+    """``doc`` (a parsed muscle file for the default topology) with the default set's lid
+    muscles added when it has none: a personal face saved before the eyelids existed still
+    blinks and takes AU5/AU7/AU43/AU45. ``doc`` itself is not changed."""
+    entries = doc.get("muscle", [])
+    if not isinstance(entries, list) or any(
+        isinstance(e, dict) and e.get("type") == "lid" for e in entries
+    ):
+        return doc
+    ids = {e.get("id") for e in entries if isinstance(e, dict)}
+    lids = [e for e in _default_doc()["muscle"] if e.get("type") == "lid" and e["id"] not in ids]
+    return {**doc, "muscle": [*entries, *lids]}
+
+
 def load_default_muscles(face: FaceMesh | None = None) -> MuscleSet:
     """The default muscle set (``data/default_muscles.toml``) placed on ``face``.
 
