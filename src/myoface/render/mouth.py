@@ -57,7 +57,7 @@ class MouthMeshes:
     lower: tuple
 
 
-def _superellipsoid(n_u: int = 10, n_v: int = 8, power: float = 4.0):
+def _superellipsoid(n_u: int = 8, n_v: int = 6, power: float = 4.0):
     """Unit rounded box: vertices (N, 3) in [-1, 1]^3 and triangles, closed, outward wound
     (a latitude-longitude sphere whose coordinates are raised to 2 / power)."""
     th = np.linspace(0.0, np.pi, n_v + 1)[1:-1]
@@ -156,7 +156,7 @@ def _teeth_row(arch, table, scale, rng):
     t = np.concatenate(tris)
     # the gum: a band along the arch's front, from the crowns' necks into the lips' shadow
     s_max = sum(w for _n, w, _h in table) * scale
-    s = np.linspace(-s_max, s_max, 41)
+    s = np.linspace(-s_max, s_max, 25)
     base, _tan, normal = _arch_point(arch, s)
     rows = []
     neck_h = np.interp(np.abs(s), np.cumsum([0] + [w * scale for _n, w, _h in table]),
@@ -181,7 +181,7 @@ def _teeth_row(arch, table, scale, rng):
     return v, t, nrm, col
 
 
-def _tongue(dentition, scale, n_u: int = 24, n_v: int = 10):
+def _tongue(dentition, scale, n_u: int = 16, n_v: int = 6):
     """A flattened half-ellipsoid resting inside the lower arch (rest pose)."""
     lo = dentition.lower
     rad = np.array([17.0, 6.5, 22.0]) * scale

@@ -292,6 +292,35 @@ W_COLS = 6 * 3 + 9
 _FOLD_W = 2.5
 
 
+@njit(cache=True, fastmath=True, inline="never", error_model="numpy")
+def _wrinkle_normal(f, cx, cy, inv, nx, ny, nz, wplanes, wk):
+    """The unit normal (nx, ny, nz) tilted by the wrinkle height field's gradient at screen
+    point (cx, cy) of triangle ``f`` (kept out of line: most pixels have no wrinkles)."""
+    wx = _plane(wplanes, f, 0, cx, cy) * inv
+    wy = _plane(wplanes, f, 1, cx, cy) * inv
+    ws = _plane(wplanes, f, 2, cx, cy) * inv
+    amx = _plane(wplanes, f, 3, cx, cy) * inv
+    amy = _plane(wplanes, f, 4, cx, cy) * inv
+    amn = _plane(wplanes, f, 5, cx, cy) * inv
+    # dh/dX, dh/dY, dh/ds of h = A_y sin(k Y) + A_x sin(k X) - A_n exp(-(s / w)^2)
+    hx = amx * wk * np.cos(wk * wx)
+    hy = amy * wk * np.cos(wk * wy)
+    q = ws / _FOLD_W
+    hs = amn * 2.0 * q / _FOLD_W * np.exp(-q * q)
+    g = 18
+    gx = hx * wplanes[f, g] + hy * wplanes[f, g + 3] + hs * wplanes[f, g + 6]
+    gy = hx * wplanes[f, g + 1] + hy * wplanes[f, g + 4] + hs * wplanes[f, g + 7]
+    gz = hx * wplanes[f, g + 2] + hy * wplanes[f, g + 5] + hs * wplanes[f, g + 8]
+    nx -= gx
+    ny -= gy
+    nz -= gz
+    nn = 1.0 / (np.sqrt(nx * nx + ny * ny + nz * nz) + 1e-30)
+    nx *= nn
+    ny *= nn
+    nz *= nn
+    return nx, ny, nz
+
+
 @njit(cache=True, fastmath=True, inline="always", error_model="numpy")
 def _shade(
     f, cx, cy, planes, tex, tri_tex, light_dir, light_col, ambient, ks, shininess,
@@ -309,28 +338,7 @@ def _shade(
     ny *= nn
     nz *= nn
     if f < wflag.shape[0] and wflag[f]:
-        wx = _plane(wplanes, f, 0, cx, cy) * inv
-        wy = _plane(wplanes, f, 1, cx, cy) * inv
-        ws = _plane(wplanes, f, 2, cx, cy) * inv
-        amx = _plane(wplanes, f, 3, cx, cy) * inv
-        amy = _plane(wplanes, f, 4, cx, cy) * inv
-        amn = _plane(wplanes, f, 5, cx, cy) * inv
-        # dh/dX, dh/dY, dh/ds of h = A_y sin(k Y) + A_x sin(k X) - A_n exp(-(s / w)^2)
-        hx = amx * wk * np.cos(wk * wx)
-        hy = amy * wk * np.cos(wk * wy)
-        q = ws / _FOLD_W
-        hs = amn * 2.0 * q / _FOLD_W * np.exp(-q * q)
-        g = 18
-        gx = hx * wplanes[f, g] + hy * wplanes[f, g + 3] + hs * wplanes[f, g + 6]
-        gy = hx * wplanes[f, g + 1] + hy * wplanes[f, g + 4] + hs * wplanes[f, g + 7]
-        gz = hx * wplanes[f, g + 2] + hy * wplanes[f, g + 5] + hs * wplanes[f, g + 8]
-        nx -= gx
-        ny -= gy
-        nz -= gz
-        nn = 1.0 / (np.sqrt(nx * nx + ny * ny + nz * nz) + 1e-30)
-        nx *= nn
-        ny *= nn
-        nz *= nn
+        nx, ny, nz = _wrinkle_normal(f, cx, cy, inv, nx, ny, nz, wplanes, wk)
     ks = ks * spec[f]
     o = 3 * N_PLANES
     vx, vy, vz = planes[f, o], planes[f, o + 1], planes[f, o + 2]

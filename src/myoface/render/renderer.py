@@ -32,11 +32,12 @@ from myoface.render.raster import (
     vertex_normals_numba,
     visibility,
 )
-from myoface.render.wrinkles import WrinkleField
+from myoface.render.wrinkles import WrinkleField, wrinkle_planes
 
 _SRGB_LUT = srgb_lut()
 _NO_U8 = np.zeros((1, 1, 3), np.uint8)  # placeholders for the output shade_resolve does not use
 _NO_F32 = np.zeros((1, 1, 3), np.float32)
+_NO_FLAG = np.zeros(0, bool)  # no wrinkled triangle: the shader skips its test
 
 BACKGROUND_TOP = (0.050, 0.055, 0.065)  # linear RGB, a soft studio gradient
 BACKGROUND_BOTTOM = (0.012, 0.013, 0.016)
@@ -238,6 +239,8 @@ class Renderer:
         self.wrinkles = WrinkleField(face) if wrinkles and nf > 0 else None
         self._wplanes = np.zeros((nf if self.wrinkles else 0, W_COLS))
         self._wflag = np.zeros(nf if self.wrinkles else 0, bool)
+        self._face_tris = np.ascontiguousarray(face.triangles, dtype=np.int64)
+        self._wrinkled = False  # the last frame has a wrinkled triangle
         self._spec = np.ones(n_tris)
         if self.scene.cavity is not None:  # the inside of the mouth is wet but in shadow
             k = len(self.scene.cavity[0])
@@ -305,6 +308,7 @@ class Renderer:
             static_normals.append(nrm)
             n += len(v)
         jaw_first = n
+        self._teeth_tri0 = sum(len(t) for t in tris)
         if cavity is not None:
             meshes = mouth.mouth_meshes(self.dentition)
             for v, t, nrm, col in (meshes.upper, meshes.lower):
@@ -404,6 +408,8 @@ class Renderer:
             scr, winv, sc.tris, sc.tri_cull, cam.orthographic, cam.width, cam.height, self.ssaa,
             self._setup, self._tbox, self._bbox,
         )  # fmt: skip
+        if sc.cavity is not None:
+            self._clip_to_mouth(scr)
         nt = numba.get_num_threads()
         self._wrinkle_planes(skin, pos[: sc.n_face], winv)
         visibility(self._setup, self._tbox, self._bbox, self._zbuf, self._tid, nt)
@@ -433,38 +439,49 @@ class Renderer:
             _NO_F32 if srgb else outf,
             nt,
             self._wplanes,
-            self._wflag,
+            self._wflag if self._wrinkled else _NO_FLAG,
             self.wrinkles.k if self.wrinkles is not None else 0.0,
             self._spec,
         )
 
+    def _clip_to_mouth(self, scr) -> None:
+        """Limit the pixel boxes of the mouth's inside (cavity, teeth, tongue) to the box of
+        the lips' inner margin on screen: nothing in the mouth is seen but through it (the
+        skin hides the rest), so the rasterizer need not fill the hidden parts."""
+        sc = self.scene
+        loop, first = sc.cavity
+        k = len(loop)
+        xy = scr[first : first + k, :2]
+        if (scr[first : first + k, 2] < 1.0).any():
+            return  # the margin crosses the near plane: leave the boxes alone
+        x0, y0 = np.floor(xy.min(axis=0)).astype(np.int64) - 1
+        x1, y1 = np.ceil(xy.max(axis=0)).astype(np.int64) + 1
+        n_dyn = len(sc.dyn_tris)
+        for lo, hi in ((n_dyn - 3 * k, n_dyn), (self._teeth_tri0, len(sc.tris))):
+            tb = self._tbox[lo:hi]
+            drawn = tb[:, 0] <= tb[:, 1]
+            np.maximum(tb[:, 0], x0, out=tb[:, 0])
+            np.minimum(tb[:, 1], x1, out=tb[:, 1])
+            np.maximum(tb[:, 2], y0, out=tb[:, 2])
+            np.minimum(tb[:, 3], y1, out=tb[:, 3])
+            empty = (tb[:, 2] > tb[:, 3]) | ~drawn
+            tb[empty, 0] = 1
+            tb[empty, 1] = 0
+
     def _wrinkle_planes(self, skin, world_skin, winv) -> None:
         """The wrinkled skin triangles' planes for :func:`raster._shade` (after the set-up)."""
+        self._wrinkled = False
         if self.wrinkles is None:
             return
-        wf = self.wrinkles
-        fields = wf.vertex_fields(skin)
-        tris = self.face.triangles
-        amp = fields[:, 3:].max(axis=1)
-        flag = amp[tris].max(axis=1) > 0.0
-        self._wflag[:] = flag
-        f = np.flatnonzero(flag)
-        if len(f) == 0:
+        fields, any_ = self.wrinkles.fields_fast(skin)
+        self._wrinkled = any_
+        if not any_:
+            self._wflag[:] = False
             return
-        st = self._setup[f]
-        a0, b0, c0 = st[:, 0], st[:, 1], st[:, 2]
-        a1, b1, c1 = st[:, 3], st[:, 4], st[:, 5]
-        a2, b2, c2 = -a0 - a1, -b0 - b1, 1.0 - c0 - c1
-        t = tris[f]
-        val = fields[t] * winv[t][:, :, None]  # (F, 3 vertices, 6 fields)
-        wp = self._wplanes
-        for j in range(6):
-            v0, v1, v2 = val[:, 0, j], val[:, 1, j], val[:, 2, j]
-            wp[f, 3 * j] = a0 * v0 + a1 * v1 + a2 * v2
-            wp[f, 3 * j + 1] = b0 * v0 + b1 * v1 + b2 * v2
-            wp[f, 3 * j + 2] = c0 * v0 + c1 * v1 + c2 * v2
-        g = wf.gradients(world_skin)[f]  # (F, 3 fields, 3 xyz)
-        wp[f, 18:] = g.reshape(len(f), 9)
+        wrinkle_planes(
+            fields, np.ascontiguousarray(world_skin), self._face_tris, self._setup, winv,
+            self._wplanes, self._wflag,
+        )  # fmt: skip
 
     def triangle_ids(self) -> np.ndarray:
         """Per-pixel triangle index of the last render at supersampled size (-1: background);

@@ -1,15 +1,15 @@
 """Skin that folds: wrinkle shading driven by the compression of the skin (epidermal) triangles.
 
-Where the skin shortens along a direction, it buckles into furrows across it. Per frame, each
-skin triangle's deformation gradient F (deformed edges over rest edges, in the triangle's plane)
-gives its stretch along two fixed rest directions of the head frame, up (y) and lateral (x), and
-across the nasolabial fold (the landmark group's polyline, when the face has it). The
-compression beyond a dead zone,
+Where the skin shortens along a direction, it buckles into furrows across it. Per frame, the
+skin's deformation gradient F at each vertex (fitted by least squares to the displacements of
+the vertices within ``PATCH_RADIUS_MM`` at rest: a furrow needs a compressed patch, not one
+small triangle) gives its stretch along two fixed rest directions of the head frame, up (y) and
+lateral (x), and across the nasolabial fold (the landmark groups' polylines, when the face has
+them). The compression beyond a dead zone,
 
     c = max(0, 1 - |F t| - COMPRESSION_DEAD_ZONE),
 
-averaged onto the vertices (area-weighted), scales a height field of the skin in its rest
-coordinates X:
+scales a height field of the skin in its rest coordinates X:
 
     h = A_y sin(k X_y) + A_x sin(k X_x) - A_n exp(-(s / w)^2),    A = gain * c,
 
@@ -25,10 +25,12 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
-#: compressions below this (1 - stretch) leave the skin smooth: the relaxed tissue's rounding
-#: and the small strains of a face at rest make no furrows
-COMPRESSION_DEAD_ZONE = 0.02
+#: compressions (1 - stretch) below this leave the skin smooth: 0.05 mm of noise on the default
+#: face's vertices reads as up to 0.024 (10 draws); the AUs' compressions reach 0.04 (the
+#: forehead in AU1+2) to 0.1-0.4 (glabella in AU4, cheeks in AU6+12)
+COMPRESSION_DEAD_ZONE = 0.03
 #: furrow spacing (mm): forehead lines and crow's feet lie some 5-10 mm apart
 WAVELENGTH_MM = 6.0
 #: furrow height (mm) per unit compression (a 10 % compression: 0.4 mm, slopes ~0.4)
@@ -36,9 +38,17 @@ FURROW_GAIN_MM = 4.0
 #: the nasolabial groove: half-width (mm) and depth (mm) per unit compression
 FOLD_WIDTH_MM = 2.5
 FOLD_GAIN_MM = 6.0
-#: a rest direction that lies this close to a triangle's normal (cosine of the angle to the
-#: plane below it) has no meaningful stretch in that triangle
+#: a rest direction whose part in a vertex's tangent plane is shorter than this has no
+#: meaningful stretch there (the sides of the face for x, the underside of the nose for y)
 MIN_IN_PLANE = 0.3
+#: the strain is fitted over the vertices within this rest distance (mm): a furrow needs a
+#: compressed patch some half a wavelength across, not one small triangle
+PATCH_RADIUS_MM = 8.0
+PATCH_MIN_VERTICES = 16
+#: ... with the directions whose spread is below this fraction of the largest left out
+PATCH_RCOND = 0.1
+#: the nasolabial groove is evaluated this near its line (mm)
+FOLD_REACH_MM = 15.0
 #: per-vertex columns of :meth:`WrinkleField.vertex_fields`: rest x, rest y, nasolabial
 #: distance s, amplitudes A_x, A_y, A_n
 N_VERTEX = 6
@@ -61,8 +71,9 @@ def _polyline_distance(p: np.ndarray, line: np.ndarray):
 
 
 class WrinkleField:
-    """The wrinkle height field of a face (rest: ``face`` a FaceMesh); :meth:`compute` gives
-    its per-frame amplitudes and gradients for deformed skin vertices.
+    """The wrinkle height field of a face (rest: ``face`` a FaceMesh); :meth:`vertex_fields`
+    (:meth:`fields_fast`) and :meth:`gradients` give its per-frame amplitudes and gradients
+    for deformed skin vertices.
 
     Attributes
     ----------
@@ -77,31 +88,7 @@ class WrinkleField:
         self.rest = v
         self.triangles = t
         self.k = 2 * np.pi / WAVELENGTH_MM
-        nv, nt = len(v), len(t)
-        # rest-plane basis of each triangle, and the inverse of its rest edge matrix
-        e1 = v[t[:, 1]] - v[t[:, 0]]
-        e2 = v[t[:, 2]] - v[t[:, 0]]
-        n = np.cross(e1, e2)
-        area2 = np.linalg.norm(n, axis=1)
-        ok = area2 > 1e-12
-        n = n / np.where(ok, area2, 1.0)[:, None]
-        b1 = e1 / np.maximum(np.linalg.norm(e1, axis=1), 1e-12)[:, None]
-        b2 = np.cross(n, b1)
-        dm = np.stack(
-            [
-                np.stack([(e1 * b1).sum(1), (e2 * b1).sum(1)], 1),
-                np.stack([(e1 * b2).sum(1), (e2 * b2).sum(1)], 1),
-            ],
-            1,
-        )  # fmt: skip  (T, 2, 2): rows = basis, cols = edges
-        det = dm[:, 0, 0] * dm[:, 1, 1] - dm[:, 0, 1] * dm[:, 1, 0]
-        ok &= np.abs(det) > 1e-12
-        dm_inv = np.zeros_like(dm)
-        dm_inv[ok] = np.linalg.inv(dm[ok])
-        self._dm_inv = dm_inv
-        self._ok = ok
-        # the rest directions in each triangle's plane (2-D, unit), and whether they are usable
-        dirs = [np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])]
+        nv = len(v)
         self.fold_s = np.full(nv, np.inf)
         fold_dir = np.zeros((nv, 3))
         lm = face.landmarks
@@ -111,55 +98,88 @@ class WrinkleField:
             better = d < self.fold_s
             self.fold_s[better] = d[better]
             fold_dir[better, :2] = across[better]
+        near_fold = self.fold_s < FOLD_REACH_MM
         self.has_fold = bool(lines)
-        tri_fold = fold_dir[t].mean(axis=1)
-        self._t2d = []
-        self._use = []
-        for dvec in [*dirs, tri_fold]:
-            dv = np.broadcast_to(dvec, (nt, 3))
-            p1 = (dv * b1).sum(1)
-            p2 = (dv * b2).sum(1)
-            m = np.hypot(p1, p2)
-            self._use.append(
-                ok & (m > MIN_IN_PLANE * np.maximum(np.linalg.norm(dv, axis=1), 1e-12))
-            )
-            m = np.maximum(m, 1e-12)
-            self._t2d.append(np.column_stack([p1 / m, p2 / m]))
-        # the fold only near the fold line (3 groove widths)
-        near = self.fold_s[t].min(axis=1) < 3 * FOLD_WIDTH_MM * 2
-        self._use[2] &= near
-        # triangle -> vertex area-weighted averaging
-        w = 0.5 * area2
-        rows = t.ravel()
-        cols = np.repeat(np.arange(nt), 3)
-        a = sp.csr_matrix((np.repeat(w, 3), (rows, cols)), shape=(nv, nt))
-        tot = np.asarray(a.sum(axis=1)).ravel()
-        self._avg = sp.diags(1.0 / np.maximum(tot, 1e-12)) @ a
+        # per vertex and direction: the rest direction t in the tangent plane (unit) and the
+        # least-squares weights c_ij over the patch (neighbours within PATCH_RADIUS_MM) with
+        # F t = t + sum_j c_ij (u_j - u_i), u the displacement from rest
+        from scipy.spatial import cKDTree
+
+        from myoface.face import vertex_normals
+
+        normals = vertex_normals(v, t)
+        tree = cKDTree(v)
+        # the radius grows where the mesh is coarse, to hold PATCH_MIN_VERTICES neighbours
+        knn, _ = tree.query(v, PATCH_MIN_VERTICES + 1)
+        patches = tree.query_ball_point(v, np.maximum(PATCH_RADIUS_MM, 1.01 * knn[:, -1]))
+        self._dirs = np.zeros((3, nv, 3))
+        self._patches = []
+        self._coef = [[], [], []]
+        mats = []
+        for i in range(nv):
+            nb = np.array([j for j in patches[i] if j != i], dtype=np.int64)
+            dx = v[nb] - v[i] if len(nb) else np.zeros((0, 3))
+            m = dx.T @ dx
+            ok_i = len(nb) >= 3
+            # the patch's spread across the surface only: its thickness direction (and a
+            # direction the neighbours hardly span) is left out
+            pinv = np.linalg.pinv(m, rcond=PATCH_RCOND) if ok_i else np.zeros((3, 3))
+            self._patches.append(nb)
+            for k, dvec in enumerate((np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), fold_dir[i])):
+                tv = dvec - (dvec @ normals[i]) * normals[i]
+                tn = np.linalg.norm(tv)
+                use = ok_i and tn > MIN_IN_PLANE and (k < 2 or near_fold[i])
+                tv = tv / tn if use else np.zeros(3)
+                self._dirs[k, i] = tv
+                self._coef[k].append(dx @ (pinv @ tv) if use else np.zeros(len(nb)))
+            mats.append(len(nb))
+        self._ops = []
+        for k in range(3):
+            rows = np.repeat(np.arange(nv), mats)
+            cols = np.concatenate(self._patches) if nv else np.zeros(0, np.int64)
+            vals = np.concatenate(self._coef[k]) if nv else np.zeros(0)
+            op = sp.csr_matrix((vals, (rows, cols)), shape=(nv, nv))
+            op = op - sp.diags(np.asarray(op.sum(axis=1)).ravel())
+            self._ops.append(op.tocsr())
+        self._used = np.abs(self._dirs).sum(axis=2).T > 0  # (V, 3)
         s_fold = np.where(np.isfinite(self.fold_s), self.fold_s, 1e3)
         self._static = np.column_stack([v[:, 0], v[:, 1], s_fold])
+        self._gains = np.array([FURROW_GAIN_MM, FURROW_GAIN_MM, FOLD_GAIN_MM])
+        self._fields = np.zeros((nv, N_VERTEX))
+        self._fields[:, :3] = self._static
 
     def compressions(self, skin: np.ndarray) -> np.ndarray:
-        """Per-triangle compression (T, 3) beyond the dead zone along rest x, rest y and
-        across the nasolabial line, for deformed skin vertices (V, 3) mm."""
-        t = self.triangles
-        d1 = skin[t[:, 1]] - skin[t[:, 0]]
-        d2 = skin[t[:, 2]] - skin[t[:, 0]]
-        out = np.zeros((len(t), 3))
-        for j in range(3):
-            a = self._dm_inv @ self._t2d[j][:, :, None]  # (T, 2, 1): edge weights
-            ft = d1 * a[:, 0] + d2 * a[:, 1]
-            stretch = np.linalg.norm(ft, axis=1)
-            c = np.clip(1.0 - stretch - COMPRESSION_DEAD_ZONE, 0.0, None)
-            out[:, j] = np.where(self._use[j], c, 0.0)
+        """Per-vertex compression (V, 3), 1 - stretch where positive (0 where a direction does
+        not apply), along rest x, rest y and across the nasolabial line, for deformed skin
+        vertices (V, 3) mm: the stretch |F t| of the deformation gradient F fitted by least
+        squares to the displacements over the patch around each vertex (plain loop: the
+        reference of :meth:`fields_fast`)."""
+        u = np.asarray(skin, dtype=np.float64) - self.rest
+        out = np.zeros((len(u), 3))
+        for i, nb in enumerate(self._patches):
+            for k in range(3):
+                if not self._used[i, k]:
+                    continue
+                ft = self._dirs[k, i] + self._coef[k][i] @ (u[nb] - u[i])
+                out[i, k] = max(0.0, 1.0 - float(np.linalg.norm(ft)))
         return out
 
     def vertex_fields(self, skin: np.ndarray) -> np.ndarray:
         """Per-vertex (V, N_VERTEX): rest x, rest y, nasolabial distance, and the amplitudes
         A_x, A_y (furrow heights, mm) and A_n (groove depth, mm) for skin (V, 3) mm."""
-        c = self._avg @ self.compressions(skin)
-        amp = np.column_stack([FURROW_GAIN_MM * c[:, 0], FURROW_GAIN_MM * c[:, 1],
-                               FOLD_GAIN_MM * c[:, 2]])  # fmt: skip
-        return np.column_stack([self._static, amp])
+        c = np.clip(self.compressions(skin) - COMPRESSION_DEAD_ZONE, 0.0, None)
+        return np.column_stack([self._static, c * self._gains])
+
+    def fields_fast(self, skin: np.ndarray) -> tuple[np.ndarray, bool]:
+        """:meth:`vertex_fields` by sparse products, into a buffer reused between calls
+        (valid until the next call), and whether any amplitude is non-zero."""
+        u = np.asarray(skin, dtype=np.float64) - self.rest
+        amp = self._fields[:, 3:]
+        for k in range(3):
+            ft = self._dirs[k] + self._ops[k] @ u
+            c = 1.0 - np.sqrt((ft * ft).sum(axis=1)) - COMPRESSION_DEAD_ZONE
+            amp[:, k] = np.where(self._used[:, k] & (c > 0.0), c * self._gains[k], 0.0)
+        return self._fields, bool(amp.any())
 
     def gradients(self, skin: np.ndarray) -> np.ndarray:
         """Per-triangle world gradients (T, 3, 3) on the deformed surface of the three
@@ -185,3 +205,71 @@ def wrinkle_height(fields: np.ndarray, k: float) -> np.ndarray:
     (N, N_VERTEX) (reference for the renderer's per-pixel evaluation)."""
     x, y, s, ax, ay, an = fields.T
     return ay * np.sin(k * y) + ax * np.sin(k * x) - an * np.exp(-((s / FOLD_WIDTH_MM) ** 2))
+
+
+@njit(cache=True, error_model="numpy")
+def wrinkle_planes(fields, world, tris, setup, winv, wplanes, wflag):
+    """Per skin triangle with a non-zero amplitude at a vertex (``wflag``), the planes of the
+    perspective-correct numerators of the 6 vertex ``fields`` (from the triangle set-up's
+    barycentric planes, columns 0..5, and the vertices' 1 / w), then the world gradients on the
+    surface ``world`` (V, 3) of the fields rest x, rest y and fold distance (see
+    :func:`myoface.render.raster._shade`)."""
+    for f in range(tris.shape[0]):
+        i0, i1, i2 = tris[f, 0], tris[f, 1], tris[f, 2]
+        amp = 0.0
+        for j in range(3, 6):
+            amp = max(amp, fields[i0, j], fields[i1, j], fields[i2, j])
+        wflag[f] = amp > 0.0
+        if not wflag[f]:
+            continue
+        a0, b0, c0 = setup[f, 0], setup[f, 1], setup[f, 2]
+        a1, b1, c1 = setup[f, 3], setup[f, 4], setup[f, 5]
+        a2, b2, c2 = -a0 - a1, -b0 - b1, 1.0 - c0 - c1
+        q0, q1, q2 = winv[i0], winv[i1], winv[i2]
+        for j in range(6):
+            v0, v1, v2 = fields[i0, j] * q0, fields[i1, j] * q1, fields[i2, j] * q2
+            wplanes[f, 3 * j] = a0 * v0 + a1 * v1 + a2 * v2
+            wplanes[f, 3 * j + 1] = b0 * v0 + b1 * v1 + b2 * v2
+            wplanes[f, 3 * j + 2] = c0 * v0 + c1 * v1 + c2 * v2
+        e1x = world[i1, 0] - world[i0, 0]
+        e1y = world[i1, 1] - world[i0, 1]
+        e1z = world[i1, 2] - world[i0, 2]
+        e2x = world[i2, 0] - world[i0, 0]
+        e2y = world[i2, 1] - world[i0, 1]
+        e2z = world[i2, 2] - world[i0, 2]
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        a2n = max(nx * nx + ny * ny + nz * nz, 1e-18)
+        # grad l_k = (n x e_k) / |n|^2, e_k the edge opposite vertex k
+        for k in range(3):
+            if k == 0:
+                ex, ey, ez = (
+                    world[i2, 0] - world[i1, 0],
+                    world[i2, 1] - world[i1, 1],
+                    world[i2, 2] - world[i1, 2],
+                )
+                vi = i0
+            elif k == 1:
+                ex, ey, ez = (
+                    world[i0, 0] - world[i2, 0],
+                    world[i0, 1] - world[i2, 1],
+                    world[i0, 2] - world[i2, 2],
+                )
+                vi = i1
+            else:
+                ex, ey, ez = e1x, e1y, e1z
+                vi = i2
+            gx = (ny * ez - nz * ey) / a2n
+            gy = (nz * ex - nx * ez) / a2n
+            gz = (nx * ey - ny * ex) / a2n
+            for j in range(3):
+                val = fields[vi, j]
+                if k == 0:
+                    wplanes[f, 18 + 3 * j] = val * gx
+                    wplanes[f, 19 + 3 * j] = val * gy
+                    wplanes[f, 20 + 3 * j] = val * gz
+                else:
+                    wplanes[f, 18 + 3 * j] += val * gx
+                    wplanes[f, 19 + 3 * j] += val * gy
+                    wplanes[f, 20 + 3 * j] += val * gz
