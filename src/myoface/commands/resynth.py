@@ -134,5 +134,5 @@ class _PosedRenderer:
         self._poses = iter(poses)
         self.camera = renderer.camera
 
-    def render(self, vertices=None):
-        return self._renderer.render(vertices, pose=next(self._poses))
+    def render(self, vertices=None, **kw):  # kw: the renderer's others, e.g. jaw=
+        return self._renderer.render(vertices, pose=next(self._poses), **kw)
