@@ -48,7 +48,8 @@ def test_textured_skin_glb_carries_the_new_positions_and_normals():
 
 def test_scene_follows_the_physics(viewer):
     fm, sc = viewer.model, viewer.scene
-    assert sc.eyes is not None and len(sc.fans) == 3  # two eye sockets and the mouth
+    assert sc.eyes is not None and len(sc.fans) == 2  # two eye sockets
+    assert sc.cavity is not None and sc.jaw is not None  # the mouth: cavity, lower teeth
     sc.set_layer("fat", True)
     sc.set_bones(True)
     try:
@@ -57,11 +58,15 @@ def test_scene_follows_the_physics(viewer):
         skin = viewer.apply(fm.validate({"jaw": 0.8, "zygomaticus_major_l": 1.0}))
         assert skin[chin, 1] < fm.face.vertices[chin, 1] - 3.0  # the jaw opened
         np.testing.assert_allclose(sc.skin.vertices, skin * 1e-3, atol=1e-6)
-        # the mouth's cavity fan keeps its rim on the skin's mouth opening
-        mouth = max(sc.fans, key=lambda f: f[2] - f[1])
-        first = mouth[1]
-        loop = viewer.renderer.scene.fans[[f[1] for f in sc.fans].index(first)][0]
-        np.testing.assert_allclose(mouth[0].vertices[: len(loop)], skin[loop] * 1e-3, atol=1e-6)
+        # the mouth's cavity keeps its rim on the lips' inner margin
+        loop, _first = viewer.renderer.scene.cavity
+        np.testing.assert_allclose(sc.cavity.vertices[: len(loop)], skin[loop] * 1e-3, atol=1e-6)
+        # the lower teeth and tongue follow the jaw's rotation
+        rot, shift = fm.jaw_pose(viewer.worker.current)
+        w, *xyz = sc.jaw.wxyz
+        assert np.isclose(abs(w), np.cos(0.5 * np.arccos((np.trace(rot) - 1) / 2)), atol=1e-6)
+        assert abs(w) < 1.0 - 1e-4  # rotated
+        np.testing.assert_allclose(sc.jaw.position, shift * 1e-3, atol=1e-9)
         # the lattice layer and the bone nodes moved with the tissue
         handle, sel = sc.layers["fat"]
         x = viewer.worker.current.x

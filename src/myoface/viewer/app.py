@@ -148,7 +148,7 @@ class FaceViewer:
 
     # ------------------------------------------------------------------ plumbing
     def _publish(self, x: np.ndarray) -> None:
-        self.scene.update(x)
+        self.scene.update(x, jaw=self.model.jaw_pose(self.worker.current))
 
     def _notify(self, message: str, error: bool = True) -> None:
         if error:

@@ -39,6 +39,25 @@ def _srgb8(linear) -> tuple[int, int, int]:
     return tuple(int(x) for x in c)
 
 
+def _quaternion_wxyz(rot: np.ndarray) -> tuple[float, float, float, float]:
+    """The unit quaternion (w, x, y, z) of a rotation matrix (3, 3) (Shepperd's method)."""
+    tr = np.trace(rot)
+    if tr > 0:
+        s = 2.0 * np.sqrt(1.0 + tr)
+        q = (0.25 * s, (rot[2, 1] - rot[1, 2]) / s, (rot[0, 2] - rot[2, 0]) / s,
+             (rot[1, 0] - rot[0, 1]) / s)  # fmt: skip
+    else:
+        i = int(np.argmax(np.diag(rot)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + rot[i, i] - rot[j, j] - rot[k, k])
+        v = np.zeros(3)
+        v[i] = 0.25 * s
+        v[j] = (rot[j, i] + rot[i, j]) / s
+        v[k] = (rot[k, i] + rot[i, k]) / s
+        q = ((rot[k, j] - rot[j, k]) / s, *v)
+    return tuple(float(c) for c in q)
+
+
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     out = np.zeros_like(vertices, dtype=np.float64)
     vertex_normals_numba(
@@ -172,20 +191,22 @@ class FaceScene:
                 side="double",
             )
             self.fans.append((handle, first, center))
-        eye_tris = sc.tris[sc.tris.min(axis=1) >= sc.n_dynamic] - sc.n_dynamic
-        if len(eye_tris):
-            import trimesh
-
-            col = to_srgb8(sc.vcol[sc.n_dynamic :].reshape(1, -1, 3))[0]
-            eyes = trimesh.Trimesh(
-                pos[sc.n_dynamic :] * MM,
-                eye_tris,
-                vertex_colors=np.column_stack([col, np.full(len(col), 255, np.uint8)]),
-                process=False,
+        # the mouth's cavity (follows the lips' margin; one colour, the dark of its middle)
+        self.cavity = None
+        if sc.cavity is not None:
+            loop, first = sc.cavity
+            n_cav = 2 * len(loop) + 1
+            tris = sc.tris[(sc.tris.min(axis=1) >= first) & (sc.tris.max(axis=1) < first + n_cav)]
+            self.cavity = scene_api.add_mesh_simple(
+                "/face/dressing/mouth_cavity",
+                (pos[first : first + n_cav] * MM).astype(np.float32),
+                (tris - first).astype(np.int32),
+                color=_srgb8(sc.vcol[first + len(loop)]),
+                side="double",
             )
-            self.eyes = scene_api.add_mesh_trimesh("/face/dressing/eyes", eyes)
-        else:
-            self.eyes = None
+        # fixed in the head: eyeballs and upper teeth; carried by the jaw: lower teeth, tongue
+        self.eyes = self._static_mesh("/face/dressing/eyes", pos, sc.n_dynamic, sc.n_jaw_first)
+        self.jaw = self._static_mesh("/face/dressing/jaw", pos, sc.n_jaw_first, len(pos))
         ins, org = muscle_segments(model)
         self.vectors = scene_api.add_line_segments(
             "/muscles",
@@ -222,6 +243,23 @@ class FaceScene:
             visible=False,
         )
 
+    def _static_mesh(self, name, pos, lo, hi):
+        """A vertex-coloured mesh of the scene's rigid vertices lo..hi-1 (None when empty)."""
+        sc = self.renderer.scene
+        tris = sc.tris[(sc.tris.min(axis=1) >= lo) & (sc.tris.max(axis=1) < hi)] - lo
+        if hi <= lo or not len(tris):
+            return None
+        import trimesh
+
+        col = to_srgb8(sc.vcol[lo:hi].reshape(1, -1, 3))[0]
+        mesh = trimesh.Trimesh(
+            pos[lo:hi] * MM,
+            tris,
+            vertex_colors=np.column_stack([col, np.full(len(col), 255, np.uint8)]),
+            process=False,
+        )
+        return self.api.add_mesh_trimesh(name, mesh)
+
     def _segments(self, x, sel) -> np.ndarray:
         t = self.model.tissue
         return (np.stack([x[t.spring_i[sel]], x[t.spring_j[sel]]], axis=1) * MM).astype(np.float32)
@@ -255,18 +293,28 @@ class FaceScene:
         self.bones.visible = bool(on)
 
     # ------------------------------------------------------------------ updates
-    def update(self, x: np.ndarray) -> None:
-        """Move everything visible to the tissue node positions ``x`` (N, 3) mm."""
+    def update(self, x: np.ndarray, jaw=None) -> None:
+        """Move everything visible to the tissue node positions ``x`` (N, 3) mm and the
+        mandible's rigid motion ``jaw`` (:meth:`myoface.model.FaceModel.jaw_pose`; None:
+        closed)."""
         self.x = x
         skin = x[: self.model.face.n_vertices]
         if self.textured_on:
             self.textured.glb_data = self._glb.data(skin)
         else:
             self.skin.vertices = (skin * MM).astype(np.float32)
-        if self.fans:
+        if self.fans or self.cavity is not None:
             pos = self.renderer.positions(skin)
             for handle, first, center in self.fans:
                 handle.vertices = (pos[first : center + 1] * MM).astype(np.float32)
+            if self.cavity is not None:
+                loop, first = self.renderer.scene.cavity
+                n_cav = 2 * len(loop) + 1
+                self.cavity.vertices = (pos[first : first + n_cav] * MM).astype(np.float32)
+        if self.jaw is not None:
+            rot, shift = (np.eye(3), np.zeros(3)) if jaw is None else jaw
+            self.jaw.wxyz = _quaternion_wxyz(np.asarray(rot, dtype=np.float64))
+            self.jaw.position = tuple(float(c) for c in np.asarray(shift) * MM)
         for handle, sel in self.layers.values():
             if handle.visible:
                 handle.points = self._segments(x, sel)
