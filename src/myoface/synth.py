@@ -56,14 +56,16 @@ def render_face(
     width: int = 512,
     height: int = 512,
     texture=None,
+    gaze=None,
 ) -> np.ndarray:
     """The skin of ``model`` in ``state`` (default: rest) rendered as an (H, W, 3) uint8 image:
     lit, texture-mapped (``texture``: an image or path for the face's UVs; default the face's
     own), with eyes and mouth, seen from a camera preset ``view`` (:data:`VIEWS`) that frames
-    the rest face."""
+    the rest face; ``gaze``: the eyes turned by ``(yaw_rad, pitch_rad)`` (see
+    :meth:`myoface.render.Renderer.render`)."""
     cam = make_camera(model.face.vertices, view, width, height)
     r = Renderer(model.face, cam, texture=texture)
-    return r.render(model.skin_vertices(state), jaw=model.jaw_pose(state))
+    return r.render(model.skin_vertices(state), jaw=model.jaw_pose(state), gaze=gaze)
 
 
 @dataclass

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import myoface as mf
 from myoface.control.timeline import BLINK_DURATION_S, Timeline
-from myoface.errors import MyofaceFormatError
+from myoface.errors import MyofaceFormatError, MyofaceValueError
 from myoface.face import load_default_face
 from myoface.face.eyes import EYE_RADIUS_MM, eyeball_center
 from myoface.muscles import load_default_muscles, muscles_from_dict
@@ -277,3 +277,35 @@ def test_a_face_saved_before_the_eyelids_gets_them(tmp_path):
     skin = fm.skin_vertices(fm.relax(mf.au_contractions({45: 1.0}, fm.ids)).state)
     for eye in fm.eyelids.eyes.values():
         assert opening_area_mm2(skin, eye) < 0.01
+
+
+def test_gaze_turns_the_iris(fm):
+    """The eyeballs turn about their centres: the dark iris and pupil move towards the
+    subject's left (+x: the image's right in the front view) for a positive yaw, up for a
+    positive pitch; bad angles are refused."""
+    from myoface.render.renderer import gaze_rotation
+
+    np.testing.assert_allclose(gaze_rotation((0.0, 0.0)), np.eye(3), atol=1e-15)
+    g = gaze_rotation((0.3, 0.2))
+    np.testing.assert_allclose(g @ g.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(
+        g @ [0, 0, 1.0], [np.sin(0.3) * np.cos(0.2), np.sin(0.2), np.cos(0.3) * np.cos(0.2)]
+    )
+    face = fm.face
+    cam = Camera.front(face.vertices[face.landmarks["eye_l"]], width=160, height=80)
+    r = Renderer(face, cam, ssaa=1)
+    skin = skin_for(fm, {5: 1.0})  # wide open: the iris has room to move
+
+    def iris_centre(img):
+        dark = img.astype(float).max(axis=2) < 70  # iris and pupil (the socket is hidden)
+        rows, cols = np.nonzero(dark)
+        return np.array([cols.mean(), rows.mean()])
+
+    ahead = iris_centre(r.render(skin))
+    left = iris_centre(r.render(skin, gaze=(0.35, 0.0)))
+    up = iris_centre(r.render(skin, gaze=(0.0, 0.25)))
+    assert left[0] - ahead[0] > 3  # px, towards the image's right
+    assert ahead[1] - up[1] > 2  # px, up the image
+    for bad in [(1.0, 0.0), (0.0, float("nan")), "up"]:
+        with pytest.raises(MyofaceValueError, match="gaze"):
+            r.render(skin, gaze=bad)

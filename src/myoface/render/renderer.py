@@ -165,6 +165,33 @@ class _Scene:
     n_jaw_first: int = 0
 
 
+#: the largest gaze angle (rad) :func:`gaze_rotation` takes, horizontally and vertically: the
+#: eyes' range of motion is about 45 degrees from straight ahead (Guitton & Volle, "Gaze
+#: control in humans: eye-head coordination during orienting movements to targets within and
+#: beyond the oculomotor range", J. Neurophysiol. 58, 1987)
+MAX_GAZE_RAD = np.deg2rad(45.0)
+
+
+def gaze_rotation(gaze) -> np.ndarray:
+    """The rotation (3, 3) of an eyeball for ``gaze = (yaw_rad, pitch_rad)``: straight ahead
+    (+z) turns to ``(sin(yaw) cos(pitch), sin(pitch), cos(yaw) cos(pitch))`` (yaw towards the
+    subject's left, +x; pitch up), each angle within :data:`MAX_GAZE_RAD`."""
+    try:
+        yaw, pitch = (float(a) for a in gaze)
+    except (TypeError, ValueError):
+        raise MyofaceValueError(f"gaze must be (yaw_rad, pitch_rad); got {gaze!r}") from None
+    for name, a in (("yaw", yaw), ("pitch", pitch)):
+        if not np.isfinite(a) or abs(a) > MAX_GAZE_RAD:
+            raise MyofaceValueError(
+                f"gaze {name} must be finite and within +-{MAX_GAZE_RAD:.3f} rad (45 degrees); "
+                f"got {a}"
+            )
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cp, sp], [0.0, -sp, cp]])
+    return ry @ rx
+
+
 class Renderer:
     """Renders a :class:`~myoface.face.FaceMesh` (rest or deformed) with a camera and lights.
 
@@ -294,6 +321,8 @@ class Renderer:
         dyn_tris = np.concatenate(tris).astype(np.int64)
         static_normals = []
         static_pos = []
+        #: (first vertex, end, centre) of each eyeball, for the gaze
+        self._eyeballs = []
         for op in openings:
             if not op.name.startswith("eye"):
                 continue
@@ -306,6 +335,7 @@ class Renderer:
             vcol.append(col)
             static_pos.append(v)
             static_normals.append(nrm)
+            self._eyeballs.append((n, n + len(v), center))
             n += len(v)
         jaw_first = n
         self._teeth_tri0 = sum(len(t) for t in tris)
@@ -340,10 +370,10 @@ class Renderer:
         self._n_total = n
         return scene
 
-    def positions(self, skin: np.ndarray, jaw=None) -> np.ndarray:
+    def positions(self, skin: np.ndarray, jaw=None, gaze=None) -> np.ndarray:
         """Positions (N, 3) mm of every drawn vertex (skin, dressing fans, eyeballs, teeth) for
-        the skin vertices ``skin`` and the jaw's rigid motion ``jaw`` (see :meth:`render`), in
-        the order of :attr:`scene`."""
+        the skin vertices ``skin``, the jaw's rigid motion ``jaw`` and the eyes' ``gaze`` (see
+        :meth:`render`), in the order of :attr:`scene`."""
         sc = self.scene
         pos = np.empty((self._n_total, 3))
         pos[: sc.n_face] = skin
@@ -355,20 +385,24 @@ class Renderer:
             loop, first = sc.cavity
             mouth.cavity_positions(skin[loop], pos[first : first + 2 * len(loop) + 1])
         pos[sc.n_dynamic :] = self._static_pos
+        if gaze is not None:
+            g = gaze_rotation(gaze)
+            for a, b, c in self._eyeballs:
+                pos[a:b] = (pos[a:b] - c) @ g.T + c
         if jaw is not None:
             rot, shift = _check_pose(jaw, "jaw")
             pos[sc.n_jaw_first :] = pos[sc.n_jaw_first :] @ rot.T + shift
         return pos
 
     # ------------------------------------------------------------------ render
-    def render_linear(self, vertices=None, pose=None, jaw=None) -> np.ndarray:
-        """The image (H, W, 3) float32 in linear RGB (before tone mapping); ``pose`` and
-        ``jaw`` as for :meth:`render`."""
+    def render_linear(self, vertices=None, pose=None, jaw=None, gaze=None) -> np.ndarray:
+        """The image (H, W, 3) float32 in linear RGB (before tone mapping); ``pose``, ``jaw``
+        and ``gaze`` as for :meth:`render`."""
         out = np.empty((self.camera.height, self.camera.width, 3), np.float32)
-        self._draw(vertices, None, out, pose, jaw)
+        self._draw(vertices, None, out, pose, jaw, gaze)
         return out
 
-    def render(self, vertices=None, pose=None, jaw=None) -> np.ndarray:
+    def render(self, vertices=None, pose=None, jaw=None, gaze=None) -> np.ndarray:
         """The image (H, W, 3) uint8 sRGB of the skin at ``vertices`` (default: rest).
 
         ``pose``: None, or ``(rotation (3, 3), translation (3,) mm)``, a rigid motion of the
@@ -376,19 +410,21 @@ class Renderer:
         sees it; the lights stay where they are (a head that turns in a lit room).
         ``jaw``: None (closed), or the mandible's rigid motion from rest in the head frame, the
         same form (:meth:`myoface.model.FaceModel.jaw_pose`): the lower teeth and the tongue
-        follow it."""
+        follow it.
+        ``gaze``: None (straight ahead), or ``(yaw_rad, pitch_rad)``: both eyeballs turned about
+        their centres, yaw towards the subject's left (+x), pitch up (:func:`gaze_rotation`)."""
         out = np.empty((self.camera.height, self.camera.width, 3), np.uint8)
-        self._draw(vertices, out, None, pose, jaw)
+        self._draw(vertices, out, None, pose, jaw, gaze)
         return out
 
-    def _draw(self, vertices, out8, outf, pose=None, jaw=None) -> None:
+    def _draw(self, vertices, out8, outf, pose=None, jaw=None, gaze=None) -> None:
         skin = (
             self.face.vertices
             if vertices is None
             else _check_vertices(vertices, self.face.n_vertices)
         )
         sc = self.scene
-        pos = self.positions(skin, jaw)
+        pos = self.positions(skin, jaw, gaze)
         rot = None
         if pose is not None:
             rot, shift = _check_pose(pose)
@@ -396,6 +432,10 @@ class Renderer:
         normals = np.empty_like(pos)
         vertex_normals_numba(pos[: sc.n_dynamic], sc.dyn_tris, normals[: sc.n_dynamic])
         normals[sc.n_dynamic :] = sc.normals_static
+        if gaze is not None:
+            g = gaze_rotation(gaze)
+            for a, b, _ in self._eyeballs:
+                normals[a:b] = normals[a:b] @ g.T
         if jaw is not None:
             jrot = np.asarray(jaw[0], dtype=np.float64)
             normals[sc.n_jaw_first :] = normals[sc.n_jaw_first :] @ jrot.T
