@@ -127,12 +127,10 @@ def spring_forces_numba(x, si, sj, rest, mat_id, mat, law, f):
 @njit(cache=True, parallel=True)
 def spring_forces_parallel(x, si, sj, rest, mat_id, mat, law, f, buffers):
     """Like :func:`spring_forces_numba` on all cores: each thread owns a contiguous range of
-    springs and a private force buffer (``buffers``: (T, N, 3)), summed at the end; each range
-    through :func:`spring_forces_split` (the coefficients four springs at a time)."""
+    springs and a private force buffer (``buffers``: (T, N, 3)), summed at the end."""
     nt = buffers.shape[0]
     n = x.shape[0]
     ns = si.shape[0]
-    work = np.empty((nt, SPRING_WORK * SPRING_CHUNK))
     for t in prange(nt):
         b = buffers[t]
         for q in range(n):
@@ -141,7 +139,7 @@ def spring_forces_parallel(x, si, sj, rest, mat_id, mat, law, f, buffers):
             b[q, 2] = 0.0
         k0 = (ns * t) // nt
         k1 = (ns * (t + 1)) // nt
-        spring_forces_split(x, si, sj, rest, mat_id, mat, law, k0, k1, b, work[t])
+        spring_forces_range(x, si, sj, rest, mat_id, mat, law, k0, k1, b)
     # reduce over threads, parallel over nodes
     for q in prange(n):
         for t in range(nt):
@@ -359,77 +357,60 @@ def element_volumes_numba(x, elems, sign, out):
 # ---------------------------------------------------------------------------------------------
 
 
-#: springs per chunk of :func:`spring_forces_split` (its scratch, SPRING_WORK rows of this many
-#: float64, ~16 kB, stays in the L1 cache)
-SPRING_CHUNK = 256
-#: rows of that scratch: r_k (3), l_k, alpha_k, beta_k, e^c_k, c_k
-SPRING_WORK = 8
+def spring_constants(mat, mat_id, rest):
+    """Per-spring constants of eq. (2) for :func:`spring_forces_split`: (alpha, beta, e^c),
+    each (S,) float64, with e^c = strain_c * l_k (mm) the same product :func:`spring_magnitude`
+    forms."""
+    alpha = np.ascontiguousarray(mat[mat_id, 0], dtype=np.float64)
+    beta = np.ascontiguousarray(mat[mat_id, 1], dtype=np.float64)
+    ec = np.ascontiguousarray(mat[mat_id, 2] * rest, dtype=np.float64)
+    return alpha, beta, ec
 
 
 @njit(cache=True, error_model="numpy")
-def _spring_chunk_coefficients(w, law):
-    """c_k = |s_k| / |r_k| (eq. 1-2) for a chunk of SPRING_CHUNK springs, lane by lane, from
-    rows 0-2 (r_k), 3 (l_k), 4 (alpha), 5 (beta), 6 (e^c) of ``w`` into row 7. A branch-free
-    loop over one array at constant offsets: vectorised, with no run-time overlap test."""
-    c = SPRING_CHUNK
-    for q in range(c):
-        rx = w[q]
-        ry = w[c + q]
-        rz = w[2 * c + q]
-        d = np.sqrt(rx * rx + ry * ry + rz * rz)
-        e = d - w[3 * c + q]
-        a = w[4 * c + q]
-        ec = w[6 * c + q]
-        lo = a * e
-        if law == LAW_PAPER:
-            hi = w[5 * c + q] * e
-        else:
-            hi = a * ec + w[5 * c + q] * (e - ec)
-        m = lo if e <= ec else hi
-        g = m / d
-        w[7 * c + q] = g if d >= MIN_SPRING_LENGTH else 0.0
-
-
-@njit(cache=True, error_model="numpy")
-def spring_forces_split(x, si, sj, rest, mat_id, mat, law, k0, k1, f, work):
+def spring_forces_split(x, si, sj, rest, alpha, beta, ec, law, k0, k1, rx, ry, rz, coef, f):
     """Add the forces of springs ``k0 .. k1-1`` to ``f`` (N, 3): the same values, added in the
-    same order, as :func:`spring_forces_range`, a chunk of :data:`SPRING_CHUNK` springs at a
-    time: their vectors r_k and constants gathered into ``work``
-    ((SPRING_WORK * SPRING_CHUNK,) float64 scratch), their coefficients c_k = |s_k| / |r_k|
-    computed there four at a time (the square root and the division are most of a spring's
-    cost), then s_k = c_k r_k added to both ends. A spring shorter than
-    :data:`MIN_SPRING_LENGTH` adds nothing."""
-    c = SPRING_CHUNK
-    for c0 in range(k0, k1, c):
-        n = min(c, k1 - c0)
-        for q in range(n):
-            k = c0 + q
-            i = si[k]
-            j = sj[k]
-            m = mat_id[k]
-            lk = rest[k]
-            work[q] = x[j, 0] - x[i, 0]
-            work[c + q] = x[j, 1] - x[i, 1]
-            work[2 * c + q] = x[j, 2] - x[i, 2]
-            work[3 * c + q] = lk
-            work[4 * c + q] = mat[m, 0]
-            work[5 * c + q] = mat[m, 1]
-            work[6 * c + q] = mat[m, 2] * lk  # e^c as spring_magnitude forms it
-        _spring_chunk_coefficients(work, law)  # the lanes past n compute on stale data, unused
-        for q in range(n):
-            k = c0 + q
-            g = work[7 * c + q]
-            i = si[k]
-            j = sj[k]
-            fx = g * work[q]
-            fy = g * work[c + q]
-            fz = g * work[2 * c + q]
-            f[i, 0] += fx
-            f[i, 1] += fy
-            f[i, 2] += fz
-            f[j, 0] -= fx
-            f[j, 1] -= fy
-            f[j, 2] -= fz
+    same order, as :func:`spring_forces_range`, in three passes: the spring vectors r_k gathered
+    into ``rx, ry, rz`` ((S,) scratch, entries k0..k1-1 written); the coefficients
+    c_k = |s_k| / |r_k| of eq. (1)-(2) into ``coef`` (a branch-free loop over contiguous arrays,
+    vectorised: the square root and the division, the slow part of a spring, go four at a
+    time); the scatter s_k = c_k r_k to both ends. ``alpha, beta, ec`` from
+    :func:`spring_constants`. A spring shorter than :data:`MIN_SPRING_LENGTH` adds nothing."""
+    for k in range(k0, k1):
+        i = si[k]
+        j = sj[k]
+        rx[k] = x[j, 0] - x[i, 0]
+        ry[k] = x[j, 1] - x[i, 1]
+        rz[k] = x[j, 2] - x[i, 2]
+    if law == LAW_PAPER:
+        for k in range(k0, k1):
+            d = np.sqrt(rx[k] * rx[k] + ry[k] * ry[k] + rz[k] * rz[k])
+            e = d - rest[k]
+            lo = alpha[k] * e
+            hi = beta[k] * e
+            g = (lo if e <= ec[k] else hi) / d
+            coef[k] = g if d >= MIN_SPRING_LENGTH else 0.0
+    else:
+        for k in range(k0, k1):
+            d = np.sqrt(rx[k] * rx[k] + ry[k] * ry[k] + rz[k] * rz[k])
+            e = d - rest[k]
+            lo = alpha[k] * e
+            hi = alpha[k] * ec[k] + beta[k] * (e - ec[k])
+            g = (lo if e <= ec[k] else hi) / d
+            coef[k] = g if d >= MIN_SPRING_LENGTH else 0.0
+    for k in range(k0, k1):
+        g = coef[k]
+        i = si[k]
+        j = sj[k]
+        fx = g * rx[k]
+        fy = g * ry[k]
+        fz = g * rz[k]
+        f[i, 0] += fx
+        f[i, 1] += fy
+        f[i, 2] += fz
+        f[j, 0] -= fx
+        f[j, 1] -= fy
+        f[j, 2] -= fz
 
 
 #: prisms per chunk of :func:`prism_volume_forces_split` (its scratch, PRISM_WORK rows of this
