@@ -191,3 +191,25 @@ def test_step_change_energy_never_grows_and_motion_is_bounded(default_tissue, se
     assert np.all(speed <= v_max)
     assert np.all(travel <= s.t * v_max)
     assert travel.max() > 0.1  # the skin did follow the targets
+
+
+def test_early_stop_at_the_same_step_as_the_serial_reference(default_tissue):
+    """The team kernel tests a step's max |v| dt only once every block has finished it (at the
+    start of the next step, or after the run): it stops at the same step as the serial kernel,
+    with the same last move, for any number of blocks."""
+    m, tg = _step_change(default_tissue, seed=7, amp_mm=1.0)
+    x0, v0 = _start(m, tg, seed=7, v_scale=20.0)
+    xs, vs = x0.copy(), v0.copy()
+    tol = 1e-3  # mm per step: reached after several hundred steps
+    ref = run_rk2_serial(m, xs, vs, 20_000, m.stable_dt, tol)
+    assert 100 < ref[0] < 20_000 and ref[1] < tol and ref[2] == -1
+    for nb in (1, 2, 3):
+        x, v = x0.copy(), v0.copy()
+        got = run_rk2(m, x, v, 20_000, m.stable_dt, tol, n_blocks=nb)
+        assert got[0] == ref[0] and got[2] == -1
+        assert got[1] == pytest.approx(ref[1], rel=1e-6)
+        np.testing.assert_allclose(x, xs, rtol=0, atol=1e-9 * np.abs(xs - x0).max())
+    # a run that ends exactly at the step that reaches the tolerance reports it as the last
+    x, v = x0.copy(), v0.copy()
+    got = run_rk2(m, x, v, ref[0], m.stable_dt, tol, n_blocks=2)
+    assert got[0] == ref[0] and got[1] == pytest.approx(ref[1], rel=1e-6)
