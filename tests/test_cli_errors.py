@@ -485,8 +485,9 @@ def test_odd_video_size_is_said(tmp_path, capsys):
     argv = ["synth", "--au", "12=0.5", "--duration", "0.1", "--fps", "10", "--ssaa", "1"]
     code, _, err = run_cli(capsys, [*argv, "--width", 33, "--height", 32, "--quiet", "-o", out])
     assert code == 0
-    assert len(err) == 1 and "32x32 pixels, not 33x32" in err[0], err
-    assert iio.imread(out, plugin="pyav").shape[1:3] == (32, 32)
+    # padded, not cropped: every rendered column is in the file, the last one twice
+    assert len(err) == 1 and "34x32 pixels, not 33x32 (the last column repeated)" in err[0], err
+    assert iio.imread(out, plugin="pyav").shape[1:3] == (32, 34)
 
 
 def test_bench_json_path_checked_before_the_run(tmp_path, capsys):

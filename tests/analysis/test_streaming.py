@@ -281,3 +281,21 @@ def test_odd_size_video_is_analysed_with_every_pixel_in_the_overlay(face_clip, t
     first = next(iter(ov))
     # the frame's last column (x = 128) is there, and repeated in the padding
     assert np.abs(first[: SIZE - 1, SIZE].astype(int) - odd[0][:, SIZE]).mean() < 12
+
+
+@pytest.mark.slow
+def test_memory_stays_flat_over_a_long_video(face_clip, tmp_path):
+    """``myoface analyze`` on 1200 frames: the peak resident memory grows by less than the
+    issue's bound, 20 MB per 1000 frames, after the warm-up (the benchmark's measurement,
+    analysis.rss_mb_growth_per_1000_frames, on a synthetic clip). Keeping each frame's
+    measurement as before (a few kB with its contours) would not break it at this length;
+    keeping each frame (48 kB here) would, by far."""
+    from myoface.bench.analysis import _rss_per_frame
+
+    fm, frames, init = face_clip
+    n = 1200
+    clip = tmp_path / "long.mp4"
+    _write_clip(frames, clip, n)
+    got = _rss_per_frame(clip, tmp_path / "out", "snakes", n, args=["--init", str(init)])
+    assert got["frames"] == n
+    assert got["mb_per_1000_frames"] < 20, got

@@ -251,22 +251,24 @@ def _rss_mb(pid: int) -> float | None:
         return None
 
 
-def _rss_per_frame(video, out, tracker: str, n_frames: int) -> dict:
-    """Run ``myoface analyze video -o out --tracker tracker`` in a subprocess and sample its
+def _rss_per_frame(video, out, tracker: str, n_frames: int, args=()) -> dict:
+    """Run ``myoface analyze video -o out --tracker tracker *args`` in a subprocess and sample its
     resident memory every 0.1 s against the rows its contractions.csv holds then (the
     analysis streams them); the growth of the peak resident memory per 1000 frames is the
     least-squares slope after the warm-up (the first quarter of the frames, at least 100:
     the model's set-up, the first compilations and the encoders' buffers)."""
     import subprocess
     import sys
+    import tempfile
     import time
 
     cmd = [sys.executable, "-m", "myoface", "analyze", str(video), "-o", str(out)]
-    cmd += ["--tracker", tracker, "--quiet"]
+    cmd += ["--tracker", tracker, "--quiet", *args]
     csv_path = out / "contractions.csv"
     samples, rows, offset, peak = [], -1, 0, 0.0  # rows: without the header
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    errors = tempfile.TemporaryFile()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=errors)
     try:
         while proc.poll() is None:
             rss = _rss_mb(proc.pid)
@@ -281,11 +283,13 @@ def _rss_per_frame(video, out, tracker: str, n_frames: int) -> dict:
                 if 0 <= rows < n_frames:  # the frames' loop (not the plot after it)
                     samples.append((rows, peak))
             time.sleep(0.1)
-        err = proc.stderr.read().decode(errors="replace").strip()
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+        errors.seek(0)
+        err = errors.read().decode(errors="replace").strip()
+        errors.close()
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
         raise RuntimeError(f"myoface analyze failed: {err.splitlines()[-1:] or proc.returncode}")
