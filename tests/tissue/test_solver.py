@@ -416,8 +416,8 @@ def test_relaxed_states_carry_where_they_came_from(fm):
 
 
 def test_energy_gradient_hessian_in_one_pass_equals_the_separate_kernels(fm):
-    """The Newton loop's fused pass (energy, gradient and the springs' Hessian) against the
-    energy-gradient kernel and the springs' Hessian assembly, at a state far from rest."""
+    """The Newton loop's fused pass (energy, gradient, the springs' and the prisms' Hessians)
+    against the energy-gradient kernel and the separate assemblies, at a state far from rest."""
     from myoface.tissue.hessian import add_prism_hessian, add_spring_hessian
     from myoface.tissue.solver import energy_gradient_hessian_free
 
@@ -426,21 +426,37 @@ def test_energy_gradient_hessian_in_one_pass_equals_the_separate_kernels(fm):
     nf = pat.n_free
     x = _perturbed(tm, 0.5, seed=8)
     en, g = _free_energy_gradient(tm, x)
-    d0, l0 = np.zeros(9 * nf), np.zeros(9 * pat.nl)
-    add_prism_hessian(x, *pat.prism_args(), pat.pslots, pat.prev, d0, l0)
-    d1, l1 = d0.copy(), l0.copy()
-    add_spring_hessian(x, *pat.spring_args(), pat.sfi, pat.sfj, pat.soff, d1, l1)
-    d2, l2 = d0.copy(), l0.copy()
+    dp, lp = np.zeros(9 * nf), np.zeros(9 * pat.nl)
+    add_prism_hessian(x, *pat.prism_args(), pat.pslots, pat.prev, dp, lp)
+    ds, ls = np.zeros(9 * nf), np.zeros(9 * pat.nl)
+    add_spring_hessian(x, *pat.spring_args(), pat.sfi, pat.sfj, pat.soff, ds, ls)
+    d2, l2 = np.zeros(9 * nf), np.zeros(9 * pat.nl)
+    dp2, lp2 = np.zeros(9 * nf), np.zeros(9 * pat.nl)
     g2 = np.empty((nf, 3))
     en2 = energy_gradient_hessian_free(
-        x, *pat.spring_args(), pat.sfi, pat.sfj, pat.soff, *pat.prism_args(), g2, True, True, d2, l2
+        x,
+        *pat.spring_args(),
+        pat.sfi,
+        pat.sfj,
+        pat.soff,
+        *pat.prism_args(),
+        g2,
+        True,
+        True,
+        d2,
+        l2,
+        True,
+        pat.pslots,
+        pat.prev,
+        dp2,
+        lp2,
     )
-    # the same sums in the same order (fastmath may contract them differently)
+    # the same sums (fastmath may contract them differently: rounding only)
     assert en2 == pytest.approx(en, rel=1e-12)
-    np.testing.assert_allclose(g2.reshape(-1), g, rtol=0, atol=1e-10 * np.abs(g).max())
-    np.testing.assert_allclose(d2, d1, rtol=0, atol=1e-10 * np.abs(d1).max())
-    np.testing.assert_allclose(l2, l1, rtol=0, atol=1e-10 * np.abs(l1).max())
-    # and the full Hessian is the reference assembly's
+    for got, ref in ((g2.reshape(-1), g), (d2, ds), (l2, ls), (dp2, dp), (lp2, lp)):
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10 * np.abs(ref).max())
+    # and together they are the reference assembly's Hessian
     dref, lref = np.empty(9 * nf), np.empty(9 * pat.nl)
     pat.assemble(x, dref, lref)
-    np.testing.assert_allclose(d2, dref, rtol=0, atol=1e-10 * np.abs(dref).max())
+    np.testing.assert_allclose(d2 + dp2, dref, rtol=0, atol=1e-10 * np.abs(dref).max())
+    np.testing.assert_allclose(l2 + lp2, lref, rtol=0, atol=1e-10 * np.abs(lref).max())

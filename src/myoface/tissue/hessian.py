@@ -737,66 +737,72 @@ def add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, pslots, prev, dvals,
             gr[t, 1] -= g1y + g2y + g3y
             gr[t, 2] -= g1z + g2z + g3z
         dv = vsign * vol / 6.0 - rest_vol[q]
-        # Gauss-Newton term 2 kv (vsign/6)^2 g_a g_b^T: scale the gradients by its square root
-        sw = np.sqrt(2.0 * kv[q]) * abs(vsign) / 6.0
-        fr = efree[q]
-        for a in range(6):
-            gr[a, 0] *= sw
-            gr[a, 1] *= sw
-            gr[a, 2] *= sw
-            fa = fr[a]
-            if fa >= 0:
-                o = 9 * fa
-                for r in range(3):
-                    for c3 in range(3):
-                        dvals[o + 3 * r + c3] += gr[a, r] * gr[a, c3]
-        for p in range(15):
-            wv[p, 0] = 0.0
-            wv[p, 1] = 0.0
-            wv[p, 2] = 0.0
-        for r in range(18):
-            p = PRISM_SKEW_NB[r, 0]
-            sg = PRISM_SKEW_NB[r, 1]
-            ik = PRISM_SKEW_NB[r, 2]
-            il = PRISM_SKEW_NB[r, 3]
-            wv[p, 0] += sg * (pts[ik, 0] - pts[il, 0])
-            wv[p, 1] += sg * (pts[ik, 1] - pts[il, 1])
-            wv[p, 2] += sg * (pts[ik, 2] - pts[il, 2])
-        w2 = 2.0 * kv[q] * dv * vsign / 6.0
-        sl = pslots[q]
-        rv = prev[q]
-        for p in range(15):
-            o = sl[p]
-            if o < 0:
-                continue
-            o *= 9
-            if (rv >> p) & 1:  # the stored block is H_ba: its skew part changes sign
-                a = PRISM_PAIRS_NB[p, 1]
-                b = PRISM_PAIRS_NB[p, 0]
-                sg = -w2
-            else:
-                a = PRISM_PAIRS_NB[p, 0]
-                b = PRISM_PAIRS_NB[p, 1]
-                sg = w2
-            w0 = sg * wv[p, 0]
-            w1 = sg * wv[p, 1]
-            w2_ = sg * wv[p, 2]
-            ga0 = gr[a, 0]
-            ga1 = gr[a, 1]
-            ga2 = gr[a, 2]
-            gb0 = gr[b, 0]
-            gb1 = gr[b, 1]
-            gb2 = gr[b, 2]
-            # + [w]x = [[0, -w2, w1], [w2, 0, -w0], [-w1, w0, 0]]
-            lvals[o] += ga0 * gb0
-            lvals[o + 1] += ga0 * gb1 - w2_
-            lvals[o + 2] += ga0 * gb2 + w1
-            lvals[o + 3] += ga1 * gb0 + w2_
-            lvals[o + 4] += ga1 * gb1
-            lvals[o + 5] += ga1 * gb2 - w0
-            lvals[o + 6] += ga2 * gb0 - w1
-            lvals[o + 7] += ga2 * gb1 + w0
-            lvals[o + 8] += ga2 * gb2
+        add_one_prism_hessian(
+            pts, gr, wv, dv, kv[q], vsign, efree[q], pslots[q], prev[q], dvals, lvals
+        )
+
+
+@njit(cache=True, nogil=True, fastmath=True, inline="always")
+def add_one_prism_hessian(pts, gr, wv, dv, kvq, vsign, fr, sl, rv, dvals, lvals):
+    """One prism's part of :func:`add_prism_hessian`: its nodes ``pts`` (6, 3) mm, the
+    gradient of 6 times its volume ``gr`` (6, 3) (scaled in place), its volume change ``dv``
+    (mm^3) and weight ``kvq``; ``wv`` (15, 3): work."""
+    sw = np.sqrt(2.0 * kvq) * abs(vsign) / 6.0
+    for a in range(6):
+        gr[a, 0] *= sw
+        gr[a, 1] *= sw
+        gr[a, 2] *= sw
+        fa = fr[a]
+        if fa >= 0:
+            o = 9 * fa
+            for r in range(3):
+                for c3 in range(3):
+                    dvals[o + 3 * r + c3] += gr[a, r] * gr[a, c3]
+    for p in range(15):
+        wv[p, 0] = 0.0
+        wv[p, 1] = 0.0
+        wv[p, 2] = 0.0
+    for r in range(18):
+        p = PRISM_SKEW_NB[r, 0]
+        sg = PRISM_SKEW_NB[r, 1]
+        ik = PRISM_SKEW_NB[r, 2]
+        il = PRISM_SKEW_NB[r, 3]
+        wv[p, 0] += sg * (pts[ik, 0] - pts[il, 0])
+        wv[p, 1] += sg * (pts[ik, 1] - pts[il, 1])
+        wv[p, 2] += sg * (pts[ik, 2] - pts[il, 2])
+    w2 = 2.0 * kvq * dv * vsign / 6.0
+    for p in range(15):
+        o = sl[p]
+        if o < 0:
+            continue
+        o *= 9
+        if (rv >> p) & 1:  # the stored block is H_ba: its skew part changes sign
+            a = PRISM_PAIRS_NB[p, 1]
+            b = PRISM_PAIRS_NB[p, 0]
+            sg = -w2
+        else:
+            a = PRISM_PAIRS_NB[p, 0]
+            b = PRISM_PAIRS_NB[p, 1]
+            sg = w2
+        w0 = sg * wv[p, 0]
+        w1 = sg * wv[p, 1]
+        w2_ = sg * wv[p, 2]
+        ga0 = gr[a, 0]
+        ga1 = gr[a, 1]
+        ga2 = gr[a, 2]
+        gb0 = gr[b, 0]
+        gb1 = gr[b, 1]
+        gb2 = gr[b, 2]
+        # + [w]x = [[0, -w2, w1], [w2, 0, -w0], [-w1, w0, 0]]
+        lvals[o] += ga0 * gb0
+        lvals[o + 1] += ga0 * gb1 - w2_
+        lvals[o + 2] += ga0 * gb2 + w1
+        lvals[o + 3] += ga1 * gb0 + w2_
+        lvals[o + 4] += ga1 * gb1
+        lvals[o + 5] += ga1 * gb2 - w0
+        lvals[o + 6] += ga2 * gb0 - w1
+        lvals[o + 7] += ga2 * gb1 + w0
+        lvals[o + 8] += ga2 * gb2
 
 
 PRISM_SKEW_NB = PRISM_SKEW  # module-level constants numba freezes into the compiled code

@@ -16,10 +16,9 @@ module finds it by Newton's method on the *exact* Hessian of E, each Newton syst
 2. **Newton steps** — the Hessian (springs with their tangent stiffness and unclipped geometric
    term, the volume penalty with its second-derivative term) assembled in symmetric 3x3-block
    storage over the springs and prisms that touch a free node (one pass per spring and per
-   prism node pair; the springs' part in the same pass as the energy and gradient at the
-   point, when the step that reached it was too long for the next one to keep the Hessian;
-   the prisms' part, two thirds of the cost, is kept from step to step until a node has moved
-   by PRISM_LAG_MM); CG on it preconditioned by a symmetric block Gauss-Seidel sweep of the
+   prism node pair; in the same pass as the energy and gradient at the point, when the step
+   that reached it was too long for the next one to keep the Hessian; the prisms' part, two
+   thirds of the cost, is kept from step to step until a node has moved by PRISM_LAG_MM); CG on it preconditioned by a symmetric block Gauss-Seidel sweep of the
    Hessian itself, to a relative accuracy eta that tightens as the gradient falls (Eisenstat &
    Walker 1996, choice 2, between ETA_MIN and ETA_MAX); a direction of negative curvature ends
    the CG early (Steihaug 1983); an Armijo backtracking line search on E keeps every step a
@@ -51,7 +50,8 @@ sweeps are bound by their dependencies, not by memory).
 
 Measured (default face, 2026-11-30, the working tree's muscle set, a machine shared with other
 work at load 7-12, thread CPU, against the solver before the extrapolated start, the fused
-springs' pass and the 32-bit tables, in the same run): neutral -> surprise, 7 Newton steps,
+springs' pass and the 32-bit tables, in the same run; the prisms' part fused into the pass
+too measured within the noise of this, 13.5 vs 14.7 ms cold, 4.9 vs 6.7 ms warm): neutral -> surprise, 7 Newton steps,
 33 CG iterations, 6 assemblies (5 of the prisms' part) either way, 16.8 -> 15.5 ms median
 (11.7 -> 10.4 ms 10th percentile), 3.6e-4 mm from the L-BFGS reference; one frame of a 25 fps
 smile from the previous frame's equilibrium, means over 24 frames: 3.5 -> 2.8 Newton steps,
@@ -101,6 +101,7 @@ from myoface.tissue.hessian import (
     BlockPattern,
     SymmetricPattern,
     _add_sym6,
+    add_one_prism_hessian,
     add_prism_hessian,
     add_spring_hessian,
     assemble_block_hessian,
@@ -292,6 +293,11 @@ def energy_gradient_free(
         False,
         none,
         none,
+        False,
+        np.empty((0, 15), np.int32),
+        np.empty(0, np.int32),
+        none,
+        none,
     )
 
 
@@ -318,10 +324,17 @@ def energy_gradient_hessian_free(
     want_h,
     dvals,
     lvals,
+    want_p,
+    pslots,
+    prev,
+    dprism,
+    lprism,
 ):
     """:func:`energy_gradient_free`, and, when ``want_h``, the springs' Hessian
     (:func:`~myoface.tissue.hessian.add_spring_hessian`) added to ``dvals``, ``lvals`` in the
-    same pass over the springs (their lengths and phases computed once for both)."""
+    same pass over the springs (their lengths and phases computed once for both); when
+    ``want_p`` (and ``want``) the prisms' Hessian (:func:`~myoface.tissue.hessian.
+    add_prism_hessian`) added to ``dprism``, ``lprism`` in the same pass over the prisms."""
     if want:
         grad[:, :] = 0.0
     en = 0.0
@@ -375,27 +388,29 @@ def energy_gradient_hessian_free(
                 _add_sym6(dvals, fj, h0, h1, h2, h4, h5, h8)
                 _add_sym6(lvals, soff[k], -h0, -h1, -h2, -h4, -h5, -h8)
     gr = np.empty((6, 3))
+    pts = np.empty((6, 3))
+    wv = np.empty((15, 3))
     for q in range(elems.shape[0]):
         el = elems[q]
         vol = 0.0
         for a in range(6):
+            i = el[a]
+            pts[a, 0] = x[i, 0]
+            pts[a, 1] = x[i, 1]
+            pts[a, 2] = x[i, 2]
             gr[a, 0] = 0.0
             gr[a, 1] = 0.0
             gr[a, 2] = 0.0
         for t in range(3):  # tetrahedron t of the prism is slots (t, t+1, t+2, t+3) (PRISM_TETS)
-            i0 = el[t]
-            i1 = el[t + 1]
-            i2 = el[t + 2]
-            i3 = el[t + 3]
-            ax = x[i1, 0] - x[i0, 0]
-            ay = x[i1, 1] - x[i0, 1]
-            az = x[i1, 2] - x[i0, 2]
-            bx = x[i2, 0] - x[i0, 0]
-            by = x[i2, 1] - x[i0, 1]
-            bz = x[i2, 2] - x[i0, 2]
-            cx = x[i3, 0] - x[i0, 0]
-            cy = x[i3, 1] - x[i0, 1]
-            cz = x[i3, 2] - x[i0, 2]
+            ax = pts[t + 1, 0] - pts[t, 0]
+            ay = pts[t + 1, 1] - pts[t, 1]
+            az = pts[t + 1, 2] - pts[t, 2]
+            bx = pts[t + 2, 0] - pts[t, 0]
+            by = pts[t + 2, 1] - pts[t, 1]
+            bz = pts[t + 2, 2] - pts[t, 2]
+            cx = pts[t + 3, 0] - pts[t, 0]
+            cy = pts[t + 3, 1] - pts[t, 1]
+            cz = pts[t + 3, 2] - pts[t, 2]
             g1x = by * cz - bz * cy
             g1y = bz * cx - bx * cz
             g1z = bx * cy - by * cx
@@ -430,6 +445,10 @@ def energy_gradient_hessian_free(
                     grad[fa, 0] += coef * gr[a, 0]
                     grad[fa, 1] += coef * gr[a, 1]
                     grad[fa, 2] += coef * gr[a, 2]
+            if want_p:  # scales gr in place: after its use for the gradient
+                add_one_prism_hessian(
+                    pts, gr, wv, dv, kv[q], vsign, fr, pslots[q], prev[q], dprism, lprism
+                )
     return en
 
 
@@ -1051,25 +1070,13 @@ def _newton(
     x_prism = np.empty_like(x)
     # the Hessian at x, assembled with the energy and gradient there (the first one, and at a
     # point where the last step was too long for the next one to keep the Hessian)
-    n_prism = _prism_part(
-        x,
-        free,
-        x_prism,
-        False,
-        prism_lag,
-        elems,
-        efree,
-        rest_vol,
-        kv,
-        vsign,
-        pslots,
-        prev,
-        dprism,
-        lprism,
-    )
+    dprism[:] = 0.0
+    lprism[:] = 0.0
+    x_prism[:, :] = x
+    n_prism = 1
     have_prism = True
-    dvals[:] = dprism
-    lvals[:] = lprism
+    dvals[:] = 0.0
+    lvals[:] = 0.0
     energy = energy_gradient_hessian_free(
         x,
         si,
@@ -1092,7 +1099,14 @@ def _newton(
         True,
         dvals,
         lvals,
+        True,
+        pslots,
+        prev,
+        dprism,
+        lprism,
     )
+    dvals += dprism
+    lvals += lprism
     have_h = True
     _flatten(grad, g)
     gnorm_prev = np.sqrt(g @ g)
@@ -1161,26 +1175,17 @@ def _newton(
         small = -slope <= roundoff * max(abs(energy), 1.0)
         while True:
             _moved(x, free, step, t, xn)
-            if want_h and t == 1.0:
-                n_prism += _prism_part(
-                    xn,
-                    free,
-                    x_prism,
-                    have_prism,
-                    prism_lag,
-                    elems,
-                    efree,
-                    rest_vol,
-                    kv,
-                    vsign,
-                    pslots,
-                    prev,
-                    dprism,
-                    lprism,
-                )
+            fuse = want_h and t == 1.0
+            due = fuse and (not have_prism or _largest_move(xn, free, x_prism) > prism_lag)
+            if due:
+                dprism[:] = 0.0
+                lprism[:] = 0.0
+                x_prism[:, :] = xn
                 have_prism = True
-                dvals[:] = dprism
-                lvals[:] = lprism
+                n_prism += 1
+            if fuse:
+                dvals[:] = 0.0
+                lvals[:] = 0.0
             en = energy_gradient_hessian_free(
                 xn,
                 si,
@@ -1200,13 +1205,21 @@ def _newton(
                 vsign,
                 grad,
                 True,
-                want_h and t == 1.0,
+                fuse,
                 dvals,
                 lvals,
+                due,
+                pslots,
+                prev,
+                dprism,
+                lprism,
             )
+            if fuse:
+                dvals += dprism
+                lvals += lprism
             n_energy += 1
             if small or en <= energy + armijo_c * t * slope or t < 1e-4:
-                have_h = want_h and t == 1.0
+                have_h = fuse
                 break
             curv = en - energy - slope * t
             tq = -slope * t * t / (2.0 * curv) if curv > 0 else 0.5 * t
