@@ -50,8 +50,9 @@ sweeps are bound by their dependencies, not by memory).
 
 Measured (default face, 2026-11-30, the working tree's muscle set, a machine shared with other
 work at load 7-12, thread CPU, against the solver before the extrapolated start, the fused
-springs' pass and the 32-bit tables, in the same run; the prisms' part fused into the pass
-too measured within the noise of this, 13.5 vs 14.7 ms cold, 4.9 vs 6.7 ms warm): neutral -> surprise, 7 Newton steps,
+springs' pass and the 32-bit tables, in the same run; a second run with the prisms' part
+fused into that pass too: 14.7 -> 13.5 ms cold, 6.7 -> 4.9 ms warm, its own gain within the
+noise): neutral -> surprise, 7 Newton steps,
 33 CG iterations, 6 assemblies (5 of the prisms' part) either way, 16.8 -> 15.5 ms median
 (11.7 -> 10.4 ms 10th percentile), 3.6e-4 mm from the L-BFGS reference; one frame of a 25 fps
 smile from the previous frame's equilibrium, means over 24 frames: 3.5 -> 2.8 Newton steps,
