@@ -106,6 +106,8 @@ class Synthesizer:
         self.state = model.rest_state()
         # the last state known to be the equilibrium of its contractions (the rest state is)
         self._settled = self.state
+        #: where the eyes look: None (ahead) or (yaw_rad, pitch_rad) (see Renderer.render)
+        self.gaze = None
 
     def _relax(self, c) -> None:
         t0 = time.perf_counter()
@@ -127,7 +129,9 @@ class Synthesizer:
         """Render the model's current skin (uint8 RGB)."""
         t0 = time.perf_counter()
         img = self.renderer.render(
-            self.model.skin_vertices(self.state), jaw=self.model.jaw_pose(self.state)
+            self.model.skin_vertices(self.state),
+            jaw=self.model.jaw_pose(self.state),
+            gaze=self.gaze,
         )
         if self.overlay == "muscles":
             ins, org = muscle_segments(self.model)
@@ -140,15 +144,20 @@ class Synthesizer:
         self._relax(contractions)
         return self.frame()
 
-    def frames(self, table: np.ndarray, times: Sequence[float]):
-        """Yield one image per row of ``table`` (T, M) at ``times`` (s)."""
+    def frames(self, table: np.ndarray, times: Sequence[float], gaze=None):
+        """Yield one image per row of ``table`` (T, M) at ``times`` (s); ``gaze`` (T, 2) rad,
+        optional: where the eyes look in each frame (:attr:`gaze`)."""
         times = np.asarray(times, dtype=np.float64)
         if self.dynamics == "quasistatic":
-            for c in table:
+            for k, c in enumerate(table):
+                if gaze is not None:
+                    self.gaze = tuple(gaze[k])
                 yield self.image(c)
             return
         prev = times[0]
         for k, c in enumerate(table):
+            if gaze is not None:
+                self.gaze = tuple(gaze[k])
             if k == 0:
                 self._relax(c)
             else:
@@ -168,6 +177,7 @@ class Synthesizer:
         compose: Callable[[int, np.ndarray], np.ndarray] | None = None,
         show_progress: bool = True,
         desc: str = "rendering",
+        gaze=None,
     ) -> Path:
         """Write one video frame per row of ``table`` (T, M) at ``times`` (s) (see
         :meth:`frames`, continuing from :attr:`state`) to ``path`` at ``fps``; returns the path.
@@ -176,11 +186,11 @@ class Synthesizer:
         rendered (:class:`~myoface.render.VideoWriter` with ``background=True``).
         ``compose(k, image)``, if given, returns the picture to write for frame ``k`` (e.g. the
         image beside an input video's frame). The encoding times land in
-        ``stats.encode_ms``.
+        ``stats.encode_ms``. ``gaze`` (T, 2) rad: see :meth:`frames`.
         """
         table = np.asarray(table, dtype=np.float64)
         frames = progress(
-            self.frames(table, times), total=len(table), desc=desc, enabled=show_progress
+            self.frames(table, times, gaze), total=len(table), desc=desc, enabled=show_progress
         )
         with VideoWriter(path, fps, background=True) as vw:
             for k, img in enumerate(frames):
@@ -195,10 +205,11 @@ class Synthesizer:
         fps: float = 30.0,
         show_progress: bool = True,
     ) -> Path:
-        """Render ``timeline`` to a video file at ``fps``, from the rest state; returns the
-        path."""
+        """Render ``timeline`` to a video file at ``fps``, from the rest state (its gaze events
+        turn the eyes); returns the path."""
         n = max(1, int(round(timeline.duration * fps)) + 1)
         times = np.arange(n) / fps
         table = timeline.contractions(times, self.model.ids)
+        gaze = timeline.gaze(times) if timeline.has_gaze else None
         self.state = self.model.rest_state()
-        return self.write_video(table, times, path, fps, show_progress=show_progress)
+        return self.write_video(table, times, path, fps, show_progress=show_progress, gaze=gaze)

@@ -309,3 +309,30 @@ def test_gaze_turns_the_iris(fm):
     for bad in [(1.0, 0.0), (0.0, float("nan")), "up"]:
         with pytest.raises(MyofaceValueError, match="gaze"):
             r.render(skin, gaze=bad)
+
+
+def test_gaze_events_in_a_timeline_turn_the_eyes(fm):
+    from myoface.synth import Synthesizer
+
+    ev = {"kind": "gaze", "start": 0.0, "duration": 1.0, "onset": 0.2, "offset": 0.2}
+    tl = Timeline.from_dict({"event": [{**ev, "yaw_deg": 20.0}, {"kind": "blink", "start": 2.0}]})
+    g = tl.gaze([0.0, 0.5, 1.5])
+    np.testing.assert_allclose(g, [[0.0, 0.0], [np.deg2rad(20.0), 0.0], [0.0, 0.0]], atol=1e-12)
+    assert not tl.contractions([0.5], fm.ids).any()  # a gaze moves no muscle
+    assert Timeline.from_dict(tl.to_dict()).gaze([0.5])[0, 0] == pytest.approx(np.deg2rad(20.0))
+    with pytest.raises(MyofaceFormatError, match="pitch_deg"):
+        Timeline.from_dict({"event": [{**ev, "pitch_deg": 60.0}]})
+    with pytest.raises(MyofaceFormatError, match="unknown keys"):
+        Timeline.from_dict({"event": [{**ev, "kind": "au", "name": "12", "yaw_deg": 5.0}]})
+    # the synthesizer turns the eyes frame by frame, and nothing else changes
+    face = fm.face
+    cam = Camera.front(face.vertices, width=96, height=96)
+    syn = Synthesizer(fm, Renderer(face, cam, ssaa=1))
+    table = np.zeros((2, fm.n_muscles))
+    ahead, turned = syn.frames(table, [0.0, 0.5], gaze=np.array([[0.0, 0.0], [0.35, 0.0]]))
+    changed = np.abs(ahead.astype(int) - turned.astype(int)).max(axis=2) > 0
+    assert changed.sum() > 4
+    eyes = cam.project(face.vertices[np.r_[face.landmarks["eye_l"], face.landmarks["eye_r"]]])
+    rows, cols = np.nonzero(changed)
+    assert cols.min() >= eyes[:, 0].min() - 2 and cols.max() <= eyes[:, 0].max() + 2
+    assert rows.min() >= eyes[:, 1].min() - 2 and rows.max() <= eyes[:, 1].max() + 2

@@ -5,7 +5,7 @@ A timeline file (TOML or JSON) holds events::
     duration = 4.0            # optional: total length in s (default: the end of the last event)
 
     [[event]]
-    kind = "expression"       # expression | au | muscle | viseme | blink
+    kind = "expression"       # expression | au | muscle | viseme | blink | gaze
     name = "happiness"        # expression / viseme name, AU key ("12", "L12"), or muscle id
     start = 0.5               # s
     duration = 2.0            # s, onset + apex + offset
@@ -17,6 +17,10 @@ A blink is an event of its own: ``kind = "blink"`` with only ``start`` needed; `
 ``"both"`` (default), ``"L"`` or ``"R"`` (the subject's side), ``duration`` defaults to
 :data:`BLINK_DURATION_S` and the ramps to :data:`BLINK_ONSET_FRACTION` /
 :data:`BLINK_OFFSET_FRACTION` of it (the lids close faster than they open); it drives AU45.
+A gaze event turns the eyes: ``kind = "gaze"``, ``yaw_deg`` (towards the subject's left) and
+``pitch_deg`` (up), each within :data:`MAX_GAZE_DEG`, with ``start`` / ``duration`` /
+``onset`` / ``offset`` as for the others (the eyes go there and come back); overlapping gaze
+events are averaged by their envelopes (:meth:`Timeline.gaze`). It moves no muscle.
 
 JSON: ``{"duration": 4.0, "events": [{...}, ...]}``. Times are finite numbers of seconds, at
 most :data:`MAX_TIME_S` (a day); files are UTF-8.
@@ -42,7 +46,9 @@ import numpy as np
 from myoface.control import facs
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 
-KINDS = ("expression", "au", "muscle", "viseme", "blink")
+KINDS = ("expression", "au", "muscle", "viseme", "blink", "gaze")
+#: the largest gaze angle (degrees) of a gaze event (see myoface.render.renderer.MAX_GAZE_RAD)
+MAX_GAZE_DEG = 45.0
 #: a blink's default length (s) and its closing and reopening ramps (fractions of it): a
 #: spontaneous blink lasts a few tenths of a second and the lid goes down faster than it comes
 #: up (Evinger, Manning & Sibony, "Eyelid movements: mechanisms and normal data", Invest.
@@ -55,6 +61,7 @@ BLINK_OFFSET_FRACTION = 0.6
 #: blink sides (``name`` of a blink event) -> the AU45 key
 BLINK_SIDES = {"both": "45", "l": "L45", "r": "R45"}
 _EVENT_KEYS = {"kind", "name", "start", "duration", "intensity", "onset", "offset"}
+_GAZE_KEYS = {"yaw_deg", "pitch_deg"}
 #: default rise/decay of AU, muscle and viseme events, as a fraction of their duration
 DEFAULT_RAMP_FRACTION = 1.0 / 3.0
 #: the largest time (s) a timeline may name: a start, a duration, an onset or an offset
@@ -89,6 +96,8 @@ class Event:
     intensity: float = 1.0
     onset: float | None = None
     offset: float | None = None
+    yaw_deg: float | None = None
+    pitch_deg: float | None = None
 
     @property
     def ramps(self) -> tuple[float, float]:
@@ -129,6 +138,8 @@ class Event:
             return facs.au_contractions({self.name: self.intensity}, muscle_ids, strict=strict)
         if self.kind == "viseme":
             return facs.viseme_contractions(self.name, self.intensity, muscle_ids, strict=strict)
+        if self.kind == "gaze":
+            return np.zeros(len(muscle_ids))
         if self.kind == "blink":
             au = BLINK_SIDES[self.name.lower()]
             return facs.au_contractions({au: self.intensity}, muscle_ids, strict=strict)
@@ -166,7 +177,7 @@ def _number(ev: dict, key: str, where: str, default=None) -> float | None:
 def _event(ev, where: str) -> Event:
     if not isinstance(ev, dict):
         raise MyofaceFormatError(f"{where}: an event must be a table; got {_brief(ev)}")
-    unknown = set(ev) - _EVENT_KEYS
+    unknown = set(ev) - _EVENT_KEYS - (_GAZE_KEYS if ev.get("kind") == "gaze" else set())
     if unknown:
         raise MyofaceFormatError(
             f"{where}: unknown keys {sorted(unknown)} (allowed: {sorted(_EVENT_KEYS)})"
@@ -174,7 +185,7 @@ def _event(ev, where: str) -> Event:
     kind = ev.get("kind")
     if kind not in KINDS:
         raise MyofaceFormatError(f"{where}: kind must be one of {KINDS}; got {_brief(kind)}")
-    raw = ev.get("name", "both" if kind == "blink" else None)
+    raw = ev.get("name", {"blink": "both", "gaze": "gaze"}.get(kind))
     if isinstance(raw, bool) or not isinstance(raw, str | int):
         raise MyofaceFormatError(f"{where}: missing name (a string, or an AU number)")
     if isinstance(raw, int) and not 0 <= raw < 1000:
@@ -211,7 +222,16 @@ def _event(ev, where: str) -> Event:
             facs.viseme_contractions(name, 1.0, [], strict=False)
     except MyofaceValueError as exc:
         raise MyofaceFormatError(f"{where}: {exc}") from None
-    e = Event(kind, name, start, duration, inten, onset, offset)
+    angles = {}
+    if kind == "gaze":
+        for key in sorted(_GAZE_KEYS):
+            a = _number(ev, key, where, 0.0)
+            if abs(a) > MAX_GAZE_DEG:
+                raise MyofaceFormatError(
+                    f"{where}: {key} must be within +-{MAX_GAZE_DEG:g} degrees; got {a:g}"
+                )
+            angles[key] = a
+    e = Event(kind, name, start, duration, inten, onset, offset, **angles)
     a, o = e.ramps
     if a + o > duration + 1e-12:
         raise MyofaceFormatError(
@@ -288,6 +308,27 @@ class Timeline:
             text = "\n".join(lines)
         with atomic_output(p) as tmp:
             tmp.write_text(text)
+
+    @property
+    def has_gaze(self) -> bool:
+        return any(e.kind == "gaze" for e in self.events)
+
+    def gaze(self, times) -> np.ndarray:
+        """The eyes' gaze (T, 2) rad, (yaw, pitch), at ``times`` (T,) s: the gaze events'
+        angles averaged with their envelopes as weights (straight ahead where none is on; a
+        single event at weight w gives w times its angles)."""
+        t = np.atleast_1d(np.asarray(times, dtype=np.float64))
+        if t.ndim != 1 or not np.isfinite(t).all():
+            raise MyofaceValueError("times must be a finite 1-D array (s)")
+        total = np.zeros((len(t), 2))
+        weight = np.zeros(len(t))
+        for e in self.events:
+            if e.kind != "gaze":
+                continue
+            w = e.weight(t)
+            total += w[:, None] * np.deg2rad([e.yaw_deg or 0.0, e.pitch_deg or 0.0])[None, :]
+            weight += w
+        return total / np.maximum(weight, 1.0)[:, None]
 
     def contractions(self, times, muscle_ids: Sequence[str], *, strict: bool = True) -> np.ndarray:
         """Contraction vectors (T, M) at ``times`` (T,) s, in ``muscle_ids`` order."""
