@@ -114,3 +114,33 @@ def test_contact_acts_where_the_tissue_alone_interpenetrates(fm):
         n_through += contact_violations(raw, fm.dentition, pose) != clean
         assert contact_violations(fm.skin_vertices(st_), fm.dentition, pose) == clean
     assert n_through >= 1
+
+
+def test_mouth_drawn_only_through_the_lips_changes_nothing(fm, renderer, monkeypatch):
+    """Limiting the mouth's inside to the box of the lips' inner margin is an optimization: the
+    image is the same as when everything is rasterized."""
+    st_ = fm.relax(mf.au_contractions({26: 1.0, 12: 0.6}, fm.ids)).state
+    skin, jaw = fm.skin_vertices(st_), fm.jaw_pose(st_)
+    clipped = renderer.render(skin, jaw=jaw)
+    monkeypatch.setattr(Renderer, "_clip_to_mouth", lambda self, scr: None)
+    np.testing.assert_array_equal(renderer.render(skin, jaw=jaw), clipped)
+
+
+def test_teeth_placed_from_the_lips_of_any_face(fm):
+    """A larger face moved elsewhere (as a personal face may be) gets larger teeth there."""
+    from myoface.face.teeth import EDGE_HIDDEN_MM, LABIAL_GAP_MM, fit_dentition
+
+    face = fm.face
+    big = face.with_vertices(1.2 * face.vertices + np.array([3.0, -5.0, 2.0]))
+    d0, d1 = fit_dentition(face), fit_dentition(big)
+    assert d1.scale == pytest.approx(1.2 * d0.scale)
+    assert d1.upper.xc == pytest.approx(1.2 * d0.upper.xc + 3.0)
+    g = LABIAL_GAP_MM  # the teeth's front a fixed distance behind the lips, in any face
+    assert d1.upper.z0 == pytest.approx(1.2 * (d0.upper.z0 + g) - g + 2.0)
+    e = EDGE_HIDDEN_MM  # the edge a fixed distance above the lip's margin
+    assert d1.upper.edge_y == pytest.approx(1.2 * (d0.upper.edge_y - e) + e - 5.0)
+    # no lip landmarks, no teeth
+    from myoface.face import FaceMesh
+
+    bare = FaceMesh(face.vertices, face.triangles, face.uv, None, {})
+    assert fit_dentition(bare) is None
