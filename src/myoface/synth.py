@@ -210,6 +210,6 @@ class Synthesizer:
         n = max(1, int(round(timeline.duration * fps)) + 1)
         times = np.arange(n) / fps
         table = timeline.contractions(times, self.model.ids)
-        gaze = timeline.gaze(times) if timeline.has_gaze else None
+        gaze = timeline.gaze(times) if getattr(timeline, "has_gaze", False) else None
         self.state = self.model.rest_state()
         return self.write_video(table, times, path, fps, show_progress=show_progress, gaze=gaze)
