@@ -348,69 +348,12 @@ def element_volumes_numba(x, elems, sign, out):
 
 
 # ---------------------------------------------------------------------------------------------
-# the RK2 kernels' form of the same forces (:mod:`myoface.tissue.rk2`): the arithmetic is split
-# so that the compiler vectorises it (four float64 at a time), with no change to any value —
-# square roots and divisions are correctly rounded four at a time too, and no product is fused
-# into an add (numba does not contract without fastmath). ``error_model="numpy"``: a division by
-# zero gives inf/NaN (then discarded) instead of a Python exception, whose test in the loop would
-# stop the vectorisation.
+# the RK2 kernel's form of the volume forces (:mod:`myoface.tissue.rk2`): the arithmetic is split
+# from the gather and scatter so that the compiler vectorises it (four float64 at a time), with no
+# change to any value (no product is fused into an add: numba does not contract without
+# fastmath). ``error_model="numpy"``: no Python exception's test in the loop, which would stop
+# the vectorisation.
 # ---------------------------------------------------------------------------------------------
-
-
-def spring_constants(mat, mat_id, rest):
-    """Per-spring constants of eq. (2) for :func:`spring_forces_split`: (alpha, beta, e^c),
-    each (S,) float64, with e^c = strain_c * l_k (mm) the same product :func:`spring_magnitude`
-    forms."""
-    alpha = np.ascontiguousarray(mat[mat_id, 0], dtype=np.float64)
-    beta = np.ascontiguousarray(mat[mat_id, 1], dtype=np.float64)
-    ec = np.ascontiguousarray(mat[mat_id, 2] * rest, dtype=np.float64)
-    return alpha, beta, ec
-
-
-@njit(cache=True, error_model="numpy")
-def spring_forces_split(x, si, sj, rest, alpha, beta, ec, law, k0, k1, rx, ry, rz, coef, f):
-    """Add the forces of springs ``k0 .. k1-1`` to ``f`` (N, 3): the same values, added in the
-    same order, as :func:`spring_forces_range`, in three passes: the spring vectors r_k gathered
-    into ``rx, ry, rz`` ((S,) scratch, entries k0..k1-1 written); the coefficients
-    c_k = |s_k| / |r_k| of eq. (1)-(2) into ``coef`` (a branch-free loop over contiguous arrays,
-    vectorised: the square root and the division, the slow part of a spring, go four at a
-    time); the scatter s_k = c_k r_k to both ends. ``alpha, beta, ec`` from
-    :func:`spring_constants`. A spring shorter than :data:`MIN_SPRING_LENGTH` adds nothing."""
-    for k in range(k0, k1):
-        i = si[k]
-        j = sj[k]
-        rx[k] = x[j, 0] - x[i, 0]
-        ry[k] = x[j, 1] - x[i, 1]
-        rz[k] = x[j, 2] - x[i, 2]
-    if law == LAW_PAPER:
-        for k in range(k0, k1):
-            d = np.sqrt(rx[k] * rx[k] + ry[k] * ry[k] + rz[k] * rz[k])
-            e = d - rest[k]
-            lo = alpha[k] * e
-            hi = beta[k] * e
-            g = (lo if e <= ec[k] else hi) / d
-            coef[k] = g if d >= MIN_SPRING_LENGTH else 0.0
-    else:
-        for k in range(k0, k1):
-            d = np.sqrt(rx[k] * rx[k] + ry[k] * ry[k] + rz[k] * rz[k])
-            e = d - rest[k]
-            lo = alpha[k] * e
-            hi = alpha[k] * ec[k] + beta[k] * (e - ec[k])
-            g = (lo if e <= ec[k] else hi) / d
-            coef[k] = g if d >= MIN_SPRING_LENGTH else 0.0
-    for k in range(k0, k1):
-        g = coef[k]
-        i = si[k]
-        j = sj[k]
-        fx = g * rx[k]
-        fy = g * ry[k]
-        fz = g * rz[k]
-        f[i, 0] += fx
-        f[i, 1] += fy
-        f[i, 2] += fz
-        f[j, 0] -= fx
-        f[j, 1] -= fy
-        f[j, 2] -= fz
 
 
 #: prisms per chunk of :func:`prism_volume_forces_split` (its scratch, PRISM_WORK rows of this

@@ -42,8 +42,7 @@ from myoface.tissue.forces import (
     PRISM_WORK,
     internal_forces_numba,
     prism_volume_forces_split,
-    spring_constants,
-    spring_forces_split,
+    spring_forces_range,
 )
 from myoface.tissue.model import TissueModel
 
@@ -201,8 +200,6 @@ class Rk2Plan:
         and prisms start.
     spring_i, spring_j, rest_length, spring_material : (S',) — the springs, block by block, in
         model order within a block.
-    alpha, beta, strain_c_length : (S',) float64 — each spring's two stiffnesses (g/s^2) and
-        threshold e^c = strain_c * l_k (mm) of eq. (2), read from the material table once.
     elements, rest_volume, volume_weight : (E', 6), (E',), (E',) — the prisms, likewise.
 
     A node's force is summed over the same springs, then the same prisms, in the same order
@@ -219,9 +216,6 @@ class Rk2Plan:
     spring_j: np.ndarray
     rest_length: np.ndarray
     spring_material: np.ndarray
-    alpha: np.ndarray
-    beta: np.ndarray
-    strain_c_length: np.ndarray
     elements: np.ndarray
     rest_volume: np.ndarray
     volume_weight: np.ndarray
@@ -261,9 +255,6 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
     def c(a, dtype):
         return np.ascontiguousarray(a, dtype=dtype)
 
-    alpha, beta, ec = spring_constants(
-        model.materials, model.spring_material[k], model.rest_length[k]
-    )
     return Rk2Plan(
         free=free,
         inv_mass=c(1.0 / model.mass[free], np.float64),
@@ -275,9 +266,6 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
         spring_j=c(sj[k], np.int64),
         rest_length=c(model.rest_length[k], np.float64),
         spring_material=c(model.spring_material[k], np.int64),
-        alpha=alpha,
-        beta=beta,
-        strain_c_length=ec,
         elements=c(el[e], np.int64).reshape(-1, 6),
         rest_volume=c(model.rest_volume[e], np.float64),
         volume_weight=c(model.volume_weight[e], np.float64),
@@ -307,8 +295,7 @@ def rk2_plan(model: TissueModel, n_blocks: int | None = None) -> Rk2Plan:
 
 @njit(cache=True)
 def _block_forces(
-    x, fb, si, sj, rest, alpha, beta, ec, law, elems, rest_vol, kv, vsign, s0, s1, e0, e1,
-    rx, ry, rz, coef, work,
+    x, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, s0, s1, e0, e1, work,
 ):  # fmt: skip
     """Spring and volume forces of one block's springs s0..s1-1 and prisms e0..e1-1 at x, into
     the block's own buffer ``fb`` (N, 3), zeroed first."""
@@ -316,14 +303,14 @@ def _block_forces(
         fb[i, 0] = 0.0
         fb[i, 1] = 0.0
         fb[i, 2] = 0.0
-    spring_forces_split(x, si, sj, rest, alpha, beta, ec, law, s0, s1, rx, ry, rz, coef, fb)
+    spring_forces_range(x, si, sj, rest, mat_id, mat, law, s0, s1, fb)
     prism_volume_forces_split(x, elems, rest_vol, kv, vsign, e0, e1, fb, work)
 
 
 @njit(cache=True)
 def _rk2_task(
     phase, b, x, v, xm, vm, buf, vblock, dt, free, inv_m, damp, bnodes, bsprings, bprisms,
-    si, sj, rest, alpha, beta, ec, law, elems, rest_vol, kv, vsign, rx, ry, rz, coef, work,
+    si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, work,
 ):  # fmt: skip
     """One block's half of an RK2 step: ``phase`` 0 evaluates the forces at (x, v) and writes
     the block's midpoint (x + dt/2 v, v + dt/2 a) into ``xm, vm``; ``phase`` 1 evaluates them at
@@ -331,8 +318,8 @@ def _rk2_task(
     fb = buf[b]
     xe = x if phase == 0 else xm
     _block_forces(
-        xe, fb, si, sj, rest, alpha, beta, ec, law, elems, rest_vol, kv, vsign,
-        bsprings[b], bsprings[b + 1], bprisms[b], bprisms[b + 1], rx, ry, rz, coef, work[b],
+        xe, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
+        bsprings[b], bsprings[b + 1], bprisms[b], bprisms[b + 1], work[b],
     )  # fmt: skip
     if phase == 0:
         h = 0.5 * dt
@@ -371,7 +358,7 @@ def _largest(a):
 @njit(cache=True, parallel=True)
 def _rk2_run_team(
     x, v, n_steps, dt, tol_mm, n_workers, free, inv_m, damp, bnodes, bsprings, bprisms,
-    si, sj, rest, alpha, beta, ec, law, elems, rest_vol, kv, vsign,
+    si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
 ):  # fmt: skip
     """Midpoint RK2 for up to n_steps, the plan's blocks shared by a team of ``n_workers``
     threads started once for the whole run; stops early when max |v| dt < tol_mm (tol_mm > 0).
@@ -389,11 +376,6 @@ def _rk2_run_team(
     xm = x.copy()  # kinematic rows stay at x (their velocity is zero), free rows are written
     vm = v.copy()
     vblock = np.zeros(nb)
-    ns = si.shape[0]
-    rx = np.empty(ns)  # the springs' vectors and coefficients (each block writes its own)
-    ry = np.empty(ns)
-    rz = np.empty(ns)
-    coef = np.empty(ns)
     work = np.zeros((nb, PRISM_WORK * PRISM_CHUNK))  # each block's scratch for its prisms
     counters = np.zeros(16, np.int64)  # [_CLAIMED], [_DONE] on cache lines of their own
     stop = np.full(3, -1.0)  # the step the run stopped at, its max |v| dt, non-finite step
@@ -422,8 +404,7 @@ def _rk2_run_team(
                     break
             _rk2_task(
                 half % 2, b, x, v, xm, vm, buf, vblock, dt, free, inv_m, damp, bnodes, bsprings,
-                bprisms, si, sj, rest, alpha, beta, ec, law, elems, rest_vol, kv, vsign,
-                rx, ry, rz, coef, work,
+                bprisms, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, work,
             )  # fmt: skip
             _atomic_add(counters, _DONE, 1)
     if stop[0] >= 0.0:
@@ -554,9 +535,8 @@ def _rk2_kernel(p: Rk2Plan, model: TissueModel, x, v, n_steps, dt, tol_mm, worke
         p.spring_i,
         p.spring_j,
         p.rest_length,
-        p.alpha,
-        p.beta,
-        p.strain_c_length,
+        p.spring_material,
+        model.materials,
         model.spring_law,
         p.elements,
         p.rest_volume,
