@@ -1,23 +1,49 @@
 """The paper's explicit integrator: midpoint RK2 on ``m x'' + gamma x' + g + q = 0``, all cores.
 
 Two force evaluations per step (Terzopoulos & Waters 1993, Section III-B: explicit Euler was not
-stable enough). The parallel kernel cuts the free nodes into one slab per thread (once per model,
-:func:`rk2_plan`); each thread keeps private copies of the springs and prisms that touch its
-nodes and adds their forces into a buffer of its own, then takes its nodes' midpoint (or full)
-update from it. No atomics, nothing written by two threads, no allocation and no return to
-Python between steps: a step is two parallel loops, the two barriers the scheme needs (every
-midpoint before the second evaluation, every new position before the next step). Each node adds
-the same terms in the same order whatever the number of slabs, so the trajectory does not depend
-on the number of threads.
+stable enough). The free nodes are cut into slabs (blocks) along the lattice's long axis, once
+per model (:func:`rk2_plan`); each block keeps private copies of the springs and prisms that
+touch its nodes and adds their forces into a buffer of its own, then takes its nodes' midpoint
+(or full) update from it. Nothing is written by two threads, and each node adds the same terms
+in the same order whatever the number of blocks, so the trajectory does not depend on the number
+of threads, bit for bit.
 
-:func:`_rk2_run_serial` is the single-thread kernel this replaced (a scatter over every spring and
-element); it stays as the reference the tests hold the parallel one against, and as the
-benchmark's peer.
+What one step costs (default face, measured): 1,072 free nodes of 1,872; 10,211 springs with a
+free end (of 13,302) and 2,026 prisms with a free node and a volume weight, each evaluated twice
+(with 2 blocks 10,524 and 2,165: those across the cut twice); no muscle force (the muscles move
+kinematic nodes, set before the run). On one thread, a step is ~240 us of spring
+forces, ~130 us of prisms (their gradients now computed four prisms at a time, see
+:func:`~myoface.tissue.forces.prism_volume_forces_split`) and ~25 us for the rest.
 
-Threads that meet twice a step only pay while the cores are free: on a machine busy with other
-work, a thread that waits for one the system has descheduled loses a time slice each time, and
-one thread is several times faster. So :func:`run_rk2` measures both as it goes and uses the
-faster (the result is the same, bit for bit).
+The team (:func:`_rk2_run_team`): one parallel region per call, not two per step. The run is a
+sequence of tasks (step, half-step, block); a thread takes the next one from an atomic counter,
+waits (spinning ~1 us, then yielding its core) until every task of the earlier half-steps is
+done, runs it and counts it done. numba's region launch (OpenMP layer here) cost ~10 us each on
+an idle machine and up to milliseconds on a busy one; the wait costs well under 1 us when the
+other thread is running. Any thread may run any task, so a team smaller than asked still
+finishes, in order.
+
+Measured on this repository's 2-core machine (AMD EPYC, while other jobs ran: load 2-3),
+``myoface bench --only tissue.rk2`` and interleaved runs of 200 steps against the previous
+kernel in the same process: 2 threads ~3,000 steps/s median (best 4,100; previous kernel 2,800,
+best 3,300), 1 thread ~1,800-2,250 (previous 1,700), the single-thread reference ~1,400-1,550.
+The paper's 5,000 steps/s (200 us a step) is not reached: the two force evaluations alone are
+~400 us of one core's time, so even a perfect split over two cores leaves ~200 us.
+
+Tried and dropped (measured, same values to the last bit): springs in three passes (gather the
+vectors, vectorised square roots and divisions, scatter; per-spring constants) — 30 % faster
+alone, slower inside the step (the extra arrays' memory traffic: 418 vs 385 us a step); the
+same in L1-sized chunks (slower still); keeping a node's sum in registers over the springs that
+start at it (no gain: the scatter is not bound by store forwarding).
+
+:func:`_rk2_run_serial` is the single-thread kernel the parallel one replaced (a scatter over
+every spring and element); it stays as the reference the tests hold the parallel one against,
+and as the benchmark's peer.
+
+Threads that wait for each other twice a step only pay while the cores are free: on a machine
+busy with other work, a thread that waits for one the system has descheduled loses time, and one
+thread can be faster. So :func:`run_rk2` measures both as it goes and uses the faster (the
+result is the same, bit for bit).
 
 References: Terzopoulos & Waters 1993, eq. (1)-(4) and Section III-B.
 """
