@@ -18,7 +18,9 @@ def smile_video(tmp_path_factory):
     d = tmp_path_factory.mktemp("smile")
     fm = build_face_model()
     cam = Camera.front(fm.face.vertices, width=192, height=192, fov_deg=None)
-    r = Renderer(fm.face, cam, texture=to_srgb8(default_skin_texture(fm.face, 256, makeup=True)))
+    # the made-up face of the paper's closed loop, without teeth (as analysis.closed_loop)
+    tex = to_srgb8(default_skin_texture(fm.face, 256, makeup=True))
+    r = Renderer(fm.face, cam, texture=tex, teeth=False)
     state = fm.rest_state()
     with VideoWriter(d / "smile.mp4", fps=10) as vw:
         for c in (0.0, 0.3, 0.6, 0.9, 0.6, 0.3, 0.0):
@@ -129,7 +131,9 @@ def test_analyze_then_resynth(smile_video, tmp_path, capsys):
     # the contours are drawn on every frame, in yellow (every frame was measured)
     assert min(n_marks) > 0.8 * n_marks[0], n_marks
     # the paper's fiducial scheme, on request: a different estimate that follows the smile
-    # (less accurate than the curve fit: the closed loop holds it to correlation > 0.7)
+    # (less accurate than the curve fit, and less since issue 19 made the zygomaticus pull
+    # the corners out and back as much as up: correlation 0.72 measured), to a correlation
+    # that 7 frames of noise reach by chance less than once in 20 (r > 0.7, one-sided)
     out2 = tmp_path / "ana_fid"
     argv = ["analyze", str(video), "--init", str(init)]
     assert main([*argv, "-o", str(out2), "--estimator", "fiducials", "--quiet"]) == 0
@@ -137,7 +141,7 @@ def test_analyze_then_resynth(smile_video, tmp_path, capsys):
     _, rows2 = _read_csv(out2 / "contractions.csv")
     for s in "lr":
         z2 = np.array([float(r[f"zygomaticus_major_{s}"]) for r in rows2])
-        assert z2[0] == 0 and np.corrcoef(z2, SMILE)[0, 1] > 0.8, z2
+        assert z2[0] == 0 and np.corrcoef(z2, SMILE)[0, 1] > 0.7, z2
         assert np.abs(z2 - est[f"zygomaticus_major_{s}"]).max() > 0.01  # not the curve fit
     # resynth --side-by-side: the input (scaled to 96 rows) | the model driven by the CSV
     re = tmp_path / "re.mp4"
