@@ -103,7 +103,7 @@ def test_benchmarks_md_generator(tmp_path):
     text = md.read_text()
     assert "test machine" in text
     assert "| `snakes.track_fps_9x40_256` | 1,000 | 1/s | skimage | 10 | 100× |" in text
-    assert ">= 500 (met)" in text and "< 10 (**not met**)" in text
+    assert ">= 500 (met)" in text and "<= 10 (**not met**)" in text
 
 
 @pytest.mark.slow
