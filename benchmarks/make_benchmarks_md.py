@@ -16,7 +16,6 @@ import datetime as _dt
 import json
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -82,23 +81,56 @@ def _meets(name: str, value: float, ratio: float | None = None) -> str:
     return "; ".join(out)
 
 
+def _is_table(det) -> bool:
+    """``{group: {row: {column: number}}}`` with the same columns in every group."""
+    if not isinstance(det, dict) or not det:
+        return False
+    groups = list(det.values())
+    if not all(isinstance(g, dict) and g for g in groups):
+        return False
+    cells = [c for g in groups for c in g.values()]
+    if not all(isinstance(c, dict) and c for c in cells):
+        return False
+    return (
+        all(isinstance(v, int | float) or v is None for c in cells for v in c.values())
+        and len({tuple(c) for c in cells}) == 1
+    )
+
+
+def _flatten(det, prefix: str = ""):
+    """(key path, value) pairs of a nested detail, lists kept whole."""
+    if isinstance(det, dict):
+        for k, v in det.items():
+            yield from _flatten(v, f"{prefix} / {k}" if prefix else str(k))
+    else:
+        yield prefix, det
+
+
+def _value(v) -> str:
+    if isinstance(v, bool) or v is None or isinstance(v, str):
+        return str(v)
+    if isinstance(v, int | float):
+        return _fmt(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    return str(v)
+
+
 def _detail_table(r: dict) -> list[str]:
-    """A record's breakdown ``{group: {row: {column: value}}}`` (e.g. tracker -> muscle ->
-    rmse/corr) as one Markdown table with a column per (group, column)."""
+    """A record's breakdown: ``{group: {row: {column: value}}}`` (e.g. tracker -> muscle ->
+    rmse/corr) as one Markdown table with a column per (group, column); any other shape as a
+    list of its values by key."""
     det = r.get("detail")
     if not det:
         return []
+    out = ["", f"### `{r['name']}`, in detail", ""]
+    if not _is_table(det):
+        return out + [f"- {k}: {_value(v)}" for k, v in _flatten(det)]
     groups = list(det)
     rows = list(next(iter(det.values())))
     cols = list(next(iter(next(iter(det.values())).values())))
     head = [f"{g} {c}" for g in groups for c in cols]
-    out = [
-        "",
-        f"### `{r['name']}`, in detail",
-        "",
-        "| | " + " | ".join(head) + " |",
-        "|---|" + "---:|" * len(head),
-    ]
+    out += ["| | " + " | ".join(head) + " |", "|---|" + "---:|" * len(head)]
     for row in rows:
         vals = [det[g].get(row, {}).get(c) for g in groups for c in cols]
         out.append(f"| {row} | " + " | ".join(_fmt(v) for v in vals) + " |")
@@ -167,12 +199,12 @@ def main(argv=None) -> int:
     else:
         cmd = ["myoface", "bench"] + (["--quick"] if args.quick else [])
         cmd += ["--only", args.only] if args.only else []
-        with tempfile.TemporaryDirectory() as d:
-            out = Path(d) / "run.json"
-            subprocess.run([*cmd, "--json", str(out)], check=True, stdout=sys.stderr)
-            records = json.loads(out.read_text())
-            side = out.with_name(out.stem + ".detail.json")
-            details = json.loads(side.read_text()) if side.is_file() else {}
+        # the run's records are kept beside the output (rerun the formatting with --json)
+        out = args.out.with_name(args.out.stem + ".run.json")
+        subprocess.run([*cmd, "--json", str(out)], check=True, stdout=sys.stderr)
+        records = json.loads(out.read_text())
+        side = out.with_name(out.stem + ".detail.json")
+        details = json.loads(side.read_text()) if side.is_file() else {}
         command = " ".join(cmd)
     date = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     for r in records:
