@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
+from _sheet import labelled
 
 import myoface as mf
 
@@ -27,11 +27,7 @@ def contact_sheet(size: int = 224) -> np.ndarray:
         state = None
         if name != "neutral":
             state = mf.relax(fm, mf.expression_contractions(name, 1.0, fm.ids)).state
-        img = Image.fromarray(mf.render_face(fm, state, width=size, height=size))
-        canvas = Image.new("RGB", (size, size + 18), (255, 255, 255))
-        canvas.paste(img, (0, 0))
-        ImageDraw.Draw(canvas).text((6, size + 3), name, fill=(0, 0, 0))
-        tiles.append(np.asarray(canvas))
+        tiles.append(labelled(mf.render_face(fm, state, width=size, height=size), name))
     return np.concatenate(tiles, axis=1)
 
 

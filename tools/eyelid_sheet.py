@@ -12,7 +12,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
+from _sheet import labelled
 
 import myoface as mf
 from myoface.render import Camera, Renderer
@@ -40,11 +40,7 @@ def eyelid_sheet(size: int = 384) -> np.ndarray:
     tiles = []
     for label, aus in TILES:
         state = mf.relax(fm, mf.au_contractions(aus, fm.ids)).state if aus else None
-        img = Image.fromarray(r.render(fm.skin_vertices(state)))
-        canvas = Image.new("RGB", (size, size // 2 + 18), (255, 255, 255))
-        canvas.paste(img, (0, 0))
-        ImageDraw.Draw(canvas).text((6, size // 2 + 3), label, fill=(0, 0, 0))
-        tiles.append(np.asarray(canvas))
+        tiles.append(labelled(r.render(fm.skin_vertices(state)), label))
     tiles.append(np.full_like(tiles[0], 255))  # a blank to fill the grid
     rows = [np.concatenate(tiles[k : k + 4], axis=1) for k in range(0, len(tiles), 4)]
     return np.concatenate(rows, axis=0)
