@@ -321,37 +321,37 @@ class Renderer:
         dyn_tris = np.concatenate(tris).astype(np.int64)
         static_normals = []
         static_pos = []
+
         #: (first vertex, end, centre) of each eyeball, for the gaze
-        self._eyeballs = []
-        for op in openings:
-            if not op.name.startswith("eye"):
-                continue
-            center = eyeball_center(f.vertices, op.loop)  # where the eyelids slide
-            v, t, nrm, col = dressing.eyeball(center, np.array([0, 0, 1.0]), dressing.EYE_RADIUS_MM)
-            tris.append(t + n)
+        def add_static(v, t, nrm, col) -> int:
+            """Append a closed, untextured mesh fixed in the head (back faces culled); the
+            index of its first vertex."""
+            nonlocal n
+            first = n
+            tris.append(t + first)
             tri_tex.append(np.zeros(len(t), bool))
             tri_cull.append(np.ones(len(t), bool))
             uv.append(np.zeros((len(v), 2)))
             vcol.append(col)
             static_pos.append(v)
             static_normals.append(nrm)
-            self._eyeballs.append((n, n + len(v), center))
             n += len(v)
+            return first
+
+        self._eyeballs = []
+        for op in openings:
+            if not op.name.startswith("eye"):
+                continue
+            center = eyeball_center(f.vertices, op.loop)  # where the eyelids slide
+            v, t, nrm, col = dressing.eyeball(center, np.array([0, 0, 1.0]), dressing.EYE_RADIUS_MM)
+            first = add_static(v, t, nrm, col)
+            self._eyeballs.append((first, first + len(v), center))
         jaw_first = n
         self._teeth_tri0 = sum(len(t) for t in tris)
         if cavity is not None:
             meshes = mouth.mouth_meshes(self.dentition)
-            for v, t, nrm, col in (meshes.upper, meshes.lower):
-                if v is meshes.lower[0]:
-                    jaw_first = n
-                tris.append(t + n)
-                tri_tex.append(np.zeros(len(t), bool))
-                tri_cull.append(np.ones(len(t), bool))
-                uv.append(np.zeros((len(v), 2)))
-                vcol.append(col)
-                static_pos.append(v)
-                static_normals.append(nrm)
-                n += len(v)
+            add_static(*meshes.upper)
+            jaw_first = add_static(*meshes.lower)
         scene = _Scene(
             np.ascontiguousarray(np.concatenate(tris), dtype=np.int64),
             np.concatenate(tri_tex),
