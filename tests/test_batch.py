@@ -22,7 +22,8 @@ def clips(tmp_path_factory):
     """smile.mp4 (rest, smile, rest), brows.mp4 (rest, brows raised twice), broken.mp4
     (random bytes) and init.json (the sections projected by the camera)."""
     from myoface.analysis.batch import cached_model
-    from myoface.analysis.pipeline import project_sections, save_init
+    from myoface.analysis.initfiles import save_init
+    from myoface.analysis.sections import project_sections
     from myoface.render import Camera, Renderer, VideoWriter, to_srgb8
     from myoface.render.dressing import default_skin_texture
 
@@ -51,7 +52,7 @@ def clips(tmp_path_factory):
 def _table(path) -> np.ndarray:
     with open(path, newline="") as fh:
         rows = list(csv.DictReader(fh))
-    from myoface.analysis.pipeline import PAPER_MUSCLES
+    from myoface.analysis.sections import PAPER_MUSCLES
 
     return np.array([[float(r[m]) for m in PAPER_MUSCLES] for r in rows])
 
@@ -60,7 +61,7 @@ def _table(path) -> np.ndarray:
 def test_batch_dask_then_resume_then_local(clips, tmp_path, capsys):
     from myoface.analysis.batch import DONE_FILE, SUMMARY_COLUMNS
     from myoface.analysis.outputs import FOLDER_FILES
-    from myoface.analysis.pipeline import PAPER_MUSCLES
+    from myoface.analysis.sections import PAPER_MUSCLES
 
     out = tmp_path / "out"
     argv = ["batch", str(clips / "*.mp4"), "--init", str(clips / "init.json"), "-o", str(out)]

@@ -10,7 +10,8 @@ from myoface.cli import main
 
 @pytest.fixture(scope="module")
 def smile_video(tmp_path_factory):
-    from myoface.analysis.pipeline import project_sections, save_init
+    from myoface.analysis.initfiles import save_init
+    from myoface.analysis.sections import project_sections
     from myoface.model import build_face_model
     from myoface.render import Camera, Renderer, VideoWriter, to_srgb8
     from myoface.render.dressing import default_skin_texture
@@ -63,7 +64,8 @@ def test_analyze_then_resynth(smile_video, tmp_path, capsys):
     import imageio.v3 as iio
     from scipy.spatial import cKDTree
 
-    from myoface.analysis.pipeline import PAPER_MUSCLES, load_init
+    from myoface.analysis.initfiles import load_init
+    from myoface.analysis.sections import PAPER_MUSCLES
     from myoface.model import build_face_model
 
     out = tmp_path / "ana"
@@ -193,7 +195,7 @@ def test_analyze_check_init(smile_video, tmp_path):
     0.71 px of rounding)."""
     import imageio.v3 as iio
 
-    from myoface.analysis.pipeline import load_init
+    from myoface.analysis.initfiles import load_init
 
     png = tmp_path / "check.png"
     video, init = smile_video / "smile.mp4", smile_video / "init.json"

@@ -93,7 +93,7 @@ def test_binary_contractions_csv(tmp_path, capsys):
 
 
 def test_csv_with_nul_bytes_only(tmp_path):
-    from myoface.analysis.pipeline import read_contractions_csv
+    from myoface.analysis.contractions_csv import read_contractions_csv
 
     p = tmp_path / "c.csv"
     p.write_bytes(b"time_s,jaw\n0,0\x00.1\n")
@@ -431,7 +431,7 @@ def test_resynth_warns_about_columns_of_no_muscle(tmp_path, capsys):
 
 
 def test_read_contractions_csv_warns_for_unknown_columns(tmp_path):
-    from myoface.analysis.pipeline import read_contractions_csv
+    from myoface.analysis.contractions_csv import read_contractions_csv
 
     p = tmp_path / "c.csv"
     p.write_text("frame,time_s,quality,jaw,jaw_angle_rad,head_scale\n0,0,ok,0.5,0.1,1\n")

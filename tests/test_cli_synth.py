@@ -273,7 +273,7 @@ def test_demo_real_video(model, tmp_path, monkeypatch, capsys):
         assert left.max() < CODEC_MAD_LEVELS, (name, left.max())
         _check_face_visible(sbs[0, :, 640:], corner=20, tol=CODEC_MAD_LEVELS)
     # the resynthesis' first frame is the default face driven by the CSV's first row
-    from myoface.analysis.pipeline import read_contractions_csv
+    from myoface.analysis.contractions_csv import read_contractions_csv
     from myoface.render import Renderer
     from myoface.synth import Synthesizer, make_camera
 

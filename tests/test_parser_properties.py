@@ -126,7 +126,7 @@ csv_text = st.lists(
 def test_contractions_csv_of_any_bytes(scratch, data):
     import warnings
 
-    from myoface.analysis.pipeline import read_contractions_csv
+    from myoface.analysis.contractions_csv import read_contractions_csv
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # unknown columns are a warning, not an error
@@ -150,7 +150,7 @@ SECTIONS = ["lips", "upper_lip", "chin", "brow_l", "nonsense"]
     .map(str.encode)
 )
 def test_init_json_of_any_bytes(scratch, data):
-    from myoface.analysis.pipeline import load_init
+    from myoface.analysis.initfiles import load_init
 
     only_myoface_errors(load_init, _write(scratch, data, ".json"))
 

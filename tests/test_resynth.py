@@ -31,7 +31,8 @@ def _table(model):
 
 
 def _write_csv(path, model, table, fps=10.0):
-    from myoface.analysis.pipeline import FrameMeasurement, write_contractions_csv
+    from myoface.analysis.contractions_csv import write_contractions_csv
+    from myoface.analysis.tracker import FrameMeasurement
 
     frames = [FrameMeasurement(k, k / fps, "ok", row, np.zeros(2)) for k, row in enumerate(table)]
     write_contractions_csv(path, list(model.ids), frames, model.muscles.jaw.max_angle_rad)

@@ -28,7 +28,7 @@ def test_fit_similarity_recovers_a_known_map():
 
 
 def test_rigid_vertices_leave_out_what_muscles_move():
-    from myoface.analysis.pipeline import model_fiducials
+    from myoface.analysis.sections import model_fiducials
     from myoface.model import build_face_model
 
     fm = build_face_model()

@@ -143,7 +143,7 @@ def _read(path):
 
 
 def test_write_openface_csv_from_the_3d_fit(tmp_path, ids):
-    from myoface.analysis.pipeline import write_contractions_csv
+    from myoface.analysis.contractions_csv import write_contractions_csv
 
     smile = au_contractions({12: 0.8, 6: 0.4}, ids)
     pose = HeadPose.from_euler(10, -5, 2, (1, 2, -500))
@@ -177,7 +177,7 @@ def test_write_openface_csv_from_the_3d_fit(tmp_path, ids):
 def test_write_openface_csv_without_a_3d_pose(tmp_path, ids):
     """The snakes' CSV: the paper's 12 muscles + jaw and a 2-D head frame. The pose cells are
     empty, and AUs whose principal muscles were not estimated (AU4: the corrugators) too."""
-    from myoface.analysis.pipeline import PAPER_MUSCLES
+    from myoface.analysis.sections import PAPER_MUSCLES
 
     cols = list(PAPER_MUSCLES)
     c = au_contractions({12: 0.6}, ids)

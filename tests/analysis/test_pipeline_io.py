@@ -5,19 +5,15 @@ import json
 import numpy as np
 import pytest
 
-from myoface.analysis.pipeline import (
-    SECTIONS,
-    FrameMeasurement,
-    load_init,
-    read_contractions_csv,
-    save_init,
-    write_contractions_csv,
-)
+from myoface.analysis.contractions_csv import read_contractions_csv, write_contractions_csv
+from myoface.analysis.initfiles import load_init, save_init
+from myoface.analysis.sections import SECTIONS
+from myoface.analysis.tracker import FrameMeasurement
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
 
 
 def test_every_section_is_a_contour_of_the_default_face(default_face):
-    from myoface.analysis.pipeline import FEATURES, model_fiducials, section_vertices
+    from myoface.analysis.sections import FEATURES, model_fiducials, section_vertices
 
     for sec in SECTIONS:
         v = section_vertices(default_face, sec)
@@ -90,7 +86,8 @@ def test_contractions_csv_errors(tmp_path, text, match):
 
 def test_low_contrast_frame_is_reported_not_measured():
     """A washed-out frame (a fade to grey) is recorded as low contrast with empty values."""
-    from myoface.analysis.pipeline import Analyzer, project_sections
+    from myoface.analysis.pipeline import Analyzer
+    from myoface.analysis.sections import project_sections
     from myoface.model import build_face_model
     from myoface.render import Camera, Renderer, to_srgb8
     from myoface.render.dressing import default_skin_texture

@@ -73,7 +73,8 @@ def leaving_video(scene, tmp_path_factory):
     """The face slides out of the frame and back (:data:`SHIFTS`) while it smiles; an H.264
     video, its initial contours (the model's sections projected by the known camera) and the
     true contractions."""
-    from myoface.analysis.pipeline import project_sections, save_init
+    from myoface.analysis.initfiles import save_init
+    from myoface.analysis.sections import project_sections
     from myoface.render import VideoWriter
 
     fm, cam, r = scene
@@ -101,7 +102,7 @@ def test_snakes_follow_a_face_that_leaves_the_frame_and_comes_back(leaving_video
     frame: the frames without the face say so with empty values, and once the face is back
     (found again by searching the frame for the calibration's eye-and-nose region) the
     contours are re-initialised at its new place and the frames are measured again."""
-    from myoface.analysis.pipeline import PAPER_MUSCLES
+    from myoface.analysis.sections import PAPER_MUSCLES
 
     video, init, truth = leaving_video
     out = tmp_path / "out"
@@ -133,7 +134,7 @@ def test_snakes_follow_a_face_that_leaves_the_frame_and_comes_back(leaving_video
 def test_landmarks_follow_a_face_that_leaves_the_frame_and_comes_back(leaving_video, tmp_path):
     """The same video with MediaPipe's face mesh on every frame: frames without a face are
     ``no_face`` with empty values, the frames after the return are measured again."""
-    from myoface.analysis.pipeline import PAPER_MUSCLES
+    from myoface.analysis.sections import PAPER_MUSCLES
 
     video, _, truth = leaving_video
     out = tmp_path / "out"
@@ -177,7 +178,7 @@ def test_a_hand_over_the_mouth_is_reported_and_the_lips_found_again(scene):
     """A flat, skin-coloured "hand" covers the mouth for five frames: the lips' contour loses
     its edge (``escaped:lips``, empty values) and is put back where the model predicts the lips
     at the last estimate; when the hand goes, the frames are measured again."""
-    from myoface.analysis.pipeline import project_sections
+    from myoface.analysis.sections import project_sections
 
     fm, cam, r = scene
     init = project_sections(fm, cam)
@@ -210,7 +211,7 @@ def test_a_turned_head_is_not_read_as_muscle_action(scene):
     2-D analysis would read the foreshortened face as an asymmetric smile, so frames turned
     past about 10 degrees are ``head_turned`` (or lost), with empty values; the frontal frames
     before and after are measured."""
-    from myoface.analysis.pipeline import project_sections
+    from myoface.analysis.sections import project_sections
 
     fm, cam, r = scene
     init = project_sections(fm, cam)

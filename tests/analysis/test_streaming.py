@@ -24,7 +24,8 @@ FPS = 10.0
 def face_clip(tmp_path_factory):
     """Three renders of the default face (rest, smile, rest) and the contours' init file (the
     model's sections projected by the known camera: no MediaPipe needed)."""
-    from myoface.analysis.pipeline import project_sections, save_init
+    from myoface.analysis.initfiles import save_init
+    from myoface.analysis.sections import project_sections
     from myoface.model import build_face_model
     from myoface.render import Camera, Renderer, to_srgb8
     from myoface.render.dressing import default_skin_texture
@@ -60,8 +61,8 @@ class _WatchedVideo(Video):
 
 
 def test_each_row_is_in_the_csv_before_the_next_frame_is_read(face_clip, tmp_path):
+    from myoface.analysis.contractions_csv import read_contractions_csv
     from myoface.analysis.outputs import analyze_to_folder
-    from myoface.analysis.pipeline import read_contractions_csv
 
     fm, frames, init = face_clip
     out = tmp_path / "out"
@@ -109,7 +110,7 @@ def test_the_record_kept_per_frame_is_small(face_clip):
     """What the streaming analysis keeps of a frame is its row's numbers, not the frame, its
     contours or its measurement: a bound on the bytes per frame, independent of the frame."""
     from myoface.analysis.outputs import FrameLog
-    from myoface.analysis.pipeline import FrameMeasurement
+    from myoface.analysis.tracker import FrameMeasurement
 
     ids = 40  # about the 3-D fit's count (every muscle of the default model and the jaw)
     log = FrameLog(ids)
@@ -155,7 +156,7 @@ def test_an_interrupted_analysis_keeps_its_rows_and_leaves_no_part_file(
     """A ``myoface analyze`` process stopped by a signal part-way: the CSV has the header and
     every measured row (pandas-style readers read it), the overlay is a finished video of
     those frames, nothing temporary is left, and stderr is one line that says what was kept."""
-    from myoface.analysis.pipeline import read_contractions_csv
+    from myoface.analysis.contractions_csv import read_contractions_csv
 
     fm, frames, init = face_clip
     clip = tmp_path / "long.mp4"

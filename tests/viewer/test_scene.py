@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from myoface.analysis.pipeline import hold_last_measured
+from myoface.analysis.contractions_csv import hold_last_measured
 from myoface.errors import MyofaceValueError
 from myoface.model import build_face_model
 from myoface.viewer.state import ViewerState

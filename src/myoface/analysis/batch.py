@@ -196,7 +196,7 @@ def cached_model(face: str | None = None, muscles: str | None = None):
         fm = _MODELS.get(key)
         if fm is None:
             from myoface.analysis.estimate import skin_response
-            from myoface.analysis.pipeline import PAPER_MUSCLES
+            from myoface.analysis.sections import PAPER_MUSCLES
             from myoface.model import load_face_model
 
             fm = load_face_model(face, muscles=muscles)
@@ -511,7 +511,8 @@ def run_batch(
     :data:`SUMMARY_COLUMNS` and ``means`` ({muscle: mean contraction}).
     """
     from myoface._io import ensure_output_dir
-    from myoface.analysis.pipeline import ESTIMATORS, load_init
+    from myoface.analysis.initfiles import load_init
+    from myoface.analysis.pipeline import ESTIMATORS
     from myoface.render import progress
 
     if engine not in ENGINES:

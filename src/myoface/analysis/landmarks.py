@@ -4,7 +4,7 @@ MediaPipe's legacy face mesh (``mediapipe==0.10.14``, ``solutions.face_mesh``; K
 2019, "Real-time Facial Surface Geometry from Monocular Video on Mobile GPUs") ships its models
 inside the wheel and runs offline. Its 468 points have the topology of myoface's default face
 (both are the MediaPipe canonical face), so every section contour of
-:data:`~myoface.analysis.pipeline.SECTIONS` is read off the detected points by the same vertex
+:data:`~myoface.analysis.sections.SECTIONS` is read off the detected points by the same vertex
 indices as on the model. Install it with ``pip install "myoface[mediapipe]"``.
 
 The hairline is left out of the automatic contours: the face mesh ends on the forehead, below
@@ -138,7 +138,7 @@ class FaceMeshDetector:
 
 def contours_from_landmarks(face, points, sections=AUTO_SECTIONS) -> dict[str, np.ndarray]:
     """Section contours (pixels) from detected points sharing ``face``'s topology."""
-    from myoface.analysis.pipeline import section_vertices
+    from myoface.analysis.sections import section_vertices
 
     p = np.asarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[0] != face.n_vertices or p.shape[1] < 2:
@@ -250,7 +250,7 @@ class LandmarkAnalyzer:
     frame with a face.
 
     ``measure(frame, index, time_s)`` returns the same
-    :class:`~myoface.analysis.pipeline.FrameMeasurement` as the snake
+    :class:`~myoface.analysis.tracker.FrameMeasurement` as the snake
     :class:`~myoface.analysis.pipeline.Analyzer`; its contours are the sections read off the
     detected points (for the overlay).
     """
@@ -259,7 +259,7 @@ class LandmarkAnalyzer:
 
     def __init__(self, model, muscle_ids=None, refine: int = 1, detector=None):
         from myoface.analysis.estimate import ContractionEstimator
-        from myoface.analysis.pipeline import PAPER_MUSCLES, SECTIONS, model_fiducials
+        from myoface.analysis.sections import PAPER_MUSCLES, SECTIONS, model_fiducials
 
         if model.face.n_vertices != 468:
             raise MyofaceValueError(
@@ -281,7 +281,7 @@ class LandmarkAnalyzer:
         self._p0 = None
 
     def measure(self, frame, index: int = 0, time_s: float = 0.0):
-        from myoface.analysis.pipeline import FrameMeasurement
+        from myoface.analysis.tracker import FrameMeasurement
 
         pts = self.detector.detect(frame)
         nan = np.full(len(self.ids), np.nan)

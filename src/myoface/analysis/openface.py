@@ -245,8 +245,8 @@ def openface_pose(pose) -> tuple[float, float, float, float, float, float]:
 
 def _muscle_columns(header) -> list[str]:
     """The contraction columns of a contractions.csv header (muscles and the jaw)."""
+    from myoface.analysis.contractions_csv import CSV_OTHER_COLUMNS
     from myoface.analysis.fit import POSE_COLUMNS
-    from myoface.analysis.pipeline import CSV_OTHER_COLUMNS
 
     other = set(CSV_OTHER_COLUMNS) | set(POSE_COLUMNS) | {"residual_mm"}
     return [c for c in header if c and c not in other]
@@ -258,7 +258,7 @@ def read_for_openface(path):
     import csv
 
     from myoface._io import read_text
-    from myoface.analysis.pipeline import read_contractions_csv
+    from myoface.analysis.contractions_csv import read_contractions_csv
 
     p = Path(path)
     text = read_text(p, "contractions CSV")

@@ -3,7 +3,7 @@
 
 ==================  ==========================================================================
 contractions.csv    frame, time_s, quality, one column per muscle, jaw_angle_rad, head frame
-                    (:func:`~myoface.analysis.pipeline.write_contractions_csv`)
+                    (:func:`~myoface.analysis.contractions_csv.write_contractions_csv`)
 analysis.json       settings, calibration and per-frame diagnostics
 contractions.png    the contractions over time (the paper's Fig. 8)
 overlay.mp4         the contours on the frames (the paper's Fig. 7a)
@@ -104,7 +104,7 @@ class FrameLog:
         self._names: dict[str, str] = {}  # one string object per distinct quality
 
     def append(self, m) -> None:
-        """Record the measurement ``m`` (a :class:`~myoface.analysis.pipeline.FrameMeasurement`
+        """Record the measurement ``m`` (a :class:`~myoface.analysis.tracker.FrameMeasurement`
         or the 3-D fit's)."""
         self._index.append(int(m.index))
         self._time.append(float(m.time_s))
@@ -209,7 +209,7 @@ def analyze_to_folder(
 
     The analysis streams: each frame is decoded, tracked and fitted, and its row appended to
     contractions.csv (flushed at once; see
-    :class:`~myoface.analysis.pipeline.ContractionsCsvWriter`) and its picture to the overlay
+    :class:`~myoface.analysis.contractions_csv.ContractionsCsvWriter`) and its picture to the overlay
     videos before the next frame is read; of each frame only a compact record is kept
     (:class:`FrameLog`, for the plot and analysis.json), so memory does not grow with the
     video's length. The overlay videos are written under temporary names (``.overlay.*.part.mp4``)
@@ -234,7 +234,7 @@ def analyze_to_folder(
     tracker, calibration_frame, refine, sigma, estimator : as in
         :func:`~myoface.analysis.pipeline.make_analyzer`.
     init : initial contours on the calibration frame, for the snakes: a JSON file (see
-        :func:`~myoface.analysis.pipeline.load_init`) or {section: (K, 2)} pixels; None:
+        :func:`~myoface.analysis.initfiles.load_init`) or {section: (K, 2)} pixels; None:
         found with MediaPipe.
     max_frames : analyse at most this many frames.
     face : the face model's file (``None``: the bundled face); recorded in analysis.json, and
@@ -253,7 +253,8 @@ def analyze_to_folder(
         When interrupted (see above).
     """
     from myoface._io import output_dir
-    from myoface.analysis.pipeline import load_init, make_analyzer
+    from myoface.analysis.initfiles import load_init
+    from myoface.analysis.pipeline import make_analyzer
     from myoface.analysis.video import Video, open_video
 
     if not isinstance(video, Video):
@@ -345,7 +346,8 @@ def _measure_into(video, an, model, out, start, max_frames, tracker, show_progre
     error when nothing could be measured (and then no file is left)."""
     import contextlib
 
-    from myoface.analysis.pipeline import ContractionsCsvWriter, measure_frames
+    from myoface.analysis.contractions_csv import ContractionsCsvWriter
+    from myoface.analysis.pipeline import measure_frames
     from myoface.render import VideoWriter, progress
 
     log = FrameLog(len(an.ids))

@@ -1,154 +1,74 @@
 """The paper's analysis loop: face video -> snakes on nine feature contours -> fiducials in a
 head frame -> muscle contractions and jaw rotation per frame (Terzopoulos & Waters 1993,
-Section V).
+Section V), and the driver of every tracker.
 
-Contours (the paper's nine sections, with the two lip contours joined into one closed
-contour around the lips and the brows traced around their outline):
+The analysis level, one module a stage:
 
-============  ==================================  =======================================
-section       landmark groups (default face)      fiducial features read off the contour
-============  ==================================  =======================================
-hairline      forehead_top                        centroid
-eyebrow_r/l   eyebrow + eyebrow_lower (closed)    inner end, centroid, outer end
-nasolabial    nasolabial_r / nasolabial_l         top
-nose          nose_base                           centroid
-lips          lip_upper + lip_lower outer (closed) corners, top, bottom, lower-lip sides
-chin          chin_outline                        bottom
-============  ==================================  =======================================
+- :mod:`~myoface.analysis.sections`: the feature contours (sections), their features and the
+  model's skin curves they are compared with;
+- :mod:`~myoface.analysis.initfiles`: the snakes' initial contours as JSON;
+- trackers, each behind :class:`~myoface.analysis.tracker.Tracker` (frame ->
+  :class:`~myoface.analysis.tracker.FrameMeasurement`): the snakes (:class:`Analyzer`, here),
+  the 3-D fit of the model to MediaPipe's points (:mod:`~myoface.analysis.fit`) and the
+  paper's 2-D scheme on those points (:mod:`~myoface.analysis.landmarks`);
+- :mod:`~myoface.analysis.contractions_csv`: the measurements as a CSV, and back;
+- :mod:`~myoface.analysis.outputs`: a whole run to a folder (CSV, plot, overlays, JSON).
 
-Features are geometric (extremes, centroids) rather than node identities, because snake nodes
-slide along the edges they sit on. The same rules applied to the model's landmark contours (front
-view, rest) pick the model vertices the features stand for.
-``_l`` / ``_r`` are the subject's left / right (the subject's left is on the image's right).
+This module makes and calibrates a tracker (:func:`make_analyzer`) and drives it over a video
+(:func:`measure_frames`, :func:`analyze_video`). Features are geometric (extremes,
+centroids) rather than node identities, because snake nodes slide along the edges they sit on.
 By default (``estimator="curves"``) the contractions come from the whole contours, not from
 these points: :class:`~myoface.analysis.curvefit.CurveEstimator` fits the model's curves to
 them. With ``estimator="fiducials"`` (the paper's scheme) the fiducials' displacements from the
 calibration frame, in the head frame (translation of the head reference contour removed, pixels
 scaled to mm with the model's size), are inverted to contractions by
-:class:`~myoface.analysis.estimate.ContractionEstimator`.
+:class:`~myoface.analysis.estimate.ContractionEstimator`. The analysis never changes the
+caller's face model: each tracker keeps its own state.
 """
 
 from __future__ import annotations
 
-import json
 import os
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 
-from myoface.analysis.estimate import PAPER_ASSIGNMENT, ContractionEstimator, Fiducial
+from myoface.analysis.contractions_csv import (  # noqa: F401  (re-exported: the analysis' API)
+    CSV_OTHER_COLUMNS,
+    HEAD_2D_COLUMNS,
+    ContractionsCsvWriter,
+    contractions_csv_header,
+    contractions_csv_row,
+    hold_last_measured,
+    read_contractions_csv,
+    write_contractions_csv,
+)
+from myoface.analysis.estimate import ContractionEstimator
 from myoface.analysis.headframe import HeadTracker, Similarity, head_box
+from myoface.analysis.initfiles import load_init, save_init  # noqa: F401  (re-exported)
 from myoface.analysis.potentials import PotentialField, potential_field
+from myoface.analysis.sections import (  # noqa: F401  (re-exported)
+    CURVE_EXCLUDED,
+    FEATURES,
+    LINE_SECTIONS,
+    PAPER_MUSCLES,
+    SECTIONS,
+    curve_centroid,
+    model_fiducials,
+    project_sections,
+    section_features,
+    section_vertices,
+)
 from myoface.analysis.snakes import SnakeParams, Snakes, make_contours, resample_polyline
-from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
-
-#: section -> (landmark groups whose concatenation is the contour, closed)
-SECTIONS = {
-    "hairline": (("forehead_top",), False),
-    "eyebrow_r": (("eyebrow_r", "eyebrow_r_lower*"), True),
-    "eyebrow_l": (("eyebrow_l", "eyebrow_l_lower*"), True),
-    "nasolabial_r": (("nasolabial_r",), False),
-    "nasolabial_l": (("nasolabial_l",), False),
-    "nose": (("nose_base",), False),
-    "lips": (("lip_upper_outer", "lip_lower_outer*"), True),
-    "chin": (("chin_outline",), False),
-}
-#: the fiducial features read off each section's contour (see :func:`section_features`)
-FEATURES = {
-    # the hairline and the nose are tracked (head reference, midline) but give no fiducial: an
-    # open contour's centroid moves as its ends slide, by more than these features move
-    "hairline": (),
-    "eyebrow_r": ("inner", "centroid", "outer"),
-    "eyebrow_l": ("inner", "centroid", "outer"),
-    "nasolabial_r": ("top",),
-    "nasolabial_l": ("top",),
-    "nose": (),
-    "lips": ("corner_r", "corner_l", "top", "bottom", "bottom_r", "bottom_l"),
-    "chin": ("bottom",),
-}
-
-
-def section_vertices(face, section: str) -> np.ndarray:
-    """Vertex indices of a section's contour on the face model (``*``: reversed group, the
-    first vertex dropped when it repeats the previous group's last)."""
-    groups, _ = SECTIONS[section]
-    out: list[int] = []
-    for g in groups:
-        rev = g.endswith("*")
-        idx = list(face.landmark(g.rstrip("*")))
-        if rev:
-            idx = idx[::-1]
-        if out and idx and idx[0] == out[-1]:
-            idx = idx[1:]
-        out += [int(i) for i in idx]
-    if SECTIONS[section][1] and len(out) > 1 and out[-1] == out[0]:
-        out = out[:-1]
-    return np.array(out)
-
-
-def curve_centroid(pts: np.ndarray, closed: bool) -> np.ndarray:
-    """The centroid of a polyline as a curve (segment midpoints weighted by length), so that
-    it does not move when nodes slide along the curve."""
-    q = np.vstack([pts, pts[:1]]) if closed else pts
-    seg = np.linalg.norm(np.diff(q, axis=0), axis=1)
-    if seg.sum() <= 0:
-        return pts.mean(axis=0)
-    mid = 0.5 * (q[1:] + q[:-1])
-    return (mid * seg[:, None]).sum(axis=0) / seg.sum()
-
-
-def section_features(section: str, pts: np.ndarray, midline_x: float) -> np.ndarray:
-    """The feature points (F, 2) of a contour ``pts`` (K, 2), image (x, y) pixels:
-    ``inner``/``outer`` the points nearest to / farthest from the face's midline, ``top`` /
-    ``bottom`` the highest / lowest, ``corner_r`` / ``corner_l`` the leftmost / rightmost in the
-    image (the subject's right / left), ``bottom_r`` / ``bottom_l`` the lowest point of the
-    middle third of the image-left / image-right half, ``centroid`` the mean."""
-    out = []
-    for f in FEATURES[section]:
-        if f == "centroid":
-            out.append(curve_centroid(pts, SECTIONS[section][1]))
-        elif f == "inner":
-            out.append(pts[np.argmin(np.abs(pts[:, 0] - midline_x))])
-        elif f == "outer":
-            out.append(pts[np.argmax(np.abs(pts[:, 0] - midline_x))])
-        elif f == "top":
-            out.append(pts[np.argmin(pts[:, 1])])
-        elif f == "bottom":
-            out.append(pts[np.argmax(pts[:, 1])])
-        elif f == "corner_r":
-            out.append(pts[np.argmin(pts[:, 0])])
-        elif f == "corner_l":
-            out.append(pts[np.argmax(pts[:, 0])])
-        elif f in ("bottom_r", "bottom_l"):
-            # the lowest point of the middle third of the contour's left / right half
-            x0, x1 = pts[:, 0].min(), pts[:, 0].max()
-            c = 0.5 * (x0 + x1)
-            lo, hi = (
-                (x0 + (c - x0) / 3, c - (c - x0) / 3)
-                if f == "bottom_r"
-                else (c + (x1 - c) / 3, x1 - (x1 - c) / 3)
-            )
-            m = (pts[:, 0] >= lo) & (pts[:, 0] <= hi)
-            q = pts[m] if m.any() else pts
-            out.append(q[np.argmax(q[:, 1])])
-    return np.array(out).reshape(-1, 2)
-
+from myoface.analysis.tracker import FrameMeasurement, Tracker  # noqa: F401  (re-exported)
+from myoface.errors import MyofaceValueError
 
 #: the potential's Gaussian width on the face, mm (``sigma=None``): features are blurred by
 #: the same amount of skin whatever the face's size in pixels (1.5 px on the 256 x 256
 #: closed-loop frames, where a pixel is 0.77 mm)
 SIGMA_MM = 1.2
-#: sections tracked as thin dark lines (the "line" potential) rather than as edges
-LINE_SECTIONS = ("nasolabial_r", "nasolabial_l")
-#: sections tracked but not fitted by the curve estimator: the nose is the head reference, and
-#: its lower contour is a shading boundary (the alae's shadow), not a mark on the skin, so its
-#: snake does not stay on the same skin as the face moves
-CURVE_EXCLUDED = ("nose",)
 #: how contractions are read off the contours (see :class:`Analyzer`)
 ESTIMATORS = ("curves", "fiducials")
-#: the muscles the paper estimates, plus the jaw
-PAPER_MUSCLES = tuple(PAPER_ASSIGNMENT)
 #: a frame is unusable when more than this fraction of a contour's nodes escaped its edge
 ESCAPE_LIMIT = 0.5
 #: ... or when its strongest edges are weaker than this fraction of the calibration frame's
@@ -185,80 +105,6 @@ WINDOW_MARGIN = 0.15
 WINDOW_PAD_PX = 8.0
 
 
-# ------------------------------------------------------------------------------ init files
-
-
-def load_init(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """Read an initial-contours file: ``{"contours": {section: [[x, y], ...], ...}}`` (pixels
-    of the calibration frame, (x, y) = (column, row)); see :data:`SECTIONS` for the names and
-    the node order. Sections may be left out."""
-    from myoface._io import parse_json, read_text
-
-    p = Path(path)
-    if not p.is_file():
-        raise MyofaceFileNotFoundError(f"no such contour file: {p}")
-    doc = parse_json(read_text(p, "contour file (JSON)"), str(p))
-    cont = doc.get("contours") if isinstance(doc, dict) else None
-    if not isinstance(cont, dict) or not cont:
-        raise MyofaceFormatError(f'{p}: expected {{"contours": {{section: [[x, y], ...]}}}}')
-    out = {}
-    for name, pts in cont.items():
-        if name not in SECTIONS:
-            raise MyofaceFormatError(
-                f"{p}: unknown section {name!r}; sections are {', '.join(SECTIONS)}"
-            )
-        try:
-            a = np.asarray(pts, dtype=np.float64)
-        except (TypeError, ValueError, OverflowError):
-            raise MyofaceFormatError(f"{p}: section {name!r} must be a list of [x, y]") from None
-        if a.ndim != 2 or a.shape[1] != 2 or len(a) < 2:
-            raise MyofaceFormatError(
-                f"{p}: section {name!r} must be a list of at least 2 [x, y] points; got shape "
-                f"{a.shape}"
-            )
-        if not np.isfinite(a).all():
-            raise MyofaceFormatError(f"{p}: section {name!r} has NaN or infinite coordinates")
-        out[name] = a
-    return out
-
-
-def save_init(path: str | os.PathLike, contours: dict[str, np.ndarray], note: str = "") -> None:
-    from myoface._io import atomic_output
-
-    doc = {
-        "note": note or "initial contours, pixels (x, y) of the calibration frame",
-        "contours": {k: np.round(v, 2).tolist() for k, v in contours.items()},
-    }
-    with atomic_output(path) as tmp:
-        tmp.write_text(json.dumps(doc, indent=1))
-
-
-def project_sections(model, camera, state=None) -> dict[str, np.ndarray]:
-    """The model's section contours in ``state`` (default: rest) projected by ``camera`` (for
-    synthetic video whose camera is known, e.g. the closed-loop test: an exact automatic
-    initialisation)."""
-    v = camera.project(model.skin_vertices(state))[:, :2]
-    return {name: v[section_vertices(model.face, name)] for name in SECTIONS}
-
-
-def model_fiducials(face) -> list[Fiducial]:
-    """The fiducials of every section's features on the face model, found with the same rules
-    as on the image (:func:`section_features`) on the front view of the rest face."""
-    out = []
-    img_like = face.vertices[:, :2] * np.array([1.0, -1.0])  # image y points down
-    for sec in SECTIONS:
-        verts = section_vertices(face, sec)
-        pts = img_like[verts]
-        feats = section_features(sec, pts, 0.0)
-        for name, q in zip(FEATURES[sec], feats, strict=True):
-            if name == "centroid":
-                out.append(Fiducial(f"{sec}:{name}", tuple(int(v) for v in verts)))
-            else:
-                k = int(np.argmin(np.linalg.norm(pts - q, axis=1)))
-                out.append(Fiducial(f"{sec}:{name}", int(verts[k])))
-    return out
-
-
 # ------------------------------------------------------------------------------ the analyzer
 
 
@@ -272,19 +118,6 @@ def _init_mm_per_px(model, init: dict) -> float:
     if not r_px > 0:
         raise MyofaceValueError("the initial contours are degenerate (a single point)")
     return float(r_mm / r_px)
-
-
-@dataclass
-class FrameMeasurement:
-    index: int
-    time_s: float
-    quality: str  # "ok", or why the frame could not be measured
-    contractions: np.ndarray  # (M,) over Analyzer.ids, NaN when not measured
-    head_shift_px: np.ndarray  # (2,) the head's translation from the calibration frame
-    contours: dict = field(repr=False, default_factory=dict)
-    iterations: int = 0
-    head_scale: float = 1.0
-    head_rot_rad: float = 0.0
 
 
 class Analyzer:
@@ -1007,282 +840,3 @@ def measure_frames(video, analyzer, start: int = 0, max_frames: int | None = Non
             break
         n += 1
         yield frame, analyzer.measure(frame, k, k / video.fps)
-
-
-#: the head columns of the snakes' (2-D head frame) rows in a contractions CSV
-HEAD_2D_COLUMNS = ("head_dx_px", "head_dy_px", "head_scale", "head_rot_deg")
-
-
-def contractions_csv_header(ids, first) -> list[str]:
-    """The columns of a contractions CSV whose first measurement is ``first`` (see
-    :func:`write_contractions_csv`): the 3-D fit's measurements carry their own head
-    columns (``HEAD_COLUMNS``), the others the 2-D head frame's."""
-    head = list(first.HEAD_COLUMNS) if hasattr(first, "head_cells") else list(HEAD_2D_COLUMNS)
-    return ["frame", "time_s", "quality", *ids, "jaw_angle_rad", *head]
-
-
-def contractions_csv_row(f, ids, jaw_max_rad: float, pose_cols: bool) -> str:
-    """One measurement ``f`` as a line of a contractions CSV (no newline); ``pose_cols``: the
-    header has the 3-D fit's head columns."""
-    vals = ["" if not np.isfinite(v) else f"{v:.5f}" for v in f.contractions]
-    jaw = ""
-    if "jaw" in ids and np.isfinite(f.contractions[ids.index("jaw")]):
-        jaw = f"{f.contractions[ids.index('jaw')] * jaw_max_rad:.5f}"
-    if pose_cols:
-        head = f.head_cells()
-    else:
-        head = [f.head_shift_px[0], f.head_shift_px[1], f.head_scale, np.degrees(f.head_rot_rad)]
-        head = [
-            "" if not np.isfinite(v) else f"{v:.{d}f}"
-            for v, d in zip(head, (3, 3, 5, 3), strict=True)
-        ]
-    return ",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw, *head])
-
-
-def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_rad: float) -> None:
-    """``frame,time_s,quality,<muscle ids...>,jaw_angle_rad,head_dx_px,head_dy_px,head_scale,
-    head_rot_deg`` (empty cells where a frame could not be measured, and head cells where the
-    face was not found). With the 3-D fit's measurements
-    (:class:`~myoface.analysis.fit.FitMeasurement`) the head columns are the 3-D pose and the
-    fit's residual: ``head_yaw_deg, head_pitch_deg, head_roll_deg, head_tx_mm, head_ty_mm,
-    head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.fit.HeadPose`). Written whole
-    (atomically); :class:`ContractionsCsvWriter` writes the same rows one by one."""
-    from myoface._io import atomic_output
-
-    ids = list(ids)
-    # measurements of the 3-D fit (myoface.analysis.fit) carry the head's 3-D pose instead
-    pose_cols = bool(frames) and all(hasattr(f, "head_cells") for f in frames)
-    cols = contractions_csv_header(ids, frames[0] if pose_cols else None)
-    lines = [",".join(cols)]
-    lines += [contractions_csv_row(f, ids, jaw_max_rad, pose_cols) for f in frames]
-    with atomic_output(path) as tmp:
-        tmp.write_text("\n".join(lines) + "\n")
-
-
-class ContractionsCsvWriter:
-    """A contractions CSV (:func:`write_contractions_csv`'s columns) written row by row as the
-    frames are measured, each row flushed to the file at once: whenever the run stops, the
-    file holds the header and every row measured so far, each complete.
-
-    The file appears under its final name with the header and the first row (written to a
-    temporary name beside it, then renamed over any older file, so a reader never sees a
-    half file); the following rows are appended to it. Before the first row there is no
-    file (and an older one is left as it was).
-
-    >>> with ContractionsCsvWriter("out/contractions.csv", ids, jaw_max) as w:  # doctest: +SKIP
-    ...     for m in measurements:
-    ...         w.write(m)
-
-    Parameters
-    ----------
-    path : the CSV file; its folder must exist.
-    ids : the measurements' contraction ids (``Analyzer.ids``).
-    jaw_max_rad : the jaw's largest angle (rad), for the ``jaw_angle_rad`` column.
-
-    Attributes
-    ----------
-    n_rows : int -- rows written so far.
-    """
-
-    def __init__(self, path, ids, jaw_max_rad: float):
-        from myoface._io import check_output_path
-
-        self.path = check_output_path(path)
-        self.ids = list(ids)
-        self.jaw_max_rad = float(jaw_max_rad)
-        self.n_rows = 0
-        self._fh = None
-        self._pose_cols = False
-
-    def write(self, m) -> None:
-        """Append the row of measurement ``m`` and flush it to the file."""
-        if self._fh is None:  # the first row says which head columns the file has
-            self._pose_cols = hasattr(m, "head_cells")
-        row = contractions_csv_row(m, self.ids, self.jaw_max_rad, self._pose_cols)
-        if self._fh is None:
-            head = ",".join(contractions_csv_header(self.ids, m))
-            self._fh = self._publish(head + "\n" + row + "\n")
-        else:
-            self._fh.write(row + "\n")  # one write: a stop between rows, never inside one
-            self._fh.flush()
-        self.n_rows += 1
-
-    def _publish(self, text: str):
-        """The file opened for appending, holding ``text``, renamed to :attr:`path`."""
-        import tempfile
-
-        fd, tmp = tempfile.mkstemp(
-            prefix=f".{self.path.stem}.", suffix=".part.csv", dir=self.path.parent
-        )
-        try:
-            umask = os.umask(0)
-            os.umask(umask)
-            os.fchmod(fd, 0o666 & ~umask)  # mkstemp's 0600 -> the usual permissions
-            fh = os.fdopen(fd, "a", encoding="utf-8", newline="")
-        except BaseException:
-            os.close(fd)
-            os.unlink(tmp)
-            raise
-        try:
-            fh.write(text)
-            fh.flush()
-            os.replace(tmp, self.path)
-        except BaseException:
-            fh.close()
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return fh
-
-    def close(self) -> None:
-        """Close the file (it stays, with the rows written)."""
-        if self._fh is not None:
-            self._fh.close()
-            self._fh = None
-
-    def discard(self) -> None:
-        """Close and remove the file (a run that measured nothing worth keeping)."""
-        had = self._fh is not None
-        self.close()
-        if had:
-            self.path.unlink(missing_ok=True)
-
-    def __enter__(self) -> ContractionsCsvWriter:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-
-#: the columns of a contractions CSV that are not muscles (see :func:`write_contractions_csv`)
-CSV_OTHER_COLUMNS = (
-    "frame",
-    "time_s",
-    "time",
-    "quality",
-    "jaw_angle_rad",
-    "head_dx_px",
-    "head_dy_px",
-    "head_scale",
-    "head_rot_deg",
-    # the 3-D fit's (myoface.analysis.fit.FitMeasurement.HEAD_COLUMNS)
-    "head_yaw_deg",
-    "head_pitch_deg",
-    "head_roll_deg",
-    "head_tx_mm",
-    "head_ty_mm",
-    "head_tz_mm",
-    "residual_mm",
-)
-
-
-def read_contractions_csv(path, muscle_ids) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """(times (T,), contractions (T, M) over ``muscle_ids``, quality).
-
-    A muscle of ``muscle_ids`` without a column stays at rest (0): the analysis estimates the
-    paper's 12 muscles and the jaw, fewer than a face model has. Columns that are neither a
-    muscle of ``muscle_ids`` nor one of :data:`CSV_OTHER_COLUMNS` are ignored with a
-    :class:`~myoface.errors.MyofaceWarning` that lists them (e.g. a CSV of another face
-    model's muscles).
-
-    Raises a clear :class:`~myoface.errors.MyofaceFormatError` for a file that is not UTF-8
-    CSV text, a missing time column, a header without any known muscle, a repeated column,
-    a row longer than the header, and NaN or out-of-range values in measured ('ok') rows.
-    """
-    import csv
-    import io
-    import warnings
-
-    from myoface._io import read_text
-    from myoface.errors import MyofaceWarning
-
-    p = Path(path)
-    if not p.is_file():
-        raise MyofaceFileNotFoundError(f"no such CSV file: {p}")
-    text = read_text(p, "contractions CSV")
-    try:
-        rows = [r for r in csv.reader(io.StringIO(text, newline="")) if any(c.strip() for c in r)]
-    except csv.Error as exc:
-        raise MyofaceFormatError(f"{p}: not a CSV file: {exc}") from None
-    if not rows:
-        raise MyofaceFormatError(f"{p}: no header and no rows")
-    head = [c.strip() for c in rows[0]]
-    rows = rows[1:]
-    if not rows:
-        raise MyofaceFormatError(f"{p}: no rows")
-    seen = set()
-    for c in head:
-        if c in seen:
-            raise MyofaceFormatError(f"{p}: column {c[:40]!r} appears twice in the header")
-        seen.add(c)
-    col = {c: i for i, c in enumerate(head)}
-    tcol = "time_s" if "time_s" in col else "time" if "time" in col else None
-    if tcol is None:
-        raise MyofaceFormatError(f"{p}: missing column 'time_s' (or 'time')")
-    ids = list(muscle_ids)
-    known = [m for m in ids if m in col]
-    if not known:
-        raise MyofaceFormatError(
-            f"{p}: no column names a muscle of this face model (its muscles: "
-            f"{', '.join(ids[:6])}{', ...' if len(ids) > 6 else ''})"
-        )
-    unknown = [c for c in head if c not in CSV_OTHER_COLUMNS and c not in ids]
-    if unknown:
-        shown = ", ".join(repr(c[:40]) for c in unknown[:8]) + (", ..." if len(unknown) > 8 else "")
-        warnings.warn(
-            f"{p.name}: {len(unknown)} column(s) name no muscle of this face model and are "
-            f"ignored: {shown}; {len(ids) - len(known)} of its {len(ids)} muscles have no "
-            "column and stay at rest",
-            MyofaceWarning,
-            stacklevel=2,
-        )
-    times = np.empty(len(rows))
-    table = np.zeros((len(rows), len(ids)))
-    quality = []
-
-    def cell(r, name):
-        i = col.get(name)
-        return r[i].strip() if i is not None and i < len(r) else ""
-
-    for k, r in enumerate(rows):
-        if len(r) > len(head):
-            raise MyofaceFormatError(
-                f"{p}: row {k + 2} has {len(r)} cells; the header has {len(head)}"
-            )
-        try:
-            times[k] = float(cell(r, tcol))
-        except ValueError:
-            raise MyofaceFormatError(f"{p}: row {k + 2}: bad time {cell(r, tcol)[:40]!r}") from None
-        q = cell(r, "quality") or "ok"
-        quality.append(q)
-        for m in known:
-            c = cell(r, m)
-            if c == "" and q != "ok":
-                table[k, ids.index(m)] = np.nan
-                continue
-            try:
-                v = float(c)
-            except ValueError:
-                raise MyofaceFormatError(
-                    f"{p}: row {k + 2}: bad value {c[:40]!r} for {m}"
-                ) from None
-            if not np.isfinite(v) or not 0 <= v <= 1:
-                raise MyofaceFormatError(
-                    f"{p}: row {k + 2}: {m} must be a number in [0, 1]; got {c[:40]!r}"
-                )
-            table[k, ids.index(m)] = v
-    if not np.isfinite(times).all() or np.any(np.diff(times) < 0):
-        raise MyofaceFormatError(f"{p}: times must be finite and non-decreasing")
-    return times, table, quality
-
-
-def hold_last_measured(table: np.ndarray) -> np.ndarray:
-    """Fill the unmeasured rows (NaN) of a contraction table with the last measured row (zeros
-    before the first), so a model can be driven through them; returns a new array."""
-    out = np.array(table, dtype=np.float64)
-    last = np.zeros(out.shape[1])
-    for k in range(len(out)):
-        if np.isnan(out[k]).any():
-            out[k] = last
-        else:
-            last = out[k]
-    return out

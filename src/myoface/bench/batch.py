@@ -31,7 +31,8 @@ def _clips(quick: bool) -> tuple[list[Path], Path]:
     key = bool(quick)
     if key not in _cache:
         from myoface.analysis.batch import cached_model
-        from myoface.analysis.pipeline import project_sections, save_init
+        from myoface.analysis.initfiles import save_init
+        from myoface.analysis.sections import project_sections
         from myoface.render import Camera, Renderer, VideoWriter, to_srgb8
         from myoface.render.dressing import default_skin_texture
 

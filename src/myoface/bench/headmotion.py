@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from myoface.analysis.pipeline import PAPER_MUSCLES
+from myoface.analysis.sections import PAPER_MUSCLES
 from myoface.bench import Measurement, benchmark
 
 #: the expression programme: (expression, apex frame as a fraction of the sequence, intensity)

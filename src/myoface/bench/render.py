@@ -93,7 +93,8 @@ def _demo_contractions(ids, fps: float = 25.0, duration_s: float = 3.0):
 def write_demo_contractions_csv(path, model, fps: float = 25.0, duration_s: float = 3.0):
     """Write :func:`_demo_contractions` for ``model`` as a ``contractions.csv`` in the format
     ``myoface analyze`` writes (every frame measured, head still)."""
-    from myoface.analysis.pipeline import FrameMeasurement, write_contractions_csv
+    from myoface.analysis.contractions_csv import write_contractions_csv
+    from myoface.analysis.tracker import FrameMeasurement
 
     ids = list(model.ids)
     times, table = _demo_contractions(ids, fps, duration_s)
@@ -116,7 +117,7 @@ def bench_resynth_fps_512(quick: bool) -> Measurement:
     encoding runs in a background thread beside the next frame's physics and render)."""
     import statistics
 
-    from myoface.analysis.pipeline import hold_last_measured, read_contractions_csv
+    from myoface.analysis.contractions_csv import hold_last_measured, read_contractions_csv
     from myoface.commands.resynth import resynthesize
     from myoface.model import build_face_model
 

@@ -111,8 +111,8 @@ def add_arguments(p):
 
 def run(args) -> int:
     from myoface._io import check_output_dir, check_output_path
+    from myoface.analysis.initfiles import load_init
     from myoface.analysis.outputs import analyze_to_folder, draw_contours
-    from myoface.analysis.pipeline import load_init
     from myoface.analysis.video import open_video
     from myoface.render import write_image
 

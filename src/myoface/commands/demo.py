@@ -112,7 +112,8 @@ def _synthetic_video(folder: Path, fps: float) -> tuple[Path, Path]:
     the features, and its exact initial contours."""
     import numpy as np
 
-    from myoface.analysis.pipeline import project_sections, save_init
+    from myoface.analysis.initfiles import save_init
+    from myoface.analysis.sections import project_sections
     from myoface.model import build_face_model
     from myoface.render import Camera, Renderer, VideoWriter, to_srgb8
     from myoface.render.dressing import default_skin_texture

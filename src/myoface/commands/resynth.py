@@ -32,7 +32,7 @@ def run(args) -> int:
     import numpy as np
 
     from myoface._io import check_output_path
-    from myoface.analysis.pipeline import hold_last_measured, read_contractions_csv
+    from myoface.analysis.contractions_csv import hold_last_measured, read_contractions_csv
 
     if not args.output.lower().endswith((".mp4", ".mov", ".mkv", ".avi")):
         raise MyofaceValueError(f"-o must be a video file (.mp4); got {args.output}")

@@ -176,7 +176,7 @@ class ViewerState:
     # ------------------------------------------------------------------ playback
     def load_playback(self, path) -> float:
         """Load a ``contractions.csv`` or a timeline file; returns its duration (s)."""
-        from myoface.analysis.pipeline import hold_last_measured, read_contractions_csv
+        from myoface.analysis.contractions_csv import hold_last_measured, read_contractions_csv
         from myoface.control import load_timeline
 
         p = Path(path)

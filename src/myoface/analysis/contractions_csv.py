@@ -1,0 +1,290 @@
+"""The contractions CSV: one row per frame (muscles, jaw, head pose, quality), written whole
+or streamed row by row, and read back for resynthesis."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from myoface.analysis.tracker import FrameMeasurement
+from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
+
+#: the head columns of the snakes' (2-D head frame) rows in a contractions CSV
+HEAD_2D_COLUMNS = ("head_dx_px", "head_dy_px", "head_scale", "head_rot_deg")
+
+
+def contractions_csv_header(ids, first) -> list[str]:
+    """The columns of a contractions CSV whose first measurement is ``first`` (see
+    :func:`write_contractions_csv`): the 3-D fit's measurements carry their own head
+    columns (``HEAD_COLUMNS``), the others the 2-D head frame's."""
+    head = list(first.HEAD_COLUMNS) if hasattr(first, "head_cells") else list(HEAD_2D_COLUMNS)
+    return ["frame", "time_s", "quality", *ids, "jaw_angle_rad", *head]
+
+
+def contractions_csv_row(f, ids, jaw_max_rad: float, pose_cols: bool) -> str:
+    """One measurement ``f`` as a line of a contractions CSV (no newline); ``pose_cols``: the
+    header has the 3-D fit's head columns."""
+    vals = ["" if not np.isfinite(v) else f"{v:.5f}" for v in f.contractions]
+    jaw = ""
+    if "jaw" in ids and np.isfinite(f.contractions[ids.index("jaw")]):
+        jaw = f"{f.contractions[ids.index('jaw')] * jaw_max_rad:.5f}"
+    if pose_cols:
+        head = f.head_cells()
+    else:
+        head = [f.head_shift_px[0], f.head_shift_px[1], f.head_scale, np.degrees(f.head_rot_rad)]
+        head = [
+            "" if not np.isfinite(v) else f"{v:.{d}f}"
+            for v, d in zip(head, (3, 3, 5, 3), strict=True)
+        ]
+    return ",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw, *head])
+
+
+def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_rad: float) -> None:
+    """``frame,time_s,quality,<muscle ids...>,jaw_angle_rad,head_dx_px,head_dy_px,head_scale,
+    head_rot_deg`` (empty cells where a frame could not be measured, and head cells where the
+    face was not found). With the 3-D fit's measurements
+    (:class:`~myoface.analysis.fit.FitMeasurement`) the head columns are the 3-D pose and the
+    fit's residual: ``head_yaw_deg, head_pitch_deg, head_roll_deg, head_tx_mm, head_ty_mm,
+    head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.fit.HeadPose`). Written whole
+    (atomically); :class:`ContractionsCsvWriter` writes the same rows one by one."""
+    from myoface._io import atomic_output
+
+    ids = list(ids)
+    # measurements of the 3-D fit (myoface.analysis.fit) carry the head's 3-D pose instead
+    pose_cols = bool(frames) and all(hasattr(f, "head_cells") for f in frames)
+    cols = contractions_csv_header(ids, frames[0] if pose_cols else None)
+    lines = [",".join(cols)]
+    lines += [contractions_csv_row(f, ids, jaw_max_rad, pose_cols) for f in frames]
+    with atomic_output(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+
+
+class ContractionsCsvWriter:
+    """A contractions CSV (:func:`write_contractions_csv`'s columns) written row by row as the
+    frames are measured, each row flushed to the file at once: whenever the run stops, the
+    file holds the header and every row measured so far, each complete.
+
+    The file appears under its final name with the header and the first row (written to a
+    temporary name beside it, then renamed over any older file, so a reader never sees a
+    half file); the following rows are appended to it. Before the first row there is no
+    file (and an older one is left as it was).
+
+    >>> with ContractionsCsvWriter("out/contractions.csv", ids, jaw_max) as w:  # doctest: +SKIP
+    ...     for m in measurements:
+    ...         w.write(m)
+
+    Parameters
+    ----------
+    path : the CSV file; its folder must exist.
+    ids : the measurements' contraction ids (``Analyzer.ids``).
+    jaw_max_rad : the jaw's largest angle (rad), for the ``jaw_angle_rad`` column.
+
+    Attributes
+    ----------
+    n_rows : int -- rows written so far.
+    """
+
+    def __init__(self, path, ids, jaw_max_rad: float):
+        from myoface._io import check_output_path
+
+        self.path = check_output_path(path)
+        self.ids = list(ids)
+        self.jaw_max_rad = float(jaw_max_rad)
+        self.n_rows = 0
+        self._fh = None
+        self._pose_cols = False
+
+    def write(self, m) -> None:
+        """Append the row of measurement ``m`` and flush it to the file."""
+        if self._fh is None:  # the first row says which head columns the file has
+            self._pose_cols = hasattr(m, "head_cells")
+        row = contractions_csv_row(m, self.ids, self.jaw_max_rad, self._pose_cols)
+        if self._fh is None:
+            head = ",".join(contractions_csv_header(self.ids, m))
+            self._fh = self._publish(head + "\n" + row + "\n")
+        else:
+            self._fh.write(row + "\n")  # one write: a stop between rows, never inside one
+            self._fh.flush()
+        self.n_rows += 1
+
+    def _publish(self, text: str):
+        """The file opened for appending, holding ``text``, renamed to :attr:`path`."""
+        import tempfile
+
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{self.path.stem}.", suffix=".part.csv", dir=self.path.parent
+        )
+        try:
+            umask = os.umask(0)
+            os.umask(umask)
+            os.fchmod(fd, 0o666 & ~umask)  # mkstemp's 0600 -> the usual permissions
+            fh = os.fdopen(fd, "a", encoding="utf-8", newline="")
+        except BaseException:
+            os.close(fd)
+            os.unlink(tmp)
+            raise
+        try:
+            fh.write(text)
+            fh.flush()
+            os.replace(tmp, self.path)
+        except BaseException:
+            fh.close()
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return fh
+
+    def close(self) -> None:
+        """Close the file (it stays, with the rows written)."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def discard(self) -> None:
+        """Close and remove the file (a run that measured nothing worth keeping)."""
+        had = self._fh is not None
+        self.close()
+        if had:
+            self.path.unlink(missing_ok=True)
+
+    def __enter__(self) -> ContractionsCsvWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+#: the columns of a contractions CSV that are not muscles (see :func:`write_contractions_csv`)
+CSV_OTHER_COLUMNS = (
+    "frame",
+    "time_s",
+    "time",
+    "quality",
+    "jaw_angle_rad",
+    "head_dx_px",
+    "head_dy_px",
+    "head_scale",
+    "head_rot_deg",
+    # the 3-D fit's (myoface.analysis.fit.FitMeasurement.HEAD_COLUMNS)
+    "head_yaw_deg",
+    "head_pitch_deg",
+    "head_roll_deg",
+    "head_tx_mm",
+    "head_ty_mm",
+    "head_tz_mm",
+    "residual_mm",
+)
+
+
+def read_contractions_csv(path, muscle_ids) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """(times (T,), contractions (T, M) over ``muscle_ids``, quality).
+
+    A muscle of ``muscle_ids`` without a column stays at rest (0): the analysis estimates the
+    paper's 12 muscles and the jaw, fewer than a face model has. Columns that are neither a
+    muscle of ``muscle_ids`` nor one of :data:`CSV_OTHER_COLUMNS` are ignored with a
+    :class:`~myoface.errors.MyofaceWarning` that lists them (e.g. a CSV of another face
+    model's muscles).
+
+    Raises a clear :class:`~myoface.errors.MyofaceFormatError` for a file that is not UTF-8
+    CSV text, a missing time column, a header without any known muscle, a repeated column,
+    a row longer than the header, and NaN or out-of-range values in measured ('ok') rows.
+    """
+    import csv
+    import io
+    import warnings
+
+    from myoface._io import read_text
+    from myoface.errors import MyofaceWarning
+
+    p = Path(path)
+    if not p.is_file():
+        raise MyofaceFileNotFoundError(f"no such CSV file: {p}")
+    text = read_text(p, "contractions CSV")
+    try:
+        rows = [r for r in csv.reader(io.StringIO(text, newline="")) if any(c.strip() for c in r)]
+    except csv.Error as exc:
+        raise MyofaceFormatError(f"{p}: not a CSV file: {exc}") from None
+    if not rows:
+        raise MyofaceFormatError(f"{p}: no header and no rows")
+    head = [c.strip() for c in rows[0]]
+    rows = rows[1:]
+    if not rows:
+        raise MyofaceFormatError(f"{p}: no rows")
+    seen = set()
+    for c in head:
+        if c in seen:
+            raise MyofaceFormatError(f"{p}: column {c[:40]!r} appears twice in the header")
+        seen.add(c)
+    col = {c: i for i, c in enumerate(head)}
+    tcol = "time_s" if "time_s" in col else "time" if "time" in col else None
+    if tcol is None:
+        raise MyofaceFormatError(f"{p}: missing column 'time_s' (or 'time')")
+    ids = list(muscle_ids)
+    known = [m for m in ids if m in col]
+    if not known:
+        raise MyofaceFormatError(
+            f"{p}: no column names a muscle of this face model (its muscles: "
+            f"{', '.join(ids[:6])}{', ...' if len(ids) > 6 else ''})"
+        )
+    unknown = [c for c in head if c not in CSV_OTHER_COLUMNS and c not in ids]
+    if unknown:
+        shown = ", ".join(repr(c[:40]) for c in unknown[:8]) + (", ..." if len(unknown) > 8 else "")
+        warnings.warn(
+            f"{p.name}: {len(unknown)} column(s) name no muscle of this face model and are "
+            f"ignored: {shown}; {len(ids) - len(known)} of its {len(ids)} muscles have no "
+            "column and stay at rest",
+            MyofaceWarning,
+            stacklevel=2,
+        )
+    times = np.empty(len(rows))
+    table = np.zeros((len(rows), len(ids)))
+    quality = []
+
+    def cell(r, name):
+        i = col.get(name)
+        return r[i].strip() if i is not None and i < len(r) else ""
+
+    for k, r in enumerate(rows):
+        if len(r) > len(head):
+            raise MyofaceFormatError(
+                f"{p}: row {k + 2} has {len(r)} cells; the header has {len(head)}"
+            )
+        try:
+            times[k] = float(cell(r, tcol))
+        except ValueError:
+            raise MyofaceFormatError(f"{p}: row {k + 2}: bad time {cell(r, tcol)[:40]!r}") from None
+        q = cell(r, "quality") or "ok"
+        quality.append(q)
+        for m in known:
+            c = cell(r, m)
+            if c == "" and q != "ok":
+                table[k, ids.index(m)] = np.nan
+                continue
+            try:
+                v = float(c)
+            except ValueError:
+                raise MyofaceFormatError(
+                    f"{p}: row {k + 2}: bad value {c[:40]!r} for {m}"
+                ) from None
+            if not np.isfinite(v) or not 0 <= v <= 1:
+                raise MyofaceFormatError(
+                    f"{p}: row {k + 2}: {m} must be a number in [0, 1]; got {c[:40]!r}"
+                )
+            table[k, ids.index(m)] = v
+    if not np.isfinite(times).all() or np.any(np.diff(times) < 0):
+        raise MyofaceFormatError(f"{p}: times must be finite and non-decreasing")
+    return times, table, quality
+
+
+def hold_last_measured(table: np.ndarray) -> np.ndarray:
+    """Fill the unmeasured rows (NaN) of a contraction table with the last measured row (zeros
+    before the first), so a model can be driven through them; returns a new array."""
+    out = np.array(table, dtype=np.float64)
+    last = np.zeros(out.shape[1])
+    for k in range(len(out)):
+        if np.isnan(out[k]).any():
+            out[k] = last
+        else:
+            last = out[k]
+    return out
