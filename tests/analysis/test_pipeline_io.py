@@ -8,7 +8,7 @@ import pytest
 from myoface.analysis.contractions_csv import read_contractions_csv, write_contractions_csv
 from myoface.analysis.initfiles import load_init, save_init
 from myoface.analysis.sections import SECTIONS
-from myoface.analysis.tracker import FrameMeasurement
+from myoface.analysis.tracker import FrameMeasurement, Tracker
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
 
 
@@ -97,8 +97,39 @@ def test_low_contrast_frame_is_reported_not_measured():
     r = Renderer(fm.face, cam, texture=to_srgb8(default_skin_texture(fm.face, 256, makeup=True)))
     img = r.render(fm.skin_vertices()).astype(np.float64)
     faded = (0.15 * img + 0.85 * img.mean()).astype(np.uint8)
+    before = _model_digest(fm)
     an = Analyzer(fm, project_sections(fm, cam), head_frame="contours", head_reference=())
+    assert isinstance(an, Tracker)
     q = [an.measure(f, k).quality for k, f in enumerate([img.astype(np.uint8), faded])]
     assert q[0] == "ok" and q[1] == "low_contrast", q
     m = an.measure(faded, 2)
     assert np.isnan(m.contractions).all()
+    an.close()
+    # the tracker owns its state: the caller's face model is as it was
+    after = _model_digest(fm)
+    assert len(before) > 20
+    assert {k: after.get(k) for k in before} == before
+
+
+def _model_digest(fm) -> dict:
+    """A hash of each array the face model and its parts hold, by path (three levels deep).
+    Lazily computed caches appear as new paths; a path present before must keep its hash."""
+    import hashlib
+
+    out = {}
+
+    def walk(obj, path, depth):
+        if isinstance(obj, np.ndarray):
+            out[path] = hashlib.sha256(np.ascontiguousarray(obj).tobytes()).hexdigest()
+        elif depth < 3 and hasattr(obj, "__dict__"):
+            for k, v in vars(obj).items():
+                walk(v, f"{path}.{k}", depth + 1)
+        elif depth < 3 and isinstance(obj, list | tuple):
+            for k, v in enumerate(obj):
+                walk(v, f"{path}[{k}]", depth + 1)
+        elif depth < 3 and isinstance(obj, dict):
+            for k, v in obj.items():
+                walk(v, f"{path}[{k!r}]", depth + 1)
+
+    walk(fm, "model", 0)
+    return out
