@@ -54,7 +54,10 @@ def table_markdown() -> str:
         "default face; the displacement of its points (MediaPipe vertices, named in "
         "`src/myoface/data/au_range.toml`) in the head frame, mirrored so that *lateral* is away "
         "from the midline on both sides. *Opening*: the increase of the distance between the two "
-        "points. Direction: the mean displacement's components, largest first (mm).",
+        "points. *Interincisal*: the distance between the edges of the model's upper and lower "
+        "central incisors at the midline (the lower ones carried by the jaw), as a mouth opening "
+        "is measured in the clinic; its direction is the lower edge's motion. Direction: the "
+        "mean displacement's components, largest first (mm).",
         "",
         f"**synth.au_range_within = {within:.2f}** ({sum(bool(r.within) for r in rows)} of "
         f"{n_pub} AUs with a published range lie inside it). AUs without a published value are "
@@ -74,8 +77,9 @@ def table_markdown() -> str:
         within = "-" if r.within is None else ("yes" if r.within else "**no**")
         dir_ok = "" if r.direction_ok else " **(wrong)**"
         src = ref.source or ref.note
+        points = ", ".join(ref.points) or "upper and lower central incisors' edges, midline"
         out.append(
-            f"| {ref.au} | {names[ref.au].name} | {', '.join(ref.points)} ({ref.quantity}) | "
+            f"| {ref.au} | {names[ref.au].name} | {points} ({ref.quantity}) | "
             f"{r.value_mm:.1f} | {r.direction_text()}{dir_ok} | {', '.join(ref.direction)} | "
             f"{rng} | {within} | {src} |"
         )

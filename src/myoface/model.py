@@ -39,7 +39,6 @@ from myoface.muscles import (
     load_muscles,
     read_waters_expressions,
     read_waters_muscles,
-    rotate_about_axis,
 )
 from myoface.muscles.lids import build_eyelids
 from myoface.tissue import (
@@ -178,8 +177,8 @@ class FaceModel:
     def targets(self, contractions) -> np.ndarray:
         """Positions (K, 3) mm of the kinematic nodes for ``contractions``.
 
-        The jaw rotates each kinematic node by its vertex's jaw weight times the opening angle;
-        the muscles then add ``sum_i c_i B_i`` (T&W 1993, eq. (5)), rotated with the jaw.
+        The jaw rotates each kinematic node by its vertex's jaw weight times the opening angle
+        and slides it by that weight times the condylar slide; the muscles then add ``sum_i c_i B_i`` (T&W 1993, eq. (5)), rotated with the jaw.
         """
         c = self.validate(contractions)
         x = self._kin_rest + self._kin_basis @ c
@@ -236,15 +235,13 @@ class FaceModel:
     def jaw_pose(self, state: FaceState | None = None):
         """The mandible's rigid motion from rest in ``state`` (default: rest): ``(rotation
         (3, 3), translation (3,) mm)``, ``x -> rotation @ x + translation``, the jaw's full
-        rotation about its hinge (what the lower teeth follow); the identity without a jaw."""
+        rotation about its hinge and condylar slide (:meth:`myoface.muscles.Jaw.pose`, what the
+        lower teeth follow); the identity without a jaw."""
         s = self._rest if state is None else state
         j = self.muscles.jaw_index
         if j is None:
             return np.eye(3), np.zeros(3)
-        jaw = self.muscles.jaw
-        angle = float(s.contractions[j]) * jaw.max_angle_rad
-        rot = rotate_about_axis(np.eye(3), np.zeros(3), jaw.hinge_axis, angle).T  # rows -> R
-        return rot, jaw.hinge_point - rot @ jaw.hinge_point
+        return self.muscles.jaw.pose(float(s.contractions[j]))
 
     def skin_mesh(self, state: FaceState | None = None) -> FaceMesh:
         """The skin of ``state`` (default: rest) as a FaceMesh (same topology, UVs, texture,

@@ -153,11 +153,68 @@ def test_jaw_weights_follow_anatomy(muscles, default_face):
     np.testing.assert_allclose(w[f.landmark("menton")], 1)
     np.testing.assert_allclose(w[f.landmark("nose_tip")], 0)
     corners = set(f.landmark("mouth_corner_l")) | set(f.landmark("mouth_corner_r"))
-    lower = [i for i in f.landmark("lip_lower_inner") if i not in (78, 308)]
-    upper = [i for i in f.landmark("lip_upper_inner") if i not in (78, 308)]
-    assert np.all(w[lower] == 1) and np.all(w[upper] == 0)
+    # the lips follow whole (lower) or not at all (upper), but for the corners
+    lower_out = [i for i in f.landmark("lip_lower_outer") if i not in corners]
+    upper_out = [i for i in f.landmark("lip_upper_outer") if i not in corners]
+    assert np.all(w[lower_out] == 1) and np.all(w[upper_out] == 0)
+    # the inner margins: the middle held, the three vertices nearest each corner turn smoothly
+    # round the commissure (the lower lip always following more than the upper beside it)
+    lo_in, up_in = w[f.landmark("lip_lower_inner")], w[f.landmark("lip_upper_inner")]
+    assert np.all(lo_in[3:-3] == 1) and np.all(up_in[3:-3] == 0)
+    assert np.all(lo_in[1:3] > up_in[1:3]) and np.all(lo_in[-3:-1] > up_in[-3:-1])
+    assert np.all(np.diff(lo_in[:4]) > 0) and np.all(np.diff(up_in[:4]) < 0)
     assert all(0.2 < w[i] < 0.8 for i in corners)  # the corners stretch between the lips
     assert np.all(w[f.vertices[:, 1] > 0] == 0)  # eyes, brows, forehead never follow the jaw
+
+
+def test_default_jaw_turns_and_slides_forward_and_down(muscles):
+    """The condyles slide forward and down the articular eminence (myoface.muscles.jaw)."""
+    jaw = muscles.jaw
+    _, down, forward = jaw.slide_mm
+    assert down < 0 and forward > 0
+    assert 0.3 < np.arctan2(-down, forward) < 0.8  # the eminence's 30-40 deg, give or take
+
+
+def test_jaw_slide_grows_with_the_opening_and_the_pose_moves_the_hinge_by_it(muscles):
+    from myoface.muscles.jaw import SLIDE_POWER
+
+    jaw = muscles.jaw
+    rot0, shift0 = jaw.pose(0.0)
+    np.testing.assert_allclose(rot0, np.eye(3), atol=1e-15)
+    np.testing.assert_allclose(shift0, 0.0, atol=1e-12)
+    # the slide grows faster than the opening: a relaxed opening is mostly rotation
+    assert np.linalg.norm(jaw.slide(0.5)) < 0.5 * np.linalg.norm(jaw.slide(1.0))
+    np.testing.assert_allclose(jaw.slide(0.5), 0.5**SLIDE_POWER * jaw.slide_mm)
+    for c in (0.3, 1.0):
+        rot, shift = jaw.pose(c)
+        np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-12)
+        assert np.arccos((np.trace(rot) - 1) / 2) == pytest.approx(c * jaw.max_angle_rad)
+        # the hinge (the condyles) moves by exactly the slide
+        np.testing.assert_allclose(rot @ jaw.hinge_point + shift, jaw.hinge_point + jaw.slide(c))
+        # a point of weight 1 follows the pose, one of weight 0 stays, one of weight 1/2 on
+        # the hinge moves by half the slide
+        p = np.array([[0.0, -60.0, 40.0], [5.0, -50.0, 30.0], jaw.hinge_point])
+        q = jaw.rotate(p, np.array([1.0, 0.0, 0.5]), c)
+        np.testing.assert_allclose(q[0], rot @ p[0] + shift, atol=1e-9)
+        np.testing.assert_array_equal(q[1], p[1])
+        np.testing.assert_allclose(q[2], p[2] + 0.5 * jaw.slide(c), atol=1e-9)
+
+
+def test_jaw_file_slide(tmp_path, default_face):
+    f = tmp_path / "m.toml"
+    head = (
+        '[[muscle]]\nid = "pull"\ntype = "linear"\norigin = { vertex = 345, depth_mm = 12 }\n'
+        "insertion = { vertex = 291 }\nradius_mm = 10\nmax_shortening_mm = 3\n"
+        '[jaw]\nhinge = { xyz_mm = [0, -20, -30] }\nmax_angle_rad = 0.4\nlower = ["chin"]\n'
+        'upper = ["nose_base"]\n'
+    )
+    f.write_text(head)
+    assert np.all(load_muscles(f, default_face).jaw.slide_mm == 0)  # default: a pure hinge
+    f.write_text(head + "slide_mm = [0, -5, 8]\n")
+    np.testing.assert_array_equal(load_muscles(f, default_face).jaw.slide_mm, [0, -5, 8])
+    f.write_text(head + "slide_mm = [0, -5]\n")
+    with pytest.raises(MyofaceFormatError, match="slide_mm must be 3 finite numbers"):
+        load_muscles(f, default_face)
 
 
 def test_rotate_about_axis_is_rigid_rotation():

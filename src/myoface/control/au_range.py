@@ -4,6 +4,11 @@ Each action unit is relaxed alone at full intensity (``au_contractions({au: 1.0}
 displacement of its measured points (MediaPipe vertex indices, so any face in that topology) is
 compared with the range reported for real faces in ``data/au_range.toml`` (with its sources).
 
+The jaw's openings (AU26, AU27) are measured as the clinic measures a mouth opening: the
+distance between the upper and lower central incisors' edges at the midline (quantity
+``"interincisal"``; the model's teeth, :mod:`myoface.face.teeth`, the lower ones carried by the
+jaw), not between the lips, which part less than the teeth (they roll over them).
+
 Directions are in the head frame (+x the subject's left, +y up, +z forward), each point's x
 mirrored so that +x is lateral (away from the midline) on both sides:
 ``lateral/medial``, ``up/down``, ``forward/back``.
@@ -37,7 +42,7 @@ AXES = {
     "forward": (2, 1.0),
     "back": (2, -1.0),
 }
-QUANTITIES = ("displacement", "opening")
+QUANTITIES = ("displacement", "opening", "interincisal")
 #: points within this distance (mm) of the midline have no lateral side: their x is not mirrored
 MIDLINE_MM = 1.0
 
@@ -49,9 +54,10 @@ class AURange:
     Attributes
     ----------
     au : int — FACS action unit number.
-    points : tuple of str — names of the measured points.
+    points : tuple of str — names of the measured points (none for ``"interincisal"``: the
+        teeth's edges are measured).
     vertices : tuple of int — their MediaPipe vertex indices.
-    quantity : {"displacement", "opening"}
+    quantity : {"displacement", "opening", "interincisal"}
     direction : tuple of str — signed axes of the published motion (see :data:`AXES`).
     range_mm : (low, high) mm, or None when no published value was found.
     source : str — the publication of the range ("" when none).
@@ -148,11 +154,12 @@ def parse_au_ranges(doc: dict) -> tuple[AURange, ...]:
     for row in doc["au"]:
         au = int(row["au"])
         _check(au, au in table, "not in the AU table")
-        names = tuple(row["points"])
-        _check(au, len(names) > 0, "no points")
-        _check(au, all(n in points for n in names), f"unknown point in {names}")
+        names = tuple(row.get("points", ()))
         q = row["quantity"]
         _check(au, q in QUANTITIES, f"quantity must be one of {QUANTITIES}; got {q!r}")
+        _check(au, len(names) > 0 or q == "interincisal", "no points")
+        _check(au, q != "interincisal" or not names, "an interincisal opening takes no points")
+        _check(au, all(n in points for n in names), f"unknown point in {names}")
         _check(au, q != "opening" or len(names) == 2, "an opening needs exactly two points")
         direction = tuple(row["direction"])
         _check(au, all(d in AXES for d in direction), f"direction must name {tuple(AXES)}")
@@ -185,9 +192,35 @@ def _lateral_frame(rest: np.ndarray, d: np.ndarray) -> np.ndarray:
     return d * np.column_stack([side, np.ones_like(side), np.ones_like(side)])
 
 
-def measure_au_range(ref: AURange, rest: np.ndarray, moved: np.ndarray) -> tuple[float, np.ndarray]:
+def incisal_edges(dentition, jaw_pose=None) -> np.ndarray:
+    """The upper and lower central incisors' edges at the midline, (2, 3) mm (head frame): the
+    upper fixed to the skull, the lower moved by the mandible's rigid motion ``jaw_pose``
+    (``(rotation (3, 3), translation (3,) mm)``, :meth:`myoface.model.FaceModel.jaw_pose`;
+    None: rest). ``dentition``: :class:`myoface.face.teeth.Dentition`."""
+    up, lo = dentition.upper, dentition.lower
+    upper = np.array([up.xc, up.edge_y, up.z0])
+    lower = np.array([lo.xc, lo.edge_y, lo.z0])
+    if jaw_pose is not None:
+        rot, shift = jaw_pose
+        lower = np.asarray(rot) @ lower + np.asarray(shift)
+    return np.stack([upper, lower])
+
+
+def measure_au_range(
+    ref: AURange, rest: np.ndarray, moved: np.ndarray, incisors: np.ndarray | None = None
+) -> tuple[float, np.ndarray]:
     """The quantity (mm) and mean (lateral, up, forward) displacement (3,) mm of ``ref``'s points
-    between skin vertices ``rest`` (V, 3) mm and ``moved`` (V, 3) mm (head frame)."""
+    between skin vertices ``rest`` (V, 3) mm and ``moved`` (V, 3) mm (head frame).
+
+    For an ``"interincisal"`` quantity, ``incisors`` (2, 2, 3) mm are the incisal edges
+    (:func:`incisal_edges`, upper then lower) at rest and moved: the value is the distance
+    between the edges when moved (what a ruler between the teeth reads, as in the clinic), the
+    direction the lower edge's motion relative to the upper's."""
+    if ref.quantity == "interincisal":
+        if incisors is None:
+            raise MyofaceValueError(f"AU{ref.au}: an interincisal opening needs the incisors")
+        (u0, l0), (u1, l1) = np.asarray(incisors, dtype=np.float64)
+        return float(np.linalg.norm(u1 - l1)), (l1 - l0) - (u1 - u0)
     idx = np.asarray(ref.vertices)
     d = _lateral_frame(rest[idx], moved[idx] - rest[idx])
     if ref.quantity == "opening":
@@ -220,17 +253,27 @@ def measure_au_ranges(model=None, aus=None) -> list[AURangeResult]:
         model = build_face_model()
     refs = [r for r in au_ranges() if aus is None or r.au in set(aus)]
     nv = model.face.n_vertices
-    bad = [r.au for r in refs if max(r.vertices) >= nv]
+    bad = [r.au for r in refs if r.vertices and max(r.vertices) >= nv]
     if bad:
         raise MyofaceValueError(
             f"the AU range points are MediaPipe face-mesh vertices; this face has {nv} vertices "
             f"(AUs {bad} cannot be measured)"
         )
+    if any(r.quantity == "interincisal" for r in refs) and model.dentition is None:
+        raise MyofaceValueError("an interincisal opening needs a face with teeth (lip landmarks)")
     rest = model.skin_vertices()
     out = []
     for ref in refs:
         res = model.relax(au_contractions({ref.au: 1.0}, model.ids))
-        value, mean = measure_au_range(ref, rest, model.skin_vertices(res.state))
+        incisors = None
+        if ref.quantity == "interincisal":
+            incisors = np.stack(
+                [
+                    incisal_edges(model.dentition),
+                    incisal_edges(model.dentition, model.jaw_pose(res.state)),
+                ]
+            )
+        value, mean = measure_au_range(ref, rest, model.skin_vertices(res.state), incisors)
         out.append(AURangeResult(ref, value, mean, bool(res.converged)))
     return out
 

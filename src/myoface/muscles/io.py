@@ -36,7 +36,8 @@ Types and their keys:
   angle_deg (see :mod:`myoface.muscles.lids`): moves the eyelid skin, not the tissue.
 
 An optional ``[jaw]`` table: ``hinge`` (a point), ``axis`` (default [1, 0, 0]),
-``max_angle_rad``, and the harmonic weight constraints ``lower`` / ``upper`` (lists of landmark
+``max_angle_rad``, ``slide_mm`` (the condyles' translation at full opening, head frame, default
+[0, 0, 0]: see :mod:`myoface.muscles.jaw`), and the harmonic weight constraints ``lower`` / ``upper`` (lists of landmark
 group names or vertex indices held at 1 / 0), ``lower_below`` / ``upper_above`` (points: every
 vertex below / above that point's height is held at 1 / 0). Vertices listed as both are left free.
 """
@@ -241,7 +242,16 @@ def _build(entry: dict, placer: _Placer, ctx: str):
 
 
 def _build_jaw(spec: dict, placer: _Placer, where: str) -> Jaw:
-    allowed = {"hinge", "axis", "max_angle_rad", "lower", "upper", "lower_below", "upper_above"}
+    allowed = {
+        "hinge",
+        "axis",
+        "max_angle_rad",
+        "slide_mm",
+        "lower",
+        "upper",
+        "lower_below",
+        "upper_above",
+    }
     unknown = set(spec) - allowed - {"note"}
     if unknown:
         raise MyofaceFormatError(f"{where}: [jaw]: unknown keys {sorted(unknown)}")
@@ -272,6 +282,7 @@ def _build_jaw(spec: dict, placer: _Placer, where: str) -> Jaw:
         _floats(spec.get("axis", [1.0, 0.0, 0.0]), 3, f"{where}: [jaw].axis"),
         _number(spec, "max_angle_rad", f"{where}: [jaw]"),
         w,
+        _floats(spec.get("slide_mm", [0.0, 0.0, 0.0]), 3, f"{where}: [jaw].slide_mm"),
     )
 
 
