@@ -135,8 +135,6 @@ def test_within_counts_only_aus_with_a_published_range():
 
 #: AUs whose direction the model cannot produce yet, with the reason (strict: fixing one fails)
 KNOWN_DIRECTION_MISSES = {
-    20: "the risorius pulls straight towards bone behind the cheek: on the curved face the corner "
-    "goes more back than sideways (an origin far enough forward would lie outside the head)",
     24: "the only lip sphincter also purses the lips forwards; a lip press (no protrusion) is "
     "not modelled",
 }
