@@ -111,3 +111,79 @@ def test_compiled_kernels_match_the_reference(fm):
     g = wf.gradients(skin)
     np.testing.assert_allclose(wp[flag, 18:], g[flag].reshape(-1, 9), rtol=1e-9, atol=1e-12)
     assert np.array_equal(flag, ref[tris, 3:].max(axis=(1, 2)) > 0)
+
+
+@pytest.fixture(scope="module")
+def normal_map(fm):
+    from myoface.render.wrinkles import WrinkleNormalMap
+
+    return WrinkleNormalMap(WrinkleField(fm.face), fm.face.uv, size=256)
+
+
+def test_normal_map_is_flat_at_rest_and_tilts_only_where_the_skin_compresses(fm, normal_map):
+    assert normal_map.image(fm.face.vertices) is None
+    st = fm.relax(mf.au_contractions({6: 1.0, 12: 1.0}, fm.ids)).state
+    img = normal_map.image(fm.skin_vertices(st))
+    assert img.shape == (256, 256, 3) and img.dtype == np.uint8
+    tilted = np.abs(img.reshape(-1, 3).astype(int) - (128, 128, 255)).max(axis=1) > 2
+    assert tilted.sum() > 1000  # the smile's cheeks and crow's feet fold
+    fields, _ = normal_map.field.fields_fast(fm.skin_vertices(st))
+    amp = normal_map._interp @ fields[:, 3:]
+    compressed = np.zeros(256 * 256, bool)
+    compressed[normal_map.texels[amp.max(axis=1) > 0]] = True
+    assert not (tilted & ~compressed).any()
+
+
+def test_normal_map_tilt_is_the_height_fields_slope(fm, normal_map):
+    """The map's tilt at a texel against a finite difference of the height field along the
+    surface (rest geometry, amplitudes held at the texel's): the slope along +u and +v."""
+    from myoface.render.wrinkles import wrinkle_height
+
+    st = fm.relax(mf.au_contractions({6: 1.0, 12: 1.0}, fm.ids)).state
+    skin = fm.skin_vertices(st)
+    img = normal_map.image(skin).reshape(-1, 3).astype(np.float64)
+    fields, _ = normal_map.field.fields_fast(skin)
+    fields = fields.copy()
+    nm, face = normal_map, fm.face
+    amp = nm._interp @ fields[:, 3:]
+    rng = np.random.default_rng(0)
+    strong = np.flatnonzero(np.abs(img[nm.texels, :2] - 128).max(axis=1) > 30)
+    checked = 0
+    for i in rng.choice(strong, size=min(40, len(strong)), replace=False):
+        row = nm._interp.getrow(i)
+        tri_v = row.indices
+        f = int(np.flatnonzero((np.sort(face.triangles, 1) == np.sort(tri_v)).all(1))[0])
+        a, b, c = face.triangles[f]
+        uv = face.uv[[a, b, c]]
+        w = dict(zip(row.indices, row.data, strict=True))
+        bary = np.array([w.get(a, 0.0), w.get(b, 0.0), w.get(c, 0.0)])
+        if bary.min() < 0.05:
+            continue  # near an edge the step would leave the triangle
+        uv0 = bary @ uv
+        m = np.column_stack([uv[1] - uv[0], uv[2] - uv[0]])
+
+        def at(q, a=a, b=b, c=c, uv=uv, m=m, i=i):
+            l12 = np.linalg.solve(m, q - uv[0])
+            bb = np.array([1 - l12.sum(), *l12])
+            f6 = bb @ fields[[a, b, c]]
+            f6[3:] = amp[i]  # the amplitudes held
+            return wrinkle_height(f6[None], nm.field.k)[0], bb @ face.vertices[[a, b, c]]
+
+        eps = 2e-4
+        slopes = []
+        for d in (np.array([eps, 0.0]), np.array([0.0, eps])):
+            (h1, p1), (h0, p0) = at(uv0 + d), at(uv0 - d)
+            slopes.append((h1 - h0) / np.linalg.norm(p1 - p0))
+        # the tangent frame: T along +u, B the part of +v across T (rest geometry)
+        jac = np.column_stack([face.vertices[b] - face.vertices[a],
+                               face.vertices[c] - face.vertices[a]]) @ np.linalg.inv(m)  # fmt: skip
+        t = jac[:, 0] / np.linalg.norm(jac[:, 0])
+        dv = jac[:, 1] / np.linalg.norm(jac[:, 1])
+        bv = dv - (dv @ t) * t
+        slope_b = (slopes[1] - (dv @ t) * slopes[0]) / np.linalg.norm(bv)
+        # the tangent-space normal is (-h_T, -h_B, 1) normalised (8-bit)
+        n = img[nm.texels[i]] / 127.5 - 1.0
+        np.testing.assert_allclose(-n[0] / n[2], slopes[0], atol=0.03 + 0.05 * abs(slopes[0]))
+        np.testing.assert_allclose(-n[1] / n[2], slope_b, atol=0.03 + 0.05 * abs(slope_b))
+        checked += 1
+    assert checked >= 10

@@ -81,6 +81,22 @@ def test_scene_follows_the_physics(viewer):
         viewer.apply(fm.validate({}))
 
 
+def _glb_normal_map(glb: bytes) -> np.ndarray:
+    """The normal texture of a GLB's first material, decoded (H, W, 3) uint8."""
+    import io
+    import json
+    import struct
+
+    from PIL import Image
+
+    (json_len,) = struct.unpack_from("<I", glb, 12)
+    doc = json.loads(glb[20 : 20 + json_len])
+    tex = doc["textures"][doc["materials"][0]["normalTexture"]["index"]]
+    view = doc["bufferViews"][doc["images"][tex["source"]]["bufferView"]]
+    o = 20 + json_len + 8 + view.get("byteOffset", 0)
+    return np.asarray(Image.open(io.BytesIO(glb[o : o + view["byteLength"]])).convert("RGB"))
+
+
 def test_textured_view_follows_the_physics(viewer):
     from myoface.viewer.scene import read_glb_positions
 
@@ -88,8 +104,15 @@ def test_textured_view_follows_the_physics(viewer):
     sc.set_textured(True)
     try:
         assert sc.textured.visible and not sc.skin.visible
+        flat = _glb_normal_map(sc.textured.glb_data)
+        assert (np.abs(flat.astype(int) - (128, 128, 255)) <= 1).all()  # at rest: no furrows
         skin = viewer.apply(fm.validate({"frontalis_major_l": 1.0, "frontalis_major_r": 1.0}))
         np.testing.assert_allclose(read_glb_positions(sc.textured.glb_data), skin * 1e-3, atol=1e-6)
+        # a smile: the wrinkles' normal map goes with the skin (cheeks, crow's feet)
+        viewer.apply(fm.validate({"zygomaticus_major_l": 1.0, "zygomaticus_major_r": 1.0}))
+        folded = _glb_normal_map(sc.textured.glb_data)
+        assert sc._glb.wrinkled
+        assert (np.abs(folded.astype(int) - (128, 128, 255)).max(axis=2) > 8).sum() > 500
     finally:
         sc.set_textured(False)
         viewer.apply(fm.validate({}))

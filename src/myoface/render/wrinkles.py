@@ -273,3 +273,122 @@ def wrinkle_planes(fields, world, tris, setup, winv, wplanes, wflag):
                     wplanes[f, 18 + 3 * j] += val * gx
                     wplanes[f, 19 + 3 * j] += val * gy
                     wplanes[f, 20 + 3 * j] += val * gz
+
+
+#: the size (texels) of :class:`WrinkleNormalMap`'s square normal map: on the default face a
+#: texel is about 0.3 mm of skin, some 20 texels a furrow
+NORMAL_MAP_SIZE = 512
+#: triangles cover the texels within this many texels outside their edges (so that bilinear
+#: filtering at a UV seam does not blend in the flat normal of an uncovered texel)
+NORMAL_MAP_BLEED_TEXELS = 1.5
+
+
+class WrinkleNormalMap:
+    """The wrinkle height field of a :class:`WrinkleField` baked into a tangent-space normal
+    map over the face's UV layout, for renderers that take a normal texture (the web viewer's
+    glTF skin) rather than shading each pixel as :mod:`myoface.render.raster` does.
+
+    Each texel is a point of a skin triangle at rest (found once, with its barycentric
+    weights); per frame the vertices' amplitudes (:meth:`WrinkleField.fields_fast`) are
+    interpolated to the texels and the height field's surface gradient grad h (rest
+    geometry) tilts the normal, n' = normalize(n - grad h), written in the glTF convention:
+    tangent +X along increasing u, +Y along increasing v (up in the image), RGB = (n' + 1) / 2.
+
+    Parameters
+    ----------
+    field : the face's :class:`WrinkleField`.
+    uv : (V, 2) the face's texture coordinates (OBJ convention: v up, image row 0 at v = 1).
+    size : texels per side.
+    """
+
+    def __init__(self, field: WrinkleField, uv, size: int = NORMAL_MAP_SIZE):
+        uv = np.asarray(uv, dtype=np.float64)
+        self.field = field
+        self.size = int(size)
+        s = self.size
+        rest, tris = field.rest, field.triangles
+        # texel centres in uv: column j -> u = (j + 0.5) / s, row i -> v = 1 - (i + 0.5) / s
+        owner = np.full(s * s, -1, np.int64)
+        bary = np.zeros((s * s, 3))
+        for f, (a, b, c) in enumerate(tris):
+            t = uv[[a, b, c]] * s
+            t[:, 1] = s - t[:, 1]  # (column, row) coordinates
+            m = np.array([t[1] - t[0], t[2] - t[0]]).T
+            det = np.linalg.det(m)
+            if abs(det) < 1e-12:
+                continue
+            eps = NORMAL_MAP_BLEED_TEXELS / np.sqrt(abs(det))
+            lo = np.maximum(np.floor(t.min(0) - 2).astype(int), 0)
+            hi = np.minimum(np.ceil(t.max(0) + 2).astype(int), s - 1)
+            jj, ii = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1))
+            p = np.column_stack([jj.ravel() + 0.5, ii.ravel() + 0.5]) - t[0]
+            l12 = np.linalg.solve(m, p.T).T
+            w = np.column_stack([1 - l12.sum(1), l12])
+            idx = ii.ravel() * s + jj.ravel()
+            inside = w.min(1) >= 0
+            near = ~inside & (w.min(1) >= -eps) & (owner[idx] < 0)
+            for sel in (inside, near):  # inside wins over another triangle's bleed
+                owner[idx[sel]] = f
+                bary[idx[sel]] = np.clip(w[sel], 0, None) / np.clip(w[sel], 0, None).sum(1)[:, None]
+        self.texels = np.flatnonzero(owner >= 0)
+        f = owner[self.texels]
+        b = bary[self.texels]
+        n_t, n_v = len(self.texels), len(rest)
+        corners = tris[f]  # (N, 3)
+        self._interp = sp.csr_matrix(
+            (b.ravel(), (np.repeat(np.arange(n_t), 3), corners.ravel())), shape=(n_t, n_v)
+        )
+        # per triangle: J = dp/d(u, v) (rest geometry) and the uv gradient of the fold distance
+        p0, p1, p2 = rest[tris[:, 0]], rest[tris[:, 1]], rest[tris[:, 2]]
+        d1, d2 = uv[tris[:, 1]] - uv[tris[:, 0]], uv[tris[:, 2]] - uv[tris[:, 0]]
+        muv = np.stack([d1, d2], axis=2)  # (T, 2, 2): columns the uv edges
+        det = muv[:, 0, 0] * muv[:, 1, 1] - muv[:, 0, 1] * muv[:, 1, 0]
+        ok = np.abs(det) > 1e-15
+        inv = np.zeros_like(muv)
+        inv[ok] = np.linalg.inv(muv[ok])
+        jac = np.stack([p1 - p0, p2 - p0], axis=2) @ inv  # (T, 3, 2)
+        sv = field._static[:, 2]
+        ds = np.stack([sv[tris[:, 1]] - sv[tris[:, 0]], sv[tris[:, 2]] - sv[tris[:, 0]]], 1)
+        grad_s = np.einsum("ti,tij->tj", ds, inv)  # (T, 2)
+        # the tangent frame: T along +u, B along +v (Gram-Schmidt), both unit
+        tu = jac[:, :, 0] / np.maximum(np.linalg.norm(jac[:, :, 0], axis=1), 1e-12)[:, None]
+        bv = jac[:, :, 1] - (jac[:, :, 1] * tu).sum(1)[:, None] * tu
+        bv /= np.maximum(np.linalg.norm(bv, axis=1), 1e-12)[:, None]
+        # grad h = J (J^T J)^-1 g_uv: its (T, B) components are G^T g_uv, G = J (J^T J)^-1
+        jtj = np.einsum("tki,tkj->tij", jac, jac)
+        jtj_inv = np.zeros_like(jtj)
+        good = ok & (np.abs(np.linalg.det(jtj)) > 1e-18)
+        jtj_inv[good] = np.linalg.inv(jtj[good])
+        g = jac @ jtj_inv  # (T, 3, 2)
+        frame = np.stack([np.einsum("tk,tki->ti", tu, g), np.einsum("tk,tki->ti", bv, g)], 1)
+        # d(x, y, s)/d(u, v) per texel's triangle, premultiplied into the frame: (N, 3 fields, 2)
+        duv = np.stack([jac[:, 0, :], jac[:, 1, :], grad_s], axis=1)  # (T, 3, 2)
+        dfield = np.einsum("tfj,tcj->tfc", duv, frame)[f]  # (N, 3, 2): (T, B) components
+        # dh/d(x, y, s) per unit amplitude is static (the rest coordinates do not move):
+        # k cos(k x), k cos(k y), 2 s / w^2 exp(-(s / w)^2)
+        x, y, sf = (self._interp @ field._static).T
+        k = field.k
+        per_amp = np.column_stack(
+            [k * np.cos(k * x), k * np.cos(k * y),
+             2 * sf / FOLD_WIDTH_MM**2 * np.exp(-((sf / FOLD_WIDTH_MM) ** 2))]
+        )  # fmt: skip
+        #: (N, 3, 2) the (T, B) components of grad h per unit amplitude A_x, A_y, A_n
+        self._slope = np.ascontiguousarray(per_amp[:, :, None] * dfield, dtype=np.float32)
+
+    def image(self, skin: np.ndarray) -> np.ndarray | None:
+        """The normal map (size, size, 3) uint8 for skin vertices (V, 3) mm, or None when no
+        skin is compressed (the map would be flat)."""
+        fields, any_ = self.field.fields_fast(skin)
+        if not any_:
+            return None
+        amp = (self._interp @ fields[:, 3:]).astype(np.float32)  # (N, 3): A_x, A_y, A_n
+        on = np.flatnonzero(amp.any(axis=1))
+        grad_tb = np.einsum("nf,nfc->nc", amp[on], self._slope[on])  # grad h along T, B
+        n = np.empty((len(on), 3), np.float32)
+        n[:, :2] = -grad_tb
+        n[:, 2] = 1.0
+        n /= np.sqrt((n * n).sum(axis=1))[:, None]
+        out = np.empty((self.size * self.size, 3), np.uint8)
+        out[:] = (128, 128, 255)
+        out[self.texels[on]] = np.clip(np.rint((n + 1.0) * 127.5), 0, 255).astype(np.uint8)
+        return out.reshape(self.size, self.size, 3)

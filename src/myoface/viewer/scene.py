@@ -78,15 +78,21 @@ class TexturedSkinGLB:
     triangles : (T, 3) int
     uv : (V, 2) texture coordinates
     texture : (H, W, 3) linear RGB in [0, 1] or sRGB uint8
+    wrinkles : a :class:`~myoface.render.wrinkles.WrinkleNormalMap` of the face, or None: its
+        normal map (the skin's furrows where it is compressed) goes into the GLB's material
+        with each new skin, so the browser shades the same folds as the CPU renderer.
     """
 
-    def __init__(self, vertices, triangles, uv, texture):
+    def __init__(self, vertices, triangles, uv, texture, wrinkles=None):
         import trimesh
         from PIL import Image
 
         tex = texture if texture.dtype == np.uint8 else to_srgb8(texture)
+        self.wrinkles = wrinkles
+        flat = np.full((4, 4, 3), (128, 128, 255), np.uint8)
         material = trimesh.visual.material.PBRMaterial(
             baseColorTexture=Image.fromarray(tex),
+            normalTexture=Image.fromarray(flat) if wrinkles is not None else None,
             metallicFactor=0.0,
             roughnessFactor=0.65,
             doubleSided=True,
@@ -101,39 +107,73 @@ class TexturedSkinGLB:
         glb = mesh.export(file_type="glb", include_normals=True)
         (json_len,) = struct.unpack_from("<I", glb, 12)
         doc = json.loads(glb[20 : 20 + json_len])
-        binary = glb[20 + json_len + 8 :]
+        binary = bytes(glb[20 + json_len + 8 :])
         prim = doc["meshes"][0]["primitives"][0]["attributes"]
-        self._offsets = {}
+        # the binary chunk as one piece per buffer view, re-assembled on each call (the normal
+        # map's PNG changes length from frame to frame)
+        self._views = [
+            bytearray(binary[bv.get("byteOffset", 0) : bv.get("byteOffset", 0) + bv["byteLength"]])
+            for bv in doc["bufferViews"]
+        ]
+        self._at = {}
         for key in ("POSITION", "NORMAL"):
             acc = doc["accessors"][prim[key]]
             if acc["count"] != len(v) or acc["componentType"] != 5126:
                 raise RuntimeError("unexpected glTF layout from trimesh")  # pragma: no cover
-            view = doc["bufferViews"][acc["bufferView"]]
-            self._offsets[key] = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+            self._at[key] = (acc["bufferView"], acc.get("byteOffset", 0))
+        self._normal_view = None
+        if wrinkles is not None:
+            mat = doc["materials"][doc["meshes"][0]["primitives"][0]["material"]]
+            image = doc["textures"][mat["normalTexture"]["index"]]["source"]
+            self._normal_view = doc["images"][image]["bufferView"]
+        self._flat_png = self._views[self._normal_view] if wrinkles is not None else None
         pos = doc["accessors"][prim["POSITION"]]
         pos["min"] = (v.min(axis=0) * MM - GLB_BOUNDS_PAD_M).tolist()
         pos["max"] = (v.max(axis=0) * MM + GLB_BOUNDS_PAD_M).tolist()
-        header = json.dumps(doc, separators=(",", ":")).encode()
-        header += b" " * (-len(header) % 4)
-        out = io.BytesIO()
-        total = 12 + 8 + len(header) + 8 + len(binary)
-        out.write(struct.pack("<4sII", b"glTF", 2, total))
-        out.write(struct.pack("<I4s", len(header), b"JSON") + header)
-        out.write(struct.pack("<I4s", len(binary), b"BIN\x00") + binary)
-        self._glb = bytearray(out.getvalue())
-        self._bin = 12 + 8 + len(header) + 8
+        self._doc = doc
         self.triangles = np.asarray(triangles)
         self.n = len(v)
+        #: whether the last :meth:`data` carried a non-flat normal map
+        self.wrinkled = False
 
     def data(self, vertices) -> bytes:
-        """The GLB with the skin at ``vertices`` (V, 3) mm."""
+        """The GLB with the skin at ``vertices`` (V, 3) mm (and its wrinkles' normal map)."""
         v = np.asarray(vertices, dtype=np.float64)
         n = vertex_normals(v, self.triangles)
         for key, arr in (("POSITION", v * MM), ("NORMAL", n)):
             a = np.ascontiguousarray(arr, dtype="<f4").tobytes()
-            o = self._bin + self._offsets[key]
-            self._glb[o : o + len(a)] = a
-        return bytes(self._glb)
+            view, o = self._at[key]
+            self._views[view][o : o + len(a)] = a
+        if self.wrinkles is not None:
+            img = self.wrinkles.image(v)
+            self.wrinkled = img is not None
+            self._views[self._normal_view] = self._flat_png if img is None else _png(img)
+        doc = self._doc
+        parts, offset = [], 0
+        for bv, chunk in zip(doc["bufferViews"], self._views, strict=True):
+            bv["byteOffset"], bv["byteLength"] = offset, len(chunk)
+            pad = -len(chunk) % 4
+            parts += [chunk, b"\0" * pad]
+            offset += len(chunk) + pad
+        doc["buffers"][0]["byteLength"] = offset
+        header = json.dumps(doc, separators=(",", ":")).encode()
+        header += b" " * (-len(header) % 4)
+        out = io.BytesIO()
+        out.write(struct.pack("<4sII", b"glTF", 2, 12 + 8 + len(header) + 8 + offset))
+        out.write(struct.pack("<I4s", len(header), b"JSON") + header)
+        out.write(struct.pack("<I4s", offset, b"BIN\x00"))
+        for part in parts:
+            out.write(part)
+        return out.getvalue()
+
+
+def _png(img: np.ndarray) -> bytes:
+    """``img`` (H, W, 3) uint8 as PNG bytes (fast compression: it is sent once per update)."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, format="PNG", compress_level=1)
+    return buf.getvalue()
 
 
 def read_glb_positions(glb: bytes) -> np.ndarray:
@@ -172,7 +212,14 @@ class FaceScene:
         self.textured = None
         self._glb = None
         if renderer.texture is not None and face.uv is not None:
-            self._glb = TexturedSkinGLB(face.vertices, face.triangles, face.uv, renderer.texture)
+            wrinkles = None
+            if renderer.wrinkles is not None:
+                from myoface.render.wrinkles import WrinkleNormalMap
+
+                wrinkles = WrinkleNormalMap(renderer.wrinkles, face.uv)
+            self._glb = TexturedSkinGLB(
+                face.vertices, face.triangles, face.uv, renderer.texture, wrinkles
+            )
             self.textured = scene_api.add_glb(
                 "/face/skin_textured", self._glb.data(skin), visible=False
             )
