@@ -133,25 +133,7 @@ def test_within_counts_only_aus_with_a_published_range():
         au_range_within([unpublished])
 
 
-#: AUs whose direction the model cannot produce yet, with the reason (strict: fixing one fails)
-KNOWN_DIRECTION_MISSES = {
-    24: "the only lip sphincter also purses the lips forwards; a lip press (no protrusion) is "
-    "not modelled",
-}
-
-
-@pytest.mark.parametrize(
-    "au",
-    [
-        pytest.param(
-            r.au,
-            marks=pytest.mark.xfail(reason=KNOWN_DIRECTION_MISSES[r.au], strict=True),
-        )
-        if r.au in KNOWN_DIRECTION_MISSES
-        else r.au
-        for r in au_ranges()
-    ],
-)
+@pytest.mark.parametrize("au", [r.au for r in au_ranges()])
 def test_each_au_moves_its_points_in_the_reference_direction(measured, au):
     r = measured[au]
     assert r.converged
