@@ -51,9 +51,15 @@ def test_no_compression_no_amplitude(fm):
     assert np.all(f[:, 3:] == 0.0)
     # a uniform stretch (no compression anywhere) makes no furrows either
     assert np.all(wf.vertex_fields(1.05 * fm.face.vertices)[:, 3:] == 0.0)
-    # a uniform squeeze makes them everywhere it is beyond the dead zone
+    # a uniform squeeze makes furrows wherever the skin folds into lines (forehead, glabella,
+    # crow's feet, the nose), beyond the dead zone; nowhere else (the cheeks, around the mouth)
+    from myoface.render.wrinkles import furrow_regions
+
     squeezed = wf.vertex_fields(0.9 * fm.face.vertices)[:, 3:5].max(axis=1)
-    assert np.mean(squeezed > 0.0) > 0.95
+    regions = furrow_regions(fm.face)
+    assert 0.2 < np.mean(regions > 0) < 0.7
+    assert np.mean(squeezed[regions > 0.5] > 0.0) > 0.95
+    assert np.all(squeezed[regions == 0] == 0.0)
 
 
 def test_shading_differs_only_where_the_skin_compresses(fm, pair):
@@ -81,6 +87,22 @@ def test_forehead_lines_in_a_brow_raise(fm, pair):
     # the chin, far from the brows, is unchanged
     chin = _region_pixels(r, fm, st, lm["chin_outline"], grow_px=0)
     assert d[chin].max() == 0.0
+
+
+def test_furrow_regions_follow_the_face(fm):
+    """Forehead and crow's feet fold into lines; the cheeks and the chin do not."""
+    from myoface.render.wrinkles import furrow_regions
+
+    w = furrow_regions(fm.face)
+    lm = fm.face.landmarks
+    assert w[lm["forehead"]].min() == 1.0
+    assert w[lm["cheek_l"]].max() == 0.0 and w[lm["cheek_r"]].max() == 0.0
+    assert w[lm["chin_boss"]].max() == 0.0
+    # the same regions on a face twice the size (margins scale with the eyes' distance)
+    from myoface.face import FaceMesh
+
+    big = FaceMesh(2 * fm.face.vertices, fm.face.triangles, landmarks=fm.face.landmarks)
+    np.testing.assert_allclose(furrow_regions(big), w, atol=1e-9)
 
 
 def test_nasolabial_fold_in_a_smile(fm, pair):

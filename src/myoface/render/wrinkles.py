@@ -16,6 +16,8 @@ scales a height field of the skin in its rest coordinates X:
 horizontal furrows where the skin is squeezed vertically (the forehead in a brow raise, crow's
 feet), vertical ones where it is squeezed sideways (the glabella in a frown), and one groove
 along the nasolabial line (s: the rest distance to it) where the cheek pushes against it. The
+furrows A_x, A_y are weighted by where skin folds into lines (:func:`furrow_regions`: forehead,
+glabella, crow's feet, the nose's bridge); the squeezed cheek shows the groove only. The
 renderer tilts each pixel's normal by the height field's gradient on the deformed surface
 (n' = normalize(n - grad h)): a normal map whose strength is the skin's own compression, zero
 wherever the skin is not compressed. Millimetres; head frame x lateral, y up, z forward.
@@ -52,6 +54,44 @@ FOLD_REACH_MM = 15.0
 #: per-vertex columns of :meth:`WrinkleField.vertex_fields`: rest x, rest y, nasolabial
 #: distance s, amplitudes A_x, A_y, A_n
 N_VERTEX = 6
+
+
+def _smoothstep(x, lo, hi):
+    t = np.clip((np.asarray(x, dtype=np.float64) - lo) / (hi - lo), 0.0, 1.0)
+    return t * t * (3 - 2 * t)
+
+
+def furrow_regions(face) -> np.ndarray:
+    """Per vertex (V,), in [0, 1]: where the skin folds into fine furrows when it is squeezed.
+
+    Expression lines form where the skin is thin and tied to the muscle beneath: the forehead
+    and the glabella (above the eyes' upper edge), the crow's feet (beside the eyes' outer
+    corners) and the nose's bridge and sides (AU9's lines). Elsewhere (the cheeks, around the mouth,
+    the chin) compressed skin bulges rather than folding into parallel lines; the cheek's
+    compression shows as the nasolabial groove instead. From the face's landmark groups
+    (``eye_l``, ``eye_r``, ``nose_tip``), with margins in units of the inter-ocular distance
+    so they scale with the face; 1 everywhere when the groups are missing."""
+    lm = face.landmarks
+    v = np.asarray(face.vertices, dtype=np.float64)
+    if not all(k in lm and len(lm[k]) for k in ("eye_l", "eye_r", "nose_tip")):
+        return np.ones(len(v))
+    eyes = [v[np.asarray(lm[k])] for k in ("eye_l", "eye_r")]
+    centre = [e.mean(axis=0) for e in eyes]
+    iod = float(np.linalg.norm(centre[0][:2] - centre[1][:2]))
+    top = max(float(e[:, 1].max()) for e in eyes)
+    mid_y = 0.5 * (centre[0][1] + centre[1][1])
+    outer = 0.5 * (float(np.abs(eyes[0][:, 0]).max()) + float(np.abs(eyes[1][:, 0]).max()))
+    inner = 0.5 * (float(np.abs(eyes[0][:, 0]).min()) + float(np.abs(eyes[1][:, 0]).min()))
+    nose_y = float(v[np.asarray(lm["nose_tip"]), 1].mean())
+    y, ax = v[:, 1], np.abs(v[:, 0])
+    forehead = _smoothstep(y, top - 0.03 * iod, top + 0.1 * iod)
+    crows = _smoothstep(ax, outer - 0.06 * iod, outer + 0.03 * iod) * (
+        1.0 - _smoothstep(np.abs(y - mid_y), 0.2 * iod, 0.3 * iod)
+    )
+    bridge = (1.0 - _smoothstep(ax, 0.8 * inner, 1.1 * inner)) * _smoothstep(
+        y, nose_y - 0.05 * iod, nose_y + 0.1 * iod
+    )
+    return np.maximum.reduce([forehead, crows, bridge])
 
 
 def _polyline_distance(p: np.ndarray, line: np.ndarray):
@@ -145,6 +185,10 @@ class WrinkleField:
         s_fold = np.where(np.isfinite(self.fold_s), self.fold_s, 1e3)
         self._static = np.column_stack([v[:, 0], v[:, 1], s_fold])
         self._gains = np.array([FURROW_GAIN_MM, FURROW_GAIN_MM, FOLD_GAIN_MM])
+        #: (V, 3) per-vertex gains: the furrows only where the skin folds into lines
+        #: (:func:`furrow_regions`), the nasolabial groove wherever it applies
+        regions = furrow_regions(face)
+        self._vertex_gains = self._gains * np.column_stack([regions, regions, np.ones(nv)])
         self._fields = np.zeros((nv, N_VERTEX))
         self._fields[:, :3] = self._static
 
@@ -168,7 +212,7 @@ class WrinkleField:
         """Per-vertex (V, N_VERTEX): rest x, rest y, nasolabial distance, and the amplitudes
         A_x, A_y (furrow heights, mm) and A_n (groove depth, mm) for skin (V, 3) mm."""
         c = np.clip(self.compressions(skin) - COMPRESSION_DEAD_ZONE, 0.0, None)
-        return np.column_stack([self._static, c * self._gains])
+        return np.column_stack([self._static, c * self._vertex_gains])
 
     def fields_fast(self, skin: np.ndarray) -> tuple[np.ndarray, bool]:
         """:meth:`vertex_fields` by sparse products, into a buffer reused between calls
@@ -178,7 +222,7 @@ class WrinkleField:
         for k in range(3):
             ft = self._dirs[k] + self._ops[k] @ u
             c = 1.0 - np.sqrt((ft * ft).sum(axis=1)) - COMPRESSION_DEAD_ZONE
-            amp[:, k] = np.where(self._used[:, k] & (c > 0.0), c * self._gains[k], 0.0)
+            amp[:, k] = np.where(self._used[:, k] & (c > 0.0), c * self._vertex_gains[:, k], 0.0)
         return self._fields, bool(amp.any())
 
     def gradients(self, skin: np.ndarray) -> np.ndarray:
