@@ -20,6 +20,8 @@ from myoface.analysis.fit import (
     PinholeCamera,
     confounded_muscles,
     initial_pose,
+    lid_gains,
+    model_error_weights,
     rotmat,
     rotvec,
 )
@@ -203,6 +205,60 @@ def test_confounded_muscles_of_the_default_face(fm):
         assert out[f"buccinator_{side}"] == f"zygomaticus_major_{side}"
         assert f"risorius_{side}" not in out
     assert "jaw" not in out or confounded_muscles(fm, 0.99)[-1][0] != "jaw"
+
+
+def test_model_error_weights():
+    """A landmark's variance grows by the model's error, a fraction of the largest
+    displacement any one muscle makes there: weight 1 where no muscle moves the skin, 1/2
+    where one moves it sigma / model_error, less further; model_error 0 weighs all alike."""
+    resp = np.zeros((4, 3, 2))
+    resp[1, 0, 0] = 10.0  # 10 mm at full contraction
+    resp[2, :, 1] = [0.0, 30.0, 40.0]  # 50 mm
+    resp[3, 1, 0], resp[3, 1, 1] = 10.0, -20.0  # the larger one counts
+    w = model_error_weights(resp, 0.1, 1.0)
+    np.testing.assert_allclose(w, [1.0, 0.5, 1 / 26, 0.2])
+    np.testing.assert_allclose(model_error_weights(resp, 0.0, 1.0), 1.0)
+    with pytest.raises(ValueError, match="model_error"):
+        model_error_weights(resp, -0.1)
+
+
+def test_no_muscle_moves_the_rigid_points_as_much_as_the_lips(fm):
+    """On the default face the points the fidelity measure takes as rigid (eye corners, nose
+    bridge) weigh more in the fit than any point of the lips or the chin."""
+    from myoface.analysis.estimate import skin_response
+    from myoface.analysis.fidelity import REGIONS, RIGID_POINTS
+
+    w = model_error_weights(skin_response(fm, fm.ids))
+    moving = [*REGIONS["lips"], *REGIONS["chin"], *REGIONS["mouth_corners"]]
+    assert w[list(RIGID_POINTS)].min() > w[moving].max()
+
+
+def test_lids_close_a_fraction_of_the_persons_own_opening(fm):
+    """A person whose left eye is open 1.4 times as wide as the model's: the left lid muscles'
+    gain is 1.4, the right ones' 1; after calibration on the person's neutral, the person
+    closing the left eye half way (half of their own opening) is measured as 0.5, not as the
+    0.7 of the model's opening that the lid moved."""
+    from myoface.analysis.estimate import skin_response
+
+    resp = skin_response(fm, fm.ids)
+    close = {s: fm.ids.index(f"orbicularis_oculi_palpebralis_{s}") for s in "lr"}
+    eye_l = fm.eyelids.eyes["eye_l"].vertices
+    rest = fm.skin_vertices()
+    person = rest.copy()
+    person[eye_l] -= 0.4 * resp[eye_l, :, close["l"]]  # the margins 40 % further apart
+    gains = {fm.ids[i]: g for i, (g, _) in lid_gains(fm, person).items()}
+    assert gains[fm.ids[close["l"]]] == pytest.approx(1.4, abs=0.03)
+    assert gains["levator_palpebrae_superioris_l"] == gains[fm.ids[close["l"]]]
+    assert gains[fm.ids[close["r"]]] == pytest.approx(1.0, abs=1e-9)
+    pose = HeadPose.from_euler(5.0, 0.0, 0.0, (0.0, 0.0, -500.0))
+    fit = ModelFit(fm, CAMERA, replace(EXACT, refine=0))
+    fit.calibrate([landmarks(person, pose)], index=0)
+    half = person.copy()
+    half[eye_l] += 0.5 * 1.4 * resp[eye_l, :, close["l"]]
+    r = fit.fit(landmarks(half, pose))
+    assert r.contractions[close["l"]] == pytest.approx(0.5, abs=0.05)
+    assert r.contractions[close["r"]] < 0.05
+    assert fit.calibration.extra["lid_gains"][fm.ids[close["l"]]] == pytest.approx(1.4, abs=0.03)
 
 
 def test_csv_has_pose_and_residual_columns(tmp_path, fm):

@@ -93,6 +93,16 @@ class FitSettings:
         x, y / 10 1.1 mm), so it only keeps the depth of the pose from being ill-posed.
     oval_weight : weight of the face oval's points (the mesh's outer rim), which MediaPipe
         puts on the face's silhouette, not on fixed skin, as the head turns.
+    model_error : the model's own error at a point, as a fraction of the largest skin
+        displacement any one muscle (or the jaw) makes there at full contraction
+        (:func:`model_error_weights`): a point the muscles move far (lips, cheeks, chin) is
+        known less well than one no muscle moves (eye corners, nose bridge), because the
+        model's muscles and tissue are an approximation of the person's. Without it, what an
+        expression moves that the model cannot (a broad smile's cheeks bulging up and out)
+        is explained by moving the head: on the sample video's smile the head rose ~1.2 mm
+        against its eye corners and nose bridge, the chin then seemed to drop, and the jaw
+        opened 0.13 rad behind closed teeth. 0: every point is known to
+        :attr:`landmark_sigma_mm`.
     rate_per_s : temporal prior: a contraction changes by about this much per second (1 sd);
         a fast expression goes from 0 to 1 in a quarter of a second.
     rotation_rate_deg_per_s, translation_rate_mm_per_s : the same for the head pose (weak: a
@@ -110,6 +120,7 @@ class FitSettings:
     landmark_sigma_mm: float = 1.0
     depth_sigma_mm: float = 10.0
     oval_weight: float = 0.2
+    model_error: float = 0.1
     rate_per_s: float = 4.0
     rotation_rate_deg_per_s: float = 180.0
     translation_rate_mm_per_s: float = 300.0
@@ -270,6 +281,60 @@ def landmark_weights(face, oval_weight: float = FitSettings.oval_weight) -> np.n
     return w
 
 
+def model_error_weights(response, model_error: float = FitSettings.model_error,
+                        sigma_mm: float = FitSettings.landmark_sigma_mm) -> np.ndarray:  # fmt: skip
+    """Per-vertex weights (V,) for the model's own error (:attr:`FitSettings.model_error`):
+    ``1 / (1 + (model_error * e / sigma_mm)^2)`` with ``e`` the largest displacement (mm) any
+    one muscle's full contraction makes at the vertex (``response`` (V, 3, M): mm per unit
+    contraction, :func:`~myoface.analysis.estimate.skin_response`). That is the landmark's
+    variance ``sigma_mm^2`` grown by the model's ``(model_error * e)^2``: 1 where no muscle
+    moves the skin, about 0.5 where a muscle moves it ``sigma_mm / model_error`` (10 mm by
+    default)."""
+    if not model_error >= 0:
+        raise MyofaceValueError(f"model_error must be >= 0; got {model_error}")
+    r = np.asarray(response, dtype=np.float64)
+    e = np.linalg.norm(r, axis=1).max(axis=1) if r.shape[2] else np.zeros(len(r))
+    return 1.0 / (1.0 + (model_error * e / sigma_mm) ** 2)
+
+
+#: the person's eye opening over the model's (:func:`lid_gains`) is kept within these bounds: a
+#: tracker that finds an eye closed (or wide open) at calibration should not rescale its lids
+#: beyond what faces differ by
+LID_GAIN_RANGE = (0.5, 2.0)
+
+
+def lid_gains(model, shape) -> dict[int, tuple[float, np.ndarray]]:
+    """How much further the lids of ``shape`` (V, 3) mm, head frame (the person's neutral),
+    move than the model's for the same contraction: ``{muscle index: (gain, vertices)}`` for
+    each lid muscle (:mod:`myoface.muscles.lids`), ``gain`` the eye's opening (mean height of
+    the upper margin over the lower, between the canthi) in ``shape`` over the model's, within
+    :data:`LID_GAIN_RANGE`, and ``vertices`` those the lids move.
+
+    A lid muscle's contraction is a fraction of the eye's own opening (at 1 the margins meet),
+    so its skin displacement is proportional to the opening: the model's response, measured on
+    the model's eyes, is the person's divided by this gain."""
+    lids = getattr(model, "eyelids", None)
+    out: dict[int, tuple[float, np.ndarray]] = {}
+    if lids is None:
+        return out
+    rest = model.skin_vertices()
+    shape = np.asarray(shape, dtype=np.float64)
+    for eye in lids.eyes.values():
+
+        def opening(x, eye=eye):
+            up, lo = eye.upper[1:-1], eye.lower[1:-1]
+            return float(x[up, 1].mean() - x[lo, 1].mean())
+
+        ref = opening(rest)
+        if not ref > 0:
+            continue
+        gain = float(np.clip(opening(shape) / ref, *LID_GAIN_RANGE))
+        for i in (eye.raise_i, eye.close_i):
+            if i is not None:
+                out[int(i)] = (gain, np.asarray(eye.vertices))
+    return out
+
+
 def confounded_muscles(model, threshold: float = 0.95, ids=None) -> list[tuple[str, float, str]]:
     """Muscles the skin alone cannot tell apart from the others: ``(muscle, R2, nearest)``, R2
     the share of the muscle's skin response (every vertex, x, y, z) that the other muscles'
@@ -380,8 +445,17 @@ class ModelFit:
         self.ids = tuple(model.ids)
         self.n_muscles = len(self.ids)
         self.neutral = model.skin_vertices()
-        self.response = skin_response(model, self.ids)  # (V, 3, M) mm per unit contraction
-        self.base_weights = landmark_weights(model.face, self.settings.oval_weight)
+        #: the model's skin response (V, 3, M) mm per unit contraction, and the fit's: the
+        #: same with the lids' scaled to the person's eye opening at calibration
+        #: (:func:`lid_gains`; their extra part is :attr:`lid_extra`)
+        self.model_response = skin_response(model, self.ids)
+        self.response = self.model_response
+        self.lid_extra = np.zeros_like(self.model_response)
+        self.base_weights = landmark_weights(
+            model.face, self.settings.oval_weight
+        ) * model_error_weights(
+            self.response, self.settings.model_error, self.settings.landmark_sigma_mm
+        )
         self.identity_mm = np.zeros_like(self.neutral)
         #: the fit's own state of the model's tissue (each relax starts from the last)
         self.state = model.rest_state()
@@ -425,7 +499,8 @@ class ModelFit:
         if not res.converged or any(issubclass(w.category, RelaxWarning) for w in caught):
             self.unconverged_relaxes += 1
         self.state = res.state
-        return self.model.skin_vertices(self.state) - self.neutral
+        disp = self.model.skin_vertices(self.state) - self.neutral
+        return disp + self.lid_extra @ np.asarray(c, dtype=np.float64)
 
     def shape(self, contractions) -> np.ndarray:
         """The fit's forward model (V, 3) mm, head frame, at ``contractions``: the person's
@@ -568,8 +643,29 @@ class ModelFit:
         pose = poses[0]
         self.identity_mm = identity
         self._prev = None
-        self.calibration = Calibration(index, scores, identity, pose, resid, {"frames": use})
+        gains = self._scale_lids(self.neutral + identity)
+        extra = {"frames": use, "lid_gains": gains}
+        self.calibration = Calibration(index, scores, identity, pose, resid, extra)
         return self.calibration
+
+    def _scale_lids(self, shape) -> dict[str, float]:
+        """Scale the lid muscles' response to the eye openings of ``shape`` (the person's
+        neutral; :func:`lid_gains`): the fit then reads a lid's contraction as the fraction of
+        the person's own opening that it closes (or opens), which is what it means on any
+        face the contractions drive. Returns {muscle id: gain}."""
+        extra = np.zeros_like(self.model_response)
+        gains = lid_gains(self.model, shape)
+        for i, (g, verts) in gains.items():
+            extra[verts, :, i] = (g - 1.0) * self.model_response[verts, :, i]
+        self._collect()
+        self.lid_extra = extra
+        self.response = self.model_response + extra
+        # the linearisation starts again from rest with the new response
+        self.state = self.model.rest_state()
+        self._c0 = np.zeros(self.n_muscles)
+        self._d0 = np.zeros_like(self.neutral)
+        self._jac = None
+        return {self.ids[i]: round(g, 4) for i, (g, _) in gains.items()}
 
     # -------------------------------------------------------------- internals
     def _pixel_mm(self, pose: HeadPose) -> float:
@@ -1248,6 +1344,7 @@ class FitAnalyzer:
                 ],
                 "identity_rms_mm": float(np.sqrt((cal.identity_mm**2).sum(1).mean())),
                 "residual_mm": cal.residual_mm,
+                "lid_gains": cal.extra.get("lid_gains", {}),
                 "pose": cal.pose.columns(),
             }
         return out
