@@ -12,15 +12,11 @@ from scipy.sparse.linalg import spsolve
 
 from myoface.errors import MyofaceValueError
 from myoface.tissue import internal_forces, potential_energy, relax, rest_state
-from myoface.tissue.hessian import BlockPattern, symmetric_matvec
+from myoface.tissue.hessian import energy_gradient_free, symmetric_matvec
 from myoface.tissue.solver import (
     NEWTON_TOL_MM,
     PRECOND_SHIFT,
-    assemble_block_hessian,
     diagonal_blocks,
-    energy_gradient,
-    energy_gradient_free,
-    kernel_args,
     newton_data,
     pcg,
     sgs_precond,
@@ -54,26 +50,29 @@ def _perturbed(tm, scale_mm, seed=0):
 def _free_energy_gradient(tm, x):
     pat = newton_data(tm).pattern
     g = np.empty((pat.n_free, 3))
-    en = energy_gradient_free(x, *pat.spring_args(), pat.sfi, pat.sfj, *pat.prism_args(), g, True)
+    en = energy_gradient_free(x, pat.springs, pat.prisms, g)
     return en, g.reshape(-1)
 
 
 def test_energy_gradient_matches_the_reference_kernels(fm):
+    """The Newton solver's kernel against the force module's energy and forces: over the
+    springs and prisms that touch a free node, so its energy is E less a constant (the same at
+    every x with the same kinematic nodes), and its gradient is minus the forces on the free
+    nodes."""
     tm = fm.tissue
+    # the kinematic nodes moved too (the same way in x and x2), so that the parts between them
+    # hold energy
+    kin_move = np.random.default_rng(10).normal(0, 0.3, (len(tm.kinematic_index), 3))
     x = _perturbed(tm, 0.5)
-    grad = np.empty_like(x)
-    en = energy_gradient(x, *kernel_args(tm), grad)
-    assert en == pytest.approx(potential_energy(tm, x), rel=1e-12)
+    x[tm.kinematic_index] += kin_move
+    en = potential_energy(tm, x)
     f = internal_forces(tm, x)
-    np.testing.assert_allclose(grad, -f, rtol=0, atol=1e-9 * np.abs(f).max())
-    # the Newton solver's kernel: the springs and prisms that touch a free node, so its energy
-    # is E less a constant (the same at every x with the same kinematic nodes), and its gradient
-    # is over the free nodes
     en_free, g_free = _free_energy_gradient(tm, x)
     np.testing.assert_allclose(
         g_free, -f[tm.free_index].reshape(-1), rtol=0, atol=1e-9 * np.abs(f).max()
     )
     x2 = _perturbed(tm, 0.5, seed=7)
+    x2[tm.kinematic_index] += kin_move
     en2 = potential_energy(tm, x2)
     en2_free, _ = _free_energy_gradient(tm, x2)
     assert en_free - en2_free == pytest.approx(en - en2, rel=1e-9)
@@ -82,41 +81,32 @@ def test_energy_gradient_matches_the_reference_kernels(fm):
 
 def test_hessian_is_the_jacobian_of_the_gradient(fm):
     """The exact Hessian (unclipped geometric term, full volume term) against central
-    differences of the gradient, at a state far from rest (compressed and stretched springs);
-    the symmetric storage the solver assembles against the full block assembly."""
+    differences of the force module's forces, along random directions, at a state far from
+    rest (compressed and stretched springs); its product (symmetric storage) against the
+    assembled matrix's."""
     tm = fm.tissue
     pat = newton_data(tm).pattern
     x = _perturbed(tm, 0.5, seed=1)
     dvals, lvals = np.empty(9 * pat.n_free), np.empty(9 * pat.nl)
     pat.assemble(x, dvals, lvals)
     h = pat.matrix(dvals, lvals)
-    full = BlockPattern(tm.n_nodes, tm.free_index, tm.spring_i, tm.spring_j, tm.elements)
-    bvals = np.empty(full.nnzb * 9)
-    assemble_block_hessian(
-        x, *kernel_args(tm), full.fmap, full.spring_slots, full.element_slots, bvals
-    )
-    ref = full.scalar_matrix(bvals)
-    assert abs(h - ref).max() < 1e-12 * abs(ref).max()
-    assert abs(ref - ref.T).max() < 1e-10 * abs(ref).max()
+    assert abs(h - h.T).max() == 0.0
     free = tm.free_index
-    v = np.random.default_rng(2).normal(size=3 * len(free))
-    hv = np.empty_like(v)
-    symmetric_matvec(pat.lptr, pat.lcol, dvals, lvals, v, hv)
-    np.testing.assert_allclose(hv, ref @ v, rtol=0, atol=1e-12 * np.abs(ref @ v).max())
     eps = 1e-6  # mm: central differences have error O(eps^2) relative to the O(1) terms
-
-    def grad(xx):
-        g = np.empty_like(xx)
-        energy_gradient(xx, *kernel_args(tm), g)
-        return g[free].reshape(-1)
-
-    xp, xm = x.copy(), x.copy()
-    xp[free] += eps * v.reshape(-1, 3)
-    xm[free] -= eps * v.reshape(-1, 3)
-    fd = (grad(xp) - grad(xm)) / (2 * eps)
-    # the energy is piecewise smooth (biphasic springs): a spring within eps of its threshold
-    # would make the difference quotient meaningless; at a random state none is
-    assert np.abs(hv - fd).max() < 1e-6 * np.abs(fd).max()
+    rng = np.random.default_rng(2)
+    for _ in range(3):
+        v = rng.normal(size=3 * len(free))
+        hv = np.empty_like(v)
+        symmetric_matvec(pat.lptr, pat.lcol, dvals, lvals, v, hv)
+        np.testing.assert_allclose(hv, h @ v, rtol=0, atol=1e-12 * np.abs(hv).max())
+        xp, xm = x.copy(), x.copy()
+        xp[free] += eps * v.reshape(-1, 3)
+        xm[free] -= eps * v.reshape(-1, 3)
+        fd = (internal_forces(tm, xm)[free] - internal_forces(tm, xp)[free]).reshape(-1)
+        fd /= 2 * eps
+        # the energy is piecewise smooth (biphasic springs): a spring within eps of its
+        # threshold would make the difference quotient meaningless; at a random state none is
+        assert np.abs(hv - fd).max() < 1e-6 * np.abs(fd).max()
 
 
 def test_rest_factor_solves_the_rest_stiffness(fm):
@@ -137,6 +127,15 @@ def test_rest_factor_solves_the_rest_stiffness(fm):
         k.shape[0],
         3 * tm.kinematic.sum(),
     )
+    # K_fk: the change of the gradient over the free nodes with the kinematic nodes, at rest
+    kin, free, eps = tm.kinematic_index, tm.free_index, 1e-6
+    v = np.random.default_rng(9).normal(size=(len(kin), 3))
+    xp, xm = tm.rest_positions.copy(), tm.rest_positions.copy()
+    xp[kin] += eps * v
+    xm[kin] -= eps * v
+    fd = (internal_forces(tm, xm)[free] - internal_forces(tm, xp)[free]).reshape(-1) / (2 * eps)
+    kv = data.coupling @ v.reshape(-1)
+    np.testing.assert_allclose(kv, fd, rtol=0, atol=1e-6 * np.abs(fd).max())
 
 
 @settings(max_examples=3, deadline=None, derandomize=True)
@@ -418,8 +417,11 @@ def test_relaxed_states_carry_where_they_came_from(fm):
 def test_energy_gradient_hessian_in_one_pass_equals_the_separate_kernels(fm):
     """The Newton loop's fused pass (energy, gradient, the springs' and the prisms' Hessians)
     against the energy-gradient kernel and the separate assemblies, at a state far from rest."""
-    from myoface.tissue.hessian import add_prism_hessian, add_spring_hessian
-    from myoface.tissue.solver import energy_gradient_hessian_free
+    from myoface.tissue.hessian import (
+        add_prism_hessian,
+        add_spring_hessian,
+        energy_gradient_hessian,
+    )
 
     tm = fm.tissue
     pat = newton_data(tm).pattern
@@ -427,35 +429,18 @@ def test_energy_gradient_hessian_in_one_pass_equals_the_separate_kernels(fm):
     x = _perturbed(tm, 0.5, seed=8)
     en, g = _free_energy_gradient(tm, x)
     dp, lp = np.zeros(9 * nf), np.zeros(9 * pat.nl)
-    add_prism_hessian(x, *pat.prism_args(), pat.pslots, pat.prev, dp, lp)
+    add_prism_hessian(x, pat.prisms, dp, lp)
     ds, ls = np.zeros(9 * nf), np.zeros(9 * pat.nl)
-    add_spring_hessian(x, *pat.spring_args(), pat.sfi, pat.sfj, pat.soff, ds, ls)
+    add_spring_hessian(x, pat.springs, ds, ls)
     d2, l2 = np.zeros(9 * nf), np.zeros(9 * pat.nl)
     dp2, lp2 = np.zeros(9 * nf), np.zeros(9 * pat.nl)
     g2 = np.empty((nf, 3))
-    en2 = energy_gradient_hessian_free(
-        x,
-        *pat.spring_args(),
-        pat.sfi,
-        pat.sfj,
-        pat.soff,
-        *pat.prism_args(),
-        g2,
-        True,
-        True,
-        d2,
-        l2,
-        True,
-        pat.pslots,
-        pat.prev,
-        dp2,
-        lp2,
-    )
+    en2 = energy_gradient_hessian(x, pat.springs, pat.prisms, g2, True, d2, l2, True, dp2, lp2)
     # the same sums (fastmath may contract them differently: rounding only)
     assert en2 == pytest.approx(en, rel=1e-12)
     for got, ref in ((g2.reshape(-1), g), (d2, ds), (l2, ls), (dp2, dp), (lp2, lp)):
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-10 * np.abs(ref).max())
-    # and together they are the reference assembly's Hessian
+    # and together they are the pattern's assembly
     dref, lref = np.empty(9 * nf), np.empty(9 * pat.nl)
     pat.assemble(x, dref, lref)
     np.testing.assert_allclose(d2 + dp2, dref, rtol=0, atol=1e-10 * np.abs(dref).max())

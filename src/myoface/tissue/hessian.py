@@ -1,10 +1,19 @@
-"""Sparse stiffness (Hessian) assembly for the implicit / quasi-static solver.
+"""Stiffness (Hessian) matrices of the lattice's potential energy over the free nodes.
 
-The matrix is the Hessian of the lattice's potential energy over the *free* nodes, with each
-spring's block projected to be positive semi-definite (its compressive geometric term clipped)
-and the volume term in Gauss-Newton form (2 kv g g^T). It is assembled straight into a fixed CSR
-pattern (built once per model) by a numba kernel, so a refactorisation costs one pass over the
-springs plus the sparse LU itself.
+Two of them:
+
+* the L-BFGS reference's preconditioner (:class:`HessianPattern`, :func:`assemble_hessian_numba`):
+  each spring's block projected to be positive semi-definite (its compressive geometric term
+  clipped) and the volume term in Gauss-Newton form (2 kv g g^T), in a fixed scalar CSR pattern
+  built once per model, for a sparse LU;
+* the Newton solver's exact Hessian (:class:`SymmetricPattern`), in symmetric 3x3-block storage,
+  over the springs and prisms that touch a free node. One pass over the springs
+  (:func:`_spring_pass`) and one over the prisms (:func:`_prism_pass`) compute the energy, its
+  gradient and this Hessian, each on request; every kernel of the Newton solver's is made of
+  them (:func:`energy_gradient_hessian`, :func:`energy_gradient_free`,
+  :func:`add_spring_hessian`, :func:`add_prism_hessian`).
+
+References: Terzopoulos & Waters 1993, eq. (1)-(4).
 """
 
 from __future__ import annotations
@@ -13,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
-from myoface.tissue.forces import LAW_CONTINUOUS, PRISM_TETS, spring_magnitude
+from myoface.tissue.forces import LAW_CONTINUOUS, MIN_SPRING_LENGTH, PRISM_TETS, spring_magnitude
 
 
 class HessianPattern:
@@ -204,237 +213,8 @@ PRISM_TETS_H = PRISM_TETS
 
 
 # ---------------------------------------------------------------------------------------------
-# the exact Hessian in 3x3 blocks (the Newton solver's, :mod:`myoface.tissue.solver`)
+# the exact Hessian, symmetric storage (the Newton solver's, :mod:`myoface.tissue.solver`)
 # ---------------------------------------------------------------------------------------------
-
-
-class BlockPattern:
-    """Block CSR pattern (3x3 blocks) of the Hessian over the free nodes, and where each
-    spring's and each prism's blocks go in it.
-
-    Attributes
-    ----------
-    n_free : int; fmap : (N,) int64 — free-node number of each node, -1 for kinematic ones.
-    indptr : (F+1,) int64; indices : (nnzb,) int64 — block rows, sorted columns.
-    nnzb : int
-    spring_slots : (S, 4) int64 — block of (i,i), (j,j), (i,j), (j,i) of each spring, -1 where
-        a node is not free.
-    element_slots : (E, 36) int64 — block of (node a, node b) of each prism (a, b in 0..5, row
-        major), -1 where a node is not free.
-    """
-
-    def __init__(self, n_nodes, free_index, si, sj, elements):
-        fmap = -np.ones(n_nodes, np.int64)
-        fmap[free_index] = np.arange(len(free_index))
-        nf = len(free_index)
-        pi = [np.arange(nf), fmap[si], fmap[sj]]
-        pj = [np.arange(nf), fmap[sj], fmap[si]]
-        el = np.asarray(elements, np.int64).reshape(-1, 6)
-        fe = fmap[el]
-        for a in range(6):
-            for b in range(6):
-                pi.append(fe[:, a])
-                pj.append(fe[:, b])
-        rows, cols = np.concatenate(pi), np.concatenate(pj)
-        ok = (rows >= 0) & (cols >= 0)
-        blk = sp.coo_matrix((np.ones(int(ok.sum())), (rows[ok], cols[ok])), shape=(nf, nf)).tocsr()
-        blk.sum_duplicates()
-        blk.sort_indices()
-        self.n_free = nf
-        self.fmap = fmap
-        self.indptr = blk.indptr.astype(np.int64)
-        self.indices = blk.indices.astype(np.int64)
-        self.nnzb = len(self.indices)
-        fi, fj = fmap[si], fmap[sj]
-        self.spring_slots = np.stack(
-            [
-                _block_slots(self.indptr, self.indices, fi, fi),
-                _block_slots(self.indptr, self.indices, fj, fj),
-                _block_slots(self.indptr, self.indices, fi, fj),
-                _block_slots(self.indptr, self.indices, fj, fi),
-            ],
-            axis=1,
-        )
-        es = np.empty((len(el), 36), np.int64)
-        for a in range(6):
-            for b in range(6):
-                es[:, 6 * a + b] = _block_slots(self.indptr, self.indices, fe[:, a], fe[:, b])
-        self.element_slots = es
-        for arr in (self.fmap, self.indptr, self.indices, self.spring_slots, self.element_slots):
-            arr.flags.writeable = False
-
-    def scalar_matrix(self, bvals) -> sp.csr_matrix:
-        """The (3F, 3F) scipy CSR matrix of block values ``bvals`` (nnzb*9,)."""
-        b = sp.bsr_matrix(
-            (np.asarray(bvals).reshape(-1, 3, 3), self.indices, self.indptr),
-            shape=(3 * self.n_free, 3 * self.n_free),
-        )
-        return b.tocsr()
-
-
-def _block_slots(indptr, indices, a, b):
-    """Index in ``indices`` of block (a[q], b[q]) for each q, -1 where a or b is -1."""
-    out = -np.ones(len(a), np.int64)
-    ok = np.flatnonzero((a >= 0) & (b >= 0))
-    if len(ok):
-        r0 = indptr[a[ok]]
-        r1 = indptr[a[ok] + 1]
-        # the rows are sorted: a vectorised binary search row by row via a global key
-        key = a[ok] * (len(indptr)) + b[ok]
-        rows_of = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
-        allkey = rows_of * (len(indptr)) + indices
-        pos = np.searchsorted(allkey, key)
-        if np.any(pos >= r1) or np.any(pos < r0) or np.any(allkey[pos] != key):
-            raise ValueError("block not in the pattern")
-        out[ok] = pos
-    return out
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _add9(bvals, slot, h, sgn):
-    if slot >= 0:
-        o = 9 * slot
-        for q in range(9):
-            bvals[o + q] += sgn * h[q]
-
-
-@njit(cache=True, nogil=True, fastmath=True)
-def assemble_block_hessian(
-    x,
-    si,
-    sj,
-    rest,
-    mat_id,
-    mat,
-    law,
-    elems,
-    rest_vol,
-    kv,
-    vsign,
-    fmap,
-    spring_slots,
-    element_slots,
-    bvals,
-):
-    """Fill ``bvals`` (nnzb*9,) with the exact Hessian of the potential energy over the free
-    nodes at ``x`` (N, 3) mm, in the block pattern of :class:`BlockPattern`.
-
-    Springs: ``(c - g) u u^T + g I`` on (i,i), (j,j) and its negative on (i,j), (j,i), with u the
-    unit direction, c = d|s|/de the tangent stiffness (alpha or beta, eq. 2) and g = |s|/d the
-    geometric term — negative for a compressed spring, and not clipped: this is the true
-    Hessian, which may be indefinite away from an equilibrium. Volume penalty
-    Q_j = kv_j (V_j - V0_j)^2: ``2 kv (dV/dx)(dV/dx)^T + 2 kv (V - V0) d2V/dx2``, with d2V of each
-    tetrahedron from its triple product (bilinear in each pair of its edge vectors).
-    """
-    bvals[:] = 0.0
-    h = np.empty(9)
-    for k in range(si.shape[0]):
-        if spring_slots[k, 0] < 0 and spring_slots[k, 1] < 0:
-            continue
-        i = si[k]
-        j = sj[k]
-        rx = x[j, 0] - x[i, 0]
-        ry = x[j, 1] - x[i, 1]
-        rz = x[j, 2] - x[i, 2]
-        d = np.sqrt(rx * rx + ry * ry + rz * rz)
-        if d < 1e-12:
-            continue
-        lk = rest[k]
-        e = d - lk
-        m = mat_id[k]
-        c = mat[m, 0] if e <= mat[m, 2] * lk else mat[m, 1]
-        g = spring_magnitude(e, lk, m, mat, law) / d
-        u0 = rx / d
-        u1 = ry / d
-        u2 = rz / d
-        w = c - g
-        h[0] = w * u0 * u0 + g
-        h[1] = w * u0 * u1
-        h[2] = w * u0 * u2
-        h[3] = h[1]
-        h[4] = w * u1 * u1 + g
-        h[5] = w * u1 * u2
-        h[6] = h[2]
-        h[7] = h[5]
-        h[8] = w * u2 * u2 + g
-        _add9(bvals, spring_slots[k, 0], h, 1.0)
-        _add9(bvals, spring_slots[k, 1], h, 1.0)
-        _add9(bvals, spring_slots[k, 2], h, -1.0)
-        _add9(bvals, spring_slots[k, 3], h, -1.0)
-    grad = np.empty((6, 3))
-    wv = np.empty((6, 6, 3))
-    pts = np.empty((4, 3))
-    for q in range(elems.shape[0]):
-        if kv[q] == 0.0:
-            continue
-        es = element_slots[q]
-        anyfree = False
-        for s in range(36):
-            if es[s] >= 0:
-                anyfree = True
-                break
-        if not anyfree:
-            continue
-        el = elems[q]
-        grad[:, :] = 0.0
-        wv[:, :, :] = 0.0
-        vol = 0.0
-        for t in range(3):  # tetrahedron t: prism slots t, t+1, t+2, t+3 (PRISM_TETS)
-            for r in range(4):
-                for c3 in range(3):
-                    pts[r, c3] = x[el[t + r], c3]
-            ax = pts[1, 0] - pts[0, 0]
-            ay = pts[1, 1] - pts[0, 1]
-            az = pts[1, 2] - pts[0, 2]
-            bx = pts[2, 0] - pts[0, 0]
-            by = pts[2, 1] - pts[0, 1]
-            bz = pts[2, 2] - pts[0, 2]
-            cx = pts[3, 0] - pts[0, 0]
-            cy = pts[3, 1] - pts[0, 1]
-            cz = pts[3, 2] - pts[0, 2]
-            g1 = (by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx)
-            g2 = (cy * az - cz * ay, cz * ax - cx * az, cx * ay - cy * ax)
-            g3 = (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
-            vol += ax * g1[0] + ay * g1[1] + az * g1[2]
-            for r in range(3):
-                grad[t + 1, r] += g1[r]
-                grad[t + 2, r] += g2[r]
-                grad[t + 3, r] += g3[r]
-                grad[t, r] -= g1[r] + g2[r] + g3[r]
-            # the triple product is linear in each vertex, so d2T/dp_m2 = 0, and
-            # d2T/dp_m dp_n = [p_k - p_l]x for (m, n, k, l) an even permutation of (0, 1, 2, 3)
-            for pr in range(6):
-                m = _PAIRS[pr, 0]
-                n = _PAIRS[pr, 1]
-                kk = _PAIRS[pr, 2]
-                ll = _PAIRS[pr, 3]
-                for c3 in range(3):
-                    dw = pts[kk, c3] - pts[ll, c3]
-                    wv[t + m, t + n, c3] += dw
-                    wv[t + n, t + m, c3] -= dw
-        dv = vsign * vol / 6.0 - rest_vol[q]
-        wg = 2.0 * kv[q] * (vsign / 6.0) ** 2
-        w2 = 2.0 * kv[q] * dv * vsign / 6.0
-        for a in range(6):
-            for b in range(6):
-                slot = es[6 * a + b]
-                if slot < 0:
-                    continue
-                o = 9 * slot
-                for r in range(3):
-                    for c3 in range(3):
-                        bvals[o + 3 * r + c3] += wg * grad[a, r] * grad[b, c3]
-                # + w2 [w]x, [w]x = [[0, -w2, w1], [w2, 0, -w0], [-w1, w0, 0]]
-                w0 = w2 * wv[a, b, 0]
-                w1 = w2 * wv[a, b, 1]
-                w2_ = w2 * wv[a, b, 2]
-                bvals[o + 1] -= w2_
-                bvals[o + 2] += w1
-                bvals[o + 3] += w2_
-                bvals[o + 5] -= w0
-                bvals[o + 6] -= w1
-                bvals[o + 7] += w0
-
 
 #: (m, n, k, l): the six vertex pairs (m, n) of a tetrahedron with the other two (k, l) in the
 #: order that makes (m, n, k, l) an even permutation of (0, 1, 2, 3)
@@ -442,11 +222,6 @@ _PAIRS = np.array(
     [[1, 2, 0, 3], [2, 3, 0, 1], [3, 1, 0, 2], [1, 0, 3, 2], [2, 0, 1, 3], [3, 0, 2, 1]],
     dtype=np.int64,
 )
-
-
-# ---------------------------------------------------------------------------------------------
-# the exact Hessian, symmetric storage (the Newton solver's hot path)
-# ---------------------------------------------------------------------------------------------
 
 #: the 15 node pairs (a, b), a < b, of a prism, in row-major order
 PRISM_PAIRS = np.array([(a, b) for a in range(6) for b in range(a + 1, 6)], dtype=np.int64)
@@ -564,28 +339,43 @@ class SymmetricPattern:
                 val.flags.writeable = False
                 setattr(self, name, val)
 
-    def spring_args(self) -> tuple:
-        """The springs' arrays in the kernels' argument order."""
-        return (self.si, self.sj, self.rest, self.alpha, self.beta, self.ec, self.law)
-
-    def prism_args(self) -> tuple:
-        """The prisms' arrays in the kernels' argument order."""
-        return (self.elems, self.efree, self.rest_volume, self.kv, self.vsign)
-
-    def assemble(self, x, dvals, lvals) -> None:
-        """Fill ``dvals``, ``lvals`` with the exact Hessian at ``x`` (N, 3) mm."""
-        assemble_symmetric_hessian(
-            x,
-            *self.spring_args(),
+    @property
+    def springs(self) -> tuple:
+        """The springs' arrays, as the kernels take them: (si, sj, rest, alpha, beta, ec, law,
+        sfi, sfj, soff)."""
+        return (
+            self.si,
+            self.sj,
+            self.rest,
+            self.alpha,
+            self.beta,
+            self.ec,
+            self.law,
             self.sfi,
             self.sfj,
             self.soff,
-            *self.prism_args(),
+        )
+
+    @property
+    def prisms(self) -> tuple:
+        """The prisms' arrays, as the kernels take them: (elems, efree, rest_volume, kv, vsign,
+        pslots, prev)."""
+        return (
+            self.elems,
+            self.efree,
+            self.rest_volume,
+            self.kv,
+            self.vsign,
             self.pslots,
             self.prev,
-            dvals,
-            lvals,
         )
+
+    def assemble(self, x, dvals, lvals) -> None:
+        """Fill ``dvals``, ``lvals`` with the exact Hessian at ``x`` (N, 3) mm."""
+        dvals[:] = 0.0
+        lvals[:] = 0.0
+        add_spring_hessian(x, self.springs, dvals, lvals)
+        add_prism_hessian(x, self.prisms, dvals, lvals)
 
     def matrix(self, dvals, lvals) -> sp.csr_matrix:
         """The full (3F, 3F) scipy CSR matrix of the storage (a reference for tests)."""
@@ -598,6 +388,14 @@ class SymmetricPattern:
             (np.asarray(lvals).reshape(-1, 3, 3), self.lcol, self.lptr), shape=(3 * nf, 3 * nf)
         )
         return (d + lo + lo.T).tocsr()
+
+
+# ------------------------------------------------- energy, gradient and Hessian: one pass each ----
+#
+# One loop over the springs (:func:`_spring_pass`) and one over the prisms (:func:`_prism_pass`)
+# compute, on request, the energy, its gradient and the exact Hessian in the symmetric storage;
+# every kernel below is one of them or both. (Inlined, with the requests known at each call, so
+# numba compiles each use without the parts it does not ask for.)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -617,94 +415,91 @@ def _add_sym6(arr, slot, h0, h1, h2, h4, h5, h8):
         arr[o + 8] += h8
 
 
-@njit(cache=True, nogil=True)
-def assemble_symmetric_hessian(
-    x,
-    si,
-    sj,
-    rest,
-    alpha,
-    beta,
-    ec,
-    law,
-    sfi,
-    sfj,
-    soff,
-    elems,
-    efree,
-    rest_vol,
-    kv,
-    vsign,
-    pslots,
-    prev,
-    dvals,
-    lvals,
-):
-    """The exact Hessian of the potential energy over the free nodes at ``x`` (N, 3) mm into
-    the symmetric storage of :class:`SymmetricPattern` (``dvals``, ``lvals``); the same
-    matrix as :func:`assemble_block_hessian`, computed once per spring and per prism node pair:
-    :func:`add_spring_hessian` plus :func:`add_prism_hessian`."""
-    dvals[:] = 0.0
-    lvals[:] = 0.0
-    add_spring_hessian(x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff, dvals, lvals)
-    add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, pslots, prev, dvals, lvals)
-
-
-@njit(cache=True, nogil=True, fastmath=True)
-def add_spring_hessian(x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff, dvals, lvals):
-    """Add the springs' Hessian at ``x`` to the symmetric storage: ``(c - g) u u^T + g I`` (c the
-    tangent stiffness, g = |s|/d, u the direction) on both diagonal blocks, minus it on the
-    off-diagonal one."""
+@njit(cache=True, nogil=True, fastmath=True, inline="always")
+def _spring_pass(x, springs, grad, want_g, dvals, lvals, want_h):
+    """The springs' energy (nJ, returned), their gradient dE/dx (uN) added to ``grad`` (F, 3)
+    when ``want_g``, and their Hessian added to ``dvals``, ``lvals`` when ``want_h``: per
+    spring ``(c - g) u u^T + g I`` on both diagonal blocks and its negative on the off-diagonal
+    one (c the tangent stiffness, alpha or beta (eq. 2); g = |s| / d, negative for a compressed
+    spring and not clipped; u the unit direction). ``springs``: :attr:`SymmetricPattern.springs`.
+    """
+    si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff = springs
+    en = 0.0
     for k in range(si.shape[0]):
         i = si[k]
         j = sj[k]
         rx = x[j, 0] - x[i, 0]
         ry = x[j, 1] - x[i, 1]
         rz = x[j, 2] - x[i, 2]
-        d2 = rx * rx + ry * ry + rz * rz
-        if d2 < 1e-24:  # MIN_SPRING_LENGTH^2: no direction, no force
-            continue
-        d = np.sqrt(d2)
+        d = np.sqrt(rx * rx + ry * ry + rz * rz)
         e = d - rest[k]
-        if e <= ec[k]:
-            c = alpha[k]
-            s = c * e
+        a = alpha[k]
+        c = ec[k]
+        if e <= c:
+            en += 0.5 * a * e * e
+            s = a * e
+            cs = a
+        elif law == 1:  # LAW_PAPER
+            en += 0.5 * a * c * c + 0.5 * beta[k] * (e * e - c * c)
+            s = beta[k] * e
+            cs = beta[k]
         else:
-            c = beta[k]
-            s = alpha[k] * ec[k] + c * (e - ec[k]) if law == LAW_CONTINUOUS else c * e
-        inv = 1.0 / d
-        g = s * inv
-        w = (c - g) * inv * inv
-        h0 = w * rx * rx + g
-        h1 = w * rx * ry
-        h2 = w * rx * rz
-        h4 = w * ry * ry + g
-        h5 = w * ry * rz
-        h8 = w * rz * rz + g
-        _add_sym6(dvals, sfi[k], h0, h1, h2, h4, h5, h8)
-        _add_sym6(dvals, sfj[k], h0, h1, h2, h4, h5, h8)
-        _add_sym6(lvals, soff[k], -h0, -h1, -h2, -h4, -h5, -h8)
+            de = e - c
+            en += a * c * (0.5 * c + de) + 0.5 * beta[k] * de * de
+            s = a * c + beta[k] * de
+            cs = beta[k]
+        if (want_g or want_h) and d >= MIN_SPRING_LENGTH:
+            inv = 1.0 / d
+            g = s * inv
+            fi = sfi[k]
+            fj = sfj[k]
+            if want_g:
+                if fi >= 0:
+                    grad[fi, 0] -= g * rx
+                    grad[fi, 1] -= g * ry
+                    grad[fi, 2] -= g * rz
+                if fj >= 0:
+                    grad[fj, 0] += g * rx
+                    grad[fj, 1] += g * ry
+                    grad[fj, 2] += g * rz
+            if want_h:
+                w = (cs - g) * inv * inv
+                h0 = w * rx * rx + g
+                h1 = w * rx * ry
+                h2 = w * rx * rz
+                h4 = w * ry * ry + g
+                h5 = w * ry * rz
+                h8 = w * rz * rz + g
+                _add_sym6(dvals, fi, h0, h1, h2, h4, h5, h8)
+                _add_sym6(dvals, fj, h0, h1, h2, h4, h5, h8)
+                _add_sym6(lvals, soff[k], -h0, -h1, -h2, -h4, -h5, -h8)
+    return en
 
 
-@njit(cache=True, nogil=True, fastmath=True)
-def add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, pslots, prev, dvals, lvals):
-    """Add the volume penalty's Hessian at ``x`` to the symmetric storage: per prism
-    ``2 kv (dV/dx_a)(dV/dx_b)^T`` plus ``2 kv (V - V0) d2V/dx_a dx_b`` (a skew 3x3 block, zero
-    on the diagonal)."""
+@njit(cache=True, nogil=True, fastmath=True, inline="always")
+def _prism_pass(x, prisms, grad, want_g, dvals, lvals, want_h):
+    """The volume penalty Q = kv (V - V0)^2 of the prisms: its energy (nJ, returned), its
+    gradient added to ``grad`` (F, 3) when ``want_g``, and its Hessian added to ``dvals``,
+    ``lvals`` when ``want_h`` (:func:`add_one_prism_hessian`). A prism's volume is the sum of
+    its three tetrahedra's (nodes t .. t+3, :data:`~myoface.tissue.forces.PRISM_TETS`), each a
+    sixth of a triple product. ``prisms``: :attr:`SymmetricPattern.prisms`."""
+    elems, efree, rest_vol, kv, vsign, pslots, prev = prisms
     gr = np.empty((6, 3))
-    wv = np.empty((15, 3))
     pts = np.empty((6, 3))
+    wv = np.empty((15, 3))
+    en = 0.0
     for q in range(elems.shape[0]):
         el = elems[q]
         for a in range(6):  # the prism's nodes, loaded once
-            pts[a, 0] = x[el[a], 0]
-            pts[a, 1] = x[el[a], 1]
-            pts[a, 2] = x[el[a], 2]
+            i = el[a]
+            pts[a, 0] = x[i, 0]
+            pts[a, 1] = x[i, 1]
+            pts[a, 2] = x[i, 2]
             gr[a, 0] = 0.0
             gr[a, 1] = 0.0
             gr[a, 2] = 0.0
         vol = 0.0
-        for t in range(3):  # tetrahedron t: prism nodes t .. t+3 (PRISM_TETS)
+        for t in range(3):
             ax = pts[t + 1, 0] - pts[t, 0]
             ay = pts[t + 1, 1] - pts[t, 1]
             az = pts[t + 1, 2] - pts[t, 2]
@@ -717,36 +512,52 @@ def add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, pslots, prev, dvals,
             g1x = by * cz - bz * cy
             g1y = bz * cx - bx * cz
             g1z = bx * cy - by * cx
-            g2x = cy * az - cz * ay
-            g2y = cz * ax - cx * az
-            g2z = cx * ay - cy * ax
-            g3x = ay * bz - az * by
-            g3y = az * bx - ax * bz
-            g3z = ax * by - ay * bx
             vol += ax * g1x + ay * g1y + az * g1z
-            gr[t + 1, 0] += g1x
-            gr[t + 1, 1] += g1y
-            gr[t + 1, 2] += g1z
-            gr[t + 2, 0] += g2x
-            gr[t + 2, 1] += g2y
-            gr[t + 2, 2] += g2z
-            gr[t + 3, 0] += g3x
-            gr[t + 3, 1] += g3y
-            gr[t + 3, 2] += g3z
-            gr[t, 0] -= g1x + g2x + g3x
-            gr[t, 1] -= g1y + g2y + g3y
-            gr[t, 2] -= g1z + g2z + g3z
+            if want_g or want_h:  # the triple product's gradient over the four nodes
+                g2x = cy * az - cz * ay
+                g2y = cz * ax - cx * az
+                g2z = cx * ay - cy * ax
+                g3x = ay * bz - az * by
+                g3y = az * bx - ax * bz
+                g3z = ax * by - ay * bx
+                gr[t + 1, 0] += g1x
+                gr[t + 1, 1] += g1y
+                gr[t + 1, 2] += g1z
+                gr[t + 2, 0] += g2x
+                gr[t + 2, 1] += g2y
+                gr[t + 2, 2] += g2z
+                gr[t + 3, 0] += g3x
+                gr[t + 3, 1] += g3y
+                gr[t + 3, 2] += g3z
+                gr[t, 0] -= g1x + g2x + g3x
+                gr[t, 1] -= g1y + g2y + g3y
+                gr[t, 2] -= g1z + g2z + g3z
         dv = vsign * vol / 6.0 - rest_vol[q]
-        add_one_prism_hessian(
-            pts, gr, wv, dv, kv[q], vsign, efree[q], pslots[q], prev[q], dvals, lvals
-        )
+        en += kv[q] * dv * dv
+        fr = efree[q]
+        if want_g:
+            coef = 2.0 * kv[q] * dv * vsign / 6.0
+            for a in range(6):
+                fa = fr[a]
+                if fa >= 0:
+                    grad[fa, 0] += coef * gr[a, 0]
+                    grad[fa, 1] += coef * gr[a, 1]
+                    grad[fa, 2] += coef * gr[a, 2]
+        if want_h:  # scales gr in place: after its use for the gradient
+            add_one_prism_hessian(
+                pts, gr, wv, dv, kv[q], vsign, fr, pslots[q], prev[q], dvals, lvals
+            )
+    return en
 
 
 @njit(cache=True, nogil=True, fastmath=True, inline="always")
 def add_one_prism_hessian(pts, gr, wv, dv, kvq, vsign, fr, sl, rv, dvals, lvals):
-    """One prism's part of :func:`add_prism_hessian`: its nodes ``pts`` (6, 3) mm, the
-    gradient of 6 times its volume ``gr`` (6, 3) (scaled in place), its volume change ``dv``
-    (mm^3) and weight ``kvq``; ``wv`` (15, 3): work."""
+    """One prism's Hessian ``2 kv (dV/dx_a)(dV/dx_b)^T + 2 kv (V - V0) d2V/dx_a dx_b`` (the
+    second a skew 3x3 block, zero on the diagonal) added to the symmetric storage: its nodes
+    ``pts`` (6, 3) mm, the gradient of 6 times its volume ``gr`` (6, 3) (scaled in place), its
+    volume change ``dv`` (mm^3) and weight ``kvq``, the free numbers of its nodes ``fr`` (6,),
+    its lower blocks ``sl`` (15,) and reversal mask ``rv`` (see :class:`SymmetricPattern`);
+    ``wv`` (15, 3): work."""
     sw = np.sqrt(2.0 * kvq) * abs(vsign) / 6.0
     for a in range(6):
         gr[a, 0] *= sw
@@ -807,6 +618,43 @@ def add_one_prism_hessian(pts, gr, wv, dv, kvq, vsign, fr, sl, rv, dvals, lvals)
 
 PRISM_SKEW_NB = PRISM_SKEW  # module-level constants numba freezes into the compiled code
 PRISM_PAIRS_NB = PRISM_PAIRS
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def energy_gradient_hessian(x, springs, prisms, grad, want_h, dvals, lvals, want_p, dprism, lprism):
+    """The potential energy E over the springs and prisms that touch a free node (nJ; E less
+    a constant: the parts between kinematic nodes), its gradient dE/dx (uN) into ``grad``
+    (F, 3) in free-node order, and in the same passes, when ``want_h``, the springs' Hessian
+    added to ``dvals``, ``lvals``, when ``want_p`` the prisms' added to ``dprism``, ``lprism``
+    (symmetric storage of :class:`SymmetricPattern`, whose ``springs`` and ``prisms`` these
+    are). Eq. (1)-(4) of Terzopoulos & Waters 1993."""
+    grad[:, :] = 0.0
+    en = _spring_pass(x, springs, grad, True, dvals, lvals, want_h)
+    return en + _prism_pass(x, prisms, grad, True, dprism, lprism, want_p)
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def energy_gradient_free(x, springs, prisms, grad):
+    """:func:`energy_gradient_hessian` without the Hessian: the energy (nJ, returned) and its
+    gradient (uN) into ``grad`` (F, 3)."""
+    grad[:, :] = 0.0
+    none = np.empty(0)
+    en = _spring_pass(x, springs, grad, True, none, none, False)
+    return en + _prism_pass(x, prisms, grad, True, none, none, False)
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def add_spring_hessian(x, springs, dvals, lvals):
+    """Add the springs' Hessian at ``x`` (N, 3) mm to the symmetric storage (see
+    :func:`_spring_pass`)."""
+    _spring_pass(x, springs, np.empty((0, 3)), False, dvals, lvals, True)
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def add_prism_hessian(x, prisms, dvals, lvals):
+    """Add the volume penalty's Hessian at ``x`` (N, 3) mm to the symmetric storage (see
+    :func:`add_one_prism_hessian`)."""
+    _prism_pass(x, prisms, np.empty((0, 3)), False, dvals, lvals, True)
 
 
 @njit(cache=True, nogil=True, fastmath=True)

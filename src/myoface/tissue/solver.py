@@ -97,15 +97,11 @@ from numba import njit
 from scipy.sparse.linalg import splu
 
 from myoface.errors import MyofaceSimulationError
-from myoface.tissue.forces import MIN_SPRING_LENGTH, spring_magnitude
 from myoface.tissue.hessian import (
-    BlockPattern,
     SymmetricPattern,
-    _add_sym6,
-    add_one_prism_hessian,
     add_prism_hessian,
     add_spring_hessian,
-    assemble_block_hessian,
+    energy_gradient_hessian,
 )
 from myoface.tissue.model import TissueModel
 
@@ -162,295 +158,6 @@ def cached(model: TissueModel, key: str, build):
                 val = build()
                 model.cache[key] = val
     return val
-
-
-def kernel_args(model: TissueModel) -> tuple:
-    """The packed arrays the energy, force and Hessian kernels take, in their argument order."""
-    return (
-        model.spring_i,
-        model.spring_j,
-        model.rest_length,
-        model.spring_material,
-        model.materials,
-        model.spring_law,
-        model.elements,
-        model.rest_volume,
-        model.volume_weight,
-        model.volume_sign,
-    )
-
-
-# ---------------------------------------------------------------------- energy + gradient ----
-
-
-@njit(cache=True, nogil=True)
-def energy_gradient(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, grad):
-    """Potential energy E (nJ) at ``x`` (N, 3) mm, and its gradient dE/dx = -(g + q) into
-    ``grad`` (N, 3) uN, in one pass over springs and prisms (eq. 1-4)."""
-    grad[:, :] = 0.0
-    en = 0.0
-    for k in range(si.shape[0]):
-        i = si[k]
-        j = sj[k]
-        rx = x[j, 0] - x[i, 0]
-        ry = x[j, 1] - x[i, 1]
-        rz = x[j, 2] - x[i, 2]
-        d = np.sqrt(rx * rx + ry * ry + rz * rz)
-        lk = rest[k]
-        e = d - lk
-        m = mat_id[k]
-        ec = mat[m, 2] * lk
-        a = mat[m, 0]
-        if e <= ec:
-            en += 0.5 * a * e * e
-        elif law == 1:  # LAW_PAPER
-            en += 0.5 * a * ec * ec + 0.5 * mat[m, 1] * (e * e - ec * ec)
-        else:
-            en += 0.5 * a * ec * ec + a * ec * (e - ec) + 0.5 * mat[m, 1] * (e - ec) ** 2
-        if d < MIN_SPRING_LENGTH:
-            continue
-        s = spring_magnitude(e, lk, m, mat, law) / d
-        grad[i, 0] -= s * rx
-        grad[i, 1] -= s * ry
-        grad[i, 2] -= s * rz
-        grad[j, 0] += s * rx
-        grad[j, 1] += s * ry
-        grad[j, 2] += s * rz
-    g = np.empty((3, 3, 3))
-    for q in range(elems.shape[0]):
-        el = elems[q]
-        vol = 0.0
-        for t in range(3):
-            i0 = el[t]
-            i1 = el[t + 1]
-            i2 = el[t + 2]
-            i3 = el[t + 3]
-            ax = x[i1, 0] - x[i0, 0]
-            ay = x[i1, 1] - x[i0, 1]
-            az = x[i1, 2] - x[i0, 2]
-            bx = x[i2, 0] - x[i0, 0]
-            by = x[i2, 1] - x[i0, 1]
-            bz = x[i2, 2] - x[i0, 2]
-            cx = x[i3, 0] - x[i0, 0]
-            cy = x[i3, 1] - x[i0, 1]
-            cz = x[i3, 2] - x[i0, 2]
-            g[t, 0, 0] = by * cz - bz * cy
-            g[t, 0, 1] = bz * cx - bx * cz
-            g[t, 0, 2] = bx * cy - by * cx
-            g[t, 1, 0] = cy * az - cz * ay
-            g[t, 1, 1] = cz * ax - cx * az
-            g[t, 1, 2] = cx * ay - cy * ax
-            g[t, 2, 0] = ay * bz - az * by
-            g[t, 2, 1] = az * bx - ax * bz
-            g[t, 2, 2] = ax * by - ay * bx
-            vol += ax * g[t, 0, 0] + ay * g[t, 0, 1] + az * g[t, 0, 2]
-        dv = vsign * vol / 6.0 - rest_vol[q]
-        en += kv[q] * dv * dv
-        coef = 2.0 * kv[q] * dv * vsign / 6.0
-        if coef == 0.0:
-            continue
-        # tetrahedron t of the prism is slots (t, t+1, t+2, t+3) (PRISM_TETS)
-        for t in range(3):
-            i0 = el[t]
-            for r in range(3):
-                iq = el[t + 1 + r]
-                for c in range(3):
-                    grad[iq, c] += coef * g[t, r, c]
-                    grad[i0, c] -= coef * g[t, r, c]
-    return en
-
-
-@njit(cache=True, nogil=True, fastmath=True)
-def energy_gradient_free(
-    x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, elems, efree, rest_vol, kv, vsign, grad, want
-):
-    """The Newton solver's energy and gradient: over the springs and prisms that touch a free
-    node only (the arrays of :class:`~myoface.tissue.hessian.SymmetricPattern`), so the energy
-    (nJ) is E less a constant (the parts between kinematic nodes), and, when ``want``, its
-    gradient dE/dx (uN) over the free nodes into ``grad`` (F, 3) in free-node order.
-
-    The same sums as :func:`energy_gradient`, in one pass, with the material table unpacked
-    per spring."""
-    none = np.empty(0)
-    return energy_gradient_hessian_free(
-        x,
-        si,
-        sj,
-        rest,
-        alpha,
-        beta,
-        ec,
-        law,
-        sfi,
-        sfj,
-        sfi,
-        elems,
-        efree,
-        rest_vol,
-        kv,
-        vsign,
-        grad,
-        want,
-        False,
-        none,
-        none,
-        False,
-        np.empty((0, 15), np.int32),
-        np.empty(0, np.int32),
-        none,
-        none,
-    )
-
-
-@njit(cache=True, nogil=True, fastmath=True)
-def energy_gradient_hessian_free(
-    x,
-    si,
-    sj,
-    rest,
-    alpha,
-    beta,
-    ec,
-    law,
-    sfi,
-    sfj,
-    soff,
-    elems,
-    efree,
-    rest_vol,
-    kv,
-    vsign,
-    grad,
-    want,
-    want_h,
-    dvals,
-    lvals,
-    want_p,
-    pslots,
-    prev,
-    dprism,
-    lprism,
-):
-    """:func:`energy_gradient_free`, and, when ``want_h``, the springs' Hessian
-    (:func:`~myoface.tissue.hessian.add_spring_hessian`) added to ``dvals``, ``lvals`` in the
-    same pass over the springs (their lengths and phases computed once for both); when
-    ``want_p`` (and ``want``) the prisms' Hessian (:func:`~myoface.tissue.hessian.
-    add_prism_hessian`) added to ``dprism``, ``lprism`` in the same pass over the prisms."""
-    if want:
-        grad[:, :] = 0.0
-    en = 0.0
-    for k in range(si.shape[0]):
-        i = si[k]
-        j = sj[k]
-        rx = x[j, 0] - x[i, 0]
-        ry = x[j, 1] - x[i, 1]
-        rz = x[j, 2] - x[i, 2]
-        d2 = rx * rx + ry * ry + rz * rz
-        d = np.sqrt(d2)
-        e = d - rest[k]
-        a = alpha[k]
-        c = ec[k]
-        if e <= c:
-            en += 0.5 * a * e * e
-            s = a * e
-            cs = a
-        elif law == 1:  # LAW_PAPER
-            en += 0.5 * a * c * c + 0.5 * beta[k] * (e * e - c * c)
-            s = beta[k] * e
-            cs = beta[k]
-        else:
-            de = e - c
-            en += a * c * (0.5 * c + de) + 0.5 * beta[k] * de * de
-            s = a * c + beta[k] * de
-            cs = beta[k]
-        if want and d >= MIN_SPRING_LENGTH:
-            inv = 1.0 / d
-            g = s * inv
-            fi = sfi[k]
-            fj = sfj[k]
-            if fi >= 0:
-                grad[fi, 0] -= g * rx
-                grad[fi, 1] -= g * ry
-                grad[fi, 2] -= g * rz
-            if fj >= 0:
-                grad[fj, 0] += g * rx
-                grad[fj, 1] += g * ry
-                grad[fj, 2] += g * rz
-            if want_h:
-                # (c - g) u u^T + g I, as add_spring_hessian
-                w = (cs - g) * inv * inv
-                h0 = w * rx * rx + g
-                h1 = w * rx * ry
-                h2 = w * rx * rz
-                h4 = w * ry * ry + g
-                h5 = w * ry * rz
-                h8 = w * rz * rz + g
-                _add_sym6(dvals, fi, h0, h1, h2, h4, h5, h8)
-                _add_sym6(dvals, fj, h0, h1, h2, h4, h5, h8)
-                _add_sym6(lvals, soff[k], -h0, -h1, -h2, -h4, -h5, -h8)
-    gr = np.empty((6, 3))
-    pts = np.empty((6, 3))
-    wv = np.empty((15, 3))
-    for q in range(elems.shape[0]):
-        el = elems[q]
-        vol = 0.0
-        for a in range(6):
-            i = el[a]
-            pts[a, 0] = x[i, 0]
-            pts[a, 1] = x[i, 1]
-            pts[a, 2] = x[i, 2]
-            gr[a, 0] = 0.0
-            gr[a, 1] = 0.0
-            gr[a, 2] = 0.0
-        for t in range(3):  # tetrahedron t of the prism is slots (t, t+1, t+2, t+3) (PRISM_TETS)
-            ax = pts[t + 1, 0] - pts[t, 0]
-            ay = pts[t + 1, 1] - pts[t, 1]
-            az = pts[t + 1, 2] - pts[t, 2]
-            bx = pts[t + 2, 0] - pts[t, 0]
-            by = pts[t + 2, 1] - pts[t, 1]
-            bz = pts[t + 2, 2] - pts[t, 2]
-            cx = pts[t + 3, 0] - pts[t, 0]
-            cy = pts[t + 3, 1] - pts[t, 1]
-            cz = pts[t + 3, 2] - pts[t, 2]
-            g1x = by * cz - bz * cy
-            g1y = bz * cx - bx * cz
-            g1z = bx * cy - by * cx
-            vol += ax * g1x + ay * g1y + az * g1z
-            if want:
-                g2x = cy * az - cz * ay
-                g2y = cz * ax - cx * az
-                g2z = cx * ay - cy * ax
-                g3x = ay * bz - az * by
-                g3y = az * bx - ax * bz
-                g3z = ax * by - ay * bx
-                gr[t + 1, 0] += g1x
-                gr[t + 1, 1] += g1y
-                gr[t + 1, 2] += g1z
-                gr[t + 2, 0] += g2x
-                gr[t + 2, 1] += g2y
-                gr[t + 2, 2] += g2z
-                gr[t + 3, 0] += g3x
-                gr[t + 3, 1] += g3y
-                gr[t + 3, 2] += g3z
-                gr[t, 0] -= g1x + g2x + g3x
-                gr[t, 1] -= g1y + g2y + g3y
-                gr[t, 2] -= g1z + g2z + g3z
-        dv = vsign * vol / 6.0 - rest_vol[q]
-        en += kv[q] * dv * dv
-        if want:
-            coef = 2.0 * kv[q] * dv * vsign / 6.0
-            fr = efree[q]
-            for a in range(6):
-                fa = fr[a]
-                if fa >= 0:
-                    grad[fa, 0] += coef * gr[a, 0]
-                    grad[fa, 1] += coef * gr[a, 1]
-                    grad[fa, 2] += coef * gr[a, 2]
-            if want_p:  # scales gr in place: after its use for the gradient
-                add_one_prism_hessian(
-                    pts, gr, wv, dv, kv[q], vsign, fr, pslots[q], prev[q], dprism, lprism
-                )
-    return en
 
 
 # ------------------------------------------------------------------ block LDL^T and PCG ----
@@ -660,56 +367,17 @@ def sgs_precond(lptr, lcol, dused, lvals, dinv, r, z, w):
     """``z = (D + L^T)^-1 D (D + L)^-1 r``: symmetric block Gauss-Seidel on the matrix with
     diagonal blocks D (``dused``, inverses ``dinv``) and strictly lower blocks L (``lvals`` in
     the storage of :class:`~myoface.tissue.hessian.SymmetricPattern`); SPD when D is. ``w``:
-    work (3F,). A forward sweep (gather over each row's lower blocks) and a backward one
-    (scatter of each row's lower blocks, transposed)."""
-    nf = lptr.shape[0] - 1
-    for i in range(nf):  # (D + L) y = r, y into z
-        s0 = r[3 * i]
-        s1 = r[3 * i + 1]
-        s2 = r[3 * i + 2]
-        for k in range(lptr[i], lptr[i + 1]):
-            j = 3 * lcol[k]
-            o = 9 * k
-            y0 = z[j]
-            y1 = z[j + 1]
-            y2 = z[j + 2]
-            s0 -= lvals[o] * y0 + lvals[o + 1] * y1 + lvals[o + 2] * y2
-            s1 -= lvals[o + 3] * y0 + lvals[o + 4] * y1 + lvals[o + 5] * y2
-            s2 -= lvals[o + 6] * y0 + lvals[o + 7] * y1 + lvals[o + 8] * y2
-        o = 9 * i
-        z[3 * i] = dinv[o] * s0 + dinv[o + 1] * s1 + dinv[o + 2] * s2
-        z[3 * i + 1] = dinv[o + 3] * s0 + dinv[o + 4] * s1 + dinv[o + 5] * s2
-        z[3 * i + 2] = dinv[o + 6] * s0 + dinv[o + 7] * s1 + dinv[o + 8] * s2
-    for i in range(nf):  # w = D y
-        o = 9 * i
-        y0 = z[3 * i]
-        y1 = z[3 * i + 1]
-        y2 = z[3 * i + 2]
-        w[3 * i] = dused[o] * y0 + dused[o + 1] * y1 + dused[o + 2] * y2
-        w[3 * i + 1] = dused[o + 3] * y0 + dused[o + 4] * y1 + dused[o + 5] * y2
-        w[3 * i + 2] = dused[o + 6] * y0 + dused[o + 7] * y1 + dused[o + 8] * y2
-    for i in range(nf - 1, -1, -1):  # (D + L^T) z = w
-        o = 9 * i
-        s0 = w[3 * i]
-        s1 = w[3 * i + 1]
-        s2 = w[3 * i + 2]
-        z0 = dinv[o] * s0 + dinv[o + 1] * s1 + dinv[o + 2] * s2
-        z1 = dinv[o + 3] * s0 + dinv[o + 4] * s1 + dinv[o + 5] * s2
-        z2 = dinv[o + 6] * s0 + dinv[o + 7] * s1 + dinv[o + 8] * s2
-        z[3 * i] = z0
-        z[3 * i + 1] = z1
-        z[3 * i + 2] = z2
-        for k in range(lptr[i], lptr[i + 1]):
-            j = 3 * lcol[k]
-            o = 9 * k
-            w[j] -= lvals[o] * z0 + lvals[o + 3] * z1 + lvals[o + 6] * z2
-            w[j + 1] -= lvals[o + 1] * z0 + lvals[o + 4] * z1 + lvals[o + 7] * z2
-            w[j + 2] -= lvals[o + 2] * z0 + lvals[o + 5] * z1 + lvals[o + 8] * z2
+    work (3F,). (:func:`pcg` applies it in Eisenstat's form; this is its reference.)"""
+    _lower_solve(lptr, lcol, lvals, dinv, r, z)
+    dz = np.empty_like(z)
+    _block_mul(dused, z, dz)
+    _upper_solve(lptr, lcol, lvals, dinv, np.empty(0), dz, z, w)
 
 
 @njit(cache=True, nogil=True, fastmath=True)
 def _lower_solve(lptr, lcol, lvals, dinv, r, y):
-    """``y = (D + L)^-1 r`` (block forward substitution; ``dinv``: the inverses of D's blocks)."""
+    """``y = (D + L)^-1 r`` (block forward substitution, gathering each row's lower blocks;
+    ``dinv``: the inverses of D's blocks)."""
     nf = lptr.shape[0] - 1
     for i in range(nf):
         s0 = r[3 * i]
@@ -731,10 +399,13 @@ def _lower_solve(lptr, lcol, lvals, dinv, r, y):
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def _upper_solve(lptr, lcol, lvals, dinv, r, z, w):
+def _upper_solve(lptr, lcol, lvals, dinv, emat, r, z, w):
     """``z = (D + L^T)^-1 r`` (block back substitution, scattering each row's lower blocks
-    transposed); ``w``: work (3F,)."""
+    transposed into ``w`` (3F,), which starts as a copy of ``r``). With ``emat`` (F*9,) not
+    empty, ``w`` ends as ``r - E z`` (E the blocks of ``emat``), for :func:`pcg`: a row's part
+    of ``w`` is written once the row is solved, when nothing reads it any more."""
     nf = lptr.shape[0] - 1
+    with_e = emat.shape[0] > 0
     for i in range(3 * nf):
         w[i] = r[i]
     for i in range(nf - 1, -1, -1):
@@ -748,6 +419,10 @@ def _upper_solve(lptr, lcol, lvals, dinv, r, z, w):
         z[3 * i] = z0
         z[3 * i + 1] = z1
         z[3 * i + 2] = z2
+        if with_e:
+            w[3 * i] = r[3 * i] - (emat[o] * z0 + emat[o + 1] * z1 + emat[o + 2] * z2)
+            w[3 * i + 1] = r[3 * i + 1] - (emat[o + 3] * z0 + emat[o + 4] * z1 + emat[o + 5] * z2)
+            w[3 * i + 2] = r[3 * i + 2] - (emat[o + 6] * z0 + emat[o + 7] * z1 + emat[o + 8] * z2)
         for k in range(lptr[i], lptr[i + 1]):
             j = 3 * lcol[k]
             o = 9 * k
@@ -791,19 +466,14 @@ def pcg(lptr, lcol, dused, lvals, dinv, emat, b, eta, max_iter, x, work):
     t = work[4]
     w = work[5]
     y = work[6]
+    none = np.empty(0)
     _lower_solve(lptr, lcol, lvals, dinv, b, r)
-    _block_mul(dused, r, z)
-    rz = 0.0
-    for i in range(n):
-        y[i] = 0.0
-        p[i] = z[i]
-        rz += r[i] * z[i]
+    y[:] = 0.0
+    rz = _step_residual(y, r, z, p, q, 0.0, dused)
+    p[:] = z
     stop = eta * eta * rz
     for it in range(max_iter):
-        _upper_solve(lptr, lcol, lvals, dinv, p, t, w)
-        _block_mul(emat, t, q)
-        for i in range(n):
-            w[i] = p[i] - q[i]
+        _upper_solve(lptr, lcol, lvals, dinv, emat, p, t, w)  # t = A^-T p, w = p - E t
         _lower_solve(lptr, lcol, lvals, dinv, w, q)
         pq = 0.0
         for i in range(n):
@@ -811,25 +481,46 @@ def pcg(lptr, lcol, dused, lvals, dinv, emat, b, eta, max_iter, x, work):
             pq += p[i] * q[i]
         if not pq > 0.0:
             # x = M^-1 b at once, else the last iterate
-            _upper_solve(lptr, lcol, lvals, dinv, z if it == 0 else y, x, w)
+            _upper_solve(lptr, lcol, lvals, dinv, none, z if it == 0 else y, x, w)
             return it + 1, 1
         a = rz / pq
-        for i in range(n):
-            y[i] += a * p[i]
-            r[i] -= a * q[i]
-        _block_mul(dused, r, z)
-        rz_new = 0.0
-        for i in range(n):
-            rz_new += r[i] * z[i]
+        rz_new = _step_residual(y, r, z, p, q, a, dused)
         if rz_new <= stop:
-            _upper_solve(lptr, lcol, lvals, dinv, y, x, w)
+            _upper_solve(lptr, lcol, lvals, dinv, none, y, x, w)
             return it + 1, 0
         beta = rz_new / rz
         rz = rz_new
         for i in range(n):
             p[i] = z[i] + beta * p[i]
-    _upper_solve(lptr, lcol, lvals, dinv, y, x, w)
+    _upper_solve(lptr, lcol, lvals, dinv, none, y, x, w)
     return max_iter, 0
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _step_residual(y, r, z, p, q, a, dblocks):
+    """One CG update in one pass: ``y += a p``, ``r -= a q``, ``z = D r`` (D block diagonal,
+    ``dblocks`` (F*9,)); returns ``r.z``."""
+    rz = 0.0
+    for i in range(r.shape[0] // 3):
+        o = 9 * i
+        i0 = 3 * i
+        y[i0] += a * p[i0]
+        y[i0 + 1] += a * p[i0 + 1]
+        y[i0 + 2] += a * p[i0 + 2]
+        r0 = r[i0] - a * q[i0]
+        r1 = r[i0 + 1] - a * q[i0 + 1]
+        r2 = r[i0 + 2] - a * q[i0 + 2]
+        r[i0] = r0
+        r[i0 + 1] = r1
+        r[i0 + 2] = r2
+        z0 = dblocks[o] * r0 + dblocks[o + 1] * r1 + dblocks[o + 2] * r2
+        z1 = dblocks[o + 3] * r0 + dblocks[o + 4] * r1 + dblocks[o + 5] * r2
+        z2 = dblocks[o + 6] * r0 + dblocks[o + 7] * r1 + dblocks[o + 8] * r2
+        z[i0] = z0
+        z[i0 + 1] = z1
+        z[i0 + 2] = z2
+        rz += r0 * z0 + r1 * z1 + r2 * z2
+    return rz
 
 
 # ------------------------------------------------------------------------- per-model data ----
@@ -874,20 +565,11 @@ def _build_newton_data(model: TissueModel) -> NewtonData:
     node_graph = (lo + lo.T + sp.eye(nf)).tocsr()
     precond = block_ldl(k, nf, node_graph)
     # K_fk at rest: the Hessian of a copy of the model in which every node is free
-    allfree = replace(model, kinematic=np.zeros(model.n_nodes, bool), cache={})
-    pat_all = BlockPattern(
-        model.n_nodes, np.arange(model.n_nodes), model.spring_i, model.spring_j, model.elements
-    )
-    ball = np.empty(pat_all.nnzb * 9)
-    assemble_block_hessian(
-        model.rest_positions,
-        *kernel_args(allfree),
-        pat_all.fmap,
-        pat_all.spring_slots,
-        pat_all.element_slots,
-        ball,
-    )
-    kall = pat_all.scalar_matrix(ball).tocsr()
+    allfree = SymmetricPattern(replace(model, kinematic=np.zeros(model.n_nodes, bool), cache={}))
+    dall = np.empty(9 * allfree.n_free)
+    lall = np.empty(9 * allfree.nl)
+    allfree.assemble(model.rest_positions, dall, lall)
+    kall = allfree.matrix(dall, lall)
     fd = (3 * model.free_index[:, None] + np.arange(3)).reshape(-1)
     kd = (3 * model.kinematic_index[:, None] + np.arange(3)).reshape(-1)
     coupling = kall[fd][:, kd].tocsr()
@@ -924,15 +606,53 @@ def extrapolated_start(
     instead of 0.06-0.36 mm). Between unrelated moves ``a`` is about 0 and nothing changes; a
     move reversed (``a`` = -1) returns to the previous equilibrium."""
     kin = model.kinematic_index
-    dk = x[kin] - x_kin_start
-    mk = x_kin_start - previous_x[kin]
-    nn = float(np.vdot(mk, mk))
-    if not nn > 0.0:
-        return dk
-    a = min(max(float(np.vdot(mk, dk)) / nn, -1.0), EXTRAPOLATE_MAX)
-    free = model.free_index
-    x[free] += a * (x[free] - previous_x[free])
-    return dk - a * mk
+    dk = np.empty((len(kin), 3))
+    _extrapolate(x, model.free_index, kin, x_kin_start, previous_x, EXTRAPOLATE_MAX, dk)
+    return dk
+
+
+@njit(cache=True, nogil=True)
+def _extrapolate(x, free, kin, x_kin_start, previous_x, a_max, dk):
+    """:func:`extrapolated_start` on the index arrays: ``x`` in place, the rest of the kinematic
+    move into ``dk`` (K, 3); returns its largest coordinate (mm)."""
+    nn = 0.0
+    md = 0.0
+    for a in range(kin.shape[0]):
+        i = kin[a]
+        for c in range(3):
+            m = x_kin_start[a, c] - previous_x[i, c]
+            d = x[i, c] - x_kin_start[a, c]
+            dk[a, c] = d
+            nn += m * m
+            md += m * d
+    if nn > 0.0:
+        s = min(max(md / nn, -1.0), a_max)
+        for a in range(free.shape[0]):
+            i = free[a]
+            for c in range(3):
+                x[i, c] += s * (x[i, c] - previous_x[i, c])
+        for a in range(kin.shape[0]):
+            i = kin[a]
+            for c in range(3):
+                dk[a, c] -= s * (x_kin_start[a, c] - previous_x[i, c])
+    return np.abs(dk).max() if dk.size > 0 else 0.0
+
+
+#: the Newton loop's parameters, in the order :func:`_newton` takes them
+_PARAMS = np.array(
+    [
+        ETA_MAX,
+        ETA_MIN,
+        CHORD_RATIO,
+        CHORD_RATE,
+        PRISM_LAG_MM,
+        ARMIJO_C,
+        ENERGY_ROUNDOFF,
+        CG_MAX_ITER,
+    ],
+    dtype=np.float64,
+)
+_PARAMS.flags.writeable = False
 
 
 def relax_newton(
@@ -959,49 +679,37 @@ def relax_newton(
     data = newton_data(model)
     pat = data.pattern
     free = model.free_index
+    kin = model.kinematic_index
     x = np.array(x, dtype=np.float64, order="C")
     if len(free) == 0:
         return x, True, 0, 0.0, 0, 0.0
 
     # 1. the initial guess: the last move repeated (in a video) and the linear response of the
     # free nodes to the rest of the kinematic nodes' move
-    dk = x[model.kinematic_index] - x_kin_start
-    if previous_x is not None:
-        dk = extrapolated_start(model, x, x_kin_start, previous_x)
-    if np.abs(dk).max() > LINEAR_RESPONSE_MIN_MM:
+    x_kin_start = np.ascontiguousarray(x_kin_start, dtype=np.float64)
+    if previous_x is None:
+        dk = x[kin] - x_kin_start
+        left = float(np.abs(dk).max()) if dk.size else 0.0
+    else:
+        dk = np.empty((len(kin), 3))
+        prev = np.ascontiguousarray(previous_x, dtype=np.float64)
+        left = _extrapolate(x, free, kin, x_kin_start, prev, EXTRAPOLATE_MAX, dk)
+    if left > LINEAR_RESPONSE_MIN_MM:
         x[free] += data.precond.solve(-(data.coupling @ dk.reshape(-1))).reshape(-1, 3)
 
     # 2. Newton steps (one compiled loop: no Python between the kernels)
     out = np.zeros(9) if stats is None else stats
-    params = np.array(
-        [
-            ETA_MAX,
-            ETA_MIN,
-            CHORD_RATIO,
-            CHORD_RATE,
-            PRISM_LAG_MM,
-            ARMIJO_C,
-            ENERGY_ROUNDOFF,
-            CG_MAX_ITER,
-        ],
-        dtype=np.float64,
-    )
     _newton(
         x,
         free,
-        *pat.spring_args(),
-        pat.sfi,
-        pat.sfj,
-        pat.soff,
-        *pat.prism_args(),
-        pat.pslots,
-        pat.prev,
+        pat.springs,
+        pat.prisms,
         pat.lptr,
         pat.lcol,
         data.rest_diag,
         float(tol_mm),
         int(max_iter),
-        params,
+        _PARAMS,
         out,
     )
     it, ok, move, cg = int(out[0]), bool(out[1]), float(out[2]), int(out[3])
@@ -1010,40 +718,37 @@ def relax_newton(
     return x, ok, it, move, cg, float(out[8])
 
 
+@njit(cache=True, nogil=True, fastmath=True, inline="always")
+def _evaluate(x, springs, prisms, grad, want_h, due, dvals, lvals, dprism, lprism):
+    """Energy and gradient at ``x`` (:func:`~myoface.tissue.hessian.energy_gradient_hessian`),
+    and with ``want_h`` the Hessian there into ``dvals``, ``lvals`` in the same passes: the
+    springs' part new, the prisms' part (``dprism``, ``lprism``) new when ``due``, else the
+    one kept."""
+    if want_h and not due:
+        dvals[:] = dprism
+        lvals[:] = lprism
+    elif want_h:
+        dvals[:] = 0.0
+        lvals[:] = 0.0
+        dprism[:] = 0.0
+        lprism[:] = 0.0
+    en = energy_gradient_hessian(
+        x, springs, prisms, grad, want_h, dvals, lvals, want_h and due, dprism, lprism
+    )
+    if want_h and due:
+        dvals += dprism
+        lvals += lprism
+    return en
+
+
 @njit(cache=True, nogil=True)
-def _newton(
-    x,
-    free,
-    si,
-    sj,
-    rest,
-    alpha,
-    beta,
-    ec,
-    law,
-    sfi,
-    sfj,
-    soff,
-    elems,
-    efree,
-    rest_vol,
-    kv,
-    vsign,
-    pslots,
-    prev,
-    lptr,
-    lcol,
-    rest_diag,
-    tol,
-    max_iter,
-    params,
-    stats,
-):
+def _newton(x, free, springs, prisms, lptr, lcol, rest_diag, tol, max_iter, params, stats):
     """The Newton iterations of :func:`relax_newton` on ``x`` (N, 3) mm, in place (see the
-    module docstring). ``params``: [ETA_MAX, ETA_MIN, CHORD_RATIO, CHORD_RATE, PRISM_LAG_MM,
-    ARMIJO_C, ENERGY_ROUNDOFF, CG_MAX_ITER]. ``stats`` (9,) receives [iterations, converged,
-    last move (mm), CG iterations, Hessian assemblies, of which with the prisms' part, energy
-    evaluations, status (-1: non-finite energy or forces), largest force on a free node (uN)]."""
+    module docstring). ``springs``, ``prisms``: the pattern's (:class:`~myoface.tissue.hessian.
+    SymmetricPattern`). ``params``: :data:`_PARAMS`. ``stats`` (9,) receives [iterations,
+    converged, last move (mm), CG iterations, Hessian assemblies, of which with the prisms'
+    part, energy evaluations, status (-1: non-finite energy or forces), largest force on a free
+    node (uN)]."""
     eta_max = params[0]
     eta_min = params[1]
     chord_ratio = params[2]
@@ -1057,8 +762,8 @@ def _newton(
     nl = lcol.shape[0]
     dvals = np.empty(9 * nf)
     lvals = np.empty(9 * nl)
-    dprism = np.zeros(9 * nf)
-    lprism = np.zeros(9 * nl)
+    dprism = np.empty(9 * nf)
+    lprism = np.empty(9 * nl)
     dused = np.empty(9 * nf)
     dinv = np.empty(9 * nf)
     emat = np.empty(9 * nf)
@@ -1066,50 +771,13 @@ def _newton(
     step = np.empty(n)
     rhs = np.empty(n)
     grad = np.empty((nf, 3))
-    g = np.empty(n)
-    xn = np.empty_like(x)
-    x_prism = np.empty_like(x)
+    xn = x.copy()  # the line search's point: its kinematic nodes are x's throughout
+    x_prism = x.copy()  # where the prisms' part of the Hessian was assembled
     # the Hessian at x, assembled with the energy and gradient there (the first one, and at a
     # point where the last step was too long for the next one to keep the Hessian)
-    dprism[:] = 0.0
-    lprism[:] = 0.0
-    x_prism[:, :] = x
-    n_prism = 1
-    have_prism = True
-    dvals[:] = 0.0
-    lvals[:] = 0.0
-    energy = energy_gradient_hessian_free(
-        x,
-        si,
-        sj,
-        rest,
-        alpha,
-        beta,
-        ec,
-        law,
-        sfi,
-        sfj,
-        soff,
-        elems,
-        efree,
-        rest_vol,
-        kv,
-        vsign,
-        grad,
-        True,
-        True,
-        dvals,
-        lvals,
-        True,
-        pslots,
-        prev,
-        dprism,
-        lprism,
-    )
-    dvals += dprism
-    lvals += lprism
+    energy = _evaluate(x, springs, prisms, grad, True, True, dvals, lvals, dprism, lprism)
+    g = grad.reshape(n)
     have_h = True
-    _flatten(grad, g)
     gnorm_prev = np.sqrt(g @ g)
     eta = eta_max
     move = np.inf
@@ -1117,6 +785,7 @@ def _newton(
     rate = 1.0  # the last full step's gradient reduction, |g_new| / |g_old|
     cg = 0
     n_asm = 0
+    n_prism = 1
     n_energy = 1
     converged = False
     it = 0
@@ -1131,29 +800,16 @@ def _newton(
         # Newton step, and most often the last one
         chord = it > 1 and t == 1.0 and move < chord_ratio * tol and rate < chord_rate
         if not chord:
-            if not have_h:
-                n_prism += _prism_part(
-                    x,
-                    free,
-                    x_prism,
-                    have_prism,
-                    prism_lag,
-                    elems,
-                    efree,
-                    rest_vol,
-                    kv,
-                    vsign,
-                    pslots,
-                    prev,
-                    dprism,
-                    lprism,
-                )
-                have_prism = True
+            if not have_h:  # the prisms' part kept unless a node has moved by PRISM_LAG_MM
+                if _largest_move(x, free, x_prism) > prism_lag:
+                    dprism[:] = 0.0
+                    lprism[:] = 0.0
+                    add_prism_hessian(x, prisms, dprism, lprism)
+                    _copy_free(x, free, x_prism)
+                    n_prism += 1
                 dvals[:] = dprism
                 lvals[:] = lprism
-                add_spring_hessian(
-                    x, si, sj, rest, alpha, beta, ec, law, sfi, sfj, soff, dvals, lvals
-                )
+                add_spring_hessian(x, springs, dvals, lvals)
             diagonal_blocks(dvals, rest_diag, dused, dinv, emat)
             n_asm += 1
         have_h = False
@@ -1177,47 +833,11 @@ def _newton(
         while True:
             _moved(x, free, step, t, xn)
             fuse = want_h and t == 1.0
-            due = fuse and (not have_prism or _largest_move(xn, free, x_prism) > prism_lag)
+            due = fuse and _largest_move(xn, free, x_prism) > prism_lag
+            en = _evaluate(xn, springs, prisms, grad, fuse, due, dvals, lvals, dprism, lprism)
             if due:
-                dprism[:] = 0.0
-                lprism[:] = 0.0
-                x_prism[:, :] = xn
-                have_prism = True
+                _copy_free(xn, free, x_prism)
                 n_prism += 1
-            if fuse:
-                dvals[:] = 0.0
-                lvals[:] = 0.0
-            en = energy_gradient_hessian_free(
-                xn,
-                si,
-                sj,
-                rest,
-                alpha,
-                beta,
-                ec,
-                law,
-                sfi,
-                sfj,
-                soff,
-                elems,
-                efree,
-                rest_vol,
-                kv,
-                vsign,
-                grad,
-                True,
-                fuse,
-                dvals,
-                lvals,
-                due,
-                pslots,
-                prev,
-                dprism,
-                lprism,
-            )
-            if fuse:
-                dvals += dprism
-                lvals += lprism
             n_energy += 1
             if small or en <= energy + armijo_c * t * slope or t < 1e-4:
                 have_h = fuse
@@ -1225,9 +845,8 @@ def _newton(
             curv = en - energy - slope * t
             tq = -slope * t * t / (2.0 * curv) if curv > 0 else 0.5 * t
             t = min(max(tq, 0.1 * t), 0.5 * t)
-        x[:, :] = xn
+        _copy_free(xn, free, x)
         energy = en
-        _flatten(grad, g)
         # the step (to a relative accuracy of ETA_MAX or better, not cut short by negative
         # curvature) estimates the distance left
         if move < tol and curved == 0:
@@ -1256,39 +875,24 @@ def _newton(
 
 
 @njit(cache=True, nogil=True)
-def _prism_part(
-    x, free, x_prism, have, lag, elems, efree, rest_vol, kv, vsign, pslots, prev, dprism, lprism
-):
-    """The prisms' part of the Hessian at ``x`` into ``dprism``, ``lprism`` (and ``x`` into
-    ``x_prism``) unless ``have`` one assembled where no free node was more than ``lag`` mm
-    away (see :data:`PRISM_LAG_MM`). Returns 1 if it assembled, else 0."""
-    if have and _largest_move(x, free, x_prism) <= lag:
-        return 0
-    dprism[:] = 0.0
-    lprism[:] = 0.0
-    add_prism_hessian(x, elems, efree, rest_vol, kv, vsign, pslots, prev, dprism, lprism)
-    x_prism[:, :] = x
-    return 1
-
-
-@njit(cache=True, nogil=True)
-def _flatten(a, out):
-    """``out`` (3F,) = ``a`` (F, 3)."""
-    for i in range(a.shape[0]):
-        out[3 * i] = a[i, 0]
-        out[3 * i + 1] = a[i, 1]
-        out[3 * i + 2] = a[i, 2]
-
-
-@njit(cache=True, nogil=True)
 def _moved(x, free, step, t, out):
-    """``out`` = ``x`` (N, 3) with the free nodes moved by ``t * step`` ((3F,), free order)."""
-    out[:, :] = x
+    """The free nodes of ``out`` (N, 3) = those of ``x`` moved by ``t * step`` ((3F,), free
+    order); its kinematic nodes are left as they are."""
     for a in range(free.shape[0]):
         i = free[a]
-        out[i, 0] += t * step[3 * a]
-        out[i, 1] += t * step[3 * a + 1]
-        out[i, 2] += t * step[3 * a + 2]
+        out[i, 0] = x[i, 0] + t * step[3 * a]
+        out[i, 1] = x[i, 1] + t * step[3 * a + 1]
+        out[i, 2] = x[i, 2] + t * step[3 * a + 2]
+
+
+@njit(cache=True, nogil=True)
+def _copy_free(src, free, dst):
+    """The free nodes of ``src`` (N, 3) into ``dst``."""
+    for a in range(free.shape[0]):
+        i = free[a]
+        dst[i, 0] = src[i, 0]
+        dst[i, 1] = src[i, 1]
+        dst[i, 2] = src[i, 2]
 
 
 @njit(cache=True, nogil=True)
