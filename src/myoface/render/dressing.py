@@ -21,9 +21,12 @@ PUPIL = (0.005, 0.005, 0.005)
 SOCKET = (0.05, 0.025, 0.022)
 MOUTH = (0.09, 0.015, 0.015)
 #: eye geometry (mm, degrees): eyeball radius (see myoface.face.eyes); angular radii of iris
-#: and pupil
+#: and pupil. The visible iris is 11.7 mm across (horizontal "white-to-white" diameter
+#: 11.71 +- 0.42 mm, 100 adults: F. Rüfer, A. Schröder, C. Erb, "White-to-white corneal
+#: diameter", Cornea 24(3):259-261, 2005): asin(5.85 / 12) = 29 degrees on the 12 mm eyeball
+#: (24 degrees, a 9.8 mm iris, left white above and below it: a stare); the pupil 4.2 mm
 EYE_RADIUS_MM = _EYE_RADIUS_MM
-IRIS_DEG = 24.0
+IRIS_DEG = 29.0
 PUPIL_DEG = 10.0
 
 
