@@ -178,7 +178,8 @@ class FaceModel:
         """Positions (K, 3) mm of the kinematic nodes for ``contractions``.
 
         The jaw rotates each kinematic node by its vertex's jaw weight times the opening angle
-        and slides it by that weight times the condylar slide; the muscles then add ``sum_i c_i B_i`` (T&W 1993, eq. (5)), rotated with the jaw.
+        and slides it by that weight times the condylar slide; the muscles then add
+        ``sum_i c_i B_i`` (T&W 1993, eq. (5)), rotated with the jaw.
         """
         c = self.validate(contractions)
         x = self._kin_rest + self._kin_basis @ c
