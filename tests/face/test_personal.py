@@ -275,6 +275,51 @@ def test_cli_from_photo_and_a_photo_without_a_face(tmp_path, capsys):
     assert "no face found in the photo" in capsys.readouterr().err
 
 
+def test_lips_a_little_apart_are_closed_and_an_open_mouth_is_left(default_face):
+    """close_lips: inner lip contours 1 mm apart meet at their midpoints (texture
+    coordinates too; the corners and every other vertex unchanged); 5 mm apart (the default
+    face's own open mouth) they are left as they are."""
+    from myoface.face.personal import close_lips
+
+    lm = default_face.landmarks
+    up, lo = np.asarray(lm["lip_upper_inner"]), np.asarray(lm["lip_lower_inner"])
+    up, lo = up[up != lo], lo[up != lo]  # (the corners are shared)
+    v = default_face.vertices.astype(np.float64)
+    uv = np.asarray(default_face.uv, dtype=np.float64)
+    _, _, gap, closed = close_lips(v, uv, lm, 2.0)
+    assert gap > 4.0 and not closed
+    apart = v.copy()
+    mid = 0.5 * (v[up] + v[lo])
+    apart[up], apart[lo] = mid + [0, 0.5, 0], mid - [0, 0.5, 0]
+    out, out_uv, gap, closed = close_lips(apart, uv, lm, 2.0)
+    assert closed and gap == pytest.approx(1.0)
+    np.testing.assert_allclose(out[up], out[lo])
+    np.testing.assert_allclose(out[up], mid, atol=1e-12)
+    np.testing.assert_allclose(out_uv[up], out_uv[lo])
+    others = np.setdiff1d(np.arange(len(v)), np.r_[up, lo])  # the corners among them
+    np.testing.assert_array_equal(out[others], apart[others])
+    np.testing.assert_array_equal(out_uv[others], uv[others])
+    assert not np.shares_memory(out, apart) and (apart[up] != out[up]).any()
+
+
+@needs_mediapipe
+@pytest.mark.shared_data
+def test_the_sample_videos_closed_lips_stay_closed():
+    """The sample video's first frame (lips closed at rest): MediaPipe finds the inner lip
+    contours ~1 mm apart; the face made from it has them meeting, and renders no mouth
+    opening between them."""
+    from myoface.analysis.video import open_video
+    from myoface.face.personal import CLOSED_LIPS_MM, face_from_photo
+
+    frame = next(iter(open_video(shared_path("video", "single_face.mp4"))))
+    face, info = face_from_photo(frame)
+    assert 0.0 < info["lip_gap_mm"] < CLOSED_LIPS_MM and info["lips_closed"]
+    lm = face.landmarks
+    np.testing.assert_allclose(
+        face.vertices[lm["lip_upper_inner"]], face.vertices[lm["lip_lower_inner"]]
+    )
+
+
 @needs_mediapipe
 @pytest.mark.shared_data
 def test_landmarks_found_on_the_scan_agree_with_the_annotation():

@@ -487,6 +487,35 @@ def find_landmarks_in_maps(maps: CylindricalMaps) -> np.ndarray:
 
 #: share of the generic face's depth mixed into the depth MediaPipe infers from one photo
 PHOTO_DEPTH_BLEND = 0.5
+#: MediaPipe's face mesh leaves its inner lip contours apart on closed lips (1.0-1.2 mm at the
+#: generic face's size along the whole mouth of the sample video's closed, resting lips), which
+#: a face made from the photo renders as parted lips with the mouth's dark inside between them.
+#: A mean gap below this (mm) is taken for closed lips and closed (:func:`close_lips`); a
+#: mouth open in the photo (the teeth or the mouth's inside showing) is left as it is.
+CLOSED_LIPS_MM = 2.0
+
+
+def close_lips(vertices: np.ndarray, uv: np.ndarray, landmarks: dict, max_gap_mm: float):
+    """Close the mouth of a face in the default topology whose inner lip contours are less
+    than ``max_gap_mm`` apart on average (mm; vertices (V, 3) head frame, y up): each upper
+    inner-lip vertex and the lower one facing it (``lip_upper_inner`` / ``lip_lower_inner``,
+    corners shared) are moved to their midpoint, and their texture coordinates ``uv`` (V, 2)
+    too (the photo's lip line between them is left out). Returns (vertices, uv, mean gap mm,
+    closed?); new arrays, the inputs unchanged."""
+    v = np.array(vertices, dtype=np.float64)
+    t = np.array(uv, dtype=np.float64)
+    up = np.asarray(landmarks.get("lip_upper_inner", ()), dtype=np.int64)
+    lo = np.asarray(landmarks.get("lip_lower_inner", ()), dtype=np.int64)
+    pairs = [(a, b) for a, b in zip(up, lo, strict=False) if a != b]
+    if not pairs or len(up) != len(lo):
+        return v, t, float("nan"), False
+    a, b = np.array(pairs).T
+    gap = float((v[a, 1] - v[b, 1]).mean())
+    if not gap < max_gap_mm:
+        return v, t, gap, False
+    mid, mid_uv = 0.5 * (v[a] + v[b]), 0.5 * (t[a] + t[b])
+    v[a], v[b], t[a], t[b] = mid, mid, mid_uv, mid_uv
+    return v, t, gap, True
 
 
 def face_from_photo(
@@ -502,7 +531,9 @@ def face_from_photo(
     topology; a similarity takes them onto the generic face (one photo has no absolute scale, so
     the face gets the generic face's size), the depth is blended with the generic face's
     (``depth_blend`` of it; monocular depth is the weakest coordinate), and the photo becomes the
-    texture, each vertex's texture coordinate being where it was found in it.
+    texture, each vertex's texture coordinate being where it was found in it. Lips that
+    MediaPipe leaves a little apart (less than :data:`CLOSED_LIPS_MM`) are closed
+    (:func:`close_lips`; ``info["lips_closed"]``).
     """
     from myoface.analysis.landmarks import FaceMeshDetector
     from myoface.face.io import load_default_face
@@ -525,6 +556,7 @@ def face_from_photo(
     head[:, 2] = (1 - depth_blend) * head[:, 2] + depth_blend * generic.vertices[:, 2]
     res = float(np.sqrt(((head - generic.vertices) ** 2).sum(1).mean()))
     uv = np.column_stack([pts[:, 0] / w, 1 - pts[:, 1] / h])
+    head, uv, gap, closed = close_lips(head, uv, generic.landmarks, CLOSED_LIPS_MM)
     face = FaceMesh(head, generic.triangles, uv, img, generic.landmarks, name=name)
     yaw = float(np.degrees(np.arctan2(r[0, 2], r[2, 2])))
     info = {
@@ -533,5 +565,7 @@ def face_from_photo(
         "head_yaw_deg": yaw,
         "fit_rms_to_generic_mm": res,
         "depth_blend": depth_blend,
+        "lip_gap_mm": gap,
+        "lips_closed": closed,
     }
     return face, info
