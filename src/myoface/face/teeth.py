@@ -11,9 +11,11 @@ each a parabolic band in the head frame's horizontal (x, z) plane
 with the teeth between it and ``thickness_mm`` behind it, from the incisal edge up (upper) or
 down (lower) over the crowns and the gums. The arch is placed from the lips at rest: its front
 ``LABIAL_GAP_MM`` behind the lips' meeting line at the midline and ``CORNER_GAP_MM`` behind the
-mouth corners, the upper incisal edge ``EDGE_HIDDEN_MM`` above the upper lip's inner margin and
-the lower one as far below the lower lip's (a relaxed face with parted lips shows no teeth; a
-smile or speech does).
+mouth corners, the upper incisal edge ``REST_DISPLAY_MM`` below the upper lip's inner margin
+(the upper incisors' display of a relaxed face with parted lips; never lower than
+``EDGE_HIDDEN_MM`` above the lower lip's margin, so lips that meet at rest hide them) and the
+lower one ``EDGE_HIDDEN_MM`` below the lower lip's (hidden at rest; a smile or speech shows
+both).
 
 The contact (:func:`lip_contact`) is a projection of the relaxed skin: lip vertices inside a
 tooth band are moved out through its front, and where the upper lip's margin would pass below
@@ -35,7 +37,13 @@ LIP_GROUPS = ("lip_upper_outer", "lip_upper_inner", "lip_lower_inner", "lip_lowe
 LABIAL_GAP_MM = 2.5
 #: ... and this far behind the mouth corners (mm), so the relaxed corners clear the canines
 CORNER_GAP_MM = 4.5
-#: the incisal edges lie this far inside the lips' inner margins at rest (mm): hidden at rest
+#: the upper incisors show this much below the upper lip at rest, lips apart (mm): 1.91 mm in
+#: men, 3.40 mm in women, decreasing with age (R. G. Vig, G. C. Brundo, "The kinetics of
+#: anterior tooth display", J. Prosthet. Dent. 39(5):502-504, 1978)
+REST_DISPLAY_MM = 2.0
+#: a hidden incisal edge lies this far inside the lip's inner margin at rest (mm): the lower
+#: incisors behind the lower lip (their display at rest is about 0.5-1.2 mm, same source:
+#: left at zero), the upper ones when the lips meet
 EDGE_HIDDEN_MM = 0.2
 #: the lower arch lies this far behind the upper (overjet, mm)
 OVERJET_MM = 2.0
@@ -157,9 +165,11 @@ def fit_dentition(face) -> Dentition | None:
     # the arch reaches back to the first molars, about 30 mm behind the incisors (scaled)
     back = 30.0 * scale
     half_w = float(np.sqrt(back / b))
-    upper = Arch(
-        xc, z0, b, half_w, float(mid_u[1]) + EDGE_HIDDEN_MM, 0.012, 22.0 * scale, 1.0
-    )  # crowns ~10.5 mm + gums
+    # the upper incisal edge: REST_DISPLAY_MM below the upper lip, but hidden behind the lower
+    # lip when the lips (nearly) meet at rest
+    edge_u = max(float(mid_u[1]) - REST_DISPLAY_MM * scale, float(mid_l[1]) + EDGE_HIDDEN_MM)
+    edge_u = min(edge_u, float(mid_u[1]) + EDGE_HIDDEN_MM)
+    upper = Arch(xc, z0, b, half_w, edge_u, 0.012, 22.0 * scale, 1.0)  # crowns ~10.5 mm + gums
     lb = b * 1.08
     lower = Arch(
         xc, z0 - OVERJET_MM, lb, float(np.sqrt(back / lb)), float(mid_l[1]) - EDGE_HIDDEN_MM, 0.006,
