@@ -63,11 +63,11 @@ def run_closed_loop(
     head_frame: str = "contours",
     tracker: str = "snakes",
     synthesis: bool = False,
-    teeth: bool = False,
+    teeth: bool = True,
     **analyzer_options,
 ) -> ClosedLoopResult:
-    """Render ``n_frames`` of known contractions (orthographic frontal camera, make-up texture),
-    analyse them with :class:`Analyzer` (contours initialised from the known camera; static
+    """Render ``n_frames`` of known contractions (orthographic frontal camera framing the face
+    over the whole sequence, make-up texture), analyse them with :class:`Analyzer` (contours initialised from the known camera; static
     head, so no head-frame correction), and return truth and estimates.
 
     ``tracker="landmarks"`` analyses the same frames with
@@ -79,10 +79,9 @@ def run_closed_loop(
     ``synthesis=True`` (snakes only) gives the analyzer the camera, so that it removes the
     tracker's bias by analysis by synthesis (:mod:`myoface.analysis.synthesis`); its
     appearance model is made from the first (neutral) frame, not from the known texture.
-    ``teeth``: render the teeth in the mouth (default False: the paper's made-up face had
-    none, and the snakes' lower-lip contour is drawn to the bright teeth that show when the
-    lower lip is pulled down: with them the depressor labii inferioris' RMSE was 0.24-0.27
-    on the 16-frame sequence, 0.09-0.11 without; tests/analysis/test_closed_loop.py).
+    ``teeth``: render the teeth, the tongue and the shaded cavity in the mouth (default, as a
+    video shows them); False: the mouth drawn shut by a fan of the lips' colour (what the
+    frames showed before the model had a mouth).
     ``analyzer_options`` go to :class:`Analyzer` (e.g. ``estimator="fiducials"``)."""
     from myoface.render import Camera, Renderer, to_srgb8
     from myoface.render.dressing import default_skin_texture
@@ -92,15 +91,21 @@ def run_closed_loop(
     if synthesis and tracker != "snakes":
         raise MyofaceValueError("synthesis=True needs tracker='snakes'")
     ids = tuple(ids)
-    cam = Camera.front(model.face.vertices, width=size, height=size, fov_deg=None)
-    if tracker != "oracle":  # the oracle reads the model's curves, not images
-        tex = to_srgb8(default_skin_texture(model.face, 512, makeup=True))
-        renderer = Renderer(model.face, cam, texture=tex, teeth=teeth)
     truth = truth_sequence(n_frames, ids, seed)
-    frames = []
+    states = []
     state = model.rest_state()
     for c in truth:
         state = model.relax(dict(zip(ids, c, strict=True)), state).state
+        states.append(state)
+    # framed on the face's extent over the sequence, as a camera operator would: a chin that
+    # the opened jaw took out of a frame framed at rest would leave its contour on the border
+    extent = np.concatenate([model.face.vertices] + [model.skin_vertices(s) for s in states])
+    cam = Camera.front(extent, width=size, height=size, fov_deg=None)
+    if tracker != "oracle":  # the oracle reads the model's curves, not images
+        tex = to_srgb8(default_skin_texture(model.face, 512, makeup=True))
+        renderer = Renderer(model.face, cam, texture=tex, teeth=teeth)
+    frames = []
+    for state in states:
         if tracker == "oracle":
             frames.append(project_sections(model, cam, state))
         else:

@@ -103,9 +103,48 @@ RESEED_STEP = 0.05
 #: this fraction of its size, plus WINDOW_PAD_PX (room for the contours to move in one frame)
 WINDOW_MARGIN = 0.15
 WINDOW_PAD_PX = 8.0
+#: sections whose outline encloses the mouth: they move in a layer of their own, the edge
+#: potential of the frame with everything darker than the lips raised to the lips' own dark
+#: tone (:func:`lips_tone`), so that the mouth's inside, dark as the lips part, makes no
+#: edge. Without it the lips' snake, on the outer margin, is drawn to the inner one where the
+#: lower lip is thin (near the corners when the jaw opens and the depressors pull it down):
+#: measured on the closed loop's frames with the mouth's cavity rendered, up to 2.6 mm (3.4
+#: px) inside the outline, against 0.8 mm with the mouth drawn shut
+MOUTH_SECTIONS = ("lips",)
+#: the band inside a mouth section's outline (mm on the face) whose grey levels give the
+#: lips' tone, and the percentile of them taken (:func:`lips_tone`)
+MOUTH_BAND_MM = (0.5, 2.5)
+MOUTH_FLOOR_PERCENTILE = 10.0
 
 
 # ------------------------------------------------------------------------------ the analyzer
+
+
+def lips_tone(
+    frame: np.ndarray,
+    contour: np.ndarray,
+    band_px=(1.0, 3.0),
+    percentile: float = MOUTH_FLOOR_PERCENTILE,
+) -> float:
+    """The lips' dark tone on ``frame``: the ``percentile`` of the grey levels (0-255) in the
+    band ``band_px`` (px) inside the closed ``contour`` ((K, 2) image (x, y) px, the lips'
+    outer outline), sampled along each node's inward normal."""
+    from myoface.analysis.potentials import bilinear, to_intensity
+
+    q = np.asarray(contour, dtype=np.float64)
+    img = np.ascontiguousarray(to_intensity(frame))
+    tan = np.roll(q, -1, axis=0) - np.roll(q, 1, axis=0)
+    nrm = np.stack([-tan[:, 1], tan[:, 0]], axis=1)
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-12)[:, None]
+    # the normal (-ty, tx) points inwards on a contour running clockwise on the screen (y
+    # down: positive shoelace area)
+    area = 0.5 * np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1])
+    if area < 0:
+        nrm = -nrm
+    depths = np.linspace(band_px[0], band_px[1], 5)
+    pts = (q[:, None, :] + depths[None, :, None] * nrm[:, None, :]).reshape(-1, 2)
+    vals = np.array([bilinear(img, x, y) for x, y in pts])
+    return float(np.percentile(vals, percentile))
 
 
 def _init_mm_per_px(model, init: dict) -> float:
@@ -147,6 +186,9 @@ class Analyzer:
         jointly by :class:`~myoface.analysis.estimate.ContractionEstimator`.
     line_sections : sections tracked in the ``"line"`` potential (thin dark lines) instead of
         ``potential``.
+    mouth_sections : sections around the mouth, tracked in ``potential`` with the mouth's
+        inside no darker than the lips (see :data:`MOUTH_SECTIONS`; the lips' tone measured
+        on the calibration frame).
     reseed : with ``estimator="curves"``, a second pass per frame: the contours are moved to
         where the model, at the first estimate, puts their skin, relaxed again and the
         contractions re-estimated (analysis by synthesis; twice the tracking cost).
@@ -180,6 +222,7 @@ class Analyzer:
         head_reference=("nose",),
         estimator: str = "curves",
         line_sections=LINE_SECTIONS,
+        mouth_sections=MOUTH_SECTIONS,
         reseed: bool = True,
         synthesis=None,
         synthesis_rounds: int = 3,
@@ -215,7 +258,25 @@ class Analyzer:
             closed.append(SECTIONS[sec][1])
         self.contours = make_contours(polys, closed=closed, names=self.sections)
         self.params = params or SnakeParams(p=0.01, tol_px=TRACK_TOL_PX)
-        self.layers = [1 if s in line_sections else 0 for s in self.sections]
+        # the potential's layers: ``potential`` (edges), then the lines' and the mouth's when
+        # some section is tracked in them
+        kinds = ["edge"]
+        for kind, secs in (("line", line_sections), ("mouth", mouth_sections)):
+            if any(s in secs for s in self.sections):
+                kinds.append(kind)
+        self._layer_kinds = tuple(kinds)
+        self.layers = [
+            kinds.index("line")
+            if s in line_sections
+            else kinds.index("mouth")
+            if s in mouth_sections
+            else 0
+            for s in self.sections
+        ]
+        #: the lips' dark tone (grey level) below which the mouth sections' layer raises the
+        #: frame (:func:`lips_tone`, measured on the calibration frame; None before)
+        self.mouth_floor = None
+        self.mouth_sections = tuple(mouth_sections)
         self.snakes = Snakes(self.contours, self.params, layers=self.layers)
         all_fids = {f.name: f for f in model_fiducials(model.face)}
         self.fiducials = [all_fids[f"{s}:{n}"] for s in self.sections for n in FEATURES[s]]
@@ -258,21 +319,23 @@ class Analyzer:
 
     # ------------------------------------------------------------ potentials
     def _methods(self) -> tuple:
-        return (self.potential, "line") if any(self.layers) else (self.potential,)
+        return tuple("line" if k == "line" else self.potential for k in self._layer_kinds)
 
     def _field_for(self, frame: np.ndarray, nodes: np.ndarray) -> PotentialField:
         """The potentials of ``frame`` (``potential``, then ``"line"`` when some section is
-        tracked as a line) on a window around ``nodes`` ((N, 2) image (x, y) px): the
+        tracked as a line, then ``potential`` raised to :attr:`mouth_floor` when some section
+        is around the mouth) on a window around ``nodes`` ((N, 2) image (x, y) px): the
         contours' box grown by :data:`WINDOW_MARGIN` of its size and :data:`WINDOW_PAD_PX`;
-        the line layer (whose wide blur costs most) only around the contours that move in
-        it, the same way."""
+        the other layers (the line's wide blur costs most) only around the contours that
+        move in them, the same way."""
         q = np.asarray(nodes, dtype=np.float64)
         box, _ = self._box(frame, q, None)
-        layer_windows = None
-        if any(self.layers):
-            line = self.snakes.node_layer == 1
-            layer_windows = [None, self._box(frame, q[line], None)[0]]
-        return potential_field(frame, self.sigma, self._methods(), box, layer_windows)
+        layer = self.snakes.node_layer
+        layer_windows = [None] + [
+            self._box(frame, q[layer == j], None)[0] for j in range(1, len(self._layer_kinds))
+        ]
+        floors = [self.mouth_floor if k == "mouth" else None for k in self._layer_kinds]
+        return potential_field(frame, self.sigma, self._methods(), box, layer_windows, floors)
 
     @staticmethod
     def _box(frame, q: np.ndarray, pad: float | None):
@@ -291,8 +354,10 @@ class Analyzer:
         m = WINDOW_PAD_PX / 2
         if not fld.covers(nodes, m):
             return False
-        line = self.snakes.node_layer == 1
-        return not line.any() or fld.covers(nodes[line], m, layer=1)
+        layer = self.snakes.node_layer
+        return all(
+            fld.covers(nodes[layer == j], m, layer=j) for j in range(1, len(self._layer_kinds))
+        )
 
     def _relax(self, frame: np.ndarray, fld: PotentialField | None):
         """Relax the snakes on ``frame``; ``fld`` (this frame's potentials) is reused when its
@@ -479,6 +544,17 @@ class Analyzer:
             self.head = HeadTracker(frame, head_box(self._init, np.shape(frame)))
             self._sim = self.head.current
         res, fld = self._relax(frame, None)
+        if "mouth" in self._layer_kinds:
+            # the lips' tone where the contours settled, and the mouth's sections settled again
+            # in their layer raised to it
+            band = tuple(b / _init_mm_per_px(self.model, self._init) for b in MOUTH_BAND_MM)
+            tones = [
+                lips_tone(frame, q, band)
+                for s, q in zip(self.sections, res.split(), strict=True)
+                if s in self.mouth_sections
+            ]
+            self.mouth_floor = float(min(tones))
+            res, fld = self._relax(frame, None)
         self._contrast0 = _contrast(fld)
         conts = res.split()
         pts, ref = self._features(conts)
@@ -610,14 +686,15 @@ class Analyzer:
         return FrameMeasurement(index, time_s, "ok", c, hs[0], named, *hs[1:])
 
     # ------------------------------------------------------------ analysis by synthesis
-    def _track_synthetic(self, skin: np.ndarray, start: list[np.ndarray]) -> dict:
-        """The contours tracked on the model rendered at ``skin``, from the nodes ``start``
-        (calibration coordinates), with the video tracker's rest lengths and parameters."""
+    def _track_synthetic(self, skin: np.ndarray, start: list[np.ndarray], jaw=None) -> dict:
+        """The contours tracked on the model rendered at ``skin`` (the lower teeth moved by the
+        jaw's rigid motion ``jaw``, None: closed), from the nodes ``start`` (calibration
+        coordinates), with the video tracker's rest lengths and parameters."""
         sn = self._synth_snakes
         sn.contours.nodes[:] = np.concatenate(start)
         sn.rest[:] = self.snakes.rest / (self._sim.s if self.head_frame == "register" else 1.0)
         sn.reference = self.snakes.reference
-        fld = self._field_for(self._synth.render(skin), sn.contours.nodes)
+        fld = self._field_for(self._synth.render(skin, jaw), sn.contours.nodes)
         return dict(zip(self.sections, sn.relax(fld).split(), strict=True))
 
     def _start_synthesis(self, frame: np.ndarray, conts_cal: list[np.ndarray]) -> None:
@@ -633,7 +710,7 @@ class Analyzer:
         video = dict(zip(self.sections, start, strict=True))
         for _ in range(self.synthesis_rounds):
             skin = self.curves.relaxed_skin(c)
-            synth = self._track_synthetic(skin, start)
+            synth = self._track_synthetic(skin, start, self.model.jaw_pose(self.curves.state))
             pred = self.curves.predicted(skin)
             self.curves.relinearise(c, pred)
             c = self.curves.synthesis_step(c, pred, video, synth, self._synth_bias)

@@ -266,10 +266,11 @@ def _clip_box(box, w: int, h: int):
     return None if x1 - x0 < 2 or y1 - y0 < 2 else (x0, y0, x1, y1)
 
 
-def _box_potentials(a: np.ndarray, sigma: float, methods, box):
+def _box_potentials(a: np.ndarray, sigma: float, methods, box, floor: float | None = None):
     """The potentials ``methods`` of image ``a`` and their gradients on ``box`` (x0, y0, x1,
     y1), each (L, y1 - y0 + 1, x1 - x0 + 1): filtered on the box grown by the blur's reach,
-    so that they equal the whole image's inside it."""
+    so that they equal the whole image's inside it. ``floor``: grey levels below it are
+    raised to it first (see :func:`potential_field`)."""
     h, w = a.shape[:2]
     x0, y0, x1, y1 = box
     smooth = [m for m in methods if m != "paper"]
@@ -277,6 +278,8 @@ def _box_potentials(a: np.ndarray, sigma: float, methods, box):
     cx0, cy0 = max(x0 - reach, 0), max(y0 - reach, 0)
     cx1, cy1 = min(x1 + reach, w - 1), min(y1 + reach, h - 1)
     img = np.ascontiguousarray(to_intensity(a[cy0 : cy1 + 1, cx0 : cx1 + 1]))
+    if floor is not None:
+        np.maximum(img, float(floor), out=img)
     tmp = np.empty_like(img)
     threads = img.size > SERIAL_PIXELS
     blur = _blur_separable if threads else _blur_separable_1
@@ -311,7 +314,12 @@ def _box_potentials(a: np.ndarray, sigma: float, methods, box):
 
 
 def potential_field(
-    image, sigma: float = 2.0, methods=("gaussian",), window=None, layer_windows=None
+    image,
+    sigma: float = 2.0,
+    methods=("gaussian",),
+    window=None,
+    layer_windows=None,
+    layer_floors=None,
 ) -> PotentialField:
     """The potentials ``methods`` (one layer each, see :func:`image_potential`) of ``image``
     (H, W[, 3]) over ``window`` = (x0, y0, x1, y1) pixels (inclusive; clipped to the image;
@@ -325,6 +333,12 @@ def potential_field(
     layer is computed only there and is 0 elsewhere (with a 0 gradient), e.g. the "line"
     layer, whose wide blur costs most, around the few contours that move in it. Its values
     inside its window are again those of the whole image.
+
+    ``layer_floors``: one entry per method, None or a grey level (0-255) below which that
+    layer's image is raised to it before filtering: what is darker than the feature itself
+    makes no edge. For the lips' outline (:class:`~myoface.analysis.pipeline.Analyzer`,
+    ``mouth_sections``): the mouth's dark inside, seen as the lips part, is then no darker
+    than the lips, and the only edge left near it is the lips' with the skin.
     """
     for m in methods:
         if m not in METHODS:
@@ -341,8 +355,14 @@ def potential_field(
     sub = [None] * len(methods) if layer_windows is None else list(layer_windows)
     if len(sub) != len(methods):
         raise MyofaceValueError("layer_windows must have one entry (or None) per method")
+    floors = [None] * len(methods) if layer_floors is None else list(layer_floors)
+    if len(floors) != len(methods):
+        raise MyofaceValueError("layer_floors must have one entry (or None) per method")
+    for fl in floors:
+        if fl is not None and not (np.isfinite(fl) and 0 <= fl <= 255):
+            raise MyofaceValueError(f"a layer's floor must be a grey level in [0, 255]; got {fl}")
     x0, y0, x1, y1 = box
-    whole = [j for j, lw in enumerate(sub) if lw is None]
+    whole = [j for j, lw in enumerate(sub) if lw is None and floors[j] is None]
     shape = (len(methods), y1 - y0 + 1, x1 - x0 + 1)
     pot, gx, gy = np.zeros(shape), np.zeros(shape), np.zeros(shape)
     if whole:
@@ -350,13 +370,16 @@ def potential_field(
         pot[whole], gx[whole], gy[whole] = p, u, v
     boxes = [None] * len(methods)
     for j, lw in enumerate(sub):
-        if lw is None:
+        if lw is None and floors[j] is None:
             continue
-        b = _clip_box((max(lw[0], x0), max(lw[1], y0), min(lw[2], x1), min(lw[3], y1)), w, h)
-        boxes[j] = b if b is not None else (x0, y0, x0, y0)
+        if lw is None:  # a floored layer over the whole window
+            b = box
+        else:
+            b = _clip_box((max(lw[0], x0), max(lw[1], y0), min(lw[2], x1), min(lw[3], y1)), w, h)
+            boxes[j] = b if b is not None else (x0, y0, x0, y0)
         if b is None:
             continue
-        p, u, v = _box_potentials(a, sigma, [methods[j]], b)
+        p, u, v = _box_potentials(a, sigma, [methods[j]], b, floors[j])
         sl = (slice(b[1] - y0, b[3] - y0 + 1), slice(b[0] - x0, b[2] - x0 + 1))
         pot[j][sl], gx[j][sl], gy[j][sl] = p[0], u[0], v[0]
     return PotentialField(pot, gx, gy, (x0, y0), (w, h), tuple(boxes))

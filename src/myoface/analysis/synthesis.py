@@ -38,7 +38,7 @@ class FrameSynthesizer:
     with, or one fitted to it). Lights and material are the renderer's defaults; the texture
     absorbs whatever they do not explain at rest."""
 
-    def __init__(self, face, camera, frame: np.ndarray, ssaa: int = 2):
+    def __init__(self, face, camera, frame: np.ndarray, ssaa: int = 2, teeth: bool = True):
         from myoface.face import FaceMesh
         from myoface.render import Renderer
         from myoface.render.renderer import load_texture
@@ -57,11 +57,16 @@ class FrameSynthesizer:
         uv = np.column_stack([px[:, 0] / w, 1.0 - px[:, 1] / h])
         textured = FaceMesh(face.vertices, face.triangles, uv, None, face.landmarks)
         white = np.ones((h, w, 3), np.float32)
-        self.renderer = Renderer(textured, camera, texture=white, ssaa=ssaa)
+        self.renderer = Renderer(textured, camera, texture=white, ssaa=ssaa, teeth=teeth)
         # what the renderer adds to and multiplies the texture by at rest
         lit = self.renderer.render_linear()
         matte = Renderer(
-            textured, camera, material=_matte(self.renderer.material), texture=white, ssaa=ssaa
+            textured,
+            camera,
+            material=_matte(self.renderer.material),
+            texture=white,
+            ssaa=ssaa,
+            teeth=teeth,
         ).render_linear()
         gloss = lit - matte
         skin = self.renderer.triangle_ids()[:: self.renderer.ssaa, :: self.renderer.ssaa]
@@ -75,9 +80,11 @@ class FrameSynthesizer:
         albedo = np.clip(albedo[iy, ix], 0.0, 1.0)
         self.renderer.texture = np.ascontiguousarray(albedo, dtype=np.float32)
 
-    def render(self, skin_vertices: np.ndarray) -> np.ndarray:
-        """The synthetic frame (H, W, 3) uint8 of the skin at ``skin_vertices``."""
-        return self.renderer.render(skin_vertices)
+    def render(self, skin_vertices: np.ndarray, jaw=None) -> np.ndarray:
+        """The synthetic frame (H, W, 3) uint8 of the skin at ``skin_vertices``, the lower
+        teeth and the tongue moved by the jaw's rigid motion ``jaw`` (None: closed; see
+        :meth:`myoface.model.FaceModel.jaw_pose`)."""
+        return self.renderer.render(skin_vertices, jaw=jaw)
 
 
 def _matte(material):
