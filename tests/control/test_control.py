@@ -107,10 +107,11 @@ def test_expressions_follow_their_prototypes():
 def test_visemes():
     assert {"rest", "PBM", "A", "O", "U", "FV"} <= set(list_visemes())
     a = viseme_contractions("A", 1.0, IDS)
-    assert a[IDS.index("jaw")] > 0.5
+    assert a[IDS.index("jaw")] == a.max() > 0.5  # "a": the widest opening
+    assert a[IDS.index("jaw")] > viseme_contractions("E", 1.0, IDS)[IDS.index("jaw")]
     assert not viseme_contractions("rest", 1.0, IDS).any()
     u = viseme_contractions("U", 1.0, IDS)
-    assert u[IDS.index("orbicularis_oris")] == 1.0
+    assert u[IDS.index("orbicularis_oris")] == u.max() > 0.5  # "u": the lips rounded
 
 
 @pytest.mark.parametrize(
