@@ -57,3 +57,21 @@ def test_readme_python_examples_run(tmp_path, monkeypatch):
     result = env["result"]
     assert result.contractions.shape == (8, len(result.ids))
     assert result.quality.count("ok") == 8
+
+
+def test_readme_analysis_stages_example_runs(tmp_path, monkeypatch, capsys):
+    """The analysis section's stage-by-stage example, on the first frames of the sample video."""
+    text = (REPO / "README.md").read_text()
+    block = text.split("### The analysis in Python, stage by stage", 1)[1].split("\n#", 1)[0]
+    (code,) = re.findall(r"```python\n(.*?)```", block, flags=re.S)
+    video_path = shared_path("video", "single_face.mp4")
+    if not _mediapipe_available():
+        pytest.skip("MediaPipe is not installed")
+    import imageio.v3 as iio
+
+    frames = iio.imread(video_path, plugin="pyav")[:12]
+    iio.imwrite(tmp_path / "clip.mp4", frames, plugin="pyav", codec="libx264", fps=30)
+    monkeypatch.chdir(tmp_path)
+    exec(compile(code, "README.md", "exec"), {})
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 12 and all(" ok {" in line for line in lines)
