@@ -394,8 +394,7 @@ class SymmetricPattern:
 #
 # One loop over the springs (:func:`_spring_pass`) and one over the prisms (:func:`_prism_pass`)
 # compute, on request, the energy, its gradient and the exact Hessian in the symmetric storage;
-# every kernel below is one of them or both. (Inlined, with the requests known at each call, so
-# numba compiles each use without the parts it does not ask for.)
+# every kernel below is one of them or both.
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -415,7 +414,7 @@ def _add_sym6(arr, slot, h0, h1, h2, h4, h5, h8):
         arr[o + 8] += h8
 
 
-@njit(cache=True, nogil=True, fastmath=True, inline="always")
+@njit(cache=True, nogil=True, fastmath=True)
 def _spring_pass(x, springs, grad, want_g, dvals, lvals, want_h):
     """The springs' energy (nJ, returned), their gradient dE/dx (uN) added to ``grad`` (F, 3)
     when ``want_g``, and their Hessian added to ``dvals``, ``lvals`` when ``want_h``: per
@@ -476,7 +475,7 @@ def _spring_pass(x, springs, grad, want_g, dvals, lvals, want_h):
     return en
 
 
-@njit(cache=True, nogil=True, fastmath=True, inline="always")
+@njit(cache=True, nogil=True, fastmath=True)
 def _prism_pass(x, prisms, grad, want_g, dvals, lvals, want_h):
     """The volume penalty Q = kv (V - V0)^2 of the prisms: its energy (nJ, returned), its
     gradient added to ``grad`` (F, 3) when ``want_g``, and its Hessian added to ``dvals``,
@@ -623,14 +622,21 @@ PRISM_PAIRS_NB = PRISM_PAIRS
 @njit(cache=True, nogil=True, fastmath=True)
 def energy_gradient_hessian(x, springs, prisms, grad, want_h, dvals, lvals, want_p, dprism, lprism):
     """The potential energy E over the springs and prisms that touch a free node (nJ; E less
-    a constant: the parts between kinematic nodes), its gradient dE/dx (uN) into ``grad``
-    (F, 3) in free-node order, and in the same passes, when ``want_h``, the springs' Hessian
-    added to ``dvals``, ``lvals``, when ``want_p`` the prisms' added to ``dprism``, ``lprism``
-    (symmetric storage of :class:`SymmetricPattern`, whose ``springs`` and ``prisms`` these
-    are). Eq. (1)-(4) of Terzopoulos & Waters 1993."""
+    a constant: the parts between kinematic nodes) and its gradient dE/dx (uN) into ``grad``
+    (F, 3) in free-node order; in the same passes, when ``want_p``, the prisms' Hessian into
+    ``dprism``, ``lprism``, and when ``want_h`` the Hessian into ``dvals``, ``lvals``: the
+    springs' part plus the prisms' in ``dprism``, ``lprism`` (new, or as given). Symmetric
+    storage of :class:`SymmetricPattern`, whose ``springs`` and ``prisms`` these are.
+    Eq. (1)-(4) of Terzopoulos & Waters 1993."""
     grad[:, :] = 0.0
-    en = _spring_pass(x, springs, grad, True, dvals, lvals, want_h)
-    return en + _prism_pass(x, prisms, grad, True, dprism, lprism, want_p)
+    if want_p:
+        dprism[:] = 0.0
+        lprism[:] = 0.0
+    en = _prism_pass(x, prisms, grad, True, dprism, lprism, want_p)
+    if want_h:
+        dvals[:] = dprism
+        lvals[:] = lprism
+    return en + _spring_pass(x, springs, grad, True, dvals, lvals, want_h)
 
 
 @njit(cache=True, nogil=True, fastmath=True)

@@ -298,33 +298,34 @@ def ldl_solve(ptr, rows, vals, diag, dinv, perm, b, out, y):
         out[p + 2] = y[3 * J + 2]
 
 
-@njit(cache=True, nogil=True)
-def _chol3(a, o, out):
-    """Lower Cholesky factor of the symmetric 3x3 block ``a[o:o+9]`` into ``out`` (9,);
-    False if the block is not positive definite."""
-    l00 = a[o]
-    if not l00 > 0.0:
+@njit(cache=True, nogil=True, inline="always")
+def _inverse_spd3(a, o, out):
+    """The inverse of the symmetric 3x3 block ``a[o:o+9]`` into ``out[o:o+9]`` (its adjugate over
+    its determinant) if the block is positive definite (its leading minors positive: Sylvester's
+    criterion); returns whether it is (``out`` is then left as it was)."""
+    a00 = a[o]
+    a01 = a[o + 1]
+    a02 = a[o + 2]
+    a11 = a[o + 4]
+    a12 = a[o + 5]
+    a22 = a[o + 8]
+    m2 = a00 * a11 - a01 * a01
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    if not (a00 > 0.0 and m2 > 0.0 and det > 0.0):
         return False
-    l00 = np.sqrt(l00)
-    l10 = a[o + 3] / l00
-    l20 = a[o + 6] / l00
-    d1 = a[o + 4] - l10 * l10
-    if not d1 > 0.0:
-        return False
-    l11 = np.sqrt(d1)
-    l21 = (a[o + 7] - l20 * l10) / l11
-    d2 = a[o + 8] - l20 * l20 - l21 * l21
-    if not d2 > 0.0:
-        return False
-    out[0] = l00
-    out[1] = 0.0
-    out[2] = 0.0
-    out[3] = l10
-    out[4] = l11
-    out[5] = 0.0
-    out[6] = l20
-    out[7] = l21
-    out[8] = np.sqrt(d2)
+    r = 1.0 / det
+    out[o] = c00 * r
+    out[o + 1] = c01 * r
+    out[o + 2] = c02 * r
+    out[o + 3] = c01 * r
+    out[o + 4] = (a00 * a22 - a02 * a02) * r
+    out[o + 5] = (a01 * a02 - a00 * a12) * r
+    out[o + 6] = c02 * r
+    out[o + 7] = out[o + 5]
+    out[o + 8] = m2 * r
     return True
 
 
@@ -334,32 +335,15 @@ def diagonal_blocks(dvals, fallback, dused, dinv, emat):
     inverses into ``dinv``, and ``emat = 2 dused - dvals`` (for :func:`pcg`): the Hessian's
     ``dvals`` where a block is positive definite, else the rest stiffness's block ``fallback``
     (always positive definite), so that the preconditioner is SPD whatever the Hessian."""
-    ch = np.empty(9)
     for i in range(dvals.shape[0] // 9):
         o = 9 * i
-        src = dvals if _chol3(dvals, o, ch) else fallback
-        if src is fallback:
-            _chol3(fallback, o, ch)
+        src = dvals
+        if not _inverse_spd3(dvals, o, dinv):
+            src = fallback
+            _inverse_spd3(fallback, o, dinv)
         for q in range(9):
             dused[o + q] = src[o + q]
             emat[o + q] = 2.0 * src[o + q] - dvals[o + q]
-        # inverse of L L^T from the inverse of the lower factor L
-        i00 = 1.0 / ch[0]
-        i11 = 1.0 / ch[4]
-        i22 = 1.0 / ch[8]
-        i10 = -ch[3] * i00 * i11
-        i21 = -ch[7] * i11 * i22
-        i20 = -(ch[6] * i00 + ch[7] * i10) * i22
-        # (L^-1)^T L^-1, L^-1 = [[i00, 0, 0], [i10, i11, 0], [i20, i21, i22]]
-        dinv[o] = i00 * i00 + i10 * i10 + i20 * i20
-        dinv[o + 1] = i10 * i11 + i20 * i21
-        dinv[o + 2] = i20 * i22
-        dinv[o + 3] = dinv[o + 1]
-        dinv[o + 4] = i11 * i11 + i21 * i21
-        dinv[o + 5] = i21 * i22
-        dinv[o + 6] = dinv[o + 2]
-        dinv[o + 7] = dinv[o + 5]
-        dinv[o + 8] = i22 * i22
 
 
 @njit(cache=True, nogil=True, fastmath=True)
@@ -718,29 +702,6 @@ def relax_newton(
     return x, ok, it, move, cg, float(out[8])
 
 
-@njit(cache=True, nogil=True, fastmath=True, inline="always")
-def _evaluate(x, springs, prisms, grad, want_h, due, dvals, lvals, dprism, lprism):
-    """Energy and gradient at ``x`` (:func:`~myoface.tissue.hessian.energy_gradient_hessian`),
-    and with ``want_h`` the Hessian there into ``dvals``, ``lvals`` in the same passes: the
-    springs' part new, the prisms' part (``dprism``, ``lprism``) new when ``due``, else the
-    one kept."""
-    if want_h and not due:
-        dvals[:] = dprism
-        lvals[:] = lprism
-    elif want_h:
-        dvals[:] = 0.0
-        lvals[:] = 0.0
-        dprism[:] = 0.0
-        lprism[:] = 0.0
-    en = energy_gradient_hessian(
-        x, springs, prisms, grad, want_h, dvals, lvals, want_h and due, dprism, lprism
-    )
-    if want_h and due:
-        dvals += dprism
-        lvals += lprism
-    return en
-
-
 @njit(cache=True, nogil=True)
 def _newton(x, free, springs, prisms, lptr, lcol, rest_diag, tol, max_iter, params, stats):
     """The Newton iterations of :func:`relax_newton` on ``x`` (N, 3) mm, in place (see the
@@ -775,7 +736,9 @@ def _newton(x, free, springs, prisms, lptr, lcol, rest_diag, tol, max_iter, para
     x_prism = x.copy()  # where the prisms' part of the Hessian was assembled
     # the Hessian at x, assembled with the energy and gradient there (the first one, and at a
     # point where the last step was too long for the next one to keep the Hessian)
-    energy = _evaluate(x, springs, prisms, grad, True, True, dvals, lvals, dprism, lprism)
+    energy = energy_gradient_hessian(
+        x, springs, prisms, grad, True, dvals, lvals, True, dprism, lprism
+    )
     g = grad.reshape(n)
     have_h = True
     gnorm_prev = np.sqrt(g @ g)
@@ -834,7 +797,9 @@ def _newton(x, free, springs, prisms, lptr, lcol, rest_diag, tol, max_iter, para
             _moved(x, free, step, t, xn)
             fuse = want_h and t == 1.0
             due = fuse and _largest_move(xn, free, x_prism) > prism_lag
-            en = _evaluate(xn, springs, prisms, grad, fuse, due, dvals, lvals, dprism, lprism)
+            en = energy_gradient_hessian(
+                xn, springs, prisms, grad, fuse, dvals, lvals, due, dprism, lprism
+            )
             if due:
                 _copy_free(xn, free, x_prism)
                 n_prism += 1
