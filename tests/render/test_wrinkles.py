@@ -103,6 +103,11 @@ def test_furrow_regions_follow_the_face(fm):
 
     big = FaceMesh(2 * fm.face.vertices, fm.face.triangles, landmarks=fm.face.landmarks)
     np.testing.assert_allclose(furrow_regions(big), w, atol=1e-9)
+    # without eye landmarks (Waters' face): the forehead only, the top of the face
+    bare = furrow_regions(FaceMesh(fm.face.vertices, fm.face.triangles))
+    y = fm.face.vertices[:, 1]
+    assert bare[y > y.max() - 0.2 * np.ptp(y)].min() == 1.0
+    assert bare[y < y.max() - 0.4 * np.ptp(y)].max() == 0.0
 
 
 def test_nasolabial_fold_in_a_smile(fm, pair):

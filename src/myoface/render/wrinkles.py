@@ -56,6 +56,11 @@ FOLD_REACH_MM = 15.0
 N_VERTEX = 6
 
 
+#: a face without eye landmarks folds into lines on the top part of its height only (the
+#: forehead: above the brows, about the top third on the default face and Waters' face)
+FOREHEAD_FRACTION = 0.35
+
+
 def _smoothstep(x, lo, hi):
     t = np.clip((np.asarray(x, dtype=np.float64) - lo) / (hi - lo), 0.0, 1.0)
     return t * t * (3 - 2 * t)
@@ -70,11 +75,14 @@ def furrow_regions(face) -> np.ndarray:
     the chin) compressed skin bulges rather than folding into parallel lines; the cheek's
     compression shows as the nasolabial groove instead. From the face's landmark groups
     (``eye_l``, ``eye_r``, ``nose_tip``), with margins in units of the inter-ocular distance
-    so they scale with the face; 1 everywhere when the groups are missing."""
+    so they scale with the face. Without those groups (e.g. Waters' face), the forehead only:
+    the top :data:`FOREHEAD_FRACTION` of the face's height."""
     lm = face.landmarks
     v = np.asarray(face.vertices, dtype=np.float64)
     if not all(k in lm and len(lm[k]) for k in ("eye_l", "eye_r", "nose_tip")):
-        return np.ones(len(v))
+        lo, hi = float(v[:, 1].min()), float(v[:, 1].max())
+        start = hi - FOREHEAD_FRACTION * (hi - lo)
+        return _smoothstep(v[:, 1], start, start + 0.08 * (hi - lo))
     eyes = [v[np.asarray(lm[k])] for k in ("eye_l", "eye_r")]
     centre = [e.mean(axis=0) for e in eyes]
     iod = float(np.linalg.norm(centre[0][:2] - centre[1][:2]))
