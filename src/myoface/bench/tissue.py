@@ -266,9 +266,35 @@ def _timed_relaxes(tm, state, targets, reps: dict) -> dict:
     return {m: (float(np.median(w)), float(np.median(c)), res[m]) for m, (w, c) in times.items()}
 
 
-def _relax_detail(new, peer) -> dict:
-    """``{solver: {row: {column: value}}}`` for BENCHMARKS.md's detail table."""
-    return {
+#: the Newton solver's counts per relax in the detail, by their index in relax_newton's stats
+NEWTON_COUNTS = {
+    "CG iterations": 3,
+    "Hessian assemblies": 4,
+    "of which the prisms' part": 5,
+    "energy and gradient passes": 6,
+}
+
+
+def _newton_counts(tm, state, targets) -> np.ndarray:
+    """The Newton solver's counts (``relax_newton``'s stats, (9,)) on the relax that
+    ``relax(tm, state, targets)`` makes (its start and guess), run once outside the timing."""
+    from myoface.tissue import rest_state
+    from myoface.tissue.solver import NEWTON_TOL_MM, relax_newton
+
+    state = state if state is not None else rest_state(tm)
+    kin = tm.kinematic_index
+    x = state.x.copy()
+    x_kin_start = x[kin].copy()
+    x[kin] = targets
+    stats = np.zeros(9)
+    relax_newton(tm, x, x_kin_start, NEWTON_TOL_MM, 50, stats=stats, previous_x=state.previous_x)
+    return stats
+
+
+def _relax_detail(new, peer, counts=None) -> dict:
+    """``{solver: {row: {column: value}}}`` for BENCHMARKS.md's detail table; ``counts``:
+    the Newton solver's stats (mean over the relaxes), for the rows of :data:`NEWTON_COUNTS`."""
+    out = {
         solver: {
             "median wall": {"ms": d["wall"] * 1e3},
             "median thread CPU": {"ms": d["cpu"] * 1e3},
@@ -277,6 +303,10 @@ def _relax_detail(new, peer) -> dict:
         }
         for solver, d in (("newton", new), ("lbfgs", peer))
     }
+    if counts is not None:
+        for row, i in NEWTON_COUNTS.items():
+            out["newton"][row] = {"ms": float(counts[i])}
+    return out
 
 
 @benchmark("tissue.relax_ms", "ms", higher_is_better=False, peer=RELAX_PEER)
@@ -307,7 +337,7 @@ def bench_relax(quick: bool) -> Measurement:
         out["newton"]["wall"] * 1e3,
         n,
         out["lbfgs"]["wall"] * 1e3,
-        detail=_relax_detail(out["newton"], out["lbfgs"]),
+        detail=_relax_detail(out["newton"], out["lbfgs"], _newton_counts(tm, None, tg)),
     )
 
 
@@ -353,9 +383,10 @@ def bench_relax_warm(quick: bool) -> Measurement:
             "iterations": float(np.median(its)),
             "err_mm": float(errs.max()),
         }
+    counts = np.mean([_newton_counts(tm, eq[k], tgs[k + 1]) for k in frames], axis=0)
     return Measurement(
         out["newton"]["wall"] * 1e3,
         len(frames) * reps,
         out["lbfgs"]["wall"] * 1e3,
-        detail=_relax_detail(out["newton"], out["lbfgs"]),
+        detail=_relax_detail(out["newton"], out["lbfgs"], counts),
     )
