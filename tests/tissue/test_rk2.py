@@ -53,13 +53,13 @@ def test_parallel_kernel_follows_the_serial_reference(default_tissue):
     assert ra[0] == rb[0] == n and ra[2] == rb[2] == -1
     move = np.abs(xb - x0).max()
     assert move > 1.0  # the lattice really moved
-    # Same arithmetic per spring and per tetrahedron, and the same order of the springs' terms at
-    # each node; what differs is the prisms': the parallel kernel sums each prism's gradient per
-    # node over its three tetrahedra before adding it, the serial one adds every term as it comes.
-    # That is a reassociation: a few ulps of a force per evaluation, ~1e-13 of the motion after n steps of
-    # this damped (contractive) system. 1e-9 of the motion leaves 4 orders of magnitude for it;
-    # any modelling slip (a spring or prism missed or counted twice, a wrong sign or midpoint)
-    # moves nodes by far more than 1e-9 mm.
+    # Same arithmetic per spring and per tetrahedron; what differs is the order of the sums at a
+    # node: the parallel kernel adds it prism by prism (each prism's volume term, plus the springs
+    # that prism computes, summed per node before they are added), the serial one every spring,
+    # then every tetrahedron's term, as they come. That is a reassociation: a few ulps of a force
+    # per evaluation, ~1e-13 of the motion after n steps of this damped (contractive) system.
+    # 1e-9 of the motion leaves 4 orders of magnitude for it; any modelling slip (a spring or
+    # prism missed or counted twice, a wrong sign or midpoint) moves nodes by far more than 1e-9 mm.
     np.testing.assert_allclose(xa, xb, rtol=0, atol=1e-9 * move)
     np.testing.assert_allclose(va, vb, rtol=0, atol=1e-9 * np.abs(vb).max())
 
@@ -122,6 +122,44 @@ def test_parallel_kernel_on_a_lattice_with_every_node_free():
     run_rk2_serial(lat, xb, vb, 400, 1e-4)
     # reassociation of the prism's terms only, as above
     np.testing.assert_allclose(xa, xb, rtol=0, atol=1e-9 * np.abs(xb - x0).max())
+
+
+def test_springs_inside_and_outside_prisms_each_count_once():
+    """Springs that no prism holds (a node off the prism; a second spring on a prism edge) are
+    evaluated on their own, the others with their prism: each once, whatever the blocks."""
+    rng = np.random.default_rng(1)
+    pos = np.array(
+        [[0, 0, 0], [4, 0, 0], [0, 4, 0], [0, 0, 3], [4, 0, 3], [0, 4, 3], [5, 5, 5]], float
+    )
+    springs = [[0, 1], [1, 2], [2, 0], [3, 4], [4, 5], [5, 3], [0, 3], [1, 4], [2, 5], [4, 0]]
+    springs += [[6, 5], [1, 6], [0, 1]]  # off the prism, and [0, 1] a second time
+    lat = make_lattice(
+        pos,
+        springs,
+        mass=0.02,
+        damping=0.5,
+        elements=[[0, 1, 2, 3, 4, 5]],
+        volume_weight=5.0,
+    )
+    x0 = pos + rng.normal(0, 0.8, pos.shape)
+    v0 = rng.normal(0, 5.0, pos.shape)
+    xb, vb = x0.copy(), v0.copy()
+    run_rk2_serial(lat, xb, vb, 400, 1e-4)
+    for nb in (1, 2, 3):
+        xa, va = x0.copy(), v0.copy()
+        run_rk2(lat, xa, va, 400, 1e-4, n_blocks=nb)
+        np.testing.assert_allclose(xa, xb, rtol=0, atol=1e-9 * np.abs(xb - x0).max())
+
+
+def test_every_spring_of_the_face_is_computed_with_a_prism_once(default_tissue):
+    m = default_tissue
+    live = ~(m.kinematic[m.spring_i] & m.kinematic[m.spring_j])
+    plan = rk2_mod.rk2_plan(m, 1)
+    assert len(plan.spring_i) == 0  # none left to the separate spring loop
+    k = plan.pair_consts.reshape(-1, rk2_mod.SPRING_ROWS, rk2_mod.PRISM_CHUNK)
+    held = k[:, 1] > 0  # alpha > 0: a lane with a spring
+    assert held.sum() == live.sum()
+    np.testing.assert_array_equal(np.sort(k[:, 0][held]), np.sort(m.rest_length[live]))
 
 
 def test_springs_alone_follow_the_serial_reference_bit_for_bit():

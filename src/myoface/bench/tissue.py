@@ -191,8 +191,10 @@ def bench_rk2(quick: bool) -> Measurement:
     threads, or one when it measures one to be faster: on a machine busy with other work).
     Peer: the previous single-thread kernel (kept as the reference) on the same steps from the
     same state, timed alternately with ours in the same run. The detail gives the parallel kernel
-    with a fixed number of threads too, each run's best rate, and the CPU time of all the
-    process's threads per step (a thread waiting for another spins, then yields its core)."""
+    with a fixed number of threads too, each run's best rate, the CPU time of all the process's
+    threads per step (a thread waiting for another spins, then yields its core) and that of the
+    calling thread (``time.thread_time``: on one thread, the kernel's own cost, which a busy
+    machine hardly changes; with a team, the calling thread's share)."""
     import numba
 
     from myoface.tissue import rest_state, step_rk2
@@ -222,10 +224,12 @@ def bench_rk2(quick: bool) -> Measurement:
     n = 3 if quick else 15
     times = {k: [] for k in runs}
     cpu = {k: [] for k in runs}
+    tcpu = {k: [] for k in runs}
     for _ in range(n):  # alternate, so all see the same load on a shared machine
         for k, fn in runs.items():
-            t0, c0 = time.perf_counter(), time.process_time()
+            t0, c0, h0 = time.perf_counter(), time.process_time(), time.thread_time()
             fn()
+            tcpu[k].append(time.thread_time() - h0)
             cpu[k].append(time.process_time() - c0)
             times[k].append(time.perf_counter() - t0)
     rate = {k: steps / float(np.median(ts)) for k, ts in times.items()}
@@ -233,6 +237,9 @@ def bench_rk2(quick: bool) -> Measurement:
         "steps/s": {k: {"median": rate[k], "best": steps / float(np.min(times[k]))} for k in runs},
         "CPU us/step (all threads)": {
             k: {"median": float(np.median(cpu[k])) / steps * 1e6} for k in runs
+        },
+        "CPU us/step (calling thread)": {
+            k: {"median": float(np.median(tcpu[k])) / steps * 1e6} for k in runs
         },
     }
     return Measurement(rate["default (step_rk2)"], n, rate["previous kernel (peer)"], detail)

@@ -2,18 +2,29 @@
 
 Two force evaluations per step (Terzopoulos & Waters 1993, Section III-B: explicit Euler was not
 stable enough). The free nodes are cut into slabs (blocks) along the lattice's long axis, once
-per model (:func:`rk2_plan`); each block keeps private copies of the springs and prisms that
-touch its nodes and adds their forces into a buffer of its own, then takes its nodes' midpoint
-(or full) update from it. Nothing is written by two threads, and each node adds the same terms
-in the same order whatever the number of blocks, so the trajectory does not depend on the number
-of threads, bit for bit.
+per model (:func:`rk2_plan`); each block keeps private copies of the prisms that touch its nodes
+and adds their forces into a buffer of its own, then takes its nodes' midpoint (or full) update
+from it. Nothing is written by two threads, and each node adds the same terms in the same order
+whatever the number of blocks, so the trajectory does not depend on the number of threads, bit
+for bit.
 
-What one step costs (default face, measured): 1,072 free nodes of 1,872; 10,211 springs with a
-free end (of 13,302) and 2,026 prisms with a free node and a volume weight, each evaluated twice
-(with 2 blocks 10,524 and 2,165: those across the cut twice); no muscle force (the muscles move
-kinematic nodes, set before the run). On one thread, a step is ~240 us of spring
-forces, ~130 us of prisms (their gradients now computed four prisms at a time, see
-:func:`~myoface.tissue.forces.prism_volume_forces_split`) and ~25 us for the rest.
+The springs are computed with the prisms. Every spring of the layered lattice joins two nodes of
+some prism (an edge or a side-face diagonal: one of its 15 node pairs, :data:`PRISM_PAIRS`), so
+each spring with a free end is given to one such prism, once per model. A block then works on a
+chunk of 64 prisms at a time, side by side in *lanes*: it gathers their six nodes' coordinates
+once, computes their volume forces (:func:`~myoface.tissue.forces._prism_chunk_forces`) and,
+pair by pair, the forces of the springs they hold (:func:`_pair_lanes`: square roots and
+divisions four at a time), summed per node in the lanes, and adds each prism's six sums into
+its buffer. The springs no longer gather their ends' positions, nor add into the nodes, on their
+own: that memory traffic was most of their cost. Same arithmetic per spring and per tetrahedron
+as the reference kernels; only the order of the sums at a node differs (prism by prism). A
+spring that no prism holds (a lattice without prisms) is evaluated on its own after the prisms.
+
+What one step costs (default face, as built on 2026-11-30): 1,070 free nodes of 1,872; 10,195
+springs with a free end (of 13,302), all held by the 2,026 prisms with a free node, in 32 chunks
+(204 chunk-pairs: 13,056 lanes for the 10,195 springs, because the prisms are ordered by which
+pairs hold a spring, so a chunk's prisms mostly hold the same ones; in model order it would be
+307 chunk-pairs, 19,648 lanes); each evaluated twice a step.
 
 The team (:func:`_rk2_run_team`): one parallel region per call, not two per step. The run is a
 sequence of tasks (step, half-step, block); a thread takes the next one from an atomic counter,
@@ -23,18 +34,19 @@ an idle machine and up to milliseconds on a busy one; the wait costs well under 
 other thread is running. Any thread may run any task, so a team smaller than asked still
 finishes, in order.
 
-Measured on this repository's 2-core machine (AMD EPYC, while other jobs ran: load 2-3),
-``myoface bench --only tissue.rk2`` and interleaved runs of 200 steps against the previous
-kernel in the same process: 2 threads ~3,000 steps/s median (best 4,100; previous kernel 2,800,
-best 3,300), 1 thread ~1,800-2,250 (previous 1,700), the single-thread reference ~1,400-1,550.
-The paper's 5,000 steps/s (200 us a step) is not reached: the two force evaluations alone are
-~400 us of one core's time, so even a perfect split over two cores leaves ~200 us.
+Measured (thread CPU time, one thread, interleaved runs of 200 steps in one process, 2-core
+machine under load 5-9 from other jobs): ~1.45-1.7x less CPU a step than the previous parallel
+kernel (springs and prisms apart); see the commit log for the numbers of each run.
 
-Tried and dropped (measured, same values to the last bit): springs in three passes (gather the
-vectors, vectorised square roots and divisions, scatter; per-spring constants) — 30 % faster
-alone, slower inside the step (the extra arrays' memory traffic: 418 vs 385 us a step); the
-same in L1-sized chunks (slower still); keeping a node's sum in registers over the springs that
-start at it (no gain: the scatter is not bound by store forwarding).
+Tried and dropped (measured): springs in three passes (gather the vectors, vectorised square
+roots and divisions, scatter; per-spring constants) — 30 % faster alone, slower inside the step
+(the extra arrays' memory traffic); the same in L1-sized chunks (slower still); keeping a node's
+sum in registers over the springs that start at it (no gain). With the springs in the prisms:
+each node gathering its terms from the chunks' stored results instead of the prisms adding
+into the nodes (slower: ~20 % more CPU a step); an explicit branch instead of the discard row
+for a prism's nodes outside the block, contracted multiply-adds in the spring lanes, and the
+prisms in model order (better locality, 1.5x the lanes) — no difference the busy machine could
+resolve.
 
 :func:`_rk2_run_serial` is the single-thread kernel the parallel one replaced (a scatter over
 every spring and element); it stays as the reference the tests hold the parallel one against,
@@ -64,11 +76,13 @@ from numba.extending import intrinsic
 
 from myoface.errors import MyofaceSimulationError, MyofaceValueError
 from myoface.tissue.forces import (
+    LAW_PAPER,
+    MIN_SPRING_LENGTH,
     PRISM_CHUNK,
     PRISM_WORK,
+    _prism_chunk_forces,
     internal_forces_numba,
-    prism_volume_forces_split,
-    spring_forces_range,
+    spring_magnitude,
 )
 from myoface.tissue.model import TissueModel
 
@@ -204,6 +218,15 @@ def _wait_done(counters, target):
 
 # ------------------------------------------------------------------------ the parallel kernel ----
 
+#: the 15 node pairs (edges and face diagonals) of a prism [a0, b0, c0, a1, b1, c1]: every spring
+#: of the layered lattice joins two nodes of some prism, so it is computed with that prism, from
+#: the prism's gathered coordinates, and added to its nodes' sums there
+PRISM_PAIRS = np.array(
+    [(a, b) for a in range(6) for b in range(a + 1, 6)], dtype=np.int64
+)  # fmt: skip
+#: rows of a (chunk, pair)'s spring constants: l_k, alpha, beta, e^c (= strain_c * l_k)
+SPRING_ROWS = 4
+
 
 @dataclass(frozen=True)
 class Rk2Plan:
@@ -211,51 +234,103 @@ class Rk2Plan:
     once by :func:`rk2_plan`.
 
     The free nodes are cut into ``n_blocks`` slabs along the lattice's longest axis, one per
-    thread. Block b owns its nodes and a private copy of every spring and prism that touches
-    them (only those: springs with a free end, prisms with a free node and a volume weight; the
-    rest push on kinematic nodes only), so a thread adds up the forces on its nodes in a buffer
-    of its own, with no atomics and nothing shared, and updates them; the springs and prisms
-    that straddle the cut between two slabs are evaluated by both, the price of that.
-    Free nodes are numbered ``q = 0 .. F-1`` block by block (``free[q]`` is the node).
+    thread, and numbered ``q = 0 .. F-1`` block by block (``free[q]`` is the node). Block b
+    evaluates every prism that has a node of its own (its private copy, in *lanes*: a chunk of
+    :data:`~myoface.tissue.forces.PRISM_CHUNK` prisms computed side by side), and each spring
+    with a free end is *owned* by one prism that contains both its nodes (one of the 15 pairs
+    :data:`PRISM_PAIRS`), so it is computed with that prism, from the coordinates the prism
+    gathered, and added into the prism's per-node sums; then each prism's six sums are added
+    into the block's own buffer (rows ``q - q0`` for its nodes, the last row for the others). A
+    spring no prism owns (a lattice without prisms) is evaluated on its own after the prisms.
+    Nothing is written by two threads, and each node adds the same terms in the same order
+    whatever the number of blocks, so the trajectory does not depend on the number of threads.
 
     Attributes
     ----------
     free : (F,) int64 — node index of each free node.
     inv_mass, damping : (F,) float64 — 1/m (1/g) and gamma (g/s) of each free node.
-    block_nodes, block_springs, block_prisms : (B+1,) int64 — where each block's nodes q, springs
-        and prisms start.
-    spring_i, spring_j, rest_length, spring_material : (S',) — the springs, block by block, in
-        model order within a block.
-    elements, rest_volume, volume_weight : (E', 6), (E',), (E',) — the prisms, likewise.
-
-    A node's force is summed over the same springs, then the same prisms, in the same order
-    whatever the number of blocks, so the trajectory does not depend on the number of threads.
+    block_nodes : (B+1,) int64 — where each block's nodes q start.
+    block_chunks : (B+1,) int64 — where each block's chunks start.
+    chunk_lanes : (C+1,) int64 — where each chunk's lanes (prisms) start.
+    elements : (L, 6) int64 — each lane's prism (nodes).
+    target : (L, 6) int64 — the row of the block's buffer each of its nodes adds into.
+    rest_volume, volume_weight : (L,) float64 — V0 (mm^3) and kv of each lane's prism.
+    chunk_pairs : (C+1,) int64 — where each chunk's list of pairs with a spring starts.
+    pair : (P,) int64 — a row of :data:`PRISM_PAIRS` with a spring in some lane of the chunk.
+    pair_consts : (P * SPRING_ROWS * PRISM_CHUNK,) float64 — per (chunk, pair) and lane:
+        l_k (mm), alpha, beta (g/s^2), e^c = strain_c * l_k (mm); zeros in a lane without
+        that spring (it adds exactly nothing).
+    block_springs : (B+1,) int64 — where each block's springs without a prism start.
+    spring_i, spring_j, spring_ti, spring_tj, rest_length, spring_material : (S',) — those
+        springs (nodes, rows of the block buffer, l_k, material), block by block, model order.
     """
 
     free: np.ndarray
     inv_mass: np.ndarray
     damping: np.ndarray
     block_nodes: np.ndarray
-    block_springs: np.ndarray
-    block_prisms: np.ndarray
-    spring_i: np.ndarray
-    spring_j: np.ndarray
-    rest_length: np.ndarray
-    spring_material: np.ndarray
+    block_chunks: np.ndarray
+    chunk_lanes: np.ndarray
     elements: np.ndarray
+    target: np.ndarray
     rest_volume: np.ndarray
     volume_weight: np.ndarray
+    chunk_pairs: np.ndarray
+    pair: np.ndarray
+    pair_consts: np.ndarray
+    block_springs: np.ndarray
+    spring_i: np.ndarray
+    spring_j: np.ndarray
+    spring_ti: np.ndarray
+    spring_tj: np.ndarray
+    rest_length: np.ndarray
+    spring_material: np.ndarray
 
     @property
     def n_blocks(self) -> int:
         return len(self.block_nodes) - 1
+
+    @property
+    def rows(self) -> int:
+        """Rows of a block's force buffer: its largest block's nodes, plus the discard row."""
+        return int(np.diff(self.block_nodes).max(initial=0)) + 1
 
 
 def _offsets(counts) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
 
+def _spring_owners(model: TissueModel, prisms: np.ndarray):
+    """For each spring, the prism (an index into ``model.elements``, one of ``prisms``) and the
+    pair (row of :data:`PRISM_PAIRS`) that computes it, or -1, -1. A spring goes to the first
+    pair (in :data:`PRISM_PAIRS` order), then the first prism, that joins its two nodes and does
+    not already hold a spring: few distinct pairs per chunk, all springs of a layer alike."""
+    n, el = model.n_nodes, model.elements
+    a, b = PRISM_PAIRS[:, 0], PRISM_PAIRS[:, 1]
+    u, v = el[prisms][:, a], el[prisms][:, b]  # (E', 15)
+    ckey = (np.minimum(u, v) * n + np.maximum(u, v)).ravel()
+    cpair = np.tile(np.arange(len(PRISM_PAIRS)), len(prisms))
+    cprism = np.repeat(prisms, len(PRISM_PAIRS))
+    co = np.lexsort((cprism, cpair, ckey))
+    ckey, cpair, cprism = ckey[co], cpair[co], cprism[co]
+    si, sj = model.spring_i, model.spring_j
+    skey = np.minimum(si, sj) * n + np.maximum(si, sj)
+    so = np.lexsort((np.arange(len(si)), skey))
+    # rank of each spring among the springs of its node pair, matched to the candidate of that rank
+    first = np.searchsorted(skey[so], skey[so], side="left")
+    rank = np.arange(len(so)) - first
+    start = np.searchsorted(ckey, skey[so], side="left")
+    count = np.searchsorted(ckey, skey[so], side="right") - start
+    ok = rank < count
+    owner = np.full(len(si), -1, np.int64)
+    opair = np.full(len(si), -1, np.int64)
+    owner[so[ok]] = cprism[start[ok] + rank[ok]]
+    opair[so[ok]] = cpair[start[ok] + rank[ok]]
+    return owner, opair
+
+
 def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
+    lanes = PRISM_CHUNK
     kin = model.kinematic
     free = np.flatnonzero(~kin)
     nf = len(free)
@@ -269,14 +344,66 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
         block = rank * n_blocks // nf
     order = np.lexsort((free, block))
     free, block = free[order].astype(np.int64), block[order]
+    block_nodes = _offsets(np.bincount(block, minlength=n_blocks))
     node_block = np.full(model.n_nodes, -1, np.int64)
     node_block[free] = block
+    local = np.full(model.n_nodes, -1, np.int64)
+    local[free] = np.arange(nf) - block_nodes[block]
 
     si, sj, el = model.spring_i, model.spring_j, model.elements
-    keep_e = ~kin[el].all(axis=1) & (model.volume_weight != 0.0)
-    ks = [np.flatnonzero((node_block[si] == b) | (node_block[sj] == b)) for b in range(n_blocks)]
-    ke = [np.flatnonzero(keep_e & (node_block[el] == b).any(axis=1)) for b in range(n_blocks)]
-    k, e = np.concatenate(ks).astype(np.int64), np.concatenate(ke).astype(np.int64)
+    live = ~(kin[si] & kin[sj])  # springs that move a free node
+    prisms = np.flatnonzero(~kin[el].all(axis=1))  # prisms with a free node
+    owner, opair = _spring_owners(model, prisms)
+    owner[~live] = -1
+    # each prism's springs: (prism, pair) -> spring, and a bit mask of its pairs
+    pos_of = np.full(len(el), -1, np.int64)
+    pos_of[prisms] = np.arange(len(prisms))
+    owned = np.full((len(prisms), len(PRISM_PAIRS)), -1, np.int64)
+    has = owner >= 0
+    owned[pos_of[owner[has]], opair[has]] = np.flatnonzero(has)
+    mask = ((owned >= 0) << np.arange(len(PRISM_PAIRS))).sum(axis=1)
+    # one global order of the prisms (alike masks together: few pairs per chunk); each block
+    # takes the prisms with a node of its own in that order
+    prisms_sorted = np.lexsort((prisms, mask))
+    mat, rest, mid = model.materials, model.rest_length, model.spring_material
+
+    chunk_counts, lane_rows, tgt_rows, chunk_npairs, pairs, consts = [], [], [], [], [], []
+    block_chunks = [0]
+    spring_lists, spring_t = [], []
+    for b in range(n_blocks):
+        nloc = block_nodes[b + 1] - block_nodes[b]
+        mine = prisms_sorted[(node_block[el[prisms[prisms_sorted]]] == b).any(axis=1)]
+        for c0 in range(0, len(mine), lanes):
+            ch = mine[c0 : c0 + lanes]  # positions in ``prisms``
+            e = prisms[ch]
+            chunk_counts.append(len(ch))
+            lane_rows.append(e)
+            tgt_rows.append(np.where(node_block[el[e]] == b, local[el[e]], nloc))
+            union = np.flatnonzero((owned[ch] >= 0).any(axis=0))
+            chunk_npairs.append(len(union))
+            for p_ in union:
+                k = owned[ch, p_]
+                c = np.zeros((SPRING_ROWS, lanes))
+                h = k >= 0
+                kk = k[h]
+                c[0, : len(ch)][h] = rest[kk]
+                c[1, : len(ch)][h] = mat[mid[kk], 0]
+                c[2, : len(ch)][h] = mat[mid[kk], 1]
+                c[3, : len(ch)][h] = mat[mid[kk], 2] * rest[kk]  # as spring_magnitude forms it
+                pairs.append(p_)
+                consts.append(c.ravel())
+        block_chunks.append(len(chunk_counts))
+        # springs that move a node of this block and that no prism computes
+        ks = np.flatnonzero(live & (owner < 0) & ((node_block[si] == b) | (node_block[sj] == b)))
+        spring_lists.append(ks)
+        spring_t.append(
+            (
+                np.where(node_block[si[ks]] == b, local[si[ks]], nloc),
+                np.where(node_block[sj[ks]] == b, local[sj[ks]], nloc),
+            )
+        )
+    lane_e = np.concatenate(lane_rows) if lane_rows else np.zeros(0, np.int64)
+    ks = np.concatenate(spring_lists).astype(np.int64)
 
     def c(a, dtype):
         return np.ascontiguousarray(a, dtype=dtype)
@@ -285,16 +412,25 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
         free=free,
         inv_mass=c(1.0 / model.mass[free], np.float64),
         damping=c(model.damping[free], np.float64),
-        block_nodes=_offsets(np.bincount(block, minlength=n_blocks)),
-        block_springs=_offsets([len(a) for a in ks]),
-        block_prisms=_offsets([len(a) for a in ke]),
-        spring_i=c(si[k], np.int64),
-        spring_j=c(sj[k], np.int64),
-        rest_length=c(model.rest_length[k], np.float64),
-        spring_material=c(model.spring_material[k], np.int64),
-        elements=c(el[e], np.int64).reshape(-1, 6),
-        rest_volume=c(model.rest_volume[e], np.float64),
-        volume_weight=c(model.volume_weight[e], np.float64),
+        block_nodes=block_nodes,
+        block_chunks=np.array(block_chunks, np.int64),
+        chunk_lanes=_offsets(chunk_counts),
+        elements=c(el[lane_e], np.int64).reshape(-1, 6),
+        target=c(np.concatenate(tgt_rows) if tgt_rows else np.zeros((0, 6)), np.int64).reshape(
+            -1, 6
+        ),
+        rest_volume=c(model.rest_volume[lane_e], np.float64),
+        volume_weight=c(model.volume_weight[lane_e], np.float64),
+        chunk_pairs=_offsets(chunk_npairs),
+        pair=np.array(pairs, np.int64),
+        pair_consts=c(np.concatenate(consts) if consts else np.zeros(0), np.float64),
+        block_springs=_offsets([len(a) for a in spring_lists]),
+        spring_i=c(si[ks], np.int64),
+        spring_j=c(sj[ks], np.int64),
+        spring_ti=c(np.concatenate([t[0] for t in spring_t]), np.int64),
+        spring_tj=c(np.concatenate([t[1] for t in spring_t]), np.int64),
+        rest_length=c(rest[ks], np.float64),
+        spring_material=c(mid[ks], np.int64),
     )
 
 
@@ -319,52 +455,175 @@ def rk2_plan(model: TissueModel, n_blocks: int | None = None) -> Rk2Plan:
     return plan
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
+def _pair_lanes(w, k, a, b, law):
+    """The springs of pair (a, b) of a chunk's prisms, lane by lane: their forces (eq. 1-2, the
+    same arithmetic as :func:`~myoface.tissue.forces.spring_forces_range`) from the nodes'
+    coordinates (rows 3a.., 3b.. of ``w``) and constants ``k`` (rows l_k, alpha, beta, e^c), added
+    to the two nodes' force rows (20 + 3a.., 20 + 3b..). ``a``, ``b`` are constants where this is
+    inlined, so every row is at a fixed offset and the loop is vectorised."""
+    c = PRISM_CHUNK
+    oa = 3 * a * c
+    ob = 3 * b * c
+    fa = (20 + 3 * a) * c
+    fb = (20 + 3 * b) * c
+    for q in range(c):
+        rx = w[ob + q] - w[oa + q]
+        ry = w[ob + c + q] - w[oa + c + q]
+        rz = w[ob + 2 * c + q] - w[oa + 2 * c + q]
+        d = np.sqrt(rx * rx + ry * ry + rz * rz)
+        lk = k[q]
+        alpha = k[c + q]
+        beta = k[2 * c + q]
+        ec = k[3 * c + q]
+        e = d - lk
+        if law == LAW_PAPER:
+            hi = beta * e
+        else:
+            hi = alpha * ec + beta * (e - ec)
+        s = (alpha * e if e <= ec else hi) / d
+        s = s if d >= MIN_SPRING_LENGTH else 0.0
+        fx = s * rx
+        fy = s * ry
+        fz = s * rz
+        w[fa + q] += fx
+        w[fa + c + q] += fy
+        w[fa + 2 * c + q] += fz
+        w[fb + q] -= fx
+        w[fb + c + q] -= fy
+        w[fb + 2 * c + q] -= fz
+
+
+@njit(cache=True, error_model="numpy")
+def _pair_springs(w, k, pair, law):
+    """:func:`_pair_lanes` for pair ``pair`` (a row of :data:`PRISM_PAIRS`), with the pair's
+    nodes as constants (one specialised loop per pair)."""
+    if pair == 0:
+        _pair_lanes(w, k, 0, 1, law)
+    elif pair == 1:
+        _pair_lanes(w, k, 0, 2, law)
+    elif pair == 2:
+        _pair_lanes(w, k, 0, 3, law)
+    elif pair == 3:
+        _pair_lanes(w, k, 0, 4, law)
+    elif pair == 4:
+        _pair_lanes(w, k, 0, 5, law)
+    elif pair == 5:
+        _pair_lanes(w, k, 1, 2, law)
+    elif pair == 6:
+        _pair_lanes(w, k, 1, 3, law)
+    elif pair == 7:
+        _pair_lanes(w, k, 1, 4, law)
+    elif pair == 8:
+        _pair_lanes(w, k, 1, 5, law)
+    elif pair == 9:
+        _pair_lanes(w, k, 2, 3, law)
+    elif pair == 10:
+        _pair_lanes(w, k, 2, 4, law)
+    elif pair == 11:
+        _pair_lanes(w, k, 2, 5, law)
+    elif pair == 12:
+        _pair_lanes(w, k, 3, 4, law)
+    elif pair == 13:
+        _pair_lanes(w, k, 3, 5, law)
+    else:
+        _pair_lanes(w, k, 4, 5, law)
+
+
+@njit(cache=True, error_model="numpy")
 def _block_forces(
-    x, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, s0, s1, e0, e1, work,
+    x, fb, nloc, ch0, ch1, chunk_lanes, elems, target, rest_vol, kv, vsign, chunk_pairs, pair,
+    consts, law, s0, s1, si, sj, ti, tj, rest, mat_id, mat, w,
 ):  # fmt: skip
-    """Spring and volume forces of one block's springs s0..s1-1 and prisms e0..e1-1 at x, into
-    the block's own buffer ``fb`` (N, 3), zeroed first."""
-    for i in range(fb.shape[0]):
-        fb[i, 0] = 0.0
-        fb[i, 1] = 0.0
-        fb[i, 2] = 0.0
-    spring_forces_range(x, si, sj, rest, mat_id, mat, law, s0, s1, fb)
-    prism_volume_forces_split(x, elems, rest_vol, kv, vsign, e0, e1, fb, work)
+    """Spring and volume forces on one block's nodes at x, into rows 0..nloc-1 of the block's
+    buffer ``fb`` (row nloc takes what goes to other nodes): its chunks ch0..ch1-1 of prisms,
+    each with the springs it owns, then its springs s0..s1-1 that no prism owns."""
+    c = PRISM_CHUNK
+    for r in range(nloc + 1):
+        fb[r, 0] = 0.0
+        fb[r, 1] = 0.0
+        fb[r, 2] = 0.0
+    kw = SPRING_ROWS * c
+    for ch in range(ch0, ch1):
+        e0 = chunk_lanes[ch]
+        n = chunk_lanes[ch + 1] - e0
+        for q in range(n):
+            e = e0 + q
+            for s in range(6):
+                m = elems[e, s]
+                w[(3 * s) * c + q] = x[m, 0]
+                w[(3 * s + 1) * c + q] = x[m, 1]
+                w[(3 * s + 2) * c + q] = x[m, 2]
+            w[18 * c + q] = rest_vol[e]
+            w[19 * c + q] = kv[e]
+        _prism_chunk_forces(w, vsign)  # rows 20..37: each node's volume force
+        for t in range(chunk_pairs[ch], chunk_pairs[ch + 1]):
+            _pair_springs(w, consts[t * kw : (t + 1) * kw], pair[t], law)
+        for q in range(n):  # the lanes past n computed on stale data, unused
+            e = e0 + q
+            for s in range(6):
+                r = target[e, s]
+                fb[r, 0] += w[(20 + 3 * s) * c + q]
+                fb[r, 1] += w[(21 + 3 * s) * c + q]
+                fb[r, 2] += w[(22 + 3 * s) * c + q]
+    for k in range(s0, s1):
+        i = si[k]
+        j = sj[k]
+        rx = x[j, 0] - x[i, 0]
+        ry = x[j, 1] - x[i, 1]
+        rz = x[j, 2] - x[i, 2]
+        d = np.sqrt(rx * rx + ry * ry + rz * rz)
+        if d < MIN_SPRING_LENGTH:
+            continue
+        s = spring_magnitude(d - rest[k], rest[k], mat_id[k], mat, law) / d
+        a = ti[k]
+        b = tj[k]
+        fb[a, 0] += s * rx
+        fb[a, 1] += s * ry
+        fb[a, 2] += s * rz
+        fb[b, 0] -= s * rx
+        fb[b, 1] -= s * ry
+        fb[b, 2] -= s * rz
 
 
 @njit(cache=True)
 def _rk2_task(
-    phase, b, x, v, xm, vm, buf, vblock, dt, free, inv_m, damp, bnodes, bsprings, bprisms,
-    si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, work,
+    phase, b, x, v, xm, vm, buf, vblock, dt, free, inv_m, damp, bnodes, bchunks, chunk_lanes,
+    elems, target, rest_vol, kv, vsign, chunk_pairs, pair, consts, law, bsprings, si, sj, ti, tj,
+    rest, mat_id, mat, work,
 ):  # fmt: skip
     """One block's half of an RK2 step: ``phase`` 0 evaluates the forces at (x, v) and writes
     the block's midpoint (x + dt/2 v, v + dt/2 a) into ``xm, vm``; ``phase`` 1 evaluates them at
     the midpoint, takes the full step with its slopes, and writes the block's largest |v|."""
     fb = buf[b]
+    q0 = bnodes[b]
+    nloc = bnodes[b + 1] - q0
     xe = x if phase == 0 else xm
     _block_forces(
-        xe, fb, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
-        bsprings[b], bsprings[b + 1], bprisms[b], bprisms[b + 1], work[b],
+        xe, fb, nloc, bchunks[b], bchunks[b + 1], chunk_lanes, elems, target, rest_vol, kv, vsign,
+        chunk_pairs, pair, consts, law, bsprings[b], bsprings[b + 1], si, sj, ti, tj, rest,
+        mat_id, mat, work[b],
     )  # fmt: skip
     if phase == 0:
         h = 0.5 * dt
-        for q in range(bnodes[b], bnodes[b + 1]):
+        for r in range(nloc):
+            q = q0 + r
             i = free[q]
             g = damp[q]
             c = inv_m[q]
             for a in range(3):
                 xm[i, a] = x[i, a] + h * v[i, a]
-                vm[i, a] = v[i, a] + h * ((fb[i, a] - g * v[i, a]) * c)
+                vm[i, a] = v[i, a] + h * ((fb[r, a] - g * v[i, a]) * c)
         return
     vb = 0.0
-    for q in range(bnodes[b], bnodes[b + 1]):
+    for r in range(nloc):
+        q = q0 + r
         i = free[q]
         g = damp[q]
         c = inv_m[q]
         for a in range(3):
             x[i, a] += dt * vm[i, a]
-            v[i, a] += dt * ((fb[i, a] - g * vm[i, a]) * c)
+            v[i, a] += dt * ((fb[r, a] - g * vm[i, a]) * c)
             av = abs(v[i, a])
             if av > vb:
                 vb = av
@@ -383,8 +642,9 @@ def _largest(a):
 
 @njit(cache=True, parallel=True)
 def _rk2_run_team(
-    x, v, n_steps, dt, tol_mm, n_workers, free, inv_m, damp, bnodes, bsprings, bprisms,
-    si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign,
+    x, v, n_steps, dt, tol_mm, n_workers, rows, free, inv_m, damp, bnodes, bchunks, chunk_lanes,
+    elems, target, rest_vol, kv, vsign, chunk_pairs, pair, consts, law, bsprings, si, sj, ti, tj,
+    rest, mat_id, mat,
 ):  # fmt: skip
     """Midpoint RK2 for up to n_steps, the plan's blocks shared by a team of ``n_workers``
     threads started once for the whole run; stops early when max |v| dt < tol_mm (tol_mm > 0).
@@ -398,11 +658,11 @@ def _rk2_run_team(
     any thread may run any task, and each task computes the same numbers whoever runs it. A team
     with fewer threads than asked (or one) still runs every task, in order."""
     nb = bnodes.shape[0] - 1
-    buf = np.zeros((nb, x.shape[0], 3))
+    buf = np.zeros((nb, rows, 3))  # each block's force sums (and its discard row)
     xm = x.copy()  # kinematic rows stay at x (their velocity is zero), free rows are written
     vm = v.copy()
     vblock = np.zeros(nb)
-    work = np.zeros((nb, PRISM_WORK * PRISM_CHUNK))  # each block's scratch for its prisms
+    work = np.zeros((nb, PRISM_WORK * PRISM_CHUNK))  # each block's lanes
     counters = np.zeros(16, np.int64)  # [_CLAIMED], [_DONE] on cache lines of their own
     stop = np.full(3, -1.0)  # the step the run stopped at, its max |v| dt, non-finite step
     n_tasks = 2 * n_steps * nb
@@ -429,8 +689,9 @@ def _rk2_run_team(
                     _atomic_add(counters, _DONE, 1)
                     break
             _rk2_task(
-                half % 2, b, x, v, xm, vm, buf, vblock, dt, free, inv_m, damp, bnodes, bsprings,
-                bprisms, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign, work,
+                half % 2, b, x, v, xm, vm, buf, vblock, dt, free, inv_m, damp, bnodes, bchunks,
+                chunk_lanes, elems, target, rest_vol, kv, vsign, chunk_pairs, pair, consts, law,
+                bsprings, si, sj, ti, tj, rest, mat_id, mat, work,
             )  # fmt: skip
             _atomic_add(counters, _DONE, 1)
     if stop[0] >= 0.0:
@@ -552,22 +813,30 @@ def _rk2_kernel(p: Rk2Plan, model: TissueModel, x, v, n_steps, dt, tol_mm, worke
         float(dt),
         float(tol_mm),
         int(workers),
+        p.rows,
         p.free,
         p.inv_mass,
         p.damping,
         p.block_nodes,
-        p.block_springs,
-        p.block_prisms,
-        p.spring_i,
-        p.spring_j,
-        p.rest_length,
-        p.spring_material,
-        model.materials,
-        model.spring_law,
+        p.block_chunks,
+        p.chunk_lanes,
         p.elements,
+        p.target,
         p.rest_volume,
         p.volume_weight,
         model.volume_sign,
+        p.chunk_pairs,
+        p.pair,
+        p.pair_consts,
+        model.spring_law,
+        p.block_springs,
+        p.spring_i,
+        p.spring_j,
+        p.spring_ti,
+        p.spring_tj,
+        p.rest_length,
+        p.spring_material,
+        model.materials,
     )
 
 
