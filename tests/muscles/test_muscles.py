@@ -6,6 +6,7 @@ from scipy.spatial import cKDTree
 
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 from myoface.muscles import (
+    Jaw,
     LinearMuscle,
     SheetMuscle,
     SphincterMuscle,
@@ -175,20 +176,30 @@ def test_default_jaw_turns_and_slides_forward_and_down(muscles):
     assert 0.3 < np.arctan2(-down, forward) < 0.8  # the eminence's 30-40 deg, give or take
 
 
-def test_jaw_slide_grows_with_the_opening_and_the_pose_moves_the_hinge_by_it(muscles):
-    from myoface.muscles.jaw import SLIDE_POWER
-
+def test_jaw_opens_in_two_phases_and_the_pose_moves_the_hinge_by_the_slide(muscles):
+    """A hinge first (rotation linear in the control, no slide), then the condyles slide while
+    the mandible turns on to its largest angle; the motion has no kink where the slide starts."""
     jaw = muscles.jaw
+    k, h = jaw.translation_from, jaw.hinge_angle_rad
+    assert 0 < k < 1 and 0 < h < jaw.max_angle_rad
+    for c in (0.0, 0.5 * k, k):  # the hinge phase
+        assert jaw.angle_rad(c) == pytest.approx(h * c)
+        np.testing.assert_array_equal(jaw.slide(c), 0.0)
+    assert jaw.angle_rad(1.0) == pytest.approx(jaw.max_angle_rad)
+    np.testing.assert_allclose(jaw.slide(1.0), jaw.slide_mm)
+    c = np.linspace(0, 1, 201)
+    angle = np.array([jaw.angle_rad(x) for x in c])
+    slide = np.array([np.linalg.norm(jaw.slide(x)) for x in c])
+    assert np.all(np.diff(angle) > 0) and np.all(np.diff(slide) >= 0)
+    rate = np.diff(angle) / np.diff(c)
+    assert np.abs(np.diff(rate)).max() < 0.05 * h  # smooth: the rate changes by little steps
     rot0, shift0 = jaw.pose(0.0)
     np.testing.assert_allclose(rot0, np.eye(3), atol=1e-15)
     np.testing.assert_allclose(shift0, 0.0, atol=1e-12)
-    # the slide grows faster than the opening: a relaxed opening is mostly rotation
-    assert np.linalg.norm(jaw.slide(0.5)) < 0.5 * np.linalg.norm(jaw.slide(1.0))
-    np.testing.assert_allclose(jaw.slide(0.5), 0.5**SLIDE_POWER * jaw.slide_mm)
-    for c in (0.3, 1.0):
+    for c in (0.3, 0.8, 1.0):
         rot, shift = jaw.pose(c)
         np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-12)
-        assert np.arccos((np.trace(rot) - 1) / 2) == pytest.approx(c * jaw.max_angle_rad)
+        assert np.arccos((np.trace(rot) - 1) / 2) == pytest.approx(jaw.angle_rad(c))
         # the hinge (the condyles) moves by exactly the slide
         np.testing.assert_allclose(rot @ jaw.hinge_point + shift, jaw.hinge_point + jaw.slide(c))
         # a point of weight 1 follows the pose, one of weight 0 stays, one of weight 1/2 on
@@ -198,6 +209,21 @@ def test_jaw_slide_grows_with_the_opening_and_the_pose_moves_the_hinge_by_it(mus
         np.testing.assert_allclose(q[0], rot @ p[0] + shift, atol=1e-9)
         np.testing.assert_array_equal(q[1], p[1])
         np.testing.assert_allclose(q[2], p[2] + 0.5 * jaw.slide(c), atol=1e-9)
+
+
+def test_a_jaw_without_a_translation_phase_is_the_papers_hinge(muscles):
+    jaw = muscles.jaw
+    plain = Jaw(jaw.hinge_point, jaw.hinge_axis, 0.3, jaw.weights)
+    for c in (0.0, 0.4, 1.0):
+        assert plain.angle_rad(c) == pytest.approx(0.3 * c)
+        np.testing.assert_array_equal(plain.slide(c), 0.0)
+    for bad, match in (
+        (dict(hinge_angle_rad=0.5), "hinge_angle_rad must be in"),
+        (dict(translation_from=1.0), "translation_from must be in"),
+        (dict(slide_mm=[0.0, 1.0]), "slide_mm must be a finite 3-vector"),
+    ):
+        with pytest.raises(MyofaceValueError, match=match):
+            Jaw(jaw.hinge_point, jaw.hinge_axis, 0.3, jaw.weights, **bad)
 
 
 def test_jaw_file_slide(tmp_path, default_face):
@@ -210,8 +236,10 @@ def test_jaw_file_slide(tmp_path, default_face):
     )
     f.write_text(head)
     assert np.all(load_muscles(f, default_face).jaw.slide_mm == 0)  # default: a pure hinge
-    f.write_text(head + "slide_mm = [0, -5, 8]\n")
-    np.testing.assert_array_equal(load_muscles(f, default_face).jaw.slide_mm, [0, -5, 8])
+    f.write_text(head + "slide_mm = [0, -5, 8]\nhinge_angle_rad = 0.2\ntranslation_from = 0.5\n")
+    jaw = load_muscles(f, default_face).jaw
+    np.testing.assert_array_equal(jaw.slide_mm, [0, -5, 8])
+    assert (jaw.hinge_angle_rad, jaw.translation_from) == (0.2, 0.5)
     f.write_text(head + "slide_mm = [0, -5]\n")
     with pytest.raises(MyofaceFormatError, match="slide_mm must be 3 finite numbers"):
         load_muscles(f, default_face)

@@ -36,8 +36,10 @@ Types and their keys:
   angle_deg (see :mod:`myoface.muscles.lids`): moves the eyelid skin, not the tissue.
 
 An optional ``[jaw]`` table: ``hinge`` (a point), ``axis`` (default [1, 0, 0]),
-``max_angle_rad``, ``slide_mm`` (the condyles' translation at full opening, head frame, default
-[0, 0, 0]: see :mod:`myoface.muscles.jaw`), and the harmonic weight constraints ``lower`` / ``upper`` (lists of landmark
+``max_angle_rad``, optionally a translation phase (see :mod:`myoface.muscles.jaw`):
+``slide_mm`` (the condyles' translation at full opening, head frame, default [0, 0, 0]),
+``hinge_angle_rad`` (the hinge phase's rate, default ``max_angle_rad``) and
+``translation_from`` (where the translation starts, default 0), and the harmonic weight constraints ``lower`` / ``upper`` (lists of landmark
 group names or vertex indices held at 1 / 0), ``lower_below`` / ``upper_above`` (points: every
 vertex below / above that point's height is held at 1 / 0). Vertices listed as both are left free.
 """
@@ -247,6 +249,8 @@ def _build_jaw(spec: dict, placer: _Placer, where: str) -> Jaw:
         "axis",
         "max_angle_rad",
         "slide_mm",
+        "hinge_angle_rad",
+        "translation_from",
         "lower",
         "upper",
         "lower_below",
@@ -283,6 +287,8 @@ def _build_jaw(spec: dict, placer: _Placer, where: str) -> Jaw:
         _number(spec, "max_angle_rad", f"{where}: [jaw]"),
         w,
         _floats(spec.get("slide_mm", [0.0, 0.0, 0.0]), 3, f"{where}: [jaw].slide_mm"),
+        _number(spec, "hinge_angle_rad", f"{where}: [jaw]") if "hinge_angle_rad" in spec else None,
+        _number(spec, "translation_from", f"{where}: [jaw]") if "translation_from" in spec else 0.0,
     )
 
 

@@ -2,12 +2,20 @@
 
 The jaw opens by rotating the bone nodes of the lower face about a hinge axis through the
 temporomandibular joints (T&W 1993, Section III-C: "plus jaw rotation") and, as a real jaw
-does, by sliding the condyles forward and down the articular eminence: the hinge translates by
-``opening ** SLIDE_POWER * slide_mm`` while the mandible turns by ``opening * max_angle_rad``
-(the rotation stays linear in the control, so ``jaw_angle_rad = opening * max_angle_rad``).
-The slide grows with the opening: a relaxed opening is mostly rotation, a maximal one adds the
-full condylar translation (Travers et al. 2000; Ferrario et al. 2005: at maximal opening about
-three quarters of the incisors' motion is rotation).
+does, in two phases (the classical account of mouth opening): first the condyles turn in
+their fossae (a hinge, ``hinge_angle_rad`` per unit of the control), then, from the control
+``translation_from`` on, they also slide forward and down the articular eminence (``slide_mm``
+at full opening) while the mandible turns further, to ``max_angle_rad`` at full opening. With
+``t = ((c - translation_from) / (1 - translation_from)) ** SLIDE_POWER`` for the control
+``c`` past ``translation_from`` (0 before):
+
+    angle(c) = hinge_angle_rad * c + (max_angle_rad - hinge_angle_rad) * t
+    slide(c) = slide_mm * t
+
+A relaxed opening is a pure rotation; a maximal one adds the condylar translation and the
+rotation it allows (Travers et al. 2000; Ferrario et al. 2005: at maximal opening about three
+quarters of the incisors' motion is rotation). Without the two optional parameters the jaw is
+the paper's hinge, ``angle = c * max_angle_rad``.
 
 A smooth weight w in [0, 1] per skin vertex says how much of the motion a point follows: 1 on
 the chin and the lower lip, 0 on the upper lip, the nose and everything above; in between it is
@@ -35,11 +43,8 @@ from scipy.sparse.csgraph import connected_components
 from myoface.errors import MyofaceValueError
 from myoface.face.mesh import unique_edges
 
-#: the condylar slide grows as the opening to this power: none at rest, little in a relaxed
-#: opening (a quarter of it at half opening), all of it at the maximal opening. Our choice: the
-#: classical account has pure rotation over the first ~12-25 mm of incisal opening and the
-#: translation after it, jaw tracking finds translation from the first millimetres, smaller
-#: than the rotation's share (Ferrario et al. 2005); a square is between the two.
+#: the translation phase grows as its progress to this power: it starts smoothly (no kink in
+#: the motion where it begins) and ends at the full slide. Our choice.
 SLIDE_POWER = 2.0
 
 
@@ -104,8 +109,12 @@ class Jaw:
     hinge_axis : (3,) — unit axis; a positive rotation opens the mouth (right-handed).
     max_angle_rad : float — the rotation at contraction 1 of the ``"jaw"`` control.
     weights : (V,) float in [0, 1] — how much of the motion each skin vertex follows.
-    slide_mm : (3,) mm — the condyles' translation (head frame) at contraction 1; at
-        contraction c it is ``c ** SLIDE_POWER * slide_mm``. Default: none (a pure hinge).
+    slide_mm : (3,) mm — the condyles' translation (head frame) at contraction 1. Default:
+        none (a pure hinge).
+    hinge_angle_rad : float — the hinge phase's rotation per unit of the control (rad), at
+        most ``max_angle_rad`` (default: ``max_angle_rad``, a linear rotation).
+    translation_from : float in [0, 1) — the control where the translation phase starts
+        (default 0).
     """
 
     hinge_point: np.ndarray
@@ -113,6 +122,8 @@ class Jaw:
     max_angle_rad: float
     weights: np.ndarray
     slide_mm: np.ndarray | None = None
+    hinge_angle_rad: float | None = None
+    translation_from: float = 0.0
 
     def __post_init__(self):
         hp = np.asarray(self.hinge_point, dtype=np.float64)
@@ -135,14 +146,31 @@ class Jaw:
         if sl.shape != (3,) or not np.isfinite(sl).all():
             raise MyofaceValueError(f"jaw slide_mm must be a finite 3-vector (mm); got {sl}")
         object.__setattr__(self, "slide_mm", sl)
+        hinge = self.max_angle_rad if self.hinge_angle_rad is None else self.hinge_angle_rad
+        if not 0 < float(hinge) <= float(self.max_angle_rad):
+            raise MyofaceValueError(
+                f"jaw hinge_angle_rad must be in (0, max_angle_rad = {self.max_angle_rad}]; "
+                f"got {hinge}"
+            )
+        object.__setattr__(self, "hinge_angle_rad", float(hinge))
+        if not 0 <= float(self.translation_from) < 1:
+            raise MyofaceValueError(
+                f"jaw translation_from must be in [0, 1); got {self.translation_from}"
+            )
+
+    def translation_phase(self, opening: float) -> float:
+        """How far (0-1) the translation phase has gone at jaw control ``opening`` in [0, 1]."""
+        k = float(self.translation_from)
+        return (max(float(opening) - k, 0.0) / (1.0 - k)) ** SLIDE_POWER
 
     def angle_rad(self, opening: float) -> float:
         """The mandible's rotation (rad) at jaw control ``opening`` in [0, 1]."""
-        return float(opening) * self.max_angle_rad
+        h = self.hinge_angle_rad
+        return h * float(opening) + (self.max_angle_rad - h) * self.translation_phase(opening)
 
     def slide(self, opening: float) -> np.ndarray:
         """The condyles' translation (3,) mm at jaw control ``opening`` in [0, 1]."""
-        return float(opening) ** SLIDE_POWER * self.slide_mm
+        return self.translation_phase(opening) * self.slide_mm
 
     def pose(self, opening: float) -> tuple[np.ndarray, np.ndarray]:
         """The mandible's rigid motion from rest at ``opening``: ``(rotation (3, 3),

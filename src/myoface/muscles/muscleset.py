@@ -19,8 +19,8 @@ class MuscleSet:
     """The actuators of a face: muscles with unique ids, plus optionally the jaw.
 
     Contractions are vectors c (M,) in [0, 1] ordered like :attr:`ids`; the jaw, when present,
-    is the last entry (``"jaw"``), mapping [0, 1] to an opening rotation of
-    ``c * jaw.max_angle_rad``.
+    is the last entry (``"jaw"``), mapping [0, 1] to the mandible's opening (rotation
+    ``jaw.angle_rad(c)``, up to ``jaw.max_angle_rad``, and condylar slide ``jaw.slide(c)``).
 
     Parameters
     ----------
