@@ -15,10 +15,12 @@ module finds it by Newton's method on the *exact* Hessian of E, each Newton syst
    smile, frames moving 0.41-0.51 mm);
 2. **Newton steps** — the Hessian (springs with their tangent stiffness and unclipped geometric
    term, the volume penalty with its second-derivative term) assembled in symmetric 3x3-block
-   storage over the springs and prisms that touch a free node (one pass per spring and per
-   prism node pair; in the same pass as the energy and gradient at the point, when the step
-   that reached it was too long for the next one to keep the Hessian; the prisms' part, two
-   thirds of the cost, is kept from step to step until a node has moved by PRISM_LAG_MM); CG on it preconditioned by a symmetric block Gauss-Seidel sweep of the
+   storage over the springs and prisms that touch a free node (:mod:`myoface.tissue.hessian`:
+   one pass over the springs and one over the prisms give the energy, its gradient and the
+   Hessian, each on request; the Hessian in the same passes as the energy and gradient at the
+   point, when the step that reached it was too long for the next one to keep the Hessian; the
+   prisms' part, two thirds of the cost, is kept from step to step until a node has moved by
+   PRISM_LAG_MM); CG on it preconditioned by a symmetric block Gauss-Seidel sweep of the
    Hessian itself, to a relative accuracy eta that tightens as the gradient falls (Eisenstat &
    Walker 1996, choice 2, between ETA_MIN and ETA_MAX); a direction of negative curvature ends
    the CG early (Steihaug 1983); an Armijo backtracking line search on E keeps every step a
@@ -61,6 +63,36 @@ smile from the previous frame's equilibrium, means over 24 frames: 3.5 -> 2.8 Ne
 same conditions): energy and gradient 0.31 ms, springs' Hessian 0.33 ms on its own, prisms'
 0.5-0.75 ms, one CG iteration 0.09 ms (two triangular sweeps, each about as long as a product
 with H: bound by their memory traffic, not their flops).
+
+Issue 20 (the kernels in one place, CG's vector updates fused into one pass and ``E t`` into the
+back substitution, the extrapolated start compiled, the line search moving only the free nodes,
+the Hessian's arrays copied from the prisms' part instead of zeroed and summed, the diagonal
+blocks inverted by their adjugate): the same iterations, counts and equilibria as before;
+against the solver before it in the same process, alternating, thread CPU (2026-11-30 19:20,
+load 7 on 2 cores, the working tree's muscle set of the moment): neutral -> surprise median
+10.7 -> 10.3 ms (fastest of 31 9.7 -> 9.2 ms), 2.0e-4 mm from the reference either way; one
+frame of the smile, median over the 25 frames of each frame's median 4.1 -> 3.7 ms (of each
+frame's fastest 3.7 -> 3.5 ms), at most 5.5e-3 mm from the reference either way. Per pass now
+(fastest of 1000, same load): energy and gradient 0.16-0.17 ms (the springs' half 0.1 ms), with
+the springs' Hessian 0.33 ms, with the prisms' too 0.65-0.83 ms, the prisms' Hessian alone
+0.37-0.39 ms, one CG iteration 0.07-0.09 ms (a sweep 0.03 ms). A warm relax is about one full
+pass, three energy passes, one springs' Hessian, ten CG iterations and three CG set-ups (two
+sweeps each) and 0.2-0.3 ms of Python around it (:func:`~myoface.tissue.integrate.relax`'s
+copies and checks): 2.5-2.8 ms at these costs, so 2 ms needs fewer passes, not faster ones.
+
+Measured for issue 20 and did not pay (counts on the default face, surprise and three to five
+other expressions from rest, the 25 frames of the smile): float32 lower blocks in the sweeps
+(5 CG iterations of the same system 0.88 -> 0.89 ms: latency-bound, not memory-bound); a
+sweep with the row's sums kept apart and pre-multiplied column indices (slower, 31 -> 44 us);
+the prisms sorted by block (within the noise); a looser forcing term (ETA_MAX 0.2-0.9) while
+steps are long (> 0.1, 0.5 or 1 mm): from rest -22 % CG iterations on one expression, as many
+more on another, and a surprise 8e-3 mm from the reference; PRISM_LAG_MM 0.6-2 mm: one to
+three fewer prisms' assemblies from rest, but 1e-3 - 8e-3 mm from the reference (the last
+steps on an older Hessian underestimate the distance left); the prisms' Hessian of the rest
+state kept throughout (twice the Newton steps, 2e-2 mm off); the chord step's CG at eta 0.1
+(1.0e-2 mm off on a smile frame); CHORD_RATIO 3 or 20, CHORD_RATE 0.03 or 0.3 (as many
+passes or more); from rest, Newton without the linear response (one to four more steps on
+three of four expressions, three fewer on the fourth).
 
 Measured for the warm start and did not pay: a factorisation of a recent Hessian carried with
 the state, for chord or quasi-Newton steps (a numeric block LDL^T in the rest factor's
