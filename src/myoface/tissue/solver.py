@@ -468,12 +468,14 @@ def pcg(lptr, lcol, dused, lvals, dinv, emat, b, eta, max_iter, x, work):
     ``A^-1 H A^-T v = t + A^-1 (v - E t)``, ``t = A^-T v``, ``E = 2 D - D_H`` (``emat``; D_H
     the Hessian's diagonal blocks, D the ones the preconditioner uses): one forward and one back
     substitution per iteration and no product with H. The iterates, residual norms
-    ``r.M^-1 r`` and curvatures are those of the plain preconditioned CG.
+    ``r.M^-1 r`` and curvatures are those of the plain preconditioned CG. x itself is updated
+    with each step ``a p`` of y as ``a A^-T p``, the iteration's t: no back substitution at the
+    end.
 
     From x = 0, until ``sqrt(r.z) <= eta sqrt(r0.z0)`` (z = M^-1 r). Stops early on a direction
     of negative or zero curvature: x keeps the last iterate, or the preconditioned residual if
-    that happens at once (Steihaug 1983). ``work``: (7, n). Returns (iterations, 1 if it stopped
-    on curvature)."""
+    that happens at once (Steihaug 1983). ``work``: (6, n) or more rows. Returns (iterations, 1
+    if it stopped on curvature)."""
     n = b.shape[0]
     r = work[0]
     z = work[1]
@@ -481,11 +483,11 @@ def pcg(lptr, lcol, dused, lvals, dinv, emat, b, eta, max_iter, x, work):
     q = work[3]
     t = work[4]
     w = work[5]
-    y = work[6]
-    none = np.empty(0)
     _lower_solve(lptr, lcol, lvals, dinv, b, r)
-    y[:] = 0.0
-    rz = _step_residual(y, r, z, p, q, 0.0, dused)
+    x[:] = 0.0
+    t[:] = 0.0
+    q[:] = 0.0
+    rz = _step_residual(x, r, z, t, q, 0.0, dused)  # z = D r
     p[:] = z
     stop = eta * eta * rz
     for it in range(max_iter):
@@ -496,33 +498,31 @@ def pcg(lptr, lcol, dused, lvals, dinv, emat, b, eta, max_iter, x, work):
             q[i] += t[i]
             pq += p[i] * q[i]
         if not pq > 0.0:
-            # x = M^-1 b at once, else the last iterate
-            _upper_solve(lptr, lcol, lvals, dinv, none, z if it == 0 else y, x, w)
-            return it + 1, 1
+            if it == 0:  # x = M^-1 b = A^-T z, and p = z
+                x[:] = t
+            return it + 1, 1  # else x is the last iterate
         a = rz / pq
-        rz_new = _step_residual(y, r, z, p, q, a, dused)
+        rz_new = _step_residual(x, r, z, t, q, a, dused)  # x += a A^-T p
         if rz_new <= stop:
-            _upper_solve(lptr, lcol, lvals, dinv, none, y, x, w)
             return it + 1, 0
         beta = rz_new / rz
         rz = rz_new
         for i in range(n):
             p[i] = z[i] + beta * p[i]
-    _upper_solve(lptr, lcol, lvals, dinv, none, y, x, w)
     return max_iter, 0
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def _step_residual(y, r, z, p, q, a, dblocks):
-    """One CG update in one pass: ``y += a p``, ``r -= a q``, ``z = D r`` (D block diagonal,
+def _step_residual(x, r, z, t, q, a, dblocks):
+    """One CG update in one pass: ``x += a t``, ``r -= a q``, ``z = D r`` (D block diagonal,
     ``dblocks`` (F*9,)); returns ``r.z``."""
     rz = 0.0
     for i in range(r.shape[0] // 3):
         o = 9 * i
         i0 = 3 * i
-        y[i0] += a * p[i0]
-        y[i0 + 1] += a * p[i0 + 1]
-        y[i0 + 2] += a * p[i0 + 2]
+        x[i0] += a * t[i0]
+        x[i0 + 1] += a * t[i0 + 1]
+        x[i0 + 2] += a * t[i0 + 2]
         r0 = r[i0] - a * q[i0]
         r1 = r[i0 + 1] - a * q[i0 + 1]
         r2 = r[i0 + 2] - a * q[i0 + 2]
@@ -760,7 +760,7 @@ def _newton(x, free, springs, prisms, lptr, lcol, rest_diag, tol, max_iter, para
     dused = np.empty(9 * nf)
     dinv = np.empty(9 * nf)
     emat = np.empty(9 * nf)
-    work = np.empty((7, n))
+    work = np.empty((6, n))
     step = np.empty(n)
     rhs = np.empty(n)
     grad = np.empty((nf, 3))
