@@ -72,12 +72,15 @@ against the solver before it in the same process, alternating, thread CPU (2026-
 load 7 on 2 cores, the working tree's muscle set of the moment): neutral -> surprise median
 10.7 -> 10.3 ms (fastest of 31 9.7 -> 9.2 ms), 2.0e-4 mm from the reference either way; one
 frame of the smile, median over the 25 frames of each frame's median 4.1 -> 3.7 ms (of each
-frame's fastest 3.7 -> 3.5 ms), at most 5.5e-3 mm from the reference either way. Per pass now
+frame's fastest 3.7 -> 3.5 ms), at most 5.5e-3 mm from the reference either way; with CG
+then updating x by each iteration's ``A^-T p`` (one sweep fewer per system), a second such run
+(19:33, load 7-8.5): 10.8 -> 9.9 ms from rest (fastest 9.2 -> 8.9 ms), 4.8 -> 4.2 ms a frame
+(of each frame's fastest 3.9 -> 3.85 ms), the same counts and distances. Per pass now
 (fastest of 1000, same load): energy and gradient 0.16-0.17 ms (the springs' half 0.1 ms), with
 the springs' Hessian 0.33 ms, with the prisms' too 0.65-0.83 ms, the prisms' Hessian alone
 0.37-0.39 ms, one CG iteration 0.07-0.09 ms (a sweep 0.03 ms). A warm relax is about one full
-pass, three energy passes, one springs' Hessian, ten CG iterations and three CG set-ups (two
-sweeps each) and 0.2-0.3 ms of Python around it (:func:`~myoface.tissue.integrate.relax`'s
+pass, three energy passes, one springs' Hessian, ten CG iterations and three CG set-ups (a
+sweep each) and 0.2-0.3 ms of Python around it (:func:`~myoface.tissue.integrate.relax`'s
 copies and checks): 2.5-2.8 ms at these costs, so 2 ms needs fewer passes, not faster ones.
 
 Measured for issue 20 and did not pay (counts on the default face, surprise and three to five
