@@ -297,3 +297,53 @@ def test_equilibrium_ignores_sliding_along_the_contour():
     assert res.converged and res.iterations < 300
     assert res.nodes[:, 0].mean() > pts[:, 0].mean() + 0.1  # it did slide
     assert np.abs(res.nodes[:, 1] - 19.5).max() < 0.2
+
+
+def lips_image(size=96, center=(48.0, 44.0), radii=(24.0, 12.0), lip_px=2.5):
+    """A made-up mouth: skin (170), an elliptical ring of lip (100) ``lip_px`` wide, and the
+    mouth's dark inside (15) within it, each edge anti-aliased over 1 px."""
+    ys, xs = np.mgrid[0:size, 0:size]
+    u = np.sqrt(((xs - center[0]) / radii[0]) ** 2 + ((ys - center[1]) / radii[1]) ** 2)
+    outer = np.clip((1.0 - u) * min(radii) + 0.5, 0, 1)  # 1 inside the lips' outline
+    inner = np.clip((1.0 - u) * min(radii) - lip_px + 0.5, 0, 1)  # 1 inside the opening
+    return (170.0 * (1 - outer) + 100.0 * (outer - inner) + 15.0 * inner).astype(np.uint8)
+
+
+def test_a_floored_layer_makes_no_edge_of_what_is_darker_than_the_floor():
+    """``layer_floors``: the layer is the potential of the image raised to the floor, so that
+    a thin lip around a dark mouth has one edge, its outline with the skin; in the plain
+    potential the opening's stronger edge, 2.5 px inside, draws the lips' contour in."""
+    from myoface.analysis.potentials import potential_field
+
+    img = lips_image()
+    f = potential_field(img, 1.5, ("gaussian", "gaussian"), layer_floors=[None, 80.0])
+    raised = np.maximum(img, 80).astype(np.uint8)
+    np.testing.assert_allclose(f.potential[1], image_potential(raised, 1.5), atol=1e-9)
+    np.testing.assert_allclose(f.potential[0], image_potential(img, 1.5), atol=1e-9)
+    start = ellipse_points((48, 44), (24, 12), 120, grow=3.0)
+    inside = {}
+    for layer in (0, 1):
+        c = make_contours([start], closed=True)
+        nodes = Snakes(c, SnakeParams(p=0.01), layers=[layer]).relax(f).split()[0]
+        # px inside the outline (negative outside)
+        u = np.hypot((nodes[:, 0] - 48) / 24, (nodes[:, 1] - 44) / 12)
+        inside[layer] = np.sign(1 - u) * ellipse_distance(nodes, (48, 44), (24, 12))
+    assert np.abs(inside[1]).max() < 0.6, inside[1]
+    assert inside[0].mean() > 0.6 and inside[0].mean() > 3 * np.abs(inside[1]).mean(), inside
+    with pytest.raises(MyofaceValueError, match="layer_floors"):
+        potential_field(img, 1.5, ("gaussian",), layer_floors=[1.0, 2.0])
+    with pytest.raises(MyofaceValueError, match="floor"):
+        potential_field(img, 1.5, ("gaussian",), layer_floors=[300.0])
+
+
+def test_the_lips_tone_is_read_inside_their_outline():
+    """:func:`~myoface.analysis.pipeline.lips_tone`: the grey levels of the band inside the
+    outline, whichever way the contour runs; the skin outside and the mouth's inside (beyond
+    the band) do not count."""
+    from myoface.analysis.pipeline import lips_tone
+
+    img = lips_image(lip_px=4.0)
+    outline = ellipse_points((48, 44), (24, 12), 120)
+    for q in (outline, outline[::-1]):
+        tone = lips_tone(img, q, band_px=(1.5, 2.5), percentile=50)
+        assert abs(tone - 100) < 8, tone
