@@ -27,7 +27,8 @@ module finds it by Newton's method on the *exact* Hessian of E, each Newton syst
    descent step;
 3. **the last step** — once a Newton step is short (< CHORD_RATIO * tol) and cut the gradient
    as a Newton step does where the Hessian hardly changes (by CHORD_RATE), the next step reuses
-   that Hessian (no new assembly): it is nearly a Newton step, and most often the last one.
+   that Hessian (no new assembly): it is nearly a Newton step, and most often the last one (when
+   it is not, the Hessian at its end is made in the line search's pass there).
    Converged when a step (CG to ETA_MAX = 0.1 or better, not stopped by curvature) moves no
    node by more than tol: the step estimates the distance left, and is taken.
 
@@ -75,7 +76,12 @@ frame of the smile, median over the 25 frames of each frame's median 4.1 -> 3.7 
 frame's fastest 3.7 -> 3.5 ms), at most 5.5e-3 mm from the reference either way; with CG
 then updating x by each iteration's ``A^-T p`` (one sweep fewer per system), a second such run
 (19:33, load 7-8.5): 10.8 -> 9.9 ms from rest (fastest 9.2 -> 8.9 ms), 4.8 -> 4.2 ms a frame
-(of each frame's fastest 3.9 -> 3.85 ms), the same counts and distances. Per pass now
+(of each frame's fastest 3.9 -> 3.85 ms), the same counts and distances; and with the
+springs' Hessian at the end of a step on the kept Hessian that does not end the solve made in
+the line search's pass (the next step needs it; it was a pass of its own), a third (19:38,
+load 6-7): from rest median 16.0 -> 14.9 ms (the load varied: 10th percentile 10.2 -> 9.4,
+fastest 9.9 -> 9.2 ms), a frame 4.0 -> 3.5 ms (of each frame's fastest 3.6 -> 3.0 ms), the
+same counts and distances. Per pass now
 (fastest of 1000, same load): energy and gradient 0.16-0.17 ms (the springs' half 0.1 ms), with
 the springs' Hessian 0.33 ms, with the prisms' too 0.65-0.83 ms, the prisms' Hessian alone
 0.37-0.39 ms, one CG iteration 0.07-0.09 ms (a sweep 0.03 ms). A warm relax is about one full
@@ -822,9 +828,11 @@ def _newton(x, free, springs, prisms, lptr, lcol, rest_diag, tol, max_iter, para
             converged = True
             break
         move = np.abs(step).max()
-        # a step too long for the next one to keep this Hessian (see CHORD_RATIO) needs the
-        # Hessian at its end: assembled with the energy there, in the same pass
-        want_h = move >= chord_ratio * tol
+        # a step too long for the next one to keep this Hessian (see CHORD_RATIO), or a step
+        # with the kept Hessian that does not end the solve, needs the Hessian at its end:
+        # assembled with the energy there, in the same pass
+        last = move < tol and curved == 0
+        want_h = move >= chord_ratio * tol or (chord and not last)
         # line search: Armijo backtracking with a safeguarded quadratic step
         t = 1.0
         small = -slope <= roundoff * max(abs(energy), 1.0)
@@ -849,7 +857,7 @@ def _newton(x, free, springs, prisms, lptr, lcol, rest_diag, tol, max_iter, para
         energy = en
         # the step (to a relative accuracy of ETA_MAX or better, not cut short by negative
         # curvature) estimates the distance left
-        if move < tol and curved == 0:
+        if last:
             move *= t
             converged = True
             break
