@@ -252,8 +252,9 @@ class Rk2Plan:
     block_nodes : (B+1,) int64 — where each block's nodes q start.
     block_chunks : (B+1,) int64 — where each block's chunks start.
     chunk_lanes : (C+1,) int64 — where each chunk's lanes (prisms) start.
-    elements : (L, 6) int64 — each lane's prism (nodes).
-    target : (L, 6) int64 — the row of the block's buffer each of its nodes adds into.
+    elements : (L, 6) uint32 — each lane's prism (nodes).
+    target : (L, 6) uint32 — the row of the block's buffer each of its nodes adds into
+        (unsigned: no test for a negative index in the gather and the scatter).
     rest_volume, volume_weight : (L,) float64 — V0 (mm^3) and kv of each lane's prism.
     chunk_pairs : (C+1,) int64 — where each chunk's list of pairs with a spring starts.
     pair : (P,) int64 — a row of :data:`PRISM_PAIRS` with a spring in some lane of the chunk.
@@ -415,8 +416,8 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
         block_nodes=block_nodes,
         block_chunks=np.array(block_chunks, np.int64),
         chunk_lanes=_offsets(chunk_counts),
-        elements=c(el[lane_e], np.int64).reshape(-1, 6),
-        target=c(np.concatenate(tgt_rows) if tgt_rows else np.zeros((0, 6)), np.int64).reshape(
+        elements=c(el[lane_e], np.uint32).reshape(-1, 6),
+        target=c(np.concatenate(tgt_rows) if tgt_rows else np.zeros((0, 6)), np.uint32).reshape(
             -1, 6
         ),
         rest_volume=c(model.rest_volume[lane_e], np.float64),
