@@ -30,6 +30,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from myoface.render.wrinkles import FOLD_WIDTH_MM
+
 #: pixels whose depth is below this (mm) are behind the camera's near plane
 NEAR_MM = 1.0
 
@@ -288,8 +290,8 @@ def _plane(planes, f, j, cx, cy):
 #: perspective-correct numerators of the 6 vertex fields of :mod:`myoface.render.wrinkles`
 #: (rest x, rest y, fold distance, A_x, A_y, A_n), then the world gradients (3 x 3) of the first 3
 W_COLS = 6 * 3 + 9
-#: the nasolabial groove's half-width (mm), as :data:`myoface.render.wrinkles.FOLD_WIDTH_MM`
-_FOLD_W = 2.5
+#: the nasolabial groove's half-width (mm)
+_FOLD_W = FOLD_WIDTH_MM
 
 
 @njit(cache=True, fastmath=True, inline="never", error_model="numpy")

@@ -37,9 +37,11 @@ COMPRESSION_DEAD_ZONE = 0.03
 WAVELENGTH_MM = 6.0
 #: furrow height (mm) per unit compression (a 10 % compression: 0.4 mm, slopes ~0.4)
 FURROW_GAIN_MM = 4.0
-#: the nasolabial groove: half-width (mm) and depth (mm) per unit compression
-FOLD_WIDTH_MM = 2.5
-FOLD_GAIN_MM = 6.0
+#: the nasolabial groove: half-width (mm) and depth (mm) per unit compression (set by eye: the
+#: smile's fold is a broad crease that reads from nose to mouth corner; at 2.5 mm and 6 mm it
+#: hardly showed in AU6+12, where the cheek is compressed 0.1-0.25 across it)
+FOLD_WIDTH_MM = 4.0
+FOLD_GAIN_MM = 12.0
 #: a rest direction whose part in a vertex's tangent plane is shorter than this has no
 #: meaningful stretch there (the sides of the face for x, the underside of the nose for y)
 MIN_IN_PLANE = 0.3
