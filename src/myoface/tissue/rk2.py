@@ -34,9 +34,17 @@ an idle machine and up to milliseconds on a busy one; the wait costs well under 
 other thread is running. Any thread may run any task, so a team smaller than asked still
 finishes, in order.
 
-Measured (thread CPU time, one thread, interleaved runs of 200 steps in one process, 2-core
-machine under load 5-9 from other jobs): ~1.45-1.7x less CPU a step than the previous parallel
-kernel (springs and prisms apart); see the commit log for the numbers of each run.
+Measured on this repository's 2-core machine while other jobs ran (load 6-9: every wall time
+here is the busy machine's), 2026-11-30 19:45 UTC. Interleaved runs of 200 steps in one process
+against the previous parallel kernel (springs and prisms apart), medians of 15: one thread
+327 vs 603 us of thread CPU a step (1.84x less), 1,990 vs 1,100 steps/s wall; two threads
+1,140 vs 770 steps/s (the team loses to one thread when the cores are busy). ``myoface bench
+--only tissue.rk2`` right after: 1,910 steps/s median (best 3,230) against the single-thread
+reference's 1,020 (1.87x); one thread 2,180 (best 4,500), 333 us of CPU a step against the
+reference's 722. The paper's 5,000 steps/s (200 us a step) needs either one thread a little
+faster still or the two threads of a quiet machine: one step is ~330 us of one core's time
+under this load (the gathers of the prisms' coordinates and the additions into the nodes are
+most of it now).
 
 Tried and dropped (measured): springs in three passes (gather the vectors, vectorised square
 roots and divisions, scatter; per-spring constants) — 30 % faster alone, slower inside the step
