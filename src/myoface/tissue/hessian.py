@@ -22,7 +22,13 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
-from myoface.tissue.forces import LAW_CONTINUOUS, MIN_SPRING_LENGTH, PRISM_TETS, spring_magnitude
+from myoface.tissue.forces import (
+    LAW_CONTINUOUS,
+    MIN_SPRING_LENGTH,
+    PRISM_TETS,
+    _tet_gradient,
+    spring_magnitude,
+)
 
 
 class HessianPattern:
@@ -499,26 +505,11 @@ def _prism_pass(x, prisms, grad, want_g, dvals, lvals, want_h):
             gr[a, 2] = 0.0
         vol = 0.0
         for t in range(3):
-            ax = pts[t + 1, 0] - pts[t, 0]
-            ay = pts[t + 1, 1] - pts[t, 1]
-            az = pts[t + 1, 2] - pts[t, 2]
-            bx = pts[t + 2, 0] - pts[t, 0]
-            by = pts[t + 2, 1] - pts[t, 1]
-            bz = pts[t + 2, 2] - pts[t, 2]
-            cx = pts[t + 3, 0] - pts[t, 0]
-            cy = pts[t + 3, 1] - pts[t, 1]
-            cz = pts[t + 3, 2] - pts[t, 2]
-            g1x = by * cz - bz * cy
-            g1y = bz * cx - bx * cz
-            g1z = bx * cy - by * cx
-            vol += ax * g1x + ay * g1y + az * g1z
+            vol6, g1x, g1y, g1z, g2x, g2y, g2z, g3x, g3y, g3z = _tet_gradient(
+                pts, t, t + 1, t + 2, t + 3
+            )
+            vol += vol6
             if want_g or want_h:  # the triple product's gradient over the four nodes
-                g2x = cy * az - cz * ay
-                g2y = cz * ax - cx * az
-                g2z = cx * ay - cy * ax
-                g3x = ay * bz - az * by
-                g3y = az * bx - ax * bz
-                g3z = ax * by - ay * bx
                 gr[t + 1, 0] += g1x
                 gr[t + 1, 1] += g1y
                 gr[t + 1, 2] += g1z
