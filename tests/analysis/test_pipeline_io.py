@@ -55,7 +55,7 @@ def test_contractions_csv_roundtrip(tmp_path):
         FrameMeasurement(2, 0.08, "ok", np.array([0.5, 0.3]), np.zeros(2)),
     ]
     p = tmp_path / "c.csv"
-    write_contractions_csv(p, ids, frames, jaw_max_rad=0.3)
+    write_contractions_csv(p, ids, frames, jaw=0.3)
     with open(p, newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert rows[1]["zygomaticus_major_l"] == "" and rows[1]["quality"] == "escaped:chin"
@@ -64,6 +64,25 @@ def test_contractions_csv_roundtrip(tmp_path):
     np.testing.assert_allclose(t, [0, 0.04, 0.08])
     assert table[2].tolist() == [0.3, 0.5, 0.0] and np.isnan(table[1, 0])
     assert q == ["ok", "escaped:chin", "ok"]
+
+
+def test_contractions_csv_jaw_angle_follows_the_models_jaw(tmp_path):
+    """The jaw_angle_rad column is the model's jaw angle at the measured control (the hinge,
+    then the condyles' slide with more turn), not the control times the largest angle."""
+    import csv
+
+    import myoface as mf
+
+    jaw = mf.build_face_model().muscles.jaw
+    ids = ("jaw",)
+    frames = [FrameMeasurement(k, 0.04 * k, "ok", np.array([c]), np.zeros(2))
+              for k, c in enumerate((0.0, 0.3, 0.8, 1.0))]  # fmt: skip
+    p = tmp_path / "c.csv"
+    write_contractions_csv(p, ids, frames, jaw)
+    with open(p, newline="") as fh:
+        got = [float(r["jaw_angle_rad"]) for r in csv.DictReader(fh)]
+    np.testing.assert_allclose(got, [jaw.angle_rad(c) for c in (0.0, 0.3, 0.8, 1.0)], atol=1e-5)
+    assert got[-1] == pytest.approx(jaw.max_angle_rad, abs=1e-5)
 
 
 @pytest.mark.parametrize(

@@ -23,13 +23,28 @@ def contractions_csv_header(ids, first) -> list[str]:
     return ["frame", "time_s", "quality", *ids, "jaw_angle_rad", *head]
 
 
-def contractions_csv_row(f, ids, jaw_max_rad: float, pose_cols: bool) -> str:
-    """One measurement ``f`` as a line of a contractions CSV (no newline); ``pose_cols``: the
-    header has the 3-D fit's head columns."""
+def jaw_angle_function(jaw):
+    """The jaw's rotation (rad) as a function of its control: ``jaw`` a
+    :class:`~myoface.muscles.jaw.Jaw` (its :meth:`~myoface.muscles.jaw.Jaw.angle_rad`: the
+    hinge, then the condyles' slide), or a number, the largest angle of a plain hinge
+    (``c * jaw``), or None (no jaw: 0)."""
+    if jaw is None:
+        return lambda c: 0.0
+    if hasattr(jaw, "angle_rad"):
+        return jaw.angle_rad
+    k = float(jaw)
+    return lambda c: c * k
+
+
+def contractions_csv_row(f, ids, jaw, pose_cols: bool) -> str:
+    """One measurement ``f`` as a line of a contractions CSV (no newline); ``jaw``: the
+    model's jaw, or a function of the jaw control giving its angle (see
+    :func:`jaw_angle_function`); ``pose_cols``: the header has the 3-D fit's head columns."""
+    angle = jaw if callable(jaw) else jaw_angle_function(jaw)
     vals = ["" if not np.isfinite(v) else f"{v:.5f}" for v in f.contractions]
-    jaw = ""
+    jaw_cell = ""
     if "jaw" in ids and np.isfinite(f.contractions[ids.index("jaw")]):
-        jaw = f"{f.contractions[ids.index('jaw')] * jaw_max_rad:.5f}"
+        jaw_cell = f"{angle(float(f.contractions[ids.index('jaw')])):.5f}"
     if pose_cols:
         head = f.head_cells()
     else:
@@ -38,10 +53,10 @@ def contractions_csv_row(f, ids, jaw_max_rad: float, pose_cols: bool) -> str:
             "" if not np.isfinite(v) else f"{v:.{d}f}"
             for v, d in zip(head, (3, 3, 5, 3), strict=True)
         ]
-    return ",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw, *head])
+    return ",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw_cell, *head])
 
 
-def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_rad: float) -> None:
+def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw) -> None:
     """``frame,time_s,quality,<muscle ids...>,jaw_angle_rad,head_dx_px,head_dy_px,head_scale,
     head_rot_deg`` (empty cells where a frame could not be measured, and head cells where the
     face was not found). With the 3-D fit's measurements
@@ -56,7 +71,8 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw_max_ra
     pose_cols = bool(frames) and all(hasattr(f, "head_cells") for f in frames)
     cols = contractions_csv_header(ids, frames[0] if pose_cols else None)
     lines = [",".join(cols)]
-    lines += [contractions_csv_row(f, ids, jaw_max_rad, pose_cols) for f in frames]
+    angle = jaw_angle_function(jaw)
+    lines += [contractions_csv_row(f, ids, angle, pose_cols) for f in frames]
     with atomic_output(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
 
@@ -71,7 +87,7 @@ class ContractionsCsvWriter:
     half file); the following rows are appended to it. Before the first row there is no
     file (and an older one is left as it was).
 
-    >>> with ContractionsCsvWriter("out/contractions.csv", ids, jaw_max) as w:  # doctest: +SKIP
+    >>> with ContractionsCsvWriter("out/contractions.csv", ids, model.muscles.jaw) as w:  # doctest: +SKIP
     ...     for m in measurements:
     ...         w.write(m)
 
@@ -79,19 +95,20 @@ class ContractionsCsvWriter:
     ----------
     path : the CSV file; its folder must exist.
     ids : the measurements' contraction ids (``Analyzer.ids``).
-    jaw_max_rad : the jaw's largest angle (rad), for the ``jaw_angle_rad`` column.
+    jaw : the model's :class:`~myoface.muscles.jaw.Jaw` (or a plain hinge's largest angle, rad),
+        for the ``jaw_angle_rad`` column (see :func:`jaw_angle_function`).
 
     Attributes
     ----------
     n_rows : int -- rows written so far.
     """
 
-    def __init__(self, path, ids, jaw_max_rad: float):
+    def __init__(self, path, ids, jaw):
         from myoface._io import check_output_path
 
         self.path = check_output_path(path)
         self.ids = list(ids)
-        self.jaw_max_rad = float(jaw_max_rad)
+        self.jaw_angle = jaw_angle_function(jaw)
         self.n_rows = 0
         self._fh = None
         self._pose_cols = False
@@ -100,7 +117,7 @@ class ContractionsCsvWriter:
         """Append the row of measurement ``m`` and flush it to the file."""
         if self._fh is None:  # the first row says which head columns the file has
             self._pose_cols = hasattr(m, "head_cells")
-        row = contractions_csv_row(m, self.ids, self.jaw_max_rad, self._pose_cols)
+        row = contractions_csv_row(m, self.ids, self.jaw_angle, self._pose_cols)
         if self._fh is None:
             head = ",".join(contractions_csv_header(self.ids, m))
             self._fh = self._publish(head + "\n" + row + "\n")

@@ -357,8 +357,7 @@ def _measure_into(video, an, model, out, start, max_frames, tracker, show_progre
         n -= start
     if max_frames is not None:
         n = max_frames if n is None else min(n, max_frames)
-    jaw_max = model.muscles.jaw.max_angle_rad if model.muscles.jaw is not None else 0.0
-    csv = ContractionsCsvWriter(out / "contractions.csv", an.ids, jaw_max)
+    csv = ContractionsCsvWriter(out / "contractions.csv", an.ids, model.muscles.jaw)
     interrupted = None
     try:
         with contextlib.ExitStack() as stack:

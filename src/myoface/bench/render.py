@@ -102,8 +102,7 @@ def write_demo_contractions_csv(path, model, fps: float = 25.0, duration_s: floa
         FrameMeasurement(k, float(t), "ok", row, np.zeros(2))
         for k, (t, row) in enumerate(zip(times, table, strict=True))
     ]
-    jaw_max = model.muscles.jaw.max_angle_rad if model.muscles.jaw is not None else 0.0
-    write_contractions_csv(path, ids, frames, jaw_max)
+    write_contractions_csv(path, ids, frames, model.muscles.jaw)
 
 
 @benchmark("synth.resynth_fps_512", "1/s", higher_is_better=True)
