@@ -459,8 +459,9 @@ def _load_face_file(path: Path, muscles, params) -> FaceModel:
         raise MyofaceFormatError(f"{path}: its muscles.toml is not valid TOML: {exc}") from None
     mirror = default_mirror_map() if default_topology else None
     if default_topology:
-        from myoface.muscles.io import with_default_lids
+        from myoface.muscles.io import with_later_defaults
 
-        doc = with_default_lids(doc)  # a face saved before the eyelids gets the default lids
+        # a face saved before the eyelids (or the lips' marginal part) gets the default ones
+        doc = with_later_defaults(doc)
     ms = muscles_from_dict(doc, face, where=f"{path}:muscles.toml", mirror=mirror)
     return FaceModel(face, ms, params)

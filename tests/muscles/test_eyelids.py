@@ -336,3 +336,23 @@ def test_gaze_events_in_a_timeline_turn_the_eyes(fm):
     rows, cols = np.nonzero(changed)
     assert cols.min() >= eyes[:, 0].min() - 2 and cols.max() <= eyes[:, 0].max() + 2
     assert rows.min() >= eyes[:, 1].min() - 2 and rows.max() <= eyes[:, 1].max() + 2
+
+
+def test_a_face_saved_before_the_lips_marginal_part_takes_au24(tmp_path):
+    """A personal face saved before orbicularis_oris_marginalis existed gets the default one:
+    AU24 (which needs it) works and presses the lower lip up."""
+    from importlib import resources
+
+    from myoface.face.facefile import save_face
+
+    text = (resources.files("myoface") / "data" / "default_muscles.toml").read_text()
+    start = text.index('[[muscle]]\nid = "orbicularis_oris_marginalis"')
+    end = text.index("\n\n", start) + 2  # the entry ends at the first blank line
+    old = text[:start] + text[end:]
+    assert "orbicularis_oris_marginalis" not in old and "[jaw]" in old
+    path = save_face(tmp_path / "old.myoface", load_default_face(), muscles_toml=old)
+    fm = mf.load_face_model(path)
+    assert "orbicularis_oris_marginalis" in fm.ids
+    lip = fm.face.landmark("lip_lower_outer")
+    st = fm.relax(mf.au_contractions({24: 1.0}, fm.ids)).state
+    assert (fm.skin_vertices(st)[lip, 1] - fm.skin_vertices()[lip, 1]).mean() > 0.3

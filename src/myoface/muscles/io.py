@@ -367,6 +367,28 @@ def with_default_lids(doc: dict) -> dict:
     return {**doc, "muscle": [*entries, *lids]}
 
 
+#: default muscles added after personal faces were first saved, and not recognisable by their
+#: type as the lids are: a face file without them gets the default set's (AU24 needs the first)
+LATER_DEFAULT_MUSCLES = ("orbicularis_oris_marginalis",)
+
+
+def with_later_defaults(doc: dict) -> dict:
+    """``doc`` (a parsed muscle file for the default topology) with what the default set gained
+    since such files were written: the lids (:func:`with_default_lids`) and the muscles of
+    :data:`LATER_DEFAULT_MUSCLES` it lacks. ``doc`` itself is not changed."""
+    doc = with_default_lids(doc)
+    entries = doc.get("muscle", [])
+    if not isinstance(entries, list):
+        return doc
+    ids = {e.get("id") for e in entries if isinstance(e, dict)}
+    extra = [
+        e
+        for e in _default_doc()["muscle"]
+        if e["id"] in LATER_DEFAULT_MUSCLES and e["id"] not in ids
+    ]
+    return {**doc, "muscle": [*entries, *extra]} if extra else doc
+
+
 def load_default_muscles(face: FaceMesh | None = None) -> MuscleSet:
     """The default muscle set (``data/default_muscles.toml``) placed on ``face``.
 
