@@ -12,10 +12,10 @@ leaves the tracker's sub-pixel bias in the muscles whose signature is smallest, 
 say by how much it may.
 
 The frames show the mouth as a video does (teeth, tongue, the shaded cavity) and are framed on
-the face over the whole sequence. The sequences have 24 frames: with the jaw's condylar slide
-(0.4 rad and 12 mm) the 16-frame sequence's steps of up to 0.21 in the jaw between frames move
+the face over the whole sequence. The sequences have 24 frames: once the jaw slid as well as
+turned (4520154) the 16-frame sequence's steps of up to 0.21 in the jaw between frames moved
 the chin and the lower lip by about 10 px at 256 x 256, more than the contours follow from one
-frame to the next (measured before the mouth was rendered: jaw RMSE 0.111 on 16 frames).
+frame to the next (measured at ca01a7d, the mouth drawn shut: jaw RMSE 0.111 on 16 frames).
 
 With the default analysis (snakes, curve fit, a second tracking pass from the model's
 prediction) the errors measured on the 24-frame sequence were: frontalis bellies RMSE
