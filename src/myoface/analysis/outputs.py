@@ -33,13 +33,19 @@ def draw_contours(frame: np.ndarray, contours: dict, color=(255, 215, 0)) -> np.
     img = frame.copy()
     h, w = img.shape[:2]
     for pts in contours.values():
-        p = np.asarray(pts, float)
-        n = max(2, int(np.linalg.norm(np.diff(p, axis=0), axis=1).sum() * 2))
+        p = np.asarray(pts, float).reshape(-1, 2)
+        p = p[np.isfinite(p).all(axis=1)]
+        if len(p) < 2:
+            continue
+        # two samples a pixel along the polyline, at most what crosses the frame a few times
+        # (a contour projected from a wild pose can be kilometres long)
+        length = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+        n = int(min(max(2, length * 2), 8 * (w + h) * len(p)))
         t = np.linspace(0, len(p) - 1, n)
         x = np.interp(t, np.arange(len(p)), p[:, 0])
         y = np.interp(t, np.arange(len(p)), p[:, 1])
-        xi = np.clip(np.round(x).astype(int), 0, w - 1)
-        yi = np.clip(np.round(y).astype(int), 0, h - 1)
+        xi = np.round(np.clip(x, 0, w - 1)).astype(int)
+        yi = np.round(np.clip(y, 0, h - 1)).astype(int)
         img[yi, xi] = color
     return img
 

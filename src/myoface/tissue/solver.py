@@ -609,6 +609,11 @@ def _build_newton_data(model: TissueModel) -> NewtonData:
 #: of a move that repeats the last one (round-off), or none at all; it would move the free nodes
 #: by about as much, a millionth of what Newton resolves
 LINEAR_RESPONSE_MIN_MM = 1e-9
+#: a relax whose last step moved less than the tolerance but left a free node with a larger
+#: net force than this (uN) has not converged: its line search stalled far from equilibrium
+#: (a converged relax of the default face leaves at most about 1 uN; a warm start extrapolated
+#: past Newton's basin once "converged" with 2e95 uN left and nodes at 1e19 mm)
+EQUILIBRIUM_FORCE_MAX_UN = 1e3
 #: the last move is repeated at most this many times over (and reversed at most once): beyond
 #: that the secant of one frame says little about the response
 EXTRAPOLATE_MAX = 2.0
@@ -740,7 +745,10 @@ def relax_newton(
     it, ok, move, cg = int(out[0]), bool(out[1]), float(out[2]), int(out[3])
     if out[7] < 0:
         raise MyofaceSimulationError(f"newton relax: non-finite energy or forces at iteration {it}")
-    return x, ok, it, move, cg, float(out[8])
+    fmax = float(out[8])
+    if not (np.isfinite(fmax) and fmax <= EQUILIBRIUM_FORCE_MAX_UN and np.isfinite(x).all()):
+        ok = False  # a stalled line search, not an equilibrium (the caller falls back)
+    return x, ok, it, move, cg, fmax
 
 
 @njit(cache=True, nogil=True)
