@@ -11,16 +11,19 @@ BENCHMARKS.md), which the full analysis (with analysis by synthesis) meets; the 
 leaves the tracker's sub-pixel bias in the muscles whose signature is smallest, and the bounds
 say by how much it may.
 
-The frames show the mouth as a video does (teeth, tongue, the shaded cavity) and are framed on
-the face over the whole sequence. The sequences have 24 frames: once the jaw slid as well as
+The frames show the mouth drawn shut (as the paper's synthetic frames; ``run_closed_loop(teeth=
+True)`` renders the teeth and the dark cavity, which the lips' snake then needs the mouth layer
+for: see :func:`~myoface.analysis.closed_loop.run_closed_loop`) and are framed on the face over
+the whole sequence. The sequences have 24 frames: once the jaw slid as well as
 turned (4520154) the 16-frame sequence's steps of up to 0.21 in the jaw between frames moved
 the chin and the lower lip by about 10 px at 256 x 256, more than the contours follow from one
 frame to the next (measured at ca01a7d, the mouth drawn shut: jaw RMSE 0.111 on 16 frames).
 
 With the default analysis (snakes, curve fit, a second tracking pass from the model's
 prediction) the errors measured on the 24-frame sequence were: frontalis bellies RMSE
-0.008-0.022, zygomatic majors 0.013-0.026, levator labii superioris alaeque nasi 0.017-0.020,
-depressor labii inferioris 0.145-0.241, jaw 0.003.
+0.007-0.026, zygomatic majors 0.008-0.013, levator labii superioris alaeque nasi 0.013-0.017,
+depressor labii inferioris 0.071-0.081, jaw 0.004 (with the mouth's inside rendered and no
+mouth layer: depressors 0.145-0.241).
 """
 
 import numpy as np
@@ -48,15 +51,6 @@ def plain():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=False,
-    raises=AssertionError,
-    reason="known regression, not the mouth's: the plain analysis' frontalis_outer_r RMSE "
-    "0.043-0.045 (bound 0.04) on the 24-frame sequence since the model of 19:30 on 2026-11-30 "
-    "(the two-phase jaw 493ac9d, visemes 27f33c5), 0.022 on that of 19:20; 0.043 with the "
-    "camera framed at rest too; 0.0095 with analysis by synthesis (bench, 48 frames); every "
-    "other bound held (jaw 0.004, zygomatic majors <= 0.030, levators <= 0.044)",
-)
 def test_closed_loop_recovers_every_muscle(plain):
     res = plain
     assert all(q == "ok" for q in res.quality)
@@ -81,14 +75,6 @@ def test_closed_loop_recovers_every_muscle(plain):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=False,  # (the left side's 0.107 is near the bound; rounding differs across CPUs)
-    raises=AssertionError,
-    reason="known defect of the plain analysis (the tracker's bias on the lower lip's outline, "
-    "which analysis by synthesis removes): with the mouth rendered (teeth, dark cavity) the "
-    "depressor labii inferioris' RMSE is 0.145-0.241 on 24 frames, 0.157-0.168 on the bench's "
-    "48 (0.094-0.107 on 16 frames with the mouth drawn shut, before the two-phase jaw)",
-)
 def test_closed_loop_recovers_the_depressors(plain):
     """The depressors' signature beyond the jaw's is a sub-pixel change of the lower lip's
     outline at 256 x 256, where the tracker's bias (which analysis by synthesis removes, see

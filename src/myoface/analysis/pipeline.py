@@ -191,8 +191,11 @@ class Analyzer:
     line_sections : sections tracked in the ``"line"`` potential (thin dark lines) instead of
         ``potential``.
     mouth_sections : sections around the mouth, tracked in ``potential`` with the mouth's
-        inside no darker than the lips (see :data:`MOUTH_SECTIONS`; the lips' tone measured
-        on the calibration frame).
+        inside no darker than the lips (e.g. :data:`MOUTH_SECTIONS`; the lips' tone measured
+        on the calibration frame). Off by default: on the sample video's smile it drew the
+        right zygomatic major's estimate from 0.95-1.0 down to 0.3-0.55 and lost a nasolabial
+        contour (misfit), while on the closed loop's renders it kept the lips' snake on the
+        outline.
     reseed : with ``estimator="curves"``, a second pass per frame: the contours are moved to
         where the model, at the first estimate, puts their skin, relaxed again and the
         contractions re-estimated (analysis by synthesis; twice the tracking cost).
@@ -226,12 +229,16 @@ class Analyzer:
         head_reference=("nose",),
         estimator: str = "curves",
         line_sections=LINE_SECTIONS,
-        mouth_sections=MOUTH_SECTIONS,
+        mouth_sections=(),
         reseed: bool = True,
         synthesis=None,
         synthesis_rounds: int = 3,
         deferred_relax: bool = False,
+        synthesis_teeth: bool = True,
     ):
+        #: whether the synthesized frames show the teeth and the mouth's cavity (as a video
+        #: does) or the mouth drawn shut (frames rendered so, e.g. the closed loop's)
+        self.synthesis_teeth = bool(synthesis_teeth)
         if estimator not in ESTIMATORS:
             raise MyofaceValueError(f"estimator must be one of {ESTIMATORS}; got {estimator!r}")
         self.method = estimator
@@ -704,7 +711,9 @@ class Analyzer:
     def _start_synthesis(self, frame: np.ndarray, conts_cal: list[np.ndarray]) -> None:
         from myoface.analysis.synthesis import FrameSynthesizer
 
-        self._synth = FrameSynthesizer(self.model.face, self.synthesis_camera, frame)
+        self._synth = FrameSynthesizer(
+            self.model.face, self.synthesis_camera, frame, teeth=self.synthesis_teeth
+        )
         self._synth_snakes = Snakes(self.contours, self.params, layers=self.layers)
         rest = self._track_synthetic(self.model.face.vertices, conts_cal)
         _, self._synth_bias, _ = self.curves.residuals(rest, self.curves.p0)

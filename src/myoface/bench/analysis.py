@@ -40,9 +40,9 @@ def _per_muscle() -> dict:
 @benchmark("analysis.closed_loop_rmse", "contraction", higher_is_better=False)
 def bench_closed_loop_rmse(quick: bool) -> Measurement:
     """Worst per-muscle RMSE of recovered vs true contractions (the paper's 12 muscles + jaw)
-    on a synthetic sequence rendered by the model with make-up and the mouth's inside (teeth,
-    tongue, shaded cavity; 256x256, frontal, orthographic, framed on the face over the whole
-    sequence), analysed by snakes + the curve fit (the model's skin curves fitted to the
+    on a synthetic sequence rendered by the model with make-up, the mouth drawn shut as in the
+    paper's synthetic frames (256x256, frontal, orthographic, framed on the face over the
+    whole sequence), analysed by snakes + the curve fit (the model's skin curves fitted to the
     tracked contours, two corrections through the tissue, two tracking passes per frame) +
     analysis by synthesis (three rounds per frame of the model, textured from the first frame
     and deformed by the estimate, tracked like the video). The detail gives every muscle for
