@@ -12,7 +12,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from _sheet import labelled
+from _sheet import grid, labelled
 
 import myoface as mf
 from myoface.render import Camera, Renderer
@@ -41,9 +41,7 @@ def eyelid_sheet(size: int = 384) -> np.ndarray:
     for label, aus in TILES:
         state = mf.relax(fm, mf.au_contractions(aus, fm.ids)).state if aus else None
         tiles.append(labelled(r.render(fm.skin_vertices(state)), label))
-    tiles.append(np.full_like(tiles[0], 255))  # a blank to fill the grid
-    rows = [np.concatenate(tiles[k : k + 4], axis=1) for k in range(0, len(tiles), 4)]
-    return np.concatenate(rows, axis=0)
+    return grid(tiles, 4)
 
 
 def main() -> None:

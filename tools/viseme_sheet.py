@@ -13,7 +13,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from _sheet import labelled
+from _sheet import grid, labelled
 
 import myoface as mf
 from myoface.render import Camera, Renderer
@@ -37,10 +37,7 @@ def viseme_sheet(size: int = 200) -> np.ndarray:
         img = r.render(fm.skin_vertices(st), jaw=fm.jaw_pose(st))
         phon = entry.get("phonemes", "")
         tiles.append(labelled(img, f"{name} ({phon})" if phon else name))
-    while len(tiles) % 5:
-        tiles.append(np.full_like(tiles[0], 255))
-    rows = [np.concatenate(tiles[i : i + 5], axis=1) for i in range(0, len(tiles), 5)]
-    return np.concatenate(rows, axis=0)
+    return grid(tiles, 5)
 
 
 def main() -> None:

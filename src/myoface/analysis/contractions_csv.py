@@ -11,6 +11,15 @@ import numpy as np
 from myoface.analysis.tracker import FrameMeasurement
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
 
+#: the head's 3-D pose in the 3-D fit's rows (:class:`~myoface.analysis.fit.HeadPose`), in order
+POSE_COLUMNS = (
+    "head_yaw_deg",
+    "head_pitch_deg",
+    "head_roll_deg",
+    "head_tx_mm",
+    "head_ty_mm",
+    "head_tz_mm",
+)
 #: the head columns of the snakes' (2-D head frame) rows in a contractions CSV
 HEAD_2D_COLUMNS = ("head_dx_px", "head_dy_px", "head_scale", "head_rot_deg")
 
@@ -184,12 +193,7 @@ CSV_OTHER_COLUMNS = (
     "head_scale",
     "head_rot_deg",
     # the 3-D fit's (myoface.analysis.fit.FitMeasurement.HEAD_COLUMNS)
-    "head_yaw_deg",
-    "head_pitch_deg",
-    "head_roll_deg",
-    "head_tx_mm",
-    "head_ty_mm",
-    "head_tz_mm",
+    *POSE_COLUMNS,
     "residual_mm",
 )
 

@@ -56,6 +56,7 @@ from scipy.optimize import lsq_linear
 from scipy.sparse.linalg import spsolve
 from scipy.spatial.transform import Rotation
 
+from myoface.analysis.contractions_csv import POSE_COLUMNS as _POSE_COLUMNS
 from myoface.errors import MyofaceValueError
 
 #: the vertical field of view assumed for a video whose camera is not known: a typical webcam
@@ -225,15 +226,8 @@ class HeadPose:
         )
 
 
-#: the CSV columns of a pose, in order
-POSE_COLUMNS = (
-    "head_yaw_deg",
-    "head_pitch_deg",
-    "head_roll_deg",
-    "head_tx_mm",
-    "head_ty_mm",
-    "head_tz_mm",
-)
+#: the CSV columns of a pose, in order (defined with the CSV's other columns)
+POSE_COLUMNS = _POSE_COLUMNS
 
 
 def _check_points(points, n: int) -> np.ndarray:
