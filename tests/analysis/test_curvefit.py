@@ -9,7 +9,7 @@ from myoface.analysis.curvefit import (
     closest_on_polyline,
     closest_on_polyline_numpy,
 )
-from myoface.analysis.pipeline import SECTIONS, section_vertices
+from myoface.analysis.sections import SECTIONS, section_vertices
 from myoface.analysis.snakes import resample_polyline
 from myoface.errors import MyofaceValueError
 

@@ -262,7 +262,7 @@ def test_lids_close_a_fraction_of_the_persons_own_opening(fm):
 
 
 def test_csv_has_pose_and_residual_columns(tmp_path, fm):
-    from myoface.analysis.pipeline import read_contractions_csv, write_contractions_csv
+    from myoface.analysis.contractions_csv import read_contractions_csv, write_contractions_csv
 
     ids = fm.ids
     c = np.linspace(0, 1, len(ids))
@@ -317,8 +317,8 @@ def test_fit_analyzer_with_a_stand_in_detector(fm):
 def test_resynth_reproduces_the_head_pose(tmp_path, fm):
     """``myoface resynth --pose``: the CSV's head pose turns the rendered face (the nose moves
     to the image's right with a positive yaw), and rows without a pose hold the last one."""
+    from myoface.analysis.contractions_csv import write_contractions_csv
     from myoface.analysis.fit import display_poses, read_head_poses
-    from myoface.analysis.pipeline import write_contractions_csv
     from myoface.analysis.video import open_video
     from myoface.commands.resynth import resynthesize
 

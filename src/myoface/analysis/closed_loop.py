@@ -8,7 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from myoface.analysis.pipeline import PAPER_MUSCLES, Analyzer, project_sections
+from myoface.analysis.pipeline import Analyzer
+from myoface.analysis.sections import PAPER_MUSCLES, project_sections
 from myoface.errors import MyofaceValueError
 
 #: what ``run_closed_loop`` analyses the frames with
@@ -146,7 +147,7 @@ def _estimate_from_true_curves(model, cam, curves: list[dict], ids, refine: int)
     map that the camera gives."""
     from myoface.analysis.curvefit import CurveEstimator
     from myoface.analysis.landmarks import similarity_affine
-    from myoface.analysis.pipeline import CURVE_EXCLUDED, SECTIONS, section_vertices
+    from myoface.analysis.sections import CURVE_EXCLUDED, SECTIONS, section_vertices
     from myoface.analysis.snakes import resample_polyline
 
     secs = {

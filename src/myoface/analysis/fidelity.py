@@ -311,7 +311,7 @@ def resynthesis_frames(model, table, size: int = 360):
     """The model driven by ``table`` (T, M) contractions over ``model.ids`` (rows with NaN hold
     the last measured row), rendered front on, ``size`` x ``size`` (the code path of
     ``myoface resynth``): a generator of RGB uint8 images."""
-    from myoface.analysis.pipeline import hold_last_measured
+    from myoface.analysis.contractions_csv import hold_last_measured
     from myoface.render import Renderer
     from myoface.synth import Synthesizer, make_camera
 
@@ -361,7 +361,7 @@ def fidelity_of_analysis(
     import time
 
     from myoface._io import read_text
-    from myoface.analysis.pipeline import read_contractions_csv
+    from myoface.analysis.contractions_csv import read_contractions_csv
     from myoface.analysis.video import open_video
     from myoface.render import progress
 

@@ -1176,7 +1176,7 @@ class FitAnalyzer:
     def __init__(self, model, fps: float = 30.0, camera: PinholeCamera | None = None,
                  settings: FitSettings | None = None, detector=None,
                  synthesis: bool = False, deferred_relax: bool = False):  # fmt: skip
-        from myoface.analysis.pipeline import SECTIONS, section_vertices
+        from myoface.analysis.sections import SECTIONS, section_vertices
 
         if model.face.n_vertices != 468:
             raise MyofaceValueError(
