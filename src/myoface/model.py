@@ -315,7 +315,7 @@ def step(
     """``n_steps`` paper RK2 steps of ``dt`` s (default: the model's stable step) from ``state``
     (default: rest) with the kinematic nodes at ``contractions``; returns the new state."""
     c = model.validate(contractions)
-    dt = model.stable_dt if dt is None else float(dt)
+    dt = None if dt is None else float(dt)  # None: the stable step, halved where it must be
     s0 = (model._rest if state is None else state).tissue_state()
     s = step_rk2(model.tissue, s0, model.targets(c), dt, n_steps)
     return FaceState._from_tissue(s, c)

@@ -251,3 +251,24 @@ def test_early_stop_at_the_same_step_as_the_serial_reference(default_tissue):
     x, v = x0.copy(), v0.copy()
     got = run_rk2(m, x, v, ref[0], m.stable_dt, tol, n_blocks=2)
     assert got[0] == ref[0] and got[1] == pytest.approx(ref[1], rel=1e-6)
+
+
+def test_default_step_survives_a_step_change_into_the_stiff_phase():
+    """Risorius, buccinator, depressor anguli oris and the jaw at 1 from rest: at the rest
+    lattice's stable step the explicit scheme blows up (step 28); step_rk2 with its default
+    step runs the same time again in halved steps, finite, with energy not growing."""
+    import myoface as mf
+    from myoface.tissue import kinetic_energy, potential_energy
+
+    fm = mf.build_face_model()
+    c = fm.validate(
+        {"risorius_l": 1.0, "buccinator_l": 1.0, "depressor_anguli_oris_l": 1.0, "jaw": 1.0}
+    )
+    s = fm.step(None, c, n_steps=300)
+    assert np.isfinite(s.x).all()
+    assert s.t == pytest.approx(300 * fm.tissue.stable_dt)
+    x0 = fm.tissue.rest_positions.copy()
+    x0[fm.tissue.kinematic_index] = fm.targets(c)
+    e0 = potential_energy(fm.tissue, x0)
+    e1 = potential_energy(fm.tissue, s.x) + kinetic_energy(fm.tissue, s.v)
+    assert e1 <= e0 * (1 + 1e-9) + 1e-9

@@ -988,6 +988,12 @@ def run_rk2_serial(
 # ------------------------------------------------------------------------------ public API ----
 
 
+#: :func:`step_rk2` with its default step retries a run that goes NaN/Inf in steps this many
+#: times halved at most (risorius, buccinator, depressor anguli oris and the jaw all at 1 from
+#: rest blew up at step 28 with the stable step of the rest lattice, ran at half of it)
+AUTO_DT_HALVINGS = 3
+
+
 def step_rk2(model: TissueModel, state, targets=None, dt: float | None = None, n_steps: int = 1):
     """Advance ``n_steps`` paper RK2 steps of size ``dt`` on all cores.
 
@@ -999,7 +1005,9 @@ def step_rk2(model: TissueModel, state, targets=None, dt: float | None = None, n
         Positions (mm) of the kinematic nodes, in ``model.kinematic_index`` order (default: their
         rest positions); set before the first step, velocities zero.
     dt : float, optional
-        Time step, s (default ``model.stable_dt``, computed once per model).
+        Time step, s (default ``model.stable_dt``, computed once per model; a run that goes
+        NaN/Inf with it is run again in steps of half the size, twice as many, up to
+        :data:`AUTO_DT_HALVINGS` times).
     n_steps : int
 
     Returns
@@ -1016,18 +1024,25 @@ def step_rk2(model: TissueModel, state, targets=None, dt: float | None = None, n
     # integrate.py re-exports this module's API, so its helpers are imported here, not at the top
     from myoface.tissue.integrate import _targets_array
 
-    dt = model.stable_dt if dt is None else float(dt)
+    auto = dt is None
+    dt = model.stable_dt if auto else float(dt)
     if not dt > 0:
         raise MyofaceValueError(f"dt must be > 0 s; got {dt}")
-    s = state.copy()
-    s.x = np.ascontiguousarray(s.x, dtype=np.float64)
-    s.v = np.ascontiguousarray(s.v, dtype=np.float64)
-    s.x[model.kinematic_index] = _targets_array(model, targets)
-    s.v[model.kinematic_index] = 0.0
-    done, _, bad = run_rk2(model, s.x, s.v, int(n_steps), dt)
-    if bad >= 0:
-        raise MyofaceSimulationError(
-            f"RK2 produced NaN/Inf at step {bad} (dt = {dt:g} s); reduce dt"
-        )
-    s.t += done * dt
-    return s
+    tg = _targets_array(model, targets)
+    n = int(n_steps)
+    # the default step is stable for the lattice near rest; a large step change can stretch
+    # springs into their stiff phase, where it is not: then the same time is covered again
+    # from the start in steps of half the size (at most AUTO_DT_HALVINGS times)
+    for halving in range(AUTO_DT_HALVINGS + 1 if auto else 1):
+        s = state.copy()
+        s.x = np.ascontiguousarray(s.x, dtype=np.float64)
+        s.v = np.ascontiguousarray(s.v, dtype=np.float64)
+        s.x[model.kinematic_index] = tg
+        s.v[model.kinematic_index] = 0.0
+        done, _, bad = run_rk2(model, s.x, s.v, n << halving, dt / (1 << halving))
+        if bad < 0:
+            s.t += done * dt / (1 << halving)
+            return s
+    raise MyofaceSimulationError(
+        f"RK2 produced NaN/Inf at step {bad} (dt = {dt / (1 << halving):g} s); reduce dt"
+    )
