@@ -72,73 +72,91 @@ def landmark_cost(rot, trans, shape, f, cx, cy, p, use_z, w0, kxy, inv_ds, k, hu
 def normal_equations(rot, trans, shape, dsdc, free, f, cx, cy, p, use_z, w0, kxy, inv_ds, k, huber):
     """(H, b): ``J^T J`` and ``-J^T r`` of the landmark rows (Huber-reweighted ``w0``) in the
     unknowns (omega (3), dt (3), dc[free]) — the products :meth:`ModelFit._jacobians` and the
-    residuals of :meth:`ModelFit._residuals` make."""
+    residuals of :meth:`ModelFit._residuals` make.
+
+    The weighted rows are made vertex by vertex into ``J^T`` (unknowns x rows, so that each
+    product of two unknowns' columns is one contiguous dot product, :func:`_gram`): the
+    depth rows' weighted mean is removed from them first (``sum_v w_v (z_v - zbar)(z_v -
+    zbar)^T`` is the Gram matrix of ``sqrt(w_v) (z_v - zbar)``)."""
     nv = shape.shape[0]
     nf = free.shape[0]
     n = 6 + nf
     t = landmark_terms(rot, trans, shape, f, cx, cy, p, use_z, w0, kxy, inv_ds, k, huber)
     w = np.empty(nv)
+    wsum = 0.0
     for v in range(nv):
         r = t[v, 3]
         w[v] = w0[v] * (huber / max(r, 1e-12) if r > huber else 1.0)
-    h = np.zeros((n, n))
-    b = np.zeros(n)
-    dp = np.zeros((3, n))
-    ju = np.zeros(n)
-    jv = np.zeros(n)
+        wsum += w[v]
+    nrow = 3 * nv if use_z else 2 * nv
+    jt = np.zeros((n, nrow))  # the weighted rows, transposed: u (nv), v (nv), z (nv)
+    rw = np.empty(nrow)  # ... and their weighted residuals
     zmean = np.zeros(n)
-    wsum = 0.0
-    zrow = np.zeros((nv, n)) if use_z else np.zeros((0, n))
+    g = np.empty((3, 3))  # per vertex, d(u, v, z-row)/dP
     for v in range(nv):
-        y = np.empty(3)
-        for i in range(3):
-            y[i] = rot[i, 0] * shape[v, 0] + rot[i, 1] * shape[v, 1] + rot[i, 2] * shape[v, 2]
-        pc0, pc1, pc2 = y[0] + trans[0], y[1] + trans[1], y[2] + trans[2]
+        y0 = rot[0, 0] * shape[v, 0] + rot[0, 1] * shape[v, 1] + rot[0, 2] * shape[v, 2]
+        y1 = rot[1, 0] * shape[v, 0] + rot[1, 1] * shape[v, 1] + rot[1, 2] * shape[v, 2]
+        y2 = rot[2, 0] * shape[v, 0] + rot[2, 1] * shape[v, 1] + rot[2, 2] * shape[v, 2]
+        pc0, pc1, pc2 = y0 + trans[0], y1 + trans[1], y2 + trans[2]
         d = max(-pc2, 1e-6)
-        # dP/dx: omega -> -[y]x, dt -> I, dc -> R dshape/dc
-        dp[:, :] = 0.0
-        dp[0, 1], dp[0, 2] = y[2], -y[1]
-        dp[1, 0], dp[1, 2] = -y[2], y[0]
-        dp[2, 0], dp[2, 1] = y[1], -y[0]
-        dp[0, 3] = dp[1, 4] = dp[2, 5] = 1.0
-        for j in range(nf):
-            m = free[j]
-            for i in range(3):
-                dp[i, 6 + j] = (
-                    rot[i, 0] * dsdc[v, 0, m]
-                    + rot[i, 1] * dsdc[v, 1, m]
-                    + rot[i, 2] * dsdc[v, 2, m]
-                )
         sw = np.sqrt(w[v])
-        a00, a02 = f / d, f * pc0 / (d * d)
-        a11, a12 = -f / d, -f * pc1 / (d * d)
         s = kxy * sw
-        for j in range(n):
-            ju[j] = (a00 * dp[0, j] + a02 * dp[2, j]) * s
-            jv[j] = (a11 * dp[1, j] + a12 * dp[2, j]) * s
-        bu, bv = -t[v, 0] * sw, -t[v, 1] * sw
-        for i in range(n):
-            b[i] += ju[i] * bu + jv[i] * bv
-            for j in range(i, n):
-                h[i, j] += ju[i] * ju[j] + jv[i] * jv[j]
+        # rows u, v: (a00, 0, a02) and (0, a11, a12) . dP; z: -dP_z / sd (unweighted: the
+        # mean is removed below, then weighted)
+        g[0, 0], g[0, 1], g[0, 2] = f / d * s, 0.0, f * pc0 / (d * d) * s
+        g[1, 0], g[1, 1], g[1, 2] = 0.0, -f / d * s, -f * pc1 / (d * d) * s
+        g[2, 0], g[2, 1], g[2, 2] = 0.0, 0.0, -inv_ds
+        nr = 3 if use_z else 2
+        for q in range(nr):
+            col = q * nv + v
+            # dP/d(omega) = -[y]x, dP/d(dt) = I, dP/d(dc) = R dshape/dc
+            jt[0, col] = -g[q, 1] * y2 + g[q, 2] * y1
+            jt[1, col] = g[q, 0] * y2 - g[q, 2] * y0
+            jt[2, col] = -g[q, 0] * y1 + g[q, 1] * y0
+            jt[3, col] = g[q, 0]
+            jt[4, col] = g[q, 1]
+            jt[5, col] = g[q, 2]
+            # (g R) . dshape/dc
+            e0 = g[q, 0] * rot[0, 0] + g[q, 1] * rot[1, 0] + g[q, 2] * rot[2, 0]
+            e1 = g[q, 0] * rot[0, 1] + g[q, 1] * rot[1, 1] + g[q, 2] * rot[2, 1]
+            e2 = g[q, 0] * rot[0, 2] + g[q, 1] * rot[1, 2] + g[q, 2] * rot[2, 2]
+            for j in range(nf):
+                m = free[j]
+                jt[6 + j, col] = e0 * dsdc[v, 0, m] + e1 * dsdc[v, 1, m] + e2 * dsdc[v, 2, m]
+        rw[v] = t[v, 0] * sw
+        rw[nv + v] = t[v, 1] * sw
         if use_z:
+            col = 2 * nv + v
             for j in range(n):
-                zrow[v, j] = -dp[2, j] * inv_ds
-                zmean[j] += w[v] * zrow[v, j]
-            wsum += w[v]
+                zmean[j] += w[v] * jt[j, col]
+            rw[col] = t[v, 2] * sw
     if use_z:
         for j in range(n):
-            zmean[j] /= wsum
-        for v in range(nv):
-            rz = t[v, 2]
-            for i in range(n):
-                zi = zrow[v, i] - zmean[i]
-                b[i] -= w[v] * zi * rz
-                for j in range(i, n):
-                    h[i, j] += w[v] * zi * (zrow[v, j] - zmean[j])
+            zm = zmean[j] / wsum
+            for v in range(nv):
+                col = 2 * nv + v
+                jt[j, col] = (jt[j, col] - zm) * np.sqrt(w[v])
+    return _gram(jt, rw)
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _gram(jt, r):
+    """``(jt jt^T, -jt r)`` for ``jt`` (n, R): dot products of contiguous rows (vectorised:
+    the order of the sums is the compiler's)."""
+    n, nr = jt.shape
+    h = np.empty((n, n))
+    b = np.empty(n)
     for i in range(n):
-        for j in range(i):
-            h[i, j] = h[j, i]
+        acc = 0.0
+        for q in range(nr):
+            acc += jt[i, q] * r[q]
+        b[i] = -acc
+        for j in range(i, n):
+            acc = 0.0
+            for q in range(nr):
+                acc += jt[i, q] * jt[j, q]
+            h[i, j] = acc
+            h[j, i] = acc
     return h, b
 
 
