@@ -103,8 +103,12 @@ MIN_NODES_PER_BLOCK = 256
 #: return to Python between calls costs well under 1 % of that)
 CHUNK_STEPS = 64
 #: a short run (PROBE_STEPS) tries the thread count not in use, first after PROBE_MIN_S seconds,
-#: then, while it keeps losing, after twice as long each time, up to PROBE_MAX_S
-PROBE_STEPS = 4
+#: then, while it keeps losing, after twice as long each time, up to PROBE_MAX_S. Long enough
+#: that what a switch costs once (waking the team's sleeping thread, moving a block's arrays into
+#: the other core's cache: ~0.1-0.2 ms) does not decide it: probes of 4 steps made the team
+#: (~130 us a step on the quiet 2-core machine) lose to one thread (~200 us), so a run that
+#: started on one thread under load stayed there once the machine was quiet
+PROBE_STEPS = 32
 PROBE_MIN_S = 1.0
 PROBE_MAX_S = 60.0
 
@@ -178,6 +182,24 @@ def _atomic_load(typingctx, arr, idx):
 
 
 @intrinsic
+def _atomic_cas(typingctx, arr, idx, expected, new):
+    """``arr[idx] = new`` if ``arr[idx] == expected``, as one atomic compare-and-swap
+    (sequentially consistent); returns whether it swapped."""
+    if not _is_int64_vector(arr):
+        return None
+    sig = types.boolean(arr, idx, expected, new)
+
+    def codegen(context, builder, sig, args):
+        ptr = _item_pointer(context, builder, sig.args[0], args[0], args[1], sig.args[1])
+        old = context.cast(builder, args[2], sig.args[2], types.int64)
+        val = context.cast(builder, args[3], sig.args[3], types.int64)
+        res = builder.cmpxchg(ptr, old, val, "seq_cst", "seq_cst")
+        return builder.extract_value(res, 1)
+
+    return sig, codegen
+
+
+@intrinsic
 def _spin_pause(typingctx):
     """The x86 ``pause`` hint of a spin loop."""
     sig = types.void()
@@ -207,8 +229,8 @@ def _os_yield(typingctx):
 
 #: spins of a waiting thread before it starts to yield its core (~1 us of ``pause``)
 SPINS_BEFORE_YIELD = 200
-_CLAIMED = 0  # slot of the task counter in the team's counters (its own cache line) ...
-_DONE = 8  # ... and of the count of tasks done
+_DONE = 8  # slot of the count of tasks done in the team's counters (a cache line of its own)
+_LINE = 8  # float64 or int64 a cache line: per-block flags this far apart share no line
 
 
 @njit(cache=True)
@@ -275,6 +297,7 @@ class Rk2Plan:
     """
 
     free: np.ndarray
+    node_order: np.ndarray
     inv_mass: np.ndarray
     damping: np.ndarray
     block_nodes: np.ndarray
@@ -358,6 +381,10 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
     node_block[free] = block
     local = np.full(model.n_nodes, -1, np.int64)
     local[free] = np.arange(nf) - block_nodes[block]
+    # the kernel's own numbering of the nodes: the free ones block by block, then the kinematic
+    node_order = np.concatenate([free, np.flatnonzero(kin)]).astype(np.int64)
+    row_of = np.empty(model.n_nodes, np.int64)
+    row_of[node_order] = np.arange(model.n_nodes)
 
     si, sj, el = model.spring_i, model.spring_j, model.elements
     live = ~(kin[si] & kin[sj])  # springs that move a free node
@@ -419,12 +446,13 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
 
     return Rk2Plan(
         free=free,
+        node_order=node_order,
         inv_mass=c(1.0 / model.mass[free], np.float64),
         damping=c(model.damping[free], np.float64),
         block_nodes=block_nodes,
         block_chunks=np.array(block_chunks, np.int64),
         chunk_lanes=_offsets(chunk_counts),
-        elements=c(el[lane_e], np.uint32).reshape(-1, 6),
+        elements=c(row_of[el[lane_e]], np.uint32).reshape(-1, 6),
         target=c(np.concatenate(tgt_rows) if tgt_rows else np.zeros((0, 6)), np.uint32).reshape(
             -1, 6
         ),
@@ -434,8 +462,8 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
         pair=np.array(pairs, np.int64),
         pair_consts=c(np.concatenate(consts) if consts else np.zeros(0), np.float64),
         block_springs=_offsets([len(a) for a in spring_lists]),
-        spring_i=c(si[ks], np.int64),
-        spring_j=c(sj[ks], np.int64),
+        spring_i=c(row_of[si[ks]], np.int64),
+        spring_j=c(row_of[sj[ks]], np.int64),
         spring_ti=c(np.concatenate([t[0] for t in spring_t]), np.int64),
         spring_tj=c(np.concatenate([t[1] for t in spring_t]), np.int64),
         rest_length=c(rest[ks], np.float64),
@@ -597,13 +625,14 @@ def _block_forces(
 
 @njit(cache=True)
 def _rk2_task(
-    phase, b, x, v, xm, vm, buf, vblock, dt, free, inv_m, damp, bnodes, bchunks, chunk_lanes,
-    elems, target, rest_vol, kv, vsign, chunk_pairs, pair, consts, law, bsprings, si, sj, ti, tj,
-    rest, mat_id, mat, work,
+    phase, b, x, v, xm, vm, buf, vblock, dt, inv_m, damp, bnodes, bchunks, chunk_lanes, elems,
+    target, rest_vol, kv, vsign, chunk_pairs, pair, consts, law, bsprings, si, sj, ti, tj, rest,
+    mat_id, mat, work,
 ):  # fmt: skip
-    """One block's half of an RK2 step: ``phase`` 0 evaluates the forces at (x, v) and writes
-    the block's midpoint (x + dt/2 v, v + dt/2 a) into ``xm, vm``; ``phase`` 1 evaluates them at
-    the midpoint, takes the full step with its slopes, and writes the block's largest |v|."""
+    """One block's half of an RK2 step, on the kernel's own numbering of the nodes (the block's
+    nodes are rows q0 .. q1-1): ``phase`` 0 evaluates the forces at (x, v) and writes the
+    block's midpoint (x + dt/2 v, v + dt/2 a) into ``xm, vm``; ``phase`` 1 evaluates them at the
+    midpoint, takes the full step with its slopes, and writes the block's largest |v|."""
     fb = buf[b]
     q0 = bnodes[b]
     nloc = bnodes[b + 1] - q0
@@ -616,20 +645,18 @@ def _rk2_task(
     if phase == 0:
         h = 0.5 * dt
         for r in range(nloc):
-            q = q0 + r
-            i = free[q]
-            g = damp[q]
-            c = inv_m[q]
+            i = q0 + r
+            g = damp[i]
+            c = inv_m[i]
             for a in range(3):
                 xm[i, a] = x[i, a] + h * v[i, a]
                 vm[i, a] = v[i, a] + h * ((fb[r, a] - g * v[i, a]) * c)
         return
     vb = 0.0
     for r in range(nloc):
-        q = q0 + r
-        i = free[q]
-        g = damp[q]
-        c = inv_m[q]
+        i = q0 + r
+        g = damp[i]
+        c = inv_m[i]
         for a in range(3):
             x[i, a] += dt * vm[i, a]
             v[i, a] += dt * ((fb[r, a] - g * vm[i, a]) * c)
@@ -638,71 +665,93 @@ def _rk2_task(
                 vb = av
             elif not av <= vb:  # NaN: mark the block as non-finite, for good
                 vb = np.inf
-    vblock[b] = vb
+    vblock[b * _LINE] = vb
 
 
 @njit(cache=True)
 def _largest(a):
     m = 0.0
-    for i in range(a.shape[0]):
+    for i in range(0, a.shape[0], _LINE):
         m = max(m, a[i])
     return m
 
 
 @njit(cache=True, parallel=True)
 def _rk2_run_team(
-    x, v, n_steps, dt, tol_mm, n_workers, rows, free, inv_m, damp, bnodes, bchunks, chunk_lanes,
-    elems, target, rest_vol, kv, vsign, chunk_pairs, pair, consts, law, bsprings, si, sj, ti, tj,
-    rest, mat_id, mat,
+    x, v, n_steps, dt, tol_mm, n_workers, rows, node_order, n_free, inv_m, damp, bnodes, bchunks,
+    chunk_lanes, elems, target, rest_vol, kv, vsign, chunk_pairs, pair, consts, law, bsprings,
+    si, sj, ti, tj, rest, mat_id, mat,
 ):  # fmt: skip
     """Midpoint RK2 for up to n_steps, the plan's blocks shared by a team of ``n_workers``
     threads started once for the whole run; stops early when max |v| dt < tol_mm (tol_mm > 0).
     Returns (steps taken, last max |v| dt, step index of a non-finite value or -1). ``x``, ``v``
-    (N, 3) are updated in place (free nodes only).
+    (N, 3) are updated in place (free nodes only); the run works on copies in the plan's order
+    of the nodes (``node_order``: each block's nodes side by side, the kinematic ones last).
 
-    The run is a sequence of tasks, numbered step by step, half-step (phase) by half-step,
-    block by block; a thread takes the next number from a shared counter, waits until every task
-    of the earlier half-steps is done (a half-step needs its neighbours' midpoints, or their new
-    positions), runs it and counts it done. No thread launch per step, no fixed owner of a block:
-    any thread may run any task, and each task computes the same numbers whoever runs it. A team
-    with fewer threads than asked (or one) still runs every task, in order."""
+    The run is a sequence of tasks, half-step by half-step (two a step), block by block. Each
+    worker goes through the half-steps in order and, in each, claims the blocks not yet claimed
+    (an atomic compare-and-swap on the block's count of claimed half-steps), its own block
+    first (block w for worker w: the block's arrays stay in that core's cache); it waits until
+    every task of the earlier half-steps is done (a half-step needs its neighbours' midpoints,
+    or their new positions), runs it and counts it done. No thread launch per step, and no fixed
+    owner of a block: a worker that is behind (descheduled on a busy machine) has its block run
+    by another, and each task computes the same numbers whoever runs it. A team with fewer
+    threads than asked (or one) still runs every task, in order."""
     nb = bnodes.shape[0] - 1
+    n = node_order.shape[0]
+    xk = np.empty((n, 3))  # x and v in the plan's order of the nodes
+    vk = np.empty((n, 3))
+    for r in range(n):
+        i = node_order[r]
+        for a in range(3):
+            xk[r, a] = x[i, a]
+            vk[r, a] = v[i, a]
     buf = np.zeros((nb, rows, 3))  # each block's force sums (and its discard row)
-    xm = x.copy()  # kinematic rows stay at x (their velocity is zero), free rows are written
-    vm = v.copy()
-    vblock = np.zeros(nb)
+    xm = xk.copy()  # kinematic rows stay at x (their velocity is zero), free rows are written
+    vm = vk.copy()
+    vblock = np.zeros(nb * _LINE)  # each block's largest |v|, on a cache line of its own
     work = np.zeros((nb, PRISM_WORK * PRISM_CHUNK))  # each block's lanes
-    counters = np.zeros(16, np.int64)  # [_CLAIMED], [_DONE] on cache lines of their own
+    counters = np.zeros(16, np.int64)  # [_DONE] on a cache line of its own
+    claims = np.zeros(nb * _LINE, np.int64)  # half-steps claimed of each block, one a line
     stop = np.full(3, -1.0)  # the step the run stopped at, its max |v| dt, non-finite step
-    n_tasks = 2 * n_steps * nb
-    for _w in prange(n_workers):
-        while True:
-            t = _atomic_add(counters, _CLAIMED, 1)
-            if t >= n_tasks:
-                break
-            half = t // nb
-            b = t - half * nb
-            _wait_done(counters, half * nb)
-            if stop[0] >= 0.0:  # the run stopped at an earlier half-step
-                _atomic_add(counters, _DONE, 1)
-                break
-            step = half // 2
-            if half % 2 == 0 and step > 0:
-                # the previous step is complete: test it (each task of this half-step computes
-                # the same answer from the same numbers)
-                last = _largest(vblock) * dt
-                if not np.isfinite(last) or (tol_mm > 0.0 and last < tol_mm):
-                    stop[1] = last
-                    stop[2] = step - 1 if not np.isfinite(last) else -1.0
-                    stop[0] = step
+    n_halves = 2 * n_steps
+    for w in prange(n_workers):
+        quit_ = False
+        for half in range(n_halves):
+            for k in range(nb):
+                b = (w + k) % nb
+                if not _atomic_cas(claims, b * _LINE, half, half + 1):
+                    continue  # another worker has it
+                _wait_done(counters, half * nb)
+                if stop[0] >= 0.0:  # the run stopped at an earlier half-step
                     _atomic_add(counters, _DONE, 1)
+                    quit_ = True
                     break
-            _rk2_task(
-                half % 2, b, x, v, xm, vm, buf, vblock, dt, free, inv_m, damp, bnodes, bchunks,
-                chunk_lanes, elems, target, rest_vol, kv, vsign, chunk_pairs, pair, consts, law,
-                bsprings, si, sj, ti, tj, rest, mat_id, mat, work,
-            )  # fmt: skip
-            _atomic_add(counters, _DONE, 1)
+                step = half // 2
+                if half % 2 == 0 and step > 0:
+                    # the previous step is complete: test it (each task of this half-step
+                    # computes the same answer from the same numbers)
+                    last = _largest(vblock) * dt
+                    if not np.isfinite(last) or (tol_mm > 0.0 and last < tol_mm):
+                        stop[1] = last
+                        stop[2] = step - 1 if not np.isfinite(last) else -1.0
+                        stop[0] = step
+                        _atomic_add(counters, _DONE, 1)
+                        quit_ = True
+                        break
+                _rk2_task(
+                    half % 2, b, xk, vk, xm, vm, buf, vblock, dt, inv_m, damp, bnodes, bchunks,
+                    chunk_lanes, elems, target, rest_vol, kv, vsign, chunk_pairs, pair, consts,
+                    law, bsprings, si, sj, ti, tj, rest, mat_id, mat, work,
+                )  # fmt: skip
+                _atomic_add(counters, _DONE, 1)
+            if quit_:
+                break
+    for r in range(n_free):
+        i = node_order[r]
+        for a in range(3):
+            x[i, a] = xk[r, a]
+            v[i, a] = vk[r, a]
     if stop[0] >= 0.0:
         return int(stop[0]), stop[1], int(stop[2])
     last = _largest(vblock) * dt
@@ -823,7 +872,8 @@ def _rk2_kernel(p: Rk2Plan, model: TissueModel, x, v, n_steps, dt, tol_mm, worke
         float(tol_mm),
         int(workers),
         p.rows,
-        p.free,
+        p.node_order,
+        len(p.free),
         p.inv_mass,
         p.damping,
         p.block_nodes,
