@@ -254,6 +254,24 @@ def _prism_skew_table() -> np.ndarray:
 PRISM_SKEW = _prism_skew_table()
 
 
+def _local_order(free, n_nodes, si, sj, elems) -> np.ndarray:
+    """The free nodes ``free`` in reverse Cuthill-McKee order of the graph of their springs and
+    prisms: nodes joined by a spring or a prism get nearby numbers, so the Hessian's blocks of a
+    spring or a prism, and a node's neighbours in the Gauss-Seidel sweeps, lie close together in
+    memory (numbered by layer, the nodes of one prism are hundreds of rows apart)."""
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    fmap = -np.ones(n_nodes, np.int64)
+    fmap[free] = np.arange(len(free))
+    pairs = [np.stack([si, sj], axis=1)] + [elems[:, [a, b]] for a, b in PRISM_PAIRS]
+    pr = fmap[np.concatenate(pairs)]
+    pr = pr[(pr >= 0).all(axis=1)]
+    nf = len(free)
+    g = sp.coo_matrix((np.ones(len(pr)), (pr[:, 0], pr[:, 1])), shape=(nf, nf)).tocsr()
+    g = (g + g.T).tocsr()
+    return free[reverse_cuthill_mckee(g, symmetric_mode=True)]
+
+
 class SymmetricPattern:
     """The free-node Hessian in symmetric 3x3-block storage, and the packed arrays of the springs
     and prisms that touch a free node (the others add a constant to the energy and nothing to
@@ -268,8 +286,12 @@ class SymmetricPattern:
 
     Attributes (besides the storage)
     --------------------------------
-    n_free : int; fmap : (N,) int64 — free number of each node, -1 for a kinematic one.
-    si, sj, rest, alpha, beta, ec : (S',) — the active springs: ends (int32), rest length l
+    n_free : int; fmap : (N,) int64 — free number of each node, -1 for a kinematic one;
+    free_nodes : (F,) int64 — the node of each free number (:func:`_local_order`: the free
+        nodes in reverse Cuthill-McKee order, not in node order). The gradient and every vector
+        of the Newton solver's are in this order.
+    si, sj, rest, alpha, beta, ec : (S',) — the active springs (by their larger free number;
+        the prisms likewise): ends (int32), rest length l
         (mm), stiffnesses (g/s^2), threshold extension e^c = strain_c l (mm);
     sfi, sfj : (S',) int32 — free numbers of the ends; soff : (S',) int32 — lower block or -1.
     elems : (E', 6) int32; efree : (E', 6) int32; rest_volume, kv : (E',) — the active prisms
@@ -282,17 +304,22 @@ class SymmetricPattern:
 
     def __init__(self, model):
         n = model.n_nodes
-        free = np.flatnonzero(~np.asarray(model.kinematic))
+        si_all = np.asarray(model.spring_i, np.int64)
+        sj_all = np.asarray(model.spring_j, np.int64)
+        el_all = np.asarray(model.elements, np.int64).reshape(-1, 6)
+        free = _local_order(np.flatnonzero(~np.asarray(model.kinematic)), n, si_all, sj_all, el_all)
         fmap = -np.ones(n, np.int64)
         fmap[free] = np.arange(len(free))
         nf = len(free)
-        si_all = np.asarray(model.spring_i, np.int64)
-        sj_all = np.asarray(model.spring_j, np.int64)
-        act = (fmap[si_all] >= 0) | (fmap[sj_all] >= 0)
-        k = np.flatnonzero(act)
-        el_all = np.asarray(model.elements, np.int64).reshape(-1, 6)
-        eact = (fmap[el_all] >= 0).any(axis=1) & (np.asarray(model.volume_weight) != 0)
+        fs = np.maximum(fmap[si_all], fmap[sj_all])
+        # the springs and prisms in the order of their nodes' free numbers: each pass then
+        # writes the Hessian's storage (and reads the positions) from one band of rows to the next
+        k = np.flatnonzero(fs >= 0)
+        k = k[np.argsort(fs[k], kind="stable")]
+        fe_all = fmap[el_all]
+        eact = (fe_all >= 0).any(axis=1) & (np.asarray(model.volume_weight) != 0)
         e = np.flatnonzero(eact)
+        e = e[np.argsort(fe_all[e].max(axis=1), kind="stable")]
         fi, fj = fmap[si_all[k]], fmap[sj_all[k]]
         fe = fmap[el_all[e]]
         rows = [np.maximum(fi, fj)] + [np.maximum(fe[:, a], fe[:, b]) for a, b in PRISM_PAIRS]
@@ -313,6 +340,7 @@ class SymmetricPattern:
         rest = np.asarray(model.rest_length, np.float64)[k]
         self.n_free = nf
         self.fmap = fmap
+        self.free_nodes = free
         # 32-bit indices throughout: the tables are streamed at every assembly and CG sweep
         self.lptr = np.searchsorted(key // max(nf, 1), np.arange(nf + 1)).astype(np.int32)
         self.lcol = (key % max(nf, 1)).astype(np.int32)

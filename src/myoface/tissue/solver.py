@@ -595,8 +595,9 @@ def _build_newton_data(model: TissueModel) -> NewtonData:
     lall = np.empty(9 * allfree.nl)
     allfree.assemble(model.rest_positions, dall, lall)
     kall = allfree.matrix(dall, lall)
-    fd = (3 * model.free_index[:, None] + np.arange(3)).reshape(-1)
-    kd = (3 * model.kinematic_index[:, None] + np.arange(3)).reshape(-1)
+    # (that copy numbers its nodes in an order of its own: allfree.fmap)
+    fd = (3 * allfree.fmap[pat.free_nodes][:, None] + np.arange(3)).reshape(-1)
+    kd = (3 * allfree.fmap[model.kinematic_index][:, None] + np.arange(3)).reshape(-1)
     coupling = kall[fd][:, kd].tocsr()
     coupling.data.flags.writeable = False
     return NewtonData(pat, precond, coupling, _ro(dvals))
@@ -708,7 +709,7 @@ def relax_newton(
     """
     data = newton_data(model)
     pat = data.pattern
-    free = model.free_index
+    free = pat.free_nodes  # in the pattern's order
     kin = model.kinematic_index
     x = np.array(x, dtype=np.float64, order="C")
     if len(free) == 0:
