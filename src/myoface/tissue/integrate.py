@@ -111,6 +111,28 @@ def _targets_array(model: TissueModel, targets) -> np.ndarray:
     return t
 
 
+@njit(cache=True, nogil=True)
+def _start(xs, kin, tg, rest, x, x_kin_start):
+    """In one pass: ``x`` = ``xs`` (N, 3) with its kinematic nodes ``kin`` moved to ``tg``
+    (K, 3), and where they were into ``x_kin_start`` (K, 3). Returns (whether ``xs`` is
+    finite, whether its kinematic nodes are at their rest positions ``rest`` (N, 3))."""
+    finite = True
+    for i in range(xs.shape[0]):
+        for c in range(3):
+            v = xs[i, c]
+            finite = finite and np.isfinite(v)
+            x[i, c] = v
+    at_rest = True
+    for a in range(kin.shape[0]):
+        i = kin[a]
+        for c in range(3):
+            v = xs[i, c]
+            x_kin_start[a, c] = v
+            at_rest = at_rest and v == rest[i, c]
+            x[i, c] = tg[a, c]
+    return finite, at_rest
+
+
 def _kargs(model: TissueModel) -> tuple:
     """The packed arrays every force kernel takes, in kernel argument order."""
     return (
@@ -338,14 +360,20 @@ def relax(
         raise MyofaceValueError(f"tol_mm must be > 0 mm; got {tol_mm}")
     state = state if state is not None else rest_state(model)
     tg = _targets_array(model, targets)
-    x = state.x.copy()
-    if not np.isfinite(x).all():
+    kin = model.kinematic_index
+    xs = np.ascontiguousarray(state.x, dtype=np.float64)
+    if xs.shape != model.rest_positions.shape:
+        raise MyofaceValueError(
+            f"the start state's positions must have shape {model.rest_positions.shape}; "
+            f"got {xs.shape}"
+        )
+    x = np.empty_like(xs)
+    x_kin_start = np.empty((len(kin), 3))
+    finite, from_rest = _start(xs, kin, tg, model.rest_positions, x, x_kin_start)
+    if not finite:
         raise MyofaceValueError("the start state's positions must be finite")
-    x_kin_start = x[model.kinematic_index].copy()
-    x[model.kinematic_index] = tg
     if method == "newton":
         x0 = x
-        from_rest = np.array_equal(x_kin_start, model.rest_positions[model.kinematic_index])
         try:
             x, ok, it, res, _, fmax = relax_newton(
                 model, x0, x_kin_start, tol_mm, max_iter or 50, previous_x=state.previous_x

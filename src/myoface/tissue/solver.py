@@ -399,10 +399,13 @@ def sgs_precond(lptr, lcol, dused, lvals, dinv, r, z, w):
     _upper_solve(lptr, lcol, lvals, dinv, np.empty(0), dz, z, w)
 
 
-@njit(cache=True, nogil=True, fastmath=True)
+@njit(cache=True, nogil=True, fastmath={"contract"})
 def _lower_solve(lptr, lcol, lvals, dinv, r, y):
     """``y = (D + L)^-1 r`` (block forward substitution, gathering each row's lower blocks;
-    ``dinv``: the inverses of D's blocks)."""
+    ``dinv``: the inverses of D's blocks). Products fused into adds, but no reassociation: each
+    block's three sums are then made apart and subtracted from the row's (with ``fastmath=True``
+    the compiler chains all nine products into the row's sums, and the sweep waits on them:
+    28 -> 22 us on the default face)."""
     nf = lptr.shape[0] - 1
     for i in range(nf):
         s0 = r[3 * i]
@@ -669,6 +672,41 @@ def _extrapolate(x, free, kin, x_kin_start, previous_x, a_max, dk):
     return np.abs(dk).max() if dk.size > 0 else 0.0
 
 
+@njit(cache=True, nogil=True)
+def _kinematic_move(x, kin, x_kin_start, dk):
+    """The kinematic nodes' move from ``x_kin_start`` (K, 3) to where they are in ``x`` (N, 3)
+    into ``dk`` (K, 3); returns its largest coordinate (mm)."""
+    m = 0.0
+    for a in range(kin.shape[0]):
+        for c in range(3):
+            d = x[kin[a], c] - x_kin_start[a, c]
+            dk[a, c] = d
+            m = max(m, abs(d))
+    return m
+
+
+@njit(cache=True, nogil=True)
+def _add_linear_response(x, free, cptr, cidx, cval, dk, ptr, rows, vals, diag, dinv, perm):
+    """Add the free nodes' linear response ``-K_ff^-1 K_fk dk`` to the move ``dk`` (K, 3) of
+    the kinematic nodes to ``x`` (N, 3), in place: K_fk in CSR (``cptr``, ``cidx``, ``cval``),
+    K_ff^-1 by the :class:`BlockLDL` (``ptr`` .. ``perm``); ``free`` in the factor's order."""
+    n = cptr.shape[0] - 1
+    d = dk.reshape(-1)
+    b = np.empty(n)
+    for i in range(n):
+        acc = 0.0
+        for k in range(cptr[i], cptr[i + 1]):
+            acc += cval[k] * d[cidx[k]]
+        b[i] = -acc
+    out = np.empty(n)
+    ldl_solve(ptr, rows, vals, diag, dinv, perm, b, out, np.empty(n))
+    for a in range(free.shape[0]):
+        i = free[a]
+        x[i, 0] += out[3 * a]
+        x[i, 1] += out[3 * a + 1]
+        x[i, 2] += out[3 * a + 2]
+
+
 #: the Newton loop's parameters, in the order :func:`_newton` takes them
 _PARAMS = np.array(
     [
@@ -718,15 +756,17 @@ def relax_newton(
     # 1. the initial guess: the last move repeated (in a video) and the linear response of the
     # free nodes to the rest of the kinematic nodes' move
     x_kin_start = np.ascontiguousarray(x_kin_start, dtype=np.float64)
+    dk = np.empty((len(kin), 3))
     if previous_x is None:
-        dk = x[kin] - x_kin_start
-        left = float(np.abs(dk).max()) if dk.size else 0.0
+        left = _kinematic_move(x, kin, x_kin_start, dk)
     else:
-        dk = np.empty((len(kin), 3))
         prev = np.ascontiguousarray(previous_x, dtype=np.float64)
         left = _extrapolate(x, free, kin, x_kin_start, prev, EXTRAPOLATE_MAX, dk)
     if left > LINEAR_RESPONSE_MIN_MM:
-        x[free] += data.precond.solve(-(data.coupling @ dk.reshape(-1))).reshape(-1, 3)
+        c, f = data.coupling, data.precond
+        _add_linear_response(
+            x, free, c.indptr, c.indices, c.data, dk, f.ptr, f.rows, f.vals, f.diag, f.dinv, f.perm
+        )
 
     # 2. Newton steps (one compiled loop: no Python between the kernels)
     out = np.zeros(9) if stats is None else stats
