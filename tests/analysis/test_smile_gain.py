@@ -44,3 +44,16 @@ def test_a_still_input_is_refused():
     z = np.zeros((5, 2, 2))
     with pytest.raises(ValueError, match="do not move"):
         smile_gain(z, z)
+
+
+def test_the_lateral_and_vertical_parts_say_where_the_gain_is_lost():
+    """A resynthesis that widens the mouth as much as the input but raises its corners half as
+    much: lateral 1, vertical 0.5 (each corner's way out taken from the input's side)."""
+    d_in = _smile()
+    d_out = d_in * np.array([1.0, 0.5])
+    ratio, detail = smile_gain(d_in, d_out)
+    assert detail["lateral_ratio"] == pytest.approx(1.0)
+    assert detail["vertical_ratio"] == pytest.approx(0.5)
+    assert 0.5 < ratio < 1.0
+    _, detail = smile_gain(d_in, d_in * np.array([-1.0, 1.0]))  # corners drawn in, not out
+    assert detail["lateral_ratio"] == pytest.approx(-1.0)

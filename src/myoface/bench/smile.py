@@ -21,8 +21,10 @@ def smile_gain(d_in: np.ndarray, d_out: np.ndarray, apex_fraction: float = APEX_
     The apex: the frames where the input's corners (mean displacement of the two) move at
     least ``apex_fraction`` of their largest. Returns (ratio, detail): the median over the
     apex frames of |d_out| / |d_in| (mean over the corners), 1 when the model's corners
-    travel as far as the person's; the detail gives the apex frames, both displacements and
-    the cosine between their directions."""
+    travel as far as the person's; the detail gives the apex frames, both displacements, the
+    cosine between their directions and the ratio's parts across the face and up
+    (``lateral_ratio``, ``vertical_ratio``: a model that widens the mouth as the person does
+    but raises its corners less has the second below the first)."""
     a = np.asarray(d_in, dtype=np.float64)
     b = np.asarray(d_out, dtype=np.float64)
     if a.shape != b.shape or a.ndim != 3:
@@ -46,7 +48,25 @@ def smile_gain(d_in: np.ndarray, d_out: np.ndarray, apex_fraction: float = APEX_
         "resynthesis_iod": round(float(np.median(m_out[apex])), 4),
         "direction_cosine": round(cos, 3),
     }
+    if a.shape[2] >= 2:
+        detail.update(_component_ratios(a[apex], b[apex]))
     return ratio, detail
+
+
+def _component_ratios(a: np.ndarray, b: np.ndarray) -> dict:
+    """Where a smile's gain is lost: the resynthesis' corners over the input's across the face
+    (``x``, each corner's along the side the input's corner moves to) and up (``y``), each
+    the median over the apex frames ``a``, ``b`` (F, 2, dims) of the ratio of the two
+    corners' means; None where the input does not move that way (below 1 % of the IOD)."""
+    side = np.sign(a[..., 0].mean(axis=0))  # (2,): each corner's way out, as the input goes
+    out = {}
+    for name, x_in, x_out in (
+        ("lateral_ratio", (a[..., 0] * side).mean(axis=1), (b[..., 0] * side).mean(axis=1)),
+        ("vertical_ratio", a[..., 1].mean(axis=1), b[..., 1].mean(axis=1)),
+    ):
+        ok = np.abs(x_in) >= 0.01
+        out[name] = round(float(np.median(x_out[ok] / x_in[ok])), 3) if ok.any() else None
+    return out
 
 
 #: issue 19's target range for the ratio
