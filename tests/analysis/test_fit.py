@@ -404,3 +404,67 @@ def test_analysis_by_synthesis_takes_out_the_trackers_error(fm):
     assert plain.contractions[zyg].min() > 0.3
     assert r.contractions.max() < 0.02
     np.testing.assert_allclose(r.pose.angles_deg, truth.angles_deg, atol=0.05)
+
+
+class _StandInDetector:
+    """Landmarks from a list, one per frame (None: no face)."""
+
+    def __init__(self, seq):
+        self.seq = list(seq)
+
+    def detect(self, frame):
+        return self.seq.pop(0)
+
+    def close(self):
+        pass
+
+
+def _threads(*names):
+    import threading
+
+    return [t for t in threading.enumerate() if t.name.startswith(names)]
+
+
+def test_measure_frames_detects_ahead_with_the_frame_by_frame_results(fm):
+    """``measure_frames`` runs the fit analyzer's detector on a worker thread ahead of the fit
+    (``FitAnalyzer.observe``): the measurements are those of measuring frame by frame, a frame
+    without a face included; stopping early and closing leave no thread behind (the detector's
+    nor the deferred relax's)."""
+    from myoface.analysis.fit import FitAnalyzer
+    from myoface.analysis.pipeline import measure_frames
+
+    skin = fm.skin_vertices(fm.relax({"zygomaticus_major_l": 0.5}).state)
+    seq = [
+        landmarks(fm.face.vertices if k < 2 else skin, HeadPose.from_euler(3.0 * k, 0, 0))
+        for k in range(6)
+    ]
+    seq[3] = None
+
+    class Video(list):
+        fps = 30.0
+
+    video = Video([np.zeros((480, 640, 3), np.uint8)] * len(seq))
+
+    def run(ahead: bool):
+        an = FitAnalyzer(fm, camera=CAMERA, detector=_StandInDetector(seq), deferred_relax=True)
+        try:
+            if ahead:
+                return [m for _, m in measure_frames(video, an)]
+            return [an.measure(f, k, k / video.fps) for k, f in enumerate(video)]
+        finally:
+            an.close()
+
+    a, b = run(True), run(False)
+    assert [m.quality for m in a] == ["ok", "ok", "ok", "no_face", "ok", "ok"]
+    for ma, mb in zip(a, b, strict=True):
+        assert (ma.index, ma.quality) == (mb.index, mb.quality)
+        np.testing.assert_array_equal(ma.contractions, mb.contractions)
+    assert a[5].contractions[fm.ids.index("zygomaticus_major_l")] > 0.2
+    assert not _threads("myoface-detect", "myoface-fit")
+    # stopped after the first frame, then closed
+    an = FitAnalyzer(fm, camera=CAMERA, detector=_StandInDetector(seq), deferred_relax=True)
+    gen = measure_frames(video, an)
+    assert next(gen)[1].quality == "ok"
+    gen.close()
+    an.close()
+    assert not _threads("myoface-detect", "myoface-fit")

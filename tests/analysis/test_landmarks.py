@@ -6,6 +6,7 @@ import pytest
 
 from myoface.analysis.landmarks import (
     contours_from_landmarks,
+    detect_ahead,
     fit_similarity,
     rigid_vertices,
 )
@@ -25,6 +26,58 @@ def test_fit_similarity_recovers_a_known_map():
     assert np.allclose(np.stack([zs.real, zs.imag], 1), dst)
     with pytest.raises(MyofaceValueError, match="degenerate"):
         fit_similarity(np.ones((4, 2)), dst[:4])
+
+
+def _detect_threads():
+    import threading
+
+    return [t for t in threading.enumerate() if t.name == "myoface-detect"]
+
+
+def test_detect_ahead_runs_in_order_and_stops_its_thread():
+    """The detector runs on a worker thread, in order, ahead of the consumer; the results come
+    in order; stopping early (closing the generator), an exception in the detector or in the
+    source all end the thread (joined, none left) and close the source."""
+    import threading
+
+    seen, closed = [], []
+
+    def source(n):
+        try:
+            yield from range(n)
+        finally:
+            closed.append(True)
+
+    def detect(k):
+        seen.append((k, threading.current_thread().name))
+        if k == 13:
+            raise ValueError("no such frame")
+        return 10 * k
+
+    assert list(detect_ahead(source(5), detect, depth=2)) == [(k, 10 * k) for k in range(5)]
+    assert [name for _, name in seen] == ["myoface-detect"] * 5 and closed == [True]
+    assert not _detect_threads()
+    # stopped early: the thread, blocked on a full queue, sees the stop and ends
+    gen = detect_ahead(source(1000), detect, depth=3)
+    assert next(gen) == (0, 0)
+    gen.close()
+    assert not _detect_threads() and len(closed) == 2 and len(seen) < 5 + 10
+    # the detector's exception is raised in the consumer, in order, and the thread ends
+    out = []
+    with pytest.raises(ValueError, match="no such frame"):
+        for item in detect_ahead(source(20), lambda k: detect(k + 10), depth=2):
+            out.append(item)
+    assert [k for k, _ in out] == [0, 1, 2] and not _detect_threads()
+
+    def broken():
+        yield 1
+        raise RuntimeError("cannot decode")
+
+    with pytest.raises(RuntimeError, match="cannot decode"):
+        list(detect_ahead(broken(), detect))
+    assert not _detect_threads()
+    with pytest.raises(MyofaceValueError, match="depth"):
+        next(detect_ahead([], detect, depth=0))
 
 
 def test_rigid_vertices_leave_out_what_muscles_move():

@@ -77,6 +77,14 @@ NEUTRAL_MARGIN_MM = 1.0
 CALIBRATION_FRAMES = 5
 #: Euler axis order of the head angles (scipy's: upper case = intrinsic)
 EULER_ORDER = "YXZ"
+#: a frame's Gauss-Newton iterations stop once a step is below all of these: head rotation
+#: (rad; 0.006 degrees), head translation (mm) and contraction. Each is far below what the
+#: landmarks resolve (MediaPipe's ~1 mm scatter moves a contraction by a few hundredths);
+#: tolerances ten times tighter took a third more iterations on single_face.mp4 for the same
+#: analysis.fidelity (0.694 against 0.693)
+STEP_TOL_RAD = 1e-4
+STEP_TOL_MM = 1e-2
+STEP_TOL_CONTRACTION = 5e-3
 
 
 @dataclass(frozen=True)
@@ -114,6 +122,13 @@ class FitSettings:
     huber : a landmark residual beyond this many sigmas weighs less (Huber).
     iterations : Gauss-Newton steps per frame (fewer when converged).
     refine : relaxes of the tissue per frame at the estimate (0: the linear response only).
+    relax_step_mm : with the relax deferred (a video, :meth:`ModelFit.fit` ``deferred=True``):
+        the tissue is relaxed again only once the skin the estimate makes has moved this far
+        (mm, at any vertex, by the linear model) from where the tissue was last relaxed; in
+        between, the model's response Broyden-corrected at the last relax stands in for the
+        tissue (its error grows with the square of the step). A relax costs more than
+        MediaPipe on a frame; the contractions of muscles that pull nearly alike trade off
+        from frame to frame with little change of the skin, which needs no relax.
     synthesis_rounds : rounds of analysis by synthesis per frame (and at calibration) when the
         fit is given a :class:`LandmarkSynthesis`.
     """
@@ -130,6 +145,7 @@ class FitSettings:
     huber: float = 3.0
     iterations: int = 8
     refine: int = 1
+    relax_step_mm: float = 0.5
     #: with a :class:`LandmarkSynthesis`: rounds of analysis by synthesis per frame
     synthesis_rounds: int = 2
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
@@ -464,6 +480,12 @@ class ModelFit:
         self.calibration: Calibration | None = None
         #: tissue relaxes that did not converge (see :meth:`_relax`)
         self.unconverged_relaxes = 0
+        #: where the time goes (for the benchmark's breakdown): the fits' thread CPU (s) and
+        #: count, the relaxes' thread CPU (s; on the worker when deferred) and count, and the
+        #: wall time (s) fits waited for a deferred relax
+        self.timings = {
+            "fits": 0, "fit_cpu_s": 0.0, "relaxes": 0, "relax_cpu_s": 0.0, "relax_wait_s": 0.0,
+        }  # fmt: skip
 
     # -------------------------------------------------------------- public
     def lose_track(self) -> None:
@@ -483,10 +505,12 @@ class ModelFit:
         """Relax the fit's state at ``c``; the skin's displacement (V, 3) mm. A relax that
         does not converge is counted (:attr:`unconverged_relaxes`), not raised: the fit
         corrects its linear model with whatever the tissue reached."""
+        import time
         import warnings
 
         from myoface.tissue import RelaxWarning
 
+        t0 = time.thread_time()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RelaxWarning)
             res = self.model.relax(c, self.state)
@@ -494,14 +518,28 @@ class ModelFit:
             self.unconverged_relaxes += 1
         self.state = res.state
         disp = self.model.skin_vertices(self.state) - self.neutral
-        return disp + self.lid_extra @ np.asarray(c, dtype=np.float64)
+        out = disp + self.lid_extra @ np.asarray(c, dtype=np.float64)
+        self.timings["relaxes"] += 1
+        self.timings["relax_cpu_s"] += time.thread_time() - t0
+        return out
 
     def shape(self, contractions) -> np.ndarray:
         """The fit's forward model (V, 3) mm, head frame, at ``contractions``: the person's
         neutral plus the displacement at the tissue's last relax, continued linearly."""
         c = np.asarray(contractions, dtype=np.float64)
         jac = self.response if self._jac is None else self._jac
-        return self.neutral + self.identity_mm + self._d0 + jac @ (c - self._c0)
+        return self.neutral + self.identity_mm + self._d0 + _linear(jac, c - self._c0)
+
+    def _relax_due(self, c) -> bool:
+        """Whether the tissue is to be relaxed (deferred) at ``c``: once the skin the linear
+        model gives there has moved :attr:`FitSettings.relax_step_mm` from where the tissue
+        was last relaxed (at any vertex)."""
+        dc = np.asarray(c, dtype=np.float64) - self._c0
+        if np.abs(dc).max() <= 1e-6:
+            return False
+        jac = self.response if self._jac is None else self._jac
+        step = _linear(jac, dc)
+        return bool(np.sqrt((step**2).sum(1).max()) > self.settings.relax_step_mm)
 
     def _relax_later(self, c) -> None:
         """Relax the tissue at ``c`` on the worker thread (:meth:`_collect` takes it up)."""
@@ -520,12 +558,16 @@ class ModelFit:
             return
         c, fut = self._pending
         self._pending = None
+        import time
+
+        t0 = time.perf_counter()
         d_new = fut.result()
+        self.timings["relax_wait_s"] += time.perf_counter() - t0
         jac = self.response.copy()
         dc = c - self._c0
         dd = float(dc @ dc)
         if dd > 1e-10:
-            jac += np.multiply.outer((d_new - self._d0) - jac @ dc, dc / dd)
+            jac += np.multiply.outer((d_new - self._d0) - _linear(jac, dc), dc / dd)
         self._c0, self._d0, self._jac = c, d_new, jac
 
     def close(self) -> None:
@@ -552,6 +594,9 @@ class ModelFit:
         (the previous frame's estimate), and the tissue is relaxed at this frame's estimate
         on a second thread while the caller goes on (e.g. runs the detector on the next
         frame). The next call waits for it first, so the results do not depend on timing."""
+        import time
+
+        t0 = time.thread_time()
         p = _check_points(points, len(self.neutral))
         prev = self._prev
         self._collect()
@@ -563,13 +608,11 @@ class ModelFit:
                 if err is None:
                     break
                 res = self._fit(p - err, prev, refine=0, start=res)
-        if (
-            deferred
-            and self.settings.refine > 0
-            and np.abs(res.contractions - self._c0).max() > 1e-6
-        ):
+        if deferred and self.settings.refine > 0 and self._relax_due(res.contractions):
             self._relax_later(res.contractions)
         self._prev = res
+        self.timings["fits"] += 1
+        self.timings["fit_cpu_s"] += time.thread_time() - t0  # (with immediate relaxes)
         return res
 
     def calibrate(
@@ -589,26 +632,45 @@ class ModelFit:
         in the image plane then added, so that the neutral reproduces them) are fitted with
         every contraction at zero; later frames measure expression relative to it.
         """
-        frames = list(frames)
-        if not frames:
-            raise MyofaceValueError("calibrate() needs at least one frame")
-        scores = np.full(len(frames), np.nan)
         if index is None:
+            # scored as they come (``frames`` may be an iterator whose points are being
+            # detected meanwhile), each frame's fit started from the previous frame's
+            # (no temporal prior: each frame's score is its own)
             saved = self.identity_mm
             self.identity_mm = np.zeros_like(self.neutral)
             flat = self.response.reshape(-1, self.n_muscles)
-            for k, pts in enumerate(frames):
-                if pts is not None:
-                    r = self._fit(_check_points(pts, len(self.neutral)), None, refine=0)
+            got, scored, last = [], [], None
+            try:
+                for pts in frames:
+                    got.append(pts)
+                    if pts is None:
+                        scored.append(np.nan)
+                        last = None
+                        continue
+                    r = self._fit(
+                        _check_points(pts, len(self.neutral)), None, refine=0, start=last,
+                        rest=True,
+                    )  # fmt: skip
+                    last = r
                     disp = np.linalg.norm((flat @ r.contractions).reshape(-1, 3), axis=1)
-                    scores[k] = float(np.percentile(disp, NEUTRAL_PERCENTILE))
-            self.identity_mm = saved
+                    scored.append(float(np.percentile(disp, NEUTRAL_PERCENTILE)))
+            finally:
+                self.identity_mm = saved
+            frames = got
+            if not frames:
+                raise MyofaceValueError("calibrate() needs at least one frame")
+            scores = np.array(scored, dtype=np.float64)
             if not np.isfinite(scores).any():
                 raise MyofaceValueError("no face in any of the calibration frames")
             # the scores are known to the tracker's scatter: of the frames within it of the
             # lowest, the earliest (a video starts neutral more often than it ends so)
             best = np.nanmin(scores)
             index = int(np.flatnonzero(scores <= best + NEUTRAL_MARGIN_MM)[0])
+        else:
+            frames = list(frames)
+            if not frames:
+                raise MyofaceValueError("calibrate() needs at least one frame")
+            scores = np.full(len(frames), np.nan)
         if not 0 <= index < len(frames) or frames[index] is None:
             raise MyofaceValueError(f"calibration frame {index} has no face")
         use = [index]
@@ -726,19 +788,25 @@ class ModelFit:
             rows.append(jz * sw[:, None])
         return np.vstack(rows)
 
-    def _fit(self, p, prev: FrameFit | None, refine: int, start: FrameFit | None = None):
+    def _fit(self, p, prev: FrameFit | None, refine: int, start: FrameFit | None = None,
+             rest: bool = False):  # fmt: skip
         """The bounded Gauss-Newton fit of one frame (see the module's docstring), with the
-        temporal prior to ``prev``, started from ``start`` (default: ``prev``)."""
+        temporal prior to ``prev``, started from ``start`` (default: ``prev``; without
+        either from a closed-form pose and no contraction). ``rest``: with the model
+        linearised at rest (as a fit from nothing is) rather than where the tissue was last
+        relaxed."""
         m = self.n_muscles
         base = self.neutral + self.identity_mm
         start = prev if start is None else start
         if start is None:
             pose = initial_pose(base, p, self.camera)
             c = np.zeros(m)
+        else:
+            pose, c = start.pose, start.contractions.copy()
+        if start is None or rest:
             c0, d0 = np.zeros(m), np.zeros_like(base)
             jac = self.response.copy()
         else:
-            pose, c = start.pose, start.contractions.copy()
             c0, d0 = self._c0, self._d0
             jac = (self.response if self._jac is None else self._jac).copy()
         total_it, conv = 0, False
@@ -751,13 +819,13 @@ class ModelFit:
                 dc = c - c0
                 dd = float(dc @ dc)
                 if dd > 1e-10:
-                    miss = (d_new - d0) - jac @ dc
+                    miss = (d_new - d0) - _linear(jac, dc)
                     jac += np.multiply.outer(miss, dc / dd)
                 c0, d0 = c.copy(), d_new
                 self._c0, self._d0, self._jac = c0, d0, None
             pose, c, it, conv = self._gauss_newton(p, pose, c, c0, d0, jac, base, prev)
             total_it += it
-        shape = base + d0 + jac @ (c - c0)
+        shape = base + d0 + _linear(jac, c - c0)
         k = self._pixel_mm(pose)
         uv = self.camera.project(pose.apply(shape))
         resid = float(np.sqrt(((uv - p[:, :2]) ** 2).sum(1).mean()) * k)
@@ -873,11 +941,11 @@ class ModelFit:
         lam = 1e-3
         conv = False
         it = 0
-        shape = base + d0 + jac @ (c - c0)
+        shape = base + d0 + _linear(jac, c - c0)
         w0 = self._weights(pose, shape)  # (visibility from the frame's starting pose)
         while it < s.iterations:
             it += 1
-            shape = base + d0 + jac @ (c - c0)
+            shape = base + d0 + _linear(jac, c - c0)
             k = self._pixel_mm(pose)
             # the normal equations of the Huber-reweighted landmark rows (what
             # _residuals and _jacobians define), accumulated vertex by vertex, compiled
@@ -899,7 +967,7 @@ class ModelFit:
                 )
                 new_c = c.copy()
                 new_c[free] = np.clip(c[free] + step[6:], 0.0, 1.0)
-                new_shape = base + d0 + jac @ (new_c - c0)
+                new_shape = base + d0 + _linear(jac, new_c - c0)
                 cost1 = self._fast_cost(p, new_pose, new_c, new_shape, w0, k, prev, free)
                 if cost1 <= cost0 + 1e-9 * abs(cost0):
                     lam = max(lam / 10, 1e-7)
@@ -910,9 +978,9 @@ class ModelFit:
                 break
             pose, c = new_pose, new_c
             small = (
-                np.abs(step[:3]).max() < 1e-5
-                and np.abs(step[3:6]).max() < 1e-3
-                and (len(free) == 0 or np.abs(step[6:]).max() < 1e-3)
+                np.abs(step[:3]).max() < STEP_TOL_RAD
+                and np.abs(step[3:6]).max() < STEP_TOL_MM
+                and (len(free) == 0 or np.abs(step[6:]).max() < STEP_TOL_CONTRACTION)
             )
             if small:
                 conv = True
@@ -938,16 +1006,20 @@ class ModelFit:
             # the offset, poses fixed: a sparse linear least-squares problem (Gauss-Newton)
             for _ in range(2):
                 base = self.neutral + ident
-                h, g = reg.copy(), -(reg @ ident.ravel())
+                blocks, g = np.zeros((nv, 3, 3)), -(reg @ ident.ravel())
                 for p, pose in zip(frames, poses, strict=True):
                     k = self._pixel_mm(pose)
                     w0 = self._weights(pose, base)
                     rxy, rz, dist, use_z = self._residuals(p, pose, base, w0, k)
                     w = w0 * self._huber(dist)
-                    blocks, rhs = self._offset_blocks(pose, base, k, w, rxy, rz, use_z)
-                    h = h + sparse.block_diag(blocks, format="csr")
+                    hb, rhs = self._offset_blocks(pose, base, k, w, rxy, rz, use_z)
+                    blocks += hb
                     g = g + rhs
-                ident = ident + spsolve(h.tocsc(), g).reshape(-1, 3)
+                diag = sparse.bsr_matrix(
+                    (blocks, np.arange(nv), np.arange(nv + 1)), shape=(3 * nv, 3 * nv)
+                )
+                h = (reg + diag).tocsc()
+                ident = ident + spsolve(h, g).reshape(-1, 3)
         # the residual left in the image plane: into the offset, perpendicular to the view
         base = self.neutral + ident
         rest = np.zeros_like(ident)
@@ -975,8 +1047,8 @@ class ModelFit:
         return pose
 
     def _offset_blocks(self, pose, shape, k, w, rxy, rz, use_z):
-        """Per vertex, the 3x3 normal-equation block and right-hand side of the weighted
-        landmark residuals with respect to its offset (head frame)."""
+        """Per vertex, the 3x3 normal-equation block (V, 3, 3) and right-hand side (3 V,) of
+        the weighted landmark residuals with respect to its offset (head frame)."""
         s = self.settings
         f = self.camera.focal_px
         pc = pose.apply(shape)
@@ -994,7 +1066,14 @@ class ModelFit:
             jz = -pose.rotation[2] / s.depth_sigma_mm
             h += w[:, None, None] * np.outer(jz, jz)[None]
             g -= (w * rz)[:, None] * jz[None]
-        return list(h), g.ravel()
+        return h, g.ravel()
+
+
+def _linear(jac: np.ndarray, dc: np.ndarray) -> np.ndarray:
+    """``jac @ dc`` (V, 3) for a response ``jac`` (V, 3, M) and contractions ``dc`` (M,), as
+    one matrix-vector product (numpy's stacked matmul of (V, 3, M) by (M,) loops over V)."""
+    m = jac.shape[2]
+    return (np.ascontiguousarray(jac).reshape(-1, m) @ dc).reshape(-1, 3)
 
 
 def _bounded_normal(hess, rhs, lo, hi):
@@ -1147,6 +1226,10 @@ class FitMeasurement:
         return ["" if not np.isfinite(v) else f"{v:.3f}" for v in vals]
 
 
+#: ``FitAnalyzer.measure``'s default: the frame is observed (its landmarks detected) there
+_NOT_OBSERVED = object()
+
+
 class FitAnalyzer:
     """The landmark tracker with the 3-D fit: MediaPipe's face mesh (video mode) on every
     frame, :class:`ModelFit` on its points. ``measure(frame, index, time_s)`` returns a
@@ -1206,6 +1289,10 @@ class FitAnalyzer:
         self.calibration_frame: int | None = None
         self.use_synthesis = bool(synthesis)
         self.synthesis: LandmarkSynthesis | None = None
+        #: where the time goes (for the benchmark's breakdown): the calibration's wall time
+        #: (s; its MediaPipe, scores and identity fit), and the detector's wall time (s) and
+        #: count on the frames after it (on the thread that runs :meth:`observe`)
+        self.timings = {"calibration_s": 0.0, "detections": 0, "detect_s": 0.0}
 
     @property
     def mm_per_px(self) -> float | None:
@@ -1230,21 +1317,38 @@ class FitAnalyzer:
         own detector, the analysis then goes on with this one and takes these frames' points
         from the calibration instead of detecting them again (it starts on the first of
         them). Returns the calibration frame's index in the video."""
-        from myoface.analysis.landmarks import FaceMeshDetector
+        import time
 
-        points, images = [], []
+        from myoface.analysis.landmarks import FaceMeshDetector, detect_ahead
+
+        t_start = time.perf_counter()
+        images = list(frames)
+        shapes = [np.shape(f) for f in images if f is not None]
+        if not shapes:
+            raise MyofaceValueError("the video has no frames to calibrate on")
+        self._ensure_fit(shapes[0])
+        points: list = []
         det = FaceMeshDetector(video=True)
+
+        def detected():
+            # MediaPipe on a worker thread a few frames ahead while each frame is scored
+            # (ModelFit.calibrate takes the points as they come)
+            def detect(frame):
+                return None if frame is None else det.detect(frame)  # (None: no face)
+
+            for _, pts in detect_ahead(images, detect):
+                points.append(pts)
+                yield pts
+
+        stream = detected()
         try:
-            for frame in frames:
-                images.append(frame)
-                if frame is None:  # (a frame known to have no face)
-                    points.append(None)
-                    continue
-                self._ensure_fit(np.shape(frame))
-                points.append(det.detect(frame))
-            if not points:
-                raise MyofaceValueError("the video has no frames to calibrate on")
+            if calibration_frame is None:
+                self.calibration = self.fit.calibrate(stream, None)
+            else:
+                for _ in stream:
+                    pass
         except BaseException:
+            stream.close()  # (stops the detector's thread before the detector closes)
             det.close()
             raise
         # the analysis goes on with this detector, and takes the calibration frames' points
@@ -1256,9 +1360,7 @@ class FitAnalyzer:
             self._detected = {first_index + k: pts for k, pts in enumerate(points)}
         else:
             det.close()
-        if calibration_frame is None:
-            idx = None
-        else:
+        if calibration_frame is not None:
             idx = int(calibration_frame) - first_index
             if not 0 <= idx < len(points):
                 raise MyofaceValueError(
@@ -1266,7 +1368,7 @@ class FitAnalyzer:
                 )
             if points[idx] is None:
                 raise MyofaceValueError(f"no face found on calibration frame {calibration_frame}")
-        self.calibration = self.fit.calibrate(points, idx)
+            self.calibration = self.fit.calibrate(points, idx)
         if self.use_synthesis:
             cal = self.calibration
             fit = self.fit
@@ -1282,18 +1384,31 @@ class FitAnalyzer:
             self.calibration = fit.calibrate(points, cal.index, synthesis=self.synthesis)
             self.calibration.scores = cal.scores
         self.calibration_frame = first_index + self.calibration.index
+        self.timings["calibration_s"] += time.perf_counter() - t_start
         return self.calibration_frame
 
-    def _points(self, frame, index: int):
-        """The frame's landmarks: the calibration's (frames it detected), else detected."""
+    def observe(self, frame, index: int = 0):
+        """The frame's landmarks (468, 3) or None without a face: the calibration's (frames
+        it detected), else detected. Called once per frame, in order; may run on another
+        thread than :meth:`measure` (:func:`~myoface.analysis.pipeline.measure_frames`
+        runs it ahead), which takes its result as ``observation``."""
         if index in self._detected:
             return self._detected.pop(index)
-        self._detected.clear()  # (past the calibration frames: the detector tracks from here)
-        return self.detector.detect(frame)
+        import time
 
-    def measure(self, frame, index: int = 0, time_s: float = 0.0) -> FitMeasurement:
+        self._detected.clear()  # (past the calibration frames: the detector tracks from here)
+        t0 = time.perf_counter()
+        pts = self.detector.detect(frame)
+        self.timings["detections"] += 1
+        self.timings["detect_s"] += time.perf_counter() - t0
+        return pts
+
+    def measure(self, frame, index: int = 0, time_s: float = 0.0,
+                observation=_NOT_OBSERVED) -> FitMeasurement:  # fmt: skip
+        """The frame's measurement; ``observation``: its :meth:`observe` (default: observed
+        here)."""
         fit = self._ensure_fit(np.shape(frame))
-        pts = self._points(frame, index)
+        pts = self.observe(frame, index) if observation is _NOT_OBSERVED else observation
         nan = np.full(len(self.ids), np.nan)
         if pts is None:
             fit.lose_track()

@@ -136,6 +136,68 @@ class FaceMeshDetector:
         self.close()
 
 
+#: frames the face mesh is run ahead of the analysis on a thread of its own
+#: (:func:`detect_ahead`): MediaPipe works without the GIL (its graph runs on threads of its
+#: own), so on a second core it tracks the next frames while this one is fitted; a few
+#: frames absorb the jitter between the two (a frame's fit costs more where a relax of the
+#: tissue is taken up)
+DETECT_AHEAD_FRAMES = 8
+
+
+def detect_ahead(items, detect, depth: int = DETECT_AHEAD_FRAMES):
+    """Yield ``(item, detect(item))`` for the items of ``items`` in order, ``detect`` run on
+    a worker thread up to ``depth`` items ahead of the consumer (the thread calls it
+    in order: a detector in video mode tracks from one frame to the next). Its exceptions are
+    raised here, in order. Closing the generator (stopping early, an exception in the
+    consumer) stops the thread and waits for it, and closes ``items`` if it is a generator.
+    """
+    import queue
+    import threading
+
+    if depth < 1:
+        raise MyofaceValueError(f"depth must be >= 1; got {depth}")
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    done = object()
+
+    def put(entry) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(entry, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce():
+        it = iter(items)
+        try:
+            for item in it:
+                if stop.is_set() or not put((True, (item, detect(item)))):
+                    return
+            put((True, done))
+        except BaseException as exc:  # handed to the consumer
+            put((False, exc))
+        finally:
+            close = getattr(it, "close", None)
+            if close is not None:
+                close()
+
+    worker = threading.Thread(target=produce, name="myoface-detect", daemon=True)
+    worker.start()
+    try:
+        while True:
+            ok, entry = q.get()
+            if not ok:
+                raise entry
+            if entry is done:
+                return
+            yield entry
+    finally:
+        stop.set()
+        worker.join()
+
+
 def contours_from_landmarks(face, points, sections=AUTO_SECTIONS) -> dict[str, np.ndarray]:
     """Section contours (pixels) from detected points sharing ``face``'s topology."""
     from myoface.analysis.sections import section_vertices

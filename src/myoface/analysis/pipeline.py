@@ -242,12 +242,35 @@ def analyze_video(
 
 def measure_frames(video, analyzer, start: int = 0, max_frames: int | None = None):
     """Yield ``(frame, FrameMeasurement)`` for the frames of ``video`` from ``start`` on (at
-    most ``max_frames``)."""
-    n = 0
-    for k, frame in enumerate(video):
-        if k < start:
-            continue
-        if max_frames is not None and n >= max_frames:
-            break
-        n += 1
-        yield frame, analyzer.measure(frame, k, k / video.fps)
+    most ``max_frames``).
+
+    An analyzer with an ``observe(frame, index)`` method (the 3-D fit's
+    :class:`~myoface.analysis.fit.FitAnalyzer`: MediaPipe's face mesh) has it run on a
+    worker thread a few frames ahead (:func:`~myoface.analysis.landmarks.detect_ahead`),
+    and its ``measure`` takes the result as ``observation``: the face mesh tracks the next
+    frames while this one is fitted. The results are the same as frame by frame (each frame
+    is observed once, in order). Stopping early (closing this generator) stops the thread."""
+
+    def frames():
+        n = 0
+        for k, frame in enumerate(video):
+            if k < start:
+                continue
+            if max_frames is not None and n >= max_frames:
+                return
+            n += 1
+            yield k, frame
+
+    observe = getattr(analyzer, "observe", None)
+    if observe is None:
+        for k, frame in frames():
+            yield frame, analyzer.measure(frame, k, k / video.fps)
+        return
+    from myoface.analysis.landmarks import detect_ahead
+
+    ahead = detect_ahead(frames(), lambda kf: observe(kf[1], kf[0]))
+    try:
+        for (k, frame), obs in ahead:
+            yield frame, analyzer.measure(frame, k, k / video.fps, observation=obs)
+    finally:
+        ahead.close()

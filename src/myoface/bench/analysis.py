@@ -85,7 +85,13 @@ def _sample_video():
 
 
 def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None) -> int:
-    """Decode ``path`` and analyse every frame (no output files); returns the frame count."""
+    """Decode ``path`` and analyse every frame (no output files) as ``myoface analyze``
+    does (for the landmarks' 3-D fit: calibrated on the most neutral frame of the first 2 s,
+    the analysis from frame 0); returns the frame count. The run's process CPU time and the
+    analyzer's own timings (:attr:`FitAnalyzer.timings`, :attr:`ModelFit.timings`) are kept
+    for the benchmark's breakdown."""
+    import time
+
     from myoface.analysis.pipeline import make_analyzer, measure_frames
     from myoface.analysis.video import open_video
     from myoface.model import build_face_model
@@ -93,26 +99,55 @@ def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None) -> i
     fm = _cache.get("model")
     if fm is None:
         fm = _cache["model"] = build_face_model()
+    t0, c0 = time.perf_counter(), time.process_time()
     video = open_video(path)
-    an, _, start = make_analyzer(fm, video, tracker, refine=refine)
+    an, _, start = make_analyzer(fm, video, tracker, calibration_frame=None, refine=refine)
     try:
-        return sum(1 for _ in measure_frames(video, an, start, max_frames))
+        n = sum(1 for _ in measure_frames(video, an, start, max_frames))
     finally:
         an.close()
+    timings = {"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
+    timings.update(getattr(an, "timings", {}))
+    fit = getattr(an, "fit", None)
+    if fit is not None:
+        timings.update(fit.timings)
+    _cache[("timings", tracker, refine)] = {"frames": n, **timings}
+    return n
 
 
 def _mediapipe_pass(path, max_frames: int | None) -> int:
+    import time
+
     from myoface.analysis.landmarks import FaceMeshDetector
     from myoface.analysis.video import open_video
 
     n = 0
+    t0, c0 = time.perf_counter(), time.process_time()
     with FaceMeshDetector(video=True) as det:
         for frame in open_video(path):
             if max_frames is not None and n >= max_frames:
                 break
             det.detect(frame)
             n += 1
+    _cache[("timings", "mediapipe")] = {
+        "frames": n, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0
+    }  # fmt: skip
     return n
+
+
+def _breakdown(key) -> dict:
+    """The last timed pass of ``key`` per frame, ms (see :func:`_analysis_pass`)."""
+    t = _cache.get(key)
+    if not t:
+        return {}
+    n = max(t["frames"], 1)
+    out = {"frames": t["frames"]}
+    for k, v in t.items():
+        if k.endswith("_s"):
+            out[k[:-2] + "_ms_per_frame"] = round(1e3 * v / n, 3)
+        elif k != "frames":
+            out[k] = v
+    return out
 
 
 def _fps(fn, quick: bool) -> tuple[float, int]:
@@ -141,11 +176,24 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     m = None if not quick else 24
     ours, n = _fps(lambda: _analysis_pass(path, "landmarks", m), quick)
     peer, _ = _fps(lambda: _mediapipe_pass(path, m), quick)
+    ours_t = _breakdown(("timings", "landmarks", None))
+    peer_t = _breakdown(("timings", "mediapipe"))
     lin, _ = _fps(lambda: _analysis_pass(path, "landmarks", m, refine=0), quick)
     detail = {
         "fit_share_of_frame": 1.0 - ours / peer,
         "fps_refine0": lin,
         "fit_share_of_frame_refine0": 1.0 - lin / peer,
+        # the last timed pass of each, per frame (ms): wall and process CPU (all threads:
+        # on a busy machine the CPU time is the steadier measure of the work), and ours by
+        # stage: the calibration's wall time, MediaPipe's wall time on the frames after it
+        # (on the thread that runs ahead of the fit), the fit's and the relaxes' thread CPU
+        # and the time a fit waited for a deferred relax
+        "breakdown": {"ours": ours_t, "mediapipe": peer_t},
+        "cpu_ratio": (
+            peer_t["cpu_ms_per_frame"] / ours_t["cpu_ms_per_frame"]
+            if ours_t.get("cpu_ms_per_frame") and peer_t.get("cpu_ms_per_frame")
+            else None
+        ),
     }
     return Measurement(ours, n, peer, detail=detail)
 
