@@ -256,6 +256,9 @@ PRISM_PAIRS = np.array(
 )  # fmt: skip
 #: rows of a (chunk, pair)'s spring constants: l_k, alpha, beta, e^c (= strain_c * l_k)
 SPRING_ROWS = 4
+#: a pair's springs are computed from its first lane with a spring to its last, widened to
+#: whole groups of this many lanes (a vector of four float64)
+PAIR_LANE_STEP = 4
 
 
 @dataclass(frozen=True)
@@ -282,12 +285,21 @@ class Rk2Plan:
     block_nodes : (B+1,) int64 — where each block's nodes q start.
     block_chunks : (B+1,) int64 — where each block's chunks start.
     chunk_lanes : (C+1,) int64 — where each chunk's lanes (prisms) start.
-    elements : (L, 6) uint32 — each lane's prism (nodes).
-    target : (L, 6) uint32 — the row of the block's buffer each of its nodes adds into
-        (unsigned: no test for a negative index in the gather and the scatter).
+    gather : (6, L) uint32 — for each of a prism's six nodes (slot) and lane, 3 x the node's
+        row in the kernel's numbering (its offset in the positions, flat); unsigned: no test for
+        a negative index.
+    chunk_scatter : (C+1,) int64 — where each chunk's additions into its block's buffer start.
+    scatter_src, scatter_dst : (K,) uint32 — each addition: where the x component of a slot's
+        force sits in the chunk's lanes ((20 + 3 slot) PRISM_CHUNK + lane), and the row of the
+        block's buffer it goes into; lane by lane, slot by slot, only the slots of the block's
+        own nodes (a quarter of them, on the face, are kinematic or another block's: no work).
     rest_volume, volume_weight : (L,) float64 — V0 (mm^3) and kv of each lane's prism.
     chunk_pairs : (C+1,) int64 — where each chunk's list of pairs with a spring starts.
     pair : (P,) int64 — a row of :data:`PRISM_PAIRS` with a spring in some lane of the chunk.
+    pair_q0, pair_q1 : (P,) int64 — the lanes its loop runs over: from the first to the last
+        lane with such a spring, widened to multiples of four (a vector's lanes); the prisms
+        are in an order that gathers alike ones, so a pair held by a few prisms of a chunk
+        runs over a few lanes, not all 64 (on the face: 10,904 lanes, not 13,056).
     pair_consts : (P * SPRING_ROWS * PRISM_CHUNK,) float64 — per (chunk, pair) and lane:
         l_k (mm), alpha, beta (g/s^2), e^c = strain_c * l_k (mm); zeros in a lane without
         that spring (it adds exactly nothing).
@@ -303,12 +315,16 @@ class Rk2Plan:
     block_nodes: np.ndarray
     block_chunks: np.ndarray
     chunk_lanes: np.ndarray
-    elements: np.ndarray
-    target: np.ndarray
+    gather: np.ndarray
+    chunk_scatter: np.ndarray
+    scatter_src: np.ndarray
+    scatter_dst: np.ndarray
     rest_volume: np.ndarray
     volume_weight: np.ndarray
     chunk_pairs: np.ndarray
     pair: np.ndarray
+    pair_q0: np.ndarray
+    pair_q1: np.ndarray
     pair_consts: np.ndarray
     block_springs: np.ndarray
     spring_i: np.ndarray
@@ -403,7 +419,8 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
     prisms_sorted = np.lexsort((prisms, mask))
     mat, rest, mid = model.materials, model.rest_length, model.spring_material
 
-    chunk_counts, lane_rows, tgt_rows, chunk_npairs, pairs, consts = [], [], [], [], [], []
+    chunk_counts, lane_rows, chunk_npairs, pairs, consts, q0s, q1s = [], [], [], [], [], [], []
+    scatter_counts, scatter_src, scatter_dst = [], [], []
     block_chunks = [0]
     spring_lists, spring_t = [], []
     for b in range(n_blocks):
@@ -414,7 +431,11 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
             e = prisms[ch]
             chunk_counts.append(len(ch))
             lane_rows.append(e)
-            tgt_rows.append(np.where(node_block[el[e]] == b, local[el[e]], nloc))
+            own = node_block[el[e]] == b  # (lanes, 6): the slots that add into the block
+            lane, slot = np.nonzero(own)  # lane by lane, slot by slot
+            scatter_counts.append(len(lane))
+            scatter_src.append((20 + 3 * slot) * lanes + lane)
+            scatter_dst.append(local[el[e]][lane, slot])
             union = np.flatnonzero((owned[ch] >= 0).any(axis=0))
             chunk_npairs.append(len(union))
             for p_ in union:
@@ -428,6 +449,9 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
                 c[3, : len(ch)][h] = mat[mid[kk], 2] * rest[kk]  # as spring_magnitude forms it
                 pairs.append(p_)
                 consts.append(c.ravel())
+                held = np.flatnonzero(h)
+                q0s.append(held[0] // PAIR_LANE_STEP * PAIR_LANE_STEP)
+                q1s.append(-(-(held[-1] + 1) // PAIR_LANE_STEP) * PAIR_LANE_STEP)
         block_chunks.append(len(chunk_counts))
         # springs that move a node of this block and that no prism computes
         ks = np.flatnonzero(live & (owner < 0) & ((node_block[si] == b) | (node_block[sj] == b)))
@@ -452,14 +476,16 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
         block_nodes=block_nodes,
         block_chunks=np.array(block_chunks, np.int64),
         chunk_lanes=_offsets(chunk_counts),
-        elements=c(row_of[el[lane_e]], np.uint32).reshape(-1, 6),
-        target=c(np.concatenate(tgt_rows) if tgt_rows else np.zeros((0, 6)), np.uint32).reshape(
-            -1, 6
-        ),
+        gather=c(3 * row_of[el[lane_e]].T, np.uint32).reshape(6, -1),
+        chunk_scatter=_offsets(scatter_counts),
+        scatter_src=c(np.concatenate(scatter_src) if scatter_src else np.zeros(0), np.uint32),
+        scatter_dst=c(np.concatenate(scatter_dst) if scatter_dst else np.zeros(0), np.uint32),
         rest_volume=c(model.rest_volume[lane_e], np.float64),
         volume_weight=c(model.volume_weight[lane_e], np.float64),
         chunk_pairs=_offsets(chunk_npairs),
         pair=np.array(pairs, np.int64),
+        pair_q0=np.array(q0s, np.int64),
+        pair_q1=np.array(q1s, np.int64),
         pair_consts=c(np.concatenate(consts) if consts else np.zeros(0), np.float64),
         block_springs=_offsets([len(a) for a in spring_lists]),
         spring_i=c(row_of[si[ks]], np.int64),
@@ -493,18 +519,20 @@ def rk2_plan(model: TissueModel, n_blocks: int | None = None) -> Rk2Plan:
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _pair_lanes(w, k, a, b, law):
+def _pair_lanes(w, k, a, b, law, n):
     """The springs of pair (a, b) of a chunk's prisms, lane by lane: their forces (eq. 1-2, the
     same arithmetic as :func:`~myoface.tissue.forces.spring_forces_range`) from the nodes'
     coordinates (rows 3a.., 3b.. of ``w``) and constants ``k`` (rows l_k, alpha, beta, e^c), added
-    to the two nodes' force rows (20 + 3a.., 20 + 3b..). ``a``, ``b`` are constants where this is
-    inlined, so every row is at a fixed offset and the loop is vectorised."""
+    to the two nodes' force rows (20 + 3a.., 20 + 3b..), in lanes 0 .. n-1 of ``w`` and ``k``
+    (views that start at the pair's first lane group: lanes from 0, so no index can be negative
+    and the compiler sees only fixed offsets from one array). ``a``, ``b`` are constants where
+    this is inlined, so every row is at a fixed offset and the loop is vectorised."""
     c = PRISM_CHUNK
     oa = 3 * a * c
     ob = 3 * b * c
     fa = (20 + 3 * a) * c
     fb = (20 + 3 * b) * c
-    for q in range(c):
+    for q in range(n):
         rx = w[ob + q] - w[oa + q]
         ry = w[ob + c + q] - w[oa + c + q]
         rz = w[ob + 2 * c + q] - w[oa + 2 * c + q]
@@ -532,45 +560,49 @@ def _pair_lanes(w, k, a, b, law):
 
 
 @njit(cache=True, error_model="numpy")
-def _pair_springs(w, k, pair, law):
-    """:func:`_pair_lanes` for pair ``pair`` (a row of :data:`PRISM_PAIRS`), with the pair's
-    nodes as constants (one specialised loop per pair)."""
+def _pair_springs(w, k, pair, law, q0, q1):
+    """:func:`_pair_lanes` for pair ``pair`` (a row of :data:`PRISM_PAIRS`) in lanes q0 .. q1-1,
+    with the pair's nodes as constants (one specialised loop per pair)."""
+    w = w[q0:]
+    k = k[q0:]
+    n = q1 - q0
     if pair == 0:
-        _pair_lanes(w, k, 0, 1, law)
+        _pair_lanes(w, k, 0, 1, law, n)
     elif pair == 1:
-        _pair_lanes(w, k, 0, 2, law)
+        _pair_lanes(w, k, 0, 2, law, n)
     elif pair == 2:
-        _pair_lanes(w, k, 0, 3, law)
+        _pair_lanes(w, k, 0, 3, law, n)
     elif pair == 3:
-        _pair_lanes(w, k, 0, 4, law)
+        _pair_lanes(w, k, 0, 4, law, n)
     elif pair == 4:
-        _pair_lanes(w, k, 0, 5, law)
+        _pair_lanes(w, k, 0, 5, law, n)
     elif pair == 5:
-        _pair_lanes(w, k, 1, 2, law)
+        _pair_lanes(w, k, 1, 2, law, n)
     elif pair == 6:
-        _pair_lanes(w, k, 1, 3, law)
+        _pair_lanes(w, k, 1, 3, law, n)
     elif pair == 7:
-        _pair_lanes(w, k, 1, 4, law)
+        _pair_lanes(w, k, 1, 4, law, n)
     elif pair == 8:
-        _pair_lanes(w, k, 1, 5, law)
+        _pair_lanes(w, k, 1, 5, law, n)
     elif pair == 9:
-        _pair_lanes(w, k, 2, 3, law)
+        _pair_lanes(w, k, 2, 3, law, n)
     elif pair == 10:
-        _pair_lanes(w, k, 2, 4, law)
+        _pair_lanes(w, k, 2, 4, law, n)
     elif pair == 11:
-        _pair_lanes(w, k, 2, 5, law)
+        _pair_lanes(w, k, 2, 5, law, n)
     elif pair == 12:
-        _pair_lanes(w, k, 3, 4, law)
+        _pair_lanes(w, k, 3, 4, law, n)
     elif pair == 13:
-        _pair_lanes(w, k, 3, 5, law)
+        _pair_lanes(w, k, 3, 5, law, n)
     else:
-        _pair_lanes(w, k, 4, 5, law)
+        _pair_lanes(w, k, 4, 5, law, n)
 
 
 @njit(cache=True, error_model="numpy")
 def _block_forces(
-    x, fb, nloc, ch0, ch1, chunk_lanes, elems, target, rest_vol, kv, vsign, chunk_pairs, pair,
-    consts, law, s0, s1, si, sj, ti, tj, rest, mat_id, mat, w,
+    x, fb, nloc, ch0, ch1, chunk_lanes, gather, chunk_scatter, scatter_src, scatter_dst,
+    rest_vol, kv, vsign, chunk_pairs, pair, pair_q0, pair_q1, consts, law, s0, s1, si, sj, ti,
+    tj, rest, mat_id, mat, w,
 ):  # fmt: skip
     """Spring and volume forces on one block's nodes at x, into rows 0..nloc-1 of the block's
     buffer ``fb`` (row nloc takes what goes to other nodes): its chunks ch0..ch1-1 of prisms,
@@ -581,28 +613,32 @@ def _block_forces(
         fb[r, 1] = 0.0
         fb[r, 2] = 0.0
     kw = SPRING_ROWS * c
+    xf = x.reshape(x.size)  # (N, 3) C-contiguous: node m's coordinates at 3m, 3m+1, 3m+2
     for ch in range(ch0, ch1):
         e0 = chunk_lanes[ch]
         n = chunk_lanes[ch + 1] - e0
+        for s in range(6):
+            ws = w[3 * s * c : 3 * (s + 1) * c]
+            gs = gather[s, e0 : e0 + n]
+            for q in range(n):
+                m = gs[q]
+                ws[q] = xf[m]
+                ws[c + q] = xf[m + 1]
+                ws[2 * c + q] = xf[m + 2]
         for q in range(n):
-            e = e0 + q
-            for s in range(6):
-                m = elems[e, s]
-                w[(3 * s) * c + q] = x[m, 0]
-                w[(3 * s + 1) * c + q] = x[m, 1]
-                w[(3 * s + 2) * c + q] = x[m, 2]
-            w[18 * c + q] = rest_vol[e]
-            w[19 * c + q] = kv[e]
+            w[18 * c + q] = rest_vol[e0 + q]
+            w[19 * c + q] = kv[e0 + q]
         _prism_chunk_forces(w, vsign)  # rows 20..37: each node's volume force
         for t in range(chunk_pairs[ch], chunk_pairs[ch + 1]):
-            _pair_springs(w, consts[t * kw : (t + 1) * kw], pair[t], law)
-        for q in range(n):  # the lanes past n computed on stale data, unused
-            e = e0 + q
-            for s in range(6):
-                r = target[e, s]
-                fb[r, 0] += w[(20 + 3 * s) * c + q]
-                fb[r, 1] += w[(21 + 3 * s) * c + q]
-                fb[r, 2] += w[(22 + 3 * s) * c + q]
+            _pair_springs(w, consts[t * kw : (t + 1) * kw], pair[t], law, pair_q0[t], pair_q1[t])
+        # the slots of the block's own nodes, lane by lane (the lanes past n computed on stale
+        # data, unused)
+        for k in range(chunk_scatter[ch], chunk_scatter[ch + 1]):
+            o = scatter_src[k]
+            r = scatter_dst[k]
+            fb[r, 0] += w[o]
+            fb[r, 1] += w[o + c]
+            fb[r, 2] += w[o + 2 * c]
     for k in range(s0, s1):
         i = si[k]
         j = sj[k]
@@ -625,9 +661,9 @@ def _block_forces(
 
 @njit(cache=True)
 def _rk2_task(
-    phase, b, x, v, xm, vm, buf, vblock, dt, inv_m, damp, bnodes, bchunks, chunk_lanes, elems,
-    target, rest_vol, kv, vsign, chunk_pairs, pair, consts, law, bsprings, si, sj, ti, tj, rest,
-    mat_id, mat, work,
+    phase, b, x, v, xm, vm, buf, vblock, dt, inv_m, damp, bnodes, bchunks, chunk_lanes, gather,
+    chunk_scatter, scatter_src, scatter_dst, rest_vol, kv, vsign, chunk_pairs, pair, pair_q0,
+    pair_q1, consts, law, bsprings, si, sj, ti, tj, rest, mat_id, mat, work,
 ):  # fmt: skip
     """One block's half of an RK2 step, on the kernel's own numbering of the nodes (the block's
     nodes are rows q0 .. q1-1): ``phase`` 0 evaluates the forces at (x, v) and writes the
@@ -638,9 +674,9 @@ def _rk2_task(
     nloc = bnodes[b + 1] - q0
     xe = x if phase == 0 else xm
     _block_forces(
-        xe, fb, nloc, bchunks[b], bchunks[b + 1], chunk_lanes, elems, target, rest_vol, kv, vsign,
-        chunk_pairs, pair, consts, law, bsprings[b], bsprings[b + 1], si, sj, ti, tj, rest,
-        mat_id, mat, work[b],
+        xe, fb, nloc, bchunks[b], bchunks[b + 1], chunk_lanes, gather, chunk_scatter,
+        scatter_src, scatter_dst, rest_vol, kv, vsign, chunk_pairs, pair, pair_q0, pair_q1,
+        consts, law, bsprings[b], bsprings[b + 1], si, sj, ti, tj, rest, mat_id, mat, work[b],
     )  # fmt: skip
     if phase == 0:
         h = 0.5 * dt
@@ -679,8 +715,8 @@ def _largest(a):
 @njit(cache=True, parallel=True)
 def _rk2_run_team(
     x, v, n_steps, dt, tol_mm, n_workers, rows, node_order, n_free, inv_m, damp, bnodes, bchunks,
-    chunk_lanes, elems, target, rest_vol, kv, vsign, chunk_pairs, pair, consts, law, bsprings,
-    si, sj, ti, tj, rest, mat_id, mat,
+    chunk_lanes, gather, chunk_scatter, scatter_src, scatter_dst, rest_vol, kv, vsign,
+    chunk_pairs, pair, pair_q0, pair_q1, consts, law, bsprings, si, sj, ti, tj, rest, mat_id, mat,
 ):  # fmt: skip
     """Midpoint RK2 for up to n_steps, the plan's blocks shared by a team of ``n_workers``
     threads started once for the whole run; stops early when max |v| dt < tol_mm (tol_mm > 0).
@@ -741,8 +777,9 @@ def _rk2_run_team(
                         break
                 _rk2_task(
                     half % 2, b, xk, vk, xm, vm, buf, vblock, dt, inv_m, damp, bnodes, bchunks,
-                    chunk_lanes, elems, target, rest_vol, kv, vsign, chunk_pairs, pair, consts,
-                    law, bsprings, si, sj, ti, tj, rest, mat_id, mat, work,
+                    chunk_lanes, gather, chunk_scatter, scatter_src, scatter_dst, rest_vol, kv,
+                    vsign, chunk_pairs, pair, pair_q0, pair_q1, consts, law, bsprings, si, sj, ti,
+                    tj, rest, mat_id, mat, work,
                 )  # fmt: skip
                 _atomic_add(counters, _DONE, 1)
             if quit_:
@@ -879,13 +916,17 @@ def _rk2_kernel(p: Rk2Plan, model: TissueModel, x, v, n_steps, dt, tol_mm, worke
         p.block_nodes,
         p.block_chunks,
         p.chunk_lanes,
-        p.elements,
-        p.target,
+        p.gather,
+        p.chunk_scatter,
+        p.scatter_src,
+        p.scatter_dst,
         p.rest_volume,
         p.volume_weight,
         model.volume_sign,
         p.chunk_pairs,
         p.pair,
+        p.pair_q0,
+        p.pair_q1,
         p.pair_consts,
         model.spring_law,
         p.block_springs,
