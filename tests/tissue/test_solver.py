@@ -448,9 +448,13 @@ def test_energy_gradient_hessian_in_one_pass_equals_the_separate_kernels(fm):
     np.testing.assert_allclose(l2, lref, rtol=0, atol=1e-10 * np.abs(lref).max())
     # without a new prisms' part: the springs' plus the one given
     d3, l3 = np.empty(9 * nf), np.empty(9 * pat.nl)
-    energy_gradient_hessian(x, pat.springs, pat.prisms, g2, True, d3, l3, False, dp2, lp2)
+    g3 = np.empty((nf, 3))
+    en3 = energy_gradient_hessian(x, pat.springs, pat.prisms, g3, True, d3, l3, False, dp2, lp2)
     np.testing.assert_array_equal(d3, d2)
     np.testing.assert_array_equal(l3, l2)
+    # (and then the prisms' energy and gradient come from their vectorised pass: the same sums)
+    assert en3 == pytest.approx(en, rel=1e-12)
+    np.testing.assert_allclose(g3.reshape(-1), g, rtol=0, atol=1e-10 * np.abs(g).max())
 
 
 def test_a_warm_start_past_newtons_basin_falls_back_to_rest():

@@ -89,6 +89,11 @@ pass, three energy passes, one springs' Hessian, ten CG iterations and three CG 
 sweep each) and 0.2-0.3 ms of Python around it (:func:`~myoface.tissue.integrate.relax`'s
 copies and checks): 2.5-2.8 ms at these costs, so 2 ms needs fewer passes, not faster ones.
 
+Issue 20, second round (2026-11-30, 23:15-00:45): the free nodes numbered in reverse
+Cuthill-McKee order (:class:`~myoface.tissue.hessian.SymmetricPattern`), relax's start and the
+linear response compiled, the forward sweep without reassociation, the prisms' energy and
+gradient vectorised (:func:`~myoface.tissue.hessian.prism_energy_gradient`).
+
 Measured for issue 20 and did not pay (counts on the default face, surprise and three to five
 other expressions from rest, the 25 frames of the smile): float32 lower blocks in the sweeps
 (5 CG iterations of the same system 0.88 -> 0.89 ms: latency-bound, not memory-bound); a
