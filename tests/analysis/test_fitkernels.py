@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from myoface.analysis._fitkernels import box_qp, landmark_cost, normal_equations
+from myoface.analysis._fitkernels import box_qp, landmark_cost, normal_equations, vertex_normals
 from myoface.analysis.fit import FitMeasurement, HeadPose, ModelFit, _bounded_normal
 from tests.analysis.test_fit import CAMERA, landmarks
 
@@ -62,6 +62,21 @@ def test_normal_equations_and_cost_equal_the_reference(fitted, use_depth, n_free
     ref = fit._cost(p, pose, c, shape, w0, k, prev, free)
     assert fit._fast_cost(p, pose, c, shape, w0, k, prev, free) == pytest.approx(ref, rel=1e-12)
     assert landmark_cost(*ka) > 0
+
+
+def test_vertex_normals_equal_the_meshs():
+    """The compiled vertex normals the fit's visibility weights use are the mesh module's (to
+    rounding: the same sums in another order), a vertex in no triangle included."""
+    from myoface.face.mesh import vertex_normals as reference
+    from myoface.model import build_face_model
+
+    face = build_face_model().face
+    rng = np.random.default_rng(5)
+    v = face.vertices + rng.normal(0, 2.0, face.vertices.shape)
+    v = np.vstack([v, [[0.0, 0.0, 0.0]]])  # a vertex in no triangle: (0, 0, 1)
+    got = vertex_normals(v, face.triangles)
+    np.testing.assert_allclose(got, reference(v, face.triangles), rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(got[-1], [0.0, 0.0, 1.0])
 
 
 @settings(max_examples=60, deadline=None)

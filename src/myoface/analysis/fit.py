@@ -126,9 +126,12 @@ class FitSettings:
         the tissue is relaxed again only once the skin the estimate makes has moved this far
         (mm, at any vertex, by the linear model) from where the tissue was last relaxed; in
         between, the model's response Broyden-corrected at the last relax stands in for the
-        tissue (its error grows with the square of the step). A relax costs more than
-        MediaPipe on a frame; the contractions of muscles that pull nearly alike trade off
-        from frame to frame with little change of the skin, which needs no relax.
+        tissue. Its error grows with the square of the step: a frame behind on a ramp that
+        moves the lips several mm a frame it is ~0.1 mm RMS (test_fitkernels), a tenth of
+        :attr:`landmark_sigma_mm`. A relax costs more CPU than MediaPipe on a frame, and
+        MediaPipe's scatter moves the estimate's skin by ~1 mm from frame to frame. On
+        single_face.mp4: 0 (a relax whenever the estimate moves) 72 relaxes, analysis.fidelity
+        0.694; 0.5 mm 59, 0.697; 1 mm 40, 0.694; 2 mm 26, 0.703.
     synthesis_rounds : rounds of analysis by synthesis per frame (and at calibration) when the
         fit is given a :class:`LandmarkSynthesis`.
     """
@@ -145,7 +148,7 @@ class FitSettings:
     huber: float = 3.0
     iterations: int = 8
     refine: int = 1
-    relax_step_mm: float = 0.5
+    relax_step_mm: float = 2.0
     #: with a :class:`LandmarkSynthesis`: rounds of analysis by synthesis per frame
     synthesis_rounds: int = 2
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
@@ -591,9 +594,10 @@ class ModelFit:
 
         ``deferred=True`` (a video, frame after frame): no round through the tissue in this
         call; the frame is fitted with the model linearised where the tissue was last relaxed
-        (the previous frame's estimate), and the tissue is relaxed at this frame's estimate
-        on a second thread while the caller goes on (e.g. runs the detector on the next
-        frame). The next call waits for it first, so the results do not depend on timing."""
+        (an earlier frame's estimate), and the tissue is relaxed at this frame's estimate on a
+        second thread while the caller goes on (e.g. fits the next frame), once the
+        estimate's skin has moved :attr:`FitSettings.relax_step_mm` since the last relax. The
+        next call waits for it first, so the results do not depend on timing."""
         import time
 
         t0 = time.thread_time()
@@ -731,9 +735,10 @@ class ModelFit:
     def _weights(self, pose: HeadPose, shape: np.ndarray) -> np.ndarray:
         """Base weights times visibility: points whose surface turns away from the camera
         weigh less (MediaPipe guesses them)."""
-        from myoface.face.mesh import vertex_normals
+        from myoface.analysis._fitkernels import vertex_normals
 
-        n = vertex_normals(shape, self.model.face.triangles) @ pose.rotation.T
+        tri = self.model.face.triangles
+        n = vertex_normals(np.ascontiguousarray(shape, dtype=np.float64), tri) @ pose.rotation.T
         p = pose.apply(shape)
         view = -p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-9)
         cos = (n * view).sum(1)
@@ -1276,10 +1281,11 @@ class FitAnalyzer:
         self._sections = {s: section_vertices(model.face, s) for s in SECTIONS}
         self._own_detector = detector is None
         if detector is None:
-            from myoface.analysis.landmarks import FaceMeshDetector
+            from myoface.analysis.landmarks import _import_mediapipe
 
-            detector = FaceMeshDetector(video=True)
-        self.detector = detector
+            _import_mediapipe()  # (fails now, with the pip command, if it is not installed)
+        #: the detector; made when first needed (the calibration hands its own over)
+        self._detector = detector
         #: {frame index: landmarks or None} of the calibration frames, taken by measure()
         self._detected: dict = {}
         #: relax the tissue on a second thread while the next frame is detected
@@ -1293,6 +1299,15 @@ class FitAnalyzer:
         #: (s; its MediaPipe, scores and identity fit), and the detector's wall time (s) and
         #: count on the frames after it (on the thread that runs :meth:`observe`)
         self.timings = {"calibration_s": 0.0, "detections": 0, "detect_s": 0.0}
+
+    @property
+    def detector(self):
+        """The landmark detector (MediaPipe's face mesh in video mode unless one was given)."""
+        if self._detector is None:
+            from myoface.analysis.landmarks import FaceMeshDetector
+
+            self._detector = FaceMeshDetector(video=True)
+        return self._detector
 
     @property
     def mm_per_px(self) -> float | None:
@@ -1355,8 +1370,9 @@ class FitAnalyzer:
         # from it rather than detecting them twice: the same points a detector tracking from
         # the first of these frames gives (the analysis starts there)
         if self._own_detector:
-            self.detector.close()
-            self.detector = det
+            if self._detector is not None:
+                self._detector.close()
+            self._detector = det
             self._detected = {first_index + k: pts for k, pts in enumerate(points)}
         else:
             det.close()
@@ -1461,7 +1477,8 @@ class FitAnalyzer:
     def close(self) -> None:
         if self.fit is not None:
             self.fit.close()
-        self.detector.close()
+        if self._detector is not None:
+            self._detector.close()
         if self.synthesis is not None:
             self.synthesis.close()
 
