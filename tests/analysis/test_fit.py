@@ -468,3 +468,62 @@ def test_measure_frames_detects_ahead_with_the_frame_by_frame_results(fm):
     gen.close()
     an.close()
     assert not _threads("myoface-detect", "myoface-fit")
+
+
+def test_measure_frames_replays_the_calibrations_decoded_frames(fm):
+    """The fit analyzer keeps its calibration's decoded frames and the rest of that decode;
+    ``measure_frames`` takes them from it (no second decode of those frames), with the same
+    measurements as decoding again; for another start or video it decodes, and closing an
+    analyzer that kept them stops that decode."""
+    from myoface.analysis.fit import FitAnalyzer
+    from myoface.analysis.pipeline import measure_frames
+
+    seq = [landmarks(fm.face.vertices, HeadPose.from_euler(2.0 * k, 0, 0)) for k in range(5)]
+
+    class Video:
+        fps = 30.0
+
+        def __init__(self):
+            self.decoded = 0
+            self.open = 0
+
+        def __iter__(self):
+            self.open += 1
+            try:
+                for k in range(len(seq)):
+                    self.decoded += 1
+                    yield np.full((480, 640, 3), k, np.uint8)
+            finally:
+                self.open -= 1
+
+    def run(replay: bool):
+        video = Video()
+        an = FitAnalyzer(fm, camera=CAMERA, detector=_StandInDetector(seq), deferred_relax=True)
+        live = iter(video)
+        kept = [next(live) for _ in range(2)]  # (as the calibration's pass leaves them)
+        if replay:
+            an._keep_for_replay(video, 0, kept, live)
+        else:
+            live.close()
+        try:
+            out = [m for _, m in measure_frames(video, an)]
+        finally:
+            an.close()
+        assert video.open == 0
+        return out, video.decoded
+
+    (a, n_a), (b, n_b) = run(True), run(False)
+    assert (n_a, n_b) == (5, 2 + 5)
+    for ma, mb in zip(a, b, strict=True):
+        assert ma.index == mb.index
+        np.testing.assert_array_equal(ma.contractions, mb.contractions)
+    # another start: decoded again; a kept decode is stopped by close()
+    video = Video()
+    an = FitAnalyzer(fm, camera=CAMERA, detector=_StandInDetector(seq[1:]))
+    live = iter(video)
+    an._keep_for_replay(video, 0, [next(live)], live)
+    assert an.replay(video, 1) is None and video.open == 0
+    live = iter(video)
+    an._keep_for_replay(video, 0, [next(live)], live)
+    an.close()
+    assert video.open == 0

@@ -48,6 +48,7 @@ roll > 0 tilts its top towards the subject's right (counter-clockwise in the ima
 
 from __future__ import annotations
 
+import collections
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -1299,6 +1300,8 @@ class FitAnalyzer:
         #: (s; its MediaPipe, scores and identity fit), and the detector's wall time (s) and
         #: count on the frames after it (on the thread that runs :meth:`observe`)
         self.timings = {"calibration_s": 0.0, "detections": 0, "detect_s": 0.0}
+        #: the calibration's decoded frames and the rest of its decode (:meth:`replay`)
+        self._replay = None
 
     @property
     def detector(self):
@@ -1474,13 +1477,64 @@ class FitAnalyzer:
             }
         return out
 
+    def _keep_for_replay(self, video, first: int, frames: list, rest) -> None:
+        """Keep the calibration's decoded ``frames`` (``video``'s from ``first`` on) and the
+        iterator ``rest`` of the frames after them, for :meth:`replay` (a frame before the
+        first face was not kept: then the frames are decoded again)."""
+        self._drop_replay()
+        if any(f is None for f in frames):
+            _close(rest)
+            return
+        self._replay = (video, int(first), collections.deque(frames), rest)
+
+    def _drop_replay(self) -> None:
+        r, self._replay = self._replay, None
+        if r is not None:
+            _close(r[3])
+
+    def replay(self, video, start: int):
+        """``(index, frame)`` for ``video``'s frames from ``start`` on without decoding the
+        calibration's frames again (kept from its pass) and going on with its decode; None
+        when there is nothing to replay for that video and start (then the caller decodes).
+        Once: the kept frames are handed over (and released as they are taken)."""
+        r, self._replay = self._replay, None
+        if r is None:
+            return None
+        kept_video, first, frames, rest = r
+        if kept_video is not video or first != int(start):
+            _close(rest)
+            return None
+
+        def frames_from():
+            try:
+                k = first
+                while frames:
+                    yield k, frames.popleft()
+                    k += 1
+                for frame in rest:
+                    yield k, frame
+                    k += 1
+            finally:
+                frames.clear()
+                _close(rest)
+
+        return frames_from()
+
     def close(self) -> None:
+        self._drop_replay()
         if self.fit is not None:
             self.fit.close()
         if self._detector is not None:
             self._detector.close()
         if self.synthesis is not None:
             self.synthesis.close()
+
+
+def _close(iterator) -> None:
+    """Close ``iterator`` if it is a generator (stops a decoder's thread)."""
+    close = getattr(iterator, "close", None)
+    if close is not None:
+        close()
 
 
 def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine=None,
@@ -1505,8 +1559,16 @@ def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine
     try:
         if calibration_frame is None:
             first, window = 0, max(1, int(round(CALIBRATION_WINDOW_S * fps)))
-            frames = _first_seconds(itertools.islice(video, 0, None), window)
-            cal = an.calibrate(frames)
+            live = iter(video)
+            try:
+                frames = _first_seconds(live, window)
+                cal = an.calibrate(frames)
+            except BaseException:
+                _close(live)
+                raise
+            # the analysis takes these decoded frames again, then goes on decoding from
+            # where the calibration stopped, instead of decoding them twice
+            an._keep_for_replay(video, 0, frames, live)
             start = 0
             how = (
                 f"MediaPipe face mesh on every frame, {what}; calibrated on frame {cal}, "

@@ -249,17 +249,26 @@ def measure_frames(video, analyzer, start: int = 0, max_frames: int | None = Non
     worker thread a few frames ahead (:func:`~myoface.analysis.landmarks.detect_ahead`),
     and its ``measure`` takes the result as ``observation``: the face mesh tracks the next
     frames while this one is fitted. The results are the same as frame by frame (each frame
-    is observed once, in order). Stopping early (closing this generator) stops the thread."""
+    is observed once, in order). Stopping early (closing this generator) stops the thread.
+    An analyzer with a ``replay(video, start)`` method gives the frames itself when it can
+    (the 3-D fit: its calibration's decoded frames, then the rest of its decode)."""
 
     def frames():
+        # an analyzer that kept its calibration's decoded frames hands them over (``replay``:
+        # the 3-D fit's), else the video is decoded from its start
+        replay = getattr(analyzer, "replay", None)
+        source = None if replay is None else replay(video, start)
+        if source is None:
+            source = ((k, f) for k, f in enumerate(video) if k >= start)
         n = 0
-        for k, frame in enumerate(video):
-            if k < start:
-                continue
-            if max_frames is not None and n >= max_frames:
-                return
-            n += 1
-            yield k, frame
+        try:
+            for k, frame in source:
+                if max_frames is not None and n >= max_frames:
+                    return
+                n += 1
+                yield k, frame
+        finally:
+            source.close()
 
     observe = getattr(analyzer, "observe", None)
     if observe is None:
