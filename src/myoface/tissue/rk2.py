@@ -725,14 +725,14 @@ def _rk2_run_team(
     of the nodes (``node_order``: each block's nodes side by side, the kinematic ones last).
 
     The run is a sequence of tasks, half-step by half-step (two a step), block by block. Each
-    worker goes through the half-steps in order and, in each, claims the blocks not yet claimed
-    (an atomic compare-and-swap on the block's count of claimed half-steps), its own block
-    first (block w for worker w: the block's arrays stay in that core's cache); it waits until
-    every task of the earlier half-steps is done (a half-step needs its neighbours' midpoints,
-    or their new positions), runs it and counts it done. No thread launch per step, and no fixed
-    owner of a block: a worker that is behind (descheduled on a busy machine) has its block run
-    by another, and each task computes the same numbers whoever runs it. A team with fewer
-    threads than asked (or one) still runs every task, in order."""
+    worker goes through the half-steps in order: it waits until every task of the earlier
+    half-steps is done (a half-step needs its neighbours' midpoints, or their new positions),
+    then claims the blocks of this half-step not yet claimed (an atomic compare-and-swap on the
+    block's count of claimed half-steps), its own block first (block w for worker w: the
+    block's arrays stay in that core's cache), runs each and counts it done. No thread launch
+    per step, and no fixed owner of a block: a worker that is behind (descheduled on a busy
+    machine) has its block run by another, and each task computes the same numbers whoever
+    runs it. A team with fewer threads than asked (or one) still runs every task, in order."""
     nb = bnodes.shape[0] - 1
     n = node_order.shape[0]
     xk = np.empty((n, 3))  # x and v in the plan's order of the nodes
@@ -754,12 +754,18 @@ def _rk2_run_team(
     for w in prange(n_workers):
         quit_ = False
         for half in range(n_halves):
+            # every task of the earlier half-steps done (a half-step needs its neighbours'
+            # midpoints, or their new positions) before this one's blocks are claimed: a worker
+            # that is behind leaves its block to one that waits for it
+            _wait_done(counters, half * nb)
+            if stop[0] >= 0.0:  # the run stopped at this half-step or an earlier one
+                break
             for k in range(nb):
                 b = (w + k) % nb
                 if not _atomic_cas(claims, b * _LINE, half, half + 1):
                     continue  # another worker has it
-                _wait_done(counters, half * nb)
-                if stop[0] >= 0.0:  # the run stopped at an earlier half-step
+                # a claimed task not yet counted done: no worker is past this half-step
+                if stop[0] >= 0.0:  # the run stopped at this half-step
                     _atomic_add(counters, _DONE, 1)
                     quit_ = True
                     break
