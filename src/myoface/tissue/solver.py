@@ -92,7 +92,8 @@ copies and checks): 2.5-2.8 ms at these costs, so 2 ms needs fewer passes, not f
 Issue 20, second round (2026-11-30, 23:15-00:45): the free nodes numbered in reverse
 Cuthill-McKee order (:class:`~myoface.tissue.hessian.SymmetricPattern`), relax's start and the
 linear response compiled, the forward sweep without reassociation, the prisms' energy and
-gradient vectorised (:func:`~myoface.tissue.hessian.prism_energy_gradient`).
+gradient vectorised (:func:`~myoface.tissue.hessian.prism_energy_gradient`), the prisms'
+Hessian written out pair by pair (:func:`~myoface.tissue.hessian.add_one_prism_hessian`).
 
 Measured for issue 20 and did not pay (counts on the default face, surprise and three to five
 other expressions from rest, the 25 frames of the smile): float32 lower blocks in the sweeps
