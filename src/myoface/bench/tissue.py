@@ -194,10 +194,11 @@ def bench_rk2(quick: bool) -> Measurement:
     with a fixed number of threads too, each run's best rate, the CPU time of all the process's
     threads per step (a thread waiting for another spins, then yields its core) and that of the
     calling thread (``time.thread_time``: on one thread, the kernel's own cost, which a busy
-    machine hardly changes; with a team, the calling thread's share)."""
+    machine changes least; with a team, the calling thread's share), and the share of the
+    default's steps that ran on each number of threads (its choice, by measurement)."""
     import numba
 
-    from myoface.tissue import rest_state, step_rk2
+    from myoface.tissue import rest_state, rk2, step_rk2
     from myoface.tissue.rk2 import run_rk2, run_rk2_serial
 
     fm = _default_face_model()
@@ -225,6 +226,8 @@ def bench_rk2(quick: bool) -> Measurement:
     times = {k: [] for k in runs}
     cpu = {k: [] for k in runs}
     tcpu = {k: [] for k in runs}
+    pace = rk2._PACES.get(tm)
+    steps_before = dict(pace.steps_run) if pace is not None else {}
     for _ in range(n):  # alternate, so all see the same load on a shared machine
         for k, fn in runs.items():
             t0, c0, h0 = time.perf_counter(), time.process_time(), time.thread_time()
@@ -242,6 +245,13 @@ def bench_rk2(quick: bool) -> Measurement:
             k: {"median": float(np.median(tcpu[k])) / steps * 1e6} for k in runs
         },
     }
+    pace = rk2._PACES.get(tm)
+    if pace is not None:  # which thread counts the default's timed steps ran on
+        ran = {t: s - steps_before.get(t, 0) for t, s in sorted(pace.steps_run.items())}
+        total = sum(ran.values()) or 1
+        detail["default (step_rk2): share of its steps"] = {
+            f"{t} thread{'s' if t > 1 else ''}": {"share": s / total} for t, s in ran.items()
+        }
     return Measurement(rate["default (step_rk2)"], n, rate["previous kernel (peer)"], detail)
 
 

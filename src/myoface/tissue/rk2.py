@@ -815,6 +815,8 @@ class _Pace:
 
     def __init__(self):
         self.sec_per_step: dict[int, float] = {}
+        #: steps run with each thread count (what a benchmark reports of the choice)
+        self.steps_run: dict[int, int] = {}
         self.next_probe = 0.0
         self.interval = PROBE_MIN_S
         self.probe: int | None = None
@@ -830,6 +832,7 @@ class _Pace:
         return best, min(remaining, CHUNK_STEPS)
 
     def record(self, n: int, seconds: float, steps: int) -> None:
+        self.steps_run[n] = self.steps_run.get(n, 0) + steps
         if not _Pace.kernel_loaded:
             _Pace.kernel_loaded = True
             return
