@@ -1302,6 +1302,8 @@ class FitAnalyzer:
         self.timings = {"calibration_s": 0.0, "detections": 0, "detect_s": 0.0}
         #: the calibration's decoded frames and the rest of its decode (:meth:`replay`)
         self._replay = None
+        #: the frames the calibration took (:meth:`calibrate`)
+        self.calibration_images: list = []
 
     @property
     def detector(self):
@@ -1326,7 +1328,8 @@ class FitAnalyzer:
             self.fit = ModelFit(self.model, cam, self.settings, fps=self.fps)
         return self.fit
 
-    def calibrate(self, frames, calibration_frame: int | None = None, first_index: int = 0):
+    def calibrate(self, frames, calibration_frame: int | None = None, first_index: int = 0,
+                  window: int | None = None):  # fmt: skip
         """Calibrate on ``frames`` (an iterable of RGB frames, or None for a frame without a
         face: the first :data:`CALIBRATION_WINDOW_S` s of the video, from its frame
         ``first_index``): the most neutral one, or the frame ``calibration_frame`` (an index
@@ -1334,27 +1337,64 @@ class FitAnalyzer:
         places the points a little differently from its detection mode); with the analyzer's
         own detector, the analysis then goes on with this one and takes these frames' points
         from the calibration instead of detecting them again (it starts on the first of
-        them). Returns the calibration frame's index in the video."""
+        them). ``window``: ``frames`` are the video's frames from ``first_index`` on, of
+        which those up to ``window`` frames after the first with a face are taken (none
+        after them: an iterator can go on from there); an error when no frame has a face.
+        Returns the calibration frame's index in the video; :attr:`calibration_images` are
+        the frames taken (None for those before the first face)."""
+        import itertools
         import time
 
         from myoface.analysis.landmarks import FaceMeshDetector, detect_ahead
 
         t_start = time.perf_counter()
-        images = list(frames)
-        shapes = [np.shape(f) for f in images if f is not None]
-        if not shapes:
+        # the frames up to the first there is (its size makes the fit's camera); the rest are
+        # taken as they come (``frames`` may be decoding meanwhile), on the detector's thread
+        frames = iter(frames)
+        head: list = []
+        for frame in frames:
+            head.append(frame)
+            if frame is not None:
+                break
+        if not head or head[-1] is None:
+            _close(frames)
             raise MyofaceValueError("the video has no frames to calibrate on")
-        self._ensure_fit(shapes[0])
+        self._ensure_fit(np.shape(head[-1]))
+        images: list = []
         points: list = []
+        first_face: list = []  # the index of the first frame with a face, once there is one
         det = FaceMeshDetector(video=True)
+        end = object()
+
+        def source():
+            # (runs on the detector's thread, which detects each frame before taking the next)
+            it = itertools.chain(head, frames)
+            k = 0
+            while window is None or not first_face or k - first_face[0] < window:
+                frame = next(it, end)
+                if frame is end:
+                    break
+                images.append(frame)
+                yield k, frame
+                k += 1
+            if window is not None and not first_face:
+                raise MyofaceValueError(
+                    f"no face found in the {k} frames of the video (MediaPipe face mesh)"
+                )
+
+        def detect(item):
+            k, frame = item
+            pts = None if frame is None else det.detect(frame)  # (None: no face)
+            if pts is not None and not first_face:
+                first_face.append(k)
+            if pts is None and not first_face and window is not None:
+                images[k] = None  # (not kept: the search for a face may be long)
+            return pts
 
         def detected():
             # MediaPipe on a worker thread a few frames ahead while each frame is scored
             # (ModelFit.calibrate takes the points as they come)
-            def detect(frame):
-                return None if frame is None else det.detect(frame)  # (None: no face)
-
-            for _, pts in detect_ahead(images, detect):
+            for _, pts in detect_ahead(source(), detect):
                 points.append(pts)
                 yield pts
 
@@ -1403,6 +1443,7 @@ class FitAnalyzer:
             self.calibration = fit.calibrate(points, cal.index, synthesis=self.synthesis)
             self.calibration.scores = cal.scores
         self.calibration_frame = first_index + self.calibration.index
+        self.calibration_images = images
         self.timings["calibration_s"] += time.perf_counter() - t_start
         return self.calibration_frame
 
@@ -1561,14 +1602,16 @@ def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine
             first, window = 0, max(1, int(round(CALIBRATION_WINDOW_S * fps)))
             live = iter(video)
             try:
-                frames = _first_seconds(live, window)
-                cal = an.calibrate(frames)
+                # decoded, searched for the first face and detected as the calibration takes
+                # them, MediaPipe in video mode from the first frame
+                cal = an.calibrate(live, window=window)
             except BaseException:
                 _close(live)
                 raise
             # the analysis takes these decoded frames again, then goes on decoding from
             # where the calibration stopped, instead of decoding them twice
-            an._keep_for_replay(video, 0, frames, live)
+            an._keep_for_replay(video, 0, an.calibration_images, live)
+            an.calibration_images = []
             start = 0
             how = (
                 f"MediaPipe face mesh on every frame, {what}; calibrated on frame {cal}, "
@@ -1586,30 +1629,6 @@ def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine
         an.close()
         raise
     return an, how, start
-
-
-def _first_seconds(frames, window: int) -> list:
-    """The frames up to ``window`` frames after the first that has a face (MediaPipe, image
-    mode; frames before it are None in the list, to keep the indices)."""
-    from myoface.analysis.landmarks import FaceMeshDetector
-
-    out: list = []
-    seen = None
-    with FaceMeshDetector(video=False) as det:
-        for k, frame in enumerate(frames):
-            if seen is None:
-                if det.detect(frame) is None:
-                    out.append(None)
-                    continue
-                seen = k
-            out.append(frame)
-            if k - seen + 1 >= window:
-                break
-    if seen is None:
-        raise MyofaceValueError(
-            f"no face found in the {len(out)} frames of the video (MediaPipe face mesh)"
-        )
-    return out
 
 
 def read_head_poses(path) -> list:
