@@ -448,6 +448,32 @@ def _add_sym6(arr, slot, h0, h1, h2, h4, h5, h8):
         arr[o + 8] += h8
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _add_upper6(arr, slot, h0, h1, h2, h4, h5, h8):
+    """Add the upper triangle of the symmetric block [[h0, h1, h2], [h1, h4, h5], [h2, h5, h8]]
+    to diagonal block ``slot`` of ``arr`` (nothing if slot < 0); its lower triangle is left
+    for :func:`symmetrize_diagonal` (the passes write a third fewer values)."""
+    if slot >= 0:
+        o = 9 * slot
+        arr[o] += h0
+        arr[o + 1] += h1
+        arr[o + 2] += h2
+        arr[o + 4] += h4
+        arr[o + 5] += h5
+        arr[o + 8] += h8
+
+
+@njit(cache=True, nogil=True)
+def symmetrize_diagonal(dvals):
+    """Copy the upper triangle of each 3x3 block of ``dvals`` (F*9,) to its lower triangle: the
+    passes accumulate only the upper one (:func:`_add_upper6`, :func:`_add_outer`)."""
+    for i in range(dvals.shape[0] // 9):
+        o = 9 * i
+        dvals[o + 3] = dvals[o + 1]
+        dvals[o + 6] = dvals[o + 2]
+        dvals[o + 7] = dvals[o + 5]
+
+
 @njit(cache=True, nogil=True, fastmath=True)
 def _spring_pass(x, springs, grad, want_g, dvals, lvals, want_h):
     """The springs' energy (nJ, returned), their gradient dE/dx (uN) added to ``grad`` (F, 3)
@@ -503,8 +529,8 @@ def _spring_pass(x, springs, grad, want_g, dvals, lvals, want_h):
                 h4 = w * ry * ry + g
                 h5 = w * ry * rz
                 h8 = w * rz * rz + g
-                _add_sym6(dvals, fi, h0, h1, h2, h4, h5, h8)
-                _add_sym6(dvals, fj, h0, h1, h2, h4, h5, h8)
+                _add_upper6(dvals, fi, h0, h1, h2, h4, h5, h8)
+                _add_upper6(dvals, fj, h0, h1, h2, h4, h5, h8)
                 _add_sym6(lvals, soff[k], -h0, -h1, -h2, -h4, -h5, -h8)
     return en
 
@@ -567,18 +593,9 @@ def _prism_pass(x, prisms, grad, want_g, dvals, lvals, want_h):
 
 @njit(cache=True, nogil=True, fastmath=True, inline="always")
 def _add_outer(dvals, fa, a0, a1, a2):
-    """Add ``a a^T`` to diagonal block ``fa`` of ``dvals`` (nothing if fa < 0)."""
-    if fa >= 0:
-        o = 9 * fa
-        dvals[o] += a0 * a0
-        dvals[o + 1] += a0 * a1
-        dvals[o + 2] += a0 * a2
-        dvals[o + 3] += a1 * a0
-        dvals[o + 4] += a1 * a1
-        dvals[o + 5] += a1 * a2
-        dvals[o + 6] += a2 * a0
-        dvals[o + 7] += a2 * a1
-        dvals[o + 8] += a2 * a2
+    """Add the upper triangle of ``a a^T`` to diagonal block ``fa`` of ``dvals`` (nothing if
+    fa < 0; the lower one is left for :func:`symmetrize_diagonal`)."""
+    _add_upper6(dvals, fa, a0 * a0, a0 * a1, a0 * a2, a1 * a1, a1 * a2, a2 * a2)
 
 
 @njit(cache=True, nogil=True, fastmath=True, inline="always")
@@ -823,12 +840,16 @@ def energy_gradient_hessian(x, springs, prisms, grad, want_h, dvals, lvals, want
         lprism[:] = 0.0
     if want_p:
         en = _prism_pass(x, prisms, grad, True, dprism, lprism, True)
+        symmetrize_diagonal(dprism)
     else:
         en = prism_energy_gradient(x, prisms, grad)
     if want_h:
         dvals[:] = dprism
         lvals[:] = lprism
-    return en + _spring_pass(x, springs, grad, True, dvals, lvals, want_h)
+    en += _spring_pass(x, springs, grad, True, dvals, lvals, want_h)
+    if want_h:
+        symmetrize_diagonal(dvals)
+    return en
 
 
 @njit(cache=True, nogil=True, fastmath=True)
@@ -846,6 +867,7 @@ def add_spring_hessian(x, springs, dvals, lvals):
     """Add the springs' Hessian at ``x`` (N, 3) mm to the symmetric storage (see
     :func:`_spring_pass`)."""
     _spring_pass(x, springs, np.empty((0, 3)), False, dvals, lvals, True)
+    symmetrize_diagonal(dvals)
 
 
 @njit(cache=True, nogil=True, fastmath=True)
@@ -853,6 +875,7 @@ def add_prism_hessian(x, prisms, dvals, lvals):
     """Add the volume penalty's Hessian at ``x`` (N, 3) mm to the symmetric storage (see
     :func:`add_one_prism_hessian`)."""
     _prism_pass(x, prisms, np.empty((0, 3)), False, dvals, lvals, True)
+    symmetrize_diagonal(dvals)
 
 
 @njit(cache=True, nogil=True, fastmath=True)

@@ -93,7 +93,9 @@ Issue 20, second round (2026-11-30, 23:15-00:45): the free nodes numbered in rev
 Cuthill-McKee order (:class:`~myoface.tissue.hessian.SymmetricPattern`), relax's start and the
 linear response compiled, the forward sweep without reassociation, the prisms' energy and
 gradient vectorised (:func:`~myoface.tissue.hessian.prism_energy_gradient`), the prisms'
-Hessian written out pair by pair (:func:`~myoface.tissue.hessian.add_one_prism_hessian`).
+Hessian written out pair by pair (:func:`~myoface.tissue.hessian.add_one_prism_hessian`), the
+diagonal blocks accumulated in their upper triangle only
+(:func:`~myoface.tissue.hessian.symmetrize_diagonal`).
 
 Measured for issue 20 and did not pay (counts on the default face, surprise and three to five
 other expressions from rest, the 25 frames of the smile): float32 lower blocks in the sweeps
