@@ -2,11 +2,13 @@
 
 Two force evaluations per step (Terzopoulos & Waters 1993, Section III-B: explicit Euler was not
 stable enough). The free nodes are cut into slabs (blocks) along the lattice's long axis, once
-per model (:func:`rk2_plan`); each block keeps private copies of the prisms that touch its nodes
-and adds their forces into a buffer of its own, then takes its nodes' midpoint (or full) update
-from it. Nothing is written by two threads, and each node adds the same terms in the same order
-whatever the number of blocks, so the trajectory does not depend on the number of threads, bit
-for bit.
+per model (:func:`rk2_plan`), and the kernel works on its own numbering of the nodes: each
+block's free nodes side by side, the kinematic ones last (copied in and out once per call), so
+no cache line is written by two threads but at a block's ends. Each block keeps private copies
+of the prisms that touch its nodes and adds their forces into a buffer of its own, then takes
+its nodes' midpoint (or full) update from it. Nothing is written by two threads, and each node
+adds the same terms in the same order whatever the number of blocks, so the trajectory does not
+depend on the number of threads, bit for bit.
 
 The springs are computed with the prisms. Every spring of the layered lattice joins two nodes of
 some prism (an edge or a side-face diagonal: one of its 15 node pairs, :data:`PRISM_PAIRS`), so
@@ -14,37 +16,46 @@ each spring with a free end is given to one such prism, once per model. A block 
 chunk of 64 prisms at a time, side by side in *lanes*: it gathers their six nodes' coordinates
 once, computes their volume forces (:func:`~myoface.tissue.forces._prism_chunk_forces`) and,
 pair by pair, the forces of the springs they hold (:func:`_pair_lanes`: square roots and
-divisions four at a time), summed per node in the lanes, and adds each prism's six sums into
-its buffer. The springs no longer gather their ends' positions, nor add into the nodes, on their
-own: that memory traffic was most of their cost. Same arithmetic per spring and per tetrahedron
-as the reference kernels; only the order of the sums at a node differs (prism by prism). A
-spring that no prism holds (a lattice without prisms) is evaluated on its own after the prisms.
+divisions four at a time, over the lanes from the first that holds such a spring to the last),
+summed per node in the lanes, and adds the sums of the slots that are the block's own nodes
+into its buffer (a list made once: a quarter of the face's slots are kinematic or another
+block's nodes, and cost nothing). The springs no longer gather their ends' positions, nor add
+into the nodes, on their own: that memory traffic was most of their cost. Same arithmetic per
+spring and per tetrahedron as the reference kernels; only the order of the sums at a node
+differs (prism by prism). A spring that no prism holds (a lattice without prisms) is evaluated
+on its own after the prisms.
 
 What one step costs (default face, as built on 2026-11-30): 1,070 free nodes of 1,872; 10,195
 springs with a free end (of 13,302), all held by the 2,026 prisms with a free node, in 32 chunks
-(204 chunk-pairs: 13,056 lanes for the 10,195 springs, because the prisms are ordered by which
-pairs hold a spring, so a chunk's prisms mostly hold the same ones; in model order it would be
-307 chunk-pairs, 19,648 lanes); each evaluated twice a step.
+(204 chunk-pairs; 10,904 lanes of springs for the 10,195, because the prisms are ordered by which
+pairs hold a spring, so a chunk's prisms mostly hold the same ones, and a pair runs only over
+the lanes that span its springs: 13,056 lanes over whole chunks, 19,648 in model order);
+9,084 additions of a prism's node sums into the nodes (of 12,156 slots); each evaluated twice a
+step. Cut in two blocks: 2,166 prism lanes, 11,940 lanes of springs.
 
 The team (:func:`_rk2_run_team`): one parallel region per call, not two per step. The run is a
-sequence of tasks (step, half-step, block); a thread takes the next one from an atomic counter,
-waits (spinning ~1 us, then yielding its core) until every task of the earlier half-steps is
-done, runs it and counts it done. numba's region launch (OpenMP layer here) cost ~10 us each on
-an idle machine and up to milliseconds on a busy one; the wait costs well under 1 us when the
-other thread is running. Any thread may run any task, so a team smaller than asked still
-finishes, in order.
+sequence of tasks (half-step, block); a worker waits (spinning ~1 us, then yielding its core)
+until every task of the earlier half-steps is done, then claims the half-step's blocks that no
+one has claimed yet, its own first (so a block stays on one core, with its arrays in that core's
+cache), runs each and counts it done. numba's region launch (OpenMP layer here) cost ~10 us
+each on an idle machine and up to milliseconds on a busy one; the wait costs well under 1 us
+when the other thread is running. Any worker may run any task, so a worker that the system has
+descheduled leaves its block to the other, and a team smaller than asked still finishes, in
+order.
 
-Measured on this repository's 2-core machine while other jobs ran (load 6-9: every wall time
-here is the busy machine's), 2026-11-30 19:45 UTC. Interleaved runs of 200 steps in one process
-against the previous parallel kernel (springs and prisms apart), medians of 15: one thread
-327 vs 603 us of thread CPU a step (1.84x less), 1,990 vs 1,100 steps/s wall; two threads
-1,140 vs 770 steps/s (the team loses to one thread when the cores are busy). ``myoface bench
---only tissue.rk2`` right after: 1,910 steps/s median (best 3,230) against the single-thread
-reference's 1,020 (1.87x); one thread 2,180 (best 4,500), 333 us of CPU a step against the
-reference's 722. The paper's 5,000 steps/s (200 us a step) needs either one thread a little
-faster still or the two threads of a quiet machine: one step is ~330 us of one core's time
-under this load (the gathers of the prisms' coordinates and the additions into the nodes are
-most of it now).
+Measured on this repository's 2-core machine (AMD EPYC, 2 vCPUs), 2026-11-30/12-01, with other
+jobs on it (every wall time depends on them; one thread's CPU time a step least). Against the
+kernel of 28ebc64 (before the node numbering, the claims, the slot lists and the pair ranges),
+interleaved in one process, runs of 1,000 steps from rest, one block: 235 vs 323 us of thread
+CPU a step, medians of 40 (185 vs 243 at best), at load 3-5. On the quiet machine (load < 1,
+23:15 UTC) that kernel ran 1,000-step runs at ~5,050 steps/s on one thread (~197 us of CPU a
+step) and ~7,500 on two, but ``step_rk2`` stayed on one thread (4,990 steps/s): its 4-step
+probes of the team lost to one thread (see :data:`PROBE_STEPS`). On two blocks each worker's
+tasks take ~54 % of the one-block work (the prisms on both sides of the cut are computed twice).
+``myoface bench --only tissue.rk2`` at 00:00 UTC, load 4-5: 3,640 steps/s median (best 5,380)
+against the previous serial kernel's 1,340 (2.7x); the default ran 99 % of its steps on one
+thread there (two threads: 3,090 median, best 5,600), 262 us of the calling thread's CPU a
+step on one thread (the same kernel's 185 us at best above: the other jobs share the caches).
 
 Tried and dropped (measured): springs in three passes (gather the vectors, vectorised square
 roots and divisions, scatter; per-spring constants) — 30 % faster alone, slower inside the step
@@ -52,9 +63,16 @@ roots and divisions, scatter; per-spring constants) — 30 % faster alone, slowe
 sum in registers over the springs that start at it (no gain). With the springs in the prisms:
 each node gathering its terms from the chunks' stored results instead of the prisms adding
 into the nodes (slower: ~20 % more CPU a step); an explicit branch instead of the discard row
-for a prism's nodes outside the block, contracted multiply-adds in the spring lanes, and the
-prisms in model order (better locality, 1.5x the lanes) — no difference the busy machine could
-resolve.
+for a prism's nodes outside the block, and the prisms in model order (better locality, 1.5x the
+lanes) — no difference the busy machine could resolve. 2026-11-30, 23:30-00:00 UTC (one thread's
+CPU a step): contracted multiply-adds (``fastmath={"contract"}``) in the volume and spring
+lanes, ~2 % (not worth leaving the reference's arithmetic); the 4 x 4 transposes between the
+lanes and padded (N, 4) positions, for vector loads and adds of a node's three components (the
+compiler does not vectorise them: twice as slow); a pair's loop from a variable first lane on
+the whole chunk's arrays (numba's test for a negative index stops the vectorisation: twice as
+slow; hence the views); a reassignment of the springs to prisms by local search (12,864 lanes
+over whole chunks, not 13,056; lost when the prisms are sorted again) and other orders of the
+prisms (within 4 % of these lanes); chunks of 56, 68 or 72 prisms (within the noise).
 
 :func:`_rk2_run_serial` is the single-thread kernel the parallel one replaced (a scatter over
 every spring and element); it stays as the reference the tests hold the parallel one against,
@@ -267,20 +285,23 @@ class Rk2Plan:
     once by :func:`rk2_plan`.
 
     The free nodes are cut into ``n_blocks`` slabs along the lattice's longest axis, one per
-    thread, and numbered ``q = 0 .. F-1`` block by block (``free[q]`` is the node). Block b
+    thread, and numbered ``q = 0 .. F-1`` block by block (``free[q]`` is the node; the kernel
+    works on the nodes in this order, the kinematic ones after them: ``node_order``). Block b
     evaluates every prism that has a node of its own (its private copy, in *lanes*: a chunk of
     :data:`~myoface.tissue.forces.PRISM_CHUNK` prisms computed side by side), and each spring
     with a free end is *owned* by one prism that contains both its nodes (one of the 15 pairs
     :data:`PRISM_PAIRS`), so it is computed with that prism, from the coordinates the prism
-    gathered, and added into the prism's per-node sums; then each prism's six sums are added
-    into the block's own buffer (rows ``q - q0`` for its nodes, the last row for the others). A
-    spring no prism owns (a lattice without prisms) is evaluated on its own after the prisms.
+    gathered, and added into the prism's per-node sums; then the sums of the prism's nodes that
+    are the block's own are added into the block's buffer (rows ``q - q0``). A spring no prism
+    owns (a lattice without prisms) is evaluated on its own after the prisms.
     Nothing is written by two threads, and each node adds the same terms in the same order
     whatever the number of blocks, so the trajectory does not depend on the number of threads.
 
     Attributes
     ----------
     free : (F,) int64 — node index of each free node.
+    node_order : (N,) int64 — the model's node at each row of the kernel's numbering: ``free``,
+        then the kinematic nodes.
     inv_mass, damping : (F,) float64 — 1/m (1/g) and gamma (g/s) of each free node.
     block_nodes : (B+1,) int64 — where each block's nodes q start.
     block_chunks : (B+1,) int64 — where each block's chunks start.
@@ -305,7 +326,8 @@ class Rk2Plan:
         that spring (it adds exactly nothing).
     block_springs : (B+1,) int64 — where each block's springs without a prism start.
     spring_i, spring_j, spring_ti, spring_tj, rest_length, spring_material : (S',) — those
-        springs (nodes, rows of the block buffer, l_k, material), block by block, model order.
+        springs (rows of their nodes in the kernel's numbering, rows of the block buffer (its
+        last row for a node not the block's), l_k, material), block by block, model order.
     """
 
     free: np.ndarray
