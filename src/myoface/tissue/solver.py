@@ -95,7 +95,22 @@ linear response compiled, the forward sweep without reassociation, the prisms' e
 gradient vectorised (:func:`~myoface.tissue.hessian.prism_energy_gradient`), the prisms'
 Hessian written out pair by pair (:func:`~myoface.tissue.hessian.add_one_prism_hessian`), the
 diagonal blocks accumulated in their upper triangle only
-(:func:`~myoface.tissue.hessian.symmetrize_diagonal`).
+(:func:`~myoface.tissue.hessian.symmetrize_diagonal`). Against the solver before it (commit
+28ebc64) in the same process, alternating, thread CPU (2026-12-01 00:01, load 3.3-4.4 on 2
+cores): neutral -> surprise median 9.6 -> 6.9 ms (6 Newton steps instead of 7, 28 CG iterations
+instead of 35; 1.2e-3 mm from the reference instead of 2.0e-4); a frame of the smile (every
+other of the 25 frames, five rounds) median of each frame's median 3.80 -> 3.34 ms, of each
+frame's fastest 3.57 -> 3.06 ms, at most 5.5e-3 mm from the reference either way (2.96 Newton
+steps and 11.4 CG iterations a frame instead of 2.84 and 10.7: the Gauss-Seidel sweeps in the
+new order). Per pass (fastest of 20, same load): the prisms' Hessian pass 364 -> 235 us, the
+full pass 565 -> 495 us, energy and gradient with the springs' Hessian 338 -> 294 us, the
+prisms' energy and gradient 74 -> 54 us, the forward sweep 28 -> 22 us. Did not pay: the
+springs' pass row by row with the row node's sums in registers (its energy-only loop is no
+longer vectorised: 40 -> 79 us), the phase chosen without a branch (slower), the springs' pass
+in vectorised chunks (74 -> 98 us: the gather and scatter dominate), the springs interleaved
+from distant rows (no change), the back substitution as a gather over a transposed index (no
+faster), the rest factor's solve with contracted or fast-math arithmetic (no faster), no linear
+response for warm starts (slower: 3.35 vs 3.21 ms).
 
 Measured for issue 20 and did not pay (counts on the default face, surprise and three to five
 other expressions from rest, the 25 frames of the smile): float32 lower blocks in the sweeps
