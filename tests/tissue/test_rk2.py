@@ -78,6 +78,29 @@ def test_trajectory_does_not_depend_on_the_number_of_blocks(default_tissue):
         np.testing.assert_array_equal(v, out[0][1])
 
 
+def test_one_worker_runs_every_block_in_order(default_tissue):
+    """A team of one thread with several blocks claims each half-step's blocks in turn: the
+    same trajectory, bit for bit, and the same early stop as one block."""
+    import numba
+
+    m, tg = _step_change(default_tissue, seed=8, amp_mm=1.0)
+    x0, v0 = _start(m, tg, seed=8, v_scale=20.0)
+    tol = 1e-3  # mm per step: reached after several hundred steps
+    threads = numba.get_num_threads()
+    out = []
+    try:
+        numba.set_num_threads(1)
+        for nb in (1, 3):
+            x, v = x0.copy(), v0.copy()
+            out.append((run_rk2(m, x, v, 20_000, m.stable_dt, tol, n_blocks=nb), x, v))
+    finally:
+        numba.set_num_threads(threads)
+    (ra, xa, va), (rb, xb, vb) = out
+    assert 100 < ra[0] < 20_000 and ra[2] == -1 and ra == rb
+    np.testing.assert_array_equal(xa, xb)
+    np.testing.assert_array_equal(va, vb)
+
+
 def test_thread_count_chosen_by_measurement_gives_the_same_trajectory(default_tissue, monkeypatch):
     # short calls and a probe of the other thread count at every call: still bit for bit
     monkeypatch.setattr(rk2_mod, "CHUNK_STEPS", 7)
