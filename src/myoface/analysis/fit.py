@@ -1254,9 +1254,14 @@ class FitAnalyzer:
     synthesis : analysis by synthesis (:class:`LandmarkSynthesis`, made at calibration): the
         face model's own texture if it has one (e.g. ``face from-photo``), else the
         calibration frame.
-    deferred_relax : relax the tissue at each frame's estimate on a second thread while the
-        next frame is detected (:meth:`ModelFit.fit` ``deferred=True``; what a video analysis
-        does, :func:`make_fit_analyzer`), instead of a second fitting round through it.
+    deferred_relax : relax the tissue at a frame's estimate on a second thread while the
+        next frame is fitted, once its skin has moved :attr:`FitSettings.relax_step_mm` since
+        the last relax (:meth:`ModelFit.fit` ``deferred=True``; what a video analysis does,
+        :func:`make_fit_analyzer`), instead of a second fitting round through it.
+
+    :func:`~myoface.analysis.pipeline.measure_frames` runs :meth:`observe` (MediaPipe) on a
+    worker thread ahead of :meth:`measure` (the fit), and takes the frames the calibration
+    decoded from :meth:`replay`.
     """
 
     tracker = "landmarks"
@@ -1289,8 +1294,8 @@ class FitAnalyzer:
         self._detector = detector
         #: {frame index: landmarks or None} of the calibration frames, taken by measure()
         self._detected: dict = {}
-        #: relax the tissue on a second thread while the next frame is detected
-        #: (:meth:`ModelFit.fit`'s ``deferred``; the tissue then lags the estimate a frame)
+        #: relax the tissue on a second thread while the next frame is fitted
+        #: (:meth:`ModelFit.fit`'s ``deferred``; the tissue then lags the estimate)
         self.deferred_relax = bool(deferred_relax)
         self.calibration: Calibration | None = None
         self.calibration_frame: int | None = None
