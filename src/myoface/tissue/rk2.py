@@ -56,6 +56,11 @@ tasks take ~54 % of the one-block work (the prisms on both sides of the cut are 
 against the previous serial kernel's 1,340 (2.7x); the default ran 99 % of its steps on one
 thread there (two threads: 3,090 median, best 5,600), 262 us of the calling thread's CPU a
 step on one thread (the same kernel's 185 us at best above: the other jobs share the caches).
+At 00:18-00:20 UTC, load 0.5-1 (another job now and then): 5,920 and 6,040 steps/s median
+(2.7x, 3.0x the serial kernel's ~2,100), the default on two threads for 71 % and 83 % of its
+steps (two threads alone 6,240-6,400 median, best 8,190-9,590; one thread 5,020-5,380, 186-199
+us of CPU a step); with the choice tried again soon after a switch (see :class:`_Pace`): 6,100
+median (2.8x), 97 % of the steps on two threads.
 
 Tried and dropped (measured): springs in three passes (gather the vectors, vectorised square
 roots and divisions, scatter; per-spring constants) — 30 % faster alone, slower inside the step
@@ -828,9 +833,9 @@ def _rk2_run_team(
 class _Pace:
     """Measured seconds per step of one model's kernel with each thread count tried (the latest
     measurement of each), and when to try the one not in use. Switching away from a choice that
-    has become slow is immediate (its own timings show it); trying the other costs a few steps,
-    so it backs off while it loses. Shared by the threads that step the model: their races only
-    mix up timings."""
+    has become slow is immediate (its own timings show it), and the one left is tried again
+    after PROBE_MIN_S; trying the other costs a few steps, so it backs off while it loses. Shared
+    by the threads that step the model: their races only mix up timings."""
 
     #: whether the kernel has run in this process (its first call may compile or load it)
     kernel_loaded = False
@@ -861,7 +866,16 @@ class _Pace:
         if steps <= 0:
             return
         sec = seconds / steps
-        self.sec_per_step[n] = sec
+        known = self.sec_per_step
+        was_best = n in known and all(known[n] <= t for t in known.values())
+        known[n] = sec
+        if self.probe != n and was_best and any(t < sec for t in known.values()):
+            # the choice in use got slower than the other's (older) timing, perhaps for a
+            # moment: the other runs now, and the one left is tried again soon, not after the
+            # back-off its earlier probes earned (a single slow call kept the team off for
+            # up to PROBE_MAX_S)
+            self.interval = PROBE_MIN_S
+            self.next_probe = min(self.next_probe, time.monotonic() + PROBE_MIN_S)
         if self.probe == n:
             self.probe = None
             others = [t for m, t in self.sec_per_step.items() if m != n]
