@@ -124,24 +124,14 @@ class FaceModel:
         s("face", face)
         s("muscles", muscles)
         s("ids", muscles.ids)
-        nv = face.n_vertices
+        base = assemble_tissue(face.vertices, face.triangles, params)
+        nv = base.n_vertices
+        fascia = base.layer_nodes("fascia")
         jaw_w = muscles.jaw.weights if muscles.jaw is not None else np.zeros(nv)
         if len(jaw_w) != nv:
             raise MyofaceValueError(
                 f"the muscle set's jaw has {len(jaw_w)} weights but the face {nv} vertices"
             )
-        #: the teeth behind the lips (None for a face without the lip landmark groups)
-        dentition = fit_dentition(face)
-        # the soft tissue the mandible carries (the lower lip, resting on the lower incisors,
-        # and the chin) is bound to it: no mobile fat under the skin there (TissueParams.bound_fat);
-        # the lips' skin is extensible (TissueParams.lip_epidermis, lip_dermis)
-        lips = None
-        if dentition is not None:
-            lips = np.zeros(nv, bool)
-            lips[dentition.upper_lip] = True
-            lips[dentition.lower_lip] = True
-        base = assemble_tissue(face.vertices, face.triangles, params, bound=jaw_w, lips=lips)
-        fascia = base.layer_nodes("fascia")
         fb = muscles.basis(base.rest_positions[fascia], jaw_w)
         reach = np.abs(fb).max(axis=(1, 2))
         driven_v = np.flatnonzero(reach > DRIVEN_MIN_MM)
@@ -169,7 +159,8 @@ class FaceModel:
         s("_memo_lock", threading.Lock())
         #: the eyelids moved by the lid muscles (None without lid muscles or eye openings)
         s("eyelids", build_eyelids(face, muscles))
-        s("dentition", dentition)
+        #: the teeth behind the lips (None for a face without the lip landmark groups)
+        s("dentition", fit_dentition(face))
 
     def __setattr__(self, name, value):
         raise AttributeError(f"FaceModel is immutable: cannot set {name!r}")

@@ -8,27 +8,18 @@ import myoface as mf
 
 CORNERS = (61, 291)  # MediaPipe face mesh: the mouth corners, right and left
 LOWER_LIP_CENTRE = 17  # the lower lip's outer (lower) edge at the midline
-LOWER_LIP_INNER = 14  # the lower lip's inner margin at the midline
 MENTON = 152
 
 pytestmark = pytest.mark.slow  # a relax from rest at full contraction
 
 
 @pytest.fixture(scope="module")
-def fm():
-    return mf.build_face_model()
-
-
-def _displacement(fm, contractions) -> np.ndarray:
-    res = fm.relax(contractions)
+def smile():
+    """The skin's displacement (V, 3) mm at both zygomatic majors' full contraction."""
+    fm = mf.build_face_model()
+    res = fm.relax({"zygomaticus_major_l": 1.0, "zygomaticus_major_r": 1.0})
     assert res.converged
     return fm.skin_vertices(res.state) - fm.skin_vertices()
-
-
-@pytest.fixture(scope="module")
-def smile(fm):
-    """The skin's displacement (V, 3) mm at both zygomatic majors' full contraction."""
-    return _displacement(fm, {"zygomaticus_major_l": 1.0, "zygomaticus_major_r": 1.0})
 
 
 def test_the_corners_rise_and_draw_out(smile):
@@ -38,25 +29,18 @@ def test_the_corners_rise_and_draw_out(smile):
     assert d[0, 0] < -2.0 and d[1, 0] > 2.0
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="known (tissue/muscle level, issue 19): the lower lip is a free band between the "
+    "corners, so the zygomatic majors lift its centre 6.0 mm (0.79 of the corners' 7.6) and "
+    "the chin 2.4 mm up and 2.7 mm forward; on the sample video the person's lower lip "
+    "centre drops ~2 mm and the chin rises ~1.6 mm while the corners rise 10.7 mm, so the "
+    "3-D fit adds the depressor labii inferioris (1.0 at the apex) and the jaw, which drag "
+    "the model's chin down: analysis.fidelity's chin region -2.2",
+)
 def test_the_lower_lip_centre_and_chin_stay(smile):
     """The lower lip's centre, 24 mm from each corner and resting on the lower teeth, rises by
-    less than half as much as the corners; the chin, tethered to the mandible, by under 1 mm.
-
-    (Before the soft tissue over the mandible was bound to it, the lower lip was a free band
-    between the corners: its centre rose 6.0 mm, 0.79 of the corners' 7.6, and the chin 2.4 mm;
-    a person's lower lip centre stays or drops ~2 mm in a smile.)"""
+    less than half as much as the corners; the chin, tethered to the mandible, by under 1 mm."""
     corner_rise = smile[list(CORNERS), 1].mean()
     assert smile[LOWER_LIP_CENTRE, 1] < 0.5 * corner_rise
     assert np.linalg.norm(smile[MENTON]) < 1.0
-
-
-def test_the_lower_lip_still_follows_its_own_muscles(fm):
-    """Bound to the mandible, the lower lip still moves with the muscles under it: the depressor
-    labii inferioris (AU16) lowers its inner margin by more than 2 mm, and the mentalis (AU17)
-    raises the chin by more than 2 mm."""
-    d = _displacement(
-        fm, {"depressor_labii_inferioris_l": 1.0, "depressor_labii_inferioris_r": 1.0}
-    )
-    assert d[LOWER_LIP_INNER, 1] < -2.0 and d[LOWER_LIP_CENTRE, 1] < -1.0
-    d = _displacement(fm, {"mentalis_l": 1.0, "mentalis_r": 1.0})
-    assert d[MENTON, 1] > 2.0

@@ -17,11 +17,6 @@ subcutaneous fat (1-2) and muscle (2-3). Springs: the triangle edges of layers 0
 edges, and both diagonals of every quadrilateral side face (against shear). Nodes are numbered
 ``layer * n_vertices + vertex``, so the skin nodes are ``0 .. n_vertices-1`` in mesh order.
 
-Regional materials (optional, given per vertex to :func:`assemble_tissue`): the fat layer is
-replaced by a fibrous, stiffer one where the skin is bound to the bone (``bound``; a face model
-passes its jaw weights: the lower lip and chin, carried by the mandible), and the lips' skin
-(``lips``) is more extensible than the rest.
-
 The paper gives no numeric values for masses, stiffnesses or damping; the defaults below are
 ours, chosen from soft-tissue orders of magnitude (skin ~ 0.1-1 MPa; fat an order softer; collagen
 stiffening ~10x past ~15 % strain) and for an over-damped, stable lattice, as the paper asks.
@@ -44,17 +39,6 @@ MASS_FLOOR = 0.25
 #: names of the three element layers and the epidermis (the rows of the material table)
 LAYERS = ("epidermis", "dermis", "fat", "muscle")
 NODE_LAYERS = ("epidermis", "dermis_bottom", "fascia", "bone")
-#: a fat-layer spring whose two end vertices' mean ``bound`` weight is above level k of these is
-#: bound to the bone in step k + 1 of len(BOUND_LEVELS): its material goes from the fat's to
-#: ``TissueParams.bound_fat`` geometrically. Graded, because an abrupt edge (one threshold, 0.9)
-#: sheared the skin at the edge of the tissue the mandible carries: a dermis prism under the
-#: lower lip's side inverted at the jaw's full opening; bound fully from 0.5 on, the mouth corners'
-#: modiolus (half carried) was held to its fascia and the smile's corners moved 12.4 mm, past
-#: the human AU12 range (6.45-12.11 mm)
-BOUND_LEVELS = (0.5, 0.7, 0.9)
-#: regional materials: the rows of an assembled lattice's material table after :data:`LAYERS`
-#: (see :class:`TissueParams` and the ``bound`` and ``lips`` arguments of :func:`assemble_tissue`)
-REGIONAL_MATERIALS = ("bound_fat_1", "bound_fat_2", "bound_fat", "lip_epidermis", "lip_dermis")
 #: a prism whose rest volume is below this fraction of (top area x layer thickness) is treated as
 #: inverted and the layers under its vertices are thinned
 MIN_REL_VOLUME = 0.2
@@ -103,23 +87,6 @@ class TissueParams:
     dermis: LayerMaterial = LayerMaterial(1500.0, 15000.0, 0.15, 1.0)
     fat: LayerMaterial = LayerMaterial(300.0, 3000.0, 0.30, 2.0)
     muscle: LayerMaterial = LayerMaterial(1000.0, 10000.0, 0.20, 1.0)
-    #: the subcutaneous layer where the skin is bound to the bone beneath (the ``bound`` vertices
-    #: of :func:`assemble_tissue`; on a face model, the soft tissue carried by the mandible):
-    #: there is no mobile fat there — the orbicularis oris, the depressor labii inferioris and
-    #: the mentalis insert into the dermis, and fibrous septa tie the chin's skin to the bone —
-    #: so the layer is fibrous, 20x the fat's stiffness. Its stiff phase (3x, as collagen-rich
-    #: tissue is already taut) is no stiffer than the epidermis', so the explicit step is
-    #: unchanged. The prisms' volume weight stays the fat's. Graded in by :data:`BOUND_LEVELS`.
-    #: Without it the zygomatic majors' smile slid the lower lip's skin 6 mm up over
-    #: its held fascia (0.8 of the corners' rise) and the chin 2.4 mm (issue 19).
-    bound_fat: LayerMaterial = LayerMaterial(6000.0, 18000.0, 0.30, 2.0)
-    #: the lips' skin (the ``lips`` vertices): the vermilion and the orbicularis oris under it
-    #: stretch easily (the lips lengthen and thin in a smile, stretch over the teeth as the jaw
-    #: opens), 0.3 of the skin's stiffness. With the skin's stiffness the smile's lower lip
-    #: centre rose 0.47 of the corners, and at the jaw's full opening four dermis prisms at the
-    #: lower lip's inner corners inverted (the fascia under them held to the mandible)
-    lip_epidermis: LayerMaterial = LayerMaterial(600.0, 6000.0, 0.15, 0.0)
-    lip_dermis: LayerMaterial = LayerMaterial(450.0, 4500.0, 0.15, 1.0)
     #: tissue density, g/mm^3 (water); node masses are lumped from element volumes
     density: float = 1.0e-3
     #: damping ratio of the lattice's slowest mode (> 1: over-damped, as the paper asks, "slightly");
@@ -142,38 +109,6 @@ class TissueParams:
             dtype=np.float64,
         )
 
-    def bound_materials(self) -> list[LayerMaterial]:
-        """The fat layer's materials at each step of :data:`BOUND_LEVELS`, the last one
-        :attr:`bound_fat`: the small-strain stiffness goes from the fat's to the bound layer's
-        geometrically; the fibrous layer stiffens by the bound layer's ratio beta / alpha past
-        its threshold, never to less than the fat's stiff phase; the threshold strain and
-        volume weight go linearly."""
-        n = len(BOUND_LEVELS)
-        f, b = self.fat, self.bound_fat
-        out = []
-        for k in range(1, n + 1):
-            s = k / n
-            alpha = f.alpha * (b.alpha / f.alpha) ** s
-            out.append(
-                LayerMaterial(
-                    alpha,
-                    max(alpha * b.beta / b.alpha, f.beta, alpha),
-                    f.strain_c + s * (b.strain_c - f.strain_c),
-                    f.volume + s * (b.volume - f.volume),
-                )
-            )
-        return out
-
-    def regional_materials(self) -> np.ndarray:
-        """(5, 3) table [alpha, beta, strain_c] in :data:`REGIONAL_MATERIALS` order."""
-        return np.array(
-            [
-                [m.alpha, m.beta, m.strain_c]
-                for m in (*self.bound_materials(), self.lip_epidermis, self.lip_dermis)
-            ],
-            dtype=np.float64,
-        )
-
     @property
     def depths_mm(self) -> np.ndarray:
         """Depth of node layers 0..3 below the skin, mm."""
@@ -192,10 +127,8 @@ class TissueModel:
     node_layer : (N,) int8 — 0 epidermis, 1 dermis bottom, 2 fascia, 3 bone.
     spring_i, spring_j : (S,) int64 — spring end nodes.
     rest_length : (S,) float64, mm — natural lengths l_k.
-    spring_material : (S,) int64 — row of ``materials`` (:data:`LAYERS`, then
-        :data:`REGIONAL_MATERIALS`).
-    materials : (9, 3) float64 — [alpha, beta, strain_c] (a lattice from :func:`make_lattice`:
-        its own rows).
+    spring_material : (S,) int64 — row of ``materials`` (:data:`LAYERS` order).
+    materials : (4, 3) float64 — [alpha, beta, strain_c].
     elements : (E, 6) int64 — prisms [a0, b0, c0, a1, b1, c1] (top triangle, then the deeper one).
     element_layer : (E,) int8 — 1 dermis, 2 fat, 3 muscle.
     rest_volume : (E,) float64, mm^3; volume_weight : (E,) float64 — kv_j.
@@ -267,12 +200,8 @@ class TissueModel:
         return replace(self, kinematic=kin, cache={})
 
     def summary(self) -> str:
-        names = LAYERS + REGIONAL_MATERIALS
-        counts = {
-            name: int(np.sum(self.spring_material == k))
-            for k, name in enumerate(names[: len(self.materials)])
-        }
-        per = ", ".join(f"{k} {v}" for k, v in counts.items() if v or k in LAYERS)
+        counts = {name: int(np.sum(self.spring_material == k)) for k, name in enumerate(LAYERS)}
+        per = ", ".join(f"{k} {v}" for k, v in counts.items())
         return (
             f"{self.n_nodes} nodes ({int(self.kinematic.sum())} kinematic), "
             f"{self.n_elements} elements, {self.n_springs} springs ({per})"
@@ -314,12 +243,7 @@ def _order_free_volumes(pos: np.ndarray, elems: np.ndarray) -> np.ndarray:
 
 
 def assemble_tissue(
-    vertices: np.ndarray,
-    triangles: np.ndarray,
-    params: TissueParams | None = None,
-    *,
-    bound: np.ndarray | None = None,
-    lips: np.ndarray | None = None,
+    vertices: np.ndarray, triangles: np.ndarray, params: TissueParams | None = None
 ) -> TissueModel:
     """Build the layered lattice under a skin mesh, automatically (T&W 1993, Section III-D).
 
@@ -328,14 +252,6 @@ def assemble_tissue(
     vertices : (V, 3) float ndarray — skin positions, mm, outward-oriented mesh.
     triangles : (F, 3) int ndarray — counter-clockwise seen from outside.
     params : TissueParams, optional
-    bound : (V,) float ndarray in [0, 1], optional
-        How firmly the skin at each vertex is bound to the bone beneath (0: over mobile fat).
-        The fat-layer springs whose two vertices' mean weight exceeds a level of
-        :data:`BOUND_LEVELS` get the matching step of ``params.bound_materials()`` (the last,
-        above 0.9: ``params.bound_fat``). Default: none.
-    lips : (V,) bool ndarray, optional
-        The lips' vertices: the epidermis and dermis springs with both ends' vertices there get
-        ``params.lip_epidermis`` / ``params.lip_dermis``. Default: none.
 
     Returns
     -------
@@ -406,23 +322,6 @@ def assemble_tissue(
             add(a + bot, b + bot, m)  # the lower triangle's edges (not bone)
     si, sj, smat = np.concatenate(ii), np.concatenate(jj), np.concatenate(mm)
     rest = np.linalg.norm(pos[sj] - pos[si], axis=1)
-    # regional materials (rows len(LAYERS) + k of the table, in REGIONAL_MATERIALS order)
-    n_layers = len(LAYERS)
-    if bound is not None:
-        w = np.asarray(bound, dtype=np.float64)
-        if w.shape != (nv,) or not np.isfinite(w).all():
-            raise MyofaceValueError(f"bound must be a finite ({nv},) array; got shape {w.shape}")
-        wm = 0.5 * (w[si % nv] + w[sj % nv])
-        fat = smat == 2
-        for k, level in enumerate(BOUND_LEVELS):
-            smat[fat & (wm > level)] = n_layers + k
-    if lips is not None:
-        lip = np.asarray(lips, dtype=bool)
-        if lip.shape != (nv,):
-            raise MyofaceValueError(f"lips must be a ({nv},) bool array; got shape {lip.shape}")
-        both = lip[si % nv] & lip[sj % nv]
-        smat[both & (smat == 0)] = n_layers + REGIONAL_MATERIALS.index("lip_epidermis")
-        smat[both & (smat == 1)] = n_layers + REGIONAL_MATERIALS.index("lip_dermis")
 
     # volume weights: kv = volume * alpha / A^2, A = mean area of the prism's two triangles
     area_top = 0.5 * np.linalg.norm(triangle_normals(pos, elems[:, :3], unit=False), axis=1)
@@ -454,7 +353,7 @@ def assemble_tissue(
         spring_j=sj,
         rest_length=rest,
         spring_material=smat,
-        materials=np.vstack([params.materials(), params.regional_materials()]),
+        materials=params.materials(),
         elements=elems,
         element_layer=elem_layer,
         rest_volume=vol,
