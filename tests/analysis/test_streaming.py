@@ -85,9 +85,12 @@ def test_each_row_is_in_the_csv_before_the_next_frame_is_read(face_clip, tmp_pat
 
 @needs_mediapipe
 def test_the_landmark_fit_streams_its_rows_too(tmp_path):
-    """The landmark tracker with the 3-D fit (the default estimator) on the sample video:
-    after its calibration pass over the first 2 s, frame k of the analysis is read once the k
-    rows before it are in the CSV, with the fit's head columns."""
+    """The landmark tracker with the 3-D fit (the default estimator) on the sample video: the
+    video is decoded once (the calibration's frames are replayed to the analysis, which goes
+    on with the same decode), and once the first rows are written, frame k is read when all
+    but the last few rows before it are in the CSV: MediaPipe runs at most
+    ``DETECT_AHEAD_FRAMES`` frames ahead of the fit, on a thread of its own."""
+    from myoface.analysis.landmarks import DETECT_AHEAD_FRAMES
     from myoface.analysis.outputs import analyze_to_folder
 
     path = shared_path("video", "single_face.mp4")
@@ -97,13 +100,20 @@ def test_the_landmark_fit_streams_its_rows_too(tmp_path):
     out = tmp_path / "out"
     n = len(frames)
     video = _WatchedVideo(frames, n, out / "contractions.csv")
-    res = analyze_to_folder(video, out, tracker="landmarks", max_frames=6)
-    assert len(res.frames) == 6
-    # the last pass over the video is the analysis' (the calibration's came before it)
-    assert video.rows_seen[-7:] == list(range(7))  # the 7th frame is read, then not measured
+    m = n - 2
+    res = analyze_to_folder(video, out, tracker="landmarks", max_frames=m)
+    assert len(res.frames) == m
+    seen = video.rows_seen
+    assert len(seen) == m + 1  # one pass: the (m+1)-th frame is read, then not measured
+    assert seen == sorted(seen)
+    first = next(k for k, r in enumerate(seen) if r > 0)
+    assert first < n // 2  # the rows start coming before the video's end
+    lag = [k - r for k, r in enumerate(seen) if k >= first]
+    assert min(lag) >= 1 and max(lag) <= DETECT_AHEAD_FRAMES + 2, lag
+    assert seen[-1] >= m - DETECT_AHEAD_FRAMES - 2
     with open(out / "contractions.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    assert len(rows) == 6 and rows[0]["head_yaw_deg"] != "" and rows[0]["residual_mm"] != ""
+    assert len(rows) == m and rows[0]["head_yaw_deg"] != "" and rows[0]["residual_mm"] != ""
 
 
 def test_the_record_kept_per_frame_is_small(face_clip):
