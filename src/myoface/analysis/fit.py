@@ -71,7 +71,7 @@ IDENTITY_ROUNDS = 4
 #: contractions fitted against the model's neutral (an expression moves a part of the face)
 NEUTRAL_PERCENTILE = 90
 #: the scores are known to within this (mm): MediaPipe's points on identical neutral frames
-#: (video mode) score up to ~1 mm apart. The earliest frame within it of the lowest score
+#: score up to ~1 mm apart. The earliest frame within it of the lowest score
 #: calibrates, with ...
 NEUTRAL_MARGIN_MM = 1.0
 #: ... at most this many frames around it (within the margin too): their noise averages out
@@ -120,7 +120,21 @@ class FitSettings:
     magnitude_sigma : Gaussian prior on each contraction (about 0).
     sparsity : L1 prior, in squared standard deviations of the landmarks per unit contraction:
         a muscle must lower the landmark cost by this much per unit before it is used.
-    huber : a landmark residual beyond this many sigmas weighs less (Huber).
+    huber : a landmark residual beyond this many sigmas weighs less (Huber). What the model
+        cannot make (a broad smile's cheeks, a person's own way of moving) leaves residuals
+        of a few sigmas at many points at once; weighed in full they pull the head pose and
+        the other muscles. On single_face.mp4 (2026-12-01): 3.0 gave analysis.fidelity 0.703
+        and synth.smile_gain 0.672, 1.5 0.765 and 0.709 (the synthetic closed loop unchanged
+        within its tolerance).
+    tracking : MediaPipe's face mesh in its tracking (video) mode, which finds each frame's
+        face from the last frame's points, instead of detecting it on every frame (image
+        mode; the default). Tracking costs ~3 ms less CPU a frame (5.5 vs 8.5 on the sample
+        video), but it is biased where the face changes shape fast: on single_face.mp4's smile
+        it puts the chin 3.1 mm and the lower lip 4.1 mm lower than detection does (the
+        tracked box lags the opening mouth, as other trackers' users report, e.g. OpenFace
+        issue 552, MediaPipe issue 2990), and the fit then opens the jaw and pulls the lower
+        lip down while the chin rises. Detected on every frame, the points scatter a little
+        more; the fit's temporal prior takes that out.
     iterations : Gauss-Newton steps per frame (fewer when converged).
     refine : relaxes of the tissue per frame at the estimate (0: the linear response only).
     relax_step_mm : with the relax deferred (a video, :meth:`ModelFit.fit` ``deferred=True``):
@@ -146,7 +160,8 @@ class FitSettings:
     translation_rate_mm_per_s: float = 300.0
     magnitude_sigma: float = 1.0
     sparsity: float = 4.0
-    huber: float = 3.0
+    huber: float = 1.5
+    tracking: bool = False
     iterations: int = 8
     refine: int = 1
     relax_step_mm: float = 2.0
@@ -1133,11 +1148,12 @@ class LandmarkSynthesis:
         :meth:`from_frame`), in the default topology.
     camera : PinholeCamera of the frames, principal point at the image's centre.
     size : (width, height) of the frames, pixels.
-    detector : as for :class:`FitAnalyzer` (default: MediaPipe's face mesh, video mode: the
-        synthetic frames are tracked like the real ones).
+    detector : as for :class:`FitAnalyzer` (default: MediaPipe's face mesh, in the mode
+        ``tracking`` says: the synthetic frames are observed like the real ones).
+    tracking : :attr:`FitSettings.tracking` of the fit.
     """
 
-    def __init__(self, face, camera: PinholeCamera, size, detector=None):
+    def __init__(self, face, camera: PinholeCamera, size, detector=None, tracking=False):
         from myoface.render import Camera, Renderer
 
         w, h = (int(v) for v in size)
@@ -1151,7 +1167,7 @@ class LandmarkSynthesis:
         if detector is None:
             from myoface.analysis.landmarks import FaceMeshDetector
 
-            detector = FaceMeshDetector(video=True)
+            detector = FaceMeshDetector(video=tracking)
         self.detector = detector
 
     @classmethod
@@ -1237,8 +1253,8 @@ _NOT_OBSERVED = object()
 
 
 class FitAnalyzer:
-    """The landmark tracker with the 3-D fit: MediaPipe's face mesh (video mode) on every
-    frame, :class:`ModelFit` on its points. ``measure(frame, index, time_s)`` returns a
+    """The landmark tracker with the 3-D fit: MediaPipe's face mesh on every frame (detection
+    on each, or tracking with :attr:`FitSettings.tracking`), :class:`ModelFit` on its points. ``measure(frame, index, time_s)`` returns a
     :class:`FitMeasurement`; frames without a face are ``quality="no_face"`` (the next face
     starts the fit afresh).
 
@@ -1250,7 +1266,7 @@ class FitAnalyzer:
         first frame's size.
     settings : FitSettings.
     detector : an object with ``detect(frame) -> (468, 3) | None`` and ``close()`` (default:
-        MediaPipe's face mesh in video mode).
+        MediaPipe's face mesh, in the mode :attr:`FitSettings.tracking` says).
     synthesis : analysis by synthesis (:class:`LandmarkSynthesis`, made at calibration): the
         face model's own texture if it has one (e.g. ``face from-photo``), else the
         calibration frame.
@@ -1312,11 +1328,11 @@ class FitAnalyzer:
 
     @property
     def detector(self):
-        """The landmark detector (MediaPipe's face mesh in video mode unless one was given)."""
+        """The landmark detector (MediaPipe's face mesh unless one was given)."""
         if self._detector is None:
             from myoface.analysis.landmarks import FaceMeshDetector
 
-            self._detector = FaceMeshDetector(video=True)
+            self._detector = FaceMeshDetector(video=self.settings.tracking)
         return self._detector
 
     @property
@@ -1338,8 +1354,8 @@ class FitAnalyzer:
         """Calibrate on ``frames`` (an iterable of RGB frames, or None for a frame without a
         face: the first :data:`CALIBRATION_WINDOW_S` s of the video, from its frame
         ``first_index``): the most neutral one, or the frame ``calibration_frame`` (an index
-        into the video). Runs MediaPipe in video mode, as the analysis does (its tracking mode
-        places the points a little differently from its detection mode); with the analyzer's
+        into the video). Runs MediaPipe as the analysis does (:attr:`FitSettings.tracking`:
+        its two modes place the points a little differently); with the analyzer's
         own detector, the analysis then goes on with this one and takes these frames' points
         from the calibration instead of detecting them again (it starts on the first of
         them). ``window``: ``frames`` are the video's frames from ``first_index`` on, of
@@ -1368,7 +1384,7 @@ class FitAnalyzer:
         images: list = []
         points: list = []
         first_face: list = []  # the index of the first frame with a face, once there is one
-        det = FaceMeshDetector(video=True)
+        det = FaceMeshDetector(video=self.settings.tracking)
         end = object()
 
         def source():
@@ -1439,12 +1455,15 @@ class FitAnalyzer:
             frame = images[cal.index]
             size = (np.shape(frame)[1], np.shape(frame)[0])
             if self.model.face.texture is not None:
-                self.synthesis = LandmarkSynthesis(self.model.face, fit.camera, size)
+                self.synthesis = LandmarkSynthesis(
+                    self.model.face, fit.camera, size, tracking=self.settings.tracking
+                )
             else:
                 shape = fit.neutral + fit.identity_mm
                 self.synthesis = LandmarkSynthesis.from_frame(
-                    self.model.face, fit.camera, frame, shape, cal.pose
-                )
+                    self.model.face, fit.camera, frame, shape, cal.pose,
+                    tracking=self.settings.tracking,
+                )  # fmt: skip
             self.calibration = fit.calibrate(points, cal.index, synthesis=self.synthesis)
             self.calibration.scores = cal.scores
         self.calibration_frame = first_index + self.calibration.index
@@ -1608,7 +1627,7 @@ def make_fit_analyzer(model, video, calibration_frame: int | None = None, refine
             live = iter(video)
             try:
                 # decoded, searched for the first face and detected as the calibration takes
-                # them, MediaPipe in video mode from the first frame
+                # them, MediaPipe from the first frame
                 cal = an.calibrate(live, window=window)
             except BaseException:
                 _close(live)

@@ -5,8 +5,8 @@ video ``single_face.mp4``; the default face with its skin texture when the video
 not there), driven through a programme of the six universal expressions (every muscle they
 use moves; overlapping expressions mix by the FACS rule), moved along a smooth 3-D head
 trajectory (yaw +-30 deg, pitch and roll +-15 deg, translation) in front of a perspective camera
-at 640x480, rendered, and analysed as a video would be: MediaPipe's face mesh (video mode) on
-every frame, then the 3-D fit of the model (:class:`~myoface.analysis.fit.ModelFit`), its
+at 640x480, rendered, and analysed as a video would be: MediaPipe's face mesh (in the mode the
+analysis runs it, :attr:`~myoface.analysis.fit.FitSettings.tracking`) on every frame, then the 3-D fit of the model (:class:`~myoface.analysis.fit.ModelFit`), its
 calibration frame chosen automatically. The recovered contractions and head pose are compared
 with the truth; so is the skin the recovered contractions produce (head frame).
 """
@@ -191,14 +191,15 @@ def render_sequence(face, poses, skins) -> list[np.ndarray]:
 
 
 def detect_sequence(frames) -> tuple[list, np.ndarray]:
-    """MediaPipe's face mesh (video mode, as the analysis runs it) on every frame: the points
+    """MediaPipe's face mesh (in the mode the analysis runs it) on every frame: the points
     (None without a face) and the seconds each took."""
     import time
 
+    from myoface.analysis.fit import FitSettings
     from myoface.analysis.landmarks import FaceMeshDetector
 
     points, secs = [], []
-    with FaceMeshDetector(video=True) as det:
+    with FaceMeshDetector(video=FitSettings().tracking) as det:
         for f in frames:
             t0 = time.perf_counter()
             points.append(det.detect(f))
