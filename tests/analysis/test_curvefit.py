@@ -145,7 +145,10 @@ def test_deferred_relaxes_follow_a_sequence(fm):
     same results run after run (the relax is awaited, never raced), and close to the truth
     on a ramp of up to 0.07 per frame. The lag of one frame in the linearisation costs some
     accuracy where the tissue stiffens: measured when written, at most 0.029 from the truth
-    (0.009 for the synchronous fit, which a larger step, beyond DEFER_STEP, falls back to)."""
+    (0.009 for the synchronous fit, which a larger step, beyond DEFER_STEP, falls back to).
+    Since the depressor labii inferioris' zone was narrowed to the lip (radius 8 mm, 68c6775)
+    its signature in the lower lip's contour is smaller and the lag costs it more: at most
+    0.066 (0.022 synchronous), the other muscles at most 0.019."""
     truth = np.linspace([0.0, 0.0, 0.0, 0.0, 0.0], [0.6, 0.75, 0.5, 0.4, 0.45], 12)
     runs = []
     for _ in range(2):
@@ -160,4 +163,7 @@ def test_deferred_relaxes_follow_a_sequence(fm):
         assert ce._worker is None and ce._pending is None
         runs.append(np.array(est))
     np.testing.assert_array_equal(runs[0], runs[1])
-    np.testing.assert_allclose(runs[0], truth, atol=0.05)
+    dli = IDS.index("depressor_labii_inferioris_l")
+    others = [i for i in range(len(IDS)) if i != dli]
+    np.testing.assert_allclose(runs[0][:, others], truth[:, others], atol=0.05)
+    np.testing.assert_allclose(runs[0][:, dli], truth[:, dli], atol=0.09)
