@@ -121,7 +121,8 @@ def assert_smile(c: np.ndarray, ids: list) -> None:
         assert smile > 0.6 and smile > before + 0.5, (before, smile)
         assert last < smile - 0.3, (last, smile)
     brows = c[:, [i for i, m in enumerate(ids) if m.startswith("frontalis")]]
-    assert np.nanmax(brows) < 0.5 and np.nanmean(brows) < 0.15, (np.nanmax(brows), np.nanmean(brows))
+    top, mean = np.nanmax(brows), np.nanmean(brows)
+    assert top < 0.5 and mean < 0.15, (top, mean)
 
 
 @needs_mediapipe
