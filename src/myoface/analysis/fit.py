@@ -1254,9 +1254,9 @@ _NOT_OBSERVED = object()
 
 class FitAnalyzer:
     """The landmark tracker with the 3-D fit: MediaPipe's face mesh on every frame (detection
-    on each, or tracking with :attr:`FitSettings.tracking`), :class:`ModelFit` on its points. ``measure(frame, index, time_s)`` returns a
-    :class:`FitMeasurement`; frames without a face are ``quality="no_face"`` (the next face
-    starts the fit afresh).
+    on each, or tracking with :attr:`FitSettings.tracking`), :class:`ModelFit` on its points.
+    ``measure(frame, index, time_s)`` returns a :class:`FitMeasurement`; frames without a face
+    are ``quality="no_face"`` (the next face starts the fit afresh).
 
     Parameters
     ----------
@@ -1330,10 +1330,14 @@ class FitAnalyzer:
     def detector(self):
         """The landmark detector (MediaPipe's face mesh unless one was given)."""
         if self._detector is None:
-            from myoface.analysis.landmarks import FaceMeshDetector
-
-            self._detector = FaceMeshDetector(video=self.settings.tracking)
+            self._detector = self._new_detector()
         return self._detector
+
+    def _new_detector(self):
+        """MediaPipe's face mesh in the mode :attr:`FitSettings.tracking` says."""
+        from myoface.analysis.landmarks import FaceMeshDetector
+
+        return FaceMeshDetector(video=self.settings.tracking)
 
     @property
     def mm_per_px(self) -> float | None:
@@ -1366,7 +1370,7 @@ class FitAnalyzer:
         import itertools
         import time
 
-        from myoface.analysis.landmarks import FaceMeshDetector, detect_ahead
+        from myoface.analysis.landmarks import detect_ahead
 
         t_start = time.perf_counter()
         # the frames up to the first there is (its size makes the fit's camera); the rest are
@@ -1384,7 +1388,7 @@ class FitAnalyzer:
         images: list = []
         points: list = []
         first_face: list = []  # the index of the first frame with a face, once there is one
-        det = FaceMeshDetector(video=self.settings.tracking)
+        det = self._new_detector()
         end = object()
 
         def source():

@@ -165,15 +165,15 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     """Frames per second of the analysis loop on the sample video ``single_face.mp4`` (72
     frames, 640x360), decode included, no output files: the landmark tracker with its default
     estimator, the 3-D fit, as ``myoface analyze --tracker landmarks`` runs it (MediaPipe's
-    face mesh detecting the face on every frame, once; the calibration pass over the first 2 s; per frame the
-    bounded Gauss-Newton fit of head pose and every muscle, and a relax of the tissue on a
+    face mesh detecting the face on every frame, once; the calibration pass over the first
+    2 s; per frame the bounded Gauss-Newton fit of head pose and every muscle, and a relax of the tissue on a
     second thread once the estimate's skin has moved ``FitSettings.relax_step_mm``; MediaPipe
     run on a worker thread ahead of the fit). Peer: MediaPipe's face mesh alone on the same
     decoded frames in its fastest mode (video mode: tracking from frame to frame, ~3 ms CPU a
-    frame less than detecting; the fit detects, :attr:`~myoface.analysis.fit.FitSettings.tracking`),
-    in the same run; the tracker includes MediaPipe, so the ratio is the cost of myoface's
-    calibration and fit and of detection over tracking (the detail gives the share of a frame that is not
-    MediaPipe's, and the same with ``--refine 0``, the linear response only; and per frame the
+    frame less than detecting; the fit detects, see
+    :attr:`~myoface.analysis.fit.FitSettings.tracking`), in the same run; the tracker includes
+    MediaPipe, so the ratio is the cost of myoface's calibration and fit and of detection over
+    tracking (the detail gives the share of a frame that is not MediaPipe's, and the same with ``--refine 0``, the linear response only; and per frame the
     last timed pass's wall and process CPU time of each, ours by stage, with the ratio of the
     CPU times: on a busy machine the work each does, where the wall times also measure how
     much of a second core was free). The model's one-time set-up (its responses to each

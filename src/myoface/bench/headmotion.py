@@ -6,8 +6,9 @@ not there), driven through a programme of the six universal expressions (every m
 use moves; overlapping expressions mix by the FACS rule), moved along a smooth 3-D head
 trajectory (yaw +-30 deg, pitch and roll +-15 deg, translation) in front of a perspective camera
 at 640x480, rendered, and analysed as a video would be: MediaPipe's face mesh (in the mode the
-analysis runs it, :attr:`~myoface.analysis.fit.FitSettings.tracking`) on every frame, then the 3-D fit of the model (:class:`~myoface.analysis.fit.ModelFit`), its
-calibration frame chosen automatically. The recovered contractions and head pose are compared
+analysis runs it, :attr:`~myoface.analysis.fit.FitSettings.tracking`) on every frame, then the
+3-D fit of the model (:class:`~myoface.analysis.fit.ModelFit`), its calibration frame chosen
+automatically. The recovered contractions and head pose are compared
 with the truth; so is the skin the recovered contractions produce (head frame).
 """
 
