@@ -57,3 +57,23 @@ def test_the_lateral_and_vertical_parts_say_where_the_gain_is_lost():
     assert 0.5 < ratio < 1.0
     _, detail = smile_gain(d_in, d_in * np.array([-1.0, 1.0]))  # corners drawn in, not out
     assert detail["lateral_ratio"] == pytest.approx(-1.0)
+
+
+def test_region_gains_are_the_share_of_the_motion_read():
+    """A tracker that reads half of one region's motion (plus a fixed offset of its own, which
+    the displacements cancel) and all of another's scores 0.5 and 1; a region that does not
+    move has no gain; a probe without a face is left out."""
+    from myoface.bench.smile import region_gains
+
+    rng = np.random.default_rng(3)
+    true = np.repeat(rng.normal(100, 20, (1, 6, 2)), 4, axis=0)  # neutral + 3 probes
+    true[1:, :4] += rng.normal(0, 3, (3, 4, 2))  # points 0-3 move; 4-5 stay
+    read = true + 7.0  # the tracker's own offset
+    read[1:, :2] = read[0, :2] + 0.5 * (true[1:, :2] - true[0, :2])
+    read[2] = np.nan
+    gains = region_gains(true, read, {"half": (0, 1), "all": (2, 3), "still": (4, 5)})
+    assert gains["half"] == pytest.approx(0.5, abs=1e-3)
+    assert gains["all"] == pytest.approx(1.0, abs=1e-3)
+    assert gains["still"] is None
+    with pytest.raises(ValueError, match="alike"):
+        region_gains(true, read[:, :5], {"half": (0, 1)})
