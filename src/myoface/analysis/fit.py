@@ -135,6 +135,18 @@ class FitSettings:
         issue 552, MediaPipe issue 2990), and the fit then opens the jaw and pulls the lower
         lip down while the chin rises. Detected on every frame, the points scatter a little
         more; the fit's temporal prior takes that out.
+    flow : refine MediaPipe's points by optical flow (:mod:`myoface.analysis.flow`: each
+        point tracked by Lucas-Kanade from the first frame with a face, kept where the track
+        is sure), because MediaPipe reads an expression's motion short. Off by default: it
+        helps where the skin's texture moves with the skin and the face keeps its look, and
+        hurt on the real video we have. Measured 2026-12-01 (the flow on / off): on the
+        head-motion closed loop, head still, skin error 0.34 / 1.03 mm, median RMSE 0.045 /
+        0.100, worst correlation 0.99 / 0.33; head moving, skin 1.25 / 1.53 mm, head angles
+        1.87 / 2.99 degrees, worst RMSE 0.38 / 0.31. On single_face.mp4, analysis.fidelity
+        0.848 / 0.872 and synth.smile_gain 0.713 / 0.788: on a real smile the flow follows
+        the cheek's skin beside the mouth corner, which moves less than the corner MediaPipe
+        finds on the input and on the resynthesis. It costs ~7 ms a frame (head still) to
+        ~17 ms (head turning), on the detector's thread.
     iterations : Gauss-Newton steps per frame (fewer when converged).
     refine : relaxes of the tissue per frame at the estimate (0: the linear response only).
     relax_step_mm : with the relax deferred (a video, :meth:`ModelFit.fit` ``deferred=True``):
@@ -162,6 +174,7 @@ class FitSettings:
     sparsity: float = 4.0
     huber: float = 1.5
     tracking: bool = False
+    flow: bool = False
     iterations: int = 8
     refine: int = 1
     relax_step_mm: float = 2.0
@@ -1248,6 +1261,22 @@ class FitMeasurement:
         return ["" if not np.isfinite(v) else f"{v:.3f}" for v in vals]
 
 
+def analysis_detector(settings: FitSettings | None = None):
+    """The landmark detector the 3-D fit runs on a video: MediaPipe's face mesh in the mode
+    :attr:`FitSettings.tracking` says, its points refined by optical flow
+    (:class:`~myoface.analysis.flow.FlowDetector`) when :attr:`FitSettings.flow`. For the
+    frames of one video, in order."""
+    from myoface.analysis.landmarks import FaceMeshDetector
+
+    settings = settings or FitSettings()
+    det = FaceMeshDetector(video=settings.tracking)
+    if settings.flow:
+        from myoface.analysis.flow import FlowDetector
+
+        return FlowDetector(det)
+    return det
+
+
 #: ``FitAnalyzer.measure``'s default: the frame is observed (its landmarks detected) there
 _NOT_OBSERVED = object()
 
@@ -1334,10 +1363,8 @@ class FitAnalyzer:
         return self._detector
 
     def _new_detector(self):
-        """MediaPipe's face mesh in the mode :attr:`FitSettings.tracking` says."""
-        from myoface.analysis.landmarks import FaceMeshDetector
-
-        return FaceMeshDetector(video=self.settings.tracking)
+        """The analysis' detector (:func:`analysis_detector`)."""
+        return analysis_detector(self.settings)
 
     @property
     def mm_per_px(self) -> float | None:

@@ -78,6 +78,7 @@ def make_analyzer(
     sigma: float | None = None,
     estimator: str = "curves",
     show_progress: bool | None = None,
+    flow: bool = False,
 ):
     """The analyzer for ``video`` (a :class:`~myoface.analysis.video.Video`), how it was
     initialised (text) and the calibration frame's index.
@@ -93,17 +94,23 @@ def make_analyzer(
     frame (:class:`~myoface.analysis.landmarks.LandmarkAnalyzer`). ``init`` must be None.
     ``refine`` defaults to 1 for the snakes, 0 for the paper's landmark scheme and
     :attr:`~myoface.analysis.fit.FitSettings.refine` for the fit; ``estimator`` for the
-    snakes: ``"curves"`` (default) or ``"fiducials"`` (see :class:`Analyzer`).
+    snakes: ``"curves"`` (default) or ``"fiducials"`` (see :class:`Analyzer`). ``flow``: the
+    3-D fit's points refined by optical flow (:attr:`~myoface.analysis.fit.FitSettings.flow`;
+    for the landmark tracker's fit only).
     """
     import itertools
 
+    if flow and tracker != "landmarks":
+        raise MyofaceValueError(
+            "--flow refines the landmark tracker's points; use it with --tracker landmarks"
+        )
     first = 0 if calibration_frame is None else int(calibration_frame)
     if first < 0 or (video.n_frames is not None and first >= video.n_frames):
         raise MyofaceValueError(
             f"--calibration-frame must be in [0, {video.n_frames}); got {first}"
         )
     if tracker == "landmarks":
-        from myoface.analysis.fit import LANDMARK_ESTIMATORS, make_fit_analyzer
+        from myoface.analysis.fit import LANDMARK_ESTIMATORS, FitSettings, make_fit_analyzer
         from myoface.analysis.landmarks import LandmarkAnalyzer
 
         if init is not None:
@@ -118,7 +125,12 @@ def make_analyzer(
             )
         if est != "paper":
             synthesis = est == "fit-synthesis"
-            return make_fit_analyzer(model, video, calibration_frame, refine, synthesis=synthesis)
+            settings = FitSettings(flow=bool(flow))
+            return make_fit_analyzer(
+                model, video, calibration_frame, refine, settings=settings, synthesis=synthesis
+            )
+        if flow:
+            raise MyofaceValueError("--flow is for the 3-D fit, not --estimator paper")
         an = LandmarkAnalyzer(model, refine=0 if refine is None else refine)
         return an, "MediaPipe face mesh on every frame", first
     if tracker != "snakes":

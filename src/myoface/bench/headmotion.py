@@ -208,6 +208,22 @@ def detect_sequence(frames) -> tuple[list, np.ndarray]:
     return points, np.array(secs)
 
 
+def flow_sequence(frames, points) -> tuple[list, np.ndarray]:
+    """MediaPipe's ``points`` refined by optical flow as the analysis does
+    (:class:`~myoface.analysis.flow.FlowRefiner`, :attr:`~myoface.analysis.fit.FitSettings.flow`),
+    and the seconds each frame's refinement took."""
+    import time
+
+    from myoface.analysis.flow import FlowRefiner
+
+    ref, out, secs = FlowRefiner(), [], []
+    for f, p in zip(frames, points, strict=True):
+        t0 = time.perf_counter()
+        out.append(ref.refine(f, p))
+        secs.append(time.perf_counter() - t0)
+    return out, np.array(secs)
+
+
 def run_headmotion(
     model, points, truth, poses, skins, fps: float = 30.0, settings=None, synthesis=False
 ):
@@ -261,8 +277,9 @@ def run_headmotion(
 _cache: dict = {}
 
 
-def _sequence(quick: bool, still: bool):
-    """The model, truth, poses, skins, MediaPipe's points and its time per frame (cached)."""
+def _sequence(quick: bool, still: bool, flow: bool = False):
+    """The model, truth, poses, skins, MediaPipe's points and its time per frame (cached);
+    ``flow``: the points refined by optical flow, and MediaPipe's time plus the flow's."""
     key = ("seq", bool(quick), bool(still))
     if key not in _cache:
         from myoface.model import build_face_model
@@ -281,19 +298,30 @@ def _sequence(quick: bool, still: bool):
         frames = render_sequence(fm.face, poses, skins)
         points, t_det = detect_sequence(frames)
         _cache[key] = (fm, truth, poses, skins, points, t_det)
-    return _cache[key]
+        _cache[(*key, "frames")] = frames
+    if flow and (*key, "flow") not in _cache:
+        fm, truth, poses, skins, points, t_det = _cache[key]
+        flowed, t_flow = flow_sequence(_cache[(*key, "frames")], points)
+        _cache[(*key, "flow")] = (fm, truth, poses, skins, flowed, t_det + t_flow)
+    return _cache[(*key, "flow")] if flow else _cache[key]
 
 
-def _run(quick: bool, still: bool, synthesis: bool = False) -> tuple[HeadMotionResult, dict]:
+def _run(quick: bool, still: bool, synthesis: bool = False,
+         flow: bool | None = None) -> tuple[HeadMotionResult, dict]:  # fmt: skip
     """The loop (cached per run): 90 frames (16 with ``quick``) at 30 fps; the default
-    estimator (the 3-D fit), or with ``synthesis`` the fit with analysis by synthesis."""
-    key = (bool(quick), bool(still), bool(synthesis))
+    estimator (the 3-D fit), or with ``synthesis`` the fit with analysis by synthesis;
+    MediaPipe's points refined by optical flow or not (``flow``; default: as the analysis,
+    :attr:`~myoface.analysis.fit.FitSettings.flow`)."""
+    from myoface.analysis.fit import FitSettings
+
+    flow = FitSettings().flow if flow is None else bool(flow)
+    key = (bool(quick), bool(still), bool(synthesis), flow)
     if key not in _cache:
         import time
 
         from myoface.analysis.fit import confounded_muscles
 
-        fm, truth, poses, skins, points, t_det = _sequence(quick, still)
+        fm, truth, poses, skins, points, t_det = _sequence(quick, still, flow)
         t0 = time.perf_counter()
         res = run_headmotion(fm, points, truth, poses, skins, synthesis=synthesis)
         detail = {
@@ -301,6 +329,7 @@ def _run(quick: bool, still: bool, synthesis: bool = False) -> tuple[HeadMotionR
             "frames": len(truth),
             "head": "still" if still else "moving (yaw +-30, pitch/roll +-15 deg, translation)",
             "estimator": "fit-synthesis" if synthesis else "fit",
+            "optical_flow": flow,
             "summary_12_jaw": res.summary(),
             "per_muscle": {
                 m: {
@@ -314,7 +343,8 @@ def _run(quick: bool, still: bool, synthesis: bool = False) -> tuple[HeadMotionR
                 for m, r2, p in confounded_muscles(fm, 0.95)
             ],
             "fit_ms_per_frame_median": float(np.median(res.fit_seconds) * 1e3),
-            "mediapipe_ms_per_frame_median": float(np.median(t_det) * 1e3),
+            # MediaPipe, and the optical flow when it refines its points
+            "tracker_ms_per_frame_median": float(np.median(t_det) * 1e3),
             "analysis_seconds": time.perf_counter() - t0,
         }
         _cache[key] = (res, detail)
@@ -322,14 +352,15 @@ def _run(quick: bool, still: bool, synthesis: bool = False) -> tuple[HeadMotionR
 
 
 def _both(quick: bool) -> dict:
-    """Every variant's detail: moving / still head, the fit / the fit with synthesis (not in a
-    quick run)."""
-    return {
-        f"{head}, {est}": _run(quick, still, syn)[1]
-        for head, still in (("moving", False), ("still", True))
-        for est, syn in (("fit", False), ("fit-synthesis", True))
-        if not (quick and syn)
-    }
+    """Every variant's detail: moving / still head, the fit / the fit with synthesis / the fit
+    on MediaPipe's points refined by optical flow (these two not in a quick run)."""
+    out = {}
+    for head, still in (("moving", False), ("still", True)):
+        out[f"{head}, fit"] = _run(quick, still)[1]
+        if not quick:
+            out[f"{head}, fit-synthesis"] = _run(quick, still, True)[1]
+            out[f"{head}, fit with optical flow"] = _run(quick, still, False, True)[1]
+    return out
 
 
 @benchmark("analysis.headmotion_rmse_worst", "contraction", higher_is_better=False)
@@ -339,8 +370,9 @@ def bench_headmotion_rmse_worst(quick: bool) -> Measurement:
     photo, perspective camera 640x480, a 3-D head trajectory, the six expressions; MediaPipe's
     face mesh on the rendered frames; the calibration frame chosen automatically; the default
     estimator, ``fit``). The detail gives every muscle, the confounded muscles, the fit's and
-    MediaPipe's time per frame, for the head moving and still, and for the fit with analysis
-    by synthesis (``--estimator fit-synthesis``)."""
+    the tracker's time per frame, for the head moving and still, for the fit with analysis by
+    synthesis (``--estimator fit-synthesis``) and for the fit with MediaPipe's points refined
+    by optical flow (``myoface analyze --flow``)."""
     res, _ = _run(quick, False)
     return Measurement(res.summary()["rmse_worst"], len(res.truth), detail=_both(quick))
 

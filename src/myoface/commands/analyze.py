@@ -91,6 +91,13 @@ def add_arguments(p):
         "(default 1 for snakes and the 3-D fit, 0 for landmarks --estimator paper)",
     )
     p.add_argument(
+        "--flow",
+        action="store_true",
+        help="landmarks' 3-D fit: refine MediaPipe's points by optical flow (Lucas-Kanade "
+        "from the first frame), which reads skin motion MediaPipe reads short; best where "
+        "the skin has texture and the face keeps its look (see README)",
+    )
+    p.add_argument(
         "--format",
         choices=("myoface", "openface"),
         default="myoface",
@@ -160,6 +167,7 @@ def run(args) -> int:
         estimator=args.estimator,
         face=args.face,
         show_progress=not args.quiet,
+        flow=args.flow,
         finish=lambda folder, res: _extra_outputs(args, fm, folder),
     )
     print(
