@@ -110,3 +110,37 @@ def test_flow_is_for_the_landmark_fit():
 
     with pytest.raises(MyofaceValueError, match="--flow"):
         make_analyzer(None, None, tracker="snakes", flow=True)
+
+
+def test_the_fit_on_a_flow_refined_detector_reports_its_points():
+    """On frames with nothing to track (flat), the detector's points stand: the fit measures
+    what it measures without the flow, and analysis.json's description counts the points."""
+    from myoface.analysis.fit import FitAnalyzer, HeadPose, PinholeCamera
+    from myoface.model import build_face_model
+
+    fm = build_face_model()
+    cam = PinholeCamera.for_image(640, 480, 40.0)
+    pose = HeadPose.from_euler(5.0, 0.0, 0.0, (0.0, 0.0, -500.0))
+    pc = pose.apply(fm.face.vertices)
+    pts = np.column_stack([cam.project(pc), np.zeros(len(pc))])
+
+    class Fixed:
+        def detect(self, frame):
+            return pts.copy()
+
+        def close(self):
+            pass
+
+    frame = np.full((480, 640, 3), 90, np.uint8)
+    plain = FitAnalyzer(fm, camera=cam, detector=Fixed())
+    flowed = FitAnalyzer(fm, camera=cam, detector=FlowDetector(Fixed()))
+    a = [plain.measure(frame, k, k / 30) for k in range(2)]
+    b = [flowed.measure(frame, k, k / 30) for k in range(2)]
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_allclose(x.contractions, y.contractions, atol=1e-9)
+    stats = flowed.describe()["optical_flow_points"]
+    assert stats["frames"] == 2 and stats["direct"] == 0
+    assert stats["detector"] == len(pts)  # the second frame's: none tracked on a flat image
+    assert "optical_flow_points" not in plain.describe()
+    plain.close()
+    flowed.close()

@@ -1587,6 +1587,11 @@ class FitAnalyzer:
             "estimator": "fit-synthesis" if self.use_synthesis else "fit",
             "fit_settings": asdict(self.settings),
         }
+        refiner = getattr(self._detector, "refiner", None)
+        if refiner is not None:
+            # the optical flow's points (FitSettings.flow): tracked from the first frame,
+            # from the previous frame, or left at MediaPipe's
+            out["optical_flow_points"] = dict(refiner.stats)
         if self.fit is not None:
             cam = self.fit.camera
             out["camera"] = {"focal_px": cam.focal_px, "cx": cam.cx, "cy": cam.cy}
