@@ -139,11 +139,11 @@ class FitSettings:
         point tracked by Lucas-Kanade from the first frame with a face, kept where the track
         is sure), because MediaPipe reads an expression's motion short. Off by default: it
         helps where the skin's texture moves with the skin and the face keeps its look, and
-        hurt on the real video we have. Measured 2026-12-01 (the flow on / off): on the
-        head-motion closed loop, head still, skin error 0.34 / 1.03 mm, median RMSE 0.045 /
-        0.100, worst correlation 0.99 / 0.33; head moving, skin 1.25 / 1.53 mm, head angles
-        1.87 / 2.99 degrees, worst RMSE 0.38 / 0.31. On single_face.mp4, analysis.fidelity
-        0.848 / 0.872 and synth.smile_gain 0.713 / 0.788: on a real smile the flow follows
+        hurt on the real video we have. Measured 2026-12-01 (BENCHMARKS.md; the flow on /
+        off): on the head-motion closed loop, head still, skin error 0.34 / 1.03 mm, median
+        RMSE 0.045 / 0.100, worst correlation 0.99 / 0.61; head moving, skin 1.26 / 1.53 mm,
+        head angles 1.58 / 2.79 degrees, worst RMSE 0.38 / 0.31. On single_face.mp4,
+        analysis.fidelity 0.84-0.85 / 0.87 and synth.smile_gain 0.72 / 0.79: on a real smile the flow follows
         the cheek's skin beside the mouth corner, which moves less than the corner MediaPipe
         finds on the input and on the resynthesis. It costs ~7 ms a frame (head still) to
         ~17 ms (head turning), on the detector's thread.
@@ -1091,14 +1091,11 @@ class ModelFit:
         offset's regularisation left it. On the head-motion closed loop (2026-12-01) it took
         the head angles' RMS error from 1.80 to 1.28 degrees with the head still and from
         2.99 to 2.79 with it moving (analysis.fidelity 0.870, was 0.872)."""
+        from myoface.face.personal import fit_similarity_3d
+
         idx = gauge_vertices(self.model)
         base = self.neutral + ident
-        a, b = base[idx], self.neutral[idx]
-        ma, mb = a.mean(0), b.mean(0)
-        u, _, vt = np.linalg.svd((a - ma).T @ (b - mb))
-        d = np.sign(np.linalg.det(vt.T @ u.T))
-        rot = vt.T @ np.diag([1.0, 1.0, d]) @ u.T  # base -> neutral
-        t = mb - rot @ ma
+        _, rot, t = fit_similarity_3d(base[idx], self.neutral[idx], scale=False)  # base -> neutral
         new_base = base @ rot.T + t
         out = []
         for q in poses:  # P = R_q base + t_q = (R_q rot^T) new_base + (t_q - R_q rot^T t)
@@ -1296,22 +1293,6 @@ class FitMeasurement:
         return ["" if not np.isfinite(v) else f"{v:.3f}" for v in vals]
 
 
-def analysis_detector(settings: FitSettings | None = None):
-    """The landmark detector the 3-D fit runs on a video: MediaPipe's face mesh in the mode
-    :attr:`FitSettings.tracking` says, its points refined by optical flow
-    (:class:`~myoface.analysis.flow.FlowDetector`) when :attr:`FitSettings.flow`. For the
-    frames of one video, in order."""
-    from myoface.analysis.landmarks import FaceMeshDetector
-
-    settings = settings or FitSettings()
-    det = FaceMeshDetector(video=settings.tracking)
-    if settings.flow:
-        from myoface.analysis.flow import FlowDetector
-
-        return FlowDetector(det)
-    return det
-
-
 #: ``FitAnalyzer.measure``'s default: the frame is observed (its landmarks detected) there
 _NOT_OBSERVED = object()
 
@@ -1398,8 +1379,17 @@ class FitAnalyzer:
         return self._detector
 
     def _new_detector(self):
-        """The analysis' detector (:func:`analysis_detector`)."""
-        return analysis_detector(self.settings)
+        """MediaPipe's face mesh in the mode :attr:`FitSettings.tracking` says, its points
+        refined by optical flow (:class:`~myoface.analysis.flow.FlowDetector`) when
+        :attr:`FitSettings.flow`."""
+        from myoface.analysis.landmarks import FaceMeshDetector
+
+        det = FaceMeshDetector(video=self.settings.tracking)
+        if self.settings.flow:
+            from myoface.analysis.flow import FlowDetector
+
+            return FlowDetector(det)
+        return det
 
     @property
     def mm_per_px(self) -> float | None:

@@ -155,8 +155,9 @@ def _points_from_json(doc) -> np.ndarray:
 # --------------------------------------------------------------------------- alignment
 
 
-def fit_similarity_3d(src: np.ndarray, dst: np.ndarray):
-    """Least-squares ``dst ~ s R src + t`` (Umeyama 1991). Returns (s, R (3,3), t (3,))."""
+def fit_similarity_3d(src: np.ndarray, dst: np.ndarray, scale: bool = True):
+    """Least-squares ``dst ~ s R src + t`` (Umeyama 1991). Returns (s, R (3,3), t (3,));
+    ``scale=False``: the rigid fit (``s`` = 1)."""
     src, dst = np.asarray(src, float), np.asarray(dst, float)
     ms, md = src.mean(0), dst.mean(0)
     a, b = src - ms, dst - md
@@ -164,7 +165,7 @@ def fit_similarity_3d(src: np.ndarray, dst: np.ndarray):
     d = np.sign(np.linalg.det(u @ vt))
     dmat = np.diag([1.0, 1.0, d])
     r = u @ dmat @ vt
-    s = float(np.trace(np.diag(sig) @ dmat) / (a**2).sum())
+    s = float(np.trace(np.diag(sig) @ dmat) / (a**2).sum()) if scale else 1.0
     return s, r, md - s * r @ ms
 
 
