@@ -5,7 +5,8 @@ changes, and may be shared between threads: the face, the muscles, the tissue la
 arrays that map a contraction vector c (M,) (one entry per id of the muscle set, the jaw last) to
 target positions of the kinematic nodes — the bone layer, rotated by the jaw, and the fascia nodes
 the muscles reach, displaced by eq. (5) (Terzopoulos & Waters 1993) — and results derived from
-the model alone (e.g. the analysis' responses to each muscle, :meth:`FaceModel.memo`).
+the model alone (e.g. the analysis' responses to each muscle, :meth:`FaceModel.memo`, kept
+with the tissue's own in the lattice's memo, :meth:`myoface.tissue.TissueModel.memo`).
 
 :class:`FaceState` (node positions, velocities, contractions, time) is a value: :func:`relax`,
 :func:`step` and :func:`simulate` take one and return a new one. Whoever needs a state (the
@@ -23,7 +24,6 @@ Example
 from __future__ import annotations
 
 import os
-import threading
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -47,7 +47,6 @@ from myoface.tissue import (
     TissueParams,
     TissueState,
     assemble_tissue,
-    stable_time_step,
     step_rk2,
 )
 from myoface.tissue import relax as relax_tissue
@@ -110,7 +109,7 @@ class FaceModel:
     driven_nodes : (D,) int — fascia nodes moved by at least one muscle.
     expressions : dict of name -> (M,) — expressions that came with the model (Waters' macros).
     stable_dt : float — the RK2 step (s) inside the explicit scheme's stability limit,
-        computed once per model.
+        computed once per model (``tissue.stable_dt``).
     """
 
     def __init__(
@@ -148,15 +147,12 @@ class FaceModel:
         basis[np.searchsorted(kin, driven)] = fb[driven_v]
         s("_kin_basis", _frozen(basis))
         s("expressions", dict(expressions or {}))
-        s("stable_dt", float(stable_time_step(tissue)))
         s(
             "_rest",
             FaceState(
                 tissue.rest_positions, np.zeros_like(tissue.rest_positions), np.zeros(len(self.ids))
             ),
         )
-        s("_memo", {})
-        s("_memo_lock", threading.Lock())
         #: the eyelids moved by the lid muscles (None without lid muscles or eye openings)
         s("eyelids", build_eyelids(face, muscles))
         #: the teeth behind the lips (None for a face without the lip landmark groups)
@@ -188,6 +184,10 @@ class FaceModel:
             x = self.muscles.jaw.rotate(x, self._kin_jaw, c[j])
         return x
 
+    @property
+    def stable_dt(self) -> float:
+        return self.tissue.stable_dt
+
     def rest_state(self) -> FaceState:
         """The rest configuration: no contraction, zero velocity, t = 0."""
         return self._rest
@@ -196,11 +196,10 @@ class FaceModel:
         """A result derived from this model alone (never from a state), computed once.
 
         ``compute()`` runs at most once per key, even when several threads ask at the same
-        time; its result must not be changed by the caller."""
-        with self._memo_lock:
-            if key not in self._memo:
-                self._memo[key] = compute()
-            return self._memo[key]
+        time; its result must not be changed by the caller. Kept in the memo of the model's
+        lattice (this model's own, :meth:`myoface.tissue.TissueModel.memo`), beside what the
+        tissue's solvers keep, under keys of their own."""
+        return self.tissue.memo((FaceModel, key), compute)
 
     # ------------------------------------------------------------------ physics
     def relax(self, contractions, state: FaceState | None = None, **kwargs) -> RelaxResult:

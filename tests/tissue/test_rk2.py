@@ -14,8 +14,9 @@ from myoface.tissue import (
     rest_state,
     step_rk2,
 )
+from myoface.tissue import model as model_mod
 from myoface.tissue import rk2 as rk2_mod
-from myoface.tissue.rk2 import run_rk2, run_rk2_serial
+from myoface.tissue.rk2 import rk2_integrator, run_rk2, run_rk2_serial
 
 
 def _step_change(model, seed=0, radius_mm=25.0, amp_mm=4.0):
@@ -177,7 +178,7 @@ def test_springs_inside_and_outside_prisms_each_count_once():
 def test_every_spring_of_the_face_is_computed_with_a_prism_once(default_tissue):
     m = default_tissue
     live = ~(m.kinematic[m.spring_i] & m.kinematic[m.spring_j])
-    plan = rk2_mod.rk2_plan(m, 1)
+    plan = rk2_integrator(m).plan(1)
     assert len(plan.spring_i) == 0  # none left to the separate spring loop
     k = plan.pair_consts.reshape(-1, rk2_mod.SPRING_ROWS, rk2_mod.PRISM_CHUNK)
     held = k[:, 1] > 0  # alpha > 0: a lane with a spring
@@ -198,13 +199,13 @@ def test_springs_alone_follow_the_serial_reference_bit_for_bit():
 def test_stable_dt_is_computed_once_per_model(default_tissue, monkeypatch):
     m, tg = _step_change(default_tissue, seed=2)  # a fresh model: nothing cached yet
     calls = []
-    real = rk2_mod.stable_time_step
+    real = model_mod.stable_time_step
 
     def counting(model, *args, **kw):
         calls.append(model)
         return real(model, *args, **kw)
 
-    monkeypatch.setattr(rk2_mod, "stable_time_step", counting)
+    monkeypatch.setattr(model_mod, "stable_time_step", counting)
     dt = m.stable_dt
     assert dt is m.stable_dt  # the cached value itself, not a recomputation
     s = step_rk2(m, rest_state(m), tg)

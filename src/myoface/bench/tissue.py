@@ -226,8 +226,7 @@ def bench_rk2(quick: bool) -> Measurement:
     times = {k: [] for k in runs}
     cpu = {k: [] for k in runs}
     tcpu = {k: [] for k in runs}
-    pace = rk2._PACES.get(tm)
-    steps_before = dict(pace.steps_run) if pace is not None else {}
+    steps_before = rk2.rk2_integrator(tm).steps_run
     for _ in range(n):  # alternate, so all see the same load on a shared machine
         for k, fn in runs.items():
             t0, c0, h0 = time.perf_counter(), time.process_time(), time.thread_time()
@@ -245,9 +244,9 @@ def bench_rk2(quick: bool) -> Measurement:
             k: {"median": float(np.median(tcpu[k])) / steps * 1e6} for k in runs
         },
     }
-    pace = rk2._PACES.get(tm)
-    if pace is not None:  # which thread counts the default's timed steps ran on
-        ran = {t: s - steps_before.get(t, 0) for t, s in sorted(pace.steps_run.items())}
+    steps_run = rk2.rk2_integrator(tm).steps_run
+    if steps_run:  # which thread counts the default's timed steps ran on
+        ran = {t: s - steps_before.get(t, 0) for t, s in sorted(steps_run.items())}
         total = sum(ran.values()) or 1
         detail["default (step_rk2): share of its steps"] = {
             f"{t} thread{'s' if t > 1 else ''}": {"share": s / total} for t, s in ran.items()

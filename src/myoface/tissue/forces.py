@@ -161,6 +161,9 @@ def make_thread_buffers(n_nodes: int) -> np.ndarray:
 
 #: the three tetrahedra of a prism [a0, b0, c0, a1, b1, c1] (indices into the element's 6 nodes)
 PRISM_TETS = np.array([[0, 1, 2, 3], [1, 2, 3, 4], [2, 3, 4, 5]], dtype=np.int64)
+#: the 15 node pairs (a, b), a < b, of a prism (its edges and face diagonals), in row-major
+#: order: every spring of the layered lattice joins the two nodes of one of them
+PRISM_PAIRS = np.array([(a, b) for a in range(6) for b in range(a + 1, 6)], dtype=np.int64)
 
 
 def element_volumes_numpy(x, elems, sign=1.0):
@@ -339,12 +342,6 @@ def internal_forces_numba(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv
     f[:, :] = 0.0
     spring_forces_numba(x, si, sj, rest, mat_id, mat, law, f)
     volume_forces_numba(x, elems, rest_vol, kv, vsign, f)
-
-
-@njit(cache=True)
-def element_volumes_numba(x, elems, sign, out):
-    for e in range(elems.shape[0]):
-        out[e] = _prism_volume(x, elems[e], sign)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -2,10 +2,12 @@
 
 Two of them:
 
-* the L-BFGS reference's preconditioner (:class:`HessianPattern`, :func:`assemble_hessian_numba`):
-  each spring's block projected to be positive semi-definite (its compressive geometric term
-  clipped) and the volume term in Gauss-Newton form (2 kv g g^T), in a fixed scalar CSR pattern
-  built once per model, for a sparse LU;
+* the stiffness matrix (:func:`stiffness_matrix`; :class:`HessianPattern`,
+  :func:`assemble_hessian_numba`): each spring's block projected to be positive semi-definite
+  (its compressive geometric term clipped) and the volume term in Gauss-Newton form
+  (2 kv g g^T), in a fixed scalar CSR pattern built once per model (:func:`hessian_pattern`):
+  the lattice's slowest mode (:func:`myoface.tissue.assemble.lowest_frequency`) and the L-BFGS
+  reference's preconditioner, a sparse LU;
 * the Newton solver's exact Hessian (:class:`SymmetricPattern`), in symmetric 3x3-block storage,
   over the springs and prisms that touch a free node. One pass over the springs
   (:func:`_spring_pass`) and one over the prisms (:func:`_prism_pass`) compute the energy, its
@@ -21,14 +23,34 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
+from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from myoface.tissue.forces import (
     LAW_CONTINUOUS,
     MIN_SPRING_LENGTH,
+    PRISM_PAIRS,
     PRISM_TETS,
     _tet_gradient,
     spring_magnitude,
 )
+from myoface.tissue.model import TissueModel
+
+
+def kernel_args(model: TissueModel, materials: np.ndarray | None = None) -> tuple:
+    """The packed arrays every force kernel takes, in kernel argument order; ``materials``
+    (M, 3) [alpha, beta, strain_c] in place of the model's, if given."""
+    return (
+        model.spring_i,
+        model.spring_j,
+        model.rest_length,
+        model.spring_material,
+        model.materials if materials is None else materials,
+        model.spring_law,
+        model.elements,
+        model.rest_volume,
+        model.volume_weight,
+        model.volume_sign,
+    )
 
 
 class HessianPattern:
@@ -74,6 +96,32 @@ class HessianPattern:
     def matrix(self, data):
         n = 3 * self.n_free
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(n, n))
+
+
+def hessian_pattern(model: TissueModel) -> HessianPattern:
+    """The model's :class:`HessianPattern`, built once (kept in ``model.memo``)."""
+    return model.memo(
+        "hessian_pattern",
+        lambda: HessianPattern(model.n_nodes, model.free_index, model.spring_i, model.spring_j),
+    )
+
+
+def stiffness_matrix(model: TissueModel, x: np.ndarray, materials: np.ndarray | None = None):
+    """The projected stiffness matrix over the free nodes at ``x`` (N, 3) mm (scipy CSR,
+    3F x 3F, g/s^2), with the model's materials or ``materials`` (M, 3) in their place."""
+    pat = hessian_pattern(model)
+    data = np.empty(pat.nnz)
+    assemble_hessian_numba(
+        x,
+        *kernel_args(model, materials),
+        pat.fmap,
+        pat.block_indptr,
+        pat.block_indices,
+        pat.indptr,
+        pat.spring_slots,
+        data,
+    )
+    return pat.matrix(data)
 
 
 def _slots(indptr, indices, a, b):
@@ -222,45 +270,12 @@ PRISM_TETS_H = PRISM_TETS
 # the exact Hessian, symmetric storage (the Newton solver's, :mod:`myoface.tissue.solver`)
 # ---------------------------------------------------------------------------------------------
 
-#: (m, n, k, l): the six vertex pairs (m, n) of a tetrahedron with the other two (k, l) in the
-#: order that makes (m, n, k, l) an even permutation of (0, 1, 2, 3)
-_PAIRS = np.array(
-    [[1, 2, 0, 3], [2, 3, 0, 1], [3, 1, 0, 2], [1, 0, 3, 2], [2, 0, 1, 3], [3, 0, 2, 1]],
-    dtype=np.int64,
-)
-
-#: the 15 node pairs (a, b), a < b, of a prism, in row-major order
-PRISM_PAIRS = np.array([(a, b) for a in range(6) for b in range(a + 1, 6)], dtype=np.int64)
-
-
-def _prism_skew_table() -> np.ndarray:
-    """Rows (pair, sign, k, l), one per (tetrahedron t, vertex pair of :data:`_PAIRS`): the
-    second derivative of tetrahedron t's triple product with respect to the prism nodes of
-    :data:`PRISM_PAIRS` [pair] is ``sign [x_k - x_l]x`` (k, l prism nodes)."""
-    pid = -np.ones((6, 6), np.int64)
-    for q, (a, b) in enumerate(PRISM_PAIRS):
-        pid[a, b] = q
-    tab = np.empty((18, 4), np.int64)
-    for t in range(3):
-        for pr in range(6):
-            m, n, k, l = _PAIRS[pr]
-            a, b, sgn = t + m, t + n, 1
-            if a > b:
-                a, b, sgn = b, a, -1
-            tab[6 * t + pr] = (pid[a, b], sgn, t + k, t + l)
-    return tab
-
-
-PRISM_SKEW = _prism_skew_table()
-
 
 def _local_order(free, n_nodes, si, sj, elems) -> np.ndarray:
     """The free nodes ``free`` in reverse Cuthill-McKee order of the graph of their springs and
     prisms: nodes joined by a spring or a prism get nearby numbers, so the Hessian's blocks of a
     spring or a prism, and a node's neighbours in the Gauss-Seidel sweeps, lie close together in
     memory (numbered by layer, the nodes of one prism are hundreds of rows apart)."""
-    from scipy.sparse.csgraph import reverse_cuthill_mckee
-
     fmap = -np.ones(n_nodes, np.int64)
     fmap[free] = np.arange(len(free))
     pairs = [np.stack([si, sj], axis=1)] + [elems[:, [a, b]] for a, b in PRISM_PAIRS]
@@ -635,9 +650,10 @@ def add_one_prism_hessian(pts, gr, dv, kvq, vsign, fr, sl, rv, dvals, lvals):
     blocks ``sl`` (15,) and reversal mask ``rv`` (see :class:`SymmetricPattern`).
 
     Written out pair by pair (no tables, every index a constant): the second derivative of the
-    prism's 6 V for its node pair (a, b) of :data:`PRISM_PAIRS` is ``[x_k - x_l]x`` for the
-    nodes (k, l) that :data:`PRISM_SKEW` sums for the pair (the tests hold the Hessian against
-    finite differences of the forces); pairs (0, 4), (0, 5) and (1, 5) share no tetrahedron.
+    prism's 6 V for its node pair (a, b) of :data:`PRISM_PAIRS` is the sum of ``[x_k - x_l]x``
+    over the prism's tetrahedra that hold both nodes, (a, b, k, l) an even permutation of the
+    tetrahedron's nodes (the tests hold the Hessian against finite differences of the forces);
+    pairs (0, 4), (0, 5) and (1, 5) share no tetrahedron.
     On the default face the prisms' pass with the Hessian 364 -> 235 us (thread CPU, fastest of
     20 runs, alternating with the table-driven loop it replaces)."""
     sw = np.sqrt(2.0 * kvq) * abs(vsign) / 6.0
@@ -708,10 +724,6 @@ def add_one_prism_hessian(pts, gr, dv, kvq, vsign, fr, sl, rv, dvals, lvals):
     _add_pair(lvals, sl[12], rv >> 12 & 1, g30, g31, g32, g40, g41, g42, -d51x, -d51y, -d51z)
     _add_pair(lvals, sl[13], rv >> 13 & 1, g30, g31, g32, g50, g51, g52, d42x, d42y, d42z)
     _add_pair(lvals, sl[14], rv >> 14 & 1, g40, g41, g42, g50, g51, g52, d23x, d23y, d23z)
-
-
-PRISM_SKEW_NB = PRISM_SKEW  # module-level constants numba freezes into the compiled code
-PRISM_PAIRS_NB = PRISM_PAIRS
 
 
 # ------------------------------------------------ the prisms' energy and gradient, vectorised ----

@@ -1,4 +1,11 @@
-"""The layered tissue lattice: parameters, automatic assembly from a skin mesh, packed arrays.
+"""The layered tissue lattice as data: parameters, the packed arrays of a model, its state.
+
+A :class:`TissueModel` is read-only and knows no solver (as warp.sim's Model knows no
+integrator): the builder (:mod:`myoface.tissue.assemble`) stands above it, the force kernels and
+the integrators (:mod:`~myoface.tissue.rk2`, :mod:`~myoface.tissue.solver`,
+:func:`~myoface.tissue.relax`) take it. What they derive from a model alone (the Hessian's
+pattern, the Newton solver's factor, the RK2 kernel's plans, the stable time step) is kept in the
+model's :meth:`TissueModel.memo`, its one owner.
 
 Structure (Terzopoulos & Waters 1993, Section III-A/D, Fig. 3): every skin vertex is copied three
 times along its inward normal, giving four node layers —
@@ -25,23 +32,20 @@ Units: mm, g, s; stiffness in g/s^2 (= uN/mm; 1 N/m = 1000 g/s^2).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
-from functools import cached_property
+import threading
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from myoface.errors import MyofaceValueError
-from myoface.face.mesh import triangle_normals, unique_edges, vertex_normals
-from myoface.tissue.forces import LAW_CONTINUOUS, LAW_PAPER, element_volumes_numpy
+from myoface.tissue.forces import LAW_CONTINUOUS
 
-#: lightest node mass as a fraction of the median (keeps the explicit time step reasonable)
-MASS_FLOOR = 0.25
 #: names of the three element layers and the epidermis (the rows of the material table)
 LAYERS = ("epidermis", "dermis", "fat", "muscle")
 NODE_LAYERS = ("epidermis", "dermis_bottom", "fascia", "bone")
-#: a prism whose rest volume is below this fraction of (top area x layer thickness) is treated as
-#: inverted and the layers under its vertices are thinned
-MIN_REL_VOLUME = 0.2
+#: RK2 safety factor on the stability limit (see :func:`stable_time_step`)
+STABLE_DT_SAFETY = 0.5
 
 
 @dataclass(frozen=True)
@@ -115,9 +119,50 @@ class TissueParams:
         return np.cumsum([0.0, self.dermis_mm, self.fat_mm, self.muscle_mm])
 
 
-@dataclass(eq=False)
+class Memo:
+    """Results derived from one model alone, each computed once: ``memo(key, compute)``.
+
+    ``compute()`` runs at most once per key, even when several threads ask at the same time (the
+    first builds it under a lock of that key, the others wait and then share it; keys do not wait
+    for each other); afterwards a plain lookup. A ``compute`` that raises stores nothing. What it
+    returns is shared: callers must not change it."""
+
+    def __init__(self):
+        self._values: dict = {}
+        self._locks: dict = {}
+        self._lock = threading.Lock()
+
+    def __call__(self, key: Hashable, compute: Callable[[], object]):
+        try:
+            return self._values[key]
+        except KeyError:
+            pass
+        with self._lock:
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            if key not in self._values:
+                self._values[key] = compute()
+            return self._values[key]
+
+
+def _read_only(a):
+    """A read-only view of ``a`` (the caller's array keeps its own flags)."""
+    if not isinstance(a, np.ndarray):
+        return a
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
+@dataclass(frozen=True, eq=False)
 class TissueModel:
-    """Packed, read-only arrays of an assembled lattice (build with :func:`assemble_tissue`).
+    """Packed, read-only arrays of an assembled lattice (build with
+    :func:`~myoface.tissue.assemble.assemble_tissue` or
+    :func:`~myoface.tissue.assemble.make_lattice`).
+
+    Frozen, its arrays read-only views: a model never changes, so it may be shared between
+    threads, and what is derived from it alone is kept in :meth:`memo`. A changed copy
+    (``dataclasses.replace``, :meth:`with_kinematic`) is a new model with an empty memo.
 
     Attributes
     ----------
@@ -156,7 +201,17 @@ class TissueModel:
     kinematic: np.ndarray
     spring_law: int = LAW_CONTINUOUS
     params: TissueParams = field(default_factory=TissueParams)
-    cache: dict = field(default_factory=dict, repr=False)
+
+    def __post_init__(self):
+        for f in fields(self):
+            object.__setattr__(self, f.name, _read_only(getattr(self, f.name)))
+        object.__setattr__(self, "_memo", Memo())
+
+    def memo(self, key: Hashable, compute: Callable[[], object]):
+        """A result derived from this model alone, computed once (see :class:`Memo`): the
+        one place where the solvers and the integrators keep what they build per model (and,
+        through :meth:`myoface.model.FaceModel.memo`, the levels above)."""
+        return self._memo(key, compute)
 
     @property
     def n_nodes(self) -> int:
@@ -170,23 +225,20 @@ class TissueModel:
     def n_elements(self) -> int:
         return len(self.elements)
 
-    @cached_property
+    @property
     def kinematic_index(self) -> np.ndarray:
         """Indices of the kinematic nodes, in the order :func:`relax` expects their targets."""
-        return np.flatnonzero(self.kinematic)
+        return self.memo("kinematic_index", lambda: _read_only(np.flatnonzero(self.kinematic)))
 
-    @cached_property
+    @property
     def free_index(self) -> np.ndarray:
-        return np.flatnonzero(~self.kinematic)
+        return self.memo("free_index", lambda: _read_only(np.flatnonzero(~self.kinematic)))
 
-    @cached_property
+    @property
     def stable_dt(self) -> float:
         """The paper RK2's default time step, s: inside the explicit scheme's stability limit
-        (:func:`myoface.tissue.rk2.stable_time_step`), computed once per model. Two threads
-        asking at once may both compute it; they get the same value."""
-        from myoface.tissue.rk2 import stable_time_step  # rk2 imports this module
-
-        return stable_time_step(self)
+        (:func:`stable_time_step`), computed once per model."""
+        return self.memo("stable_dt", lambda: stable_time_step(self))
 
     def layer_nodes(self, layer: int | str) -> np.ndarray:
         """Node indices of node layer ``layer`` (0-3 or a name in :data:`NODE_LAYERS`), in vertex order."""
@@ -197,7 +249,7 @@ class TissueModel:
         """A copy in which ``nodes`` (indices) are kinematic too, e.g. muscle-driven fascia nodes."""
         kin = self.kinematic.copy()
         kin[np.asarray(nodes, dtype=np.int64)] = True
-        return replace(self, kinematic=kin, cache={})
+        return replace(self, kinematic=kin)
 
     def summary(self) -> str:
         counts = {name: int(np.sum(self.spring_material == k)) for k, name in enumerate(LAYERS)}
@@ -208,238 +260,62 @@ class TissueModel:
         )
 
 
-def _smooth_normals(vertices, triangles, passes):
-    n = vertex_normals(vertices, triangles)
-    if passes <= 0:
-        return n
-    edges = unique_edges(triangles)
-    for _ in range(passes):
-        acc = n.copy()
-        np.add.at(acc, edges[:, 0], n[edges[:, 1]])
-        np.add.at(acc, edges[:, 1], n[edges[:, 0]])
-        n = acc / np.linalg.norm(acc, axis=1, keepdims=True)
-    return n
+@dataclass
+class TissueState:
+    """Positions ``x`` (N, 3) mm and velocities ``v`` (N, 3) mm/s of every node, at time ``t`` s.
+
+    ``previous_x`` (N, 3) mm, optional: the positions the state was relaxed from (set by
+    :func:`~myoface.tissue.relax`); the Newton solver repeats that move in the next relax's
+    initial guess (:func:`myoface.tissue.solver.extrapolated_start`)."""
+
+    x: np.ndarray
+    v: np.ndarray
+    t: float = 0.0
+    previous_x: np.ndarray | None = None
+
+    def copy(self) -> TissueState:
+        return TissueState(self.x.copy(), self.v.copy(), self.t, self.previous_x)
 
 
-def _order_free_volumes(pos: np.ndarray, elems: np.ndarray) -> np.ndarray:
-    """Prism volumes averaged over the 6 vertex orders of their triangles.
-
-    A prism's split into three tetrahedra depends on which vertex comes first; averaging over
-    all orders makes the thickness reduction below independent of it, so a mirror-symmetric
-    mesh gets a mirror-symmetric lattice.
-    """
-    vol = np.zeros(len(elems))
-    for perm, sgn in (
-        ((0, 1, 2), 1),
-        ((1, 2, 0), 1),
-        ((2, 0, 1), 1),
-        ((0, 2, 1), -1),
-        ((2, 1, 0), -1),
-        ((1, 0, 2), -1),
-    ):
-        cols = list(perm) + [q + 3 for q in perm]
-        vol += sgn * element_volumes_numpy(pos, elems[:, cols])
-    return vol / 6.0
+def rest_state(model: TissueModel) -> TissueState:
+    """The assembled rest configuration with zero velocity."""
+    return TissueState(model.rest_positions.copy(), np.zeros_like(model.rest_positions), 0.0)
 
 
-def assemble_tissue(
-    vertices: np.ndarray, triangles: np.ndarray, params: TissueParams | None = None
-) -> TissueModel:
-    """Build the layered lattice under a skin mesh, automatically (T&W 1993, Section III-D).
-
-    Parameters
-    ----------
-    vertices : (V, 3) float ndarray — skin positions, mm, outward-oriented mesh.
-    triangles : (F, 3) int ndarray — counter-clockwise seen from outside.
-    params : TissueParams, optional
-
-    Returns
-    -------
-    TissueModel
-        With the bone layer kinematic. Where the layers would cross (sharp creases, thin
-        features), the local thickness is reduced until every element has positive volume.
-    """
-    params = params or TissueParams()
-    v = np.asarray(vertices, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    if v.ndim != 2 or v.shape[1] != 3 or not np.isfinite(v).all():
-        raise MyofaceValueError(f"vertices must be a finite (V, 3) array; got shape {v.shape}")
-    if t.ndim != 2 or t.shape[1] != 3 or t.min() < 0 or t.max() >= len(v):
-        raise MyofaceValueError("triangles must be an (F, 3) array of valid vertex indices")
-    nv = len(v)
-    normals = _smooth_normals(v, t, params.normal_smoothing)
-    depths = params.depths_mm
-
-    elems = np.concatenate(
-        [np.concatenate([t + k * nv, t + (k + 1) * nv], axis=1) for k in range(3)]
-    )
-    elem_layer = np.repeat(np.array([1, 2, 3], np.int8), len(t))
-
-    # offset the layers; where they would cross (sharp creases, thin features such as the lid
-    # and lip margins), shrink the local thickness until every prism keeps a sane volume
-    layer_d = np.diff(depths)[elem_layer - 1]
-    top_area = 0.5 * np.linalg.norm(triangle_normals(v, t, unit=False), axis=1)
-    top_area = np.tile(top_area, 3)
-    # triangles that face against their own vertex normals (folds in the source mesh) give
-    # inverted prisms at any thickness: they keep their signed rest volume and are not thinned
-    tri_n = triangle_normals(v, t)
-    folded = np.tile(np.einsum("ij,ij->i", tri_n, normals[t].mean(axis=1)) < 0.2, 3)
-    scale = np.ones(nv)
-    for _ in range(60):
-        pos = np.concatenate([v - (scale * d)[:, None] * normals for d in depths])
-        vol = -_order_free_volumes(pos, elems)  # outward winding: deeper prisms are negative
-        expected = top_area * layer_d * scale[elems[:, :3] % nv].mean(axis=1)
-        bad = (vol < MIN_REL_VOLUME * expected) & ~folded
-        if not bad.any():
-            break
-        scale[np.unique(elems[bad] % nv)] *= 0.85
-    else:
+def targets_array(model: TissueModel, targets) -> np.ndarray:
+    """``targets`` checked: (K, 3) float64 positions (mm) of the kinematic nodes in
+    ``model.kinematic_index`` order; None gives their rest positions."""
+    k = model.kinematic_index
+    if targets is None:
+        return model.rest_positions[k]
+    t = np.asarray(targets, dtype=np.float64)
+    if t.shape != (len(k), 3):
         raise MyofaceValueError(
-            f"cannot build tissue layers under this mesh: {int(bad.sum())} elements stay inverted "
-            "(is the mesh consistently oriented, normals pointing out of the head?)"
+            f"targets must have shape ({len(k)}, 3) (one per kinematic node); got {t.shape}"
         )
-    sign = -1.0
-    # the rest volume as the force kernels measure it (their fixed tetrahedral split)
-    vol = sign * element_volumes_numpy(pos, elems)
-
-    # springs
-    edges = unique_edges(t)
-    a, b = edges[:, 0], edges[:, 1]
-    ii, jj, mm = [], [], []
-
-    def add(i, j, m):
-        ii.append(i)
-        jj.append(j)
-        mm.append(np.full(len(i), m, np.int64))
-
-    add(a, b, 0)  # epidermis: the skin triangle edges
-    for k, m in ((0, 1), (1, 2), (2, 3)):  # dermis, fat, muscle elements
-        top, bot = k * nv, (k + 1) * nv
-        add(np.arange(nv) + top, np.arange(nv) + bot, m)  # vertical
-        add(a + top, b + bot, m)  # shear diagonals of each side face
-        add(b + top, a + bot, m)
-        if k < 2:
-            add(a + bot, b + bot, m)  # the lower triangle's edges (not bone)
-    si, sj, smat = np.concatenate(ii), np.concatenate(jj), np.concatenate(mm)
-    rest = np.linalg.norm(pos[sj] - pos[si], axis=1)
-
-    # volume weights: kv = volume * alpha / A^2, A = mean area of the prism's two triangles
-    area_top = 0.5 * np.linalg.norm(triangle_normals(pos, elems[:, :3], unit=False), axis=1)
-    area_bot = 0.5 * np.linalg.norm(triangle_normals(pos, elems[:, 3:], unit=False), axis=1)
-    area = np.maximum(0.5 * (area_top + area_bot), 1e-6)
-    layer_mat = [params.dermis, params.fat, params.muscle]
-    vol_w = (
-        np.array([layer_mat[k - 1].volume * layer_mat[k - 1].alpha for k in elem_layer]) / area**2
-    )
-
-    # lumped masses: each element gives density * V / 6 to each of its nodes; the skin nodes
-    # get at least the dermis share so no free node is massless
-    mass = np.zeros(len(pos))
-    np.add.at(mass, elems.reshape(-1), np.repeat(params.density * vol / 6.0, 6))
-    # nodes of tiny triangles get a floor mass (MASS_FLOOR x median) so the explicit time step is
-    # not dictated by a few slivers
-    mass = np.maximum(mass, MASS_FLOOR * np.median(mass))
-
-    laws = {"continuous": LAW_CONTINUOUS, "paper": LAW_PAPER}
-    if params.biphasic not in laws:
-        raise MyofaceValueError(f"biphasic must be one of {tuple(laws)}; got {params.biphasic!r}")
-    node_layer = np.repeat(np.arange(4, dtype=np.int8), nv)
-    model = TissueModel(
-        rest_positions=pos,
-        n_vertices=nv,
-        skin_triangles=t,
-        node_layer=node_layer,
-        spring_i=si,
-        spring_j=sj,
-        rest_length=rest,
-        spring_material=smat,
-        materials=params.materials(),
-        elements=elems,
-        element_layer=elem_layer,
-        rest_volume=vol,
-        volume_weight=vol_w,
-        volume_sign=sign,
-        mass=mass,
-        damping=np.zeros(len(pos)),
-        kinematic=node_layer == 3,
-        spring_law=laws[params.biphasic],
-        params=params,
-    )
-    model.damping[:] = 2.0 * params.damping_ratio * lowest_frequency(model) * mass
-    return model
+    if not np.isfinite(t).all():
+        raise MyofaceValueError("targets must be finite")
+    return t
 
 
-def lowest_frequency(model: TissueModel) -> float:
-    """omega_min (rad/s): the slowest natural mode of the lattice at rest (K v = w^2 M v)."""
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import eigsh
+def stable_time_step(model: TissueModel, safety: float = STABLE_DT_SAFETY) -> float:
+    """A time step (s) inside the explicit scheme's stability limit, from each free node's
+    stiffest local oscillator (beta springs) and its damping (see the comments for the two
+    limits: the oscillator's, and the slow growth of lightly damped modes under RK2).
 
-    from myoface.tissue.integrate import stiffness_matrix
-
-    k = stiffness_matrix(model, model.rest_positions).tocsc()
-    m = np.repeat(model.mass[model.free_index], 3)
-    # symmetric form M^-1/2 K M^-1/2, smallest eigenvalue by shift-invert about 0
-    s = sp.diags(1.0 / np.sqrt(m))
-    w2 = eigsh((s @ k @ s).tocsc(), k=1, sigma=0.0, which="LM", return_eigenvectors=False)[0]
-    return float(np.sqrt(max(w2, 0.0)))
-
-
-def make_lattice(
-    positions,
-    springs,
-    *,
-    materials=None,
-    spring_material=None,
-    mass=1.0,
-    damping=0.0,
-    kinematic=None,
-    elements=None,
-    volume_weight=0.0,
-    biphasic: str = "continuous",
-) -> TissueModel:
-    """A TissueModel from explicit arrays — for tests, benchmarks and non-face lattices.
-
-    Parameters
-    ----------
-    positions : (N, 3) float — rest positions, mm.
-    springs : (S, 2) int — node pairs; rest lengths are taken from ``positions``.
-    materials : (M, 3) float, optional — [alpha, beta, strain_c] rows (default one row
-        [1000, 10000, 0.2]).
-    spring_material : (S,) int, optional — default all 0.
-    mass, damping : float or (N,) — g and g/s.
-    kinematic : (N,) bool, optional — prescribed nodes (default none).
-    elements : (E, 6) int, optional — prisms [a0, b0, c0, a1, b1, c1]; volume_weight kv per element.
-    """
-    pos = np.asarray(positions, dtype=np.float64)
-    sp_ = np.asarray(springs, dtype=np.int64).reshape(-1, 2)
-    n = len(pos)
-    mats = np.asarray(materials if materials is not None else [[1000.0, 10000.0, 0.2]], np.float64)
-    smat = (
-        np.zeros(len(sp_), np.int64)
-        if spring_material is None
-        else np.asarray(spring_material, np.int64)
-    )
-    el = np.zeros((0, 6), np.int64) if elements is None else np.asarray(elements, np.int64)
-    vol = element_volumes_numpy(pos, el) if len(el) else np.zeros(0)
-    sign = 1.0 if (len(vol) == 0 or np.median(vol) > 0) else -1.0
-    laws = {"continuous": LAW_CONTINUOUS, "paper": LAW_PAPER}
-    return TissueModel(
-        rest_positions=pos,
-        n_vertices=n,
-        skin_triangles=np.zeros((0, 3), np.int64),
-        node_layer=np.zeros(n, np.int8),
-        spring_i=sp_[:, 0].copy(),
-        spring_j=sp_[:, 1].copy(),
-        rest_length=np.linalg.norm(pos[sp_[:, 1]] - pos[sp_[:, 0]], axis=1),
-        spring_material=smat,
-        materials=mats,
-        elements=el,
-        element_layer=np.ones(len(el), np.int8),
-        rest_volume=sign * vol,
-        volume_weight=np.broadcast_to(np.asarray(volume_weight, float), (len(el),)).copy(),
-        volume_sign=sign,
-        mass=np.broadcast_to(np.asarray(mass, float), (n,)).copy(),
-        damping=np.broadcast_to(np.asarray(damping, float), (n,)).copy(),
-        kinematic=np.zeros(n, bool) if kinematic is None else np.asarray(kinematic, bool).copy(),
-        spring_law=laws[biphasic],
-    )
+    Computed afresh on every call; ``model.stable_dt`` holds the default one, computed once per
+    model."""
+    stiff = np.zeros(model.n_nodes)
+    kb = model.materials[model.spring_material, 1]
+    np.add.at(stiff, model.spring_i, kb)
+    np.add.at(stiff, model.spring_j, kb)
+    free = ~model.kinematic
+    w = np.sqrt(stiff[free] / model.mass[free])
+    g = model.damping[free] / model.mass[free]
+    # for x'' + g x' + w^2 x = 0, midpoint RK2 is stable for dt below about 2 / (g/2 + w) ...
+    dt_osc = safety * np.min(2.0 / (0.5 * g + w))
+    # ... but its amplification factor on an undamped mode is sqrt(1 + (w dt)^4 / 4) > 1: the
+    # lightly damped high modes grow by about (w dt)^4 / 8 per step unless the damping takes away
+    # more (g dt / 2). Keep that growth to half the damping's decay: (w dt)^4 / 8 < g dt / 4.
+    dt_weak = np.min(np.cbrt(2.0 * g / w**4)) if np.all(g > 0) else np.inf
+    return float(min(dt_osc, dt_weak))

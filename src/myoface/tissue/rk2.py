@@ -1,98 +1,31 @@
 """The paper's explicit integrator: midpoint RK2 on ``m x'' + gamma x' + g + q = 0``, all cores.
 
-Two force evaluations per step (Terzopoulos & Waters 1993, Section III-B: explicit Euler was not
-stable enough). The free nodes are cut into slabs (blocks) along the lattice's long axis, once
-per model (:func:`rk2_plan`), and the kernel works on its own numbering of the nodes: each
-block's free nodes side by side, the kinematic ones last (copied in and out once per call), so
-no cache line is written by two threads but at a block's ends. Each block keeps private copies
-of the prisms that touch its nodes and adds their forces into a buffer of its own, then takes
-its nodes' midpoint (or full) update from it. Nothing is written by two threads, and each node
-adds the same terms in the same order whatever the number of blocks, so the trajectory does not
-depend on the number of threads, bit for bit.
+Two force evaluations per step (Terzopoulos & Waters 1993, Section III-B, eq. (3)-(4): explicit
+Euler was not stable enough). :func:`step_rk2` advances a state in time; :func:`run_rk2` runs the
+kernel on arrays in place (``relax(..., method="rk2")`` runs it to rest).
 
-The springs are computed with the prisms. Every spring of the layered lattice joins two nodes of
-some prism (an edge or a side-face diagonal: one of its 15 node pairs, :data:`PRISM_PAIRS`), so
-each spring with a free end is given to one such prism, once per model. A block then works on a
-chunk of 64 prisms at a time, side by side in *lanes*: it gathers their six nodes' coordinates
-once, computes their volume forces (:func:`~myoface.tissue.forces._prism_chunk_forces`) and,
-pair by pair, the forces of the springs they hold (:func:`_pair_lanes`: square roots and
-divisions four at a time, over the lanes from the first that holds such a spring to the last),
-summed per node in the lanes, and adds the sums of the slots that are the block's own nodes
-into its buffer (a list made once: a quarter of the face's slots are kinematic or another
-block's nodes, and cost nothing). The springs no longer gather their ends' positions, nor add
-into the nodes, on their own: that memory traffic was most of their cost. Same arithmetic per
-spring and per tetrahedron as the reference kernels; only the order of the sums at a node
-differs (prism by prism). A spring that no prism holds (a lattice without prisms) is evaluated
-on its own after the prisms.
+The parallel kernel cuts the free nodes into slabs (blocks) along the lattice's long axis, one
+per thread; each block computes the prisms that touch its nodes, with the springs they hold
+(every spring of the layered lattice joins two nodes of some prism), into a buffer of its own,
+so nothing is written by two threads and the trajectory does not depend on the number of
+threads, bit for bit (:class:`Rk2Plan`). A team of threads started once per call runs the
+half-steps' blocks in order (:func:`_rk2_run_team`; a waiting thread spins, with x86's
+``pause`` hint on x86 machines and without one elsewhere, then yields its core). Threads that
+wait for each other twice a step only pay while the cores are free, so the number of threads is
+chosen by measurement as the run goes (:class:`_Pace`). The plans and that chooser are owned by
+one :class:`Rk2Integrator` per model (:func:`rk2_integrator`, kept in the model's memo).
+:func:`_rk2_run_serial`, the single-thread kernel the parallel one replaced, is the reference
+the tests hold it against.
 
-What one step costs (default face, as built on 2026-11-30): 1,070 free nodes of 1,872; 10,195
-springs with a free end (of 13,302), all held by the 2,026 prisms with a free node, in 32 chunks
-(204 chunk-pairs; 10,904 lanes of springs for the 10,195, because the prisms are ordered by which
-pairs hold a spring, so a chunk's prisms mostly hold the same ones, and a pair runs only over
-the lanes that span its springs: 13,056 lanes over whole chunks, 19,648 in model order);
-9,084 additions of a prism's node sums into the nodes (of 12,156 slots); each evaluated twice a
-step. Cut in two blocks: 2,166 prism lanes, 11,940 lanes of springs.
-
-The team (:func:`_rk2_run_team`): one parallel region per call, not two per step. The run is a
-sequence of tasks (half-step, block); a worker waits (spinning ~1 us, then yielding its core)
-until every task of the earlier half-steps is done, then claims the half-step's blocks that no
-one has claimed yet, its own first (so a block stays on one core, with its arrays in that core's
-cache), runs each and counts it done. numba's region launch (OpenMP layer here) cost ~10 us
-each on an idle machine and up to milliseconds on a busy one; the wait costs well under 1 us
-when the other thread is running. Any worker may run any task, so a worker that the system has
-descheduled leaves its block to the other, and a team smaller than asked still finishes, in
-order.
-
-Measured on this repository's 2-core machine (AMD EPYC, 2 vCPUs), 2026-11-30/12-01, with other
-jobs on it (every wall time depends on them; one thread's CPU time a step least). Against the
-kernel of 28ebc64 (before the node numbering, the claims, the slot lists and the pair ranges),
-interleaved in one process, runs of 1,000 steps from rest, one block: 235 vs 323 us of thread
-CPU a step, medians of 40 (185 vs 243 at best), at load 3-5. On the quiet machine (load < 1,
-23:15 UTC) that kernel ran 1,000-step runs at ~5,050 steps/s on one thread (~197 us of CPU a
-step) and ~7,500 on two, but ``step_rk2`` stayed on one thread (4,990 steps/s): its 4-step
-probes of the team lost to one thread (see :data:`PROBE_STEPS`). On two blocks each worker's
-tasks take ~54 % of the one-block work (the prisms on both sides of the cut are computed twice).
-``myoface bench --only tissue.rk2`` at 00:00 UTC, load 4-5: 3,640 steps/s median (best 5,380)
-against the previous serial kernel's 1,340 (2.7x); the default ran 99 % of its steps on one
-thread there (two threads: 3,090 median, best 5,600), 262 us of the calling thread's CPU a
-step on one thread (the same kernel's 185 us at best above: the other jobs share the caches).
-At 00:18-00:20 UTC, load 0.5-1 (another job now and then): 5,920 and 6,040 steps/s median
-(2.7x, 3.0x the serial kernel's ~2,100), the default on two threads for 71 % and 83 % of its
-steps (two threads alone 6,240-6,400 median, best 8,190-9,590; one thread 5,020-5,380, 186-199
-us of CPU a step); with the choice tried again soon after a switch (see :class:`_Pace`): 6,100
-median (2.8x), 97 % of the steps on two threads.
-
-Tried and dropped (measured): springs in three passes (gather the vectors, vectorised square
-roots and divisions, scatter; per-spring constants) — 30 % faster alone, slower inside the step
-(the extra arrays' memory traffic); the same in L1-sized chunks (slower still); keeping a node's
-sum in registers over the springs that start at it (no gain). With the springs in the prisms:
-each node gathering its terms from the chunks' stored results instead of the prisms adding
-into the nodes (slower: ~20 % more CPU a step); an explicit branch instead of the discard row
-for a prism's nodes outside the block, and the prisms in model order (better locality, 1.5x the
-lanes) — no difference the busy machine could resolve. 2026-11-30, 23:30-00:00 UTC (one thread's
-CPU a step): contracted multiply-adds (``fastmath={"contract"}``) in the volume and spring
-lanes, ~2 % (not worth leaving the reference's arithmetic); the 4 x 4 transposes between the
-lanes and padded (N, 4) positions, for vector loads and adds of a node's three components (the
-compiler does not vectorise them: twice as slow); a pair's loop from a variable first lane on
-the whole chunk's arrays (numba's test for a negative index stops the vectorisation: twice as
-slow; hence the views); a reassignment of the springs to prisms by local search (12,864 lanes
-over whole chunks, not 13,056; lost when the prisms are sorted again) and other orders of the
-prisms (within 4 % of these lanes); chunks of 56, 68 or 72 prisms (within the noise).
-
-:func:`_rk2_run_serial` is the single-thread kernel the parallel one replaced (a scatter over
-every spring and element); it stays as the reference the tests hold the parallel one against,
-and as the benchmark's peer.
-
-Threads that wait for each other twice a step only pay while the cores are free: on a machine
-busy with other work, a thread that waits for one the system has descheduled loses time, and one
-thread can be faster. So :func:`run_rk2` measures both as it goes and uses the faster (the
-result is the same, bit for bit).
+The design's longer account, what a step costs on the default face, the measurements and what
+was tried and dropped: ``docs/notes/rk2.md``.
 
 References: Terzopoulos & Waters 1993, eq. (1)-(4) and Section III-B.
 """
 
 from __future__ import annotations
 
+import platform
 import threading
 import time
 import weakref
@@ -110,15 +43,14 @@ from myoface.tissue.forces import (
     LAW_PAPER,
     MIN_SPRING_LENGTH,
     PRISM_CHUNK,
+    PRISM_PAIRS,
     PRISM_WORK,
     _prism_chunk_forces,
     internal_forces_numba,
     spring_magnitude,
 )
-from myoface.tissue.model import TissueModel
+from myoface.tissue.model import TissueModel, targets_array
 
-#: RK2 safety factor on the stability limit (see :func:`stable_time_step`)
-STABLE_DT_SAFETY = 0.5
 #: fewest free nodes per thread: below this a block's work (~0.1 ms a step) no longer pays for
 #: the two thread barriers of every step, so small lattices run on fewer threads (or one)
 MIN_NODES_PER_BLOCK = 256
@@ -136,31 +68,8 @@ PROBE_MIN_S = 1.0
 PROBE_MAX_S = 60.0
 
 
-def stable_time_step(model: TissueModel, safety: float = STABLE_DT_SAFETY) -> float:
-    """A time step (s) inside the explicit scheme's stability limit, from each free node's
-    stiffest local oscillator (beta springs) and its damping (see the comments for the two
-    limits: the oscillator's, and the slow growth of lightly damped modes under RK2).
-
-    Computed afresh on every call; ``model.stable_dt`` holds the default one, computed once per
-    model."""
-    stiff = np.zeros(model.n_nodes)
-    kb = model.materials[model.spring_material, 1]
-    np.add.at(stiff, model.spring_i, kb)
-    np.add.at(stiff, model.spring_j, kb)
-    free = ~model.kinematic
-    w = np.sqrt(stiff[free] / model.mass[free])
-    g = model.damping[free] / model.mass[free]
-    # for x'' + g x' + w^2 x = 0, midpoint RK2 is stable for dt below about 2 / (g/2 + w) ...
-    dt_osc = safety * np.min(2.0 / (0.5 * g + w))
-    # ... but its amplification factor on an undamped mode is sqrt(1 + (w dt)^4 / 4) > 1: the
-    # lightly damped high modes grow by about (w dt)^4 / 8 per step unless the damping takes away
-    # more (g dt / 2). Keep that growth to half the damping's decay: (w dt)^4 / 8 < g dt / 4.
-    dt_weak = np.min(np.cbrt(2.0 * g / w**4)) if np.all(g > 0) else np.inf
-    return float(min(dt_osc, dt_weak))
-
-
 # ------------------------------------------------- atomics for the persistent team of threads ----
-# numba has no atomics on the CPU; these four intrinsics emit LLVM's own instructions.
+# numba has no atomics on the CPU; these intrinsics emit LLVM's own instructions.
 
 
 def _item_pointer(context, builder, aryty, ary, idx, idxty):
@@ -222,16 +131,22 @@ def _atomic_cas(typingctx, arr, idx, expected, new):
     return sig, codegen
 
 
+#: whether this machine is an x86 one, whose spin loops take the ``pause`` hint (an x86
+#: instruction: LLVM has no such intrinsic for other machines)
+X86 = platform.machine().lower() in ("x86_64", "amd64", "i386", "i486", "i586", "i686", "x86")
+
+
 @intrinsic
 def _spin_pause(typingctx):
-    """The x86 ``pause`` hint of a spin loop."""
+    """The x86 ``pause`` hint of a spin loop; nothing elsewhere (a plain spin)."""
     sig = types.void()
 
     def codegen(context, builder, sig, args):
-        fnty = ir.FunctionType(ir.VoidType(), [])
-        builder.call(
-            cgutils.get_or_insert_function(builder.module, fnty, "llvm.x86.sse2.pause"), []
-        )
+        if X86:
+            fnty = ir.FunctionType(ir.VoidType(), [])
+            builder.call(
+                cgutils.get_or_insert_function(builder.module, fnty, "llvm.x86.sse2.pause"), []
+            )
         return context.get_dummy_value()
 
     return sig, codegen
@@ -250,7 +165,7 @@ def _os_yield(typingctx):
     return sig, codegen
 
 
-#: spins of a waiting thread before it starts to yield its core (~1 us of ``pause``)
+#: spins of a waiting thread before it starts to yield its core (~1 us of x86 ``pause``)
 SPINS_BEFORE_YIELD = 200
 _DONE = 8  # slot of the count of tasks done in the team's counters (a cache line of its own)
 _LINE = 8  # float64 or int64 a cache line: per-block flags this far apart share no line
@@ -271,12 +186,6 @@ def _wait_done(counters, target):
 
 # ------------------------------------------------------------------------ the parallel kernel ----
 
-#: the 15 node pairs (edges and face diagonals) of a prism [a0, b0, c0, a1, b1, c1]: every spring
-#: of the layered lattice joins two nodes of some prism, so it is computed with that prism, from
-#: the prism's gathered coordinates, and added to its nodes' sums there
-PRISM_PAIRS = np.array(
-    [(a, b) for a in range(6) for b in range(a + 1, 6)], dtype=np.int64
-)  # fmt: skip
 #: rows of a (chunk, pair)'s spring constants: l_k, alpha, beta, e^c (= strain_c * l_k)
 SPRING_ROWS = 4
 #: a pair's springs are computed from its first lane with a spring to its last, widened to
@@ -287,7 +196,7 @@ PAIR_LANE_STEP = 4
 @dataclass(frozen=True)
 class Rk2Plan:
     """The packed arrays of the parallel kernel for one model and one number of blocks, built
-    once by :func:`rk2_plan`.
+    once by :meth:`Rk2Integrator.plan`.
 
     The free nodes are cut into ``n_blocks`` slabs along the lattice's longest axis, one per
     thread, and numbered ``q = 0 .. F-1`` block by block (``free[q]`` is the node; the kernel
@@ -295,7 +204,7 @@ class Rk2Plan:
     evaluates every prism that has a node of its own (its private copy, in *lanes*: a chunk of
     :data:`~myoface.tissue.forces.PRISM_CHUNK` prisms computed side by side), and each spring
     with a free end is *owned* by one prism that contains both its nodes (one of the 15 pairs
-    :data:`PRISM_PAIRS`), so it is computed with that prism, from the coordinates the prism
+    :data:`~myoface.tissue.forces.PRISM_PAIRS`), so it is computed with that prism, from the coordinates the prism
     gathered, and added into the prism's per-node sums; then the sums of the prism's nodes that
     are the block's own are added into the block's buffer (rows ``q - q0``). A spring no prism
     owns (a lattice without prisms) is evaluated on its own after the prisms.
@@ -522,27 +431,6 @@ def _build_plan(model: TissueModel, n_blocks: int) -> Rk2Plan:
         rest_length=c(rest[ks], np.float64),
         spring_material=c(mid[ks], np.int64),
     )
-
-
-_PLANS: weakref.WeakKeyDictionary[TissueModel, dict[int, Rk2Plan]] = weakref.WeakKeyDictionary()
-_PLANS_LOCK = threading.Lock()
-
-
-def rk2_plan(model: TissueModel, n_blocks: int | None = None) -> Rk2Plan:
-    """The kernel's packed arrays for ``model`` cut into ``n_blocks`` blocks (default: numba's
-    thread count), built on first use and kept as long as the model lives (keyed by the model
-    object: a model made with ``replace`` or ``with_kinematic`` gets its own). Safe to call from
-    several threads (at worst two build the same plan, and one is kept)."""
-    nb = numba.get_num_threads() if n_blocks is None else int(n_blocks)
-    if nb < 1:
-        raise MyofaceValueError(f"n_blocks must be >= 1; got {nb}")
-    plans = _PLANS.get(model)
-    plan = None if plans is None else plans.get(nb)
-    if plan is None:
-        plan = _build_plan(model, nb)
-        with _PLANS_LOCK:
-            plan = _PLANS.setdefault(model, {}).setdefault(nb, plan)
-    return plan
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -884,7 +772,95 @@ class _Pace:
             self.next_probe = time.monotonic() + self.interval
 
 
-_PACES: weakref.WeakKeyDictionary[TissueModel, _Pace] = weakref.WeakKeyDictionary()
+class Rk2Integrator:
+    """The paper's RK2 on one model: the parallel kernel's plans, one per number of blocks
+    (:class:`Rk2Plan`, built on first use), and its thread-count chooser (:class:`_Pace`).
+
+    One per model: :func:`rk2_integrator` keeps it in the model's memo (and the integrator
+    refers to its model weakly, so the two make no reference cycle). Safe to share between the
+    threads that step the model: at worst two build the same plan and one is kept, and their
+    races only mix up the chooser's timings."""
+
+    def __init__(self, model: TissueModel):
+        self._model = weakref.ref(model)
+        self._plans: dict[int, Rk2Plan] = {}
+        self._plans_lock = threading.Lock()
+        self._pace = _Pace()
+
+    @property
+    def model(self) -> TissueModel:
+        model = self._model()
+        if model is None:
+            raise ReferenceError("the model of this RK2 integrator no longer exists")
+        return model
+
+    @property
+    def steps_run(self) -> dict[int, int]:
+        """Steps run with each thread count where :meth:`run` chose it by measurement (what a
+        benchmark reports of the choice); a copy."""
+        return dict(self._pace.steps_run)
+
+    def plan(self, n_blocks: int | None = None) -> Rk2Plan:
+        """The kernel's packed arrays for the model cut into ``n_blocks`` blocks (default:
+        numba's thread count), built on first use and kept."""
+        nb = numba.get_num_threads() if n_blocks is None else int(n_blocks)
+        if nb < 1:
+            raise MyofaceValueError(f"n_blocks must be >= 1; got {nb}")
+        plan = self._plans.get(nb)
+        if plan is None:
+            plan = _build_plan(self.model, nb)
+            with self._plans_lock:
+                plan = self._plans.setdefault(nb, plan)
+        return plan
+
+    def run(
+        self,
+        x: np.ndarray,
+        v: np.ndarray,
+        n_steps: int,
+        dt: float,
+        tol_mm: float = 0.0,
+        *,
+        n_blocks: int | None = None,
+    ) -> tuple[int, float, int]:
+        """:func:`run_rk2` on this integrator's model."""
+        n_steps = int(n_steps)
+        if n_blocks is not None:
+            return self._run_blocks(x, v, n_steps, dt, tol_mm, int(n_blocks))
+        n_free = len(self.model.free_index)
+        n_max = max(1, min(numba.get_num_threads(), n_free // MIN_NODES_PER_BLOCK))
+        if n_max == 1:
+            return self._run_blocks(x, v, n_steps, dt, tol_mm, 1)
+        pace = self._pace
+        done, last = 0, 0.0
+        while done < n_steps:
+            nb, chunk = pace.choose(n_max, n_steps - done)
+            t0 = time.perf_counter()
+            d, last, bad = self._run_blocks(x, v, chunk, dt, tol_mm, nb)
+            pace.record(nb, time.perf_counter() - t0, d)
+            if bad >= 0:
+                return done + d, last, done + bad
+            done += d
+            if d < chunk or (tol_mm > 0.0 and last < tol_mm):  # converged
+                break
+        return done, last, -1
+
+    def _run_blocks(self, x, v, n_steps, dt, tol_mm, n_blocks) -> tuple[int, float, int]:
+        threads = numba.get_num_threads()
+        p = self.plan(n_blocks)
+        workers = min(threads, p.n_blocks)
+        if workers < threads:
+            numba.set_num_threads(workers)  # this thread only; no idle threads in the team
+        try:
+            done, last, bad = _rk2_kernel(p, self.model, x, v, n_steps, dt, tol_mm, workers)
+        finally:
+            numba.set_num_threads(threads)
+        return int(done), float(last), int(bad)
+
+
+def rk2_integrator(model: TissueModel) -> Rk2Integrator:
+    """The model's :class:`Rk2Integrator`, made on first use and kept in ``model.memo``."""
+    return model.memo("rk2_integrator", lambda: Rk2Integrator(model))
 
 
 def run_rk2(
@@ -909,40 +885,7 @@ def run_rk2(
 
     Returns (steps taken, last ``max |v| dt`` in mm, step index of the first non-finite value or
     -1). Stops early once ``max |v| dt < tol_mm`` when ``tol_mm > 0``."""
-    n_steps = int(n_steps)
-    if n_blocks is not None:
-        return _run_blocks(model, x, v, n_steps, dt, tol_mm, int(n_blocks))
-    n_max = max(1, min(numba.get_num_threads(), len(model.free_index) // MIN_NODES_PER_BLOCK))
-    if n_max == 1:
-        return _run_blocks(model, x, v, n_steps, dt, tol_mm, 1)
-    pace = _PACES.get(model)
-    if pace is None:
-        pace = _PACES.setdefault(model, _Pace())
-    done, last = 0, 0.0
-    while done < n_steps:
-        nb, chunk = pace.choose(n_max, n_steps - done)
-        t0 = time.perf_counter()
-        d, last, bad = _run_blocks(model, x, v, chunk, dt, tol_mm, nb)
-        pace.record(nb, time.perf_counter() - t0, d)
-        if bad >= 0:
-            return done + d, last, done + bad
-        done += d
-        if d < chunk or (tol_mm > 0.0 and last < tol_mm):  # converged
-            break
-    return done, last, -1
-
-
-def _run_blocks(model, x, v, n_steps, dt, tol_mm, n_blocks) -> tuple[int, float, int]:
-    threads = numba.get_num_threads()
-    p = rk2_plan(model, n_blocks)
-    workers = min(threads, p.n_blocks)
-    if workers < threads:
-        numba.set_num_threads(workers)  # this thread only; no idle threads in the team
-    try:
-        done, last, bad = _rk2_kernel(p, model, x, v, n_steps, dt, tol_mm, workers)
-    finally:
-        numba.set_num_threads(threads)
-    return int(done), float(last), int(bad)
+    return rk2_integrator(model).run(x, v, n_steps, dt, tol_mm, n_blocks=n_blocks)
 
 
 def _rk2_kernel(p: Rk2Plan, model: TissueModel, x, v, n_steps, dt, tol_mm, workers):
@@ -1157,14 +1100,11 @@ def step_rk2(model: TissueModel, state, targets=None, dt: float | None = None, n
 
     References: Terzopoulos & Waters 1993, eq. (3)-(4) and Section III-B.
     """
-    # integrate.py re-exports this module's API, so its helpers are imported here, not at the top
-    from myoface.tissue.integrate import _targets_array
-
     auto = dt is None
     dt = model.stable_dt if auto else float(dt)
     if not dt > 0:
         raise MyofaceValueError(f"dt must be > 0 s; got {dt}")
-    tg = _targets_array(model, targets)
+    tg = targets_array(model, targets)
     n = int(n_steps)
     # the default step is stable for the lattice near rest; a large step change can stretch
     # springs into their stiff phase, where it is not: then the same time is covered again

@@ -86,7 +86,7 @@ same counts and distances. Per pass now
 the springs' Hessian 0.33 ms, with the prisms' too 0.65-0.83 ms, the prisms' Hessian alone
 0.37-0.39 ms, one CG iteration 0.07-0.09 ms (a sweep 0.03 ms). A warm relax is about one full
 pass, three energy passes, one springs' Hessian, ten CG iterations and three CG set-ups (a
-sweep each) and 0.2-0.3 ms of Python around it (:func:`~myoface.tissue.integrate.relax`'s
+sweep each) and 0.2-0.3 ms of Python around it (:func:`~myoface.tissue.relax`'s
 copies and checks): 2.5-2.8 ms at these costs, so 2 ms needs fewer passes, not faster ones.
 
 Issue 20, second round (2026-11-30, 23:15-00:45): the free nodes numbered in reverse
@@ -152,7 +152,6 @@ Linear Systems, ch. 10 (SSOR / symmetric Gauss-Seidel preconditioning).
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -207,22 +206,6 @@ ENERGY_ROUNDOFF = 1e-12
 #: the rest stiffness is factorised with this fraction of its mean diagonal added (so a lattice
 #: without kinematic nodes, whose stiffness is singular, still gets a preconditioner)
 PRECOND_SHIFT = 1e-9
-
-_CACHE_LOCK = threading.RLock()
-
-
-def cached(model: TissueModel, key: str, build):
-    """``model.cache[key]``, built by ``build()`` once: the first caller builds it under a lock
-    (others asking at the same time wait and then share it); afterwards a plain lookup."""
-    val = model.cache.get(key)
-    if val is None:
-        with _CACHE_LOCK:
-            val = model.cache.get(key)
-            if val is None:
-                val = build()
-                model.cache[key] = val
-    return val
-
 
 # ------------------------------------------------------------------ block LDL^T and PCG ----
 
@@ -597,8 +580,8 @@ class NewtonData:
 
 
 def newton_data(model: TissueModel) -> NewtonData:
-    """The model's :class:`NewtonData`, built on first use (under a lock) and kept in its cache."""
-    return cached(model, "newton_data", lambda: _build_newton_data(model))
+    """The model's :class:`NewtonData`, built on first use and kept in ``model.memo``."""
+    return model.memo("newton_data", lambda: _build_newton_data(model))
 
 
 def _build_newton_data(model: TissueModel) -> NewtonData:
@@ -616,7 +599,7 @@ def _build_newton_data(model: TissueModel) -> NewtonData:
     node_graph = (lo + lo.T + sp.eye(nf)).tocsr()
     precond = block_ldl(k, nf, node_graph)
     # K_fk at rest: the Hessian of a copy of the model in which every node is free
-    allfree = SymmetricPattern(replace(model, kinematic=np.zeros(model.n_nodes, bool), cache={}))
+    allfree = SymmetricPattern(replace(model, kinematic=np.zeros(model.n_nodes, bool)))
     dall = np.empty(9 * allfree.n_free)
     lall = np.empty(9 * allfree.nl)
     allfree.assemble(model.rest_positions, dall, lall)

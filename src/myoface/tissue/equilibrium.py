@@ -1,10 +1,10 @@
-"""Time integration and equilibrium of the tissue lattice.
+"""The equilibrium of the tissue lattice (:func:`relax`), and its energies and forces.
 
 Three solvers behind one API (:func:`relax`):
 
 * ``"rk2"`` — the paper's explicit second-order Runge-Kutta (midpoint) scheme on
   ``m x'' + gamma x' + g + q = 0`` (eq. 3-4), two force evaluations per step, run until the
-  lattice is at rest;
+  lattice is at rest (:mod:`myoface.tissue.rk2`, which also steps it in time: ``step_rk2``);
 * ``"newton"`` (default; ``"implicit"`` is an alias) — quasi-static: the equilibrium is the
   minimum of the lattice's potential energy over the free nodes, found by inexact Newton on the
   exact Hessian with CG preconditioned by a symmetric block Gauss-Seidel sweep of that Hessian,
@@ -26,7 +26,7 @@ References: Terzopoulos & Waters 1993, eq. (3)-(4) and Section III-B.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -35,10 +35,10 @@ from scipy.sparse.linalg import splu
 from myoface.errors import MyofaceSimulationError, MyofaceValueError
 from myoface.tissue.forces import LAW_PAPER, _prism_volume
 from myoface.tissue.forces import internal_forces_numba as _forces
-from myoface.tissue.hessian import HessianPattern, assemble_hessian_numba
-from myoface.tissue.model import TissueModel
-from myoface.tissue.rk2 import run_rk2, stable_time_step, step_rk2  # noqa: F401 (re-exports)
-from myoface.tissue.solver import NEWTON_TOL_MM, cached, relax_newton
+from myoface.tissue.hessian import kernel_args, stiffness_matrix
+from myoface.tissue.model import TissueModel, TissueState, rest_state, targets_array
+from myoface.tissue.rk2 import run_rk2
+from myoface.tissue.solver import NEWTON_TOL_MM, relax_newton
 
 #: default equilibrium tolerance of "lbfgs" and "rk2": largest node move in the last solver step
 #: (time step), mm. (L-BFGS steps are short and its error is several times its last step.)
@@ -49,23 +49,6 @@ RELAX_METHODS = ("newton", "lbfgs", "rk2", "implicit")
 
 class RelaxWarning(UserWarning):
     """A relaxation hit its iteration limit before reaching the tolerance."""
-
-
-@dataclass
-class TissueState:
-    """Positions ``x`` (N, 3) mm and velocities ``v`` (N, 3) mm/s of every node, at time ``t`` s.
-
-    ``previous_x`` (N, 3) mm, optional: the positions the state was relaxed from (set by
-    :func:`relax`); the Newton solver repeats that move in the next relax's initial guess
-    (:func:`myoface.tissue.solver.extrapolated_start`)."""
-
-    x: np.ndarray
-    v: np.ndarray
-    t: float = 0.0
-    previous_x: np.ndarray | None = None
-
-    def copy(self) -> TissueState:
-        return TissueState(self.x.copy(), self.v.copy(), self.t, self.previous_x)
 
 
 @dataclass
@@ -92,25 +75,6 @@ class RelaxResult:
     method: str
 
 
-def rest_state(model: TissueModel) -> TissueState:
-    """The assembled rest configuration with zero velocity."""
-    return TissueState(model.rest_positions.copy(), np.zeros_like(model.rest_positions), 0.0)
-
-
-def _targets_array(model: TissueModel, targets) -> np.ndarray:
-    k = model.kinematic_index
-    if targets is None:
-        return model.rest_positions[k]
-    t = np.asarray(targets, dtype=np.float64)
-    if t.shape != (len(k), 3):
-        raise MyofaceValueError(
-            f"targets must have shape ({len(k)}, 3) (one per kinematic node); got {t.shape}"
-        )
-    if not np.isfinite(t).all():
-        raise MyofaceValueError("targets must be finite")
-    return t
-
-
 @njit(cache=True, nogil=True)
 def _start(xs, kin, tg, rest, x, x_kin_start):
     """In one pass: ``x`` = ``xs`` (N, 3) with its kinematic nodes ``kin`` moved to ``tg``
@@ -133,32 +97,16 @@ def _start(xs, kin, tg, rest, x, x_kin_start):
     return finite, at_rest
 
 
-def _kargs(model: TissueModel) -> tuple:
-    """The packed arrays every force kernel takes, in kernel argument order."""
-    return (
-        model.spring_i,
-        model.spring_j,
-        model.rest_length,
-        model.spring_material,
-        model.materials,
-        model.spring_law,
-        model.elements,
-        model.rest_volume,
-        model.volume_weight,
-        model.volume_sign,
-    )
-
-
 def internal_forces(model: TissueModel, x: np.ndarray) -> np.ndarray:
     """-(g + q): the spring and volume forces on every node, (N, 3) uN (eq. 3-4)."""
     f = np.empty_like(x)
-    _forces(x, *_kargs(model), f)
+    _forces(x, *kernel_args(model), f)
     return f
 
 
 def potential_energy(model: TissueModel, x: np.ndarray) -> float:
     """Elastic energy of the springs plus the volume penalty Q, nJ (= g mm^2 / s^2)."""
-    return float(_energy(x, *_kargs(model)))
+    return float(_energy(x, *kernel_args(model)))
 
 
 def kinetic_energy(model: TissueModel, v: np.ndarray) -> float:
@@ -196,46 +144,20 @@ def _energy(x, si, sj, rest, mat_id, mat, law, elems, rest_vol, kv, vsign):
 # ------------------------------------------------------------------------------ implicit ----
 
 
-def _pattern(model: TissueModel) -> HessianPattern:
-    return cached(
-        model,
-        "hessian_pattern",
-        lambda: HessianPattern(model.n_nodes, model.free_index, model.spring_i, model.spring_j),
-    )
-
-
-def stiffness_matrix(model: TissueModel, x: np.ndarray):
-    """The projected stiffness matrix over the free nodes at ``x`` (scipy CSR, 3F x 3F)."""
-    pat = _pattern(model)
-    data = np.empty(pat.nnz)
-    assemble_hessian_numba(
-        x,
-        *_kargs(model),
-        pat.fmap,
-        pat.block_indptr,
-        pat.block_indices,
-        pat.indptr,
-        pat.spring_slots,
-        data,
-    )
-    return pat.matrix(data)
-
-
 def _preconditioner(model: TissueModel):
     """Sparse LU of the rest stiffness with every spring at the geometric mean of its two phases,
-    sqrt(alpha beta): cached on the model (built once, under a lock), it serves as the initial
-    inverse Hessian of L-BFGS. (SuperLU's solve only reads the factor.)"""
+    sqrt(alpha beta): kept in ``model.memo`` (built once), it serves as the initial inverse
+    Hessian of L-BFGS. (SuperLU's solve only reads the factor.)"""
 
     def build():
         g = np.sqrt(model.materials[:, 0] * model.materials[:, 1])
         mats = np.column_stack([g, g, model.materials[:, 2]])
-        proxy = replace(model, materials=mats, cache={"hessian_pattern": _pattern(model)})
-        a = stiffness_matrix(proxy, model.rest_positions).tocsc()
+        a = stiffness_matrix(model, model.rest_positions, materials=mats).tocsc()
         return splu(
             a, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
         )
 
-    return cached(model, "precond_lu", build)
+    return model.memo("precond_lu", build)
 
 
 def _relax_lbfgs(model, x, tol_mm, max_iter, memory=8):
@@ -342,7 +264,7 @@ def relax(
         Newton iterations (default 50), quasi-Newton iterations (default 300) or RK2 steps
         (default 200,000).
     dt : float, optional
-        RK2 time step, s (default ``model.stable_dt``, :func:`stable_time_step` once per model).
+        RK2 time step, s (default ``model.stable_dt``, computed once per model).
 
     Returns
     -------
@@ -359,7 +281,7 @@ def relax(
     if not tol_mm > 0:
         raise MyofaceValueError(f"tol_mm must be > 0 mm; got {tol_mm}")
     state = state if state is not None else rest_state(model)
-    tg = _targets_array(model, targets)
+    tg = targets_array(model, targets)
     kin = model.kinematic_index
     xs = np.ascontiguousarray(state.x, dtype=np.float64)
     if xs.shape != model.rest_positions.shape:
