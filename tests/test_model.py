@@ -292,6 +292,20 @@ def test_model_is_immutable_and_states_are_values(fm):
     assert (
         res.state is not s0 and res.state.contractions[fm.ids.index("zygomaticus_major_l")] == 0.7
     )
+    # its lattice too: frozen, with read-only arrays
+    with pytest.raises(AttributeError):
+        fm.tissue.kinematic = np.zeros(fm.tissue.n_nodes, bool)
+    with pytest.raises(ValueError):
+        fm.tissue.rest_positions[0, 0] = 1.0
+    with pytest.raises(AttributeError, match="immutable"):
+        fm.stable_dt = 1.0
+
+
+def test_the_stable_step_is_the_lattices_computed_once(fm):
+    from myoface.tissue import stable_time_step
+
+    assert fm.stable_dt is fm.tissue.stable_dt
+    assert fm.stable_dt == stable_time_step(fm.tissue) > 0
 
 
 def test_two_threads_share_one_model(fm):

@@ -298,12 +298,12 @@ def _tet_gradient(x, i0, i1, i2, i3):
 
 @njit(cache=True)
 def prism_volume_forces_range(x, elems, rest_vol, kv, sign, e0, e1, f):
-    """Add -dQ_e/dx of prisms ``e0 .. e1-1`` to ``f`` (N, 3), in prism order: the kernel of the
-    parallel RK2 (:mod:`myoface.tissue.rk2`), where each thread adds a range of prisms to its own
-    buffer. Same value as :func:`volume_forces_numba`, which adds each tetrahedron's terms one by
-    one; here each node's gradient is summed over the prism's three tetrahedra (slots (0 1 2 3),
-    (1 2 3 4), (2 3 4 5) of :data:`PRISM_TETS`) in registers and added once, half the memory
-    traffic."""
+    """Add -dQ_e/dx of prisms ``e0 .. e1-1`` to ``f`` (N, 3), in prism order, each node's
+    gradient summed over the prism's three tetrahedra (slots (0 1 2 3), (1 2 3 4), (2 3 4 5) of
+    :data:`PRISM_TETS`) and added once: the arithmetic, and the order of the sums, of the
+    parallel RK2's chunked prisms (:func:`_prism_chunk_forces`), one prism at a time; the tests
+    hold :func:`prism_volume_forces_split` to it bit for bit. Same value as
+    :func:`volume_forces_numba`, which adds each tetrahedron's terms one by one."""
     for e in range(e0, e1):
         n0 = elems[e, 0]
         n1 = elems[e, 1]

@@ -731,7 +731,7 @@ def add_one_prism_hessian(pts, gr, dv, kvq, vsign, fr, sl, rv, dvals, lvals):
 # Without the Hessian, the prisms' pass is made in chunks of PRISM_CHUNK prisms: their nodes'
 # coordinates gathered into a scratch array, the arithmetic done there lane by lane (the compiler
 # vectorises it, four prisms at a time), the gradient's terms then added to the free nodes (as
-# :func:`myoface.tissue.forces.prism_volume_forces_split` does for the RK2 kernel). On the
+# :func:`myoface.tissue.forces.prism_volume_forces_split` and the RK2 kernel's chunks do). On the
 # default face 74 -> 54 us a pass.
 
 #: prisms per chunk of :func:`prism_energy_gradient` (its scratch, 38 rows of this many float64,
