@@ -21,7 +21,7 @@ def shared_path(*parts: str) -> Path:
 
 
 def _mediapipe_available() -> bool:
-    from myoface.analysis.landmarks import mediapipe_available
+    from myoface.facemesh import mediapipe_available
 
     return mediapipe_available()
 

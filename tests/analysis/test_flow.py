@@ -115,7 +115,8 @@ def test_flow_is_for_the_landmark_fit():
 def test_the_fit_on_a_flow_refined_detector_reports_its_points():
     """On frames with nothing to track (flat), the detector's points stand: the fit measures
     what it measures without the flow, and analysis.json's description counts the points."""
-    from myoface.analysis.fit import FitAnalyzer, HeadPose, PinholeCamera
+    from myoface.analysis.camera import HeadPose, PinholeCamera
+    from myoface.analysis.trackers.landmark_fit import FitTracker
     from myoface.model import build_face_model
 
     fm = build_face_model()
@@ -132,8 +133,8 @@ def test_the_fit_on_a_flow_refined_detector_reports_its_points():
             pass
 
     frame = np.full((480, 640, 3), 90, np.uint8)
-    plain = FitAnalyzer(fm, camera=cam, detector=Fixed())
-    flowed = FitAnalyzer(fm, camera=cam, detector=FlowDetector(Fixed()))
+    plain = FitTracker(fm, camera=cam, detector=Fixed())
+    flowed = FitTracker(fm, camera=cam, detector=FlowDetector(Fixed()))
     a = [plain.measure(frame, k, k / 30) for k in range(2)]
     b = [flowed.measure(frame, k, k / 30) for k in range(2)]
     for x, y in zip(a, b, strict=True):

@@ -4,12 +4,7 @@ and the acceptance test on the real face video (neutral -> smile -> neutral)."""
 import numpy as np
 import pytest
 
-from myoface.analysis.landmarks import (
-    contours_from_landmarks,
-    detect_ahead,
-    fit_similarity,
-    rigid_vertices,
-)
+from myoface.analysis.landmarks import contours_from_landmarks, fit_similarity, rigid_vertices
 from myoface.errors import MyofaceValueError
 from tests.conftest import needs_mediapipe, shared_path
 
@@ -26,58 +21,6 @@ def test_fit_similarity_recovers_a_known_map():
     assert np.allclose(np.stack([zs.real, zs.imag], 1), dst)
     with pytest.raises(MyofaceValueError, match="degenerate"):
         fit_similarity(np.ones((4, 2)), dst[:4])
-
-
-def _detect_threads():
-    import threading
-
-    return [t for t in threading.enumerate() if t.name == "myoface-detect"]
-
-
-def test_detect_ahead_runs_in_order_and_stops_its_thread():
-    """The detector runs on a worker thread, in order, ahead of the consumer; the results come
-    in order; stopping early (closing the generator), an exception in the detector or in the
-    source all end the thread (joined, none left) and close the source."""
-    import threading
-
-    seen, closed = [], []
-
-    def source(n):
-        try:
-            yield from range(n)
-        finally:
-            closed.append(True)
-
-    def detect(k):
-        seen.append((k, threading.current_thread().name))
-        if k == 13:
-            raise ValueError("no such frame")
-        return 10 * k
-
-    assert list(detect_ahead(source(5), detect, depth=2)) == [(k, 10 * k) for k in range(5)]
-    assert [name for _, name in seen] == ["myoface-detect"] * 5 and closed == [True]
-    assert not _detect_threads()
-    # stopped early: the thread, blocked on a full queue, sees the stop and ends
-    gen = detect_ahead(source(1000), detect, depth=3)
-    assert next(gen) == (0, 0)
-    gen.close()
-    assert not _detect_threads() and len(closed) == 2 and len(seen) < 5 + 10
-    # the detector's exception is raised in the consumer, in order, and the thread ends
-    out = []
-    with pytest.raises(ValueError, match="no such frame"):
-        for item in detect_ahead(source(20), lambda k: detect(k + 10), depth=2):
-            out.append(item)
-    assert [k for k, _ in out] == [0, 1, 2] and not _detect_threads()
-
-    def broken():
-        yield 1
-        raise RuntimeError("cannot decode")
-
-    with pytest.raises(RuntimeError, match="cannot decode"):
-        list(detect_ahead(broken(), detect))
-    assert not _detect_threads()
-    with pytest.raises(MyofaceValueError, match="depth"):
-        next(detect_ahead([], detect, depth=0))
 
 
 def test_rigid_vertices_leave_out_what_muscles_move():
@@ -134,11 +77,11 @@ def test_real_video_smile_with_the_landmark_tracker(real_video):
     fall at the end; the brows do not move in this video, so the frontalis must stay low.
     Measured when written: zygomatic majors 0.05-0.1 before, 1.0 during, 0.44 on the last
     frame; frontalis at most 0.39 (the right major belly, frames 5-18), mean 0.06."""
-    from myoface.analysis.landmarks import LandmarkAnalyzer
+    from myoface.analysis.trackers.landmark_paper import PaperLandmarkTracker
     from myoface.model import build_face_model
 
     fm = build_face_model()
-    an = LandmarkAnalyzer(fm)
+    an = PaperLandmarkTracker(fm)
     try:
         ms = [an.measure(f, k, k / 30) for k, f in enumerate(real_video)]
     finally:
@@ -166,7 +109,7 @@ def test_real_video_smile_with_the_snakes(real_video):
     suspect last-bit differences, e.g. of numpy's reductions with memory alignment, which the
     snakes' choice of edge amplifies)."""
     from myoface.analysis.landmarks import auto_init
-    from myoface.analysis.pipeline import Analyzer
+    from myoface.analysis.trackers.snakes import Analyzer
     from myoface.model import build_face_model
 
     fm = build_face_model()

@@ -5,7 +5,7 @@ import csv
 import numpy as np
 import pytest
 
-from myoface.analysis.fit import FitMeasurement, HeadPose, PinholeCamera
+from myoface.analysis.camera import HeadPose, PinholeCamera
 from myoface.analysis.openface import (
     OPENFACE_AUS,
     OPENFACE_COLUMNS,
@@ -15,6 +15,7 @@ from myoface.analysis.openface import (
     openface_pose,
     write_openface_csv,
 )
+from myoface.analysis.trackers.landmark_fit import FitMeasurement
 from myoface.control.facs import au_contractions
 
 

@@ -8,7 +8,7 @@ import pytest
 from myoface.analysis.contractions_csv import read_contractions_csv, write_contractions_csv
 from myoface.analysis.initfiles import load_init, save_init
 from myoface.analysis.sections import SECTIONS
-from myoface.analysis.tracker import FrameMeasurement, Tracker
+from myoface.analysis.trackers.base import FrameMeasurement, Tracker
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
 
 
@@ -105,8 +105,8 @@ def test_contractions_csv_errors(tmp_path, text, match):
 
 def test_low_contrast_frame_is_reported_not_measured():
     """A washed-out frame (a fade to grey) is recorded as low contrast with empty values."""
-    from myoface.analysis.pipeline import Analyzer
     from myoface.analysis.sections import project_sections
+    from myoface.analysis.trackers.snakes import Analyzer, SnakeTracker
     from myoface.model import build_face_model
     from myoface.render import Camera, Renderer, to_srgb8
     from myoface.render.dressing import default_skin_texture
@@ -117,8 +117,9 @@ def test_low_contrast_frame_is_reported_not_measured():
     img = r.render(fm.skin_vertices()).astype(np.float64)
     faded = (0.15 * img + 0.85 * img.mean()).astype(np.uint8)
     before = _model_digest(fm)
-    an = Analyzer(fm, project_sections(fm, cam), head_frame="contours", head_reference=())
-    assert isinstance(an, Tracker)
+    init = project_sections(fm, cam)
+    assert isinstance(SnakeTracker(fm, init), Tracker)
+    an = Analyzer(fm, init, head_frame="contours", head_reference=())
     q = [an.measure(f, k).quality for k, f in enumerate([img.astype(np.uint8), faded])]
     assert q[0] == "ok" and q[1] == "low_contrast", q
     m = an.measure(faded, 2)

@@ -164,7 +164,7 @@ def test_landmarks_follow_a_face_that_leaves_the_frame_and_comes_back(leaving_vi
 
 
 def _analyze_frames(fm, init, frames):
-    from myoface.analysis.pipeline import Analyzer
+    from myoface.analysis.trackers.snakes import Analyzer
 
     an = Analyzer(fm, init)
     try:
@@ -240,9 +240,9 @@ def test_a_face_that_appears_late_is_waited_for(tmp_path, capsys):
     trackers calibrate on the first frame with a face (the automatic initialisation searches
     the whole video, with a progress bar), measure the face, and report the frames without
     one with empty values."""
-    from myoface.analysis.landmarks import FaceMeshDetector
-    from myoface.analysis.pipeline import make_analyzer
+    from myoface.analysis.pipeline import Tracking, make_analyzer
     from myoface.analysis.video import open_video
+    from myoface.facemesh import FaceMeshDetector
     from myoface.model import build_face_model
 
     path = shared_path("video", "noface_face.mov")
@@ -255,9 +255,13 @@ def test_a_face_that_appears_late_is_waited_for(tmp_path, capsys):
                 break
     assert first is not None and first > 30  # later than the old search limit
     # the search shows its progress when asked
-    an, how, start = make_analyzer(build_face_model(), video, show_progress=True)
-    an.close()
-    assert start == first and f"frame {first}" in how
+    an, at = make_analyzer(build_face_model(), video, show_progress=True)
+    run = Tracking(video, an, at, max_frames=1)
+    try:
+        assert [m.index for _, m in run] == [first]
+    finally:
+        an.close()
+    assert run.start == first and f"frame {first}" in an.describe()["init"]
     assert "searching for a face" in capsys.readouterr().err
     for tracker, missing in (("snakes", "face_lost"), ("landmarks", "no_face")):
         out = tmp_path / tracker

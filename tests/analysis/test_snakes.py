@@ -337,10 +337,10 @@ def test_a_floored_layer_makes_no_edge_of_what_is_darker_than_the_floor():
 
 
 def test_the_lips_tone_is_read_inside_their_outline():
-    """:func:`~myoface.analysis.pipeline.lips_tone`: the grey levels of the band inside the
+    """:func:`~myoface.analysis.trackers.snakes.lips_tone`: the grey levels of the band inside the
     outline, whichever way the contour runs; the skin outside and the mouth's inside (beyond
     the band) do not count."""
-    from myoface.analysis.snaketracker import lips_tone
+    from myoface.analysis.trackers.snakes import lips_tone
 
     img = lips_image(lip_px=4.0)
     outline = ellipse_points((48, 44), (24, 12), 120)

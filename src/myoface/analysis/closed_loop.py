@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from myoface.analysis.pipeline import Analyzer
 from myoface.analysis.sections import PAPER_MUSCLES, project_sections
+from myoface.analysis.trackers.snakes import Analyzer
 from myoface.errors import MyofaceValueError
 
 #: what ``run_closed_loop`` analyses the frames with
@@ -72,7 +72,7 @@ def run_closed_loop(
     head, so no head-frame correction), and return truth and estimates.
 
     ``tracker="landmarks"`` analyses the same frames with
-    :class:`~myoface.analysis.landmarks.LandmarkAnalyzer` (MediaPipe's face mesh) instead.
+    :class:`~myoface.analysis.trackers.landmark_paper.PaperLandmarkTracker` (MediaPipe's face mesh) instead.
     ``tracker="oracle"`` skips the images: the curve estimator is given the model's own
     section curves, projected by the camera, as if tracked perfectly; what error remains is
     the estimator's (its linearisation and the ``refine`` rounds through the tissue), so the
@@ -118,9 +118,9 @@ def run_closed_loop(
         est = _estimate_from_true_curves(model, cam, frames, ids, refine)
         return ClosedLoopResult(ids, truth, est, ["ok"] * len(frames))
     if tracker == "landmarks":
-        from myoface.analysis.landmarks import LandmarkAnalyzer
+        from myoface.analysis.trackers.landmark_paper import PaperLandmarkTracker
 
-        an = LandmarkAnalyzer(model, ids, refine=0)
+        an = PaperLandmarkTracker(model, ids, refine=0)
     else:
         init = project_sections(model, cam)
         an = Analyzer(

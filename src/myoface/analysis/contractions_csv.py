@@ -3,32 +3,26 @@ or streamed row by row, and read back for resynthesis."""
 
 from __future__ import annotations
 
+import csv
 import os
 from pathlib import Path
 
 import numpy as np
 
-from myoface.analysis.tracker import FrameMeasurement
-from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
+from myoface._io import read_text
+from myoface.analysis.camera import POSE_COLUMNS, HeadPose
+from myoface.analysis.trackers.base import FrameMeasurement
+from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 
-#: the head's 3-D pose in the 3-D fit's rows (:class:`~myoface.analysis.fit.HeadPose`), in order
-POSE_COLUMNS = (
-    "head_yaw_deg",
-    "head_pitch_deg",
-    "head_roll_deg",
-    "head_tx_mm",
-    "head_ty_mm",
-    "head_tz_mm",
-)
 #: the head columns of the snakes' (2-D head frame) rows in a contractions CSV
-HEAD_2D_COLUMNS = ("head_dx_px", "head_dy_px", "head_scale", "head_rot_deg")
+HEAD_2D_COLUMNS = FrameMeasurement.HEAD_COLUMNS
 
 
-def contractions_csv_header(ids, first) -> list[str]:
-    """The columns of a contractions CSV whose first measurement is ``first`` (see
-    :func:`write_contractions_csv`): the 3-D fit's measurements carry their own head
-    columns (``HEAD_COLUMNS``), the others the 2-D head frame's."""
-    head = list(first.HEAD_COLUMNS) if hasattr(first, "head_cells") else list(HEAD_2D_COLUMNS)
+def contractions_csv_header(ids, first=None) -> list[str]:
+    """The columns of a contractions CSV whose measurements are of the kind of ``first`` (see
+    :func:`write_contractions_csv`): each kind names its head columns (``HEAD_COLUMNS``);
+    without a measurement, the 2-D head frame's."""
+    head = HEAD_2D_COLUMNS if first is None else first.HEAD_COLUMNS
     return ["frame", "time_s", "quality", *ids, "jaw_angle_rad", *head]
 
 
@@ -45,23 +39,16 @@ def jaw_angle_function(jaw):
     return lambda c: c * k
 
 
-def contractions_csv_row(f, ids, jaw, pose_cols: bool) -> str:
+def contractions_csv_row(f, ids, jaw) -> str:
     """One measurement ``f`` as a line of a contractions CSV (no newline); ``jaw``: the
     model's jaw, or a function of the jaw control giving its angle (see
-    :func:`jaw_angle_function`); ``pose_cols``: the header has the 3-D fit's head columns."""
+    :func:`jaw_angle_function`)."""
     angle = jaw if callable(jaw) else jaw_angle_function(jaw)
     vals = ["" if not np.isfinite(v) else f"{v:.5f}" for v in f.contractions]
     jaw_cell = ""
     if "jaw" in ids and np.isfinite(f.contractions[ids.index("jaw")]):
         jaw_cell = f"{angle(float(f.contractions[ids.index('jaw')])):.5f}"
-    if pose_cols:
-        head = f.head_cells()
-    else:
-        head = [f.head_shift_px[0], f.head_shift_px[1], f.head_scale, np.degrees(f.head_rot_rad)]
-        head = [
-            "" if not np.isfinite(v) else f"{v:.{d}f}"
-            for v, d in zip(head, (3, 3, 5, 3), strict=True)
-        ]
+    head = f.head_cells()
     return ",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw_cell, *head])
 
 
@@ -69,19 +56,22 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw) -> No
     """``frame,time_s,quality,<muscle ids...>,jaw_angle_rad,head_dx_px,head_dy_px,head_scale,
     head_rot_deg`` (empty cells where a frame could not be measured, and head cells where the
     face was not found). With the 3-D fit's measurements
-    (:class:`~myoface.analysis.fit.FitMeasurement`) the head columns are the 3-D pose and the
+    (:class:`~myoface.analysis.trackers.landmark_fit.FitMeasurement`) the head columns are the 3-D pose and the
     fit's residual: ``head_yaw_deg, head_pitch_deg, head_roll_deg, head_tx_mm, head_ty_mm,
-    head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.fit.HeadPose`). Written whole
+    head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.camera.HeadPose`). Written whole
     (atomically); :class:`ContractionsCsvWriter` writes the same rows one by one."""
     from myoface._io import atomic_output
 
     ids = list(ids)
-    # measurements of the 3-D fit (myoface.analysis.fit) carry the head's 3-D pose instead
-    pose_cols = bool(frames) and all(hasattr(f, "head_cells") for f in frames)
-    cols = contractions_csv_header(ids, frames[0] if pose_cols else None)
+    kinds = {type(f) for f in frames}
+    if len(kinds) > 1:
+        raise MyofaceValueError(
+            f"one CSV holds one tracker's measurements; got {sorted(k.__name__ for k in kinds)}"
+        )
+    cols = contractions_csv_header(ids, frames[0] if frames else None)
     lines = [",".join(cols)]
     angle = jaw_angle_function(jaw)
-    lines += [contractions_csv_row(f, ids, angle, pose_cols) for f in frames]
+    lines += [contractions_csv_row(f, ids, angle) for f in frames]
     with atomic_output(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
 
@@ -120,13 +110,17 @@ class ContractionsCsvWriter:
         self.jaw_angle = jaw_angle_function(jaw)
         self.n_rows = 0
         self._fh = None
-        self._pose_cols = False
+        self._kind = None
 
     def write(self, m) -> None:
         """Append the row of measurement ``m`` and flush it to the file."""
         if self._fh is None:  # the first row says which head columns the file has
-            self._pose_cols = hasattr(m, "head_cells")
-        row = contractions_csv_row(m, self.ids, self.jaw_angle, self._pose_cols)
+            self._kind = type(m)
+        elif type(m) is not self._kind:
+            raise MyofaceValueError(
+                f"{self.path}: a {type(m).__name__} after {self._kind.__name__} rows"
+            )
+        row = contractions_csv_row(m, self.ids, self.jaw_angle)
         if self._fh is None:
             head = ",".join(contractions_csv_header(self.ids, m))
             self._fh = self._publish(head + "\n" + row + "\n")
@@ -192,7 +186,7 @@ CSV_OTHER_COLUMNS = (
     "head_dy_px",
     "head_scale",
     "head_rot_deg",
-    # the 3-D fit's (myoface.analysis.fit.FitMeasurement.HEAD_COLUMNS)
+    # the 3-D fit's (myoface.analysis.trackers.landmark_fit.FitMeasurement.HEAD_COLUMNS)
     *POSE_COLUMNS,
     "residual_mm",
 )
@@ -308,4 +302,49 @@ def hold_last_measured(table: np.ndarray) -> np.ndarray:
             out[k] = last
         else:
             last = out[k]
+    return out
+
+
+def read_head_poses(path) -> list:
+    """The head poses of a contractions CSV written with the 3-D fit (its
+    :data:`POSE_COLUMNS`): one :class:`HeadPose` per row, None where the row has none (no face
+    found)."""
+    p = Path(path)
+    rows = list(csv.DictReader(read_text(p, "contractions CSV").splitlines()))
+    missing = [c for c in POSE_COLUMNS if not rows or c not in rows[0]]
+    if missing:
+        raise MyofaceFormatError(
+            f"{p}: no head pose columns ({', '.join(missing)}); they are written by "
+            "myoface analyze --tracker landmarks (the 3-D fit)"
+        )
+    out = []
+    for k, r in enumerate(rows):
+        cells = [(r.get(c) or "").strip() for c in POSE_COLUMNS]
+        if not all(cells):
+            out.append(None)
+            continue
+        try:
+            vals = {c: float(v) for c, v in zip(POSE_COLUMNS, cells, strict=True)}
+        except ValueError:
+            raise MyofaceFormatError(
+                f"{p}: row {k + 2}: a head pose cell is not a number"
+            ) from None
+        if not all(np.isfinite(v) for v in vals.values()):
+            raise MyofaceFormatError(f"{p}: row {k + 2}: a head pose cell is not finite")
+        out.append(HeadPose.from_columns(vals))
+    return out
+
+
+def display_poses(poses) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(rotation, translation mm)`` per row of ``poses`` (:func:`read_head_poses`) for
+    :meth:`~myoface.render.Renderer.render`: the head's orientation as the camera saw it, and
+    its translation from its median position (so that a renderer framing the face at rest
+    keeps it in view while it moves as in the video); rows without a pose hold the last one."""
+    known = [p for p in poses if p is not None]
+    ref = np.median([p.translation_mm for p in known], axis=0) if known else np.zeros(3)
+    out, last = [], (np.eye(3), np.zeros(3))
+    for p in poses:
+        if p is not None:
+            last = (p.rotation, p.translation_mm - ref)
+        out.append(last)
     return out

@@ -231,7 +231,7 @@ def au_intensities(contractions, muscle_ids, aus=OPENFACE_AUS) -> np.ndarray:
 
 def openface_pose(pose) -> tuple[float, float, float, float, float, float]:
     """(pose_Tx, pose_Ty, pose_Tz mm, pose_Rx, pose_Ry, pose_Rz rad) of a
-    :class:`~myoface.analysis.fit.HeadPose` in OpenFace's convention: camera frame x right, y
+    :class:`~myoface.analysis.camera.HeadPose` in OpenFace's convention: camera frame x right, y
     down, z away from the camera; ``R = Rx(pitch) Ry(yaw) Rz(roll)`` maps the head's own axes
     (OpenFace's: x to the image's right, y down, z away from the camera when it faces the
     camera) into the camera frame."""
@@ -245,8 +245,8 @@ def openface_pose(pose) -> tuple[float, float, float, float, float, float]:
 
 def _muscle_columns(header) -> list[str]:
     """The contraction columns of a contractions.csv header (muscles and the jaw)."""
+    from myoface.analysis.camera import POSE_COLUMNS
     from myoface.analysis.contractions_csv import CSV_OTHER_COLUMNS
-    from myoface.analysis.fit import POSE_COLUMNS
 
     other = set(CSV_OTHER_COLUMNS) | set(POSE_COLUMNS) | {"residual_mm"}
     return [c for c in header if c and c not in other]
@@ -276,7 +276,8 @@ def read_for_openface(path):
     except (ValueError, IndexError):
         raise MyofaceFormatError(f"{p}: a 'frame' cell is not a whole number") from None
     poses = None
-    from myoface.analysis.fit import POSE_COLUMNS, read_head_poses
+    from myoface.analysis.camera import POSE_COLUMNS
+    from myoface.analysis.contractions_csv import read_head_poses
 
     if all(c in header for c in POSE_COLUMNS):
         poses = read_head_poses(p)

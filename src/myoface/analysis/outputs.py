@@ -15,13 +15,21 @@ Image coordinates are (x, y) = (column, row) pixels.
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from myoface._io import atomic_output, output_dir
+from myoface.analysis.contractions_csv import ContractionsCsvWriter
+from myoface.analysis.initfiles import load_init
+from myoface.analysis.pipeline import Tracking, make_analyzer
+from myoface.analysis.video import Video, open_video
 from myoface.errors import MyofaceValueError
+from myoface.render import VideoWriter, progress
 
 #: the files :func:`analyze_to_folder` writes for every tracker
 FOLDER_FILES = ("contractions.csv", "analysis.json", "contractions.png", "overlay.mp4")
@@ -50,14 +58,6 @@ def draw_contours(frame: np.ndarray, contours: dict, color=(255, 215, 0)) -> np.
     return img
 
 
-def potential_image(pot: np.ndarray) -> np.ndarray:
-    """The potential (H, W) as a grey RGB image, edges (its ravines) dark, as in the paper's
-    Fig. 7b."""
-    lo, hi = np.percentile(pot, [1, 99.5])
-    g = np.clip((pot - lo) / max(hi - lo, 1e-12), 0, 1)
-    return np.repeat((g * 255).astype(np.uint8)[:, :, None], 3, axis=2)
-
-
 def plot_contractions(path, ids, times, table, quality) -> None:
     """The contractions ``table`` (T, M) over ``times`` (T,) s, one panel per muscle pair
     (the paper's Fig. 8); frames whose ``quality`` is not "ok" shaded grey."""
@@ -65,8 +65,6 @@ def plot_contractions(path, ids, times, table, quality) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from myoface._io import atomic_output
 
     groups = {}
     for j, k in enumerate(ids):
@@ -110,7 +108,7 @@ class FrameLog:
         self._names: dict[str, str] = {}  # one string object per distinct quality
 
     def append(self, m) -> None:
-        """Record the measurement ``m`` (a :class:`~myoface.analysis.tracker.FrameMeasurement`
+        """Record the measurement ``m`` (a :class:`~myoface.analysis.trackers.base.FrameMeasurement`
         or the 3-D fit's)."""
         self._index.append(int(m.index))
         self._time.append(float(m.time_s))
@@ -259,11 +257,6 @@ def analyze_to_folder(
     KeyboardInterrupt
         When interrupted (see above).
     """
-    from myoface._io import output_dir
-    from myoface.analysis.initfiles import load_init
-    from myoface.analysis.pipeline import make_analyzer
-    from myoface.analysis.video import Video, open_video
-
     if not isinstance(video, Video):
         video = open_video(video)
     how_init = None
@@ -276,23 +269,20 @@ def analyze_to_folder(
         from myoface.model import load_face_model
 
         model = load_face_model(face)
-    an, how, start = make_analyzer(
+    an, first = make_analyzer(
         model, video, tracker, init or None, calibration_frame, refine, sigma,
         estimator=estimator, flow=flow,
     )  # fmt: skip
     release = None
     try:
         with output_dir(out) as folder:
+            run = Tracking(video, an, first, max_frames)
             try:
-                log, interrupted, release = _measure_into(
-                    video, an, model, folder, start, max_frames, tracker, show_progress
-                )
+                log, interrupted, release = _measure_into(run, model, folder, show_progress)
             finally:
                 an.close()
-            _write_results(
-                video, an, folder, log, how_init or how, start, tracker, face, interrupted
-            )
-            result = FolderResult(folder, Path(video.path), tuple(an.ids), log, start)
+            _write_results(run, folder, log, how_init, tracker, face, interrupted)
+            result = FolderResult(folder, Path(video.path), tuple(an.ids), log, run.start)
             if finish is not None and interrupted is None:
                 finish(folder, result)
     finally:
@@ -308,23 +298,17 @@ def analyze_to_folder(
     return result
 
 
-def _write_results(video, an, out, log, how, start, tracker, face, interrupted) -> None:
+def _write_results(run, out, log, how_init, tracker, face, interrupted) -> None:
     """analysis.json and contractions.png (contractions.csv is written as the frames are)."""
-    import json
-
-    from myoface._io import atomic_output
-
+    video, an = run.video, run.tracker
     side = {
         "video": str(Path(video.path).resolve()),
         "fps": video.fps,
         "size": list(video.size),
         "tracker": tracker,
-        "init": how,
-        "calibration_frame": start,
+        "calibration_frame": run.start,
         "face": str(face) if face else "default",
         "muscles": list(an.ids),
-        "mm_per_px": an.mm_per_px,
-        "refine": an.refine,
     }
     if interrupted is not None:
         side["interrupted"] = True
@@ -332,50 +316,39 @@ def _write_results(video, an, out, log, how, start, tracker, face, interrupted) 
         {"frame": int(k), "quality": q, "iterations": int(it)}
         for k, q, it in zip(log.index, log.quality, log.iterations, strict=True)
     ]
-    if hasattr(an, "describe"):  # the 3-D fit: its calibration, camera and weights
-        side.update(an.describe())
-    if tracker == "snakes":
-        side["sigma_px"] = an.sigma
-        side["estimator"] = an.method
-        side["snake_params"] = {
-            k: float(np.mean(v)) if not isinstance(v, int) else v
-            for k, v in vars(an.params).items()
-        }
+    # the tracker's own account: how it was initialised, mm per pixel, its settings
+    side.update(an.describe())
+    if how_init is not None:
+        side["init"] = how_init
     with atomic_output(out / "analysis.json") as tmp:
         with open(tmp, "w", encoding="utf-8") as fh:
             json.dump(side, fh, indent=1)
     plot_contractions(out / "contractions.png", an.ids, log.times, log.contractions, log.quality)
 
 
-def _measure_into(video, an, model, out, start, max_frames, tracker, show_progress):
-    """Measure every frame from ``start`` on, streaming each frame's CSV row and overlay
-    pictures; ``(FrameLog, None)``, or ``(FrameLog, the KeyboardInterrupt)`` when interrupted
-    after the first frame (the CSV and the videos then closed with the frames so far). A clear
-    error when nothing could be measured (and then no file is left)."""
-    import contextlib
-
-    from myoface.analysis.contractions_csv import ContractionsCsvWriter
-    from myoface.analysis.pipeline import measure_frames
-    from myoface.render import VideoWriter, progress
-
+def _measure_into(run, model, out, show_progress):
+    """Measure every frame of ``run`` (a :class:`~myoface.analysis.pipeline.Tracking`),
+    streaming each frame's CSV row and overlay pictures (the contours on the frame, and on
+    each of the tracker's :meth:`debug_images`, e.g. the snakes' potential); ``(FrameLog,
+    None)``, or ``(FrameLog, the KeyboardInterrupt)`` when interrupted after the first frame
+    (the CSV and the videos then closed with the frames so far). A clear error when nothing
+    could be measured (and then no file is left)."""
+    video, an = run.video, run.tracker
+    start = run.calibrate()  # (before the progress bar: its errors come alone)
     log = FrameLog(len(an.ids))
     release = lambda: None  # noqa: E731
     n = video.n_frames
     if n is not None:
         n -= start
-    if max_frames is not None:
-        n = max_frames if n is None else min(n, max_frames)
+    if run.max_frames is not None:
+        n = run.max_frames if n is None else min(n, run.max_frames)
     csv = ContractionsCsvWriter(out / "contractions.csv", an.ids, model.muscles.jaw)
     interrupted = None
     try:
         with contextlib.ExitStack() as stack:
             vw = stack.enter_context(VideoWriter(out / "overlay.mp4", fps=video.fps))
-            pw = None
-            if tracker == "snakes":
-                pw = stack.enter_context(VideoWriter(out / "potential.mp4", fps=video.fps))
-            measured = stack.enter_context(
-                contextlib.closing(measure_frames(video, an, start, max_frames))
-            )
+            extra: dict = {}  # the debug images' videos, opened as they first come
+            measured = stack.enter_context(contextlib.closing(iter(run)))
             bar = stack.enter_context(
                 progress(None, total=n, desc="analyzing", enabled=show_progress)
             )
@@ -386,10 +359,12 @@ def _measure_into(video, an, model, out, start, max_frames, tracker, show_progre
                     log.append(m)
                     color = (255, 215, 0) if m.quality == "ok" else (230, 40, 40)
                     vw.write(draw_contours(frame, m.contours, color))
-                    if pw is not None:
-                        pw.write(
-                            draw_contours(potential_image(an.last_potential), m.contours, color)
-                        )
+                    for name, img in an.debug_images(frame, m).items():
+                        if name not in extra:
+                            extra[name] = stack.enter_context(
+                                VideoWriter(out / f"{name}.mp4", fps=video.fps)
+                            )
+                        extra[name].write(draw_contours(img, m.contours, color))
                     bar.update()
             except KeyboardInterrupt as exc:
                 if not len(log) or not vw.n_frames:

@@ -7,16 +7,17 @@ The analysis level, one module a stage:
 - :mod:`~myoface.analysis.sections`: the feature contours (sections), their features and the
   model's skin curves they are compared with;
 - :mod:`~myoface.analysis.initfiles`: the snakes' initial contours as JSON;
-- trackers, each behind :class:`~myoface.analysis.tracker.Tracker` (frame ->
-  :class:`~myoface.analysis.tracker.FrameMeasurement`): the snakes
-  (:class:`~myoface.analysis.snaketracker.Analyzer`),
-  the 3-D fit of the model to MediaPipe's points (:mod:`~myoface.analysis.fit`) and the
-  paper's 2-D scheme on those points (:mod:`~myoface.analysis.landmarks`);
+- :mod:`~myoface.analysis.trackers`: each tracker behind one protocol (frames ->
+  :class:`~myoface.analysis.trackers.base.Measurement`): the snakes
+  (:mod:`~myoface.analysis.trackers.snakes`), the 3-D fit of the model to MediaPipe's points
+  (:mod:`~myoface.analysis.trackers.landmark_fit`, the fit itself in
+  :mod:`~myoface.analysis.modelfit`: terms over one solver) and the paper's 2-D scheme on
+  those points (:mod:`~myoface.analysis.trackers.landmark_paper`);
 - :mod:`~myoface.analysis.contractions_csv`: the measurements as a CSV, and back;
 - :mod:`~myoface.analysis.outputs`: a whole run to a folder (CSV, plot, overlays, JSON).
 
-This module makes and calibrates a tracker (:func:`make_analyzer`) and drives it over a video
-(:func:`measure_frames`, :func:`analyze_video`). Features are geometric (extremes,
+This module makes a tracker (:func:`make_analyzer`) and drives it over a video: calibrates it,
+then measures (:class:`Tracking`, :func:`measure_frames`, :func:`analyze_video`). Features are geometric (extremes,
 centroids) rather than node identities, because snake nodes slide along the edges they sit on.
 By default (``estimator="curves"``) the contractions come from the whole contours, not from
 these points: :class:`~myoface.analysis.curvefit.CurveEstimator` fits the model's curves to
@@ -30,42 +31,21 @@ caller's face model: each tracker keeps its own state.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+import sys
+from collections import deque
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from myoface.analysis.contractions_csv import (  # noqa: F401  (re-exported: the analysis' API)
-    CSV_OTHER_COLUMNS,
-    HEAD_2D_COLUMNS,
-    ContractionsCsvWriter,
-    contractions_csv_header,
-    contractions_csv_row,
-    hold_last_measured,
-    read_contractions_csv,
-    write_contractions_csv,
-)
-from myoface.analysis.initfiles import load_init, save_init  # noqa: F401  (re-exported)
-from myoface.analysis.sections import (  # noqa: F401  (re-exported)
-    CURVE_EXCLUDED,
-    FEATURES,
-    LINE_SECTIONS,
-    PAPER_MUSCLES,
-    SECTIONS,
-    curve_centroid,
-    model_fiducials,
-    project_sections,
-    section_features,
-    section_vertices,
-)
-from myoface.analysis.snaketracker import (  # noqa: F401  (re-exported)
-    ESTIMATORS,
-    MOUTH_SECTIONS,
-    SIGMA_MM,
-    Analyzer,
-    lips_tone,
-)
-from myoface.analysis.tracker import FrameMeasurement, Tracker  # noqa: F401  (re-exported)
+from myoface._threads import run_ahead
+from myoface.analysis.initfiles import load_init
+from myoface.analysis.modelfit import FitSettings
+from myoface.analysis.trackers.base import KEEP_BYTES
+from myoface.analysis.trackers.landmark_fit import LANDMARK_ESTIMATORS, FitTracker
+from myoface.analysis.trackers.landmark_paper import PaperLandmarkTracker
+from myoface.analysis.trackers.snakes import SnakeTracker
 from myoface.errors import MyofaceValueError
+from myoface.facemesh import DETECT_AHEAD_FRAMES
 
 
 def make_analyzer(
@@ -73,33 +53,33 @@ def make_analyzer(
     video,
     tracker: str = "snakes",
     init=None,
-    calibration_frame: int = 0,
+    calibration_frame: int | None = 0,
     refine=None,
     sigma: float | None = None,
     estimator: str = "curves",
     show_progress: bool | None = None,
     flow: bool = False,
 ):
-    """The analyzer for ``video`` (a :class:`~myoface.analysis.video.Video`), how it was
-    initialised (text) and the calibration frame's index.
+    """The tracker for ``video`` (a :class:`~myoface.analysis.video.Video`), not yet
+    calibrated, and the frame from which :func:`measure_frames` hands it the video's frames
+    (to calibrate on, then to measure from where its calibration says).
 
-    ``tracker="snakes"``: :class:`Analyzer` from ``init`` (contours on the calibration frame)
-    or, when ``init`` is None, from MediaPipe's face mesh on the first frame with a face from
-    ``calibration_frame`` on (the whole video is searched if need be; ``show_progress``: with
-    a progress bar on stderr; default: when stderr is a terminal). ``tracker="landmarks"``:
-    ``estimator`` ``"fit"`` (default): the 3-D fit of the whole model
-    (:func:`~myoface.analysis.fit.make_fit_analyzer`: head pose and every muscle, calibrated on
-    ``calibration_frame``, or when it is None on the most neutral frame of the first seconds,
-    the analysis then starting at frame 0); ``"paper"``: the paper's 12 muscles in a 2-D head
-    frame (:class:`~myoface.analysis.landmarks.LandmarkAnalyzer`). ``init`` must be None.
-    ``refine`` defaults to 1 for the snakes, 0 for the paper's landmark scheme and
-    :attr:`~myoface.analysis.fit.FitSettings.refine` for the fit; ``estimator`` for the
-    snakes: ``"curves"`` (default) or ``"fiducials"`` (see :class:`Analyzer`). ``flow``: the
-    3-D fit's points refined by optical flow (:attr:`~myoface.analysis.fit.FitSettings.flow`;
-    for the landmark tracker's fit only).
+    ``tracker="snakes"``: :class:`~myoface.analysis.trackers.snakes.SnakeTracker` from
+    ``init`` (contours on the calibration frame) or, when ``init`` is None, from MediaPipe's
+    face mesh on the first frame with a face from ``calibration_frame`` on (the whole video is
+    searched if need be; ``show_progress``: with a progress bar on stderr; default: when
+    stderr is a terminal). ``tracker="landmarks"``: ``estimator`` ``"fit"`` (default): the
+    3-D fit of the whole model (:class:`~myoface.analysis.trackers.landmark_fit.FitTracker`:
+    head pose and every muscle, calibrated on ``calibration_frame``, or when it is None on the
+    most neutral frame of the first seconds, the analysis then starting at frame 0);
+    ``"fit-synthesis"``: the same with analysis by synthesis; ``"paper"``: the paper's 12
+    muscles in a 2-D head frame
+    (:class:`~myoface.analysis.trackers.landmark_paper.PaperLandmarkTracker`). ``init`` must
+    be None. ``refine`` defaults to 1 for the snakes, 0 for the paper's landmark scheme and
+    :attr:`~myoface.analysis.modelfit.FitSettings.refine` for the fit; ``estimator`` for the
+    snakes: ``"curves"`` (default) or ``"fiducials"``. ``flow``: the 3-D fit's points refined
+    by optical flow (:attr:`~myoface.analysis.modelfit.FitSettings.flow`).
     """
-    import itertools
-
     if flow and tracker != "landmarks":
         raise MyofaceValueError(
             "--flow refines the landmark tracker's points; use it with --tracker landmarks"
@@ -109,10 +89,8 @@ def make_analyzer(
         raise MyofaceValueError(
             f"--calibration-frame must be in [0, {video.n_frames}); got {first}"
         )
+    fps = float(video.fps) if video.fps and video.fps > 0 else 30.0
     if tracker == "landmarks":
-        from myoface.analysis.fit import LANDMARK_ESTIMATORS, FitSettings, make_fit_analyzer
-        from myoface.analysis.landmarks import LandmarkAnalyzer
-
         if init is not None:
             raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
         # the landmarks' estimators: the 3-D fit ("fit"; also the snakes' default "curves",
@@ -124,47 +102,32 @@ def make_analyzer(
                 f"got {estimator!r}"
             )
         if est != "paper":
-            synthesis = est == "fit-synthesis"
             settings = FitSettings(flow=bool(flow))
-            return make_fit_analyzer(
-                model, video, calibration_frame, refine, settings=settings, synthesis=synthesis
-            )
+            if refine is not None:
+                settings = replace(settings, refine=int(refine))
+            an = FitTracker(
+                model, fps=fps, settings=settings, synthesis=est == "fit-synthesis",
+                deferred_relax=True, calibration_frame=calibration_frame,
+            )  # fmt: skip
+            return an, first
         if flow:
             raise MyofaceValueError("--flow is for the 3-D fit, not --estimator paper")
-        an = LandmarkAnalyzer(model, refine=0 if refine is None else refine)
-        return an, "MediaPipe face mesh on every frame", first
+        return PaperLandmarkTracker(model, refine=0 if refine is None else refine), first
     if tracker != "snakes":
         raise MyofaceValueError(f"tracker must be 'snakes' or 'landmarks'; got {tracker!r}")
-    if init is not None:
-        how, start = "contours given", first
-    else:
-        import sys
-
-        from myoface.analysis.landmarks import auto_init
-
-        if show_progress is None:
-            show_progress = sys.stderr.isatty()
-        k, _, init, _ = auto_init(
-            itertools.islice(video, first, None),
-            model.face,
-            show_progress=show_progress,
-            total=None if video.n_frames is None else video.n_frames - first,
-        )
-        start = first + k
-        how = f"automatic: MediaPipe face mesh on frame {start}"
-    w, h = video.size
-    for name, pts in init.items():
-        if (pts < 0).any() or (pts[:, 0] > w - 1).any() or (pts[:, 1] > h - 1).any():
-            raise MyofaceValueError(f"contour {name!r} lies outside the frame")
-    an = Analyzer(
+    if show_progress is None:
+        show_progress = sys.stderr.isatty()
+    an = SnakeTracker(
         model,
         init,
+        show_progress=show_progress and init is None,
+        total=None if video.n_frames is None else video.n_frames - first,
         refine=1 if refine is None else refine,
         sigma=sigma,
         estimator=estimator or "curves",
         deferred_relax=True,  # a video: the tissue relaxed on a second thread
     )
-    return an, how, start
+    return an, first
 
 
 @dataclass
@@ -231,9 +194,7 @@ def analyze_video(
         video = open_video(video)
     if isinstance(init, str | os.PathLike):
         init = load_init(init)
-    an, _, start = make_analyzer(
-        model, video, tracker, init, calibration_frame, estimator=estimator
-    )
+    an, start = make_analyzer(model, video, tracker, init, calibration_frame, estimator=estimator)
     try:
         n = None if video.n_frames is None else video.n_frames - start
         if max_frames is not None:
@@ -252,46 +213,151 @@ def analyze_video(
     return VideoAnalysis(tuple(an.ids), frames)
 
 
-def measure_frames(video, analyzer, start: int = 0, max_frames: int | None = None):
-    """Yield ``(frame, FrameMeasurement)`` for the frames of ``video`` from ``start`` on (at
-    most ``max_frames``).
+class _Keeper:
+    """The frames of ``source`` as they are taken, kept (up to ``limit`` bytes) so that they
+    can be given again."""
 
-    An analyzer with an ``observe(frame, index)`` method (the 3-D fit's
-    :class:`~myoface.analysis.fit.FitAnalyzer`: MediaPipe's face mesh) has it run on a
-    worker thread a few frames ahead (:func:`~myoface.analysis.landmarks.detect_ahead`),
-    and its ``measure`` takes the result as ``observation``: the face mesh tracks the next
-    frames while this one is fitted. The results are the same as frame by frame (each frame
-    is observed once, in order). Stopping early (closing this generator) stops the thread.
-    An analyzer with a ``replay(video, start)`` method gives the frames itself when it can
-    (the 3-D fit: its calibration's decoded frames, then the rest of its decode)."""
+    def __init__(self, source, limit: int = KEEP_BYTES):
+        self.source = source
+        self.kept: deque = deque()
+        self.taken = 0
+        self.complete = True  # every frame taken is kept
+        self._bytes = 0
+        self._limit = limit
 
-    def frames():
-        # an analyzer that kept its calibration's decoded frames hands them over (``replay``:
-        # the 3-D fit's), else the video is decoded from its start
-        replay = getattr(analyzer, "replay", None)
-        source = None if replay is None else replay(video, start)
-        if source is None:
-            source = ((k, f) for k, f in enumerate(video) if k >= start)
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        frame = next(self.source)
+        self.taken += 1
+        if self.complete:
+            self._bytes += getattr(frame, "nbytes", 0)
+            if self._bytes > self._limit:
+                self.complete = False
+                self.kept.clear()
+            else:
+                self.kept.append(frame)
+        return frame
+
+
+class Tracking:
+    """A calibrated tracker run over a video: iterate for ``(frame, measurement)`` per frame
+    (the driver of every tracker, :mod:`myoface.analysis.trackers.base`).
+
+    The video is decoded from ``first`` on; the tracker's :meth:`calibrate` takes what it
+    needs of those frames, and the frames from the one it names (:attr:`start`, known once
+    iteration began) are measured, at most ``max_frames``: those the calibration took are
+    given again from memory, the rest decoded as measuring goes on. A tracker whose
+    ``OBSERVES_AHEAD`` is true has its :meth:`observe` run on a worker thread a few frames
+    ahead (:data:`~myoface.facemesh.DETECT_AHEAD_FRAMES`: MediaPipe tracks the next frames
+    while this one is fitted); the results are the same as frame by frame (each frame is
+    observed once, in order). Closing the iteration early stops the threads."""
+
+    def __init__(self, video, tracker, first: int = 0, max_frames: int | None = None,
+                 keep_bytes: int = KEEP_BYTES):  # fmt: skip
+        self.video = video
+        self.tracker = tracker
+        self.first = int(first)
+        self.max_frames = max_frames
+        self.keep_bytes = int(keep_bytes)
+        #: the first frame measured (its index in the video), once the calibration chose it
+        self.start: int | None = None
+        #: frames decoded (the calibration's and the measured ones; more when the
+        #: calibration took more than :attr:`keep_bytes` and they were decoded again)
+        self.decoded = 0
+        self._source = None  # the frames to measure, once calibrated
+        self._decoded = None
+
+    def _decoded_from(self, k0: int):
+        """``(index, frame)`` of the video's frames from ``k0`` on (its decoder stopped when
+        this generator is closed)."""
+        it = iter(self.video)
+        try:
+            for k, f in enumerate(it):
+                self.decoded += 1
+                if k >= k0:
+                    yield k, f
+        finally:
+            close = getattr(it, "close", None)
+            if close is not None:
+                close()
+
+    def calibrate(self) -> int:
+        """Calibrate the tracker on the video's frames from :attr:`first` (once; iterating
+        does it when it was not done): returns :attr:`start`."""
+        if self._source is not None:
+            return self.start
+        decoded = self._decoded_from(self.first)
+        keeper = _Keeper((f for _, f in decoded), self.keep_bytes)
+        try:
+            offset = int(self.tracker.calibrate(keeper, self.first))
+        except BaseException:
+            decoded.close()
+            raise
+        self.start = self.first + offset
+        self._decoded = decoded
+        if keeper.complete and offset <= keeper.taken:
+            kept = deque(list(keeper.kept)[offset:])
+            keeper.kept.clear()
+            self._source = self._replayed(kept, decoded)
+        else:  # the calibration took more than was kept: decode again
+            decoded.close()
+            self._source = self._decoded_from(self.start)
+        return self.start
+
+    def _frames(self):
+        self.calibrate()
+        source = self._source
         n = 0
         try:
             for k, frame in source:
-                if max_frames is not None and n >= max_frames:
+                if self.max_frames is not None and n >= self.max_frames:
                     return
                 n += 1
                 yield k, frame
         finally:
             source.close()
+            self._decoded.close()
 
-    observe = getattr(analyzer, "observe", None)
-    if observe is None:
-        for k, frame in frames():
-            yield frame, analyzer.measure(frame, k, k / video.fps)
-        return
-    from myoface.analysis.landmarks import detect_ahead
+    def _replayed(self, kept: deque, decoded):
+        """The kept frames from :attr:`start` on (released as they are given), then the rest
+        of the decode."""
+        k = self.start
+        while kept:
+            yield k, kept.popleft()
+            k += 1
+        try:
+            yield from decoded
+        finally:
+            decoded.close()
 
-    ahead = detect_ahead(frames(), lambda kf: observe(kf[1], kf[0]))
+    def __iter__(self):
+        tr, fps = self.tracker, self.video.fps
+        frames = self._frames()
+        if not tr.OBSERVES_AHEAD:
+            try:
+                for k, frame in frames:
+                    yield frame, tr.measure(frame, k, k / fps)
+            finally:
+                frames.close()
+            return
+        ahead = run_ahead(
+            frames, lambda kf: tr.observe(kf[1], kf[0]), DETECT_AHEAD_FRAMES, "myoface-detect"
+        )
+        try:
+            for (k, frame), obs in ahead:
+                yield frame, tr.measure(frame, k, k / fps, observation=obs)
+        finally:
+            ahead.close()
+
+
+def measure_frames(video, tracker, first: int = 0, max_frames: int | None = None):
+    """Yield ``(frame, measurement)`` for the frames of ``video``: ``tracker`` calibrated on
+    them from ``first`` on, then measuring (see :class:`Tracking`)."""
+    run = Tracking(video, tracker, first, max_frames)
+    it = iter(run)
     try:
-        for (k, frame), obs in ahead:
-            yield frame, analyzer.measure(frame, k, k / video.fps, observation=obs)
+        yield from it
     finally:
-        ahead.close()
+        it.close()

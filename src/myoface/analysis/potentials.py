@@ -336,7 +336,7 @@ def potential_field(
 
     ``layer_floors``: one entry per method, None or a grey level (0-255) below which that
     layer's image is raised to it before filtering: what is darker than the feature itself
-    makes no edge. For the lips' outline (:class:`~myoface.analysis.pipeline.Analyzer`,
+    makes no edge. For the lips' outline (:class:`~myoface.analysis.trackers.snakes.Analyzer`,
     ``mouth_sections``): the mouth's dark inside, seen as the lips part, is then no darker
     than the lips, and the only edge left near it is the lips' with the skin.
     """
@@ -446,3 +446,11 @@ def bilinear2(ga, gb, x, y):
     a = w00 * ga[y0, x0] + w01 * ga[y0, x0 + 1] + w10 * ga[y0 + 1, x0] + w11 * ga[y0 + 1, x0 + 1]
     b = w00 * gb[y0, x0] + w01 * gb[y0, x0 + 1] + w10 * gb[y0 + 1, x0] + w11 * gb[y0 + 1, x0 + 1]
     return a, b
+
+
+def potential_image(pot: np.ndarray) -> np.ndarray:
+    """The potential (H, W) as a grey RGB image, edges (its ravines) dark, as in the paper's
+    Fig. 7b."""
+    lo, hi = np.percentile(pot, [1, 99.5])
+    g = np.clip((pot - lo) / max(hi - lo, 1e-12), 0, 1)
+    return np.repeat((g * 255).astype(np.uint8)[:, :, None], 3, axis=2)

@@ -20,14 +20,24 @@ with those tracked on the real one:
 with r the distances, along the contour's normal, from the model's predicted node ``n`` to a
 tracked contour, and ``a`` the curve fit's rows. At the true contractions the synthetic frame
 is the real one, the two trackings agree and the step is zero, whatever the tracker's bias.
+
+:class:`LandmarkSynthesis` does the same for the landmark tracker's 3-D fit: MediaPipe run on
+the person's face rendered at the fit's estimate measures MediaPipe's own error there.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from myoface.analysis.camera import HeadPose, PinholeCamera
 from myoface.errors import MyofaceValueError
+from myoface.face import FaceMesh
+from myoface.facemesh import FaceMeshDetector
+from myoface.render import Camera, Renderer
+from myoface.render.renderer import load_texture
 
 
 class FrameSynthesizer:
@@ -39,10 +49,6 @@ class FrameSynthesizer:
     absorbs whatever they do not explain at rest."""
 
     def __init__(self, face, camera, frame: np.ndarray, ssaa: int = 2, teeth: bool = True):
-        from myoface.face import FaceMesh
-        from myoface.render import Renderer
-        from myoface.render.renderer import load_texture
-
         img = np.asarray(frame)
         if img.ndim == 2:
             img = np.repeat(img[:, :, None], 3, axis=2)
@@ -89,6 +95,68 @@ class FrameSynthesizer:
 
 def _matte(material):
     """``material`` without its specular highlight."""
-    from dataclasses import replace
-
     return replace(material, specular=0.0)
+
+
+class LandmarkSynthesis:
+    """The tracker's own error, measured on the model: the person's face rendered at the fit's
+    estimate (head pose and skin) by the fit's camera, and MediaPipe run on the render; what it
+    reports there less where the model's vertices are is its error at that configuration
+    (MediaPipe under-reads expressions and turns of the head), taken off the real frame's
+    landmarks (:meth:`~myoface.analysis.modelfit.ModelFit.fit`). At the truth the correction is exact up to how well the
+    render looks like the frame; the fit then converges to where the tracker sees the model as
+    it sees the video.
+
+    Parameters
+    ----------
+    face : FaceMesh with the person's texture (e.g. ``face from-photo``'s, or
+        :meth:`from_frame`), in the default topology.
+    camera : PinholeCamera of the frames, principal point at the image's centre.
+    size : (width, height) of the frames, pixels.
+    detector : as for :class:`~myoface.analysis.trackers.landmark_fit.FitTracker` (default: MediaPipe's face mesh, in the mode
+        ``tracking`` says: the synthetic frames are observed like the real ones).
+    tracking : :attr:`~myoface.analysis.modelfit.FitSettings.tracking` of the fit.
+    """
+
+    def __init__(self, face, camera: PinholeCamera, size, detector=None, tracking=False):
+        w, h = (int(v) for v in size)
+        if abs(camera.cx - 0.5 * w) > 1 or abs(camera.cy - 0.5 * h) > 1:
+            raise MyofaceValueError("synthesis needs the principal point at the image's centre")
+        fov = float(np.degrees(2 * np.arctan(0.5 * h / camera.focal_px)))
+        cam = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), width=w, height=h, fov_deg=fov)
+        self.camera = camera
+        self.renderer = Renderer(face, cam)
+        self._own_detector = detector is None
+        if detector is None:
+            detector = FaceMeshDetector(video=tracking)
+        self.detector = detector
+
+    @classmethod
+    def from_frame(cls, face, camera: PinholeCamera, frame, shape, pose: HeadPose, **kw):
+        """With ``frame`` (H, W, 3) as the texture: each vertex of ``shape`` (V, 3) mm, head
+        frame, where ``pose`` puts it in the frame (for a face without a texture of the
+        person, e.g. the default face: the calibration frame, shading and all)."""
+        img = np.asarray(frame)
+        h, w = img.shape[:2]
+        uv = camera.project(pose.apply(shape))
+        uv = np.column_stack([uv[:, 0] / w, 1.0 - uv[:, 1] / h])
+        textured = FaceMesh(face.vertices, face.triangles, uv, img, face.landmarks, name=face.name)
+        return cls(textured, camera, (w, h), **kw)
+
+    def tracker_error(self, skin: np.ndarray, pose: HeadPose) -> np.ndarray | None:
+        """(V, 3): the tracker's points on the model rendered with ``skin`` (V, 3) mm, head
+        frame, at ``pose``, less the model's own (x, y pixels; z relative depth, pixels, up to
+        a constant); None when the tracker finds no face in the render."""
+        img = self.renderer.render(skin, pose=(pose.rotation, pose.translation_mm))
+        q = self.detector.detect(img)
+        if q is None:
+            return None
+        pc = pose.apply(skin)
+        uv = self.camera.project(pc)
+        z = -pc[:, 2] * self.camera.focal_px / max(-pose.translation_mm[2], 1.0)
+        err = np.column_stack([q[:, :2] - uv, q[:, 2] - z])
+        err[:, 2] -= err[:, 2].mean()
+        return err
+
+    def close(self) -> None:
+        self.detector.close()

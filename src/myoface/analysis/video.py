@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface._threads import run_ahead
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -54,7 +55,7 @@ class Video:
                     raise MyofaceFormatError(f"cannot read image {f}: {exc}") from None
                 yield _rgb(img, str(f))
             return
-        yield from _prefetched(self._decoded(), PREFETCH_FRAMES)
+        yield from run_ahead(self._decoded(), depth=PREFETCH_FRAMES, name="myoface-decode")
 
     def _decoded(self) -> Iterator[np.ndarray]:
         import av
@@ -84,54 +85,6 @@ class Video:
 #: decodes and converts to RGB without the GIL): decoding costs about as much as a fifth of
 #: the snakes' analysis of a 640 x 360 frame, and a second core does it meanwhile
 PREFETCH_FRAMES = 2
-
-
-def _prefetched(frames: Iterator, depth: int) -> Iterator:
-    """The items of ``frames``, produced up to ``depth`` ahead on a background thread; its
-    exceptions are raised here, in order. Stopping early (closing this generator) stops and
-    closes ``frames`` too."""
-    import queue
-    import threading
-
-    q: queue.Queue = queue.Queue(maxsize=depth)
-    stop = threading.Event()
-    done = object()
-
-    def produce():
-        try:
-            for item in frames:
-                while not stop.is_set():
-                    try:
-                        q.put((True, item), timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
-                    return
-            q.put((True, done))
-        except BaseException as exc:  # handed to the consumer
-            q.put((False, exc))
-        finally:
-            frames.close()
-
-    worker = threading.Thread(target=produce, name="myoface-decode", daemon=True)
-    worker.start()
-    try:
-        while True:
-            ok, item = q.get()
-            if not ok:
-                raise item
-            if item is done:
-                return
-            yield item
-    finally:
-        stop.set()
-        while worker.is_alive():  # let it see the stop (it may wait on a full queue)
-            try:
-                q.get(timeout=0.1)
-            except queue.Empty:
-                pass
-        worker.join()
 
 
 def open_video(path: str | os.PathLike) -> Video:

@@ -50,7 +50,7 @@ def bench_closed_loop_rmse(quick: bool) -> Measurement:
     landmarks ("landmarks")."""
     res = _closed_loop(quick, synthesis=True)
     _closed_loop(quick)
-    from myoface.analysis.landmarks import mediapipe_available
+    from myoface.facemesh import mediapipe_available
 
     if mediapipe_available():
         _closed_loop(quick, "landmarks")
@@ -88,7 +88,7 @@ def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None) -> i
     """Decode ``path`` and analyse every frame (no output files) as ``myoface analyze``
     does (for the landmarks' 3-D fit: calibrated on the most neutral frame of the first 2 s,
     the analysis from frame 0); returns the frame count. The run's process CPU time and the
-    analyzer's own timings (:attr:`FitAnalyzer.timings`, :attr:`ModelFit.timings`) are kept
+    analyzer's own timings (:attr:`FitTracker.timings`, :attr:`ModelFit.timings`) are kept
     for the benchmark's breakdown."""
     import time
 
@@ -101,9 +101,9 @@ def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None) -> i
         fm = _cache["model"] = build_face_model()
     t0, c0 = time.perf_counter(), time.process_time()
     video = open_video(path)
-    an, _, start = make_analyzer(fm, video, tracker, calibration_frame=None, refine=refine)
+    an, first = make_analyzer(fm, video, tracker, calibration_frame=None, refine=refine)
     try:
-        n = sum(1 for _ in measure_frames(video, an, start, max_frames))
+        n = sum(1 for _ in measure_frames(video, an, first, max_frames))
     finally:
         an.close()
     timings = {"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
@@ -118,8 +118,8 @@ def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None) -> i
 def _mediapipe_pass(path, max_frames: int | None) -> int:
     import time
 
-    from myoface.analysis.landmarks import FaceMeshDetector
     from myoface.analysis.video import open_video
+    from myoface.facemesh import FaceMeshDetector
 
     n = 0
     t0, c0 = time.perf_counter(), time.process_time()
@@ -171,7 +171,7 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     run on a worker thread ahead of the fit). Peer: MediaPipe's face mesh alone on the same
     decoded frames in its fastest mode (video mode: tracking from frame to frame, ~3 ms CPU a
     frame less than detecting; the fit detects, see
-    :attr:`~myoface.analysis.fit.FitSettings.tracking`), in the same run; the tracker includes
+    :attr:`~myoface.analysis.modelfit.FitSettings.tracking`), in the same run; the tracker includes
     MediaPipe, so the ratio is the cost of myoface's calibration and fit and of detection over
     tracking (the detail gives the share of a frame that is not MediaPipe's, and the same with ``--refine 0``, the linear response only; and per frame the
     last timed pass's wall and process CPU time of each, ours by stage, with the ratio of the
@@ -392,7 +392,7 @@ def bench_rss_growth(quick: bool) -> Measurement:
         _looped_video(_sample_video(), tmp / "looped.mp4", n)
         snakes = _rss_per_frame(tmp / "looped.mp4", tmp / "snakes", "snakes", n)
         detail = {"snakes": snakes}
-        from myoface.analysis.landmarks import mediapipe_available
+        from myoface.facemesh import mediapipe_available
 
         if not quick and mediapipe_available():
             _looped_video(_sample_video(), tmp / "looped600.mp4", 600)

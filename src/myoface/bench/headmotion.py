@@ -6,8 +6,8 @@ not there), driven through a programme of the six universal expressions (every m
 use moves; overlapping expressions mix by the FACS rule), moved along a smooth 3-D head
 trajectory (yaw +-30 deg, pitch and roll +-15 deg, translation) in front of a perspective camera
 at 640x480, rendered, and analysed as a video would be: MediaPipe's face mesh (in the mode the
-analysis runs it, :attr:`~myoface.analysis.fit.FitSettings.tracking`) on every frame, then the
-3-D fit of the model (:class:`~myoface.analysis.fit.ModelFit`), its calibration frame chosen
+analysis runs it, :attr:`~myoface.analysis.modelfit.FitSettings.tracking`) on every frame, then the
+3-D fit of the model (:class:`~myoface.analysis.modelfit.ModelFit`), its calibration frame chosen
 automatically. The recovered contractions and head pose are compared
 with the truth; so is the skin the recovered contractions produce (head frame).
 """
@@ -54,10 +54,10 @@ def expression_programme(ids, n_frames: int) -> np.ndarray:
 
 
 def head_trajectory(n_frames: int, still: bool = False):
-    """Head poses (:class:`~myoface.analysis.fit.HeadPose`) along a smooth trajectory: yaw +-30
+    """Head poses (:class:`~myoface.analysis.camera.HeadPose`) along a smooth trajectory: yaw +-30
     deg, pitch and roll +-15 deg, +-20 mm across, +-10 mm up and down, +-40 mm in depth, about
     :data:`DISTANCE_MM` from the camera; ``still``: frontal, at that distance."""
-    from myoface.analysis.fit import HeadPose
+    from myoface.analysis.camera import HeadPose
 
     t = np.linspace(0.0, 1.0, n_frames)
     out = []
@@ -99,7 +99,7 @@ def camera_renderer(face, size=SIZE, fov_deg=FOV_DEG):
 def personal_face():
     """A face from a real photograph: ``face_from_photo`` on the sample video's first frame;
     None when the video or MediaPipe is not available."""
-    from myoface.analysis.landmarks import mediapipe_available
+    from myoface.facemesh import mediapipe_available
 
     if not mediapipe_available():
         return None
@@ -196,8 +196,8 @@ def detect_sequence(frames) -> tuple[list, np.ndarray]:
     (None without a face) and the seconds each took."""
     import time
 
-    from myoface.analysis.fit import FitSettings
-    from myoface.analysis.landmarks import FaceMeshDetector
+    from myoface.analysis.modelfit import FitSettings
+    from myoface.facemesh import FaceMeshDetector
 
     points, secs = [], []
     with FaceMeshDetector(video=FitSettings().tracking) as det:
@@ -210,7 +210,7 @@ def detect_sequence(frames) -> tuple[list, np.ndarray]:
 
 def flow_sequence(frames, points) -> tuple[list, np.ndarray]:
     """MediaPipe's ``points`` refined by optical flow as the analysis does
-    (:class:`~myoface.analysis.flow.FlowRefiner`, :attr:`~myoface.analysis.fit.FitSettings.flow`),
+    (:class:`~myoface.analysis.flow.FlowRefiner`, :attr:`~myoface.analysis.modelfit.FitSettings.flow`),
     and the seconds each frame's refinement took."""
     import time
 
@@ -228,17 +228,14 @@ def run_headmotion(
     model, points, truth, poses, skins, fps: float = 30.0, settings=None, synthesis=False
 ):
     """Fit the model to the landmark ``points`` of each frame (the 3-D fit, calibration frame
-    chosen automatically in the first :data:`~myoface.analysis.fit.CALIBRATION_WINDOW_S` s)
+    chosen automatically in the first :data:`~myoface.analysis.modelfit.CALIBRATION_WINDOW_S` s)
     and compare with the truth. ``synthesis``: with analysis by synthesis
-    (:class:`~myoface.analysis.fit.LandmarkSynthesis`: the model's face, its own texture)."""
+    (:class:`~myoface.analysis.synthesis.LandmarkSynthesis`: the model's face, its own texture)."""
     import time
 
-    from myoface.analysis.fit import (
-        CALIBRATION_WINDOW_S,
-        LandmarkSynthesis,
-        ModelFit,
-        PinholeCamera,
-    )
+    from myoface.analysis.camera import PinholeCamera
+    from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, ModelFit
+    from myoface.analysis.synthesis import LandmarkSynthesis
 
     cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
     fit = ModelFit(model, cam, settings, fps=fps)
@@ -311,15 +308,15 @@ def _run(quick: bool, still: bool, synthesis: bool = False,
     """The loop (cached per run): 90 frames (16 with ``quick``) at 30 fps; the default
     estimator (the 3-D fit), or with ``synthesis`` the fit with analysis by synthesis;
     MediaPipe's points refined by optical flow or not (``flow``; default: as the analysis,
-    :attr:`~myoface.analysis.fit.FitSettings.flow`)."""
-    from myoface.analysis.fit import FitSettings
+    :attr:`~myoface.analysis.modelfit.FitSettings.flow`)."""
+    from myoface.analysis.modelfit import FitSettings
 
     flow = FitSettings().flow if flow is None else bool(flow)
     key = (bool(quick), bool(still), bool(synthesis), flow)
     if key not in _cache:
         import time
 
-        from myoface.analysis.fit import confounded_muscles
+        from myoface.analysis.modelfit import confounded_muscles
 
         fm, truth, poses, skins, points, t_det = _sequence(quick, still, flow)
         t0 = time.perf_counter()

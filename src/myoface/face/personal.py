@@ -463,7 +463,7 @@ def find_landmarks(scan: FaceMesh) -> np.ndarray:
 
 def find_landmarks_in_maps(maps: CylindricalMaps) -> np.ndarray:
     """(68, 3) iBUG-68 landmarks found in cylindrical maps (see :func:`find_landmarks`)."""
-    from myoface.analysis.landmarks import FaceMeshDetector
+    from myoface.facemesh import FaceMeshDetector
 
     k = max(1, int(np.ceil(DETECTION_SHAPE[0] / maps.shape[0])))
     img = np.repeat(np.repeat(maps.rgb, k, 0), k, 1)
@@ -536,8 +536,8 @@ def face_from_photo(
     MediaPipe leaves a little apart (less than :data:`CLOSED_LIPS_MM`) are closed
     (:func:`close_lips`; ``info["lips_closed"]``).
     """
-    from myoface.analysis.landmarks import FaceMeshDetector
     from myoface.face.io import load_default_face
+    from myoface.facemesh import FaceMeshDetector
 
     img = np.asarray(image)
     if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:

@@ -1,9 +1,11 @@
 """The paper's tracker: snakes on the face's feature contours, a head frame, and the
-contractions read off the contours (the curve fit or the paper's fiducials) each frame, behind
-:class:`~myoface.analysis.tracker.Tracker` (Terzopoulos & Waters 1993, Section V).
+contractions read off the contours (the curve fit or the paper's fiducials) each frame
+(Terzopoulos & Waters 1993, Section V).
 
-:class:`Analyzer` is made from initial contours on the calibration frame (the first frame it
-measures); :func:`~myoface.analysis.pipeline.make_analyzer` makes one from a video.
+:class:`Analyzer` is the snakes' analysis, made from initial contours on the calibration frame
+(the first frame it measures); :class:`SnakeTracker` is it behind the trackers' protocol
+(:mod:`myoface.analysis.trackers.base`), finding the initial contours with MediaPipe's face
+mesh on the first frame with a face when none are given.
 """
 
 from __future__ import annotations
@@ -12,7 +14,8 @@ import numpy as np
 
 from myoface.analysis.estimate import ContractionEstimator
 from myoface.analysis.headframe import HeadTracker, Similarity, head_box
-from myoface.analysis.potentials import PotentialField, potential_field
+from myoface.analysis.landmarks import auto_init, rigid_vertices, similarity_affine
+from myoface.analysis.potentials import PotentialField, potential_field, potential_image
 from myoface.analysis.sections import (
     CURVE_EXCLUDED,
     FEATURES,
@@ -25,7 +28,7 @@ from myoface.analysis.sections import (
     section_vertices,
 )
 from myoface.analysis.snakes import SnakeParams, Snakes, make_contours, resample_polyline
-from myoface.analysis.tracker import FrameMeasurement
+from myoface.analysis.trackers.base import FrameMeasurement, TrackerBase
 from myoface.errors import MyofaceValueError
 
 #: the potential's Gaussian width on the face, mm (``sigma=None``): features are blurred by
@@ -468,12 +471,9 @@ class Analyzer:
         a registration that holds it."""
         if self._detector is False or self.model.face.n_vertices != 468:
             return None
-        from myoface.analysis.landmarks import (
-            FaceMeshDetector,
-            rigid_vertices,
-            similarity_affine,
-        )
+        from myoface.analysis.landmarks import similarity_affine
         from myoface.errors import MyofaceDependencyError
+        from myoface.facemesh import FaceMeshDetector
 
         if self._detector is None:
             try:
@@ -512,8 +512,6 @@ class Analyzer:
     def _calibrate(self, frame: np.ndarray, index: int, time_s: float) -> FrameMeasurement:
         """The first frame: the contours settle from their initial place, and what they are
         there becomes the neutral reference."""
-        from myoface.analysis.landmarks import similarity_affine
-
         self._frame_shape = frame.shape[:2]
         self._c_last = np.zeros(len(self.ids))  # the neutral frame, until it is measured
         if self.head_frame == "register":
@@ -710,3 +708,84 @@ def _contrast(fld: PotentialField) -> float:
     v = -fld.potential[0].ravel()
     k = int(0.99 * (len(v) - 1))
     return float(np.partition(v, k)[k])
+
+
+class SnakeTracker(TrackerBase):
+    """The snakes (:class:`Analyzer`) behind the trackers' protocol.
+
+    Parameters
+    ----------
+    model : FaceModel (never changed).
+    init : {section: (K, 2)} initial contours on the first frame it is given (the
+        calibration frame), or None: found with MediaPipe's face mesh on the first frame
+        with a face (:func:`~myoface.analysis.landmarks.auto_init`).
+    show_progress : a progress bar while a face is searched for; ``total`` the frames there
+        are to search (for the bar).
+    analyzer_options : :class:`Analyzer`'s (``refine``, ``sigma``, ``estimator``,
+        ``deferred_relax``, ...).
+    """
+
+    def __init__(self, model, init=None, *, show_progress: bool = False,
+                 total: int | None = None, **analyzer_options):  # fmt: skip
+        self.model = model
+        self.ids = tuple(analyzer_options.get("muscle_ids") or PAPER_MUSCLES)
+        self._init = init
+        self._show_progress = bool(show_progress)
+        self._total = total
+        self._options = analyzer_options
+        self.analyzer: Analyzer | None = None
+        self.how = "contours given"
+        self.start: int | None = None
+
+    def calibrate(self, frames, first_index: int = 0) -> int:
+        """The initial contours (given, or MediaPipe's on the first frame with a face; a
+        clear error when they leave the frame); returns that frame's position in
+        ``frames``."""
+        frames = iter(frames)
+        init, k = self._init, 0
+        if init is None:
+            k, frame, init, _ = auto_init(
+                frames, self.model.face, show_progress=self._show_progress, total=self._total
+            )
+            self.how = f"automatic: MediaPipe face mesh on frame {first_index + k}"
+            size = np.shape(frame)
+        else:
+            frame = next(frames, None)
+            if frame is None:
+                raise MyofaceValueError("the video has no frames to calibrate on")
+            size = np.shape(frame)
+        h, w = size[:2]
+        for name, pts in init.items():
+            pts = np.asarray(pts)
+            if (pts < 0).any() or (pts[:, 0] > w - 1).any() or (pts[:, 1] > h - 1).any():
+                raise MyofaceValueError(f"contour {name!r} lies outside the frame")
+        self.analyzer = Analyzer(self.model, init, **self._options)
+        self.ids = tuple(self.analyzer.ids)
+        self.start = first_index + k
+        return k
+
+    def measure(self, frame, index: int = 0, time_s: float = 0.0, observation=None):
+        return self.analyzer.measure(frame, index, time_s)
+
+    def describe(self) -> dict:
+        an = self.analyzer
+        return {
+            "init": self.how,
+            "calibration_frame": self.start,
+            "mm_per_px": an.mm_per_px,
+            "refine": an.refine,
+            "sigma_px": an.sigma,
+            "estimator": an.method,
+            "snake_params": {
+                k: float(np.mean(v)) if not isinstance(v, int) else v
+                for k, v in vars(an.params).items()
+            },
+        }
+
+    def debug_images(self, frame, measurement) -> dict:
+        """The snakes' potential (the image force field they settle in)."""
+        return {"potential": potential_image(self.analyzer.last_potential)}
+
+    def close(self) -> None:
+        if self.analyzer is not None:
+            self.analyzer.close()

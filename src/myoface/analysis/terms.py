@@ -1,0 +1,265 @@
+"""The terms of the 3-D fit's energy: what each observation and each prior adds to one frame's
+problem, ``E = sum_i E_i``, each term in units of its standard deviation (the shape of
+model-based trackers such as Face2Face, Thies et al. 2016: photometric, landmark and prior
+terms over one set of unknowns, solved by Gauss-Newton).
+
+The unknowns of a step, at an :class:`Estimate` (a head pose and contractions, with the
+model's skin there and its response to the contractions): a small rotation ``omega`` (3,
+rad, applied on the left), a translation ``dt`` (3, mm) and the change of the free
+contractions ``dc`` (F,). A term gives, at an estimate,
+
+- :meth:`Term.normal_equations`: ``(H, b)`` with ``H = J^T J`` and ``b = -J^T r`` of its
+  (weighted) residual rows ``r`` and their Jacobian ``J`` in the step's unknowns (for a term
+  linear in the unknowns, such as the L1 prior, ``H = 0`` and ``b`` half its negative
+  gradient), and
+- :meth:`Term.cost`: its value (robust where it says so).
+
+:func:`~myoface.analysis.solver.bounded_gauss_newton` sums them; adding an observation (a new
+detector, optical flow, pixels) is adding a term. Terms:
+
+- :class:`LandmarkTerm`: MediaPipe's 468 points (x, y in the image, z its relative depth),
+  Huber-weighted; compiled (:mod:`myoface.analysis._fitkernels`) so that the (2-3 V) x (6 +
+  F) Jacobian is never formed;
+- :class:`TemporalPrior`: the pose and each contraction change little from the last frame;
+- :class:`MagnitudePrior`: a weak Gaussian on each contraction (about 0);
+- :class:`SparsityPrior`: an L1 prior on the contractions (each in [0, 1], so it is linear).
+
+Their weights (:class:`~myoface.analysis.modelfit.FitSettings`) say why each is what it is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from myoface.analysis._fitkernels import landmark_cost, normal_equations
+from myoface.analysis.camera import HeadPose, PinholeCamera, rotvec
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Where a step starts (or a trial lands): ``pose``, ``contractions`` (M,), the skin there
+    ``shape`` (V, 3) mm, head frame, its response ``jac`` (V, 3, M) mm per unit contraction,
+    and ``free`` (F,): the contractions the step moves."""
+
+    pose: HeadPose
+    contractions: np.ndarray
+    shape: np.ndarray
+    jac: np.ndarray
+    free: np.ndarray
+
+    @property
+    def n_unknowns(self) -> int:
+        return 6 + len(self.free)
+
+
+class Term(Protocol):
+    """One term of the energy (see the module's docstring)."""
+
+    def prepare(self, est: Estimate) -> None:
+        """Called once per Gauss-Newton step at its start (a term may fix what it holds
+        constant over the step, e.g. the pixels' size in mm)."""
+
+    def normal_equations(self, est: Estimate) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def cost(self, est: Estimate) -> float: ...
+
+
+def _zeros(est: Estimate) -> tuple[np.ndarray, np.ndarray]:
+    n = est.n_unknowns
+    return np.zeros((n, n)), np.zeros(n)
+
+
+class LandmarkTerm:
+    """MediaPipe's points against the model's vertices (point i is vertex i).
+
+    Rows per vertex ``v``: its image position's residual ``(proj(R X_v + t) - p_v) k /
+    sigma_xy`` (x, y; ``k`` mm per pixel at the head's depth, so the residual is in mm on the
+    face, in sigmas), and, where the points carry a depth, ``(-z_v - k p_z,v - mean) /
+    sigma_z`` (MediaPipe's depth is relative: its ``w``-weighted mean is removed). Each
+    vertex's rows weigh ``w_v`` (:attr:`weights`: the face oval's points and points turned
+    away weigh less, and the model's own error where muscles move the skin far), times
+    Huber's weight of its 2-D residual beyond :attr:`huber` sigmas (iteratively reweighted
+    at each step's start; the cost is Huber's loss).
+
+    Parameters
+    ----------
+    points : (V, 3) x, y pixels (column, row) and z relative depth (pixels; NaN: not used).
+    camera : PinholeCamera.
+    weights : (V,) per-vertex weights ``w`` (fixed over the frame's steps).
+    sigma_mm, depth_sigma_mm, huber : :class:`~myoface.analysis.modelfit.FitSettings`'
+        ``landmark_sigma_mm``, ``depth_sigma_mm`` and ``huber``.
+    """
+
+    def __init__(self, points, camera: PinholeCamera, weights, sigma_mm: float,
+                 depth_sigma_mm: float, huber: float):  # fmt: skip
+        self.points = np.asarray(points, dtype=np.float64)
+        self.camera = camera
+        self.weights = np.asarray(weights, dtype=np.float64)
+        self.sigma_mm = float(sigma_mm)
+        self.depth_sigma_mm = float(depth_sigma_mm)
+        self.huber = float(huber)
+        self.use_z = bool(np.isfinite(self.points[:, 2]).all())
+        self.mm_per_px: float | None = None
+
+    def pixel_mm(self, pose: HeadPose) -> float:
+        """mm on the face per pixel at the head's depth."""
+        return pixel_mm(self.camera, pose)
+
+    def prepare(self, est: Estimate) -> None:
+        self.mm_per_px = self.pixel_mm(est.pose)
+
+    def _kernel_args(self, est: Estimate):
+        k = self.mm_per_px if self.mm_per_px is not None else self.pixel_mm(est.pose)
+        cam = self.camera
+        return (
+            np.ascontiguousarray(est.pose.rotation),
+            np.ascontiguousarray(est.pose.translation_mm, dtype=np.float64),
+            est.shape,
+            float(cam.focal_px),
+            float(cam.cx),
+            float(cam.cy),
+            self.points,
+            self.use_z,
+            self.weights,
+            k / self.sigma_mm,
+            1.0 / self.depth_sigma_mm,
+            k,
+            self.huber,
+        )
+
+    def normal_equations(self, est: Estimate):
+        ka = self._kernel_args(est)
+        return normal_equations(*ka[:3], est.jac, est.free, *ka[3:])
+
+    def cost(self, est: Estimate) -> float:
+        return float(landmark_cost(*self._kernel_args(est)))
+
+    def residuals(self, pose: HeadPose, shape: np.ndarray, k: float | None = None):
+        """The weighted rows' residuals before the weights: xy (V, 2) and z (V,) in sigmas,
+        the 2-D distance (V,) in sigmas (for Huber's weights) and whether z is used; ``k``
+        mm per pixel (default: at ``pose``'s depth)."""
+        k = self.pixel_mm(pose) if k is None else k
+        pc = pose.apply(shape)
+        uv = self.camera.project(pc)
+        rxy = (uv - self.points[:, :2]) * (k / self.sigma_mm)
+        if self.use_z:
+            w = self.weights
+            dz = -pc[:, 2] - k * self.points[:, 2]
+            dz = dz - (w * dz).sum() / w.sum()
+            rz = dz / self.depth_sigma_mm
+        else:
+            rz = np.zeros(len(self.points))
+        return rxy, rz, np.linalg.norm(rxy, axis=1), self.use_z
+
+    def huber_weights(self, dist: np.ndarray) -> np.ndarray:
+        """Huber's weight (V,) of residuals ``dist`` (sigmas): 1 inside, h / r beyond."""
+        h = self.huber
+        return np.where(dist > h, h / np.maximum(dist, 1e-12), 1.0)
+
+
+def pixel_mm(camera: PinholeCamera, pose: HeadPose) -> float:
+    """mm on the face per pixel at the head's depth (``pose``'s distance from the camera)."""
+    return float(max(-pose.translation_mm[2], 1.0) / camera.focal_px)
+
+
+class TemporalPrior:
+    """The pose and each free contraction change from the previous frame's by about a
+    plausible rate times the frame interval (1 sd): rows ``rotvec(R R_prev^T) / sigma_r``,
+    ``(t - t_prev) / sigma_t`` and ``(c - c_prev) / sigma_c``. It makes an ill-posed frame
+    (a side view that hides one half of the face) well-posed.
+
+    ``prev``: the previous frame's fit (its ``pose`` and ``contractions``); ``dt_s``: the
+    frame interval; ``rotation_rate_deg_per_s``, ``translation_rate_mm_per_s``,
+    ``rate_per_s``: the rates (:class:`~myoface.analysis.modelfit.FitSettings`)."""
+
+    def __init__(self, prev, dt_s: float, rotation_rate_deg_per_s: float,
+                 translation_rate_mm_per_s: float, rate_per_s: float):  # fmt: skip
+        self.prev = prev
+        self.sigma_r = float(np.radians(rotation_rate_deg_per_s) * dt_s)
+        self.sigma_t = float(translation_rate_mm_per_s * dt_s)
+        self.sigma_c = float(rate_per_s * dt_s)
+
+    def prepare(self, est: Estimate) -> None:
+        pass
+
+    def _pose_residuals(self, est: Estimate):
+        rv = rotvec(est.pose.rotation @ self.prev.pose.rotation.T)
+        dtr = est.pose.translation_mm - self.prev.pose.translation_mm
+        return rv, dtr
+
+    def rows(self, est: Estimate) -> tuple[np.ndarray, np.ndarray]:
+        """(A, b): the rows in the step's unknowns and their right-hand side (``-r``)."""
+        free = est.free
+        nf = len(free)
+        rv, dtr = self._pose_residuals(est)
+        a = np.zeros((6, 6 + nf))
+        a[:3, :3] = np.eye(3) / self.sigma_r
+        a[3:, 3:6] = np.eye(3) / self.sigma_t
+        rows_a = [a]
+        rows_b = [np.concatenate([-rv / self.sigma_r, -dtr / self.sigma_t])]
+        if nf:
+            a = np.zeros((nf, 6 + nf))
+            a[:, 6:] = np.eye(nf) / self.sigma_c
+            rows_a.append(a)
+            dc = est.contractions[free] - self.prev.contractions[free]
+            rows_b.append(-dc / self.sigma_c)
+        return np.vstack(rows_a), np.concatenate(rows_b)
+
+    def normal_equations(self, est: Estimate):
+        a, b = self.rows(est)
+        return a.T @ a, a.T @ b
+
+    def cost(self, est: Estimate) -> float:
+        rv, dtr = self._pose_residuals(est)
+        cost = float(rv @ rv) / self.sigma_r**2 + float(dtr @ dtr) / self.sigma_t**2
+        if len(est.free):
+            dc = est.contractions[est.free] - self.prev.contractions[est.free]
+            cost += float(dc @ dc) / self.sigma_c**2
+        return cost
+
+
+class MagnitudePrior:
+    """A weak Gaussian prior on each free contraction about 0: rows ``c / sigma``."""
+
+    def __init__(self, sigma: float):
+        self.sigma = float(sigma)
+
+    def prepare(self, est: Estimate) -> None:
+        pass
+
+    def normal_equations(self, est: Estimate):
+        h, b = _zeros(est)
+        free = est.free
+        if len(free):
+            idx = 6 + np.arange(len(free))
+            h[idx, idx] = 1.0 / self.sigma**2
+            b[6:] = -est.contractions[free] / self.sigma**2
+        return h, b
+
+    def cost(self, est: Estimate) -> float:
+        cf = est.contractions[est.free]
+        return float(cf @ cf) / self.sigma**2
+
+
+class SparsityPrior:
+    """An L1 prior on the free contractions, ``weight * sum(c)`` (they are in [0, 1], so it
+    is linear): a muscle has to lower the rest of the energy by ``weight`` per unit before it
+    is used. Between muscles whose pulls nearly coincide it gives the motion to the one that
+    makes it with the least contraction."""
+
+    def __init__(self, weight: float):
+        self.weight = float(weight)
+
+    def prepare(self, est: Estimate) -> None:
+        pass
+
+    def normal_equations(self, est: Estimate):
+        h, b = _zeros(est)
+        b[6:] = -0.5 * self.weight
+        return h, b
+
+    def cost(self, est: Estimate) -> float:
+        return self.weight * float(est.contractions[est.free].sum())

@@ -1,0 +1,387 @@
+"""The landmark tracker with the 3-D fit: MediaPipe's face mesh on every frame, the whole face
+model (head pose and every muscle) fitted to its points
+(:class:`~myoface.analysis.modelfit.ModelFit`)."""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import asdict, dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from myoface._threads import run_ahead
+from myoface.analysis.camera import POSE_COLUMNS, HeadPose, PinholeCamera
+from myoface.analysis.flow import FlowDetector
+from myoface.analysis.modelfit import (
+    CALIBRATION_WINDOW_S,
+    Calibration,
+    FitSettings,
+    ModelFit,
+)
+from myoface.analysis.sections import SECTIONS, section_vertices
+from myoface.analysis.synthesis import LandmarkSynthesis
+from myoface.analysis.trackers.base import NOT_OBSERVED, Measurement, TrackerBase
+from myoface.errors import MyofaceValueError
+from myoface.facemesh import DETECT_AHEAD_FRAMES, FaceMeshDetector, import_mediapipe
+
+#: how the landmark tracker's contractions are estimated: the 3-D fit (default), the 3-D fit
+#: with analysis by synthesis (:class:`LandmarkSynthesis`), or the paper's 2-D head frame and
+#: 12 muscles (:class:`~myoface.analysis.trackers.landmark_paper.PaperLandmarkTracker`)
+LANDMARK_ESTIMATORS = ("fit", "fit-synthesis", "paper")
+#: a frame whose landmarks stay farther than this (mm RMS) from the fitted model is not
+#: measured (``quality="misfit"``): MediaPipe lost the face, or the face is not the model's
+MISFIT_RMS_MM = 6.0
+
+
+@dataclass
+class FitMeasurement(Measurement):
+    """One frame of the 3-D fit: a :class:`~myoface.analysis.trackers.base.Measurement`
+    with the head's ``pose`` (None when not measured) and the fit's ``residual_mm`` (its
+    CSV columns, :attr:`HEAD_COLUMNS`), and the model's contours for the overlay."""
+
+    pose: HeadPose | None = None
+    residual_mm: float = float("nan")
+    contours: dict = field(repr=False, default_factory=dict)
+    iterations: int = 0
+
+    HEAD_COLUMNS: ClassVar[tuple] = (*POSE_COLUMNS, "residual_mm")
+
+    def head_cells(self) -> list[str]:
+        """The values of :data:`HEAD_COLUMNS` as CSV cells (empty when not measured)."""
+        if self.pose is None:
+            return [""] * len(self.HEAD_COLUMNS)
+        vals = [*self.pose.columns().values(), self.residual_mm]
+        return ["" if not np.isfinite(v) else f"{v:.3f}" for v in vals]
+
+
+class FitTracker(TrackerBase):
+    """The landmark tracker with the 3-D fit: MediaPipe's face mesh on every frame (detection
+    on each, or tracking with :attr:`FitSettings.tracking`), :class:`ModelFit` on its points.
+    ``measure(frame, index, time_s)`` returns a :class:`FitMeasurement`; frames without a face
+    are ``quality="no_face"`` (the next face starts the fit afresh).
+
+    Parameters
+    ----------
+    model : FaceModel in the default topology (never changed).
+    fps : the video's frame rate.
+    camera : PinholeCamera, or None: a vertical field of view of :data:`DEFAULT_FOV_DEG` on the
+        first frame's size.
+    settings : FitSettings.
+    detector : an object with ``detect(frame) -> (468, 3) | None`` and ``close()`` (default:
+        MediaPipe's face mesh, in the mode :attr:`FitSettings.tracking` says).
+    synthesis : analysis by synthesis (:class:`LandmarkSynthesis`, made at calibration): the
+        face model's own texture if it has one (e.g. ``face from-photo``), else the
+        calibration frame.
+    deferred_relax : relax the tissue at a frame's estimate on a second thread while the
+        next frame is fitted, once its skin has moved :attr:`FitSettings.relax_step_mm` since
+        the last relax (:meth:`ModelFit.fit` ``deferred=True``; what a video analysis does,
+        what a video's analysis does), instead of a second fitting round through it.
+
+    calibration_frame : the frame (its index in the video) to calibrate on, where the
+        analysis then starts; None: the most neutral of the first
+        :data:`~myoface.analysis.modelfit.CALIBRATION_WINDOW_S` s from the first frame with a
+        face, the analysis starting at the first frame given (:meth:`calibrate`).
+
+    The driver (:class:`~myoface.analysis.pipeline.Tracking`) runs :meth:`observe`
+    (MediaPipe) on a worker thread ahead of :meth:`measure` (the fit).
+    """
+
+    OBSERVES_AHEAD = True
+
+    def __init__(self, model, fps: float = 30.0, camera: PinholeCamera | None = None,
+                 settings: FitSettings | None = None, detector=None,
+                 synthesis: bool = False, deferred_relax: bool = False,
+                 calibration_frame: int | None = None):  # fmt: skip
+        if model.face.n_vertices != 468:
+            raise MyofaceValueError(
+                "the landmark tracker needs a face model with MediaPipe's 468-point topology "
+                f"(the default face); this one has {model.face.n_vertices} vertices"
+            )
+        self.model = model
+        self.ids = tuple(model.ids)
+        self.settings = settings or FitSettings()
+        self.refine = self.settings.refine
+        self.fps = float(fps)
+        self._camera = camera
+        self.fit: ModelFit | None = None
+        self._sections = {s: section_vertices(model.face, s) for s in SECTIONS}
+        self._own_detector = detector is None
+        if detector is None:
+            import_mediapipe()  # (fails now, with the pip command, if it is not installed)
+        #: the detector; made when first needed (the calibration hands its own over)
+        self._detector = detector
+        #: the optical flow's refiner (FitSettings.flow, or a flow detector given)
+        self._refiner = detector.refiner if isinstance(detector, FlowDetector) else None
+        #: {frame index: landmarks or None} of the calibration frames, taken by measure()
+        self._detected: dict = {}
+        #: relax the tissue on a second thread while the next frame is fitted
+        #: (:meth:`ModelFit.fit`'s ``deferred``; the tissue then lags the estimate)
+        self.deferred_relax = bool(deferred_relax)
+        self.calibration: Calibration | None = None
+        #: the frame to calibrate on (None: chosen), then the frame calibrated on
+        self.calibration_frame: int | None = (
+            None if calibration_frame is None else int(calibration_frame)
+        )
+        self._chosen = calibration_frame is None
+        self.how = ""
+        self.use_synthesis = bool(synthesis)
+        self.synthesis: LandmarkSynthesis | None = None
+        #: where the time goes (for the benchmark's breakdown): the calibration's wall time
+        #: (s; its MediaPipe, scores and identity fit), and the detector's wall time (s) and
+        #: count on the frames after it (on the thread that runs :meth:`observe`)
+        self.timings = {"calibration_s": 0.0, "detections": 0, "detect_s": 0.0}
+
+    @property
+    def detector(self):
+        """The landmark detector (MediaPipe's face mesh unless one was given)."""
+        if self._detector is None:
+            self._detector = self._new_detector()
+        return self._detector
+
+    def _new_detector(self):
+        """MediaPipe's face mesh in the mode :attr:`FitSettings.tracking` says, its points
+        refined by optical flow (:class:`~myoface.analysis.flow.FlowDetector`) when
+        :attr:`FitSettings.flow`."""
+        det = FaceMeshDetector(video=self.settings.tracking)
+        if self.settings.flow:
+            det = FlowDetector(det)
+            self._refiner = det.refiner  # (its point counts go into describe())
+        return det
+
+    @property
+    def mm_per_px(self) -> float | None:
+        """mm on the face per pixel at the calibration frame's head distance."""
+        if self.calibration is None or self.fit is None:
+            return None
+        return self.fit._pixel_mm(self.calibration.pose)
+
+    def _ensure_fit(self, shape) -> ModelFit:
+        if self.fit is None:
+            h, w = shape[:2]
+            cam = self._camera or PinholeCamera.for_image(w, h)
+            self.fit = ModelFit(self.model, cam, self.settings, fps=self.fps)
+        return self.fit
+
+    def calibrate(self, frames, first_index: int = 0) -> int:
+        """The protocol's calibration: on ``frames`` (the video's from ``first_index`` on),
+        the most neutral frame of the first :data:`CALIBRATION_WINDOW_S` s from the first
+        frame with a face, or the frame :attr:`calibration_frame` (then the first frame
+        given); the analysis starts at the first frame given (returns 0)."""
+        what = "the 3-D fit" + (" with analysis by synthesis" if self.use_synthesis else "")
+        if self._chosen:
+            window = max(1, int(round(CALIBRATION_WINDOW_S * self.fps)))
+            cal = self._calibrate(frames, None, first_index, window=window)
+            self.how = (
+                f"MediaPipe face mesh on every frame, {what}; calibrated on frame {cal}, "
+                f"the most neutral of the first {CALIBRATION_WINDOW_S:g} s"
+            )
+        else:
+            first = self.calibration_frame
+            if first != first_index:
+                raise MyofaceValueError(
+                    f"calibration frame {first} is not the first frame given ({first_index})"
+                )
+            one = list(itertools.islice(frames, 1))
+            if not one:
+                raise MyofaceValueError(f"the video has no frame {first}")
+            cal = self._calibrate(one, first, first_index=first)
+            self.how = f"MediaPipe face mesh on every frame, {what}; calibrated on frame {cal}"
+        return 0
+
+    def _calibrate(self, frames, calibration_frame: int | None = None, first_index: int = 0,
+                   window: int | None = None):  # fmt: skip
+        """Calibrate on ``frames`` (an iterable of RGB frames, or None for a frame without a
+        face: the first :data:`CALIBRATION_WINDOW_S` s of the video, from its frame
+        ``first_index``): the most neutral one, or the frame ``calibration_frame`` (an index
+        into the video). Runs MediaPipe as the analysis does (:attr:`FitSettings.tracking`:
+        its two modes place the points a little differently); with the analyzer's
+        own detector, the analysis then goes on with this one and takes these frames' points
+        from the calibration instead of detecting them again (it starts on the first of
+        them). ``window``: ``frames`` are the video's frames from ``first_index`` on, of
+        which those up to ``window`` frames after the first with a face are taken (none
+        after them: an iterator can go on from there); an error when no frame has a face.
+        Returns the calibration frame's index in the video."""
+        t_start = time.perf_counter()
+        # the frames up to the first there is (its size makes the fit's camera); the rest are
+        # taken as they come (``frames`` may be decoding meanwhile), on the detector's thread
+        frames = iter(frames)
+        head: list = []
+        for frame in frames:
+            head.append(frame)
+            if frame is not None:
+                break
+        if not head or head[-1] is None:
+            raise MyofaceValueError("the video has no frames to calibrate on")
+        self._ensure_fit(np.shape(head[-1]))
+        images: list = []
+        points: list = []
+        first_face: list = []  # the index of the first frame with a face, once there is one
+        # (a detector given to the tracker detects the calibration's frames too)
+        det = self._new_detector() if self._own_detector else self._detector
+        end = object()
+
+        def source():
+            # (runs on the detector's thread, which detects each frame before taking the next)
+            it = itertools.chain(head, frames)
+            k = 0
+            while window is None or not first_face or k - first_face[0] < window:
+                frame = next(it, end)
+                if frame is end:
+                    break
+                images.append(frame)
+                yield k, frame
+                k += 1
+            if window is not None and not first_face:
+                raise MyofaceValueError(
+                    f"no face found in the {k} frames of the video (MediaPipe face mesh)"
+                )
+
+        def detect(item):
+            k, frame = item
+            pts = None if frame is None else det.detect(frame)  # (None: no face)
+            if pts is not None and not first_face:
+                first_face.append(k)
+            if pts is None and not first_face and window is not None:
+                images[k] = None  # (not kept: the search for a face may be long)
+            return pts
+
+        def detected():
+            # MediaPipe on a worker thread a few frames ahead while each frame is scored
+            # (ModelFit.calibrate takes the points as they come)
+            for _, pts in run_ahead(source(), detect, DETECT_AHEAD_FRAMES, "myoface-detect"):
+                points.append(pts)
+                yield pts
+
+        stream = detected()
+        try:
+            if calibration_frame is None:
+                self.calibration = self.fit.calibrate(stream, None)
+            else:
+                for _ in stream:
+                    pass
+        except BaseException:
+            stream.close()  # (stops the detector's thread before the detector closes)
+            if self._own_detector:
+                det.close()
+            raise
+        # the analysis goes on with this detector, and takes the calibration frames' points
+        # from it rather than detecting them twice: the same points a detector tracking from
+        # the first of these frames gives (the analysis starts there)
+        if self._own_detector:
+            if self._detector is not None:
+                self._detector.close()
+            self._detector = det
+        self._detected = {first_index + k: pts for k, pts in enumerate(points)}
+        if calibration_frame is not None:
+            idx = int(calibration_frame) - first_index
+            if not 0 <= idx < len(points):
+                raise MyofaceValueError(
+                    f"calibration frame {calibration_frame} is outside the frames given"
+                )
+            if points[idx] is None:
+                raise MyofaceValueError(f"no face found on calibration frame {calibration_frame}")
+            self.calibration = self.fit.calibrate(points, idx)
+        if self.use_synthesis:
+            cal = self.calibration
+            fit = self.fit
+            frame = images[cal.index]
+            size = (np.shape(frame)[1], np.shape(frame)[0])
+            if self.model.face.texture is not None:
+                self.synthesis = LandmarkSynthesis(
+                    self.model.face, fit.camera, size, tracking=self.settings.tracking
+                )
+            else:
+                shape = fit.neutral + fit.identity_mm
+                self.synthesis = LandmarkSynthesis.from_frame(
+                    self.model.face, fit.camera, frame, shape, cal.pose,
+                    tracking=self.settings.tracking,
+                )  # fmt: skip
+            self.calibration = fit.calibrate(points, cal.index, synthesis=self.synthesis)
+            self.calibration.scores = cal.scores
+        self.calibration_frame = first_index + self.calibration.index
+        self.timings["calibration_s"] += time.perf_counter() - t_start
+        return self.calibration_frame
+
+    def observe(self, frame, index: int = 0):
+        """The frame's landmarks (468, 3) or None without a face: the calibration's (frames
+        it detected), else detected. Called once per frame, in order; may run on another
+        thread than :meth:`measure` (:func:`~myoface.analysis.pipeline.measure_frames`
+        runs it ahead), which takes its result as ``observation``."""
+        if index in self._detected:
+            return self._detected.pop(index)
+        self._detected.clear()  # (past the calibration frames: the detector tracks from here)
+        t0 = time.perf_counter()
+        pts = self.detector.detect(frame)
+        self.timings["detections"] += 1
+        self.timings["detect_s"] += time.perf_counter() - t0
+        return pts
+
+    def measure(self, frame, index: int = 0, time_s: float = 0.0,
+                observation=NOT_OBSERVED) -> FitMeasurement:  # fmt: skip
+        """The frame's measurement; ``observation``: its :meth:`observe` (the landmarks, or
+        None without a face; by default observed here)."""
+        fit = self._ensure_fit(np.shape(frame))
+        pts = self.observe(frame, index) if observation is NOT_OBSERVED else observation
+        nan = np.full(len(self.ids), np.nan)
+        if pts is None:
+            fit.lose_track()
+            return FitMeasurement(index, time_s, "no_face", nan, None, float("nan"))
+        try:
+            r = fit.fit(pts, self.synthesis, deferred=self.deferred_relax)
+        except (np.linalg.LinAlgError, MyofaceValueError):
+            fit.lose_track()
+            return FitMeasurement(index, time_s, "fit_failed", nan, None, float("nan"))
+        uv = fit.camera.project(r.pose.apply(fit.shape(r.contractions)))
+        contours = {s: uv[v] for s, v in self._sections.items()}
+        if not r.residual_mm <= MISFIT_RMS_MM:
+            fit.lose_track()
+            return FitMeasurement(
+                index, time_s, "misfit", nan, r.pose, r.residual_mm, contours, r.iterations
+            )
+        return FitMeasurement(
+            index, time_s, "ok", r.contractions, r.pose, r.residual_mm, contours, r.iterations
+        )
+
+    def describe(self) -> dict:
+        """For analysis.json: the estimator, the calibration, the camera and the weights."""
+        out = {
+            "init": self.how,
+            "mm_per_px": self.mm_per_px,
+            "refine": self.refine,
+            "estimator": "fit-synthesis" if self.use_synthesis else "fit",
+            "fit_settings": asdict(self.settings),
+        }
+        if self._refiner is not None:
+            # the optical flow's points (FitSettings.flow): tracked from the first frame,
+            # from the previous frame, or left at MediaPipe's
+            out["optical_flow_points"] = dict(self._refiner.stats)
+        if self.fit is not None:
+            cam = self.fit.camera
+            out["camera"] = {"focal_px": cam.focal_px, "cx": cam.cx, "cy": cam.cy}
+            out["unconverged_relaxes"] = self.fit.unconverged_relaxes
+        if self.calibration is not None:
+            cal = self.calibration
+            out["calibration_frame"] = self.calibration_frame
+            out["calibration"] = {
+                "scores_mm": [
+                    None if not np.isfinite(v) else round(float(v), 4) for v in cal.scores
+                ],  # fmt: skip
+                "frames_used": [
+                    self.calibration_frame - cal.index + k for k in cal.extra["frames"]
+                ],
+                "identity_rms_mm": float(np.sqrt((cal.identity_mm**2).sum(1).mean())),
+                "residual_mm": cal.residual_mm,
+                "lid_gains": cal.extra.get("lid_gains", {}),
+                "pose": cal.pose.columns(),
+            }
+        return out
+
+    def close(self) -> None:
+        if self.fit is not None:
+            self.fit.close()
+        if self._detector is not None:
+            self._detector.close()
+        if self.synthesis is not None:
+            self.synthesis.close()

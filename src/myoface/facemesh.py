@@ -1,0 +1,134 @@
+"""MediaPipe's legacy face mesh (optional: ``pip install "myoface[mediapipe]"``) as a detector
+of 468 points on RGB frames, below every level that uses it (personal faces from photos, the
+analysis' trackers, the benchmarks).
+
+``mediapipe==0.10.14``, ``solutions.face_mesh`` (Kartynnik et al. 2019, "Real-time Facial
+Surface Geometry from Monocular Video on Mobile GPUs") ships its models inside the wheel and
+runs offline. Its 468 points have the topology of myoface's default face (both are the
+MediaPipe canonical face): point i is vertex i.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import warnings
+
+import numpy as np
+
+from myoface.errors import MyofaceDependencyError, MyofaceValueError
+
+#: how to install MediaPipe (the last release whose wheel ships solutions.face_mesh)
+PIP_HINT = 'pip install "myoface[mediapipe]"   (mediapipe==0.10.14)'
+
+
+@contextlib.contextmanager
+def _quiet_native_stderr():
+    """Silence the native (C++) log lines MediaPipe and TensorFlow Lite print to the process's
+    stderr while they set up (``INFO: Created TensorFlow Lite XNNPACK delegate``, ...)."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):  # no real stderr (e.g. captured): nothing to silence
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+def import_mediapipe():
+    """MediaPipe and its face mesh solution, quiet; a :class:`MyofaceDependencyError` with the
+    pip command when it is not installed."""
+    os.environ.setdefault("GLOG_minloglevel", "2")
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            import mediapipe as mp
+            from mediapipe.python.solutions import face_mesh
+    except ImportError as exc:
+        raise MyofaceDependencyError(
+            f"automatic initialisation needs MediaPipe's face mesh, which is not installed "
+            f"({exc}); install it with: {PIP_HINT}, or give the contours with --init"
+        ) from None
+    # MediaPipe 0.10 calls a protobuf API that protobuf deprecates, on every frame. The
+    # per-call catch_warnings of FaceMeshDetector.detect does not hold while other threads
+    # (decoding ahead, the deferred relax) change the warning filters: filter it for good
+    warnings.filterwarnings(
+        "ignore", message=r"SymbolDatabase\.GetPrototype\(\) is deprecated", category=UserWarning
+    )
+    return mp, face_mesh
+
+
+def mediapipe_available() -> bool:
+    try:
+        import_mediapipe()
+    except MyofaceDependencyError:
+        return False
+    return True
+
+
+class FaceMeshDetector:
+    """MediaPipe's face mesh on RGB frames: :meth:`detect` gives (468, 3) points, x and y in
+    pixels (column, row), z in pixels towards the camera negative; or None without a face.
+
+    ``video=True`` tracks between successive frames (MediaPipe's own tracking mode), which is
+    faster on a video; ``video=False`` detects on every frame independently.
+    """
+
+    def __init__(self, video: bool = False, min_confidence: float = 0.5):
+        _, face_mesh = import_mediapipe()
+        with warnings.catch_warnings(), _quiet_native_stderr():
+            warnings.simplefilter("ignore")
+            self._fm = face_mesh.FaceMesh(
+                static_image_mode=not video,
+                max_num_faces=1,
+                refine_landmarks=False,
+                min_detection_confidence=min_confidence,
+                min_tracking_confidence=min_confidence,
+            )
+            # start the graph now (its threads log as they start), inside the silenced window
+            self._fm.process(np.zeros((64, 64, 3), dtype=np.uint8))
+
+    def detect(self, frame) -> np.ndarray | None:
+        img = np.asarray(frame)
+        if img.ndim == 2:
+            img = np.repeat(img[:, :, None], 3, axis=2)
+        if img.ndim != 3 or img.shape[2] not in (3, 4):
+            raise MyofaceValueError(f"a frame must be (H, W) or (H, W, 3); got {img.shape}")
+        img = np.ascontiguousarray(img[:, :, :3])
+        if img.dtype != np.uint8:
+            scale = 255.0 if img.max() <= 1.0 else 1.0
+            img = np.clip(img * scale, 0, 255).astype(np.uint8)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = self._fm.process(img)
+        if not res.multi_face_landmarks:
+            return None
+        h, w = img.shape[:2]
+        lm = res.multi_face_landmarks[0].landmark
+        pts = np.array([(p.x, p.y, p.z) for p in lm], dtype=np.float64)[:468]
+        return pts * np.array([w, h, w])
+
+    def close(self) -> None:
+        self._fm.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+#: frames the face mesh is run ahead of the analysis on a thread of its own
+#: (:func:`myoface._threads.run_ahead`): MediaPipe works without the GIL (its graph runs on
+#: threads of its own), so on a second core it tracks the next frames while this one is
+#: fitted; a few frames absorb the jitter between the two (a frame's fit costs more where a
+#: relax of the tissue is taken up)
+DETECT_AHEAD_FRAMES = 8

@@ -1,0 +1,213 @@
+"""The 3-D fit's energy: each term's normal equations are its cost's derivatives, the solver
+minimises the sum of whatever terms it is given, and the compiled pieces (the box-constrained
+step, the vertex normals) agree with their references."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.linalg import cho_factor, solve_triangular
+from scipy.optimize import lsq_linear
+
+from myoface.analysis._fitkernels import box_qp, vertex_normals
+from myoface.analysis.camera import HeadPose, rotmat
+from myoface.analysis.modelfit import FrameFit, ModelFit
+from myoface.analysis.solver import bounded_gauss_newton
+from myoface.analysis.terms import (
+    Estimate,
+    LandmarkTerm,
+    MagnitudePrior,
+    SparsityPrior,
+    TemporalPrior,
+)
+from tests.analysis.test_fit import CAMERA, landmarks
+
+
+@pytest.fixture(scope="module")
+def frame():
+    """A ModelFit, a frame of posed landmarks with noise and MediaPipe-like depth, an estimate
+    away from the truth (pose off by a few degrees, contractions off) and a previous frame."""
+    from myoface.model import build_face_model
+
+    fm = build_face_model()
+    fit = ModelFit(fm, CAMERA)
+    rng = np.random.default_rng(3)
+    c_true = rng.uniform(0, 0.6, fit.n_muscles) * (rng.uniform(size=fit.n_muscles) < 0.5)
+    truth = HeadPose.from_euler(12.0, -6.0, 4.0, (5.0, -3.0, -520.0))
+    p = landmarks(fit.shape(c_true), truth) + rng.normal(0, 0.7, (len(fit.neutral), 3))
+    pose = HeadPose.from_euler(9.0, -4.0, 6.0, (2.0, 0.0, -500.0))
+    c = np.clip(c_true + rng.normal(0, 0.1, fit.n_muscles), 0.05, 0.95)
+    prev = FrameFit(c_true, truth, 0.5, 1, True)
+    return fit, p, pose, c, prev
+
+
+def _estimate(fit, pose, c, free):
+    jac = np.ascontiguousarray(fit.response)
+    return Estimate(pose, c, fit.shape(c), jac, np.asarray(free, dtype=np.int64))
+
+
+def _moved(fit, est, x):
+    """The estimate after the step ``x`` (omega, dt, dc[free])."""
+    pose = HeadPose(rotmat(x[:3]) @ est.pose.rotation, est.pose.translation_mm + x[3:6])
+    c = est.contractions.copy()
+    c[est.free] += x[6:]
+    return Estimate(pose, c, fit.shape(c), est.jac, est.free)
+
+
+def _terms(fit, p, prev, huber):
+    s = fit.settings
+    w0 = fit.base_weights
+    return {
+        "landmarks": LandmarkTerm(p, CAMERA, w0, s.landmark_sigma_mm, s.depth_sigma_mm, huber),
+        "temporal": TemporalPrior(
+            prev, 1 / 30, s.rotation_rate_deg_per_s, s.translation_rate_mm_per_s, s.rate_per_s
+        ),
+        "magnitude": MagnitudePrior(s.magnitude_sigma),
+        "sparsity": SparsityPrior(s.sparsity),
+    }
+
+
+@pytest.mark.parametrize("name", ["landmarks", "temporal", "magnitude", "sparsity"])
+@pytest.mark.parametrize("use_depth", [True, False])
+@pytest.mark.parametrize("n_free", [0, 7, None])
+def test_a_terms_normal_equations_give_its_costs_gradient(frame, name, use_depth, n_free):
+    """For every term, ``b = -J^T r`` is minus half the gradient of its cost in the step's
+    unknowns (central differences along random directions), and ``H`` is symmetric positive
+    semi-definite: the term's contract with the solver. The landmarks without Huber's
+    reweighting (whose weights are held at the step's start, as iteratively reweighted least
+    squares does)."""
+    fit, p, pose, c, prev = frame
+    if not use_depth:
+        p = np.column_stack([p[:, :2], np.full(len(p), np.nan)])
+    free = np.arange(fit.n_muscles if n_free is None else n_free)
+    est = _estimate(fit, pose, c, free)
+    term = _terms(fit, p, prev, huber=np.inf)[name]
+    term.prepare(est)
+    h, b = term.normal_equations(est)
+    n = est.n_unknowns
+    assert h.shape == (n, n) and b.shape == (n,)
+    np.testing.assert_allclose(h, h.T, atol=1e-9 * (1 + np.abs(h).max()))
+    assert np.linalg.eigvalsh(h).min() >= -1e-8 * (1 + np.abs(h).max())
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        d = rng.normal(size=n)
+        d[:3] *= 1e-3  # radians
+        eps = 1e-5
+        slope = (term.cost(_moved(fit, est, eps * d)) - term.cost(_moved(fit, est, -eps * d))) / (
+            2 * eps
+        )
+        assert slope == pytest.approx(-2 * b @ d, rel=1e-5, abs=1e-6 * (1 + abs(b @ d)))
+
+
+def test_the_landmark_terms_huber_weights_hold_outliers(frame):
+    """With Huber's threshold, a point far off (beyond it) adds to the cost linearly, not
+    quadratically: moving one landmark 10x farther raises the cost about 10x, not 100x."""
+    fit, p, pose, c, prev = frame
+    est = _estimate(fit, pose, c, np.arange(fit.n_muscles))
+    s = fit.settings
+
+    def cost_with(offset):
+        q = p.copy()
+        q[0, 0] += offset
+        t = LandmarkTerm(q, CAMERA, fit.base_weights, s.landmark_sigma_mm, s.depth_sigma_mm, 1.5)
+        t.prepare(est)
+        return t.cost(est)
+
+    base = cost_with(0.0)
+    d1, d10 = cost_with(40.0) - base, cost_with(400.0) - base
+    assert 8 < d10 / d1 < 12
+
+
+def test_the_solver_sums_any_terms_it_is_given(frame):
+    """Adding an observation is adding a term: a term of our own (one contraction held at 0.3
+    by a stiff quadratic) added to the landmark fit moves that contraction there, leaves the
+    rest of the fit working, and the result is the minimum the solver reports converged."""
+    fit, p, pose, c, prev = frame
+    m = fit.ids.index("zygomaticus_major_l")
+
+    class HoldAt:
+        def prepare(self, est):
+            pass
+
+        def normal_equations(self, est):
+            n = est.n_unknowns
+            h, b = np.zeros((n, n)), np.zeros(n)
+            j = int(np.flatnonzero(est.free == m)[0]) + 6
+            h[j, j] = 1e6
+            b[j] = -1e6 * (est.contractions[m] - 0.3)
+            return h, b
+
+        def cost(self, est):
+            return 1e6 * (est.contractions[m] - 0.3) ** 2
+
+    free = np.arange(fit.n_muscles)
+    jac = np.ascontiguousarray(fit.response)
+    lm = _terms(fit, p, prev, huber=1.5)["landmarks"]
+    plain = bounded_gauss_newton([lm], fit.shape, jac, pose, c, free, 30)
+    held = bounded_gauss_newton([HoldAt(), lm], fit.shape, jac, pose, c, free, 30)
+    assert held[1][m] == pytest.approx(0.3, abs=1e-3)
+    assert abs(plain[1][m] - 0.3) > 0.01  # (the landmarks alone put it elsewhere)
+    # the head is found either way (the truth: 12, -6, 4 degrees)
+    np.testing.assert_allclose(held[0].angles_deg, [12.0, -6.0, 4.0], atol=1.5)
+    assert held[3] and (held[1] >= 0).all() and (held[1] <= 1).all()
+
+
+def test_vertex_normals_equal_the_meshs():
+    """The compiled vertex normals the fit's visibility weights use are the mesh module's (to
+    rounding: the same sums in another order), a vertex in no triangle included."""
+    from myoface.face.mesh import vertex_normals as reference
+    from myoface.model import build_face_model
+
+    face = build_face_model().face
+    rng = np.random.default_rng(5)
+    v = face.vertices + rng.normal(0, 2.0, face.vertices.shape)
+    v = np.vstack([v, [[0.0, 0.0, 0.0]]])  # a vertex in no triangle: (0, 0, 1)
+    got = vertex_normals(v, face.triangles)
+    np.testing.assert_allclose(got, reference(v, face.triangles), rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(got[-1], [0.0, 0.0, 1.0])
+
+
+def _bounded_normal(hess, rhs, lo, hi):
+    """The reference step: ``argmin x^T hess x / 2 - rhs . x`` with ``lo <= x <= hi`` as a
+    bounded least-squares problem on the Cholesky factor (scipy's BVLS)."""
+    r, _ = cho_factor(hess, lower=False)
+    r = np.triu(r)
+    y = solve_triangular(r, rhs, trans="T")
+    return lsq_linear(r, y, bounds=(lo, hi), method="bvls").x
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_muscles=st.integers(0, 34),
+    conditioning=st.sampled_from([0.0, 0.99, 0.9999]),
+)
+def test_box_qp_finds_the_bounded_minimum(seed, n_muscles, conditioning):
+    """The active-set step minimises the same bounded quadratic as scipy's BVLS (to rounding
+    of the objective), stays in the box, and satisfies the optimality conditions: zero
+    gradient on the free unknowns, and on a bound a gradient pointing out of the box. The
+    fit's problems: 6 unbounded pose unknowns, contractions within [-c, 1 - c], nearly
+    collinear columns (confounded muscles)."""
+    rng = np.random.default_rng(seed)
+    n = 6 + n_muscles
+    a = rng.normal(size=(2 * n + 4, n))
+    if n_muscles >= 2:
+        a[:, 6] = conditioning * a[:, 7] + (1 - conditioning) * a[:, 6]
+    h = a.T @ a + 1e-8 * np.eye(n)
+    rhs = rng.normal(size=n) * rng.uniform(0.1, 100)
+    c = rng.uniform(0, 1, n_muscles) * (rng.uniform(size=n_muscles) < 0.6)
+    lo = np.concatenate([np.full(6, -np.inf), -c])
+    hi = np.concatenate([np.full(6, np.inf), 1 - c])
+    x = box_qp(h, rhs, lo, hi)
+    assert (x >= lo).all() and (x <= hi).all()
+    f = lambda y: 0.5 * y @ h @ y - rhs @ y  # noqa: E731
+    ref = _bounded_normal(h, rhs, lo, hi)
+    scale = 1e-9 * (1 + abs(f(ref)))
+    assert f(x) <= f(ref) + scale
+    g = h @ x - rhs
+    tol = 1e-7 * (1 + np.abs(rhs).max())
+    inside = (x > lo) & (x < hi)
+    assert np.abs(g[inside]).max(initial=0) < tol
+    assert (g[x == lo] >= -tol).all() and (g[x == hi] <= tol).all()
