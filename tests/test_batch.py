@@ -237,3 +237,113 @@ def test_batch_without_the_extra_says_how_to_install(tmp_path, capsys, monkeypat
     assert main(["batch", str(video), "-o", str(tmp_path / "o"), "--engine", "dask"]) == 1
     err = capsys.readouterr().err
     assert 'pip install "myoface[batch]"' in err
+
+
+def test_batch_gives_each_video_the_analysis_options_of_analyze(clips, tmp_path, capsys):
+    """--calibration-frame, --max-frames, --refine, --sigma and --estimator reach each
+    video's analysis as they reach myoface analyze's (the same analysis.json settings, the
+    same contractions); done.json keeps them, so a run with another --refine analyses again."""
+    import imageio.v3 as iio
+
+    from myoface.render import VideoWriter
+
+    rest, smile = iio.imread(clips / "smile.mp4", plugin="pyav")[:2]
+    late = tmp_path / "late.mp4"  # smile, rest (the calibration frame), smile, smile
+    with VideoWriter(late, fps=10) as vw:
+        for f in (smile, rest, smile, smile):
+            vw.write(f)
+    opts = ["--init", str(clips / "init.json"), "--calibration-frame", "1", "--max-frames", "2"]
+    opts += ["--refine", "2", "--sigma", "1.5", "--estimator", "fiducials", "--quiet"]
+    out, ana = tmp_path / "out", tmp_path / "ana"
+    assert main(["batch", str(late), "-o", str(out), "--workers", "1", *opts]) == 0
+    assert main(["analyze", str(late), "-o", str(ana), *opts]) == 0
+    capsys.readouterr()
+    side = json.loads((out / "late" / "analysis.json").read_text())
+    assert side["calibration_frame"] == 1 and side["refine"] == 2
+    assert side["sigma_px"] == 1.5 and side["estimator"] == "fiducials"
+    ref = json.loads((ana / "analysis.json").read_text())
+    # every setting and per-frame record as analyze's; the contours are the file's (batch sends
+    # them to its workers: "contours given"), which analyze names
+    assert side.pop("init") == "contours given" and ref.pop("init") == str(clips / "init.json")
+    assert side == ref
+    rows = _table(out / "late" / "contractions.csv")
+    np.testing.assert_array_equal(rows, _table(ana / "contractions.csv"))
+    # frames 1 (rest: calibrated on) and 2 (the smile), then --max-frames stops it
+    with open(out / "late" / "contractions.csv", newline="") as fh:
+        assert [r["frame"] for r in csv.DictReader(fh)] == ["1", "2"]
+    from myoface.analysis.sections import PAPER_MUSCLES
+
+    zyg = PAPER_MUSCLES.index("zygomaticus_major_l")
+    assert rows[1, zyg] > rows[0, zyg] + 0.2, rows[:, zyg]
+    done = json.loads((out / "late" / "done.json").read_text())["settings"]
+    assert (done["calibration_frame"], done["max_frames"], done["refine"]) == (1, 2, 2)
+    assert (done["sigma"], done["estimator"], done["flow"]) == (1.5, "fiducials", False)
+
+    assert main(["batch", str(late), "-o", str(out), "--workers", "1", *opts]) == 0
+    assert "0 analysed, 1 already done" in capsys.readouterr().out
+    opts[opts.index("--refine") + 1] = "1"
+    assert main(["batch", str(late), "-o", str(out), "--workers", "1", *opts]) == 0
+    assert "1 analysed, 0 already done" in capsys.readouterr().out
+    assert json.loads((out / "late" / "analysis.json").read_text())["refine"] == 1
+
+
+def test_a_result_from_before_the_analysis_options_is_still_complete(tmp_path):
+    """A done.json written before batch had --calibration-frame, --refine, --sigma and
+    --flow is complete for a run without them (its analysis had their defaults), and not for
+    one with another value."""
+    import os
+
+    from myoface.analysis.batch import DONE_FILE, SUMMARY_COLUMNS, run_batch
+
+    video = tmp_path / "v.mp4"
+    video.write_bytes(b"not a video: it is never read when its result is complete")
+    st = os.stat(video)
+    row = {c: 0 for c in SUMMARY_COLUMNS} | {"status": "ok", "error": "", "frames": 3}
+    old = {
+        "tracker": "snakes",
+        "estimator": None,
+        "max_frames": None,
+        "init_sha256": None,
+        "face": None,
+        "muscles": None,
+    }
+    out = tmp_path / "out"
+    (out / "v").mkdir(parents=True)
+    doc = {"video": str(video.resolve()), "size": st.st_size, "mtime_ns": st.st_mtime_ns}
+    (out / "v" / DONE_FILE).write_text(json.dumps({**doc, "settings": old, "row": row}))
+    (rows,) = run_batch([video], out, workers=1)
+    assert rows["status"] == "skipped" and rows["frames"] == 3
+    (rows,) = run_batch([video], out, workers=1, refine=2)
+    assert rows["status"] == "failed" and "not a readable video" in rows["error"]
+
+
+def test_batch_flow_fails_as_analyze_does(tmp_path, capsys, monkeypatch):
+    """--flow is the landmark tracker's: with the snakes it is refused before any video is
+    analysed; without MediaPipe each video fails with analyze's own one-line error."""
+    import sys
+
+    from myoface.render import VideoWriter
+
+    video = tmp_path / "grey.mp4"
+    with VideoWriter(video, fps=10) as vw:
+        for _ in range(2):
+            vw.write(np.full((64, 64, 3), 128, np.uint8))
+    out = tmp_path / "out"
+    assert main(["batch", str(video), "-o", str(out), "--flow", "--quiet"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "myoface batch: error: --flow refines the landmark tracker's points; use it with "
+        "--tracker landmarks"
+    ]
+    assert not out.exists()
+
+    monkeypatch.setitem(sys.modules, "mediapipe", None)  # import mediapipe -> ImportError
+    flow = ["--tracker", "landmarks", "--flow", "--quiet"]
+    assert main(["analyze", str(video), "-o", str(tmp_path / "ana"), *flow]) == 1
+    (analyze_err,) = capsys.readouterr().err.strip().splitlines()
+    assert 'pip install "myoface[mediapipe]"' in analyze_err
+    assert main(["batch", str(video), "-o", str(out), "--workers", "1", *flow]) == 1
+    (batch_err,) = capsys.readouterr().err.strip().splitlines()
+    why = analyze_err.removeprefix("myoface analyze: error: ")
+    assert batch_err.startswith(f"myoface batch: failed: {video.resolve()}")
+    assert batch_err.endswith(why)

@@ -249,3 +249,34 @@ def test_resynth_bad_csv(tmp_path, capsys):
     assert main(["resynth", str(p), "-o", str(tmp_path / "v.mp4")]) == 1
     assert "must be a number" in capsys.readouterr().err
     assert not (tmp_path / "v.mp4").exists()
+
+
+def test_analyze_and_batch_read_the_same_analysis_options():
+    """One definition of the analysis options: each reads back as the same settings from
+    myoface analyze and from myoface batch (which gives them to every video)."""
+    from myoface.cli import build_parser
+    from myoface.commands._common import analysis_settings, default_analysis_settings
+
+    opts = ["--tracker", "landmarks", "--calibration-frame", "3", "--max-frames", "40"]
+    opts += ["--sigma", "1.5", "--estimator", "fit-synthesis", "--refine", "2", "--flow"]
+    parser = build_parser()
+    a = analysis_settings(parser.parse_args(["analyze", "v.mp4", "-o", "o", *opts]))
+    b = analysis_settings(parser.parse_args(["batch", "v.mp4", "-o", "o", *opts]))
+    assert (
+        a
+        == b
+        == {
+            "tracker": "landmarks",
+            "init": None,
+            "calibration_frame": 3,
+            "max_frames": 40,
+            "refine": 2,
+            "sigma": 1.5,
+            "estimator": "fit-synthesis",
+            "flow": True,
+        }
+    )
+    none = analysis_settings(parser.parse_args(["batch", "v.mp4", "-o", "o"]))
+    assert none == analysis_settings(parser.parse_args(["analyze", "v.mp4", "-o", "o"]))
+    assert none == default_analysis_settings() and none["tracker"] == "snakes"
+    assert default_analysis_settings(init="c.json") == {**none, "init": "c.json"}

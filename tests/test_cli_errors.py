@@ -1,4 +1,4 @@
-"""Bad input on the command line (README, "Command line"; GUIDE §4): one line on stderr, exit
+"""Bad input on the command line (README, "Command line"): one line on stderr, exit
 status 2 (usage) or 1 (a MyofaceError), no traceback, no partial output, no hang."""
 
 from __future__ import annotations
@@ -142,6 +142,25 @@ def test_latin1_init_json(tmp_path, capsys, tiny_video):
         (["analyze", "v.mp4", "-o", "a", "--refine", "1000000"], "[0, 10]"),
         (["analyze", "v.mp4", "-o", "a", "--sigma", "nan"], "argument --sigma"),
         (["analyze", "v.mp4", "-o", "a", "--max-frames", "0"], "argument --max-frames"),
+        # batch's analysis options are analyze's, with the same limits
+        (
+            ["batch", "v.mp4", "-o", "b", "--max-frames", "0"],
+            "--max-frames: expected an integer >= 1; got '0'",
+        ),
+        (
+            ["batch", "v.mp4", "-o", "b", "--max-frames", "-5"],
+            "--max-frames: expected an integer >= 1; got '-5'",
+        ),
+        (
+            ["batch", "v.mp4", "-o", "b", "--refine", "11"],
+            "argument --refine: expected an integer in [0, 10]",
+        ),
+        (
+            ["batch", "v.mp4", "-o", "b", "--calibration-frame", "-1"],
+            "argument --calibration-frame",
+        ),
+        (["batch", "v.mp4", "-o", "b", "--sigma", "0"], "argument --sigma"),
+        (["batch", "v.mp4", "-o", "b", "--estimator", "best"], "argument --estimator"),
         (["resynth", "c.csv", "-o", "v.mp4", "--size", "0"], "argument --size"),
         (["demo", "-o", "d", "--fps", "0"], "argument --fps"),
         (["demo", "-o", "d", "--size", "0"], "argument --size"),

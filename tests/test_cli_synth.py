@@ -255,6 +255,19 @@ def test_demo_real_video(model, tmp_path, monkeypatch, capsys):
     assert f"output folder: {out.resolve()}" in text
     _check_demo_images(model, out)
     ana = out / "analysis"
+    # the lines of myoface analyze --report, resynth and face from-photo, in their order
+    said = [
+        "fidelity: ",
+        f"analysed 72 frames (72 measured); output folder: {ana.resolve()}",
+        f"wrote {ana / 'resynth.mp4'} (72 frames at 30.0 fps)",
+        "face found ",
+        f"wrote {ana / 'person.png'}",
+        f"wrote {ana / 'person.myoface'}",
+        f"wrote {ana / 'resynth_person.mp4'} (72 frames at 30.0 fps)",
+    ]
+    lines = text.splitlines()
+    k = lines.index(f"analysing the sample face video {sample} (MediaPipe face mesh tracker)")
+    assert [a[: len(b)] for a, b in zip(lines[k + 1 :], said, strict=False)] == said, lines
     video = iio.imread(sample, plugin="pyav")
     assert video.shape == (72, 360, 640, 3)
     with open(ana / "contractions.csv", newline="") as fh:
@@ -291,6 +304,23 @@ def test_demo_real_video(model, tmp_path, monkeypatch, capsys):
     # --report: the fidelity of the person's resynthesis, every frame compared
     fid = json.loads((ana / "fidelity.json").read_text())
     assert fid["frames_compared"] == len(video) and "face_from_photo" in fid["face"]
+
+
+@needs_mediapipe
+def test_demo_reports_a_failing_step_as_its_own_error(tmp_path, monkeypatch, capsys):
+    """A step of the demo's loop that fails (the cached sample video is not a video) is the
+    demo's error: one line, "myoface demo: error: ...", exit status 1 returned (not a
+    SystemExit), and the output folder it made removed."""
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    (cache / "single_face.mp4").write_bytes(b"not a video")
+    monkeypatch.setenv("MYOFACE_CACHE", str(cache))
+    out = tmp_path / "demo"
+    assert main([*DEMO_ARGV, "-o", str(out)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("myoface demo: error: "), err
+    assert "single_face.mp4" in err[0] and "not a readable video" in err[0], err
+    assert not out.exists()
 
 
 @pytest.mark.slow

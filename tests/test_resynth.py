@@ -32,7 +32,7 @@ def _table(model):
 
 def _write_csv(path, model, table, fps=10.0):
     from myoface.analysis.contractions_csv import write_contractions_csv
-    from myoface.analysis.tracker import FrameMeasurement
+    from myoface.analysis.trackers.base import FrameMeasurement
 
     frames = [FrameMeasurement(k, k / fps, "ok", row, np.zeros(2)) for k, row in enumerate(table)]
     write_contractions_csv(path, list(model.ids), frames, model.muscles.jaw.max_angle_rad)
@@ -136,3 +136,57 @@ def test_held_contractions_need_no_physics(model):
     assert syn.state is not relaxed
     skin = model.skin_vertices
     assert np.abs(skin(syn.state) - skin(relaxed)).max() < 0.05  # mm, the same equilibrium
+
+
+def test_read_performance_holds_unmeasured_rows(model, tmp_path):
+    """The library's reading of a contractions.csv for resynthesis: a row the analysis did not
+    measure holds the last measured one (zeros before the first), at the CSV's frame rate."""
+    from myoface.analysis.contractions_csv import write_contractions_csv
+    from myoface.analysis.resynthesis import read_performance
+    from myoface.analysis.trackers.base import FrameMeasurement
+
+    table = _table(model)
+    lost = np.full(len(model.ids), np.nan)
+    quality = ["no_face", "ok", "ok", "no_face", "no_face", "ok"]
+    frames = [
+        FrameMeasurement(k, k / 12.5, q, row if q == "ok" else lost, np.zeros(2))
+        for k, (q, row) in enumerate(zip(quality, table, strict=True))
+    ]
+    csv = tmp_path / "c.csv"
+    write_contractions_csv(csv, list(model.ids), frames, model.muscles.jaw.max_angle_rad)
+    perf = read_performance(csv, model)
+    assert perf.n_frames == 6 and perf.quality == quality and perf.poses is None
+    assert perf.fps == pytest.approx(12.5, rel=1e-3)
+    np.testing.assert_allclose(perf.times, np.arange(6) / 12.5, atol=1e-4)
+    held = np.array([np.zeros(len(model.ids)), table[1], table[2], table[2], table[2], table[5]])
+    np.testing.assert_allclose(perf.contractions, held, atol=1e-4)  # the CSV's 4 decimals
+
+
+def test_read_performance_refuses_rows_no_video_can_show(model, tmp_path):
+    from myoface.analysis.resynthesis import read_performance
+    from myoface.errors import MyofaceValueError
+
+    csv = tmp_path / "c.csv"
+    _write_csv(csv, model, _table(model), fps=1000.0)  # 1 ms apart: a video has <= 240 fps
+    with pytest.raises(MyofaceValueError, match=r"c\.csv: its rows are 0\.001 s apart"):
+        read_performance(csv, model)
+
+
+def test_resynthesis_frames_are_the_resynth_videos_frames(model, tmp_path):
+    """The frames the fidelity measures (resynthesis_frames) are those myoface resynth
+    encodes, to H.264's loss, each its own row's (the rows differ by far more)."""
+    import imageio.v3 as iio
+
+    from myoface.analysis.resynthesis import resynthesis_frames
+
+    table = _table(model)
+    csv = tmp_path / "c.csv"
+    _write_csv(csv, model, table)
+    out = tmp_path / "r.mp4"
+    assert main(["resynth", str(csv), "-o", str(out), "--size", "64", "--quiet"]) == 0
+    video = iio.imread(out, plugin="pyav").astype(np.int16)
+    frames = np.array(list(resynthesis_frames(model, table, 64))).astype(np.int16)
+    assert frames.shape == video.shape == (len(table), 64, 64, 3)
+    mad = np.abs(video[:, None] - frames[None]).mean(axis=(2, 3, 4))  # (video k, frame j)
+    assert mad.diagonal().max() < CODEC_MAD_LEVELS, mad
+    assert (mad + np.diag(np.full(len(table), np.inf))).min() > mad.diagonal().max(), mad

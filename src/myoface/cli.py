@@ -1,9 +1,14 @@
 """The ``myoface`` command: thin subcommands over the library.
 
 Each subcommand lives in ``myoface.commands.<name>`` and defines ``NAME``, ``HELP``,
-``add_arguments(parser)`` and ``run(args) -> int``. Exit codes (GUIDE §4): 0 success,
-2 usage error, 1 a :class:`~myoface.errors.MyofaceError` (one line on stderr; the traceback
-only with ``--debug``). SIGINT, SIGTERM and SIGHUP stop a command cleanly (its temporary outputs
+``add_arguments(parser)`` and ``run(args) -> int``, which checks the arguments and calls the
+library (the work itself, e.g. :func:`myoface.analysis.outputs.analyze_to_folder` or
+:func:`myoface.analysis.resynthesis.resynthesize`, is the library's; nothing below the
+commands imports them or this module). The library is imported inside ``run``: importing the
+renderer and the physics takes about 2 s, and ``myoface --help`` should not wait for it.
+Exit codes: 0 success, 2 usage error (an unknown option, a number outside its limits), 1 a
+:class:`~myoface.errors.MyofaceError` (one line on stderr; the traceback only with
+``--debug``). SIGINT, SIGTERM and SIGHUP stop a command cleanly (its temporary outputs
 removed, exit status 128 + the signal's number); warnings are one line each on stderr.
 """
 

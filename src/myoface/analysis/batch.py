@@ -25,6 +25,10 @@ Engines:
 
 A worker process builds the face model once (:func:`cached_model`) and keeps it for every
 video it analyses; the model is immutable and shared by the worker's threads.
+
+The analysis settings (``tracker``, ``init``, ``calibration_frame``, ``max_frames``,
+``refine``, ``sigma``, ``estimator``, ``flow``) are those of ``myoface analyze``
+(:func:`~myoface.analysis.outputs.analyze_to_folder`), the same for every video.
 """
 
 from __future__ import annotations
@@ -76,9 +80,16 @@ SUMMARY_COLUMNS = (
     "fps",  # frames analysed per second of wall time
     "wall_time_s",  # the video's analysis and outputs, s (the worker's model set-up excluded)
 )
+#: settings that done.json gained after its first version, with the value the analyses of an
+#: older done.json had: its folders stay complete for a run with those values
+_LATER_SETTINGS = {"calibration_frame": None, "refine": None, "sigma": None, "flow": False}
 #: how long (s) to wait for an existing Dask scheduler, and for it to have a worker
 SCHEDULER_TIMEOUT_S = 10.0
 _GLOB_CHARS = set("*?[")
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
 
 
 def _require(module: str, feature: str):
@@ -148,7 +159,8 @@ def _is_done(folder: Path, video: Path, settings: dict) -> dict | None:
     """The summary row stored in ``folder``'s done.json when it holds this video's complete
     result with these settings, else None."""
     doc = _read_done(folder)
-    if doc is None or doc.get("settings") != settings:
+    stored = None if doc is None else doc.get("settings")
+    if not isinstance(stored, dict) or {**_LATER_SETTINGS, **stored} != settings:
         return None
     row = doc.get("row")
     if not isinstance(row, dict) or not set(SUMMARY_COLUMNS) <= set(row):
@@ -184,13 +196,21 @@ def result_folders(videos: list[Path], out: Path) -> list[str]:
 
 # ------------------------------------------------------------------------------ the task
 
+# The face models this process has built, by the files they were loaded from. A worker process
+# analyses many videos with one model, and building it (the lattice, its factorisations, the
+# skin's responses) takes seconds, as long as a short clip's analysis; the job cannot carry it
+# (a job is pickled to its worker for every video) and the model cannot own it (it is the
+# model; per-model derived data lives in FaceModel.memo). So the process keeps it, for its
+# lifetime. A path names its model for as long as the process lives, as it names the face in
+# done.json's settings: after a face file is edited, use new workers (and a new output folder).
 _MODELS: dict = {}
 _MODELS_LOCK = threading.Lock()
 
 
 def cached_model(face: str | None = None, muscles: str | None = None):
     """This process's face model for ``face`` (a path; None: the bundled face) and
-    ``muscles``, built on first use and kept (immutable, safe to share between threads)."""
+    ``muscles``, built on first use and kept for the process' lifetime (immutable, safe to
+    share between threads)."""
     key = (face, muscles)
     with _MODELS_LOCK:
         fm = _MODELS.get(key)
@@ -274,9 +294,13 @@ def analyze_job(job: _Job) -> dict:
             model=model,
             tracker=s["tracker"],
             init=job.init,
+            calibration_frame=s["calibration_frame"],
             max_frames=s["max_frames"],
+            refine=s["refine"],
+            sigma=s["sigma"],
             estimator=s["estimator"],
             face=s["face"],
+            flow=s["flow"],
         )
         wall = time.perf_counter() - t0
         row = {
@@ -481,8 +505,12 @@ def run_batch(
     timeout: float = SCHEDULER_TIMEOUT_S,
     tracker: str = "snakes",
     init=None,
+    calibration_frame: int | None = None,
     max_frames: int | None = None,
+    refine: int | None = None,
+    sigma: float | None = None,
     estimator: str | None = None,
+    flow: bool = False,
     face: str | os.PathLike | None = None,
     muscles: str | os.PathLike | None = None,
     show_progress: bool = False,
@@ -500,8 +528,10 @@ def run_batch(
     client : a ``distributed.Client`` to use (left open).
     executor : for the local engine, a ``concurrent.futures`` executor to use (left open),
         e.g. a :func:`local_pool` kept for several batches.
-    tracker, init, max_frames, estimator : as for ``myoface analyze`` (``init``: one contour
-        file or {section: (K, 2)} for every video, e.g. videos from one fixed camera).
+    tracker, init, calibration_frame, max_frames, refine, sigma, estimator, flow : as for
+        ``myoface analyze`` (:func:`~myoface.analysis.outputs.analyze_to_folder`), the same
+        for every video (``init``: one contour file or {section: (K, 2)} on the calibration
+        frame, e.g. videos from one fixed camera).
     face, muscles : the face model (default: the bundled one); paths the workers can read.
     show_progress : a progress bar over the videos on stderr.
 
@@ -512,7 +542,7 @@ def run_batch(
     """
     from myoface._io import ensure_output_dir
     from myoface.analysis.initfiles import load_init
-    from myoface.analysis.pipeline import ESTIMATORS
+    from myoface.analysis.trackers.snakes import ESTIMATORS
     from myoface.render import progress
 
     if engine not in ENGINES:
@@ -522,15 +552,36 @@ def run_batch(
     if tracker == "snakes":
         allowed = ESTIMATORS
     else:  # the landmarks' own, or the snakes' names for their counterparts
-        from myoface.analysis.fit import LANDMARK_ESTIMATORS
+        from myoface.analysis.trackers.landmark_fit import LANDMARK_ESTIMATORS
 
         allowed = (*LANDMARK_ESTIMATORS, *ESTIMATORS)
     if estimator is not None and estimator not in allowed:
         raise MyofaceValueError(
             f"the {tracker} tracker's estimator must be one of {allowed}; got {estimator!r}"
         )
-    if max_frames is not None and not (isinstance(max_frames, int) and max_frames >= 1):
+    if max_frames is not None and not (_is_int(max_frames) and max_frames >= 1):
         raise MyofaceValueError(f"max_frames must be an integer >= 1; got {max_frames!r}")
+    if calibration_frame is not None and not (
+        _is_int(calibration_frame) and calibration_frame >= 0
+    ):
+        raise MyofaceValueError(
+            f"calibration_frame must be an integer >= 0; got {calibration_frame!r}"
+        )
+    if refine is not None and not (_is_int(refine) and refine >= 0):
+        raise MyofaceValueError(f"refine must be an integer >= 0; got {refine!r}")
+    if sigma is not None and not (
+        isinstance(sigma, int | float) and not isinstance(sigma, bool) and 0 < sigma < math.inf
+    ):
+        raise MyofaceValueError(f"sigma must be a number of pixels > 0; got {sigma!r}")
+    if not isinstance(flow, bool):
+        raise MyofaceValueError(f"flow must be True or False; got {flow!r}")
+    # what make_analyzer refuses, refused before any video is analysed
+    if flow and tracker != "landmarks":
+        raise MyofaceValueError(
+            "--flow refines the landmark tracker's points; use it with --tracker landmarks"
+        )
+    if flow and estimator in ("paper", "fiducials"):
+        raise MyofaceValueError("--flow is for the 3-D fit, not --estimator paper")
     if workers is None:
         workers = os.cpu_count() or 1
     if not (isinstance(workers, int) and workers >= 1):
@@ -579,6 +630,10 @@ def run_batch(
         "init_sha256": init_sha,
         "face": face_s,
         "muscles": muscles_s,
+        "calibration_frame": calibration_frame,
+        "refine": refine,
+        "sigma": None if sigma is None else float(sigma),
+        "flow": flow,
     }
 
     paths = expand_videos([videos] if isinstance(videos, str | os.PathLike) else videos, out)

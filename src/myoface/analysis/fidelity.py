@@ -28,7 +28,7 @@ front on), and the two are compared point by point:
 
 The displacements are measured in the face's frontal plane (x across, y up; ``dims=2``):
 MediaPipe's monocular depth scatters by more than an expression moves the skin towards the
-camera (:class:`~myoface.analysis.fit.FitSettings` weighs it a tenth of
+camera (:class:`~myoface.analysis.modelfit.FitSettings` weighs it a tenth of
 x and y), and it would count that noise as unexplained motion. ``dims=3`` keeps it.
 
 Point indices are those of MediaPipe's 468-point face mesh, which is the default face's
@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface.analysis.resynthesis import resynthesis_frames
 from myoface.errors import MyofaceValueError
 
 #: points no muscle moves (MediaPipe face mesh indices): the eye corners (right eye outer and
@@ -297,7 +298,7 @@ def detect_landmarks(frames, n_points: int = 468) -> np.ndarray:
     the mouth corners most) between the reference frame and the rest of a held frame (the
     sample video's first), which the measure would take for expression motion; in image mode
     a held frame gives the same points."""
-    from myoface.analysis.landmarks import FaceMeshDetector
+    from myoface.facemesh import FaceMeshDetector
 
     out = []
     with FaceMeshDetector(video=False) as det:
@@ -305,20 +306,6 @@ def detect_landmarks(frames, n_points: int = 468) -> np.ndarray:
             p = det.detect(f)
             out.append(np.full((n_points, 3), np.nan) if p is None else p[:n_points])
     return np.array(out).reshape(-1, n_points, 3)
-
-
-def resynthesis_frames(model, table, size: int = 360):
-    """The model driven by ``table`` (T, M) contractions over ``model.ids`` (rows with NaN hold
-    the last measured row), rendered front on, ``size`` x ``size`` (the code path of
-    ``myoface resynth``): a generator of RGB uint8 images."""
-    from myoface.analysis.contractions_csv import hold_last_measured
-    from myoface.render import Renderer
-    from myoface.synth import Synthesizer, make_camera
-
-    renderer = Renderer(model.face, make_camera(model.face.vertices, "front", size, size))
-    syn = Synthesizer(model, renderer)
-    table = hold_last_measured(np.asarray(table, dtype=np.float64))
-    yield from syn.frames(table, np.arange(len(table), dtype=np.float64))
 
 
 def person_model(video_path, calibration_frame: int):

@@ -1,4 +1,5 @@
-"""Benchmarks of the image level and of synthesis (names fixed by BENCH.md)."""
+"""Benchmarks of the image level and of synthesis (their names are the keys of BENCHMARKS.md and
+of `myoface bench --json`; keep them)."""
 
 from __future__ import annotations
 
@@ -94,7 +95,7 @@ def write_demo_contractions_csv(path, model, fps: float = 25.0, duration_s: floa
     """Write :func:`_demo_contractions` for ``model`` as a ``contractions.csv`` in the format
     ``myoface analyze`` writes (every frame measured, head still)."""
     from myoface.analysis.contractions_csv import write_contractions_csv
-    from myoface.analysis.tracker import FrameMeasurement
+    from myoface.analysis.trackers.base import FrameMeasurement
 
     ids = list(model.ids)
     times, table = _demo_contractions(ids, fps, duration_s)
@@ -111,13 +112,13 @@ def bench_resynth_fps_512(quick: bool) -> Measurement:
     contractions.csv (a smile rising and falling, a brow raise, the jaw opening) read, each
     frame's tissue equilibrium (warm-started from the previous frame), its render (textured,
     lit, anti-aliased) and its H.264 encoding to an MP4, through the command's own code
-    (``commands.resynth.resynthesize``); the model is built and the kernels compiled outside
-    the timed region. The detail splits a frame into physics, render and encode (medians; the
-    encoding runs in a background thread beside the next frame's physics and render)."""
+    (:mod:`myoface.analysis.resynthesis`: ``read_performance``, then ``resynthesize``); the
+    model is built and the kernels compiled outside the timed region. The detail splits a
+    frame into physics, render and encode (medians; the encoding runs in a background thread
+    beside the next frame's physics and render)."""
     import statistics
 
-    from myoface.analysis.contractions_csv import hold_last_measured, read_contractions_csv
-    from myoface.commands.resynth import resynthesize
+    from myoface.analysis.resynthesis import read_performance, resynthesize
     from myoface.model import build_face_model
 
     t0 = time.perf_counter()
@@ -129,15 +130,15 @@ def bench_resynth_fps_512(quick: bool) -> Measurement:
         write_demo_contractions_csv(csv, fm)
 
         def one():
-            times, table, _ = read_contractions_csv(csv, list(fm.ids))
-            table = hold_last_measured(table)
-            fps = 1.0 / float(np.median(np.diff(times)))
+            perf = read_performance(csv, fm)
             out = Path(d) / "out.mp4"
-            syn = resynthesize(fm, times, table, out, fps, size=512, show_progress=False)
+            syn = resynthesize(
+                fm, perf.times, perf.contractions, out, perf.fps, size=512, show_progress=False
+            )
             stats["relax"] += syn.stats.relax_ms
             stats["render"] += syn.stats.render_ms
             stats["encode"] += syn.stats.encode_ms
-            return len(table)
+            return perf.n_frames
 
         n_frames = one()  # JIT, factorisations
         for v in stats.values():

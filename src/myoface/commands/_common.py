@@ -8,7 +8,7 @@ value outside them is a usage error, exit status 2):
 - image sides (``--width``, ``--height``, ``--size``): :data:`IMAGE_SIDE` pixels;
 - cylindrical map sides (``face maps --size``): :data:`MAP_SIDE` cells, at most
   :data:`MAX_MAP_CELLS` cells in all;
-- Gauss-Newton corrections (``analyze --refine``): 0 to :data:`MAX_REFINE`;
+- Gauss-Newton corrections (``analyze --refine``, ``batch --refine``): 0 to :data:`MAX_REFINE`;
 - ports (``view --port``): 0 (any free port) to 65535.
 """
 
@@ -29,7 +29,7 @@ IMAGE_SIDE = (16, 4096)
 MAP_SIDE = (16, 8192)
 #: the most cells of a cylindrical map (8192 x 4096: about 2 GB of memory while it is made)
 MAX_MAP_CELLS = 8192 * 4096
-#: the most Gauss-Newton corrections per frame (``analyze --refine``)
+#: the most Gauss-Newton corrections per frame (``analyze --refine``, ``batch --refine``)
 MAX_REFINE = 10
 #: a face (its mesh's largest extent, mm) outside this range is probably not in millimetres
 FACE_SIZE_MM = (50.0, 500.0)
@@ -131,18 +131,138 @@ def add_face_argument(p) -> None:
     )
 
 
+#: the trackers of ``--tracker`` (:func:`~myoface.analysis.pipeline.make_analyzer`)
+TRACKERS = ("snakes", "landmarks")
+#: the estimators of ``--estimator``: the snakes' (curves, fiducials) and the landmarks' (fit,
+#: fit-synthesis, paper)
+ESTIMATORS = ("curves", "fiducials", "fit", "fit-synthesis", "paper")
+
+
+def add_analysis_arguments(p) -> None:
+    """The options of one video's analysis, the same for ``myoface analyze`` and ``myoface
+    batch`` (which gives them to every video): ``--tracker``, ``--init``,
+    ``--calibration-frame``, ``--max-frames``, ``--sigma``, ``--estimator``, ``--refine``
+    and ``--flow``. :func:`analysis_settings` reads them back."""
+    p.add_argument(
+        "--tracker",
+        choices=TRACKERS,
+        default="snakes",
+        help="feature tracker (default: snakes, the paper's)",
+    )
+    p.add_argument(
+        "--init",
+        help="initial contours (JSON) on the calibration frame, for the snakes (default: found "
+        "automatically with MediaPipe's face mesh); myoface batch uses them for every video, "
+        "e.g. videos from one fixed camera",
+    )
+    p.add_argument(
+        "--calibration-frame",
+        type=integer(0),
+        default=None,
+        metavar="N",
+        help="the neutral frame to calibrate on; analysis starts there (default: 0; for the "
+        "landmarks' 3-D fit the most neutral frame of the first 2 s, and every frame is "
+        "analysed); with --init, the contours are on this frame",
+    )
+    p.add_argument(
+        "--max-frames",
+        type=integer(1),
+        metavar="N",
+        help="analyse at most N frames (of each video)",
+    )
+    p.add_argument(
+        "--sigma",
+        type=number(0.0, 100.0, lo_open=True, unit=" px"),
+        default=None,
+        help="potential smoothing, px (default: 1.2 mm on the face, from its size in the frame)",
+    )
+    p.add_argument(
+        "--estimator",
+        choices=ESTIMATORS,
+        default=None,
+        help="how contractions are estimated. snakes: the model's skin curves fitted to the "
+        "whole contours (curves, default), or the paper's fiducial points (fiducials). "
+        "landmarks: the 3-D fit of the whole model, head pose and every muscle (fit, "
+        "default), the same with analysis by synthesis (fit-synthesis: the face rendered at "
+        "each estimate and tracked too, which takes out MediaPipe's own error; slower), or "
+        "the paper's 12 muscles in a 2-D head frame (paper)",
+    )
+    p.add_argument(
+        "--refine",
+        type=integer(0, MAX_REFINE),
+        help=f"Gauss-Newton corrections per frame through the model, 0-{MAX_REFINE} "
+        "(default 1 for snakes and the 3-D fit, 0 for landmarks --estimator paper)",
+    )
+    p.add_argument(
+        "--flow",
+        action="store_true",
+        help="landmarks' 3-D fit: refine MediaPipe's points by optical flow (Lucas-Kanade "
+        "from the first frame), which reads skin motion MediaPipe reads short; best where "
+        "the skin has texture and the face keeps its look (see README)",
+    )
+
+
+def analysis_settings(args) -> dict:
+    """The analysis settings of ``args`` (parsed with :func:`add_analysis_arguments`): the
+    keyword arguments ``tracker``, ``init``, ``calibration_frame``, ``max_frames``,
+    ``refine``, ``sigma``, ``estimator`` and ``flow`` of
+    :func:`~myoface.analysis.outputs.analyze_to_folder` and
+    :func:`~myoface.analysis.batch.run_batch`.
+
+    Raises
+    ------
+    MyofaceValueError
+        For ``--init`` with the landmark tracker, which needs none.
+    """
+    from myoface.errors import MyofaceValueError
+
+    if args.init and args.tracker == "landmarks":
+        raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
+    return {
+        "tracker": args.tracker,
+        "init": args.init or None,
+        "calibration_frame": args.calibration_frame,
+        "max_frames": args.max_frames,
+        "refine": args.refine,
+        "sigma": args.sigma,
+        "estimator": args.estimator,
+        "flow": bool(args.flow),
+    }
+
+
+def default_analysis_settings(**given) -> dict:
+    """The analysis settings (:func:`analysis_settings`) of a command given none of the
+    analysis options, but those in ``given`` (e.g. ``tracker="landmarks"``, ``init=path``):
+    the defaults are the options' own."""
+    parser = argparse.ArgumentParser(add_help=False)
+    add_analysis_arguments(parser)
+    args = parser.parse_args([])
+    unknown = set(given) - set(vars(args))
+    if unknown:
+        raise TypeError(f"not an analysis option: {', '.join(sorted(unknown))}")
+    vars(args).update(given)
+    return analysis_settings(args)
+
+
 def load_model(args):
+    """The face model of ``--face`` and ``--muscles`` (:func:`load_face_model_option`)."""
+    return load_face_model_option(args.face, getattr(args, "muscles", None))
+
+
+def load_face_model_option(face=None, muscles=None):
+    """The face model of the options ``--face face`` and ``--muscles muscles`` (None: not
+    given, the bundled face and muscles); warns when the face is not about a face's size in
+    millimetres."""
     from myoface.errors import MyofaceValueError
     from myoface.model import load_face_model
 
-    muscles = getattr(args, "muscles", None)
-    if muscles and args.face is None:
+    if muscles and face is None:
         raise MyofaceValueError(
             f"--muscles {muscles} needs --face (the bundled face has its own muscles)"
         )
-    fm = load_face_model(args.face, muscles=muscles)
-    if args.face is not None:
-        check_face_scale(fm.face.vertices, f"--face {args.face}")
+    fm = load_face_model(face, muscles=muscles)
+    if face is not None:
+        check_face_scale(fm.face.vertices, f"--face {face}")
     return fm
 
 

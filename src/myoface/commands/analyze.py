@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
-from myoface.commands._common import MAX_REFINE, add_face_argument, integer, load_model, number
+from myoface.commands._common import (
+    add_analysis_arguments,
+    add_face_argument,
+    analysis_settings,
+    load_model,
+)
 from myoface.errors import MyofaceValueError
 
 NAME = "analyze"
@@ -43,59 +48,9 @@ def add_arguments(p):
     p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("video", help="a video file (mp4, mov, avi, ...) or a folder of images")
     p.add_argument("-o", "--output", help="output folder (required unless --check-init)")
-    p.add_argument(
-        "--tracker",
-        choices=("snakes", "landmarks"),
-        default="snakes",
-        help="feature tracker (default: snakes, the paper's)",
-    )
-    p.add_argument(
-        "--init",
-        help="initial contours (JSON) on the first frame, for the snakes (default: found "
-        "automatically with MediaPipe's face mesh)",
-    )
+    add_analysis_arguments(p)
     p.add_argument(
         "--check-init", metavar="PNG", help="draw the initial contours on the first frame and stop"
-    )
-    p.add_argument(
-        "--calibration-frame",
-        type=integer(0),
-        default=None,
-        metavar="N",
-        help="the neutral frame to calibrate on; analysis starts there (default: 0; for the "
-        "landmarks' 3-D fit the most neutral frame of the first 2 s, and every frame is "
-        "analysed); with --init, the contours are on this frame",
-    )
-    p.add_argument("--max-frames", type=integer(1), help="analyse at most this many frames")
-    p.add_argument(
-        "--sigma",
-        type=number(0.0, 100.0, lo_open=True, unit=" px"),
-        default=None,
-        help="potential smoothing, px (default: 1.2 mm on the face, from its size in the frame)",
-    )
-    p.add_argument(
-        "--estimator",
-        choices=("curves", "fiducials", "fit", "fit-synthesis", "paper"),
-        default=None,
-        help="how contractions are estimated. snakes: the model's skin curves fitted to the "
-        "whole contours (curves, default), or the paper's fiducial points (fiducials). "
-        "landmarks: the 3-D fit of the whole model, head pose and every muscle (fit, "
-        "default), the same with analysis by synthesis (fit-synthesis: the face rendered at "
-        "each estimate and tracked too, which takes out MediaPipe's own error; slower), or "
-        "the paper's 12 muscles in a 2-D head frame (paper)",
-    )
-    p.add_argument(
-        "--refine",
-        type=integer(0, MAX_REFINE),
-        help="Gauss-Newton corrections per frame through the model, 0-10 "
-        "(default 1 for snakes and the 3-D fit, 0 for landmarks --estimator paper)",
-    )
-    p.add_argument(
-        "--flow",
-        action="store_true",
-        help="landmarks' 3-D fit: refine MediaPipe's points by optical flow (Lucas-Kanade "
-        "from the first frame), which reads skin motion MediaPipe reads short; best where "
-        "the skin has texture and the face keeps its look (see README)",
     )
     p.add_argument(
         "--format",
@@ -119,7 +74,7 @@ def add_arguments(p):
 def run(args) -> int:
     from myoface._io import check_output_dir, check_output_path
     from myoface.analysis.initfiles import load_init
-    from myoface.analysis.outputs import analyze_to_folder, draw_contours
+    from myoface.analysis.outputs import draw_contours
     from myoface.analysis.video import open_video
     from myoface.render import write_image
 
@@ -140,60 +95,96 @@ def run(args) -> int:
         return 0
     if not args.output:
         raise MyofaceValueError("give an output folder with -o")
-    if args.init and args.tracker == "landmarks":
-        raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
-    if args.init:
-        load_init(args.init)  # a bad file fails before the model is built
+    settings = analysis_settings(args)
+    if settings["init"]:
+        load_init(settings["init"])  # a bad file fails before the model is built
     if args.report:
-        from myoface.analysis.landmarks import PIP_HINT, mediapipe_available
-        from myoface.errors import MyofaceDependencyError
-
-        if not mediapipe_available():  # fail before the analysis, not after it
-            raise MyofaceDependencyError(
-                f"--report runs MediaPipe's face mesh, which is not installed; {PIP_HINT}"
-            )
+        check_report_possible()  # before the analysis, not after it
     fm = load_model(args)
-    # the library function myoface batch runs for each video
-    res = analyze_to_folder(
+    analyze_video(
         video,
         args.output,
         model=fm,
-        tracker=args.tracker,
-        init=args.init or None,
-        calibration_frame=args.calibration_frame,
-        max_frames=args.max_frames,
-        refine=args.refine,
-        sigma=args.sigma,
-        estimator=args.estimator,
+        settings=settings,
         face=args.face,
-        show_progress=not args.quiet,
-        flow=args.flow,
-        finish=lambda folder, res: _extra_outputs(args, fm, folder),
+        fmt=args.format,
+        report=args.report,
+        quiet=args.quiet,
+        video_path=args.video,
+    )
+    return 0
+
+
+def check_report_possible() -> None:
+    """The fidelity report (``--report``) runs MediaPipe's face mesh: a
+    :class:`~myoface.errors.MyofaceDependencyError` when it is not installed."""
+    from myoface.errors import MyofaceDependencyError
+    from myoface.facemesh import PIP_HINT, mediapipe_available
+
+    if not mediapipe_available():
+        raise MyofaceDependencyError(
+            f"--report runs MediaPipe's face mesh, which is not installed; {PIP_HINT}"
+        )
+
+
+def analyze_video(
+    video,
+    output,
+    *,
+    model,
+    settings: dict,
+    face=None,
+    fmt: str = "myoface",
+    report: bool = False,
+    quiet: bool = False,
+    video_path=None,
+):
+    """``myoface analyze``'s work once its arguments are checked (also the demo's): ``video``
+    (a path or an opened :class:`~myoface.analysis.video.Video`, whose file is
+    ``video_path``) analysed into the folder ``output`` by
+    :func:`~myoface.analysis.outputs.analyze_to_folder` with ``settings``
+    (:func:`~myoface.commands._common.analysis_settings`), the same library function
+    ``myoface batch`` runs for each video; then openface.csv (``fmt="openface"``) and the
+    fidelity report (``report``); the command's lines printed. Returns the
+    :class:`~myoface.analysis.outputs.FolderResult`."""
+    from myoface.analysis.outputs import analyze_to_folder
+
+    video_path = video if video_path is None else video_path
+    res = analyze_to_folder(
+        video,
+        output,
+        model=model,
+        **settings,
+        face=face,
+        show_progress=not quiet,
+        finish=lambda folder, res: _extra_outputs(
+            folder, video_path, model, face=face, fmt=fmt, report=report, quiet=quiet
+        ),
     )
     print(
         f"analysed {len(res.frames)} frames ({res.n_measured} measured); "
         f"output folder: {res.folder.resolve()}"
     )
-    return 0
+    return res
 
 
-def _extra_outputs(args, model, folder) -> None:
+def _extra_outputs(folder, video_path, model, *, face, fmt, report, quiet) -> None:
     """openface.csv (``--format openface``) and the fidelity report (``--report``), made from
     the analysis' finished files in ``folder``."""
-    if args.format == "openface":
+    if fmt == "openface":
         from myoface.analysis.openface import write_openface_csv
 
         write_openface_csv(folder / "contractions.csv", folder / "openface.csv")
-    if args.report:
+    if report:
         from myoface.analysis.fidelity import write_fidelity_report
 
         # the person's own face from the calibration frame, unless a face was given
         res = write_fidelity_report(
             folder,
-            args.video,
-            model=model if args.face else None,
+            video_path,
+            model=model if face else None,
             fallback_model=model,  # when no face is found on the calibration frame
-            show_progress=not args.quiet,
+            show_progress=not quiet,
         )
         o = res.overall
         print(

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from myoface.commands._common import add_face_argument
+from myoface.commands._common import add_analysis_arguments, add_face_argument, analysis_settings
 from myoface.errors import MyofaceValueError
 
 NAME = "batch"
@@ -11,7 +11,9 @@ DESCRIPTION = """Analyse many face videos as `myoface analyze` does, one result 
 under the output folder (named after the video; clip, clip-2, ... when names repeat), and
 summarise them in OUT/summary.parquet and OUT/summary.csv: per video its path, status
 (ok / failed / skipped), error, frames, measured fraction, frames per second, wall time and
-the mean contraction of each muscle.
+the mean contraction of each muscle. The analysis options (--tracker, --init,
+--calibration-frame, --max-frames, --sigma, --estimator, --refine, --flow) are those of
+`myoface analyze`, the same for every video.
 
 Resumable: a folder holding a complete result (its done.json, written last, names the same
 video and settings) is skipped. A video that fails is recorded with its error and the batch
@@ -61,25 +63,7 @@ def add_arguments(p):
         metavar="S",
         help="seconds to wait for --scheduler and a worker of it (default 10)",
     )
-    p.add_argument(
-        "--tracker",
-        choices=("snakes", "landmarks"),
-        default="snakes",
-        help="feature tracker (default: snakes, the paper's)",
-    )
-    p.add_argument(
-        "--init",
-        help="(snakes) initial contours (JSON) for every video, e.g. videos from one fixed "
-        "camera (default: found in each video with MediaPipe's face mesh)",
-    )
-    p.add_argument(
-        "--estimator",
-        choices=("curves", "fiducials", "fit", "paper"),
-        default=None,
-        help="how contractions are estimated, as in myoface analyze (snakes: curves, the "
-        "default, or fiducials; landmarks: fit, the default, or paper)",
-    )
-    p.add_argument("--max-frames", type=int, metavar="N", help="analyse at most N frames a video")
+    add_analysis_arguments(p.add_argument_group("the analysis of each video (as myoface analyze)"))
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_face_argument(p)
 
@@ -101,15 +85,12 @@ def run(args) -> int:
         )
     if args.workers is not None and args.workers < 1:
         raise MyofaceValueError(f"--workers must be >= 1; got {args.workers}")
-    if args.max_frames is not None and args.max_frames < 1:
-        raise MyofaceValueError(f"--max-frames must be >= 1; got {args.max_frames}")
     timeout = SCHEDULER_TIMEOUT_S if args.timeout is None else args.timeout
     if not timeout > 0:
         raise MyofaceValueError(f"--timeout must be > 0 s; got {args.timeout}")
     if args.timeout is not None and not args.scheduler:
         raise MyofaceValueError("--timeout is for --scheduler")
-    if args.init and args.tracker == "landmarks":
-        raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
+    settings = analysis_settings(args)
     rows = run_batch(
         args.videos,
         args.output,
@@ -117,10 +98,7 @@ def run(args) -> int:
         workers=args.workers,
         scheduler=args.scheduler,
         timeout=timeout,
-        tracker=args.tracker,
-        init=args.init,
-        max_frames=args.max_frames,
-        estimator=args.estimator,
+        **settings,
         face=args.face,
         muscles=args.muscles,
         show_progress=not args.quiet,

@@ -136,14 +136,20 @@ def _synthetic_video(folder: Path, fps: float) -> tuple[Path, Path]:
 
 
 def analysis_loop(folder: Path, args) -> None:
-    """Analyse the sample video (or the synthetic fallback) and resynthesize it."""
+    """Analyse the sample video (or the synthetic fallback) and resynthesize it, as ``myoface
+    analyze``, ``myoface resynth`` and ``myoface face from-photo`` do (the same functions,
+    with the same printed lines and files)."""
+    import json
+
     from myoface._io import ensure_output_dir
-    from myoface.analysis.landmarks import mediapipe_available
     from myoface.analysis.sample import SampleUnavailable, cache_dir, fetch_sample_video
-    from myoface.cli import main
+    from myoface.commands._common import default_analysis_settings, load_face_model_option
+    from myoface.commands.analyze import analyze_video
+    from myoface.commands.face import photo_face_file
+    from myoface.commands.resynth import resynth_video
+    from myoface.facemesh import mediapipe_available
 
     ensure_output_dir(folder)
-    quiet = ["--quiet"] if args.quiet else []
     video = None
     if not mediapipe_available():
         print(
@@ -163,28 +169,43 @@ def analysis_loop(folder: Path, args) -> None:
     real = video is not None
     if real:
         print(f"analysing the sample face video {video} (MediaPipe face mesh tracker)")
-        argv = ["analyze", str(video), "-o", str(folder), "--tracker", "landmarks", "--report"]
-        argv += quiet
+        # myoface analyze VIDEO -o FOLDER --tracker landmarks --report
+        settings = default_analysis_settings(tracker="landmarks")
     else:
         video, init = _synthetic_video(folder, args.fps)
         print(f"analysing the synthetic video {video} (snakes)")
-        argv = ["analyze", str(video), "-o", str(folder), "--init", str(init), *quiet]
-    if main(argv) != 0:
-        raise SystemExit(1)
-    res = folder / "resynth.mp4"
-    argv = ["resynth", str(folder / "contractions.csv"), "-o", str(res), "--side-by-side"]
-    if main([*argv, str(video), *quiet]) != 0:
-        raise SystemExit(1)
+        # myoface analyze VIDEO -o FOLDER --init INIT
+        settings = default_analysis_settings(init=str(init))
+    analyze_video(
+        video,
+        folder,
+        model=load_face_model_option(),
+        settings=settings,
+        report=real,
+        quiet=args.quiet,
+    )
+    # myoface resynth FOLDER/contractions.csv -o FOLDER/resynth.mp4 --side-by-side VIDEO
+    csv = folder / "contractions.csv"
+    resynth_video(
+        load_face_model_option(),
+        csv,
+        folder / "resynth.mp4",
+        side_by_side=video,
+        quiet=args.quiet,
+    )
     if real:
-        import json
-
         # beyond the paper: the person's own face, from the calibration frame, resynthesized
+        # (myoface face from-photo VIDEO --frame N -o FOLDER/person.myoface --preview ...)
         start = json.loads((folder / "analysis.json").read_text())["calibration_frame"]
         person = folder / "person.myoface"
-        face_argv = ["face", "from-photo", str(video), "--frame", str(start), "-o", str(person)]
-        if main([*face_argv, "--name", "sample person", "--preview", str(folder / "person.png")]):
-            raise SystemExit(1)
-        res = folder / "resynth_person.mp4"
-        argv = ["resynth", str(folder / "contractions.csv"), "-o", str(res), "--side-by-side"]
-        if main([*argv, str(video), "--face", str(person), *quiet]) != 0:
-            raise SystemExit(1)
+        photo_face_file(
+            video, person, frame=start, name="sample person", preview=folder / "person.png"
+        )
+        # myoface resynth ... -o FOLDER/resynth_person.mp4 --side-by-side VIDEO --face PERSON
+        resynth_video(
+            load_face_model_option(person),
+            csv,
+            folder / "resynth_person.mp4",
+            side_by_side=video,
+            quiet=args.quiet,
+        )

@@ -312,16 +312,36 @@ def _read_photo(path: Path, frame: int):
 
 
 def _from_photo(args) -> int:
+    photo_face_file(
+        args.photo,
+        args.output,
+        frame=args.frame,
+        name=args.name,
+        depth_blend=args.depth_blend,
+        preview=args.preview,
+    )
+    return 0
+
+
+def photo_face_file(
+    photo, output, *, frame: int = 0, name=None, depth_blend=None, preview=None
+) -> None:
+    """``myoface face from-photo``'s work (also the demo's): the face of the photograph
+    ``photo`` (an image, or frame ``frame`` of a video) made by
+    :func:`~myoface.face.personal.face_from_photo` (``depth_blend``: default
+    :data:`~myoface.face.personal.PHOTO_DEPTH_BLEND`), saved with the default muscles and its
+    provenance to the face file ``output`` (.myoface), and, with ``preview``, its contact
+    sheet (PNG); the command's lines printed. A failure leaves neither file."""
     import myoface
     from myoface.face.personal import PHOTO_DEPTH_BLEND, face_from_photo
 
-    out = _check_output(args.output, ".myoface")
-    if args.preview:
-        _check_output(args.preview, ".png", "--preview")
-    src = Path(args.photo)
-    img = _read_photo(src, args.frame)
-    blend = PHOTO_DEPTH_BLEND if args.depth_blend is None else args.depth_blend
-    face, info = face_from_photo(img, name=args.name or src.stem, depth_blend=blend)
+    out = _check_output(output, ".myoface")
+    if preview:
+        _check_output(preview, ".png", "--preview")
+    src = Path(photo)
+    img = _read_photo(src, frame)
+    blend = PHOTO_DEPTH_BLEND if depth_blend is None else depth_blend
+    face, info = face_from_photo(img, name=name or src.stem, depth_blend=blend)
     print(
         f"face found {info['face_width_px']:.0f} px wide; yaw {info['head_yaw_deg']:.1f} deg; "
         f"{info['fit_rms_to_generic_mm']:.1f} mm RMS from the generic face's shape"
@@ -330,15 +350,14 @@ def _from_photo(args) -> int:
         "made_by": f"myoface {myoface.__version__} face from-photo",
         "method": "MediaPipe face mesh (468 points of the default topology) on one photo; "
         "similarity to the generic face; depth blended with the generic face's",
-        "source": {"path": src.name, "sha256": sha256_file(src), "frame": args.frame},
+        "source": {"path": src.name, "sha256": sha256_file(src), "frame": frame},
         "fit": info,
         "note": "one photograph has no absolute scale: the face has the generic face's size",
     }
     with OutputSet() as outs:  # the face file last: a failure leaves neither
-        if args.preview:
-            _write_preview(face, outs.add(args.preview))
+        if preview:
+            _write_preview(face, outs.add(preview))
         _save(face, out, provenance)
-    return 0
 
 
 def _maps(args) -> int:

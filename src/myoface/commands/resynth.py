@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from myoface.commands._common import MAX_FPS, add_face_argument, load_model, side_type
+from myoface.commands._common import add_face_argument, load_model, side_type
 from myoface.errors import MyofaceFileNotFoundError, MyofaceValueError
 
 NAME = "resynth"
@@ -29,10 +29,7 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    import numpy as np
-
     from myoface._io import check_output_path
-    from myoface.analysis.contractions_csv import hold_last_measured, read_contractions_csv
 
     if not args.output.lower().endswith((".mp4", ".mov", ".mkv", ".avi")):
         raise MyofaceValueError(f"-o must be a video file (.mp4); got {args.output}")
@@ -40,99 +37,54 @@ def run(args) -> int:
     if args.side_by_side and not Path(args.side_by_side).exists():
         raise MyofaceFileNotFoundError(f"--side-by-side: no such video: {args.side_by_side}")
     fm = load_model(args)
-    times, table, quality = read_contractions_csv(args.csv, list(fm.ids))
-    poses = None
-    if args.pose:
-        from myoface.analysis.fit import display_poses, read_head_poses
-
-        poses = display_poses(read_head_poses(args.csv))
-    table = hold_last_measured(table)  # unmeasured frames hold the last measured contractions
-    dt = float(np.median(np.diff(times))) if len(times) > 1 else 1.0 / 30
-    if not 1.0 / MAX_FPS <= dt <= 60.0:
-        raise MyofaceValueError(
-            f"{args.csv}: its rows are {dt:.3g} s apart (median); a video's frames are "
-            f"{1 / MAX_FPS:.3g} to 60 s apart"
-        )
-    fps = 1.0 / dt
-    resynthesize(
+    resynth_video(
         fm,
-        times,
-        table,
+        args.csv,
         args.output,
-        fps,
-        size=int(args.size),
+        size=args.size,
         side_by_side=args.side_by_side,
-        show_progress=not args.quiet,
-        poses=poses,
+        pose=args.pose,
+        quiet=args.quiet,
     )
-    print(f"wrote {args.output} ({len(table)} frames at {fps:.1f} fps)")
     return 0
 
 
-def resynthesize(
+def resynth_video(
     model,
-    times,
-    table,
+    csv,
     output,
-    fps: float,
     *,
     size: int = 360,
     side_by_side=None,
-    show_progress: bool = True,
-    poses=None,
-):
-    """Render ``model`` driven by the contractions ``table`` (T, M) at ``times`` (T,) s to the
-    video ``output`` at ``fps``: one ``size`` x ``size`` frame per row (front view), each the
-    equilibrium of its row warm-started from the previous one, encoded while the next is made;
-    with the frames of the video ``side_by_side`` (scaled to ``size`` rows) on the left.
-    ``poses``: per row ``(rotation, translation mm)`` of the head
-    (:func:`~myoface.analysis.fit.display_poses`), or None for the still front view.
+    pose: bool = False,
+    quiet: bool = False,
+) -> None:
+    """``myoface resynth``'s work once its arguments are checked (also the demo's): the
+    contractions of ``csv`` (:func:`~myoface.analysis.resynthesis.read_performance`) drive
+    ``model`` into the video ``output``
+    (:func:`~myoface.analysis.resynthesis.resynthesize`), and the command's line is printed."""
+    from myoface.analysis.resynthesis import read_performance, resynthesize
 
-    Returns the :class:`~myoface.synth.Synthesizer`, whose ``stats`` hold the per-frame times
-    of the physics, the rendering and the encoding.
-    """
-    import numpy as np
-
-    from myoface.render import Renderer
-    from myoface.render.renderer import resize_nearest
-    from myoface.synth import Synthesizer, make_camera
-
-    h = int(size)
-    renderer = Renderer(model.face, make_camera(model.face.vertices, "front", h, h))
-    if poses is not None:
-        renderer = _PosedRenderer(renderer, poses)
-    syn = Synthesizer(model, renderer)
-    compose = None
-    if side_by_side:
-        from myoface.analysis.video import open_video
-
-        src = iter(open_video(side_by_side))
-
-        def compose(k, img):
-            frame = next(src, None)
-            if frame is None:
-                raise MyofaceValueError("the side-by-side video is shorter than the CSV")
-            return np.concatenate([resize_nearest(frame, h), img], axis=1)
-
-    syn.write_video(
-        table,
-        times,
+    perf = read_performance(csv, model, pose=pose)
+    resynthesize(
+        model,
+        perf.times,
+        perf.contractions,
         output,
-        fps,
-        compose=compose,
-        show_progress=show_progress,
-        desc="resynthesizing",
+        perf.fps,
+        size=int(size),
+        side_by_side=side_by_side,
+        show_progress=not quiet,
+        poses=perf.poses,
     )
-    return syn
+    print(f"wrote {output} ({perf.n_frames} frames at {perf.fps:.1f} fps)")
 
 
-class _PosedRenderer:
-    """A renderer whose successive renders take the successive head ``poses``."""
+def __getattr__(name: str):
+    # ``resynthesize`` lived here; it is the library's now (myoface.analysis.resynthesis),
+    # imported on first use so that the command line starts without the renderer
+    if name == "resynthesize":
+        from myoface.analysis.resynthesis import resynthesize
 
-    def __init__(self, renderer, poses):
-        self._renderer = renderer
-        self._poses = iter(poses)
-        self.camera = renderer.camera
-
-    def render(self, vertices=None, **kw):  # kw: the renderer's others, e.g. jaw=
-        return self._renderer.render(vertices, pose=next(self._poses), **kw)
+        return resynthesize
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -227,7 +227,8 @@ class TissueModel:
 
     @property
     def kinematic_index(self) -> np.ndarray:
-        """Indices of the kinematic nodes, in the order :func:`relax` expects their targets."""
+        """Indices of the kinematic nodes, in the order :func:`~myoface.tissue.relax` expects
+        their targets."""
         return self.memo("kinematic_index", lambda: _read_only(np.flatnonzero(self.kinematic)))
 
     @property
