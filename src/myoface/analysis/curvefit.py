@@ -488,12 +488,6 @@ class CurveEstimator:
                 jac = self.jac.copy()
         self.linearisation = (c, pred, jac)
 
-    def section_residuals(self, curves: dict, c) -> dict:
-        """RMS distance (mm) across each tracked contour of ``curves`` from the nodes the model
-        predicts for ``c`` (:meth:`predict`): how well the model explains it. (The last
-        estimate's are in :attr:`last_residuals`.)"""
-        return self._section_rms(curves, self.predict(c))
-
     def _section_rms(self, curves: dict, pred: np.ndarray) -> dict:
         _, res, w = self.residuals(curves, pred)
         return self._rms_by_section(res, w)

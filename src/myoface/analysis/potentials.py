@@ -435,19 +435,6 @@ def bilinear(img, x, y):
     return a * (1 - fy) + b * fy
 
 
-@njit(cache=True, inline="always")
-def bilinear2(ga, gb, x, y):
-    """Bilinear samples of two same-shape images at (x, y), sharing the index arithmetic."""
-    x0, y0, fx, fy = _cell(ga.shape[0], ga.shape[1], x, y)
-    w00 = (1 - fx) * (1 - fy)
-    w01 = fx * (1 - fy)
-    w10 = (1 - fx) * fy
-    w11 = fx * fy
-    a = w00 * ga[y0, x0] + w01 * ga[y0, x0 + 1] + w10 * ga[y0 + 1, x0] + w11 * ga[y0 + 1, x0 + 1]
-    b = w00 * gb[y0, x0] + w01 * gb[y0, x0 + 1] + w10 * gb[y0 + 1, x0] + w11 * gb[y0 + 1, x0 + 1]
-    return a, b
-
-
 def potential_image(pot: np.ndarray) -> np.ndarray:
     """The potential (H, W) as a grey RGB image, edges (its ravines) dark, as in the paper's
     Fig. 7b."""

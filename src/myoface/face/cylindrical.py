@@ -146,11 +146,6 @@ class CylindricalMaps:
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(den > 1e-9, num / np.maximum(den, 1e-12), np.nan)
 
-    def sample_rgb(self, theta_rad, y_mm) -> np.ndarray:
-        """Colour (N, 3) float in [0, 255] at angles/heights, bilinear."""
-        row, col = self.to_cells(theta_rad, y_mm)
-        return _bilinear(self.rgb.astype(np.float64), row, col)
-
     def uv_of(self, theta_rad, y_mm) -> np.ndarray:
         """Texture coordinates (N, 2) into :attr:`rgb` (v = 0 at the bottom row's edge)."""
         u = (np.asarray(theta_rad) + np.pi) / (2 * np.pi)
