@@ -133,7 +133,7 @@ def test_analyze_then_resynth(smile_video, tmp_path, capsys):
     # the contours are drawn on every frame, in yellow (every frame was measured)
     assert min(n_marks) > 0.8 * n_marks[0], n_marks
     # the paper's fiducial scheme, on request: a different estimate that follows the smile
-    # (less accurate than the curve fit, and less since issue 19 made the zygomaticus pull
+    # (less accurate than the curve fit, and less since the recalibrated muscles made the zygomaticus pull
     # the corners out and back as much as up: correlation 0.72 measured), to a correlation
     # that 7 frames of noise reach by chance less than once in 20 (r > 0.7, one-sided)
     out2 = tmp_path / "ana_fid"

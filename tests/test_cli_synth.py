@@ -115,7 +115,7 @@ def test_synth_png_from_aus(model, tmp_path, capsys):
 
 
 def test_synth_without_control_renders_the_neutral_face(model, tmp_path, capsys):
-    """No expression, AU, muscle, viseme or timeline: the face at rest (issue 19 item 6), as
+    """No expression, AU, muscle, viseme or timeline: the face at rest, as
     the renderer draws the rest state (PNG is lossless: at most a level of rounding)."""
     import imageio.v3 as iio
 

@@ -99,7 +99,7 @@ def test_jaw_opens_the_lips(fm):
 @pytest.mark.xfail(
     strict=True,
     raises=AssertionError,
-    reason="known regression (issue 19's recalibrated muscles): the stronger muscles invert "
+    reason="known regression (the recalibrated muscles of 2026-11): the stronger muscles invert "
     "fat and muscle-layer prisms at the mouth corners and beside the nose (up to 29 in AU12, "
     "97 in disgust), and the equilibrium's asymmetry grows to 0.95 mm, 8% of the largest "
     "displacement (0.33 mm before)",

@@ -1,5 +1,5 @@
 """Property tests of every parser of user input: whatever bytes, text or values come in, only a
-MyofaceError comes out (GUIDE §4), never a bare ValueError, TypeError, UnicodeDecodeError, ...
+MyofaceError comes out (the project's rule for bad input: one clear error), never a bare ValueError, TypeError, UnicodeDecodeError, ...
 
 Timelines, contractions CSVs, initial-contour JSON, landmark files, muscle files, AU keys,
 intensities and the ``--au`` / ``--muscle`` requests of ``myoface synth``.

@@ -19,14 +19,9 @@ from myoface.analysis.camera import (
     rotmat,
     rotvec,
 )
-from myoface.analysis.modelfit import (
-    FitSettings,
-    ModelFit,
-    confounded_muscles,
-    lid_gains,
-    model_error_weights,
-)
+from myoface.analysis.modelfit import ModelFit
 from myoface.analysis.trackers.landmark_fit import FitMeasurement
+from myoface.analysis.weights import FitSettings, confounded_muscles, lid_gains, model_error_weights
 
 CAMERA = PinholeCamera.for_image(640, 480, 40.0)
 #: exact landmarks: the fit is told they are 20 times more precise than MediaPipe's, so that
@@ -196,7 +191,7 @@ def test_the_persons_neutral_carries_no_rigid_motion(fm):
     nose by 0.15 degrees and shifts it 0.12 mm). After it the identity offset has no rotation
     or translation over the gauge vertices (the nose, which no muscle moves), and the
     calibrated pose is near the true one."""
-    from myoface.analysis.modelfit import gauge_vertices
+    from myoface.analysis.weights import gauge_vertices
 
     v = fm.face.vertices
     lower = 1.0 / (1.0 + np.exp((v[:, 1] + 45.0) / 5.0))  # ~1 below the mouth, ~0 at the nose

@@ -1,5 +1,5 @@
 """The analysis never aborts a video: a face that leaves the frame and comes back, a hand over
-the mouth, a turned head, a face that appears late (issue 21, item 1)."""
+the mouth, a turned head, a face that appears late."""
 
 import csv
 import json

@@ -1,4 +1,4 @@
-"""``myoface analyze`` streams (issue 21, items 2 and 5): each frame's CSV row is in the file
+"""``myoface analyze`` streams: each frame's CSV row is in the file
 before the next frame is read, an interrupted run keeps its rows in a valid CSV and leaves no
 temporary file, what it keeps is a few bytes a frame, and odd frame sizes are padded, not cut."""
 

@@ -1,4 +1,4 @@
-"""The action units' range of motion against the published human values (issue 19, item 1)."""
+"""The action units' range of motion against the published human values."""
 
 import copy
 import tomllib

@@ -1,4 +1,4 @@
-"""The face at the jaw's full opening (issue 19: a human range of motion): the tissue holds."""
+"""The face at the jaw's full opening (a human range of motion): the tissue holds."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The zygomatic major's smile (AU12; issue 19: the resynthesized face must smile as much as the
+"""The zygomatic major's smile (AU12; the resynthesized face must smile as much as the
 person): it raises the mouth corners, not the lower lip's centre and the chin."""
 
 import numpy as np
@@ -31,7 +31,7 @@ def test_the_corners_rise_and_draw_out(smile):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="known (tissue/muscle level, issue 19): the lower lip is a free band between the "
+    reason="known (tissue/muscle level): the lower lip is a free band between the "
     "corners, so the zygomatic majors lift its centre 6.0 mm (0.79 of the corners' 7.6) and "
     "the chin 2.4 mm up and 2.7 mm forward; on the sample video the person's lower lip "
     "centre drops ~2 mm and the chin rises ~1.6 mm while the corners rise 10.7 mm, so the "

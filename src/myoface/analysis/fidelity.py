@@ -1,4 +1,4 @@
-"""How much of a video's expression motion the resynthesized model reproduces (issue 18 item 4).
+"""How much of a video's expression motion the resynthesized model reproduces.
 
 A measure with a detector that is not the fit: MediaPipe's face mesh is run on the input video
 and on the model's resynthesis of it (the model driven by the analysis' contractions, rendered
@@ -28,7 +28,7 @@ front on), and the two are compared point by point:
 
 The displacements are measured in the face's frontal plane (x across, y up; ``dims=2``):
 MediaPipe's monocular depth scatters by more than an expression moves the skin towards the
-camera (:class:`~myoface.analysis.modelfit.FitSettings` weighs it a tenth of
+camera (:class:`~myoface.analysis.weights.FitSettings` weighs it a tenth of
 x and y), and it would count that noise as unexplained motion. ``dims=3`` keeps it.
 
 Point indices are those of MediaPipe's 468-point face mesh, which is the default face's

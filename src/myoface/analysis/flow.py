@@ -23,7 +23,7 @@ taken out), so that shading which does not move with the skin pulls the flow les
 crop around the face is processed. The depth (MediaPipe's z) is kept as detected.
 
 :class:`FlowDetector` wraps any detector (``detect(frame) -> (N, 3) | None``, ``close()``)
-with a :class:`FlowRefiner`; :attr:`~myoface.analysis.modelfit.FitSettings.flow` (``myoface
+with a :class:`FlowRefiner`; :attr:`~myoface.analysis.weights.FitSettings.flow` (``myoface
 analyze --tracker landmarks --flow``) turns it on for the 3-D fit. It is off by default: on
 the closed loop's renders it cuts the skin error by two thirds, on the real sample video it
 lowers the fidelity (the attribute's docstring has the numbers).

@@ -16,9 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from myoface.errors import MyofaceValueError
-
-# TEMPORARY (issue 29 under way): moved to myoface.facemesh, re-exported until its callers move
-from myoface.facemesh import PIP_HINT, FaceMeshDetector, mediapipe_available  # noqa: F401
+from myoface.facemesh import FaceMeshDetector
 
 #: sections the automatic initialisation provides
 AUTO_SECTIONS = (

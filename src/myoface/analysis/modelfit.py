@@ -59,7 +59,6 @@ from scipy.sparse.linalg import spsolve
 from myoface.analysis._fitkernels import vertex_normals
 from myoface.analysis.camera import HeadPose, PinholeCamera, check_points, initial_pose
 from myoface.analysis.estimate import skin_response
-from myoface.analysis.landmarks import rigid_vertices
 from myoface.analysis.solver import bounded_gauss_newton
 from myoface.analysis.synthesis import LandmarkSynthesis
 from myoface.analysis.terms import (
@@ -68,6 +67,14 @@ from myoface.analysis.terms import (
     SparsityPrior,
     TemporalPrior,
     pixel_mm,
+)
+from myoface.analysis.weights import (
+    FitSettings,
+    gauge_vertices,
+    landmark_weights,
+    laplacian,
+    lid_gains,
+    model_error_weights,
 )
 from myoface.errors import MyofaceValueError
 from myoface.face.personal import fit_similarity_3d
@@ -86,205 +93,6 @@ NEUTRAL_PERCENTILE = 90
 NEUTRAL_MARGIN_MM = 1.0
 #: ... at most this many frames around it (within the margin too): their noise averages out
 CALIBRATION_FRAMES = 5
-
-
-@dataclass(frozen=True)
-class FitSettings:
-    """The fit's weights, each a standard deviation of the term it scales.
-
-    Attributes
-    ----------
-    landmark_sigma_mm : MediaPipe's scatter of a point about its vertex in the image plane, mm
-        on the face (measured on faces rendered by myoface: median 1.2 mm frontal, ~2 mm at
-        30 degrees of yaw).
-    depth_sigma_mm : the same for MediaPipe's relative depth z: about a linear fit to the true
-        depth it scatters by 1.3-2.2 mm, but it follows a turning head less than x and y do
-        (on the closed loop, weighing it like x, y / 3 made the skin error 1.5 mm, like
-        x, y / 10 1.1 mm), so it only keeps the depth of the pose from being ill-posed.
-    oval_weight : weight of the face oval's points (the mesh's outer rim), which MediaPipe
-        puts on the face's silhouette, not on fixed skin, as the head turns.
-    model_error : the model's own error at a point, as a fraction of the largest skin
-        displacement any one muscle (or the jaw) makes there at full contraction
-        (:func:`model_error_weights`): a point the muscles move far (lips, cheeks, chin) is
-        known less well than one no muscle moves (eye corners, nose bridge), because the
-        model's muscles and tissue are an approximation of the person's. Without it, what an
-        expression moves that the model cannot (a broad smile's cheeks bulging up and out)
-        is explained by moving the head: on the sample video's smile the head rose ~1.2 mm
-        against its eye corners and nose bridge, the chin then seemed to drop, and the jaw
-        opened 0.13 rad behind closed teeth. 0: every point is known to
-        :attr:`landmark_sigma_mm`.
-    rate_per_s : temporal prior: a contraction changes by about this much per second (1 sd);
-        a fast expression goes from 0 to 1 in a quarter of a second.
-    rotation_rate_deg_per_s, translation_rate_mm_per_s : the same for the head pose (weak: a
-        head turns fast; they only keep a frame with too few points well-posed).
-    magnitude_sigma : Gaussian prior on each contraction (about 0).
-    sparsity : L1 prior, in squared standard deviations of the landmarks per unit contraction:
-        a muscle must lower the landmark cost by this much per unit before it is used.
-    huber : a landmark residual beyond this many sigmas weighs less (Huber). What the model
-        cannot make (a broad smile's cheeks, a person's own way of moving) leaves residuals
-        of a few sigmas at many points at once; weighed in full they pull the head pose and
-        the other muscles. On single_face.mp4 (2026-12-01): 3.0 gave analysis.fidelity 0.703
-        and synth.smile_gain 0.672, 1.5 0.765 and 0.709 (the synthetic closed loop unchanged
-        within its tolerance).
-    tracking : MediaPipe's face mesh in its tracking (video) mode, which finds each frame's
-        face from the last frame's points, instead of detecting it on every frame (image
-        mode; the default). Tracking costs ~3 ms less CPU a frame (5.5 vs 8.5 on the sample
-        video), but it is biased where the face changes shape fast: on single_face.mp4's smile
-        it puts the chin 3.1 mm and the lower lip 4.1 mm lower than detection does (the
-        tracked box lags the opening mouth, as other trackers' users report, e.g. OpenFace
-        issue 552, MediaPipe issue 2990), and the fit then opens the jaw and pulls the lower
-        lip down while the chin rises. Detected on every frame, the points scatter a little
-        more; the fit's temporal prior takes that out.
-    flow : refine MediaPipe's points by optical flow (:mod:`myoface.analysis.flow`: each
-        point tracked by Lucas-Kanade from the first frame with a face, kept where the track
-        is sure), because MediaPipe reads an expression's motion short. Off by default: it
-        helps where the skin's texture moves with the skin and the face keeps its look, and
-        hurt on the real video we have. Measured 2026-12-01 (BENCHMARKS.md; the flow on /
-        off): on the head-motion closed loop, head still, skin error 0.34 / 1.03 mm, median
-        RMSE 0.045 / 0.100, worst correlation 0.99 / 0.61; head moving, skin 1.26 / 1.53 mm,
-        head angles 1.58 / 2.79 degrees, worst RMSE 0.38 / 0.31. On single_face.mp4,
-        analysis.fidelity 0.84-0.85 / 0.87 and synth.smile_gain 0.72 / 0.79: on a real smile the flow follows
-        the cheek's skin beside the mouth corner, which moves less than the corner MediaPipe
-        finds on the input and on the resynthesis. It costs ~7 ms a frame (head still) to
-        ~17 ms (head turning), on the detector's thread.
-    iterations : Gauss-Newton steps per frame (fewer when converged).
-    refine : relaxes of the tissue per frame at the estimate (0: the linear response only).
-    relax_step_mm : with the relax deferred (a video, :meth:`ModelFit.fit` ``deferred=True``):
-        the tissue is relaxed again only once the skin the estimate makes has moved this far
-        (mm, at any vertex, by the linear model) from where the tissue was last relaxed; in
-        between, the model's response Broyden-corrected at the last relax stands in for the
-        tissue. Its error grows with the square of the step: a frame behind on a ramp that
-        moves the lips several mm a frame it is ~0.1 mm RMS (test_fitkernels), a tenth of
-        :attr:`landmark_sigma_mm`. A relax costs more CPU than MediaPipe on a frame, and
-        MediaPipe's scatter moves the estimate's skin by ~1 mm from frame to frame. On
-        single_face.mp4: 0 (a relax whenever the estimate moves) 72 relaxes, analysis.fidelity
-        0.694; 0.5 mm 59, 0.697; 1 mm 40, 0.694; 2 mm 26, 0.703.
-    synthesis_rounds : rounds of analysis by synthesis per frame (and at calibration) when the
-        fit is given a :class:`LandmarkSynthesis`.
-    """
-
-    landmark_sigma_mm: float = 1.0
-    depth_sigma_mm: float = 10.0
-    oval_weight: float = 0.2
-    model_error: float = 0.1
-    rate_per_s: float = 4.0
-    rotation_rate_deg_per_s: float = 180.0
-    translation_rate_mm_per_s: float = 300.0
-    magnitude_sigma: float = 1.0
-    sparsity: float = 4.0
-    huber: float = 1.5
-    tracking: bool = False
-    flow: bool = False
-    iterations: int = 8
-    refine: int = 1
-    relax_step_mm: float = 2.0
-    #: with a :class:`LandmarkSynthesis`: rounds of analysis by synthesis per frame
-    synthesis_rounds: int = 2
-    #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
-    #: sd) and the offset itself (mm, 1 sd)
-    identity_edge_sigma_mm: float = 1.0
-    identity_sigma_mm: float = 10.0
-
-
-# ------------------------------------------------------------------ the model's structure
-
-
-def landmark_weights(face, oval_weight: float = FitSettings.oval_weight) -> np.ndarray:
-    """Per-vertex base weights (V,): 1, ``oval_weight`` on the face oval (the mesh's outer
-    boundary loop, which MediaPipe places on the silhouette)."""
-    w = np.ones(face.n_vertices)
-    loops = face.boundary_loops
-    if loops:
-        w[loops[0]] = oval_weight
-    return w
-
-
-def model_error_weights(response, model_error: float = FitSettings.model_error,
-                        sigma_mm: float = FitSettings.landmark_sigma_mm) -> np.ndarray:  # fmt: skip
-    """Per-vertex weights (V,) for the model's own error (:attr:`FitSettings.model_error`):
-    ``1 / (1 + (model_error * e / sigma_mm)^2)`` with ``e`` the largest displacement (mm) any
-    one muscle's full contraction makes at the vertex (``response`` (V, 3, M): mm per unit
-    contraction, :func:`~myoface.analysis.estimate.skin_response`). That is the landmark's
-    variance ``sigma_mm^2`` grown by the model's ``(model_error * e)^2``: 1 where no muscle
-    moves the skin, about 0.5 where a muscle moves it ``sigma_mm / model_error`` (10 mm by
-    default)."""
-    if not model_error >= 0:
-        raise MyofaceValueError(f"model_error must be >= 0; got {model_error}")
-    r = np.asarray(response, dtype=np.float64)
-    e = np.linalg.norm(r, axis=1).max(axis=1) if r.shape[2] else np.zeros(len(r))
-    return 1.0 / (1.0 + (model_error * e / sigma_mm) ** 2)
-
-
-#: the person's eye opening over the model's (:func:`lid_gains`) is kept within these bounds: a
-#: tracker that finds an eye closed (or wide open) at calibration should not rescale its lids
-#: beyond what faces differ by
-LID_GAIN_RANGE = (0.5, 2.0)
-
-
-def lid_gains(model, shape) -> dict[int, tuple[float, np.ndarray]]:
-    """How much further the lids of ``shape`` (V, 3) mm, head frame (the person's neutral),
-    move than the model's for the same contraction: ``{muscle index: (gain, vertices)}`` for
-    each lid muscle (:mod:`myoface.muscles.lids`), ``gain`` the eye's opening (mean height of
-    the upper margin over the lower, between the canthi) in ``shape`` over the model's, within
-    :data:`LID_GAIN_RANGE`, and ``vertices`` those the lids move.
-
-    A lid muscle's contraction is a fraction of the eye's own opening (at 1 the margins meet),
-    so its skin displacement is proportional to the opening: the model's response, measured on
-    the model's eyes, is the person's divided by this gain."""
-    lids = getattr(model, "eyelids", None)
-    out: dict[int, tuple[float, np.ndarray]] = {}
-    if lids is None:
-        return out
-    rest = model.skin_vertices()
-    shape = np.asarray(shape, dtype=np.float64)
-    for eye in lids.eyes.values():
-
-        def opening(x, eye=eye):
-            up, lo = eye.upper[1:-1], eye.lower[1:-1]
-            return float(x[up, 1].mean() - x[lo, 1].mean())
-
-        ref = opening(rest)
-        if not ref > 0:
-            continue
-        gain = float(np.clip(opening(shape) / ref, *LID_GAIN_RANGE))
-        for i in (eye.raise_i, eye.close_i):
-            if i is not None:
-                out[int(i)] = (gain, np.asarray(eye.vertices))
-    return out
-
-
-def confounded_muscles(model, threshold: float = 0.95, ids=None) -> list[tuple[str, float, str]]:
-    """Muscles the skin alone cannot tell apart from the others: ``(muscle, R2, nearest)``, R2
-    the share of the muscle's skin response (every vertex, x, y, z) that the other muscles'
-    responses explain (a variance inflation of 1 / (1 - R2)), ``nearest`` the muscle whose
-    response is most like its own; sorted, most confounded first."""
-    ids = tuple(model.ids if ids is None else ids)
-    a = skin_response(model, ids).reshape(-1, len(ids))
-    g = a.T @ a
-    gi = np.linalg.pinv(g)
-    r2 = 1.0 - 1.0 / np.maximum(np.diag(g) * np.diag(gi), 1.0)
-    norm = np.linalg.norm(a, axis=0)
-    cos = g / np.maximum(np.outer(norm, norm), 1e-12)
-    np.fill_diagonal(cos, -np.inf)
-    out = [(ids[i], float(r2[i]), ids[int(np.argmax(cos[i]))]) for i in range(len(ids))]
-    return sorted([o for o in out if o[1] >= threshold], key=lambda o: -o[1])
-
-
-def gauge_vertices(model) -> np.ndarray:
-    """The vertices whose fit defines the head frame of a person's neutral (see
-    :meth:`ModelFit._gauge`): those no muscle moves
-    (:func:`~myoface.analysis.landmarks.rigid_vertices`: the nose's bridge and body)."""
-    return np.asarray(rigid_vertices(model))
-
-
-def _laplacian(face) -> sparse.csr_matrix:
-    """The mesh graph's Laplacian (V, V): sum over edges of (e_a - e_b)(e_a - e_b)^T."""
-    e = face.edges
-    n = face.n_vertices
-    rows = np.concatenate([e[:, 0], e[:, 1], e[:, 0], e[:, 1]])
-    cols = np.concatenate([e[:, 0], e[:, 1], e[:, 1], e[:, 0]])
-    vals = np.concatenate([np.ones(2 * len(e)), -np.ones(2 * len(e))])
-    return sparse.csr_matrix((vals, (rows, cols)), shape=(n, n))
 
 
 # ------------------------------------------------------------------ results
@@ -733,7 +541,7 @@ class ModelFit:
         nv = len(self.neutral)
         ident = np.zeros_like(self.neutral)
         poses = [initial_pose(self.neutral, p, self.camera) for p in frames]
-        lap = _laplacian(self.model.face)
+        lap = laplacian(self.model.face)
         reg = sparse.kron(
             lap / s.identity_edge_sigma_mm**2 + sparse.eye(nv) / s.identity_sigma_mm**2,
             sparse.eye(3),

@@ -39,11 +39,11 @@ import numpy as np
 
 from myoface._threads import run_ahead
 from myoface.analysis.initfiles import load_init
-from myoface.analysis.modelfit import FitSettings
 from myoface.analysis.trackers.base import KEEP_BYTES
 from myoface.analysis.trackers.landmark_fit import LANDMARK_ESTIMATORS, FitTracker
 from myoface.analysis.trackers.landmark_paper import PaperLandmarkTracker
 from myoface.analysis.trackers.snakes import SnakeTracker
+from myoface.analysis.weights import FitSettings
 from myoface.errors import MyofaceValueError
 from myoface.facemesh import DETECT_AHEAD_FRAMES
 
@@ -76,9 +76,9 @@ def make_analyzer(
     muscles in a 2-D head frame
     (:class:`~myoface.analysis.trackers.landmark_paper.PaperLandmarkTracker`). ``init`` must
     be None. ``refine`` defaults to 1 for the snakes, 0 for the paper's landmark scheme and
-    :attr:`~myoface.analysis.modelfit.FitSettings.refine` for the fit; ``estimator`` for the
+    :attr:`~myoface.analysis.weights.FitSettings.refine` for the fit; ``estimator`` for the
     snakes: ``"curves"`` (default) or ``"fiducials"``. ``flow``: the 3-D fit's points refined
-    by optical flow (:attr:`~myoface.analysis.modelfit.FitSettings.flow`).
+    by optical flow (:attr:`~myoface.analysis.weights.FitSettings.flow`).
     """
     if flow and tracker != "landmarks":
         raise MyofaceValueError(

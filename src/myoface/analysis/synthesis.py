@@ -115,7 +115,7 @@ class LandmarkSynthesis:
     size : (width, height) of the frames, pixels.
     detector : as for :class:`~myoface.analysis.trackers.landmark_fit.FitTracker` (default: MediaPipe's face mesh, in the mode
         ``tracking`` says: the synthetic frames are observed like the real ones).
-    tracking : :attr:`~myoface.analysis.modelfit.FitSettings.tracking` of the fit.
+    tracking : :attr:`~myoface.analysis.weights.FitSettings.tracking` of the fit.
     """
 
     def __init__(self, face, camera: PinholeCamera, size, detector=None, tracking=False):

@@ -24,7 +24,7 @@ detector, optical flow, pixels) is adding a term. Terms:
 - :class:`MagnitudePrior`: a weak Gaussian on each contraction (about 0);
 - :class:`SparsityPrior`: an L1 prior on the contractions (each in [0, 1], so it is linear).
 
-Their weights (:class:`~myoface.analysis.modelfit.FitSettings`) say why each is what it is.
+Their weights (:class:`~myoface.analysis.weights.FitSettings`) say why each is what it is.
 """
 
 from __future__ import annotations
@@ -89,7 +89,7 @@ class LandmarkTerm:
     points : (V, 3) x, y pixels (column, row) and z relative depth (pixels; NaN: not used).
     camera : PinholeCamera.
     weights : (V,) per-vertex weights ``w`` (fixed over the frame's steps).
-    sigma_mm, depth_sigma_mm, huber : :class:`~myoface.analysis.modelfit.FitSettings`'
+    sigma_mm, depth_sigma_mm, huber : :class:`~myoface.analysis.weights.FitSettings`'
         ``landmark_sigma_mm``, ``depth_sigma_mm`` and ``huber``.
     """
 
@@ -173,7 +173,7 @@ class TemporalPrior:
 
     ``prev``: the previous frame's fit (its ``pose`` and ``contractions``); ``dt_s``: the
     frame interval; ``rotation_rate_deg_per_s``, ``translation_rate_mm_per_s``,
-    ``rate_per_s``: the rates (:class:`~myoface.analysis.modelfit.FitSettings`)."""
+    ``rate_per_s``: the rates (:class:`~myoface.analysis.weights.FitSettings`)."""
 
     def __init__(self, prev, dt_s: float, rotation_rate_deg_per_s: float,
                  translation_rate_mm_per_s: float, rate_per_s: float):  # fmt: skip

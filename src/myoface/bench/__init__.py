@@ -1,4 +1,5 @@
-"""``myoface bench``: user-facing benchmarks (contract in the project's BENCH.md).
+"""``myoface bench``: user-facing benchmarks, with stable names, units and a JSON record
+(:class:`BenchRecord`), so that runs on different machines and releases can be compared.
 
 Each module ``myoface.bench.<area>`` registers benchmarks with :func:`benchmark`. A benchmark
 function takes ``quick: bool`` and returns a :class:`Measurement`. Set-up (models, meshes, JIT
@@ -31,7 +32,9 @@ class Measurement:
 
 @dataclass
 class BenchRecord:
-    """One row of ``myoface bench --json`` (schema fixed by BENCH.md)."""
+    """One row of ``myoface bench --json``: the benchmark's name, its median ``value`` over
+    ``n`` repeats in ``unit``, which way is better, the peer measured in the same run (if
+    any) and its median, and the machine."""
 
     name: str
     value: float
@@ -44,7 +47,7 @@ class BenchRecord:
     detail: dict | None = None
 
     def to_dict(self) -> dict:
-        """The record in BENCH.md's schema (the breakdown ``detail`` is not part of it)."""
+        """The record as ``--json`` writes it (the breakdown ``detail`` goes to its own file)."""
         d = asdict(self)
         d.pop("detail")
         return d

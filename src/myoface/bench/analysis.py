@@ -1,4 +1,4 @@
-"""Benchmarks of the analysis loop (names fixed by BENCH.md)."""
+"""Benchmarks of the analysis loop (names stable across releases)."""
 
 from __future__ import annotations
 
@@ -171,7 +171,7 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     run on a worker thread ahead of the fit). Peer: MediaPipe's face mesh alone on the same
     decoded frames in its fastest mode (video mode: tracking from frame to frame, ~3 ms CPU a
     frame less than detecting; the fit detects, see
-    :attr:`~myoface.analysis.modelfit.FitSettings.tracking`), in the same run; the tracker includes
+    :attr:`~myoface.analysis.weights.FitSettings.tracking`), in the same run; the tracker includes
     MediaPipe, so the ratio is the cost of myoface's calibration and fit and of detection over
     tracking (the detail gives the share of a frame that is not MediaPipe's, and the same with ``--refine 0``, the linear response only; and per frame the
     last timed pass's wall and process CPU time of each, ours by stage, with the ratio of the
@@ -220,14 +220,14 @@ def bench_analysis_fps_snakes(quick: bool) -> Measurement:
     return Measurement(ours, n, peer)
 
 
-#: issue 18's targets for analysis.fidelity: overall and in every region
+#: the targets for analysis.fidelity: overall and in every region
 FIDELITY_TARGET = {"overall": 0.85, "region": 0.7}
 
 
 @benchmark("analysis.fidelity", "-", higher_is_better=True)
 def bench_analysis_fidelity(quick: bool) -> Measurement:
-    """How much of the sample video's expression motion the resynthesis reproduces (issue 18
-    item 4, :mod:`myoface.analysis.fidelity`): ``single_face.mp4`` (72 frames, neutral ->
+    """How much of the sample video's expression motion the resynthesis reproduces
+    (:mod:`myoface.analysis.fidelity`): ``single_face.mp4`` (72 frames, neutral ->
     smile -> neutral; 36 with ``quick``) analysed as ``myoface analyze --tracker landmarks``
     does (the 3-D fit), the contractions resynthesized on the person's own face (made with
     ``face_from_photo`` from the calibration frame) front on, and MediaPipe's face mesh run
@@ -237,7 +237,7 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
     explained fraction over every expressive point, 1 - sum|d_in - d_out|^2 / sum|d_in|^2
     (1: the same motion, 0: no better than a still face). The detail gives every region's
     explained fraction, gain (< 1: the model moves less than the face) and correlation, and
-    the issue's targets (0.85 overall, 0.7 per region), and the explained fractions with
+    the targets (0.85 overall, 0.7 per region), and the explained fractions with
     ``--flow`` (MediaPipe's points refined by optical flow; not in a quick run)."""
     import json
     import tempfile

@@ -6,7 +6,7 @@ not there), driven through a programme of the six universal expressions (every m
 use moves; overlapping expressions mix by the FACS rule), moved along a smooth 3-D head
 trajectory (yaw +-30 deg, pitch and roll +-15 deg, translation) in front of a perspective camera
 at 640x480, rendered, and analysed as a video would be: MediaPipe's face mesh (in the mode the
-analysis runs it, :attr:`~myoface.analysis.modelfit.FitSettings.tracking`) on every frame, then the
+analysis runs it, :attr:`~myoface.analysis.weights.FitSettings.tracking`) on every frame, then the
 3-D fit of the model (:class:`~myoface.analysis.modelfit.ModelFit`), its calibration frame chosen
 automatically. The recovered contractions and head pose are compared
 with the truth; so is the skin the recovered contractions produce (head frame).
@@ -196,7 +196,7 @@ def detect_sequence(frames) -> tuple[list, np.ndarray]:
     (None without a face) and the seconds each took."""
     import time
 
-    from myoface.analysis.modelfit import FitSettings
+    from myoface.analysis.weights import FitSettings
     from myoface.facemesh import FaceMeshDetector
 
     points, secs = [], []
@@ -210,7 +210,7 @@ def detect_sequence(frames) -> tuple[list, np.ndarray]:
 
 def flow_sequence(frames, points) -> tuple[list, np.ndarray]:
     """MediaPipe's ``points`` refined by optical flow as the analysis does
-    (:class:`~myoface.analysis.flow.FlowRefiner`, :attr:`~myoface.analysis.modelfit.FitSettings.flow`),
+    (:class:`~myoface.analysis.flow.FlowRefiner`, :attr:`~myoface.analysis.weights.FitSettings.flow`),
     and the seconds each frame's refinement took."""
     import time
 
@@ -308,15 +308,15 @@ def _run(quick: bool, still: bool, synthesis: bool = False,
     """The loop (cached per run): 90 frames (16 with ``quick``) at 30 fps; the default
     estimator (the 3-D fit), or with ``synthesis`` the fit with analysis by synthesis;
     MediaPipe's points refined by optical flow or not (``flow``; default: as the analysis,
-    :attr:`~myoface.analysis.modelfit.FitSettings.flow`)."""
-    from myoface.analysis.modelfit import FitSettings
+    :attr:`~myoface.analysis.weights.FitSettings.flow`)."""
+    from myoface.analysis.weights import FitSettings
 
     flow = FitSettings().flow if flow is None else bool(flow)
     key = (bool(quick), bool(still), bool(synthesis), flow)
     if key not in _cache:
         import time
 
-        from myoface.analysis.modelfit import confounded_muscles
+        from myoface.analysis.weights import confounded_muscles
 
         fm, truth, poses, skins, points, t_det = _sequence(quick, still, flow)
         t0 = time.perf_counter()

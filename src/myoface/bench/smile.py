@@ -1,5 +1,5 @@
 """``synth.smile_gain``: does the person's own face, driven by what the analysis measured, smile
-as widely as the person did (issue 19, "What must be shown")?"""
+as widely as the person did?"""
 
 from __future__ import annotations
 
@@ -69,7 +69,7 @@ def _component_ratios(a: np.ndarray, b: np.ndarray) -> dict:
     return out
 
 
-#: issue 19's target range for the ratio
+#: the target range for the ratio: the person's smile within 15 %
 SMILE_GAIN_TARGET = (0.85, 1.15)
 
 #: the expressions rendered to measure how much of a render's motion MediaPipe reads
@@ -132,7 +132,7 @@ def bench_smile_gain(quick: bool) -> Measurement:
     (:mod:`myoface.analysis.fidelity`). Value: the median over the smile's apex frames (the
     input's corners at 90 % or more of their largest displacement) of the resynthesis'
     displacement over the video's: 1 when the model smiles as widely as the person. Target
-    (issue 19): within [0.85, 1.15]. The detail: the apex frames, both displacements, the
+    within [0.85, 1.15]. The detail: the apex frames, both displacements, the
     cosine between their directions, the ratio across the face and up, and MediaPipe's gain on
     renders of the same face (:func:`tracker_gain`): the resynthesis is measured through
     MediaPipe, so where it reads a render's motion short, the ratio is short by as much."""

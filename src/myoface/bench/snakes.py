@@ -1,4 +1,4 @@
-"""Benchmarks of the snakes (names fixed by BENCH.md), with scikit-image's active_contour as the
+"""Benchmarks of the snakes (names stable across releases), with scikit-image's active_contour as the
 peer on the same synthetic task in the same run."""
 
 from __future__ import annotations

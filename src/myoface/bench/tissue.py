@@ -1,4 +1,4 @@
-"""Benchmarks of the physics level (names fixed by BENCH.md)."""
+"""Benchmarks of the physics level (names stable across releases)."""
 
 from __future__ import annotations
 

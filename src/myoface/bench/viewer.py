@@ -1,4 +1,4 @@
-"""Benchmark of the viewer (name fixed by BENCH.md)."""
+"""Benchmark of the viewer (name stable across releases)."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def bench_update(quick: bool) -> Measurement:
 def bench_drag(quick: bool) -> Measurement:
     """A slider dragged smoothly from 0 to 1 and back, one GUI event every 1/60 s (as a browser
     sends them), for 2 s: new meshes pushed to the scene per second during the drag (the
-    issue's target is 30+); server running, no client."""
+    target is 30 or more: a smooth drag); server running, no client."""
     try:
         from myoface.viewer.app import FaceViewer
     except ImportError:  # pragma: no cover - viser missing

@@ -112,7 +112,7 @@ from distant rows (no change), the back substitution as a gather over a transpos
 faster), the rest factor's solve with contracted or fast-math arithmetic (no faster), no linear
 response for warm starts (slower: 3.35 vs 3.21 ms).
 
-Measured for issue 20 and did not pay (counts on the default face, surprise and three to five
+Measured (2026-11) and did not pay (counts on the default face, surprise and three to five
 other expressions from rest, the 25 frames of the smile): float32 lower blocks in the sweeps
 (5 CG iterations of the same system 0.88 -> 0.89 ms: latency-bound, not memory-bound); a
 sweep with the row's sums kept apart and pre-multiplied column indices (slower, 31 -> 44 us);

@@ -14,15 +14,11 @@ import numpy as np
 from myoface._threads import run_ahead
 from myoface.analysis.camera import POSE_COLUMNS, HeadPose, PinholeCamera
 from myoface.analysis.flow import FlowDetector
-from myoface.analysis.modelfit import (
-    CALIBRATION_WINDOW_S,
-    Calibration,
-    FitSettings,
-    ModelFit,
-)
+from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, Calibration, ModelFit
 from myoface.analysis.sections import SECTIONS, section_vertices
 from myoface.analysis.synthesis import LandmarkSynthesis
 from myoface.analysis.trackers.base import NOT_OBSERVED, Measurement, TrackerBase
+from myoface.analysis.weights import FitSettings
 from myoface.errors import MyofaceValueError
 from myoface.facemesh import DETECT_AHEAD_FRAMES, FaceMeshDetector, import_mediapipe
 
