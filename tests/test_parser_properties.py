@@ -7,9 +7,12 @@ intensities and the ``--au`` / ``--muscle`` requests of ``myoface synth``.
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 hypothesis = pytest.importorskip("hypothesis")
@@ -107,7 +110,7 @@ def test_timeline_of_any_values(scratch, doc):
 
 # ---------------------------------------------------------------------- contractions CSV
 
-csv_text = st.lists(
+csv_free_text = st.lists(
     st.lists(
         st.sampled_from(
             ["time_s", "time", "quality", "jaw", "zygomaticus_major_l", "frame", "ok", "lost"]
@@ -121,18 +124,70 @@ csv_text = st.lists(
 ).map("\n".join)
 
 
+#: the columns a contractions CSV may have, and cells, good and bad
+CSV_COLUMNS = ["frame", "time_s", "time", "quality", "jaw", "zygomaticus_major_l", "other"]
+csv_cells = st.sampled_from(["", "0", "0.5", "1", "1.5", "-0.1", "nan", "inf", "ok", "no_face"]) | (
+    st.floats(allow_nan=True, allow_infinity=True).map(repr)
+)
+
+
+@st.composite
+def csv_text(draw):
+    """CSV text shaped like a contractions CSV: a header of known and unknown columns, rows
+    of cells that are mostly valid (times rising, contractions in [0, 1]) and sometimes not."""
+    head = draw(st.lists(st.sampled_from(CSV_COLUMNS), min_size=1, max_size=6))
+    if draw(st.booleans()):
+        head = ["time_s", "quality", *[c for c in head if c not in ("time_s", "quality")]]
+    rows = []
+    t = 0.0
+    for _ in range(draw(st.integers(0, 5))):
+        t += draw(st.sampled_from([0.0, 0.04, 0.5]))
+        row = []
+        for c in head:
+            if c in ("time_s", "time") and draw(st.integers(0, 9)):
+                row.append(f"{t:g}")
+            elif c == "quality" and draw(st.integers(0, 9)):
+                row.append(draw(st.sampled_from(["ok", "no_face"])))
+            elif draw(st.integers(0, 3)):
+                row.append(f"{draw(st.floats(0, 1)):.3f}")
+            else:
+                row.append(draw(csv_cells))
+        if draw(st.integers(0, 9)) == 0:
+            row = row[: draw(st.integers(0, len(row)))] + draw(st.lists(csv_cells, max_size=2))
+        rows.append(row)
+    return "\n".join(",".join(r) for r in [head, *rows]) + "\n"
+
+
+CSV_IDS = ["jaw", "zygomaticus_major_l", "depressor_labii_inferioris_l"]
+
+
 @SETTINGS
-@given(data=st.binary(max_size=300) | csv_text.map(str.encode))
+@given(data=st.binary(max_size=300) | csv_free_text.map(str.encode) | csv_text().map(str.encode))
 def test_contractions_csv_of_any_bytes(scratch, data):
+    """Whatever the bytes, a MyofaceError or a table with the documented properties: finite,
+    non-decreasing times, one row of every muscle asked for per time (a muscle without a
+    column at rest, 0), one quality per row, and every measured ('ok') row finite in
+    [0, 1]."""
     import warnings
 
     from myoface.analysis.contractions_csv import read_contractions_csv
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # unknown columns are a warning, not an error
-        only_myoface_errors(
-            read_contractions_csv, _write(scratch, data, ".csv"), ["jaw", "zygomaticus_major_l"]
-        )
+        try:
+            times, table, quality = read_contractions_csv(_write(scratch, data, ".csv"), CSV_IDS)
+        except MyofaceError:
+            return
+    assert times.ndim == 1 and np.isfinite(times).all() and (np.diff(times) >= 0).all()
+    assert table.shape == (len(times), len(CSV_IDS)) and len(quality) == len(times)
+    ok = np.array([q == "ok" for q in quality], dtype=bool)
+    assert np.isfinite(table[ok]).all() and (table[ok] >= 0).all() and (table[ok] <= 1).all()
+    text = data.decode("utf-8-sig")  # (accepted: it was UTF-8 text)
+    rows = [r for r in csv.reader(io.StringIO(text, newline="")) if any(c.strip() for c in r)]
+    header = [c.strip() for c in rows[0]]
+    for j, m in enumerate(CSV_IDS):
+        if m not in header:
+            assert (table[:, j] == 0).all()
 
 
 # ----------------------------------------------------------------------- init contours JSON
@@ -150,9 +205,19 @@ SECTIONS = ["lips", "upper_lip", "chin", "brow_l", "nonsense"]
     .map(str.encode)
 )
 def test_init_json_of_any_bytes(scratch, data):
+    """Whatever the bytes, a MyofaceError or contours with the documented properties: known
+    section names, each a finite (K, 2) array of K >= 2 points."""
     from myoface.analysis.initfiles import load_init
+    from myoface.analysis.sections import SECTIONS as KNOWN
 
-    only_myoface_errors(load_init, _write(scratch, data, ".json"))
+    try:
+        got = load_init(_write(scratch, data, ".json"))
+    except MyofaceError:
+        return
+    assert got and set(got) <= set(KNOWN)
+    for a in got.values():
+        assert a.dtype == np.float64 and a.ndim == 2 and a.shape[1] == 2 and len(a) >= 2
+        assert np.isfinite(a).all()
 
 
 # ------------------------------------------------------------------------- landmark files

@@ -6,7 +6,6 @@ import json
 import numpy as np
 import pytest
 
-from myoface.analysis.contractions_csv import hold_last_measured
 from myoface.errors import MyofaceValueError
 from myoface.model import build_face_model
 from myoface.viewer.state import ViewerState
@@ -204,11 +203,3 @@ def test_presets_save_apply_and_load(tmp_path):
         st.apply_preset("nope")
     with pytest.raises(MyofaceValueError, match="name"):
         st.save_preset("  ")
-
-
-def test_hold_last_measured():
-    t = np.array([[np.nan, np.nan], [0.2, 0.3], [np.nan, np.nan], [0.4, 0.1]])
-    np.testing.assert_array_equal(
-        hold_last_measured(t), [[0, 0], [0.2, 0.3], [0.2, 0.3], [0.4, 0.1]]
-    )
-    assert np.isnan(t[0, 0])  # the input is left alone
