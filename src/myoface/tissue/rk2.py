@@ -26,6 +26,7 @@ References: Terzopoulos & Waters 1993, eq. (1)-(4) and Section III-B.
 from __future__ import annotations
 
 import platform
+import sys
 import threading
 import time
 import weakref
@@ -152,14 +153,19 @@ def _spin_pause(typingctx):
     return sig, codegen
 
 
+#: the C function that gives a waiting thread's core to another runnable thread: POSIX's
+#: ``sched_yield``, Windows' ``SwitchToThread`` (kernel32; both take nothing and return an int)
+_YIELD_SYMBOL = "SwitchToThread" if sys.platform == "win32" else "sched_yield"
+
+
 @intrinsic
 def _os_yield(typingctx):
-    """``sched_yield()``: give the core to another runnable thread (POSIX)."""
+    """Give the core to another runnable thread (:data:`_YIELD_SYMBOL`)."""
     sig = types.void()
 
     def codegen(context, builder, sig, args):
         fnty = ir.FunctionType(ir.IntType(32), [])
-        builder.call(cgutils.get_or_insert_function(builder.module, fnty, "sched_yield"), [])
+        builder.call(cgutils.get_or_insert_function(builder.module, fnty, _YIELD_SYMBOL), [])
         return context.get_dummy_value()
 
     return sig, codegen

@@ -40,103 +40,8 @@ third of the cost of a triangular solve with the factor (measured on the default
 287 iterations over the Newton systems of a cold and seven warm relaxes, 0.07 vs 0.21 ms per
 application). The Hessian assembly is then the largest cost of a Newton step.
 
-What did not pay (measured on the default face, surprise and a 25 fps smile): a reduced basis of
-the free nodes' displacements trained on 85 relaxes (each muscle at 0.5 and 1, five
-expressions, twenty random mixtures) — its singular values fall slowly (1e-2 of the largest at
-r = 30, 1e-4 at 85), it leaves 0.25-0.8 mm of a held-out equilibrium outside its span (0.07 of
-a 0.46 mm frame-to-frame move), and as a coarse space it lowers the condition number of the
-rest-factor-preconditioned Hessian only from 53 to 36 (r = 60) for a product H U of r
-matrix-vector products per Newton step; a rest stiffness with each spring at its mean training
-stiffness as the factor (condition 50 instead of 53); the rest factor combined with the
-Gauss-Seidel sweeps (fewer iterations, dearer ones); float32 triangular solves (no faster: the
-sweeps are bound by their dependencies, not by memory).
-
-Measured (default face, 2026-11-30, the working tree's muscle set, a machine shared with other
-work at load 7-12, thread CPU, against the solver before the extrapolated start, the fused
-springs' pass and the 32-bit tables, in the same run; a second run with the prisms' part
-fused into that pass too: 14.7 -> 13.5 ms cold, 6.7 -> 4.9 ms warm, its own gain within the
-noise): neutral -> surprise, 7 Newton steps,
-33 CG iterations, 6 assemblies (5 of the prisms' part) either way, 16.8 -> 15.5 ms median
-(11.7 -> 10.4 ms 10th percentile), 3.6e-4 mm from the L-BFGS reference; one frame of a 25 fps
-smile from the previous frame's equilibrium, means over 24 frames: 3.5 -> 2.8 Newton steps,
-15.5 -> 10.5 CG iterations, 2.8 -> 1.9 assemblies, 4.5 -> 3.8 energy passes, median 6.7 ->
-5.1 ms, at most 5.5e-3 mm (before 2.7e-3 mm) from the reference. Per pass (10th percentile,
-same conditions): energy and gradient 0.31 ms, springs' Hessian 0.33 ms on its own, prisms'
-0.5-0.75 ms, one CG iteration 0.09 ms (two triangular sweeps, each about as long as a product
-with H: bound by their memory traffic, not their flops).
-
-Issue 20 (the kernels in one place, CG's vector updates fused into one pass and ``E t`` into the
-back substitution, the extrapolated start compiled, the line search moving only the free nodes,
-the Hessian's arrays copied from the prisms' part instead of zeroed and summed, the diagonal
-blocks inverted by their adjugate): the same iterations, counts and equilibria as before;
-against the solver before it in the same process, alternating, thread CPU (2026-11-30 19:20,
-load 7 on 2 cores, the working tree's muscle set of the moment): neutral -> surprise median
-10.7 -> 10.3 ms (fastest of 31 9.7 -> 9.2 ms), 2.0e-4 mm from the reference either way; one
-frame of the smile, median over the 25 frames of each frame's median 4.1 -> 3.7 ms (of each
-frame's fastest 3.7 -> 3.5 ms), at most 5.5e-3 mm from the reference either way; with CG
-then updating x by each iteration's ``A^-T p`` (one sweep fewer per system), a second such run
-(19:33, load 7-8.5): 10.8 -> 9.9 ms from rest (fastest 9.2 -> 8.9 ms), 4.8 -> 4.2 ms a frame
-(of each frame's fastest 3.9 -> 3.85 ms), the same counts and distances; and with the
-springs' Hessian at the end of a step on the kept Hessian that does not end the solve made in
-the line search's pass (the next step needs it; it was a pass of its own), a third (19:38,
-load 6-7): from rest median 16.0 -> 14.9 ms (the load varied: 10th percentile 10.2 -> 9.4,
-fastest 9.9 -> 9.2 ms), a frame 4.0 -> 3.5 ms (of each frame's fastest 3.6 -> 3.0 ms), the
-same counts and distances. Per pass now
-(fastest of 1000, same load): energy and gradient 0.16-0.17 ms (the springs' half 0.1 ms), with
-the springs' Hessian 0.33 ms, with the prisms' too 0.65-0.83 ms, the prisms' Hessian alone
-0.37-0.39 ms, one CG iteration 0.07-0.09 ms (a sweep 0.03 ms). A warm relax is about one full
-pass, three energy passes, one springs' Hessian, ten CG iterations and three CG set-ups (a
-sweep each) and 0.2-0.3 ms of Python around it (:func:`~myoface.tissue.relax`'s
-copies and checks): 2.5-2.8 ms at these costs, so 2 ms needs fewer passes, not faster ones.
-
-Issue 20, second round (2026-11-30, 23:15-00:45): the free nodes numbered in reverse
-Cuthill-McKee order (:class:`~myoface.tissue.hessian.SymmetricPattern`), relax's start and the
-linear response compiled, the forward sweep without reassociation, the prisms' energy and
-gradient vectorised (:func:`~myoface.tissue.hessian.prism_energy_gradient`), the prisms'
-Hessian written out pair by pair (:func:`~myoface.tissue.hessian.add_one_prism_hessian`), the
-diagonal blocks accumulated in their upper triangle only
-(:func:`~myoface.tissue.hessian.symmetrize_diagonal`). Against the solver before it (commit
-28ebc64) in the same process, alternating, thread CPU (2026-12-01 00:01, load 3.3-4.4 on 2
-cores): neutral -> surprise median 9.6 -> 6.9 ms (6 Newton steps instead of 7, 28 CG iterations
-instead of 35; 1.2e-3 mm from the reference instead of 2.0e-4); a frame of the smile (every
-other of the 25 frames, five rounds) median of each frame's median 3.80 -> 3.34 ms, of each
-frame's fastest 3.57 -> 3.06 ms, at most 5.5e-3 mm from the reference either way (2.96 Newton
-steps and 11.4 CG iterations a frame instead of 2.84 and 10.7: the Gauss-Seidel sweeps in the
-new order). Per pass (fastest of 20, same load): the prisms' Hessian pass 364 -> 235 us, the
-full pass 565 -> 495 us, energy and gradient with the springs' Hessian 338 -> 294 us, the
-prisms' energy and gradient 74 -> 54 us, the forward sweep 28 -> 22 us. Did not pay: the
-springs' pass row by row with the row node's sums in registers (its energy-only loop is no
-longer vectorised: 40 -> 79 us), the phase chosen without a branch (slower), the springs' pass
-in vectorised chunks (74 -> 98 us: the gather and scatter dominate), the springs interleaved
-from distant rows (no change), the back substitution as a gather over a transposed index (no
-faster), the rest factor's solve with contracted or fast-math arithmetic (no faster), no linear
-response for warm starts (slower: 3.35 vs 3.21 ms).
-
-Measured (2026-11) and did not pay (counts on the default face, surprise and three to five
-other expressions from rest, the 25 frames of the smile): float32 lower blocks in the sweeps
-(5 CG iterations of the same system 0.88 -> 0.89 ms: latency-bound, not memory-bound); a
-sweep with the row's sums kept apart and pre-multiplied column indices (slower, 31 -> 44 us);
-the prisms sorted by block (within the noise); a looser forcing term (ETA_MAX 0.2-0.9) while
-steps are long (> 0.1, 0.5 or 1 mm): from rest -22 % CG iterations on one expression, as many
-more on another, and a surprise 8e-3 mm from the reference; PRISM_LAG_MM 0.6-2 mm: one to
-three fewer prisms' assemblies from rest, but 1e-3 - 8e-3 mm from the reference (the last
-steps on an older Hessian underestimate the distance left); the prisms' Hessian of the rest
-state kept throughout (twice the Newton steps, 2e-2 mm off); the chord step's CG at eta 0.1
-(1.0e-2 mm off on a smile frame); CHORD_RATIO 3 or 20, CHORD_RATE 0.03 or 0.3 (as many
-passes or more); from rest, Newton without the linear response (one to four more steps on
-three of four expressions, three fewer on the fourth).
-
-Measured for the warm start and did not pay: a factorisation of a recent Hessian carried with
-the state, for chord or quasi-Newton steps (a numeric block LDL^T in the rest factor's
-symbolic pattern, 27,449 blocks, costs about 6.7 ms, a solve with it 0.3 ms; but even the
-exact Hessian of the previous frame's equilibrium is a poor model of the next one: the
-quasi-Newton steps from it shrink only by 0.35-0.4 each (springs cross their threshold in
-every frame), and from one three frames old they diverge without a line search); the
-tangent linear response as the guess (the first Newton step from the previous equilibrium
-leaves 0.4-0.6 mm, the secant 0.03-0.1 mm); relaxing only the nodes that move (70 % of the
-free nodes move more than 0.01 mm in a frame of the smile); CHOLMOD (scikit-sparse has no wheel
-for this machine); tighter or looser forcing terms for warm starts (eta 0.01-0.1: fewer
-assemblies for more CG iterations, the same cost within the noise).
+The measurements behind these choices, and what was tried and did not pay, are in
+``docs/notes/solver.md``.
 
 The exact Hessian matters: with the compressive geometric term clipped (a positive
 semi-definite "projected" Hessian) Newton converges only linearly here, since thousands of
@@ -147,8 +52,7 @@ is read-only afterwards; every solve allocates its own work arrays.
 
 References: Terzopoulos & Waters 1993, eq. (1)-(4); Nocedal & Wright 2006, Numerical
 Optimization, ch. 7 (inexact / Newton-CG methods); Saad 2003, Iterative Methods for Sparse
-Linear Systems, ch. 10 (SSOR / symmetric Gauss-Seidel preconditioning).
-"""
+Linear Systems, ch. 10 (SSOR / symmetric Gauss-Seidel preconditioning)."""
 
 from __future__ import annotations
 
