@@ -31,12 +31,21 @@ from pathlib import Path
 import numpy as np
 
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
-from myoface.face import FaceMesh, load_default_face, load_mesh, read_waters_geoface
+from myoface.face import (
+    FaceMesh,
+    default_mirror_map,
+    is_default_topology,
+    load_default_face,
+    load_mesh,
+    read_waters_geoface,
+)
+from myoface.face.facefile import read_face
 from myoface.face.teeth import fit_dentition, lip_contact
 from myoface.muscles import (
     MuscleSet,
     load_default_muscles,
     load_muscles,
+    muscles_from_dict,
     read_waters_expressions,
     read_waters_muscles,
 )
@@ -437,10 +446,6 @@ def load_face_model(path: str | os.PathLike | None = None, *, muscles=None, para
 
 def _load_face_file(path: Path, muscles, params) -> FaceModel:
     import tomllib
-
-    from myoface.face import default_mirror_map, is_default_topology
-    from myoface.face.facefile import read_face
-    from myoface.muscles import muscles_from_dict
 
     face, toml_text, _ = read_face(path)
     if muscles:

@@ -44,13 +44,18 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from myoface._io import atomic_output, ensure_output_dir
+from myoface.analysis.initfiles import load_init
 from myoface.analysis.outputs import FolderResult, analyze_to_folder
+from myoface.analysis.trackers.snakes import ESTIMATORS
+from myoface.analysis.video import open_video
 from myoface.errors import (
     MyofaceDependencyError,
     MyofaceError,
     MyofaceFileNotFoundError,
     MyofaceValueError,
 )
+from myoface.render import progress
 
 __all__ = [
     "ENGINES",
@@ -271,14 +276,11 @@ def _error_text(exc: BaseException) -> str:
 def analyze_job(job: _Job) -> dict:
     """Analyse one video into its folder and return its summary row; never raises for a bad
     video (the row says why it failed). Runs on a worker."""
-    from myoface._io import atomic_output
-
     if job.single_thread:
         # one video per worker thread: the numba kernels use this thread only
         import numba
 
         numba.set_num_threads(1)
-    from myoface.analysis.video import open_video
 
     s = job.settings
     t0 = time.perf_counter()
@@ -458,7 +460,6 @@ def write_summary(rows: list[dict], out: str | os.PathLike) -> tuple[Path, Path]
 
     pa = _require("pyarrow", "the batch summary")
     pq = _require("pyarrow.parquet", "the batch summary")
-    from myoface._io import atomic_output
 
     out = Path(out)
     ids = _muscle_ids(rows)
@@ -540,11 +541,6 @@ def run_batch(
     list of dict — the summary rows, in the order of ``videos``: the keys of
     :data:`SUMMARY_COLUMNS` and ``means`` ({muscle: mean contraction}).
     """
-    from myoface._io import ensure_output_dir
-    from myoface.analysis.initfiles import load_init
-    from myoface.analysis.trackers.snakes import ESTIMATORS
-    from myoface.render import progress
-
     if engine not in ENGINES:
         raise MyofaceValueError(f"engine must be one of {ENGINES}; got {engine!r}")
     if tracker not in ("snakes", "landmarks"):

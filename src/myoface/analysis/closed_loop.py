@@ -8,9 +8,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from myoface.analysis.sections import PAPER_MUSCLES, project_sections
+from myoface.analysis.curvefit import CurveEstimator
+from myoface.analysis.landmarks import similarity_affine
+from myoface.analysis.sections import (
+    CURVE_EXCLUDED,
+    PAPER_MUSCLES,
+    SECTIONS,
+    project_sections,
+    section_vertices,
+)
+from myoface.analysis.snakes import resample_polyline
 from myoface.analysis.trackers.snakes import Analyzer
 from myoface.errors import MyofaceValueError
+from myoface.render import Camera, Renderer, to_srgb8
+from myoface.render.dressing import default_skin_texture
 
 #: what ``run_closed_loop`` analyses the frames with
 TRACKERS = ("snakes", "landmarks", "oracle")
@@ -87,9 +98,6 @@ def run_closed_loop(
     :class:`Analyzer`: 0.024 worst with it, 0.147 without), which on the real sample video
     draws the right zygomatic major's estimate down; the default analysis leaves it off.
     ``analyzer_options`` go to :class:`Analyzer` (e.g. ``estimator="fiducials"``)."""
-    from myoface.render import Camera, Renderer, to_srgb8
-    from myoface.render.dressing import default_skin_texture
-
     if tracker not in TRACKERS:
         raise MyofaceValueError(f"tracker must be one of {TRACKERS}; got {tracker!r}")
     if synthesis and tracker != "snakes":
@@ -145,11 +153,6 @@ def _estimate_from_true_curves(model, cam, curves: list[dict], ids, refine: int)
     """The curve estimator on exact section curves (``tracker="oracle"``): calibrated on the
     first frame's curves, resampled at 1 px like the snakes' nodes, with the model-to-image
     map that the camera gives."""
-    from myoface.analysis.curvefit import CurveEstimator
-    from myoface.analysis.landmarks import similarity_affine
-    from myoface.analysis.sections import CURVE_EXCLUDED, SECTIONS, section_vertices
-    from myoface.analysis.snakes import resample_polyline
-
     secs = {
         s: (section_vertices(model.face, s), SECTIONS[s][1])
         for s in SECTIONS

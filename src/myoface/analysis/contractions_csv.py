@@ -9,10 +9,15 @@ from pathlib import Path
 
 import numpy as np
 
-from myoface._io import read_text
+from myoface._io import atomic_output, check_output_path, read_text
 from myoface.analysis.camera import POSE_COLUMNS, HeadPose
 from myoface.analysis.trackers.base import FrameMeasurement
-from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.errors import (
+    MyofaceFileNotFoundError,
+    MyofaceFormatError,
+    MyofaceValueError,
+    MyofaceWarning,
+)
 
 #: the head columns of the snakes' (2-D head frame) rows in a contractions CSV
 HEAD_2D_COLUMNS = FrameMeasurement.HEAD_COLUMNS
@@ -60,8 +65,6 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw) -> No
     fit's residual: ``head_yaw_deg, head_pitch_deg, head_roll_deg, head_tx_mm, head_ty_mm,
     head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.camera.HeadPose`). Written whole
     (atomically); :class:`ContractionsCsvWriter` writes the same rows one by one."""
-    from myoface._io import atomic_output
-
     ids = list(ids)
     kinds = {type(f) for f in frames}
     if len(kinds) > 1:
@@ -103,8 +106,6 @@ class ContractionsCsvWriter:
     """
 
     def __init__(self, path, ids, jaw):
-        from myoface._io import check_output_path
-
         self.path = check_output_path(path)
         self.ids = list(ids)
         self.jaw_angle = jaw_angle_function(jaw)
@@ -208,9 +209,6 @@ def read_contractions_csv(path, muscle_ids) -> tuple[np.ndarray, np.ndarray, lis
     import csv
     import io
     import warnings
-
-    from myoface._io import read_text
-    from myoface.errors import MyofaceWarning
 
     p = Path(path)
     if not p.is_file():

@@ -44,8 +44,16 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface._io import atomic_output, read_text
+from myoface.analysis.contractions_csv import read_contractions_csv
 from myoface.analysis.resynthesis import resynthesis_frames
+from myoface.analysis.video import open_video
 from myoface.errors import MyofaceValueError
+from myoface.face import load_default_face
+from myoface.face.personal import face_from_photo, fit_similarity_3d
+from myoface.facemesh import FaceMeshDetector
+from myoface.model import build_face_model
+from myoface.render import progress
 
 #: points no muscle moves (MediaPipe face mesh indices): the eye corners (right eye outer and
 #: inner, left eye inner and outer) and the nose bridge (from between the eyes down the ridge)
@@ -85,8 +93,6 @@ def align_sequence(points, reference: int = 0, rigid=RIGID_POINTS) -> np.ndarray
     frame's (least squares, Umeyama 1991). Frames with NaN (no face) stay NaN.
 
     Units are those of ``points`` (MediaPipe's: pixels, depth in the same scale)."""
-    from myoface.face.personal import fit_similarity_3d
-
     p = _check_sequence(points, "points")
     if p.shape[2] != 3:
         raise MyofaceValueError("align_sequence needs 3-D points (T, N, 3)")
@@ -105,8 +111,6 @@ def align_sequence(points, reference: int = 0, rigid=RIGID_POINTS) -> np.ndarray
 @lru_cache(maxsize=1)
 def _canonical_rigid() -> np.ndarray:
     """The rigid points of the default face, front on (head frame, mm)."""
-    from myoface.face import load_default_face
-
     return load_default_face().vertices[list(RIGID_POINTS)].astype(np.float64)
 
 
@@ -120,8 +124,6 @@ def displacements(points, reference: int = 0, dims: int = 2, regions=None) -> di
     default face's by one more similarity, so that two sequences whose reference frames show
     the head in different poses are compared in the same axes. ``points`` are MediaPipe's (x
     right, y down, z away from the viewer)."""
-    from myoface.face.personal import fit_similarity_3d
-
     if dims not in (2, 3):
         raise MyofaceValueError(f"dims must be 2 or 3; got {dims!r}")
     regions = REGIONS if regions is None else regions
@@ -245,8 +247,6 @@ def plot_fidelity(result: FidelityResult, path, times=None, title: str = "") -> 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from myoface._io import atomic_output
-
     names = list(result.d_in)
     n = len(next(iter(result.d_in.values())))
     t = np.arange(n) if times is None else np.asarray(times, dtype=np.float64)
@@ -298,8 +298,6 @@ def detect_landmarks(frames, n_points: int = 468) -> np.ndarray:
     the mouth corners most) between the reference frame and the rest of a held frame (the
     sample video's first), which the measure would take for expression motion; in image mode
     a held frame gives the same points."""
-    from myoface.facemesh import FaceMeshDetector
-
     out = []
     with FaceMeshDetector(video=False) as det:
         for f in frames:
@@ -313,10 +311,6 @@ def person_model(video_path, calibration_frame: int):
     frame (as ``myoface face from-photo --frame N`` and the demo make it), with the default
     muscles; and a text saying how it was made."""
     import itertools
-
-    from myoface.analysis.video import open_video
-    from myoface.face.personal import face_from_photo
-    from myoface.model import build_face_model
 
     frame = next(itertools.islice(iter(open_video(video_path)), calibration_frame, None), None)
     if frame is None:
@@ -346,11 +340,6 @@ def fidelity_of_analysis(
     measured (for fidelity.json)."""
     import csv
     import time
-
-    from myoface._io import read_text
-    from myoface.analysis.contractions_csv import read_contractions_csv
-    from myoface.analysis.video import open_video
-    from myoface.render import progress
 
     t0 = time.perf_counter()
     how = {}
@@ -424,8 +413,6 @@ def write_fidelity_report(
     ``contractions.csv``; the calibration frame from its ``analysis.json`` unless given):
     :func:`fidelity_of_analysis`, then :func:`plot_fidelity`."""
     import json
-
-    from myoface._io import atomic_output
 
     folder = Path(folder)
     if calibration_frame is None:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface._io import atomic_output, parse_json, read_text
 from myoface.analysis.sections import SECTIONS
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
 
@@ -17,8 +18,6 @@ def load_init(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Read an initial-contours file: ``{"contours": {section: [[x, y], ...], ...}}`` (pixels
     of the calibration frame, (x, y) = (column, row)); see :data:`SECTIONS` for the names and
     the node order. Sections may be left out."""
-    from myoface._io import parse_json, read_text
-
     p = Path(path)
     if not p.is_file():
         raise MyofaceFileNotFoundError(f"no such contour file: {p}")
@@ -48,8 +47,6 @@ def load_init(path: str | os.PathLike) -> dict[str, np.ndarray]:
 
 
 def save_init(path: str | os.PathLike, contours: dict[str, np.ndarray], note: str = "") -> None:
-    from myoface._io import atomic_output
-
     doc = {
         "note": note or "initial contours, pixels (x, y) of the calibration frame",
         "contours": {k: np.round(v, 2).tolist() for k, v in contours.items()},

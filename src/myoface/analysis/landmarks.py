@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from myoface.analysis.sections import section_vertices
 from myoface.errors import MyofaceValueError
 from myoface.facemesh import FaceMeshDetector
+from myoface.render import progress
 
 #: sections the automatic initialisation provides
 AUTO_SECTIONS = (
@@ -32,8 +34,6 @@ AUTO_SECTIONS = (
 
 def contours_from_landmarks(face, points, sections=AUTO_SECTIONS) -> dict[str, np.ndarray]:
     """Section contours (pixels) from detected points sharing ``face``'s topology."""
-    from myoface.analysis.sections import section_vertices
-
     p = np.asarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[0] != face.n_vertices or p.shape[1] < 2:
         raise MyofaceValueError(
@@ -55,8 +55,6 @@ def auto_init(
     whose contours lie inside the frame, and return ``(index, frame, contours, points)``; a
     clear error when no face is found. ``show_progress``: a progress bar on stderr while the
     search goes on (``total``: the number of frames, when known)."""
-    from myoface.render import progress
-
     seen = 0
     with FaceMeshDetector(video=False) as det:
         bar = progress(

@@ -50,6 +50,14 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface._io import atomic_output, read_text
+from myoface.analysis.camera import POSE_COLUMNS
+from myoface.analysis.contractions_csv import (
+    CSV_OTHER_COLUMNS,
+    read_contractions_csv,
+    read_head_poses,
+)
+from myoface.control.facs import au_table
 from myoface.errors import MyofaceFormatError
 
 #: OpenFace 2.2's AU intensity (regression) outputs, in its column order
@@ -118,8 +126,6 @@ def au_basis(muscle_ids, aus=OPENFACE_AUS) -> AUBasis:
     are missing are left out). FACS's unilateral AUs (``sides`` in the table) have one unknown
     per side.
     """
-    from myoface.control.facs import au_table
-
     ids = list(muscle_ids)
     index = {k: i for i, k in enumerate(ids)}
     table = au_table()
@@ -245,9 +251,6 @@ def openface_pose(pose) -> tuple[float, float, float, float, float, float]:
 
 def _muscle_columns(header) -> list[str]:
     """The contraction columns of a contractions.csv header (muscles and the jaw)."""
-    from myoface.analysis.camera import POSE_COLUMNS
-    from myoface.analysis.contractions_csv import CSV_OTHER_COLUMNS
-
     other = set(CSV_OTHER_COLUMNS) | set(POSE_COLUMNS) | {"residual_mm"}
     return [c for c in header if c and c not in other]
 
@@ -256,9 +259,6 @@ def read_for_openface(path):
     """(frames (T,) int, times (T,) s, quality (T,), contractions (T, M), muscle ids, poses or
     None) of a ``contractions.csv``."""
     import csv
-
-    from myoface._io import read_text
-    from myoface.analysis.contractions_csv import read_contractions_csv
 
     p = Path(path)
     text = read_text(p, "contractions CSV")
@@ -276,8 +276,6 @@ def read_for_openface(path):
     except (ValueError, IndexError):
         raise MyofaceFormatError(f"{p}: a 'frame' cell is not a whole number") from None
     poses = None
-    from myoface.analysis.camera import POSE_COLUMNS
-    from myoface.analysis.contractions_csv import read_head_poses
 
     if all(c in header for c in POSE_COLUMNS):
         poses = read_head_poses(p)
@@ -309,8 +307,6 @@ def write_openface_csv(contractions_csv, path: str | os.PathLike) -> Path:
     """Write the OpenFace-2.2-compatible CSV (:data:`OPENFACE_COLUMNS`; see the module's
     docstring) of the analysis in ``contractions_csv`` to ``path`` (replaced whole); returns
     ``path``."""
-    from myoface._io import atomic_output
-
     rows = openface_rows(*read_for_openface(contractions_csv))
     lines = [",".join(OPENFACE_COLUMNS), *(",".join(r) for r in rows)]
     with atomic_output(path) as tmp:

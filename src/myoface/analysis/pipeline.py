@@ -43,9 +43,11 @@ from myoface.analysis.trackers.base import KEEP_BYTES
 from myoface.analysis.trackers.landmark_fit import LANDMARK_ESTIMATORS, FitTracker
 from myoface.analysis.trackers.landmark_paper import PaperLandmarkTracker
 from myoface.analysis.trackers.snakes import SnakeTracker
+from myoface.analysis.video import Video, open_video
 from myoface.analysis.weights import FitSettings
 from myoface.errors import MyofaceValueError
 from myoface.facemesh import DETECT_AHEAD_FRAMES
+from myoface.render import progress
 
 
 def make_analyzer(
@@ -183,9 +185,6 @@ def analyze_video(
     :func:`measure_frames` yields them one at a time, and
     :func:`~myoface.analysis.outputs.analyze_to_folder` streams them to files in flat memory.
     """
-    from myoface.analysis.video import Video, open_video
-    from myoface.render import progress
-
     if model is None:
         from myoface.model import build_face_model
 

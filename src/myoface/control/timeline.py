@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface._io import atomic_output, parse_json, parse_toml, read_text
 from myoface.control import facs
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 
@@ -292,8 +293,6 @@ class Timeline:
 
     def save(self, path: str | os.PathLike) -> None:
         """Write as JSON (``.json``) or TOML (anything else)."""
-        from myoface._io import atomic_output
-
         p = Path(path)
         doc = self.to_dict()
         if p.suffix.lower() == ".json":
@@ -347,8 +346,6 @@ class Timeline:
 
 def load_timeline(path: str | os.PathLike) -> Timeline:
     """Read a timeline file (``.toml`` or ``.json``; see the module doc)."""
-    from myoface._io import parse_json, parse_toml, read_text
-
     p = Path(path)
     if not p.is_file():
         raise MyofaceFileNotFoundError(f"no such timeline file: {p}")

@@ -32,6 +32,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from myoface._io import atomic_output
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 
 #: map size of the Cyberware scanner the paper used (W angles x H heights), T&W 1993 §IV
@@ -213,8 +214,6 @@ class CylindricalMaps:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write ``path.npz`` (one file) or, for a path without suffix, a folder of PNGs."""
-        from myoface._io import atomic_output
-
         path = Path(path)
         if path.suffix.lower() == ".npz":
             with atomic_output(path) as tmp:

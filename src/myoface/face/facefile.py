@@ -28,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface._io import atomic_output
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
+from myoface.face.io import load_mesh, save_mesh
 from myoface.face.mesh import FaceMesh
 
 SUFFIX = ".myoface"
@@ -49,9 +51,6 @@ def save_face(
     Written to a temporary name and renamed, so a failure leaves no partial file.
     """
     import imageio.v3 as iio
-
-    from myoface._io import atomic_output
-    from myoface.face.io import save_mesh
 
     path = Path(path)
     meta = {
@@ -92,8 +91,6 @@ def _jsonable(x):
 def read_face(path: str | os.PathLike) -> tuple[FaceMesh, str | None, dict]:
     """Read a ``.myoface`` file: (face with texture and landmarks, muscle file text or None, meta)."""
     import imageio.v3 as iio
-
-    from myoface.face.io import load_mesh
 
     path = Path(path)
     if not path.is_file():

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface._io import atomic_output, read_text
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
 from myoface.face.mesh import FaceMesh, triangle_normals
 
@@ -154,8 +155,6 @@ def load_mesh(
 
 def save_mesh(face: FaceMesh, path: str | os.PathLike) -> None:
     """Write ``face`` as OBJ (with uv if present) or, by suffix, any format trimesh writes."""
-    from myoface._io import atomic_output
-
     path = Path(path)
     with atomic_output(path) as tmp:
         if path.suffix.lower() == ".obj":
@@ -190,7 +189,6 @@ def read_waters_geoface(folder: str | os.PathLike) -> FaceMesh:
     if not folder.is_dir():
         raise MyofaceFileNotFoundError(f"no such geoface folder: {folder}")
     fl, ix = _check_file(folder / "faceline.dat"), _check_file(folder / "index.dat")
-    from myoface._io import read_text
 
     try:
         vt = read_text(fl, "Waters faceline.dat").split()

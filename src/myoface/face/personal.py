@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface._io import parse_json, read_text
 from myoface.errors import (
     MyofaceError,
     MyofaceFileNotFoundError,
@@ -35,7 +36,9 @@ from myoface.errors import (
     MyofaceValueError,
 )
 from myoface.face.cylindrical import CYBERWARE_SHAPE, CylindricalMaps, maps_from_mesh
+from myoface.face.io import load_default_face
 from myoface.face.mesh import FaceMesh, point_mesh_distance
+from myoface.facemesh import FaceMeshDetector
 
 #: iBUG-68 index ranges of the label names of menpo's LJSON files (and their short forms)
 IBUG_LABELS = {
@@ -89,7 +92,6 @@ def read_landmarks(path: str | os.PathLike) -> np.ndarray:
     p = Path(path)
     if not p.is_file():
         raise MyofaceFileNotFoundError(f"no such landmark file: {p}")
-    from myoface._io import parse_json, read_text
 
     try:
         if p.suffix.lower() == ".npy":
@@ -378,8 +380,6 @@ def face_from_scan(
     ``scan`` is a (textured) head mesh in millimetres with +y roughly up; ``landmarks_mm`` its
     (68, 3) iBUG-68 points in the same coordinates. The result is in the head frame.
     """
-    from myoface.face.io import load_default_face
-
     generic = load_default_face() if generic is None else generic
     lm_in = np.asarray(landmarks_mm, float)[INNER_IBUG]
     off = float(np.median(point_mesh_distance(lm_in, scan.vertices, scan.triangles)))
@@ -463,8 +463,6 @@ def find_landmarks(scan: FaceMesh) -> np.ndarray:
 
 def find_landmarks_in_maps(maps: CylindricalMaps) -> np.ndarray:
     """(68, 3) iBUG-68 landmarks found in cylindrical maps (see :func:`find_landmarks`)."""
-    from myoface.facemesh import FaceMeshDetector
-
     k = max(1, int(np.ceil(DETECTION_SHAPE[0] / maps.shape[0])))
     img = np.repeat(np.repeat(maps.rgb, k, 0), k, 1)
     with FaceMeshDetector(video=False) as det:
@@ -536,9 +534,6 @@ def face_from_photo(
     MediaPipe leaves a little apart (less than :data:`CLOSED_LIPS_MM`) are closed
     (:func:`close_lips`; ``info["lips_closed"]``).
     """
-    from myoface.face.io import load_default_face
-    from myoface.facemesh import FaceMeshDetector
-
     img = np.asarray(image)
     if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
         raise MyofaceValueError(f"a photo must be an (H, W, 3) uint8 image; got {img.shape}")

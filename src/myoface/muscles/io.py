@@ -54,7 +54,9 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface._io import parse_toml, read_text
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.face import default_mirror_map
 from myoface.face.io import WATERS_UNIT_MM
 from myoface.face.mesh import FaceMesh
 from myoface.muscles.jaw import Jaw, harmonic_weights
@@ -341,7 +343,6 @@ def load_muscles(path: str | os.PathLike, face: FaceMesh) -> MuscleSet:
     path = Path(path)
     if not path.is_file():
         raise MyofaceFileNotFoundError(f"no such muscle file: {path}")
-    from myoface._io import parse_toml, read_text
 
     doc = parse_toml(read_text(path, "muscle file (TOML)"), str(path))
     return muscles_from_dict(doc, face, where=str(path))
@@ -404,7 +405,6 @@ def load_default_muscles(face: FaceMesh | None = None) -> MuscleSet:
             "the default muscle set needs a face in the default (MediaPipe, 468-vertex) topology; "
             f"got {face.n_vertices} vertices. Give a muscle file for this mesh instead."
         )
-    from myoface.face import default_mirror_map
 
     return muscles_from_dict(
         _default_doc(), face, where=DEFAULT_MUSCLES_FILE, mirror=default_mirror_map()
@@ -444,8 +444,6 @@ def read_waters_muscles(path: str | os.PathLike) -> MuscleSet:
     clamp`` (Waters' units, scaled by ``WATERS_UNIT_MM``). No jaw. Ids are lower-case with the
     subject's side as suffix (see :func:`_waters_id`); ``source_name`` keeps Waters' name.
     """
-    from myoface._io import read_text
-
     p = _waters_file(path, "muscle.dat")
     tok = read_text(p, "Waters muscle file").split()
     try:
@@ -487,7 +485,6 @@ def read_waters_expressions(path: str | os.PathLike, muscles: MuscleSet) -> dict
     """
     p = _waters_file(path, "expression-macros.dat")
     by_source = {m.source_name: i for i, m in enumerate(muscles.muscles) if m.kind == "waters"}
-    from myoface._io import read_text
 
     tok = read_text(p, "Waters expression file").split()
     out: dict[str, np.ndarray] = {}

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from myoface.render.raster import vertex_normals_numba
+
 #: linear RGB
 ENAMEL = (0.74, 0.70, 0.60)
 GUM = (0.42, 0.13, 0.12)
@@ -104,8 +106,6 @@ def _arch_point(arch, s: np.ndarray):
 
 
 def _mesh_normals(v, t):
-    from myoface.render.raster import vertex_normals_numba
-
     out = np.zeros_like(v)
     vertex_normals_numba(np.ascontiguousarray(v), np.ascontiguousarray(t, dtype=np.int64), out)
     return out

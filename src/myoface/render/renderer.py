@@ -17,6 +17,7 @@ import numba
 import numpy as np
 
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.face import FaceMesh
 from myoface.face.eyes import eyeball_center
 from myoface.face.teeth import fit_dentition
 from myoface.render import dressing, mouth
@@ -551,8 +552,6 @@ def render_mesh(
     ``colors`` (N, 3) linear albedo per vertex (default white); ``uv`` (N, 2) + ``texture`` for
     texture mapping. Returns uint8 sRGB, or float32 linear RGB with ``linear=True``.
     """
-    from myoface.face import FaceMesh
-
     v = _check_vertices(vertices, len(np.asarray(vertices)))
     face = FaceMesh(v, np.asarray(triangles), uv if uv is not None else None, None, {})
     r = Renderer(face, camera, lights, material, texture, ssaa=ssaa, dress=False)

@@ -29,6 +29,8 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
+from myoface.face import vertex_normals
+
 #: compressions (1 - stretch) below this leave the skin smooth: 0.05 mm of noise on the default
 #: face's vertices reads as up to 0.024 (10 draws); the AUs' compressions reach 0.04 (the
 #: forehead in AU1+2) to 0.1-0.4 (glabella in AU4, cheeks in AU6+12)
@@ -154,8 +156,6 @@ class WrinkleField:
         # least-squares weights c_ij over the patch (neighbours within PATCH_RADIUS_MM) with
         # F t = t + sum_j c_ij (u_j - u_i), u the displacement from rest
         from scipy.spatial import cKDTree
-
-        from myoface.face import vertex_normals
 
         normals = vertex_normals(v, t)
         tree = cKDTree(v)

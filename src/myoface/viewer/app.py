@@ -12,9 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface.control import au_table, list_expressions
 from myoface.errors import MyofaceDependencyError, MyofaceError, MyofaceValueError
 from myoface.render import Camera, Renderer, VideoWriter
 from myoface.render.renderer import to_srgb8
+from myoface.synth import Synthesizer
 from myoface.viewer.scene import MM, FaceScene
 from myoface.viewer.state import REGIONS, PhysicsWorker, ViewerState, region_of
 
@@ -229,7 +231,6 @@ class FaceViewer:
         live face is not disturbed); ``on_frame(k, n)`` reports progress."""
         if self.state.playback is None:
             raise MyofaceValueError("load a contractions.csv or a timeline first")
-        from myoface.synth import Synthesizer
 
         times, _ = self.state.playback
         n = max(1, int(np.floor((times[-1] - times[0]) * fps)) + 1)
@@ -339,8 +340,6 @@ class FaceViewer:
             b.on_click(self._guard(self._export_render))
 
     def _expression_gui(self, gui) -> None:
-        from myoface.control import list_expressions
-
         with gui.add_folder("expression", expand_by_default=False):
             expr = gui.add_dropdown(
                 "expression", ("none", *list_expressions()), initial_value="none"
@@ -355,8 +354,6 @@ class FaceViewer:
             inten.on_update(self._guard(set_expr))
 
     def _au_gui(self, gui) -> None:
-        from myoface.control import au_table
-
         table = au_table()
         with gui.add_folder("action units", expand_by_default=False):
             for n in UI_AUS:

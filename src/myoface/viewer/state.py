@@ -10,11 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
+from myoface.analysis.contractions_csv import hold_last_measured, read_contractions_csv
 from myoface.control import (
     au_contractions,
     expression_contractions,
     list_expressions,
     list_visemes,
+    load_timeline,
     muscle_contractions,
     viseme_contractions,
 )
@@ -176,9 +178,6 @@ class ViewerState:
     # ------------------------------------------------------------------ playback
     def load_playback(self, path) -> float:
         """Load a ``contractions.csv`` or a timeline file; returns its duration (s)."""
-        from myoface.analysis.contractions_csv import hold_last_measured, read_contractions_csv
-        from myoface.control import load_timeline
-
         p = Path(path)
         if p.suffix.lower() == ".csv":
             times, table, _ = read_contractions_csv(p, list(self.ids))

@@ -15,7 +15,13 @@ import numpy as np
 from myoface.analysis.estimate import ContractionEstimator
 from myoface.analysis.headframe import HeadTracker, Similarity, head_box
 from myoface.analysis.landmarks import auto_init, rigid_vertices, similarity_affine
-from myoface.analysis.potentials import PotentialField, potential_field, potential_image
+from myoface.analysis.potentials import (
+    PotentialField,
+    bilinear,
+    potential_field,
+    potential_image,
+    to_intensity,
+)
 from myoface.analysis.sections import (
     CURVE_EXCLUDED,
     FEATURES,
@@ -28,8 +34,10 @@ from myoface.analysis.sections import (
     section_vertices,
 )
 from myoface.analysis.snakes import SnakeParams, Snakes, make_contours, resample_polyline
+from myoface.analysis.synthesis import FrameSynthesizer
 from myoface.analysis.trackers.base import FrameMeasurement, TrackerBase
-from myoface.errors import MyofaceValueError
+from myoface.errors import MyofaceDependencyError, MyofaceValueError
+from myoface.facemesh import FaceMeshDetector
 
 #: the potential's Gaussian width on the face, mm (``sigma=None``): features are blurred by
 #: the same amount of skin whatever the face's size in pixels (1.5 px on the 256 x 256
@@ -101,8 +109,6 @@ def lips_tone(
     """The lips' dark tone on ``frame``: the ``percentile`` of the grey levels (0-255) in the
     band ``band_px`` (px) inside the closed ``contour`` ((K, 2) image (x, y) px, the lips'
     outer outline), sampled along each node's inward normal."""
-    from myoface.analysis.potentials import bilinear, to_intensity
-
     q = np.asarray(contour, dtype=np.float64)
     img = np.ascontiguousarray(to_intensity(frame))
     tan = np.roll(q, -1, axis=0) - np.roll(q, 1, axis=0)
@@ -471,9 +477,6 @@ class Analyzer:
         a registration that holds it."""
         if self._detector is False or self.model.face.n_vertices != 468:
             return None
-        from myoface.analysis.landmarks import similarity_affine
-        from myoface.errors import MyofaceDependencyError
-        from myoface.facemesh import FaceMeshDetector
 
         if self._detector is None:
             try:
@@ -672,8 +675,6 @@ class Analyzer:
         return dict(zip(self.sections, sn.relax(fld).split(), strict=True))
 
     def _start_synthesis(self, frame: np.ndarray, conts_cal: list[np.ndarray]) -> None:
-        from myoface.analysis.synthesis import FrameSynthesizer
-
         self._synth = FrameSynthesizer(
             self.model.face, self.synthesis_camera, frame, teeth=self.synthesis_teeth
         )
