@@ -95,17 +95,69 @@ timeline_like = st.fixed_dictionaries(
 def test_timeline_file_of_any_bytes(scratch, data, suffix):
     from myoface.control import load_timeline
 
-    only_myoface_errors(load_timeline, _write(scratch, data, suffix))
+    _check_timeline(_or_none(load_timeline, _write(scratch, data, suffix)))
+
+
+def _or_none(fn, *args):
+    """``fn(*args)``, or None when it raised a MyofaceError (any other exception fails)."""
+    try:
+        return fn(*args)
+    except MyofaceError:
+        return None
+
+
+def _check_timeline(tl) -> None:
+    """What an accepted timeline is: a finite duration > 0, and contractions in [0, 1] over
+    the whole of it for the default face's muscles (an event it cannot drive on this face is
+    refused with a MyofaceError, not a bare error)."""
+    if tl is None:
+        return
+    from myoface.face import load_default_face
+    from myoface.muscles.io import load_default_muscles
+
+    assert np.isfinite(tl.duration) and tl.duration > 0
+    ids = [m.id for m in load_default_muscles(load_default_face()).muscles] + ["jaw"]
+    times = np.linspace(0.0, min(tl.duration, 1e6), 7)
+    c = _or_none(tl.contractions, times, ids)
+    if c is not None:
+        assert c.shape == (7, len(ids)) and np.isfinite(c).all()
+        assert (c >= 0).all() and (c <= 1).all()
+
+
+#: timelines that are mostly valid (known kinds and names, times and intensities in range,
+#: now and then a bad value), so that the properties of accepted ones are exercised
+good_event = st.fixed_dictionaries(
+    {
+        "kind": st.sampled_from(["au", "au", "expression", "muscle", "blink", "bogus"]),
+        "start": st.floats(0, 3) | st.sampled_from([-1.0, float("nan")]),
+        "duration": st.floats(0.05, 2) | st.sampled_from([0.0, float("inf")]),
+    },
+    optional={"intensity": st.floats(0, 1) | st.sampled_from([1.5, -0.2, "C"])},
+).flatmap(
+    lambda e: st.sampled_from(
+        {
+            "au": ["12", "6", "L12", "26", "99"],
+            "expression": ["happiness", "surprise", "nope"],
+            "muscle": ["zygomaticus_major_l", "jaw", "nope"],
+            "blink": ["both", "left"],
+            "bogus": ["x"],
+        }[e["kind"]]
+    ).map(lambda n, e=e: {**e, "name": n})
+)
+good_timeline = st.fixed_dictionaries(
+    {"events": st.lists(good_event, min_size=1, max_size=4)},
+    optional={"duration": st.floats(0.1, 5)},
+)
 
 
 @SETTINGS
-@given(doc=timeline_like | values)
+@given(doc=timeline_like | values | good_timeline)
 def test_timeline_of_any_values(scratch, doc):
     from myoface.control import load_timeline
     from myoface.control.timeline import Timeline
 
-    only_myoface_errors(Timeline.from_dict, doc)
-    only_myoface_errors(load_timeline, _write(scratch, _json_text(doc), ".json"))
+    _check_timeline(_or_none(Timeline.from_dict, doc))
+    _check_timeline(_or_none(load_timeline, _write(scratch, _json_text(doc), ".json")))
 
 
 # ---------------------------------------------------------------------- contractions CSV
@@ -234,9 +286,15 @@ def test_init_json_of_any_bytes(scratch, data):
     suffix=st.sampled_from([".json", ".ljson", ".npy", ".txt", ".csv"]),
 )
 def test_landmark_file_of_any_bytes(scratch, data, suffix):
+    """A MyofaceError, or 68 finite 3-D points (what every accepted landmark file gives)."""
     from myoface.face.personal import read_landmarks
 
-    only_myoface_errors(read_landmarks, _write(scratch, data, suffix))
+    _check_landmarks(_or_none(read_landmarks, _write(scratch, data, suffix)))
+
+
+def _check_landmarks(pts) -> None:
+    if pts is not None:
+        assert pts.shape == (68, 3) and pts.dtype == np.float64 and np.isfinite(pts).all()
 
 
 @SETTINGS
@@ -254,7 +312,9 @@ def test_landmark_file_of_any_bytes(scratch, data, suffix):
 def test_ljson_groups_of_any_values(scratch, groups):
     from myoface.face.personal import read_landmarks
 
-    only_myoface_errors(read_landmarks, _write(scratch, _json_text({"groups": groups}), ".ljson"))
+    _check_landmarks(
+        _or_none(read_landmarks, _write(scratch, _json_text({"groups": groups}), ".ljson"))
+    )
 
 
 # ----------------------------------------------------------------------------- muscle files
