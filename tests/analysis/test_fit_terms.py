@@ -19,6 +19,7 @@ from myoface.analysis.terms import (
     Estimate,
     LandmarkTerm,
     MagnitudePrior,
+    OpticalFlowTerm,
     SparsityPrior,
     TemporalPrior,
 )
@@ -59,8 +60,16 @@ def _moved(fit, est, x):
 def _terms(fit, p, prev, huber):
     s = fit.settings
     w0 = fit.base_weights
+    rng = np.random.default_rng(11)
+    tracked = rng.uniform(size=len(p)) < 0.6
+    moved = p[:, :2] + rng.normal(0, 0.5, (len(p), 2))
     return {
         "landmarks": LandmarkTerm(p, CAMERA, w0, s.landmark_sigma_mm, s.depth_sigma_mm, huber),
+        # the landmarks' x, y left to the flow where it tracked, their depth kept
+        "landmarks_beside_flow": LandmarkTerm(
+            p, CAMERA, w0, s.landmark_sigma_mm, s.depth_sigma_mm, huber, xy_weights=~tracked
+        ),
+        "flow": OpticalFlowTerm(moved, tracked, CAMERA, w0, s.landmark_sigma_mm, huber),
         "temporal": TemporalPrior(
             prev, 1 / 30, s.rotation_rate_deg_per_s, s.translation_rate_mm_per_s, s.rate_per_s
         ),
@@ -69,7 +78,10 @@ def _terms(fit, p, prev, huber):
     }
 
 
-@pytest.mark.parametrize("name", ["landmarks", "temporal", "magnitude", "sparsity"])
+@pytest.mark.parametrize(
+    "name",
+    ["landmarks", "landmarks_beside_flow", "flow", "temporal", "magnitude", "sparsity"],
+)
 @pytest.mark.parametrize("use_depth", [True, False])
 @pytest.mark.parametrize("n_free", [0, 7, None])
 def test_a_terms_normal_equations_give_its_costs_gradient(frame, name, use_depth, n_free):
@@ -118,6 +130,34 @@ def test_the_landmark_terms_huber_weights_hold_outliers(frame):
     base = cost_with(0.0)
     d1, d10 = cost_with(40.0) - base, cost_with(400.0) - base
     assert 8 < d10 / d1 < 12
+
+
+def test_the_flow_term_takes_the_landmarks_place_where_it_tracked(frame):
+    """The landmarks with their x, y left to the flow where it tracked, plus the flow's term,
+    cost what the landmarks cost at the points where the flow put them (the depth rows stay
+    MediaPipe's): the flow is a term of its own, and adds nothing where it did not track."""
+    fit, p, pose, c, prev = frame
+    est = _estimate(fit, pose, c, np.arange(fit.n_muscles))
+    s = fit.settings
+    rng = np.random.default_rng(4)
+    tracked = rng.uniform(size=len(p)) < 0.5
+    xy = p[:, :2] + rng.normal(0, 0.8, (len(p), 2))
+    seen = p.copy()
+    seen[tracked, :2] = xy[tracked]
+    args = (CAMERA, fit.base_weights, s.landmark_sigma_mm, s.depth_sigma_mm, np.inf)
+    whole = LandmarkTerm(seen, *args)
+    parts = [
+        LandmarkTerm(p, *args, xy_weights=~tracked),
+        OpticalFlowTerm(xy, tracked, CAMERA, fit.base_weights, s.landmark_sigma_mm, np.inf),
+    ]
+    for t in (whole, *parts):
+        t.prepare(est)
+    assert sum(t.cost(est) for t in parts) == pytest.approx(whole.cost(est), rel=1e-12)
+    h = sum(t.normal_equations(est)[0] for t in parts)
+    np.testing.assert_allclose(h, whole.normal_equations(est)[0], rtol=1e-9, atol=1e-9)
+    none = OpticalFlowTerm(xy, np.zeros(len(p), bool), *args[:3], np.inf)
+    none.prepare(est)
+    assert none.cost(est) == 0.0
 
 
 def test_the_solver_sums_any_terms_it_is_given(frame):

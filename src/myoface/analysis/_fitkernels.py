@@ -1,12 +1,12 @@
-"""Compiled inner loops of the 3-D fit (:mod:`myoface.analysis.fit`): the normal equations of
-the weighted landmark residuals, the landmark cost, and the small box-constrained quadratic
-programme each Levenberg-Marquardt step solves.
+"""Compiled inner loops of the 3-D fit (:mod:`myoface.analysis.modelfit`): the normal equations
+of the weighted landmark residuals (:class:`~myoface.analysis.terms.LandmarkTerm`), their
+cost, and the small box-constrained quadratic programme each Levenberg-Marquardt step solves
+(:mod:`myoface.analysis.solver`).
 
-They compute what :meth:`ModelFit._residuals`, :meth:`ModelFit._jacobians` and
-:func:`myoface.analysis.fit._bounded_normal` define (those stay as the readable reference the
-tests compare against), without forming the (2-3 V) x (6 + K) Jacobian: each vertex's rows
-are accumulated into the normal matrix as they are made. ``nogil``: a frame can be fitted
-while another thread runs the face detector on the next one.
+The normal equations are formed without the (2-3 V) x (6 + K) Jacobian: each vertex's rows
+are accumulated into the normal matrix as they are made (the tests hold them against central
+differences of the term's cost, and the step against scipy's BVLS). ``nogil``: a frame can be
+fitted while another thread runs the face detector on the next one.
 """
 
 from __future__ import annotations
@@ -51,28 +51,29 @@ def landmark_terms(rot, trans, shape, f, cx, cy, p, use_z, w0, kxy, inv_ds, k, h
 
 
 @njit(cache=True, nogil=True)
-def landmark_cost(rot, trans, shape, f, cx, cy, p, use_z, w0, kxy, inv_ds, k, huber):
-    """Huber loss of the weighted 2-D residuals plus the depth residuals under the Huber
-    weights (the landmark part of :meth:`ModelFit._cost`)."""
+def landmark_cost(rot, trans, shape, f, cx, cy, p, use_z, w0, mxy, kxy, inv_ds, k, huber):
+    """Huber loss of the weighted 2-D residuals (each vertex's weighed ``w0 mxy``) plus the
+    depth residuals under the Huber weights (weighed ``w0``): the landmark term's cost."""
     t = landmark_terms(rot, trans, shape, f, cx, cy, p, use_z, w0, kxy, inv_ds, k, huber)
     cost = 0.0
     for v in range(shape.shape[0]):
         r = t[v, 3]
         if r <= huber:
-            cost += w0[v] * r * r
+            cost += w0[v] * mxy[v] * r * r
             hw = 1.0
         else:
-            cost += w0[v] * (2.0 * huber * r - huber * huber)
+            cost += w0[v] * mxy[v] * (2.0 * huber * r - huber * huber)
             hw = huber / max(r, 1e-12)
         cost += w0[v] * hw * t[v, 2] * t[v, 2]
     return cost
 
 
 @njit(cache=True, nogil=True)
-def normal_equations(rot, trans, shape, dsdc, free, f, cx, cy, p, use_z, w0, kxy, inv_ds, k, huber):
-    """(H, b): ``J^T J`` and ``-J^T r`` of the landmark rows (Huber-reweighted ``w0``) in the
-    unknowns (omega (3), dt (3), dc[free]) — the products :meth:`ModelFit._jacobians` and the
-    residuals of :meth:`ModelFit._residuals` make.
+def normal_equations(
+    rot, trans, shape, dsdc, free, f, cx, cy, p, use_z, w0, mxy, kxy, inv_ds, k, huber
+):
+    """(H, b): ``J^T J`` and ``-J^T r`` of the landmark rows (Huber-reweighted ``w0``; the 2-D
+    rows also times ``mxy``) in the unknowns (omega (3), dt (3), dc[free]).
 
     The weighted rows are made vertex by vertex into ``J^T`` (unknowns x rows, so that each
     product of two unknowns' columns is one contiguous dot product, :func:`_gram`): the
@@ -100,7 +101,8 @@ def normal_equations(rot, trans, shape, dsdc, free, f, cx, cy, p, use_z, w0, kxy
         pc0, pc1, pc2 = y0 + trans[0], y1 + trans[1], y2 + trans[2]
         d = max(-pc2, 1e-6)
         sw = np.sqrt(w[v])
-        s = kxy * sw
+        sxy = sw * np.sqrt(mxy[v])  # (the 2-D rows' own weight: 0 where another term reads x, y)
+        s = kxy * sxy
         # rows u, v: (a00, 0, a02) and (0, a11, a12) . dP; z: -dP_z / sd (unweighted: the
         # mean is removed below, then weighted)
         g[0, 0], g[0, 1], g[0, 2] = f / d * s, 0.0, f * pc0 / (d * d) * s
@@ -123,8 +125,8 @@ def normal_equations(rot, trans, shape, dsdc, free, f, cx, cy, p, use_z, w0, kxy
             for j in range(nf):
                 m = free[j]
                 jt[6 + j, col] = e0 * dsdc[v, 0, m] + e1 * dsdc[v, 1, m] + e2 * dsdc[v, 2, m]
-        rw[v] = t[v, 0] * sw
-        rw[nv + v] = t[v, 1] * sw
+        rw[v] = t[v, 0] * sxy
+        rw[nv + v] = t[v, 1] * sxy
         if use_z:
             col = 2 * nv + v
             for j in range(n):

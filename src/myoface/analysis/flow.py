@@ -134,23 +134,24 @@ class FlowRefiner:
         ok &= np.isfinite(q).all(axis=1)
         return q + ob, ok
 
-    def refine(self, frame, points):
-        """``points`` (N, 2+) detected on ``frame`` (an image), their x, y refined by the
-        flow where it is sure (a copy); None stays None."""
+    def track(self, frame, points):
+        """Where the flow finds ``points`` (N, 2+) detected on ``frame``: ``(xy (N, 2), ok
+        (N,) bool)``, ``xy`` the tracked positions where ``ok`` (the track is sure), the
+        detector's elsewhere; None (the tracks reset) for None or non-finite points."""
         if points is None or frame is None:
             self.reset()
-            return points
+            return None
         pts = np.asarray(points, dtype=np.float64)
         xy = pts[:, :2].astype(np.float32)
         if not np.isfinite(xy).all():
             self.reset()
-            return points
+            return None
         img, org = self._prepare(frame, xy)
         self.stats["frames"] += 1
         if self._ref is None:
             self._ref = (img, org, xy.copy(), xy.copy())
             self._prev = (img, org, xy.copy())
-            return pts.copy()
+            return xy.astype(np.float64), np.zeros(len(xy), dtype=bool)
         rimg, rorg, rxy, rdet = self._ref
         # from the reference frame, the detector's displacement since then the first guess
         q, ok = self._track(rimg, rorg, img, org, rxy, rxy + (xy - rdet))
@@ -171,7 +172,16 @@ class FlowRefiner:
         q[~ok] = xy[~ok]
         self.stats["detector"] += int((~ok).sum())
         self._prev = (img, org, q.copy())
-        out = pts.copy()
+        return q.astype(np.float64), ok
+
+    def refine(self, frame, points):
+        """``points`` (N, 2+) detected on ``frame`` (an image), their x, y refined by the
+        flow where it is sure (a copy); None stays None."""
+        tracked = self.track(frame, points)
+        if tracked is None:
+            return points
+        q, ok = tracked
+        out = np.asarray(points, dtype=np.float64).copy()
         out[ok, :2] = q[ok]
         return out
 

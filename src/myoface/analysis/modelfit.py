@@ -64,6 +64,7 @@ from myoface.analysis.synthesis import LandmarkSynthesis
 from myoface.analysis.terms import (
     LandmarkTerm,
     MagnitudePrior,
+    OpticalFlowTerm,
     SparsityPrior,
     TemporalPrior,
     pixel_mm,
@@ -288,7 +289,11 @@ class ModelFit:
             self._worker = None
 
     def fit(
-        self, points, synthesis: LandmarkSynthesis | None = None, deferred: bool = False
+        self,
+        points,
+        synthesis: LandmarkSynthesis | None = None,
+        deferred: bool = False,
+        flow=None,
     ) -> FrameFit:
         """Fit one frame's landmarks (468, 3): x, y pixels (column, row), z MediaPipe's relative
         depth (pixels; NaN or a (468, 2) array: not used). Warm-started from the previous
@@ -304,19 +309,27 @@ class ModelFit:
         (an earlier frame's estimate), and the tissue is relaxed at this frame's estimate on a
         second thread while the caller goes on (e.g. fits the next frame), once the
         estimate's skin has moved :attr:`FitSettings.relax_step_mm` since the last relax. The
-        next call waits for it first, so the results do not depend on timing."""
+        next call waits for it first, so the results do not depend on timing.
+
+        ``flow``: ``(xy (468, 2), tracked (468,) bool)``, the points optical flow tracked on
+        this frame (:meth:`~myoface.analysis.flow.FlowRefiner.track`): an
+        :class:`~myoface.analysis.terms.OpticalFlowTerm` reads the tracked ones in place of
+        the landmarks' x, y there."""
         t0 = time.thread_time()
         p = check_points(points, len(self.neutral))
+        if flow is not None:
+            flow = (np.asarray(flow[0], dtype=np.float64), np.asarray(flow[1], dtype=bool))
         prev = self._prev
         self._collect()
         refine = 0 if deferred else self.settings.refine
-        res = self._fit(p, prev, refine=refine)
+        res = self._fit(p, prev, refine=refine, flow=flow)
         if synthesis is not None:
             for _ in range(self.settings.synthesis_rounds):
                 err = synthesis.tracker_error(self.shape(res.contractions), res.pose)
                 if err is None:
                     break
-                res = self._fit(p - err, prev, refine=0, start=res)
+                moved = None if flow is None else (flow[0] - err[:, :2], flow[1])
+                res = self._fit(p - err, prev, refine=0, start=res, flow=moved)
         if deferred and self.settings.refine > 0 and self._relax_due(res.contractions):
             self._relax_later(res.contractions)
         self._prev = res
@@ -455,9 +468,11 @@ class ModelFit:
             points, self.camera, weights, s.landmark_sigma_mm, s.depth_sigma_mm, s.huber
         )
 
-    def terms(self, points, weights, prev: FrameFit | None) -> list:
-        """One frame's energy: the landmarks, the temporal prior to ``prev`` (when there is
-        one), the magnitude and the sparsity priors (:mod:`myoface.analysis.terms`)."""
+    def terms(self, points, weights, prev: FrameFit | None, flow=None) -> list:
+        """One frame's energy: the temporal prior to ``prev`` (when there is one), the
+        magnitude and the sparsity priors, the landmarks, and the points the optical flow
+        tracked (``flow``: ``(xy, tracked)``; in place of the landmarks' x, y where tracked)
+        (:mod:`myoface.analysis.terms`)."""
         s = self.settings
         out: list = []
         if prev is not None:
@@ -471,22 +486,41 @@ class ModelFit:
                 )  # fmt: skip
             )
         out += [MagnitudePrior(s.magnitude_sigma), SparsityPrior(s.sparsity)]
-        # (the landmarks last: the priors' normal equations are summed first, then theirs)
-        out.append(self.landmark_term(points, weights))
+        # (the observations last: the priors' normal equations are summed first, then theirs)
+        if flow is None:
+            out.append(self.landmark_term(points, weights))
+            return out
+        xy, tracked = flow
+        out.append(
+            LandmarkTerm(
+                points,
+                self.camera,
+                weights,
+                s.landmark_sigma_mm,
+                s.depth_sigma_mm,
+                s.huber,
+                xy_weights=1.0 - tracked,
+            )  # fmt: skip
+        )
+        out.append(OpticalFlowTerm(xy, tracked, self.camera, weights, s.landmark_sigma_mm, s.huber))
         return out
 
     def _fit(self, p, prev: FrameFit | None, refine: int, start: FrameFit | None = None,
-             rest: bool = False):  # fmt: skip
+             rest: bool = False, flow=None):  # fmt: skip
         """The bounded Gauss-Newton fit of one frame (see the module's docstring), with the
         temporal prior to ``prev``, started from ``start`` (default: ``prev``; without
         either from a closed-form pose and no contraction). ``rest``: with the model
         linearised at rest (as a fit from nothing is) rather than where the tissue was last
-        relaxed."""
+        relaxed. ``flow``: as for :meth:`fit`."""
         m = self.n_muscles
         base = self.neutral + self.identity_mm
+        seen = p  # where the frame's points are, the flow's where it tracked them
+        if flow is not None:
+            seen = p.copy()
+            seen[flow[1], :2] = flow[0][flow[1]]
         start = prev if start is None else start
         if start is None:
-            pose = initial_pose(base, p, self.camera)
+            pose = initial_pose(base, seen, self.camera)
             c = np.zeros(m)
         else:
             pose, c = start.pose, start.contractions.copy()
@@ -510,15 +544,15 @@ class ModelFit:
                     jac += np.multiply.outer(miss, dc / dd)
                 c0, d0 = c.copy(), d_new
                 self._c0, self._d0, self._jac = c0, d0, None
-            pose, c, it, conv = self._gauss_newton(p, pose, c, c0, d0, jac, base, prev)
+            pose, c, it, conv = self._gauss_newton(p, pose, c, c0, d0, jac, base, prev, flow=flow)
             total_it += it
         shape = base + d0 + _linear(jac, c - c0)
         k = self._pixel_mm(pose)
         uv = self.camera.project(pose.apply(shape))
-        resid = float(np.sqrt(((uv - p[:, :2]) ** 2).sum(1).mean()) * k)
+        resid = float(np.sqrt(((uv - seen[:, :2]) ** 2).sum(1).mean()) * k)
         return FrameFit(c, pose, resid, total_it, conv)
 
-    def _gauss_newton(self, p, pose, c, c0, d0, jac, base, prev, free=None):
+    def _gauss_newton(self, p, pose, c, c0, d0, jac, base, prev, free=None, flow=None):
         """One frame's energy (:meth:`terms`, visibility from the starting pose) minimised by
         :func:`~myoface.analysis.solver.bounded_gauss_newton` from ``pose``, ``c`` with the
         forward model ``base + d0 + jac (c - c0)``; only the contractions ``free`` move.
@@ -530,7 +564,7 @@ class ModelFit:
             return base + d0 + _linear(jac, cc - c0)
 
         w0 = self._weights(pose, forward(c))
-        terms = self.terms(p, w0, prev)
+        terms = self.terms(p, w0, prev, flow)
         return bounded_gauss_newton(terms, forward, jac, pose, c, free, self.settings.iterations)
 
     def _fit_identity(self, frames):

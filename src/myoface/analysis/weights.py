@@ -62,9 +62,11 @@ class FitSettings:
         issue 552, MediaPipe issue 2990), and the fit then opens the jaw and pulls the lower
         lip down while the chin rises. Detected on every frame, the points scatter a little
         more; the fit's temporal prior takes that out.
-    flow : refine MediaPipe's points by optical flow (:mod:`myoface.analysis.flow`: each
-        point tracked by Lucas-Kanade from the first frame with a face, kept where the track
-        is sure), because MediaPipe reads an expression's motion short. Off by default: it
+    flow : read the points optical flow tracks as a term of the fit's own
+        (:class:`~myoface.analysis.terms.OpticalFlowTerm`; :mod:`myoface.analysis.flow`: each
+        point tracked by Lucas-Kanade from the first frame with a face, used where the track
+        is sure, in place of MediaPipe's x, y), because MediaPipe reads an expression's motion
+        short. Off by default: it
         helps where the skin's texture moves with the skin and the face keeps its look, and
         hurt on the real video we have. Measured 2026-12-01 (BENCHMARKS.md; the flow on /
         off): on the head-motion closed loop, head still, skin error 0.34 / 1.03 mm, median

@@ -7,13 +7,13 @@ from __future__ import annotations
 import itertools
 import time
 from dataclasses import asdict, dataclass, field
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
 from myoface._threads import run_ahead
 from myoface.analysis.camera import POSE_COLUMNS, HeadPose, PinholeCamera
-from myoface.analysis.flow import FlowDetector
+from myoface.analysis.flow import FlowDetector, FlowRefiner
 from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, Calibration, ModelFit
 from myoface.analysis.sections import SECTIONS, section_vertices
 from myoface.analysis.synthesis import LandmarkSynthesis
@@ -29,6 +29,25 @@ LANDMARK_ESTIMATORS = ("fit", "fit-synthesis", "paper")
 #: a frame whose landmarks stay farther than this (mm RMS) from the fitted model is not
 #: measured (``quality="misfit"``): MediaPipe lost the face, or the face is not the model's
 MISFIT_RMS_MM = 6.0
+
+
+class LandmarkObservation(NamedTuple):
+    """What :meth:`FitTracker.observe` sees on a frame with a face: MediaPipe's ``points``
+    (468, 3), and ``flow``, ``(xy (468, 2), tracked (468,) bool)`` where optical flow tracked
+    them (:attr:`~myoface.analysis.weights.FitSettings.flow`; else None)."""
+
+    points: np.ndarray
+    flow: tuple | None = None
+
+    @property
+    def seen(self) -> np.ndarray:
+        """The points, at the flow's position where it tracked them."""
+        if self.flow is None:
+            return self.points
+        xy, ok = self.flow
+        out = np.array(self.points, dtype=np.float64)
+        out[ok, :2] = xy[ok]
+        return out
 
 
 @dataclass
@@ -109,7 +128,13 @@ class FitTracker(TrackerBase):
         #: the detector; made when first needed (the calibration hands its own over)
         self._detector = detector
         #: the optical flow's refiner (FitSettings.flow, or a flow detector given)
-        self._refiner = detector.refiner if isinstance(detector, FlowDetector) else None
+        #: the optical flow (FitSettings.flow), read by the fit as a term of its own
+        self._flow = FlowRefiner() if self.settings.flow else None
+        #: whichever refiner counts the flow's points (describe()): ours, or a flow
+        #: detector's given to the tracker (which refines its points itself)
+        self._refiner = self._flow
+        if isinstance(detector, FlowDetector):
+            self._refiner = detector.refiner
         #: {frame index: landmarks or None} of the calibration frames, taken by measure()
         self._detected: dict = {}
         #: relax the tissue on a second thread while the next frame is fitted
@@ -137,14 +162,15 @@ class FitTracker(TrackerBase):
         return self._detector
 
     def _new_detector(self):
-        """MediaPipe's face mesh in the mode :attr:`FitSettings.tracking` says, its points
-        refined by optical flow (:class:`~myoface.analysis.flow.FlowDetector`) when
-        :attr:`FitSettings.flow`."""
-        det = FaceMeshDetector(video=self.settings.tracking)
-        if self.settings.flow:
-            det = FlowDetector(det)
-            self._refiner = det.refiner  # (its point counts go into describe())
-        return det
+        """MediaPipe's face mesh in the mode :attr:`FitSettings.tracking` says."""
+        return FaceMeshDetector(video=self.settings.tracking)
+
+    def _observed(self, detector, frame) -> LandmarkObservation | None:
+        """``detector``'s points on ``frame`` and, with the flow, where it tracks them (None:
+        no face; the flow's tracks then start again)."""
+        pts = detector.detect(frame)
+        flow = None if self._flow is None else self._flow.track(frame, pts)
+        return None if pts is None else LandmarkObservation(pts, flow)
 
     @property
     def mm_per_px(self) -> float | None:
@@ -200,6 +226,9 @@ class FitTracker(TrackerBase):
         after them: an iterator can go on from there); an error when no frame has a face.
         Returns the calibration frame's index in the video."""
         t_start = time.perf_counter()
+        if self.settings.flow and self._refiner is self._flow:
+            # the flow's tracks and counts start with the calibration's first frame
+            self._flow = self._refiner = FlowRefiner()
         # the frames up to the first there is (its size makes the fit's camera); the rest are
         # taken as they come (``frames`` may be decoding meanwhile), on the detector's thread
         frames = iter(frames)
@@ -212,7 +241,8 @@ class FitTracker(TrackerBase):
             raise MyofaceValueError("the video has no frames to calibrate on")
         self._ensure_fit(np.shape(head[-1]))
         images: list = []
-        points: list = []
+        points: list = []  # the landmarks the calibration reads
+        observed: list = []  # what observe() would give on those frames
         first_face: list = []  # the index of the first frame with a face, once there is one
         # (a detector given to the tracker detects the calibration's frames too)
         det = self._new_detector() if self._own_detector else self._detector
@@ -236,17 +266,20 @@ class FitTracker(TrackerBase):
 
         def detect(item):
             k, frame = item
-            pts = None if frame is None else det.detect(frame)  # (None: no face)
-            if pts is not None and not first_face:
+            obs = None if frame is None else self._observed(det, frame)  # (None: no face)
+            if obs is not None and not first_face:
                 first_face.append(k)
-            if pts is None and not first_face and window is not None:
+            if obs is None and not first_face and window is not None:
                 images[k] = None  # (not kept: the search for a face may be long)
-            return pts
+            return obs
 
         def detected():
             # MediaPipe on a worker thread a few frames ahead while each frame is scored
             # (ModelFit.calibrate takes the points as they come)
-            for _, pts in run_ahead(source(), detect, DETECT_AHEAD_FRAMES, "myoface-detect"):
+            for _, obs in run_ahead(source(), detect, DETECT_AHEAD_FRAMES, "myoface-detect"):
+                observed.append(obs)
+                # (the calibration reads the points where the flow put them)
+                pts = None if obs is None else obs.seen
                 points.append(pts)
                 yield pts
 
@@ -269,7 +302,7 @@ class FitTracker(TrackerBase):
             if self._detector is not None:
                 self._detector.close()
             self._detector = det
-        self._detected = {first_index + k: pts for k, pts in enumerate(points)}
+        self._detected = {first_index + k: obs for k, obs in enumerate(observed)}
         if calibration_frame is not None:
             idx = int(calibration_frame) - first_index
             if not 0 <= idx < len(points):
@@ -300,32 +333,32 @@ class FitTracker(TrackerBase):
         self.timings["calibration_s"] += time.perf_counter() - t_start
         return self.calibration_frame
 
-    def observe(self, frame, index: int = 0):
-        """The frame's landmarks (468, 3) or None without a face: the calibration's (frames
-        it detected), else detected. Called once per frame, in order; may run on another
-        thread than :meth:`measure` (:func:`~myoface.analysis.pipeline.measure_frames`
-        runs it ahead), which takes its result as ``observation``."""
+    def observe(self, frame, index: int = 0) -> LandmarkObservation | None:
+        """The frame's :class:`LandmarkObservation`, or None without a face: the
+        calibration's (frames it detected), else detected. Called once per frame, in order;
+        may run on another thread than :meth:`measure` (the driver runs it ahead), which
+        takes its result as ``observation``."""
         if index in self._detected:
             return self._detected.pop(index)
         self._detected.clear()  # (past the calibration frames: the detector tracks from here)
         t0 = time.perf_counter()
-        pts = self.detector.detect(frame)
+        obs = self._observed(self.detector, frame)
         self.timings["detections"] += 1
         self.timings["detect_s"] += time.perf_counter() - t0
-        return pts
+        return obs
 
     def measure(self, frame, index: int = 0, time_s: float = 0.0,
                 observation=NOT_OBSERVED) -> FitMeasurement:  # fmt: skip
-        """The frame's measurement; ``observation``: its :meth:`observe` (the landmarks, or
-        None without a face; by default observed here)."""
+        """The frame's measurement; ``observation``: its :meth:`observe` (None without a
+        face; by default observed here)."""
         fit = self._ensure_fit(np.shape(frame))
-        pts = self.observe(frame, index) if observation is NOT_OBSERVED else observation
+        obs = self.observe(frame, index) if observation is NOT_OBSERVED else observation
         nan = np.full(len(self.ids), np.nan)
-        if pts is None:
+        if obs is None:
             fit.lose_track()
             return FitMeasurement(index, time_s, "no_face", nan, None, float("nan"))
         try:
-            r = fit.fit(pts, self.synthesis, deferred=self.deferred_relax)
+            r = fit.fit(obs.points, self.synthesis, deferred=self.deferred_relax, flow=obs.flow)
         except (np.linalg.LinAlgError, MyofaceValueError):
             fit.lose_track()
             return FitMeasurement(index, time_s, "fit_failed", nan, None, float("nan"))
