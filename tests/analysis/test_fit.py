@@ -351,8 +351,8 @@ def test_resynth_reproduces_the_head_pose(tmp_path, fm):
         read_head_poses,
         write_contractions_csv,
     )
+    from myoface.analysis.resynthesis import resynthesize
     from myoface.analysis.video import open_video
-    from myoface.commands.resynth import resynthesize
 
     zero = np.zeros(fm.n_muscles)
     yaws = [0.0, 30.0, None]

@@ -78,13 +78,3 @@ def resynth_video(
         poses=perf.poses,
     )
     print(f"wrote {output} ({perf.n_frames} frames at {perf.fps:.1f} fps)")
-
-
-def __getattr__(name: str):
-    # ``resynthesize`` lived here; it is the library's now (myoface.analysis.resynthesis),
-    # imported on first use so that the command line starts without the renderer
-    if name == "resynthesize":
-        from myoface.analysis.resynthesis import resynthesize
-
-        return resynthesize
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
