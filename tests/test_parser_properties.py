@@ -330,13 +330,48 @@ def default_face_and_ids():
     return face, [m.id for m in ms.muscles] + ["jaw"]
 
 
+@st.composite
+def muscle_files(draw) -> bytes:
+    """Any bytes, or the default muscle file with lines dropped or repeated and numbers
+    replaced by others (in range or not): mostly-valid files, so that accepted ones occur."""
+    if draw(st.integers(0, 3)) == 0:
+        return draw(st.binary(max_size=300))
+    from importlib import resources
+
+    lines = (resources.files("myoface") / "data" / "default_muscles.toml").read_text().splitlines()
+    for _ in range(draw(st.integers(0, 3))):  # a few mutations, anywhere
+        k = draw(st.integers(0, len(lines) - 1))
+        what = draw(st.sampled_from(["drop", "repeat", "number"]))
+        if what == "drop":
+            del lines[k]
+        elif what == "repeat":
+            lines.insert(k, lines[k])
+        elif "=" in lines[k]:
+            key = lines[k].split("=", 1)[0]
+            val = draw(st.sampled_from(["0", "-1", "1e9", "nan", "inf", "0.5", "[]", '"x"']))
+            lines[k] = f"{key}= {val}"
+    out = lines
+    return "\n".join(out).encode()
+
+
 @SETTINGS
-@given(data=st.binary(max_size=300))
+@given(data=muscle_files())
 def test_muscle_file_of_any_bytes(scratch, default_face_and_ids, data):
+    """A MyofaceError, or a muscle set with the documented properties: unique ids, the jaw
+    (when there is one) last, and every number in it finite."""
     from myoface.muscles.io import load_muscles
 
     face, _ = default_face_and_ids
-    only_myoface_errors(load_muscles, _write(scratch, data, ".toml"), face)
+    ms = _or_none(load_muscles, _write(scratch, data, ".toml"), face)
+    if ms is None:
+        return
+    ids = list(ms.ids)
+    assert len(set(ids)) == len(ids)
+    assert "jaw" not in ids[:-1]
+    for m in ms.muscles:
+        for v in vars(m).values():
+            if isinstance(v, float | np.ndarray) and np.asarray(v).dtype.kind == "f":
+                assert np.isfinite(v).all(), (m.id, v)
 
 
 # --------------------------------------------------------------------- AUs and intensities
@@ -431,6 +466,14 @@ def face_files(draw) -> bytes:
 @SETTINGS
 @given(data=face_files())
 def test_face_file_of_any_content(scratch, data):
+    """A MyofaceError, or a face whose mesh is finite with triangles indexing its vertices."""
     from myoface.face.facefile import read_face
 
-    only_myoface_errors(read_face, _write(scratch, data, ".myoface"))
+    got = _or_none(read_face, _write(scratch, data, ".myoface"))
+    if got is not None:
+        face, muscles, meta = got
+        assert np.isfinite(face.vertices).all() and len(face.vertices) >= 3
+        tri = np.asarray(face.triangles)
+        assert tri.min() >= 0 and tri.max() < len(face.vertices)
+        assert muscles is None or isinstance(muscles, str)
+        assert isinstance(meta, dict)
