@@ -49,6 +49,7 @@ from myoface.muscles import (
     read_waters_expressions,
     read_waters_muscles,
 )
+from myoface.muscles.io import with_later_defaults
 from myoface.muscles.lids import build_eyelids
 from myoface.tissue import (
     RelaxResult,
@@ -463,8 +464,6 @@ def _load_face_file(path: Path, muscles, params) -> FaceModel:
         raise MyofaceFormatError(f"{path}: its muscles.toml is not valid TOML: {exc}") from None
     mirror = default_mirror_map() if default_topology else None
     if default_topology:
-        from myoface.muscles.io import with_later_defaults
-
         # a face saved before the eyelids (or the lips' marginal part) gets the default ones
         doc = with_later_defaults(doc)
     ms = muscles_from_dict(doc, face, where=f"{path}:muscles.toml", mirror=mirror)

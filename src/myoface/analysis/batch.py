@@ -44,9 +44,12 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from myoface._io import atomic_output, ensure_output_dir
+from myoface._io import atomic_output, ensure_output_dir, sha256_file
+from myoface.analysis.estimate import skin_response
 from myoface.analysis.initfiles import load_init
 from myoface.analysis.outputs import FolderResult, analyze_to_folder
+from myoface.analysis.sections import PAPER_MUSCLES
+from myoface.analysis.trackers.landmark_fit import LANDMARK_ESTIMATORS
 from myoface.analysis.trackers.snakes import ESTIMATORS
 from myoface.analysis.video import open_video
 from myoface.errors import (
@@ -55,6 +58,7 @@ from myoface.errors import (
     MyofaceFileNotFoundError,
     MyofaceValueError,
 )
+from myoface.model import load_face_model
 from myoface.render import progress
 
 __all__ = [
@@ -220,10 +224,6 @@ def cached_model(face: str | None = None, muscles: str | None = None):
     with _MODELS_LOCK:
         fm = _MODELS.get(key)
         if fm is None:
-            from myoface.analysis.estimate import skin_response
-            from myoface.analysis.sections import PAPER_MUSCLES
-            from myoface.model import load_face_model
-
             fm = load_face_model(face, muscles=muscles)
             # the skin's responses to the estimated muscles (both trackers use them), memoised
             # on the model: computed here once rather than in the worker's first analysis.
@@ -548,8 +548,6 @@ def run_batch(
     if tracker == "snakes":
         allowed = ESTIMATORS
     else:  # the landmarks' own, or the snakes' names for their counterparts
-        from myoface.analysis.trackers.landmark_fit import LANDMARK_ESTIMATORS
-
         allowed = (*LANDMARK_ESTIMATORS, *ESTIMATORS)
     if estimator is not None and estimator not in allowed:
         raise MyofaceValueError(
@@ -606,8 +604,6 @@ def run_batch(
         if tracker == "landmarks":
             raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
         if isinstance(init, str | os.PathLike):
-            from myoface._io import sha256_file
-
             init_sha = sha256_file(init) if Path(init).is_file() else None
             init = load_init(init)
         else:

@@ -18,6 +18,7 @@ from myoface.analysis.sections import (
     section_vertices,
 )
 from myoface.analysis.snakes import resample_polyline
+from myoface.analysis.trackers.landmark_paper import PaperLandmarkTracker
 from myoface.analysis.trackers.snakes import Analyzer
 from myoface.errors import MyofaceValueError
 from myoface.render import Camera, Renderer, to_srgb8
@@ -126,8 +127,6 @@ def run_closed_loop(
         est = _estimate_from_true_curves(model, cam, frames, ids, refine)
         return ClosedLoopResult(ids, truth, est, ["ok"] * len(frames))
     if tracker == "landmarks":
-        from myoface.analysis.trackers.landmark_paper import PaperLandmarkTracker
-
         an = PaperLandmarkTracker(model, ids, refine=0)
     else:
         init = project_sections(model, cam)

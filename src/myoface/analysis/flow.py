@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from myoface.errors import MyofaceValueError
+from myoface.errors import MyofaceDependencyError, MyofaceValueError
 
 #: MediaPipe's outer eye corners (the inter-ocular distance that scales the tolerance)
 EYE_CORNERS = (33, 263)
@@ -43,8 +43,6 @@ def _cv2():
     try:
         import cv2
     except ImportError as e:  # pragma: no cover - it comes with mediapipe
-        from myoface.errors import MyofaceDependencyError
-
         raise MyofaceDependencyError(
             "the optical-flow refinement needs OpenCV (it comes with MediaPipe: "
             'pip install "myoface[mediapipe]")'

@@ -29,6 +29,7 @@ from myoface.analysis.initfiles import load_init
 from myoface.analysis.pipeline import Tracking, make_analyzer
 from myoface.analysis.video import Video, open_video
 from myoface.errors import MyofaceValueError
+from myoface.model import load_face_model
 from myoface.render import VideoWriter, progress
 
 #: the files :func:`analyze_to_folder` writes for every tracker
@@ -266,7 +267,7 @@ def analyze_to_folder(
         how_init = str(Path(init).resolve())
         init = load_init(init)
     if model is None:
-        from myoface.model import load_face_model
+        pass
 
         model = load_face_model(face)
     an, first = make_analyzer(

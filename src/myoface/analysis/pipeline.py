@@ -47,6 +47,7 @@ from myoface.analysis.video import Video, open_video
 from myoface.analysis.weights import FitSettings
 from myoface.errors import MyofaceValueError
 from myoface.facemesh import DETECT_AHEAD_FRAMES
+from myoface.model import build_face_model
 from myoface.render import progress
 
 
@@ -186,7 +187,7 @@ def analyze_video(
     :func:`~myoface.analysis.outputs.analyze_to_folder` streams them to files in flat memory.
     """
     if model is None:
-        from myoface.model import build_face_model
+        pass
 
         model = build_face_model()
     if not isinstance(video, Video):

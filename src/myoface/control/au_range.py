@@ -32,6 +32,7 @@ import numpy as np
 
 from myoface.control.facs import au_contractions, au_table
 from myoface.errors import MyofaceValueError
+from myoface.model import build_face_model
 
 #: the signed axes a direction may name, as (component index, sign) in (lateral, up, forward)
 AXES = {
@@ -248,8 +249,6 @@ def measure_au_ranges(model=None, aus=None) -> list[AURangeResult]:
     list of AURangeResult, in the table's order.
     """
     if model is None:
-        from myoface.model import build_face_model
-
         model = build_face_model()
     refs = [r for r in au_ranges() if aus is None or r.au in set(aus)]
     nv = model.face.n_vertices

@@ -56,7 +56,7 @@ import numpy as np
 
 from myoface._io import parse_toml, read_text
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
-from myoface.face import default_mirror_map
+from myoface.face import default_mirror_map, load_default_face
 from myoface.face.io import WATERS_UNIT_MM
 from myoface.face.mesh import FaceMesh
 from myoface.muscles.jaw import Jaw, harmonic_weights
@@ -397,8 +397,6 @@ def load_default_muscles(face: FaceMesh | None = None) -> MuscleSet:
     the bundled default face.
     """
     if face is None:
-        from myoface.face import load_default_face
-
         face = load_default_face()
     if face.n_vertices != 468:
         raise MyofaceValueError(

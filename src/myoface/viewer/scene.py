@@ -16,6 +16,7 @@ import numpy as np
 
 from myoface.render.raster import vertex_normals_numba
 from myoface.render.renderer import to_srgb8
+from myoface.render.wrinkles import WrinkleNormalMap
 from myoface.synth import muscle_segments
 
 MM = 1e-3
@@ -214,8 +215,6 @@ class FaceScene:
         if renderer.texture is not None and face.uv is not None:
             wrinkles = None
             if renderer.wrinkles is not None:
-                from myoface.render.wrinkles import WrinkleNormalMap
-
                 wrinkles = WrinkleNormalMap(renderer.wrinkles, face.uv)
             self._glb = TexturedSkinGLB(
                 face.vertices, face.triangles, face.uv, renderer.texture, wrinkles

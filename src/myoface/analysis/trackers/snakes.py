@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from myoface.analysis.curvefit import CurveEstimator
 from myoface.analysis.estimate import ContractionEstimator
 from myoface.analysis.headframe import HeadTracker, Similarity, head_box
 from myoface.analysis.landmarks import auto_init, rigid_vertices, similarity_affine
@@ -269,7 +270,7 @@ class Analyzer:
         self.estimator = ContractionEstimator(model, self.fiducials, self.ids)
         self.curves = None
         if estimator == "curves":
-            from myoface.analysis.curvefit import CurveEstimator
+            pass
 
             secs = {
                 s: (section_vertices(model.face, s), SECTIONS[s][1])
