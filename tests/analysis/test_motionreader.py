@@ -104,3 +104,21 @@ def test_the_reader_reads_known_warps_at_gain_one(head_moves):
         read, true = np.array(read), np.array(true)
         assert 0.9 <= gain(read, true) <= 1.1, (r, gain(read, true))
         assert explained(read, true) >= 0.9, (r, explained(read, true))
+
+
+@pytest.mark.shared_data
+@needs_mediapipe
+def test_the_known_warp_bench_reads_the_models_motion_in_the_warps_axes():
+    """``analysis.known_warp_*``'s comparison (the whole analysis on a known-warp clip, the
+    model read from its vertices) in the warp's axes: every frame measured, every region's
+    gain and explained fraction finite, and the brows (which MediaPipe reads best) moving
+    the model the way the warp moved them (a sign or axis error would make it negative)."""
+    from myoface.bench.knownwarp import run_known_warp
+
+    res = run_known_warp(False, quick=True)
+    assert res["measured"] == res["frames"]
+    for r, v in res["regions"].items():
+        assert np.isfinite(v["gain"]) and np.isfinite(v["explained"]), r
+        assert v["true_rms_iod"] > 0.005, r
+    assert res["regions"]["brows"]["gain"] > 0.3 and res["regions"]["brows"]["explained"] > 0.3
+    assert np.isfinite(res["leak"])
