@@ -132,3 +132,15 @@ class FaceMeshDetector:
 #: fitted; a few frames absorb the jitter between the two (a frame's fit costs more where a
 #: relax of the tissue is taken up)
 DETECT_AHEAD_FRAMES = 8
+
+
+def import_opencv(what: str):
+    """OpenCV's ``cv2`` (it comes with MediaPipe); a :class:`MyofaceDependencyError` saying
+    ``what`` needs it and how to install it, when it is not installed."""
+    try:
+        import cv2
+    except ImportError as e:  # pragma: no cover - it comes with mediapipe
+        raise MyofaceDependencyError(
+            f"{what} needs OpenCV (it comes with MediaPipe: {PIP_HINT})"
+        ) from e
+    return cv2

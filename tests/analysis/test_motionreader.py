@@ -14,6 +14,7 @@ from myoface.analysis.motionreader import (
     gain,
     window_for,
 )
+from myoface.bench.knownwarp import APEX_IOD
 from tests.conftest import needs_mediapipe, shared_path
 
 cv2 = pytest.importorskip("cv2")
@@ -47,15 +48,10 @@ def test_a_known_warp_puts_a_point_where_it_says():
 
 
 def _programme(iod, k, n):
-    """Each region's motion at frame k of n (image axes, pixels): rises and falls."""
+    """Each region's motion at frame k of n (image axes, pixels): the known-warp benchmark's
+    apex amounts, rising and falling."""
     a = np.sin(np.pi * k / (n - 1))
-    return {
-        "mouth_corners": np.array([[-0.05, -0.04], [0.05, -0.04]]) * a * iod,  # out and up
-        "lips": np.array([[0, -0.02], [0, -0.01], [0, 0.02], [0, 0.03]]) * a * iod,
-        "brows": np.array([[0, -0.03]]) * a * iod,
-        "eyelids": np.array([[0, 0.01], [0, 0.0], [0, 0.01], [0, 0.0]]) * a * iod,
-        "chin": np.array([[0, 0.03]]) * a * iod,
-    }
+    return {r: np.asarray(v) * a * iod for r, v in APEX_IOD.items()}
 
 
 @pytest.mark.shared_data

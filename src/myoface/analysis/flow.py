@@ -33,21 +33,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from myoface.errors import MyofaceDependencyError, MyofaceValueError
+from myoface.errors import MyofaceValueError
+from myoface.facemesh import import_opencv
 
 #: MediaPipe's outer eye corners (the inter-ocular distance that scales the tolerance)
 EYE_CORNERS = (33, 263)
 
 
 def _cv2():
-    try:
-        import cv2
-    except ImportError as e:  # pragma: no cover - it comes with mediapipe
-        raise MyofaceDependencyError(
-            "the optical-flow refinement needs OpenCV (it comes with MediaPipe: "
-            'pip install "myoface[mediapipe]")'
-        ) from e
-    return cv2
+    return import_opencv("the optical flow")
 
 
 class FlowRefiner:

@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from myoface.errors import MyofaceDependencyError, MyofaceValueError
+from myoface.errors import MyofaceValueError
+from myoface.facemesh import import_opencv
 
 #: fixed-point iterations of the backward map (the residual falls by the bumps' largest
 #: gradient, |d'| < 0.3, each iteration: 1e-6 px after 12)
@@ -29,13 +30,7 @@ GRID_PX = 4
 
 
 def _cv2():
-    try:
-        import cv2  # (OpenCV comes with MediaPipe, an optional extra)
-    except ImportError as e:  # pragma: no cover
-        raise MyofaceDependencyError(
-            'known warps need OpenCV (it comes with MediaPipe: pip install "myoface[mediapipe]")'
-        ) from e
-    return cv2
+    return import_opencv("a known warp")
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from myoface.analysis.knownwarp import _cv2
 from myoface.errors import MyofaceValueError
+from myoface.facemesh import import_opencv
 
 #: Lucas-Kanade's window, in inter-ocular distances (11 px at the sample video's 99 px): on
 #: its first frame warped by smooth fields (bumps of 0.25 IOD radius), with and without fake
@@ -33,7 +33,7 @@ def window_for(iod_px: float) -> int:
 
 
 def _grey(frame) -> np.ndarray:
-    cv2 = _cv2()
+    cv2 = import_opencv("the motion reader")
     img = np.asarray(frame)
     if img.ndim == 3:
         img = cv2.cvtColor(np.ascontiguousarray(img[..., :3]), cv2.COLOR_RGB2GRAY)
@@ -60,7 +60,7 @@ class FlowMotionReader:
         self.fb_max_px = float(fb_max_px)
 
     def read(self, frame) -> tuple[np.ndarray, np.ndarray]:
-        cv2 = _cv2()
+        cv2 = import_opencv("the motion reader")
         img = _grey(frame)
         if img.shape != self.ref.shape:
             raise MyofaceValueError("the frames must have the reference frame's size")
