@@ -258,6 +258,7 @@ def test_demo_real_video(model, tmp_path, monkeypatch, capsys):
     # the lines of myoface analyze --report, resynth and face from-photo, in their order
     said = [
         "fidelity: ",
+        "fidelity, MediaPipe's face mesh on both (earlier reports' measure",
         f"analysed 72 frames (72 measured); output folder: {ana.resolve()}",
         f"wrote {ana / 'resynth.mp4'} (72 frames at 30.0 fps)",
         "face found ",
@@ -304,6 +305,7 @@ def test_demo_real_video(model, tmp_path, monkeypatch, capsys):
     # --report: the fidelity of the person's resynthesis, every frame compared
     fid = json.loads((ana / "fidelity.json").read_text())
     assert fid["frames_compared"] == len(video) and "face_from_photo" in fid["face"]
+    assert fid["input_reader"]["method"] == "dis" and fid["mediapipe_on_both"] is not None
 
 
 @needs_mediapipe

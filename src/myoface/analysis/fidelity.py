@@ -1,35 +1,58 @@
-"""How much of a video's expression motion the resynthesized model reproduces.
+"""How much of a video's expression motion the analysed model reproduces.
 
-A measure with a detector that is not the fit: MediaPipe's face mesh is run on the input video
-and on the model's resynthesis of it (the model driven by the analysis' contractions, rendered
-front on), and the two are compared point by point:
+The measure (:func:`fidelity_of_analysis`, ``myoface analyze --report``, the demo, the
+benchmark ``analysis.fidelity``) reads the two sides with instruments that are not the fit's:
 
-1. each frame's points are aligned to the sequence's own reference frame (its first measured
-   frame) by a 3-D similarity (scale, rotation, translation; Umeyama 1991) fitted to the
-   *rigid* points, which no muscle moves: the eye corners and the nose bridge
-   (:data:`RIGID_POINTS`). This takes out the head's motion and the two videos' different
-   sizes and positions of the face;
-2. the *expressive* points' displacements from the reference frame (:data:`REGIONS`: mouth
-   corners, lip centres, brows, eyelids, chin) are divided by the reference frame's
-   inter-ocular distance (outer eye corners), so that both are in the same unit, and
-   expressed in the axes of a face front on (the reference frame's rigid points mapped onto
-   the default face's), so that a reference frame with the head turned is compared in the
-   same axes as one front on;
-3. per region and overall (every expressive point), over the frames and points::
+- **the input**, by a motion reader validated on known answers
+  (:mod:`myoface.analysis.motionreader`; :data:`READER`, OpenCV's DIS dense optical flow):
+  MediaPipe's face mesh finds the points once, on the analysis' calibration frame (image
+  mode), and the reader follows them from there into every measured frame, later and earlier
+  ones. On the sample video's first frame warped by known smooth fields, head still and
+  moving, DIS reads 0.96-1.04 of every region's motion (explained 0.988-1.0), Lucas-Kanade
+  0.96-1.08 (0.92-0.998) (``tests/analysis/test_motionreader.py``, 2026-12-01). DIS, not
+  Lucas-Kanade, because the analysis' own optical flow is Lucas-Kanade's: the instrument a
+  fit is fitted to must not judge it;
+- **the model**, exactly: its skin vertices at each frame's contractions (the tissue relaxed,
+  warm-started from the previous frame's), x and y of the head frame, the face front on
+  (:func:`model_displacements`). Vertex i of the default face and of a face made from a photo
+  is MediaPipe's point i. No renderer and no detector.
 
-       explained = 1 - sum |d_in - d_out|^2 / sum |d_in|^2
+On each side, the displacements of the expressive points (:data:`REGIONS`: mouth corners,
+lip centres, brows, eyelids, chin) from the reference (the calibration frame; the model's
+neutral, contractions 0) are taken with the head's motion in the image plane removed by a
+2-D similarity fitted to the *rigid* points, which no muscle moves (:data:`RIGID_POINTS`: eye
+corners, nose bridge), and divided by that side's own inter-ocular distance (outer eye
+corners, :data:`EYE_OUTER`); the input's are turned into the face's frontal axes (the
+reference frame's rigid points onto the model's), and both given as x across, y up. Then,
+per region and overall, over the frames and points::
 
-   1 when the resynthesis moves as the input does, 0 when it is no better than a still face
-   (negative when worse), with ``gain = sum d_in . d_out / sum |d_in|^2`` (the least-squares
-   factor from the input's motion to the output's: < 1 when the model moves too little) and
-   ``corr = sum d_in . d_out / sqrt(sum |d_in|^2 sum |d_out|^2)`` (the correlation about
-   zero, the reference frame's position: 1 when the output moves in proportion to the input
-   whatever the gain). ``explained = 2 gain - sum |d_out|^2 / sum |d_in|^2``.
+    explained = 1 - sum |d_in - d_out|^2 / sum |d_in|^2
 
-The displacements are measured in the face's frontal plane (x across, y up; ``dims=2``):
-MediaPipe's monocular depth scatters by more than an expression moves the skin towards the
-camera (:class:`~myoface.analysis.weights.FitSettings` weighs it a tenth of
-x and y), and it would count that noise as unexplained motion. ``dims=3`` keeps it.
+1 when the model moves as the input does, 0 when it is no better than a still face (negative
+when worse), with ``gain = sum d_in . d_out / sum |d_in|^2`` (the least-squares factor from
+the input's motion to the model's: < 1 when the model moves too little) and ``corr = sum d_in
+. d_out / sqrt(sum |d_in|^2 sum |d_out|^2)`` (the correlation about zero: 1 when the model
+moves in proportion to the input whatever the gain). ``explained = 2 gain - sum |d_out|^2 /
+sum |d_in|^2``.
+
+What the validation does not cover (measured on ``single_face.mp4``, 2026-12-01): where the
+lips part, the inner lip points (13, 14) sit on an edge that the teeth come out of, which no
+optical flow can follow through (at the smile's apex DIS and MediaPipe differ there by 5.2 and
+9.6 px RMS, at the outer lip points by 1.1-1.5 px, at the mouth corners by 3.8-4.4 px of their
+~25 px); the reader's forward-backward check flags such readings (fidelity.json's
+``failing_forward_backward_check``: 62 % of the mouth corners' readings and 41 % of the lips'
+miss by 1 px or more, the corners' by 1.65 px median; the brows' and chin's 0-0.4 %). And the
+rigid points are not quite rigid: in the blink at frames 25-29 the outer eye corners are read
+0.02-0.055 IOD off the similarity, which shows as a spike in every region there.
+
+**The measure of earlier reports** (:func:`measure_fidelity`, fidelity.json's
+``mediapipe_on_both``): MediaPipe's face mesh on the input and on the resynthesis rendered
+front on, each frame aligned to its reference frame by a 3-D similarity on the rigid points
+(Umeyama 1991) and expressed in the default face's axes (:func:`displacements`). It is not a
+valid judge: MediaPipe's gain differs on real faces (about 0.5) and on renders (about 0.7;
+``synth.smile_gain``'s ``mediapipe_gain_on_renders``), and the fit consumes its points. The displacements are measured in the face's frontal
+plane (``dims=2``): MediaPipe's monocular depth scatters by more than an expression moves the
+skin towards the camera; ``dims=3`` keeps it.
 
 Point indices are those of MediaPipe's 468-point face mesh, which is the default face's
 topology (its named landmark groups in ``data/``: ``mouth_corner_l``, ``eye_l``, ...).
@@ -38,6 +61,7 @@ topology (its named landmark groups in ``data/``: ``mouth_corner_l``, ``eye_l``,
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -46,6 +70,7 @@ import numpy as np
 
 from myoface._io import atomic_output, read_text
 from myoface.analysis.contractions_csv import read_contractions_csv
+from myoface.analysis.motionreader import aligned_displacements, grey, make_reader, similarity_2d
 from myoface.analysis.resynthesis import resynthesis_frames
 from myoface.analysis.video import open_video
 from myoface.errors import MyofaceValueError
@@ -54,6 +79,8 @@ from myoface.face.personal import face_from_photo, fit_similarity_3d
 from myoface.facemesh import FaceMeshDetector
 from myoface.model import build_face_model
 from myoface.render import progress
+from myoface.synth import SYNTH_TOL_MM
+from myoface.tissue import RelaxWarning
 
 #: points no muscle moves (MediaPipe face mesh indices): the eye corners (right eye outer and
 #: inner, left eye inner and outer) and the nose bridge (from between the eyes down the ridge)
@@ -197,6 +224,14 @@ class FidelityResult:
     dims: int
     d_in: dict = field(repr=False, default_factory=dict)
     d_out: dict = field(repr=False, default_factory=dict)
+    #: how the two sides were read (the plot's title says it)
+    method: str = "MediaPipe face mesh on both, each aligned to its reference frame"
+    #: the plot's names of the two sides
+    labels: tuple = ("input", "resynthesis")
+    #: the input's reader (empty: MediaPipe's face mesh, as on the other side)
+    reader: str = ""
+    #: the measure of earlier reports beside this one (:func:`fidelity_of_analysis`), or None
+    mediapipe_on_both: FidelityResult | None = field(repr=False, default=None)
 
     def as_dict(self) -> dict:
         return {
@@ -258,8 +293,8 @@ def plot_fidelity(result: FidelityResult, path, times=None, title: str = "") -> 
         def rms(x):
             return np.sqrt((x**2).sum(-1).mean(-1))
 
-        ax.plot(t, rms(a), color="0.2", label="input")
-        ax.plot(t, rms(b), color="tab:orange", label="resynthesis")
+        ax.plot(t, rms(a), color="0.2", label=result.labels[0])
+        ax.plot(t, rms(b), color="tab:orange", label=result.labels[1])
         ax.plot(t, rms(a - b), color="tab:red", lw=0.8, ls="--", label="difference")
         s = result.regions[name]
         ax.set_title(
@@ -275,7 +310,7 @@ def plot_fidelity(result: FidelityResult, path, times=None, title: str = "") -> 
     head = f"{title}: " if title else ""
     fig.suptitle(
         f"{head}explained {o.explained:.2f}, gain {o.gain:.2f}, corr {o.corr:.2f} (overall; "
-        "MediaPipe face mesh on both, each aligned to its reference frame)",
+        f"{result.method})",
         fontsize=8,
     )
     fig.tight_layout()
@@ -320,6 +355,170 @@ def person_model(video_path, calibration_frame: int):
     return build_face_model(face), how
 
 
+#: the reader of the input's motion (:mod:`myoface.analysis.motionreader`): OpenCV's DIS dense
+#: optical flow, an instrument the fit does not consume (the analysis' own optical flow is
+#: Lucas-Kanade's)
+READER = "dis"
+#: what holds the readers to known answers, and what they read there (2026-12-01): the sample
+#: video's first frame warped by smooth known fields, head still and moving, every region
+READER_VALIDATION = {
+    "test": "tests/analysis/test_motionreader.py::test_the_reader_reads_known_warps_at_gain_one",
+    "bounds": {"gain": [0.9, 1.1], "explained_at_least": 0.9},
+    "measured": {
+        "dis": {"gain": [0.96, 1.04], "explained": [0.988, 1.0]},
+        "lk": {"gain": [0.96, 1.08], "explained": [0.92, 0.998]},
+    },
+}
+#: the reader's names in reports
+READER_NAMES = {
+    "dis": "DIS dense optical flow (OpenCV)",
+    "lk": "pyramidal Lucas-Kanade optical flow (OpenCV)",
+}
+#: the points read on both sides: every region's and the rigid ones (face mesh indices)
+POINTS = tuple(sorted({i for v in REGIONS.values() for i in v} | set(RIGID_POINTS)))
+_POS = {i: k for k, i in enumerate(POINTS)}
+_RIGID = [_POS[i] for i in RIGID_POINTS]
+_EYES = (_POS[EYE_OUTER[0]], _POS[EYE_OUTER[1]])
+
+
+def _region_displacements(ref, seq, regions=None, rotation=None) -> dict:
+    """{region: (T, P, 2)} displacements of ``seq`` (T, len(POINTS), 2; image axes, x right,
+    y down; NaN rows: not measured) from ``ref`` (len(POINTS), 2), each frame mapped onto
+    ``ref`` by the 2-D similarity of the rigid points (the head's motion in the image plane
+    taken out), over ``ref``'s inter-ocular distance; turned by ``rotation`` (2, 2; into the
+    face's frontal axes) and given in the head frame's axes (x to the subject's left, y up)."""
+    regions = REGIONS if regions is None else regions
+    d = np.full(np.shape(seq), np.nan)
+    for k, cur in enumerate(seq):
+        if np.isfinite(cur).all():
+            d[k] = aligned_displacements(ref, cur, _RIGID, _EYES)
+    if rotation is not None:
+        d = d @ np.asarray(rotation).T
+    d = d * np.array([1.0, -1.0])
+    return {name: d[:, [_POS[i] for i in idx]] for name, idx in regions.items()}
+
+
+def model_points(model, table, ok=None) -> tuple[np.ndarray, np.ndarray, int]:
+    """The model's skin at :data:`POINTS` for each row of ``table`` (T, M) contractions over
+    ``model.ids``: the tissue relaxed to the row (warm-started from the last row's state, to
+    the resynthesis' tolerance), the vertices' x and y in the head frame (front on), as image
+    axes (x right, y down: y flipped), mm. Rows where ``ok`` is False are NaN and not relaxed.
+    Returns (T, len(POINTS), 2), the neutral's (contractions 0: the rest) (len(POINTS), 2), and
+    the rows whose relaxation did not converge. Vertex i of the default face, and of a face
+    made from a photo, is MediaPipe's face mesh point i."""
+    table = np.asarray(table, dtype=np.float64)
+    ok = np.ones(len(table), bool) if ok is None else np.asarray(ok, bool)
+    flip = np.array([1.0, -1.0])
+    idx = list(POINTS)
+    neutral = model.skin_vertices(model.rest_state())[idx, :2] * flip
+    out = np.full((len(table), len(idx), 2), np.nan)
+    state, unconverged = None, 0
+    for k, c in enumerate(table):
+        if not ok[k] or not np.isfinite(c).all():
+            continue
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RelaxWarning)
+            res = model.relax(c, state, tol_mm=SYNTH_TOL_MM)
+        state = res.state
+        unconverged += int(
+            not res.converged or any(issubclass(w.category, RelaxWarning) for w in caught)
+        )
+        out[k] = model.skin_vertices(state)[idx, :2] * flip
+    return out, neutral, unconverged
+
+
+def model_displacements(model, table, ok=None, regions=None) -> tuple[dict, dict]:
+    """The model's side of the measure, exact: :func:`model_points` of ``table``, their
+    displacements from the neutral (contractions 0) with the rigid points' similarity taken out
+    as on the input's side (on the sample video's analysis the person's model's rigid points
+    move by 0.0034 of its inter-ocular distance at most, and this changes the regions'
+    displacements by 0.0010-0.0017 IOD RMS against 0.011-0.105 of motion; 2026-12-01), over the model's own inter-ocular distance,
+    in the head frame's axes (x to the subject's left, y up). Returns ({region: (T, P, 2)}, a
+    dict of the neutral's points (image axes, mm, for the input's axes) and the relaxations
+    that did not converge)."""
+    pts, neutral, unconverged = model_points(model, table, ok)
+    d = _region_displacements(neutral, pts, regions)
+    return d, {"neutral_points": neutral, "unconverged": unconverged}
+
+
+def read_video_points(video_path, frames, calibration_frame: int, reader: str = READER,
+                      detect_landmarks_too: bool = False):  # fmt: skip
+    """The input's side: MediaPipe's face mesh (image mode) on the video's frame
+    ``calibration_frame`` gives the reference points (:data:`POINTS`), which the motion
+    reader ``reader`` ("dis" or "lk", :func:`~myoface.analysis.motionreader.make_reader`)
+    follows from that frame into each frame of ``frames`` (video frame indices; None: not
+    read): forward from the reference for the later frames, and back from it, nearest
+    first, for the earlier ones (each read against the reference frame, started from the
+    neighbour's reading). Returns (reference points (len(POINTS), 2) px, (len(frames),
+    len(POINTS), 2) px with NaN rows for frames not read, (len(frames), len(POINTS)) which
+    readings failed the reader's forward-backward check (the flow back from the frame does
+    not return to the reference point within 1 px), and with ``detect_landmarks_too`` MediaPipe's
+    points on every frame of ``frames`` (len(frames), 468, 3), else None).
+
+    Raises
+    ------
+    MyofaceValueError
+        When the calibration frame has no face, or the video ends before a frame asked for.
+    """
+    import itertools
+
+    cal = int(calibration_frame)
+    first = next(itertools.islice(iter(open_video(video_path)), cal, None), None)
+    if first is None:
+        raise MyofaceValueError(f"{video_path}: no frame {cal} (the calibration frame)")
+    with FaceMeshDetector(video=False) as det:
+        p = det.detect(first)
+    if p is None:
+        raise MyofaceValueError(f"{video_path}: no face on frame {cal} (the calibration frame)")
+    ref = np.asarray(p, dtype=np.float64)[list(POINTS), :2]
+    iod = float(np.linalg.norm(ref[_EYES[0]] - ref[_EYES[1]]))
+    rows: dict = {}
+    for r, f in enumerate(frames):
+        if f is not None:
+            rows.setdefault(int(f), []).append(r)
+    out = np.full((len(frames), len(POINTS), 2), np.nan)
+    unsure = np.zeros((len(frames), len(POINTS)), bool)
+    lm = np.full((len(frames), 468, 3), np.nan) if detect_landmarks_too else None
+    fwd = make_reader(reader, first, ref, iod)
+    before: dict = {}
+    last = max(rows, default=-1)
+
+    def put(f, q, sure=True):
+        for r in rows[f]:
+            out[r] = q
+            unsure[r] = ~np.asarray(sure)
+
+    seen = set()
+    det = FaceMeshDetector(video=False) if detect_landmarks_too else None
+    try:
+        for k, img in enumerate(open_video(video_path)):
+            if k > last:
+                break
+            if k not in rows:
+                continue
+            seen.add(k)
+            if det is not None:
+                found = det.detect(img)
+                if found is not None:
+                    lm[rows[k]] = found[:468]
+            if k < cal:
+                before[k] = grey(img)  # read after the reference, back from it
+            elif k == cal:
+                put(k, ref)
+            else:
+                put(k, *fwd.read(img))
+    finally:
+        if det is not None:
+            det.close()
+    missing = sorted(set(rows) - seen)
+    if missing:
+        raise MyofaceValueError(f"{video_path} has no frame {missing[0]}")
+    back = make_reader(reader, first, ref, iod)
+    for f in sorted(before, reverse=True):
+        put(f, *back.read(before.pop(f)))
+    return ref, out, unsure, lm
+
+
 def fidelity_of_analysis(
     video_path,
     contractions_csv,
@@ -327,22 +526,38 @@ def fidelity_of_analysis(
     model=None,
     fallback_model=None,
     calibration_frame: int = 0,
+    reader: str = READER,
+    mediapipe_on_both: bool = True,
     size: int | None = None,
-    dims: int = 2,
     show_progress: bool = False,
 ) -> tuple[FidelityResult, dict]:
-    """The fidelity measure of an analysis: MediaPipe on the frames of ``video_path`` that
-    ``contractions_csv`` measured (its ``frame`` column; "ok" rows) and on the resynthesis of
-    those rows by ``model`` (default: the person's own face made from ``calibration_frame``,
+    """The fidelity measure of an analysis, the frames of ``video_path`` that
+    ``contractions_csv`` measured (its ``frame`` column; "ok" rows) against ``model`` driven
+    by those rows (default: the person's own face made from ``calibration_frame``,
     :func:`person_model`; if no face is found there, ``fallback_model``, e.g. the analysis'
-    own, and the reason in the returned dict), rendered front on at ``size`` pixels
-    (default: the video's height, at least 256). Returns the result and a dict of how it was
-    measured (for fidelity.json)."""
+    own, and the reason in the returned dict):
+
+    - the input read by the motion reader ``reader`` (:func:`read_video_points`; default DIS
+      dense flow, validated on known warps: :data:`READER_VALIDATION`) from the calibration
+      frame, where MediaPipe's face mesh gives the points once, turned into the face's frontal
+      axes (the reference's rigid points onto the model's neutral ones);
+    - the model read exactly from its skin vertices at the same points
+      (:func:`model_displacements`): no renderer, no detector;
+
+    both as displacements over their own inter-ocular distance, head frame axes (x, y up), the
+    rigid points' similarity taken out, compared by :func:`scores`.
+
+    With ``mediapipe_on_both`` also the measure of earlier reports, MediaPipe's face mesh on
+    the input and on the resynthesis rendered front on at ``size`` pixels (default: the
+    video's height, at least 256), in the result's ``mediapipe_on_both``: not a valid judge of
+    the fit (see the module), kept to compare with earlier numbers.
+
+    Returns the result and a dict of how it was measured (for fidelity.json)."""
     import csv
     import time
 
     t0 = time.perf_counter()
-    how = {}
+    how: dict = {}
     if model is None:
         try:
             model, how["face"] = person_model(video_path, calibration_frame)
@@ -357,47 +572,117 @@ def fidelity_of_analysis(
     rows = list(csv.DictReader(read_text(Path(contractions_csv), "contractions CSV").splitlines()))
     frames = [int(r["frame"]) for r in rows]
     ok = np.array([q == "ok" for q in quality])
-    video = open_video(video_path)
-    if size is None:
-        size = max(256, int(video.size[1]))
-    wanted = dict.fromkeys(frames)
-    picked = {}
-    for k, f in enumerate(video):
-        if k in wanted:
-            picked[k] = f
-        if k >= max(frames):
-            break
-    missing = [f for f in frames if f not in picked]
-    if missing:
-        raise MyofaceValueError(
-            f"{video_path} has no frame {missing[0]}, which {contractions_csv} measured"
-        )
-    lm_in = detect_landmarks(picked[f] for f in frames)
-    rendered = progress(
-        resynthesis_frames(model, table, size),
-        total=len(table),
-        desc="fidelity",
-        enabled=show_progress,
+    if ok.sum() < 2:
+        raise MyofaceValueError(f"{contractions_csv}: fewer than 2 measured (ok) rows")
+    ref, pts_in, unsure, lm_in = read_video_points(
+        video_path,
+        [f if o else None for f, o in zip(frames, ok, strict=True)],
+        calibration_frame,
+        reader,
+        detect_landmarks_too=mediapipe_on_both,
     )
-    lm_out = detect_landmarks(rendered)
-    lm_in[~ok] = np.nan  # frames the analysis did not measure are not compared
-    lm_out[~ok] = np.nan
-    res = measure_fidelity(lm_in, lm_out, dims=dims)
+    t_in = time.perf_counter() - t0
+    d_out, side = model_displacements(model, table, ok)
+    # the input's displacements in the face's frontal axes: the reference frame's rigid points
+    # turned onto the model's neutral ones (the head's roll in the reference frame)
+    _, rot, _ = similarity_2d(ref[_RIGID], side["neutral_points"][_RIGID])
+    d_in = _region_displacements(ref, pts_in, rotation=rot)
+    per = {k: scores(d_in[k], d_out[k]) for k in d_in}
+    cat_in = np.concatenate(list(d_in.values()), axis=1)
+    cat_out = np.concatenate(list(d_out.values()), axis=1)
+    both = np.isfinite(cat_in).all((1, 2)) & np.isfinite(cat_out).all((1, 2))
+    name = READER_NAMES.get(reader, reader)
+    res = FidelityResult(
+        scores(cat_in, cat_out),
+        per,
+        int(calibration_frame),
+        int(both.sum()),
+        2,
+        d_in,
+        d_out,
+        method=f"input: {name} from frame {int(calibration_frame)}; model: its skin vertices",
+        labels=(f"input ({reader.upper()} flow)", "model (vertices)"),
+        reader=f"{name} from frame {int(calibration_frame)}",
+    )
     how.update(
         {
             "video": str(Path(video_path).resolve()),
             "contractions": str(Path(contractions_csv).resolve()),
             "frames": len(frames),
+            "input_reader": {
+                "method": reader,
+                "name": name,
+                "reference": (
+                    f"MediaPipe's face mesh (image mode) on the calibration frame "
+                    f"{int(calibration_frame)}, once; the points followed from it"
+                ),
+                # the share of the measured frames' readings whose flow back from the frame
+                # misses the reference point by 1 px or more (e.g. where the lips part)
+                "failing_forward_backward_check": {
+                    "overall": round(float(unsure[ok].mean()), 4),
+                    **{
+                        k: round(float(unsure[ok][:, [_POS[i] for i in v]].mean()), 4)
+                        for k, v in REGIONS.items()
+                    },
+                },
+                "validation": {
+                    "test": READER_VALIDATION["test"],
+                    "bounds": READER_VALIDATION["bounds"],
+                    "measured": READER_VALIDATION["measured"].get(reader),
+                },
+            },
+            "model_side": (
+                "the model's skin vertices at each row's contractions (tissue relaxed, "
+                "warm-started), x and y of the head frame, from the neutral (contractions 0), "
+                "over the model's inter-ocular distance; no renderer, no detector"
+            ),
+            "model_relaxations_not_converged": side["unconverged"],
+            "seconds_input": round(t_in, 2),
+        }
+    )
+    if mediapipe_on_both:
+        video = open_video(video_path)
+        if size is None:
+            size = max(256, int(video.size[1]))
+        rendered = progress(
+            resynthesis_frames(model, table, size),
+            total=len(table),
+            desc="fidelity",
+            enabled=show_progress,
+        )
+        lm_out = detect_landmarks(rendered)
+        lm_in[~ok] = np.nan  # frames the analysis did not measure are not compared
+        lm_out[~ok] = np.nan
+        old = measure_fidelity(lm_in, lm_out, dims=2)
+        res.mediapipe_on_both = old
+        how["mediapipe_on_both_how"] = {
             "frames_without_face_in_input": int((~np.isfinite(lm_in).all((1, 2)) & ok).sum()),
             "frames_without_face_in_resynthesis": int(
                 (~np.isfinite(lm_out).all((1, 2)) & ok).sum()
             ),
             "render": f"front view, {size}x{size}, perspective (myoface resynth's camera)",
-            "seconds": round(time.perf_counter() - t0, 2),
         }
-    )
+    how["seconds"] = round(time.perf_counter() - t0, 2)
     how["times_s"] = [float(x) for x in times]
     return res, how
+
+
+#: fidelity.json's words for the measure
+MEASURE_TEXT = (
+    "explained = 1 - sum|d_in - d_out|^2 / sum|d_in|^2 over frames and points; "
+    "gain = sum d_in.d_out / sum|d_in|^2; corr = sum d_in.d_out / sqrt(sum|d_in|^2 "
+    "sum|d_out|^2); d_in = the input's points read by the motion reader from the calibration "
+    "frame, d_out = the model's skin vertices at the same points from its neutral, each with "
+    "the rigid points' 2-D similarity taken out, over its own inter-ocular distance, x and y "
+    "of the face front on"
+)
+#: and for the measure of earlier reports
+MEDIAPIPE_ON_BOTH_TEXT = (
+    "MediaPipe's face mesh on the input and on the resynthesis rendered front on, each frame "
+    "aligned to the first compared frame by a 3-D similarity on the rigid points; not a valid "
+    "judge (MediaPipe's gain is ~0.5 on real faces and ~0.7 on renders, and the fit "
+    "consumes its points): kept to compare with earlier reports"
+)
 
 
 def write_fidelity_report(
@@ -407,11 +692,14 @@ def write_fidelity_report(
     model=None,
     fallback_model=None,
     calibration_frame: int | None = None,
+    reader: str = READER,
+    mediapipe_on_both: bool = True,
     show_progress: bool = False,
 ) -> FidelityResult:
     """``fidelity.json`` and ``fidelity.png`` in an analysis' output ``folder`` (its
     ``contractions.csv``; the calibration frame from its ``analysis.json`` unless given):
-    :func:`fidelity_of_analysis`, then :func:`plot_fidelity`."""
+    :func:`fidelity_of_analysis`, then :func:`plot_fidelity` of the primary measure. The
+    measure of earlier reports, when made, is in the JSON's ``mediapipe_on_both``."""
     import json
 
     folder = Path(folder)
@@ -424,20 +712,25 @@ def write_fidelity_report(
         model=model,
         fallback_model=fallback_model,
         calibration_frame=calibration_frame,
+        reader=reader,
+        mediapipe_on_both=mediapipe_on_both,
         show_progress=show_progress,
     )
     times = how.pop("times_s")
+    old = None
+    if res.mediapipe_on_both is not None:
+        old = {
+            "measure": MEDIAPIPE_ON_BOTH_TEXT,
+            **res.mediapipe_on_both.as_dict(),
+            **how.pop("mediapipe_on_both_how"),
+        }
     doc = {
+        "measure": MEASURE_TEXT,
         **res.as_dict(),
-        "measure": (
-            "explained = 1 - sum|d_in - d_out|^2 / sum|d_in|^2 over frames and points; "
-            "gain = sum d_in.d_out / sum|d_in|^2; corr = sum d_in.d_out / "
-            "sqrt(sum|d_in|^2 sum|d_out|^2); d = displacement from the reference frame after "
-            "a 3-D similarity on the rigid points, over the inter-ocular distance"
-        ),
+        **how,
         "rigid_points": list(RIGID_POINTS),
         "regions_points": {k: list(v) for k, v in REGIONS.items()},
-        **how,
+        "mediapipe_on_both": old,
     }
     with atomic_output(folder / "fidelity.json") as tmp:
         tmp.write_text(json.dumps(doc, indent=1))

@@ -31,7 +31,8 @@ from-photo) driven by the same contractions:
 
   person.myoface, person.png, resynth_person.mp4
   fidelity.json, fidelity.png   how much of the video's expression motion the person's
-                    resynthesis reproduces, per region (myoface analyze --report)"""
+                    model reproduces, per region: its vertices against the video read by DIS
+                    optical flow, and MediaPipe on both as before (myoface analyze --report)"""
 
 
 def add_arguments(p):
