@@ -59,6 +59,7 @@ from scipy.sparse.linalg import spsolve
 from myoface.analysis._fitkernels import vertex_normals
 from myoface.analysis.camera import HeadPose, PinholeCamera, check_points, initial_pose
 from myoface.analysis.estimate import skin_response
+from myoface.analysis.photometric import Appearance, PhotometricTerm
 from myoface.analysis.solver import bounded_gauss_newton
 from myoface.analysis.synthesis import LandmarkSynthesis
 from myoface.analysis.terms import (
@@ -198,6 +199,8 @@ class ModelFit:
         self._pending = None
         self._worker = None
         self.calibration: Calibration | None = None
+        #: the person's appearance for the photometric term (:meth:`set_appearance`)
+        self.appearance: Appearance | None = None
         #: tissue relaxes that did not converge (see :meth:`_relax`)
         self.unconverged_relaxes = 0
         #: where the time goes (for the benchmark's breakdown): the fits' thread CPU (s) and
@@ -294,6 +297,7 @@ class ModelFit:
         synthesis: LandmarkSynthesis | None = None,
         deferred: bool = False,
         flow=None,
+        image=None,
     ) -> FrameFit:
         """Fit one frame's landmarks (468, 3): x, y pixels (column, row), z MediaPipe's relative
         depth (pixels; NaN or a (468, 2) array: not used). Warm-started from the previous
@@ -314,22 +318,27 @@ class ModelFit:
         ``flow``: ``(xy (468, 2), tracked (468,) bool)``, the points optical flow tracked on
         this frame (:meth:`~myoface.analysis.flow.FlowRefiner.track`): an
         :class:`~myoface.analysis.terms.OpticalFlowTerm` reads the tracked ones in place of
-        the landmarks' x, y there."""
+        the landmarks' x, y there.
+
+        ``image``: the frame itself (RGB), read by the photometric term
+        (:class:`~myoface.analysis.photometric.PhotometricTerm`) against the calibration
+        frame's appearance, once :meth:`set_appearance` has taken it (else not used)."""
         t0 = time.thread_time()
+        photo = self.photometric_term(image)
         p = check_points(points, len(self.neutral))
         if flow is not None:
             flow = (np.asarray(flow[0], dtype=np.float64), np.asarray(flow[1], dtype=bool))
         prev = self._prev
         self._collect()
         refine = 0 if deferred else self.settings.refine
-        res = self._fit(p, prev, refine=refine, flow=flow)
+        res = self._fit(p, prev, refine=refine, flow=flow, photo=photo)
         if synthesis is not None:
             for _ in range(self.settings.synthesis_rounds):
                 err = synthesis.tracker_error(self.shape(res.contractions), res.pose)
                 if err is None:
                     break
                 moved = None if flow is None else (flow[0] - err[:, :2], flow[1])
-                res = self._fit(p - err, prev, refine=0, start=res, flow=moved)
+                res = self._fit(p - err, prev, refine=0, start=res, flow=moved, photo=photo)
         if deferred and self.settings.refine > 0 and self._relax_due(res.contractions):
             self._relax_later(res.contractions)
         self._prev = res
@@ -427,6 +436,24 @@ class ModelFit:
         self.calibration = Calibration(index, scores, identity, pose, resid, extra)
         return self.calibration
 
+    def set_appearance(self, frame) -> None:
+        """Take the person's appearance from ``frame``, the calibration frame (after
+        :meth:`calibrate`): the photometric term then reads every frame given to :meth:`fit`
+        with its ``image`` against it."""
+        if self.calibration is None:
+            raise MyofaceValueError("set_appearance() needs a calibration first")
+        self.appearance = Appearance.from_frame(
+            frame, self.model.face, self.camera, self.calibration.pose,
+            self.neutral + self.identity_mm,
+        )  # fmt: skip
+
+    def photometric_term(self, image) -> PhotometricTerm | None:
+        """The photometric term of ``image`` (None without an image or an appearance)."""
+        if image is None or self.appearance is None:
+            return None
+        s = self.settings
+        return PhotometricTerm(image, self.appearance, self.camera, s.photo_sigma, s.photo_huber)
+
     def _scale_lids(self, shape) -> dict[str, float]:
         """Scale the lid muscles' response to the eye openings of ``shape`` (the person's
         neutral; :func:`lid_gains`): the fit then reads a lid's contraction as the fraction of
@@ -468,7 +495,7 @@ class ModelFit:
             points, self.camera, weights, s.landmark_sigma_mm, s.depth_sigma_mm, s.huber
         )
 
-    def terms(self, points, weights, prev: FrameFit | None, flow=None) -> list:
+    def terms(self, points, weights, prev: FrameFit | None, flow=None, photo=None) -> list:
         """One frame's energy: the temporal prior to ``prev`` (when there is one), the
         magnitude and the sparsity priors, the landmarks, and the points the optical flow
         tracked (``flow``: ``(xy, tracked)``; in place of the landmarks' x, y where tracked)
@@ -487,6 +514,12 @@ class ModelFit:
             )
         out += [MagnitudePrior(s.magnitude_sigma), SparsityPrior(s.sparsity)]
         # (the observations last: the priors' normal equations are summed first, then theirs)
+        if photo is not None:
+            # the pixels read the motion; MediaPipe's points stay as a weak term (they find
+            # the face and keep the fit from a wrong minimum of the pixels)
+            photo.restart()
+            out.append(photo)
+            weights = weights * s.photo_landmark_weight
         if flow is None:
             out.append(self.landmark_term(points, weights))
             return out
@@ -506,7 +539,7 @@ class ModelFit:
         return out
 
     def _fit(self, p, prev: FrameFit | None, refine: int, start: FrameFit | None = None,
-             rest: bool = False, flow=None):  # fmt: skip
+             rest: bool = False, flow=None, photo=None):  # fmt: skip
         """The bounded Gauss-Newton fit of one frame (see the module's docstring), with the
         temporal prior to ``prev``, started from ``start`` (default: ``prev``; without
         either from a closed-form pose and no contraction). ``rest``: with the model
@@ -544,7 +577,9 @@ class ModelFit:
                     jac += np.multiply.outer(miss, dc / dd)
                 c0, d0 = c.copy(), d_new
                 self._c0, self._d0, self._jac = c0, d0, None
-            pose, c, it, conv = self._gauss_newton(p, pose, c, c0, d0, jac, base, prev, flow=flow)
+            pose, c, it, conv = self._gauss_newton(
+                p, pose, c, c0, d0, jac, base, prev, flow=flow, photo=photo
+            )
             total_it += it
         shape = base + d0 + _linear(jac, c - c0)
         k = self._pixel_mm(pose)
@@ -552,7 +587,8 @@ class ModelFit:
         resid = float(np.sqrt(((uv - seen[:, :2]) ** 2).sum(1).mean()) * k)
         return FrameFit(c, pose, resid, total_it, conv)
 
-    def _gauss_newton(self, p, pose, c, c0, d0, jac, base, prev, free=None, flow=None):
+    def _gauss_newton(self, p, pose, c, c0, d0, jac, base, prev, free=None, flow=None,
+                      photo=None):  # fmt: skip
         """One frame's energy (:meth:`terms`, visibility from the starting pose) minimised by
         :func:`~myoface.analysis.solver.bounded_gauss_newton` from ``pose``, ``c`` with the
         forward model ``base + d0 + jac (c - c0)``; only the contractions ``free`` move.
@@ -564,7 +600,7 @@ class ModelFit:
             return base + d0 + _linear(jac, cc - c0)
 
         w0 = self._weights(pose, forward(c))
-        terms = self.terms(p, w0, prev, flow)
+        terms = self.terms(p, w0, prev, flow, photo)
         return bounded_gauss_newton(terms, forward, jac, pose, c, free, self.settings.iterations)
 
     def _fit_identity(self, frames):

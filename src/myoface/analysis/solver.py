@@ -32,6 +32,17 @@ LAMBDA_MIN = 1e-7
 RETRIES = 6
 
 
+def _next_level(terms) -> bool:
+    """Move every coarse-to-fine term still on a coarse level to its next (``advance()``);
+    whether any did (the frame is then not done)."""
+    moved = False
+    for t in terms:
+        if getattr(t, "settling", False):
+            t.advance()
+            moved = True
+    return moved
+
+
 def bounded_gauss_newton(
     terms: Sequence[Term],
     forward: Callable[[np.ndarray], np.ndarray],
@@ -46,6 +57,9 @@ def bounded_gauss_newton(
     ``forward(c)``: the model's skin (V, 3) mm, head frame, at contractions ``c``; ``jac``
     (V, 3, M): its response to them (the forward model is linear in ``c`` over a frame);
     ``free``: the contractions that move (the others stay). At most ``iterations`` steps.
+    A term with ``settling`` True (a coarse-to-fine term on one of its coarse levels,
+    :class:`~myoface.analysis.photometric.PhotometricTerm`) keeps the steps going: where they
+    would stop, its ``advance()`` moves it to its next level instead.
     Returns (pose, contractions, steps taken, converged)."""
     free = np.asarray(free, dtype=np.int64)
     jac = np.ascontiguousarray(jac)
@@ -78,7 +92,10 @@ def bounded_gauss_newton(
                 break
             lam *= 10
         else:
-            conv = True  # no step lowers the cost: at a minimum (to rounding)
+            # no step lowers the cost: at a minimum (to rounding), or of a coarse level
+            if _next_level(terms):
+                continue
+            conv = True
             break
         pose, c = new_pose, new_c
         small = (
@@ -86,7 +103,7 @@ def bounded_gauss_newton(
             and np.abs(step[3:6]).max() < STEP_TOL_MM
             and (len(free) == 0 or np.abs(step[6:]).max() < STEP_TOL_CONTRACTION)
         )
-        if small:
+        if small and not _next_level(terms):
             conv = True
             break
     return pose, c, it, conv

@@ -109,6 +109,13 @@ class FitSettings:
     relax_step_mm: float = 2.0
     #: with a :class:`LandmarkSynthesis`: rounds of analysis by synthesis per frame
     synthesis_rounds: int = 2
+    #: the photometric term (:mod:`myoface.analysis.photometric`): read the frame's pixels
+    #: against the calibration frame's appearance; a sample's brightness error (grey levels,
+    #: 1 sd) and its Huber threshold (sigmas); MediaPipe's points then weigh this much
+    photometric: bool = False
+    photo_sigma: float = 8.0
+    photo_huber: float = 2.0
+    photo_landmark_weight: float = 0.1
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
     identity_edge_sigma_mm: float = 1.0

@@ -329,6 +329,11 @@ class FitTracker(TrackerBase):
                 )  # fmt: skip
             self.calibration = fit.calibrate(points, cal.index, synthesis=self.synthesis)
             self.calibration.scores = cal.scores
+        if self.settings.photometric:
+            frame = images[self.calibration.index]
+            if frame is None:
+                raise MyofaceValueError("the calibration frame was not kept")
+            self.fit.set_appearance(frame)
         self.calibration_frame = first_index + self.calibration.index
         self.timings["calibration_s"] += time.perf_counter() - t_start
         return self.calibration_frame
@@ -358,7 +363,10 @@ class FitTracker(TrackerBase):
             fit.lose_track()
             return FitMeasurement(index, time_s, "no_face", nan, None, float("nan"))
         try:
-            r = fit.fit(obs.points, self.synthesis, deferred=self.deferred_relax, flow=obs.flow)
+            r = fit.fit(
+                obs.points, self.synthesis, deferred=self.deferred_relax, flow=obs.flow,
+                image=frame if self.settings.photometric else None,
+            )  # fmt: skip
         except (np.linalg.LinAlgError, MyofaceValueError):
             fit.lose_track()
             return FitMeasurement(index, time_s, "fit_failed", nan, None, float("nan"))

@@ -1,0 +1,138 @@
+"""The photometric term (myoface.analysis.photometric) and the known warps it is judged on
+(myoface.analysis.knownwarp.expression_warp)."""
+
+import numpy as np
+import pytest
+
+from myoface.analysis.camera import PinholeCamera, rotmat
+from myoface.analysis.estimate import skin_response
+from myoface.analysis.knownwarp import MeshWarp, expression_warp
+from myoface.analysis.photometric import Appearance, PhotometricTerm, SurfaceSamples
+from myoface.analysis.terms import Estimate
+from myoface.control import expression_contractions
+from myoface.model import build_face_model
+
+cv2 = pytest.importorskip("cv2")
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """The default face in front of a camera, over a textured image (smooth noise: every
+    sample sees a gradient), its vertices' projections the 'landmarks'."""
+    model = build_face_model()
+    cam = PinholeCamera.for_image(320, 240)
+    shape = model.skin_vertices()
+    rng = np.random.default_rng(0)
+    img = cv2.GaussianBlur(rng.uniform(0, 255, (240, 320)).astype(np.float32), (0, 0), 2.0)
+    img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX)
+    frame = np.repeat(img[..., None], 3, axis=2).astype(np.uint8)
+    from myoface.analysis.camera import HeadPose
+
+    pose = HeadPose.from_euler(5, -3, 2, (0, 0, -450))
+    return model, cam, shape, pose, frame
+
+
+def test_samples_lie_on_their_triangles():
+    model = build_face_model()
+    s = SurfaceSamples.on(model.face.triangles, 4)
+    assert len(s) == 3 * len(model.face.triangles)
+    assert np.allclose(s.bary.sum(1), 1.0) and (s.bary > 0).all()
+    with pytest.raises(Exception, match="subdivision"):
+        SurfaceSamples.on(model.face.triangles, 2)
+
+
+def test_the_photometric_jacobian_is_the_residuals_derivative(scene):
+    """Gauss-Newton's rows against central differences of the residuals, for a rotation, a
+    translation and a contraction, on every blur level."""
+    model, cam, shape, pose, frame = scene
+    app = Appearance.from_frame(frame, model.face, cam, pose, shape)
+    jac = skin_response(model, model.ids)
+    m = len(model.ids)
+    free = np.arange(m)
+    c = np.full(m, 0.1)
+    shifted = np.roll(frame, (1, 2), axis=(0, 1))  # (a frame that differs: residuals != 0)
+    term = PhotometricTerm(shifted, app, cam)
+
+    def est_at(x):
+        from myoface.analysis.camera import HeadPose
+
+        p = HeadPose(rotmat(x[:3]) @ pose.rotation, pose.translation_mm + x[3:6])
+        cc = c + x[6:]
+        return Estimate(p, cc, shape + (jac.reshape(-1, m) @ cc).reshape(-1, 3), jac, free)
+
+    e0 = est_at(np.zeros(6 + m))
+    zyg = 6 + model.ids.index("zygomaticus_major_l")
+    for level in range(len(app.levels)):
+        term.restart()
+        for _ in range(level):
+            term.advance()
+        term.prepare(e0)
+        rows, _ = term._rows(e0)
+        ok = term._w > 0
+        assert ok.sum() > 1000
+        for k, h in [(0, 1e-4), (4, 1e-2), (zyg, 1e-2)]:
+            x = np.zeros(6 + m)
+            x[k] = h
+            _, rp = term._rows(est_at(x))
+            x[k] = -h
+            _, rm = term._rows(est_at(x))
+            fd = (rp - rm)[ok] / (2 * h)
+            ratio = float(fd @ rows[ok, k] / (rows[ok, k] @ rows[ok, k]))
+            assert np.corrcoef(fd, rows[ok, k])[0, 1] > 0.95, (level, k)
+            assert 0.85 < ratio < 1.15, (level, k, ratio)
+
+
+def test_the_photometric_fit_finds_a_known_shift(scene):
+    """The whole frame moved by 2 px: the fit (pixels only, landmarks weightless) moves the
+    head so that the model's vertices land within 0.3 px of where the texture went."""
+    from dataclasses import replace
+
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.weights import FitSettings
+
+    model, cam, shape, pose, frame = scene
+    pts = cam.project(pose.apply(shape))  # (x, y only: no depth)
+    s = replace(FitSettings(), photometric=True, photo_landmark_weight=1e-6, iterations=30)
+    fit = ModelFit(model, cam, s)
+    fit.calibrate([pts], 0)
+    fit.set_appearance(frame)
+    moved = np.ascontiguousarray(np.roll(frame, 2, axis=1))  # 2 px right
+    r = fit.fit(pts, image=moved)
+    uv = cam.project(r.pose.apply(fit.skin(r.contractions)))
+    err = uv - (pts + [2.0, 0.0])
+    inner = (pts[:, 0] > 10) & (pts[:, 0] < 300)
+    assert np.sqrt((err[inner] ** 2).sum(1).mean()) < 0.3
+    assert np.abs(r.contractions).max() < 0.1  # (a shift is the head's, not an expression)
+
+
+def test_a_mesh_warp_moves_its_points_exactly_and_does_not_fold():
+    rng = np.random.default_rng(1)
+    pts = rng.uniform(50, 150, (60, 2))
+    shifts = rng.normal(0, 3, (60, 2))
+    w = MeshWarp(points=pts, shifts=shifts)
+    assert w.min_jacobian() >= 0.2 - 1e-9  # (the shifts that would fold it are drawn in)
+    kept = w.displacement(pts)
+    assert np.allclose(w.moved(pts), pts + kept)
+    assert np.allclose(w.displacement(np.array([[0.0, 0.0], [400.0, 10.0]])), 0.0)
+
+
+def test_the_expression_warp_is_the_models_motion():
+    """On the model's own projected vertices (frontal, 4 px per mm), surprise's warp moves
+    every vertex by the model's skin displacement in pixels. The smile's skin folds in the
+    image (the cheek bulges over the nasolabial fold: 12 % of the vertices measured
+    2026-12-01), which a warp of one frame cannot show; there the shifts are drawn together
+    until the warp does not fold, and everywhere else they are the model's."""
+    model = build_face_model()
+    rest = model.skin_vertices()
+    pts = rest[:, :2] * [4.0, -4.0] + [320.0, 240.0]  # 4 px per mm, y down
+    for name, unchanged in (("surprise", 1.0), ("happiness", 0.8)):
+        c = expression_contractions(name, 0.8, model.ids)
+        warp, state = expression_warp(pts, model, c)
+        want = (model.skin_vertices(state) - rest)[:, :2] * [4.0, -4.0]
+        got = warp.displacement(pts)
+        same = np.linalg.norm(got - want, axis=1) <= 0.05
+        assert same.mean() >= unchanged, (name, same.mean())
+        assert np.abs(want).max() > 4, name  # (it moves the face by millimetres)
+        assert warp.min_jacobian() >= 0.2 - 1e-9, name
+    with pytest.raises(Exception, match="one point per vertex"):
+        expression_warp(pts[:10], model, c)
