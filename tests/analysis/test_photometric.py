@@ -67,18 +67,17 @@ def test_the_photometric_jacobian_is_the_residuals_derivative(scene):
         for _ in range(level):
             term.advance()
         term.prepare(e0)
-        rows, _ = term._rows(e0)
-        ok = term._w > 0
-        assert ok.sum() > 1000
+        rows, _, use = term._rows(e0)
+        assert len(use) > 1000
         for k, h in [(0, 1e-4), (4, 1e-2), (zyg, 1e-2)]:
             x = np.zeros(6 + m)
             x[k] = h
-            _, rp = term._rows(est_at(x))
+            _, rp, _ = term._rows(est_at(x))
             x[k] = -h
-            _, rm = term._rows(est_at(x))
-            fd = (rp - rm)[ok] / (2 * h)
-            ratio = float(fd @ rows[ok, k] / (rows[ok, k] @ rows[ok, k]))
-            assert np.corrcoef(fd, rows[ok, k])[0, 1] > 0.95, (level, k)
+            _, rm, _ = term._rows(est_at(x))
+            fd = (rp - rm) / (2 * h)
+            ratio = float(fd @ rows[:, k] / (rows[:, k] @ rows[:, k]))
+            assert np.corrcoef(fd, rows[:, k])[0, 1] > 0.95, (level, k)
             assert 0.85 < ratio < 1.15, (level, k, ratio)
 
 
