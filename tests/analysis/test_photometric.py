@@ -11,6 +11,7 @@ from myoface.analysis.photometric import Appearance, PhotometricTerm, SurfaceSam
 from myoface.analysis.terms import Estimate
 from myoface.control import expression_contractions
 from myoface.model import build_face_model
+from tests.conftest import needs_mediapipe
 
 cv2 = pytest.importorskip("cv2")
 
@@ -135,3 +136,50 @@ def test_the_expression_warp_is_the_models_motion():
         assert warp.min_jacobian() >= 0.2 - 1e-9, name
     with pytest.raises(Exception, match="one point per vertex"):
         expression_warp(pts[:10], model, c)
+
+
+@pytest.mark.shared_data
+@needs_mediapipe
+def test_a_hand_over_the_mouth_is_not_an_expression():
+    """The sample video's first frame smiling (a known warp: the model's smile, with fake head
+    motion), and for four held frames a skin-toned blob over the mouth and chin: those frames
+    are ``occluded`` (not measured), the others are measured, and after the blob the smile is
+    read again as before it (the blob did not become an expression: without the test, the fit
+    explained it by the zygomatici at 1.0)."""
+    from myoface.analysis.pipeline import Tracking
+    from myoface.analysis.sample import fetch_sample_video
+    from myoface.analysis.trackers.landmark_fit import FitTracker
+    from myoface.analysis.video import open_video
+    from myoface.analysis.weights import FitSettings
+    from myoface.bench.knownwarp import HOLD, NEUTRAL_FRAMES, RISE, _Clip, make_clip
+    from myoface.facemesh import FaceMeshDetector
+
+    frame = next(iter(open_video(fetch_sample_video(quiet=True))))
+    with FaceMeshDetector(video=False) as det:
+        pts = det.detect(frame)
+    model = build_face_model()
+    frames, _, true_c = make_clip(frame, pts, model, "happiness", True, quick=True)
+    cx, cy = pts[[61, 291, 17, 0], :2].mean(0)
+    yy, xx = np.mgrid[0 : frame.shape[0], 0 : frame.shape[1]]
+    blob = (((xx - cx) / 45) ** 2 + ((yy - cy - 10) / 30) ** 2) < 1
+    rng = np.random.default_rng(0)
+    hand = np.clip(np.array([200, 150, 130]) + rng.normal(0, 12, frame.shape), 0, 255)
+    rise = RISE // 2
+    covered = set(range(NEUTRAL_FRAMES + rise + 1, NEUTRAL_FRAMES + rise + HOLD - 1))
+    frames = [
+        np.where(blob[..., None], hand, f).astype(np.uint8) if k in covered else f
+        for k, f in enumerate(frames)
+    ]
+    tracker = FitTracker(model, fps=30.0, settings=FitSettings(photometric=True))
+    try:
+        video = _Clip(frames, 30.0)
+        first = tracker.calibrate(iter(video), 0)
+        measured = [m for _, m in Tracking(video, tracker, first)]
+    finally:
+        tracker.close()
+    quality = [m.quality for m in measured]
+    assert all(quality[k] == "occluded" for k in covered), quality
+    assert all(q == "ok" for k, q in enumerate(quality) if k not in covered), quality
+    zyg = [model.ids.index("zygomaticus_major_l"), model.ids.index("zygomaticus_major_r")]
+    after = max(covered) + 1
+    assert np.abs(measured[after].contractions[zyg] - true_c[after][zyg]).max() < 0.15

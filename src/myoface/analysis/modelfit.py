@@ -63,6 +63,7 @@ from myoface.analysis.photometric import Appearance, PhotometricTerm
 from myoface.analysis.solver import bounded_gauss_newton
 from myoface.analysis.synthesis import LandmarkSynthesis
 from myoface.analysis.terms import (
+    Estimate,
     LandmarkTerm,
     MagnitudePrior,
     OpticalFlowTerm,
@@ -119,6 +120,10 @@ class FrameFit:
     residual_mm: float
     iterations: int
     converged: bool
+    #: with the photometric term: the share of the face's visible, textured patches that do
+    #: not look as they did at calibration (an occluder; NaN without the term:
+    #: :meth:`~myoface.analysis.photometric.PhotometricTerm.occlusion`)
+    occlusion: float = float("nan")
 
 
 @dataclass
@@ -585,7 +590,10 @@ class ModelFit:
         k = self._pixel_mm(pose)
         uv = self.camera.project(pose.apply(shape))
         resid = float(np.sqrt(((uv - seen[:, :2]) ** 2).sum(1).mean()) * k)
-        return FrameFit(c, pose, resid, total_it, conv)
+        occlusion = float("nan")
+        if photo is not None:
+            occlusion = photo.occlusion(Estimate(pose, c, shape, jac, np.arange(m)))
+        return FrameFit(c, pose, resid, total_it, conv, occlusion)
 
     def _gauss_newton(self, p, pose, c, c0, d0, jac, base, prev, free=None, flow=None,
                       photo=None):  # fmt: skip

@@ -29,6 +29,14 @@ LANDMARK_ESTIMATORS = ("fit", "fit-synthesis", "paper")
 #: a frame whose landmarks stay farther than this (mm RMS) from the fitted model is not
 #: measured (``quality="misfit"``): MediaPipe lost the face, or the face is not the model's
 MISFIT_RMS_MM = 6.0
+#: with the photometric term, a frame where more than this share of the face's visible,
+#: textured patches do not look as they did at calibration is not measured
+#: (``quality="occluded"``: a hand over the mouth is not an expression), and the next frame is
+#: fitted from the last measured one
+OCCLUDED_FRACTION = 0.12
+# (measured 2026-12-01: on single_face.mp4's real smile the share is at most 0.086, 90 % of
+# frames under 0.064; a skin-toned blob over the mouth and chin of the known-warp smile makes
+# it 0.17-0.18, the frames around it 0.0)
 
 
 class LandmarkObservation(NamedTuple):
@@ -60,6 +68,9 @@ class FitMeasurement(Measurement):
     residual_mm: float = float("nan")
     contours: dict = field(repr=False, default_factory=dict)
     iterations: int = 0
+    #: the photometric term's share of patches that do not look as they did at calibration
+    #: (:attr:`~myoface.analysis.modelfit.FrameFit.occlusion`)
+    occlusion: float = float("nan")
 
     HEAD_COLUMNS: ClassVar[tuple] = (*POSE_COLUMNS, "residual_mm")
 
@@ -362,6 +373,7 @@ class FitTracker(TrackerBase):
         if obs is None:
             fit.lose_track()
             return FitMeasurement(index, time_s, "no_face", nan, None, float("nan"))
+        prev = fit._prev
         try:
             r = fit.fit(
                 obs.points, self.synthesis, deferred=self.deferred_relax, flow=obs.flow,
@@ -372,14 +384,21 @@ class FitTracker(TrackerBase):
             return FitMeasurement(index, time_s, "fit_failed", nan, None, float("nan"))
         uv = fit.camera.project(r.pose.apply(fit.shape(r.contractions)))
         contours = {s: uv[v] for s, v in self._sections.items()}
+        if r.occlusion > OCCLUDED_FRACTION:
+            fit._prev = prev  # (the next frame starts from the last measured one)
+            return FitMeasurement(
+                index, time_s, "occluded", nan, r.pose, r.residual_mm, contours, r.iterations,
+                r.occlusion,
+            )  # fmt: skip
         if not r.residual_mm <= MISFIT_RMS_MM:
             fit.lose_track()
             return FitMeasurement(
                 index, time_s, "misfit", nan, r.pose, r.residual_mm, contours, r.iterations
             )
         return FitMeasurement(
-            index, time_s, "ok", r.contractions, r.pose, r.residual_mm, contours, r.iterations
-        )
+            index, time_s, "ok", r.contractions, r.pose, r.residual_mm, contours, r.iterations,
+            r.occlusion,
+        )  # fmt: skip
 
     def describe(self) -> dict:
         """For analysis.json: the estimator, the calibration, the camera and the weights."""
