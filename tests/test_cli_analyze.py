@@ -259,6 +259,7 @@ def test_analyze_and_batch_read_the_same_analysis_options():
 
     opts = ["--tracker", "landmarks", "--calibration-frame", "3", "--max-frames", "40"]
     opts += ["--sigma", "1.5", "--estimator", "fit-synthesis", "--refine", "2", "--flow"]
+    opts += ["--photometric"]
     parser = build_parser()
     a = analysis_settings(parser.parse_args(["analyze", "v.mp4", "-o", "o", *opts]))
     b = analysis_settings(parser.parse_args(["batch", "v.mp4", "-o", "o", *opts]))
@@ -274,9 +275,11 @@ def test_analyze_and_batch_read_the_same_analysis_options():
             "sigma": 1.5,
             "estimator": "fit-synthesis",
             "flow": True,
+            "photometric": True,
         }
     )
     none = analysis_settings(parser.parse_args(["batch", "v.mp4", "-o", "o"]))
     assert none == analysis_settings(parser.parse_args(["analyze", "v.mp4", "-o", "o"]))
     assert none == default_analysis_settings() and none["tracker"] == "snakes"
+    assert none["flow"] is False and none["photometric"] is False
     assert default_analysis_settings(init="c.json") == {**none, "init": "c.json"}

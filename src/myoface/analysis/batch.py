@@ -27,8 +27,8 @@ A worker process builds the face model once (:func:`cached_model`) and keeps it 
 video it analyses; the model is immutable and shared by the worker's threads.
 
 The analysis settings (``tracker``, ``init``, ``calibration_frame``, ``max_frames``,
-``refine``, ``sigma``, ``estimator``, ``flow``) are those of ``myoface analyze``
-(:func:`~myoface.analysis.outputs.analyze_to_folder`), the same for every video.
+``refine``, ``sigma``, ``estimator``, ``flow``, ``photometric``) are those of ``myoface
+analyze`` (:func:`~myoface.analysis.outputs.analyze_to_folder`), the same for every video.
 """
 
 from __future__ import annotations
@@ -48,6 +48,7 @@ from myoface._io import atomic_output, ensure_output_dir, sha256_file
 from myoface.analysis.estimate import skin_response
 from myoface.analysis.initfiles import load_init
 from myoface.analysis.outputs import FolderResult, analyze_to_folder
+from myoface.analysis.pipeline import PHOTOMETRIC_NEEDS_LANDMARKS, PHOTOMETRIC_NOT_PAPER
 from myoface.analysis.sections import PAPER_MUSCLES
 from myoface.analysis.trackers.landmark_fit import LANDMARK_ESTIMATORS
 from myoface.analysis.trackers.snakes import ESTIMATORS
@@ -91,7 +92,13 @@ SUMMARY_COLUMNS = (
 )
 #: settings that done.json gained after its first version, with the value the analyses of an
 #: older done.json had: its folders stay complete for a run with those values
-_LATER_SETTINGS = {"calibration_frame": None, "refine": None, "sigma": None, "flow": False}
+_LATER_SETTINGS = {
+    "calibration_frame": None,
+    "refine": None,
+    "sigma": None,
+    "flow": False,
+    "photometric": False,
+}
 #: how long (s) to wait for an existing Dask scheduler, and for it to have a worker
 SCHEDULER_TIMEOUT_S = 10.0
 _GLOB_CHARS = set("*?[")
@@ -303,6 +310,7 @@ def analyze_job(job: _Job) -> dict:
             estimator=s["estimator"],
             face=s["face"],
             flow=s["flow"],
+            photometric=s["photometric"],
         )
         wall = time.perf_counter() - t0
         row = {
@@ -512,6 +520,7 @@ def run_batch(
     sigma: float | None = None,
     estimator: str | None = None,
     flow: bool = False,
+    photometric: bool = False,
     face: str | os.PathLike | None = None,
     muscles: str | os.PathLike | None = None,
     show_progress: bool = False,
@@ -529,9 +538,9 @@ def run_batch(
     client : a ``distributed.Client`` to use (left open).
     executor : for the local engine, a ``concurrent.futures`` executor to use (left open),
         e.g. a :func:`local_pool` kept for several batches.
-    tracker, init, calibration_frame, max_frames, refine, sigma, estimator, flow : as for
-        ``myoface analyze`` (:func:`~myoface.analysis.outputs.analyze_to_folder`), the same
-        for every video (``init``: one contour file or {section: (K, 2)} on the calibration
+    tracker, init, calibration_frame, max_frames, refine, sigma, estimator, flow, photometric :
+        as for ``myoface analyze`` (:func:`~myoface.analysis.outputs.analyze_to_folder`), the
+        same for every video (``init``: one contour file or {section: (K, 2)} on the calibration
         frame, e.g. videos from one fixed camera).
     face, muscles : the face model (default: the bundled one); paths the workers can read.
     show_progress : a progress bar over the videos on stderr.
@@ -576,6 +585,12 @@ def run_batch(
         )
     if flow and estimator in ("paper", "fiducials"):
         raise MyofaceValueError("--flow is for the 3-D fit, not --estimator paper")
+    if not isinstance(photometric, bool):
+        raise MyofaceValueError(f"photometric must be True or False; got {photometric!r}")
+    if photometric and tracker != "landmarks":
+        raise MyofaceValueError(PHOTOMETRIC_NEEDS_LANDMARKS)
+    if photometric and estimator in ("paper", "fiducials"):
+        raise MyofaceValueError(PHOTOMETRIC_NOT_PAPER)
     if workers is None:
         workers = os.cpu_count() or 1
     if not (isinstance(workers, int) and workers >= 1):
@@ -626,6 +641,7 @@ def run_batch(
         "refine": refine,
         "sigma": None if sigma is None else float(sigma),
         "flow": flow,
+        "photometric": photometric,
     }
 
     paths = expand_videos([videos] if isinstance(videos, str | os.PathLike) else videos, out)

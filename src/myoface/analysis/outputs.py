@@ -209,6 +209,7 @@ def analyze_to_folder(
     show_progress: bool = False,
     finish=None,
     flow: bool = False,
+    photometric: bool = False,
 ) -> FolderResult:
     """Analyse ``video`` and write the analysis into the folder ``out`` (see the module's
     table); the code path of ``myoface analyze``.
@@ -237,7 +238,7 @@ def analyze_to_folder(
         older contractions.csv in it is replaced when the first row is measured).
     model : the :class:`~myoface.model.FaceModel` (never changed; may be shared with other
         threads); default: loaded from ``face``.
-    tracker, calibration_frame, refine, sigma, estimator, flow : as in
+    tracker, calibration_frame, refine, sigma, estimator, flow, photometric : as in
         :func:`~myoface.analysis.pipeline.make_analyzer`.
     init : initial contours on the calibration frame, for the snakes: a JSON file (see
         :func:`~myoface.analysis.initfiles.load_init`) or {section: (K, 2)} pixels; None:
@@ -272,7 +273,7 @@ def analyze_to_folder(
         model = load_face_model(face)
     an, first = make_analyzer(
         model, video, tracker, init or None, calibration_frame, refine, sigma,
-        estimator=estimator, flow=flow,
+        estimator=estimator, flow=flow, photometric=photometric,
     )  # fmt: skip
     release = None
     try:

@@ -50,6 +50,12 @@ from myoface.facemesh import DETECT_AHEAD_FRAMES
 from myoface.model import build_face_model
 from myoface.render import progress
 
+#: the errors of ``photometric`` (``--photometric``) where there is no 3-D fit to add it to
+PHOTOMETRIC_NEEDS_LANDMARKS = (
+    "--photometric is a term of the landmark tracker's 3-D fit; use it with --tracker landmarks"
+)
+PHOTOMETRIC_NOT_PAPER = "--photometric is for the 3-D fit, not --estimator paper"
+
 
 def make_analyzer(
     model,
@@ -62,6 +68,7 @@ def make_analyzer(
     estimator: str = "curves",
     show_progress: bool | None = None,
     flow: bool = False,
+    photometric: bool = False,
 ):
     """The tracker for ``video`` (a :class:`~myoface.analysis.video.Video`), not yet
     calibrated, and the frame from which :func:`measure_frames` hands it the video's frames
@@ -81,12 +88,17 @@ def make_analyzer(
     be None. ``refine`` defaults to 1 for the snakes, 0 for the paper's landmark scheme and
     :attr:`~myoface.analysis.weights.FitSettings.refine` for the fit; ``estimator`` for the
     snakes: ``"curves"`` (default) or ``"fiducials"``. ``flow``: the 3-D fit's points refined
-    by optical flow (:attr:`~myoface.analysis.weights.FitSettings.flow`).
+    by optical flow (:attr:`~myoface.analysis.weights.FitSettings.flow`). ``photometric``:
+    the 3-D fit also reads the frame's pixels against the calibration frame's appearance
+    (:attr:`~myoface.analysis.weights.FitSettings.photometric`); both are the fit's, refused
+    with the snakes and with ``estimator="paper"``.
     """
     if flow and tracker != "landmarks":
         raise MyofaceValueError(
             "--flow refines the landmark tracker's points; use it with --tracker landmarks"
         )
+    if photometric and tracker != "landmarks":
+        raise MyofaceValueError(PHOTOMETRIC_NEEDS_LANDMARKS)
     first = 0 if calibration_frame is None else int(calibration_frame)
     if first < 0 or (video.n_frames is not None and first >= video.n_frames):
         raise MyofaceValueError(
@@ -105,7 +117,7 @@ def make_analyzer(
                 f"got {estimator!r}"
             )
         if est != "paper":
-            settings = FitSettings(flow=bool(flow))
+            settings = FitSettings(flow=bool(flow), photometric=bool(photometric))
             if refine is not None:
                 settings = replace(settings, refine=int(refine))
             an = FitTracker(
@@ -115,6 +127,8 @@ def make_analyzer(
             return an, first
         if flow:
             raise MyofaceValueError("--flow is for the 3-D fit, not --estimator paper")
+        if photometric:
+            raise MyofaceValueError(PHOTOMETRIC_NOT_PAPER)
         return PaperLandmarkTracker(model, refine=0 if refine is None else refine), first
     if tracker != "snakes":
         raise MyofaceValueError(f"tracker must be 'snakes' or 'landmarks'; got {tracker!r}")

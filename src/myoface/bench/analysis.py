@@ -84,12 +84,14 @@ def _sample_video():
     return fetch_sample_video(quiet=True)
 
 
-def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None) -> int:
+def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None,
+                   photometric: bool = False) -> int:  # fmt: skip
     """Decode ``path`` and analyse every frame (no output files) as ``myoface analyze``
     does (for the landmarks' 3-D fit: calibrated on the most neutral frame of the first 2 s,
-    the analysis from frame 0); returns the frame count. The run's process CPU time and the
-    analyzer's own timings (:attr:`FitTracker.timings`, :attr:`ModelFit.timings`) are kept
-    for the benchmark's breakdown."""
+    the analysis from frame 0; ``photometric``: with ``--photometric``); returns the frame
+    count. The run's process CPU time and the analyzer's own timings
+    (:attr:`FitTracker.timings`, :attr:`ModelFit.timings`) are kept for the benchmark's
+    breakdown."""
     import time
 
     from myoface.analysis.pipeline import make_analyzer, measure_frames
@@ -101,7 +103,9 @@ def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None) -> i
         fm = _cache["model"] = build_face_model()
     t0, c0 = time.perf_counter(), time.process_time()
     video = open_video(path)
-    an, first = make_analyzer(fm, video, tracker, calibration_frame=None, refine=refine)
+    an, first = make_analyzer(
+        fm, video, tracker, calibration_frame=None, refine=refine, photometric=photometric
+    )
     try:
         n = sum(1 for _ in measure_frames(video, an, first, max_frames))
     finally:
@@ -111,7 +115,7 @@ def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None) -> i
     fit = getattr(an, "fit", None)
     if fit is not None:
         timings.update(fit.timings)
-    _cache[("timings", tracker, refine)] = {"frames": n, **timings}
+    _cache[("timings", tracker, refine, photometric)] = {"frames": n, **timings}
     return n
 
 
@@ -178,24 +182,41 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     CPU times: on a busy machine the work each does, where the wall times also measure how
     much of a second core was free). The model's one-time set-up (its responses to each
     muscle) is cached on the model by the untimed warm-up pass, as in a session that analyses
-    several videos."""
+    several videos.
+
+    The detail also has the fit with its photometric term (``myoface analyze --tracker
+    landmarks --photometric``; :attr:`~myoface.analysis.weights.FitSettings.photometric`) on
+    the same video, frames and repeats, with the same breakdown by stage
+    (``fps_photometric``, ``breakdown.photometric``; ``fps_side_by_side``: the default's, the
+    photometric fit's and MediaPipe's). Measured 2026-12-01 (a7d592b's photometric term, a
+    2-core machine at a load of 2-3): default 73.9 fps, photometric 22.9, MediaPipe alone
+    198.7; per frame wall 13.1 / 43.7 / 5.2 ms, process CPU 17.4 / 43.9 / 6.4 ms, of which
+    the fit's own CPU 3.3 / 29.6 ms, the relaxes' 2.4 / 3.3 ms (22 / 33 relaxes); at a load
+    of 3-4 48.5 / 20.1 / 176.8 fps. The whole benchmark (with analysis.fps_snakes) 43 s."""
     path = _sample_video()
     m = None if not quick else 24
     ours, n = _fps(lambda: _analysis_pass(path, "landmarks", m), quick)
     peer, _ = _fps(lambda: _mediapipe_pass(path, m), quick)
-    ours_t = _breakdown(("timings", "landmarks", None))
+    ours_t = _breakdown(("timings", "landmarks", None, False))
     peer_t = _breakdown(("timings", "mediapipe"))
     lin, _ = _fps(lambda: _analysis_pass(path, "landmarks", m, refine=0), quick)
+    # --photometric (the fit also reads the frame's pixels against the calibration frame's)
+    photo, _ = _fps(lambda: _analysis_pass(path, "landmarks", m, photometric=True), quick)
+    photo_t = _breakdown(("timings", "landmarks", None, True))
     detail = {
         "fit_share_of_frame": 1.0 - ours / peer,
         "fps_refine0": lin,
         "fit_share_of_frame_refine0": 1.0 - lin / peer,
+        # the same video, frames and repeats, the same breakdown (below), with --photometric
+        "fps_photometric": photo,
+        "fit_share_of_frame_photometric": 1.0 - photo / peer,
+        "fps_side_by_side": {"default": ours, "photometric": photo, "mediapipe": peer},
         # the last timed pass of each, per frame (ms): wall and process CPU (all threads:
         # on a busy machine the CPU time is the steadier measure of the work), and ours by
         # stage: the calibration's wall time, MediaPipe's wall time on the frames after it
         # (on the thread that runs ahead of the fit), the fit's and the relaxes' thread CPU
         # and the time a fit waited for a deferred relax
-        "breakdown": {"ours": ours_t, "mediapipe": peer_t},
+        "breakdown": {"ours": ours_t, "photometric": photo_t, "mediapipe": peer_t},
         "cpu_ratio": (
             peer_t["cpu_ms_per_frame"] / ours_t["cpu_ms_per_frame"]
             if ours_t.get("cpu_ms_per_frame") and peer_t.get("cpu_ms_per_frame")

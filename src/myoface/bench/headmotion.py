@@ -27,9 +27,23 @@ skin 1.04-1.13 vs 1.03 mm, head 1.7-2.1 vs 1.3 deg: the camera moves the contrac
 by about as much as the seed does, the still head's pose clearly. The fit on points refined
 by optical flow loses most (head still, seed 0: skin 0.64 vs 0.34 mm, worst correlation
 -0.02 vs 0.99). The snakes measure 30 and 34 of 90 frames with the head moving (degraded,
-clean; the rest lost or escaped), 87 and 90 still. ``myoface bench --only
-analysis.headmotion`` takes 91 s (30 s before the degraded renders, the clean variants and the
-snakes were added), 1.0 GB at its peak; ``--quick`` 11 s.
+clean; the rest lost or escaped), 87 and 90 still.
+
+The fit with its photometric term (``photometric``, ``myoface analyze --photometric``;
+measured 2026-12-01 with a7d592b's term, degraded, seed 0, vs the default fit): head moving,
+worst RMSE 0.678 vs 0.307 (the lower lip's depressors 0.63-0.68 and the mentalis 0.68-0.84
+where the default has 0.06-0.11, the zygomatic minors 0.60-0.65 vs 0.11-0.18; the inner
+brows and levator labii better, 0.12-0.23 vs 0.25-0.31), worst correlation 0.017 vs -0.033,
+median 0.184 vs 0.163, skin 1.26 vs 1.62 mm, head 1.02 vs 2.92 deg; head still, worst 0.194
+vs 0.206, correlation 0.21 vs 0.19, median 0.077 vs 0.104, skin 0.63 vs 1.08 mm, head 2.00
+vs 1.86 deg. It costs 66 ms a frame (median, the relax each frame; the default fit 9 ms), 7 s
+a run (0.9 s a frame and 80 s a run with the term before a7d592b). In a quick run (16 frames: the
+head turns up to 18 deg a frame) it loses the head, angle errors up to 60 deg (the default's
+up to 9) and skin 5.7 mm; at 90 frames (up to 3.2 deg a frame) they stay under 2.3 deg (the
+default's up to 12.5). ``myoface bench --only
+analysis.headmotion`` takes 81 s on a loaded 2-core machine (91 s before the photometric
+variant, at another load; 30 s before the degraded renders, the clean variants and the snakes
+were added), 1.05 GB at its peak; ``--quick`` 10 s.
 """
 
 from __future__ import annotations
@@ -297,23 +311,32 @@ def flow_sequence(frames, points) -> tuple[list, np.ndarray]:
 
 
 def run_headmotion(
-    model, points, truth, poses, skins, fps: float = 30.0, settings=None, synthesis=False
-):
+    model, points, truth, poses, skins, fps: float = 30.0, settings=None, synthesis=False,
+    frames=None,
+):  # fmt: skip
     """Fit the model to the landmark ``points`` of each frame (the 3-D fit, calibration frame
     chosen automatically in the first :data:`~myoface.analysis.modelfit.CALIBRATION_WINDOW_S` s)
     and compare with the truth. ``synthesis``: with analysis by synthesis
-    (:class:`~myoface.analysis.synthesis.LandmarkSynthesis`: the model's face, its own texture)."""
+    (:class:`~myoface.analysis.synthesis.LandmarkSynthesis`: the model's face, its own texture).
+    With ``settings.photometric`` the fit also reads ``frames`` (the images the points were
+    detected on), as :class:`~myoface.analysis.trackers.landmark_fit.FitTracker` does: the
+    appearance taken from the calibration frame, each frame's pixels read against it."""
     import time
 
     from myoface.analysis.camera import PinholeCamera
     from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, ModelFit
     from myoface.analysis.synthesis import LandmarkSynthesis
 
+    photometric = settings is not None and settings.photometric
+    if photometric and (frames is None or len(frames) != len(points)):
+        raise ValueError("the photometric fit needs the frames, one per set of points")
     cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
     fit = ModelFit(model, cam, settings, fps=fps)
     syn = LandmarkSynthesis(model.face, cam, SIZE) if synthesis else None
     window = max(1, int(round(CALIBRATION_WINDOW_S * fps)))
     cal = fit.calibrate(points[:window], synthesis=syn)
+    if photometric:
+        fit.set_appearance(frames[cal.index])
     n, m = len(points), model.n_muscles
     est = np.full((n, m), np.nan)
     ang = np.full((n, 3), np.nan)
@@ -324,7 +347,7 @@ def run_headmotion(
             fit.lose_track()
             continue
         t0 = time.perf_counter()
-        r = fit.fit(p, syn)
+        r = fit.fit(p, syn, image=frames[k] if photometric else None)
         t_fit[k] = time.perf_counter() - t0
         est[k], ang[k], resid[k] = r.contractions, r.pose.angles_deg, r.residual_mm
     # the skin the estimates produce, against the true skin (head frame, the model's own)
@@ -467,25 +490,34 @@ def _head(still: bool) -> str:
     return "still" if still else "moving (yaw +-30, pitch/roll +-15 deg, translation)"
 
 
-def _run(quick: bool, still: bool, synthesis: bool = False,
-         flow: bool | None = None, degraded: bool = True) -> tuple[HeadMotionResult, dict]:  # fmt: skip
+def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = None,
+         degraded: bool = True, photometric: bool | None = None,
+         ) -> tuple[HeadMotionResult, dict]:  # fmt: skip
     """The loop (cached per run): 90 frames (16 with ``quick``) at 30 fps; the default
     estimator (the 3-D fit), or with ``synthesis`` the fit with analysis by synthesis;
     MediaPipe's points refined by optical flow or not (``flow``; default: as the analysis,
-    :attr:`~myoface.analysis.weights.FitSettings.flow`); on the camera's frames
+    :attr:`~myoface.analysis.weights.FitSettings.flow`); the fit's photometric term on or off
+    (``photometric``, ``myoface analyze --photometric``; default: as the analysis,
+    :attr:`~myoface.analysis.weights.FitSettings.photometric`); on the camera's frames
     (``degraded``, the benchmarks' numbers) or the clean renders."""
     from myoface.analysis.weights import FitSettings
 
     flow = FitSettings().flow if flow is None else bool(flow)
-    key = (bool(quick), bool(still), bool(synthesis), flow, bool(degraded))
+    photometric = FitSettings().photometric if photometric is None else bool(photometric)
+    key = (bool(quick), bool(still), bool(synthesis), flow, bool(degraded), photometric)
     if key not in _cache:
         import time
 
         from myoface.analysis.weights import confounded_muscles
 
         fm, truth, poses, skins, points, t_det = _sequence(quick, still, flow, degraded)
+        # (the flow's points are given as the points; the fit's own settings the default's)
+        settings = FitSettings(photometric=True) if photometric else None
         t0 = time.perf_counter()
-        res = run_headmotion(fm, points, truth, poses, skins, synthesis=synthesis)
+        res = run_headmotion(
+            fm, points, truth, poses, skins, settings=settings, synthesis=synthesis,
+            frames=_frames(quick, still, degraded) if photometric else None,
+        )  # fmt: skip
         detail = {
             "face": _cache["face_kind"],
             "frames": len(truth),
@@ -493,6 +525,7 @@ def _run(quick: bool, still: bool, synthesis: bool = False,
             "renders": _renders(degraded),
             "estimator": "fit-synthesis" if synthesis else "fit",
             "optical_flow": flow,
+            "photometric": photometric,
             "summary_12_jaw": res.summary(),
             "per_muscle": {
                 m: {
@@ -533,13 +566,15 @@ def _snakes(quick: bool, still: bool, degraded: bool = True) -> dict:
 
 def _both(quick: bool) -> dict:
     """Every variant's detail: moving / still head; the fit on the camera's frames and on the
-    clean renders; the fit with synthesis, the fit on MediaPipe's points refined by optical
-    flow and the paper's snakes, on the camera's frames, the snakes also on the clean renders
-    (these not in a quick run); what the camera did."""
+    clean renders; the fit with its photometric term (``photometric``) on the camera's frames;
+    the fit with synthesis, the fit on MediaPipe's points refined by optical flow and the
+    paper's snakes, on the camera's frames, the snakes also on the clean renders (these not in
+    a quick run); what the camera did."""
     out = {}
     for head, still in (("moving", False), ("still", True)):
         out[f"{head}, fit"] = _run(quick, still)[1]
         out[f"{head}, fit, clean renders"] = _run(quick, still, degraded=False)[1]
+        out[f"{head}, photometric"] = _run(quick, still, photometric=True)[1]
         if not quick:
             out[f"{head}, fit-synthesis"] = _run(quick, still, True)[1]
             out[f"{head}, fit with optical flow"] = _run(quick, still, False, True)[1]
@@ -560,9 +595,10 @@ def bench_headmotion_rmse_worst(quick: bool) -> Measurement:
     detail gives every muscle, the confounded muscles, the fit's and the tracker's time per
     frame, for the head moving and still, on the clean renders too (``..., clean renders``),
     for the fit with analysis by synthesis (``--estimator fit-synthesis``), for the fit with
-    MediaPipe's points refined by optical flow (``myoface analyze --flow``), for the paper's
-    snakes (``--tracker snakes``; on both renders), and what the camera did (``..., camera``:
-    its parameters, the H.264 stream's kbit/s and PSNR)."""
+    MediaPipe's points refined by optical flow (``myoface analyze --flow``), for the fit with
+    its photometric term (``..., photometric``: ``myoface analyze --photometric``), for the
+    paper's snakes (``--tracker snakes``; on both renders), and what the camera did
+    (``..., camera``: its parameters, the H.264 stream's kbit/s and PSNR)."""
     res, _ = _run(quick, False)
     return Measurement(res.summary()["rmse_worst"], len(res.truth), detail=_both(quick))
 

@@ -141,8 +141,8 @@ ESTIMATORS = ("curves", "fiducials", "fit", "fit-synthesis", "paper")
 def add_analysis_arguments(p) -> None:
     """The options of one video's analysis, the same for ``myoface analyze`` and ``myoface
     batch`` (which gives them to every video): ``--tracker``, ``--init``,
-    ``--calibration-frame``, ``--max-frames``, ``--sigma``, ``--estimator``, ``--refine``
-    and ``--flow``. :func:`analysis_settings` reads them back."""
+    ``--calibration-frame``, ``--max-frames``, ``--sigma``, ``--estimator``, ``--refine``,
+    ``--flow`` and ``--photometric``. :func:`analysis_settings` reads them back."""
     p.add_argument(
         "--tracker",
         choices=TRACKERS,
@@ -200,24 +200,39 @@ def add_analysis_arguments(p) -> None:
         "from the first frame), which reads skin motion MediaPipe reads short; best where "
         "the skin has texture and the face keeps its look (see README)",
     )
+    p.add_argument(
+        "--photometric",
+        action="store_true",
+        help="landmarks' 3-D fit: also fit the frame's pixels against the calibration "
+        "frame's appearance (photometric term); reads the skin's motion where MediaPipe "
+        "reads it short; slower",
+    )
 
 
 def analysis_settings(args) -> dict:
     """The analysis settings of ``args`` (parsed with :func:`add_analysis_arguments`): the
     keyword arguments ``tracker``, ``init``, ``calibration_frame``, ``max_frames``,
-    ``refine``, ``sigma``, ``estimator`` and ``flow`` of
+    ``refine``, ``sigma``, ``estimator``, ``flow`` and ``photometric`` of
     :func:`~myoface.analysis.outputs.analyze_to_folder` and
     :func:`~myoface.analysis.batch.run_batch`.
 
     Raises
     ------
     MyofaceValueError
-        For ``--init`` with the landmark tracker, which needs none.
+        For ``--init`` with the landmark tracker, which needs none, and ``--photometric``
+        with the snakes or ``--estimator paper`` (it is a term of the landmarks' 3-D fit).
     """
     from myoface.errors import MyofaceValueError
 
     if args.init and args.tracker == "landmarks":
         raise MyofaceValueError("--init is for the snakes; the landmark tracker needs none")
+    if args.photometric:  # refused before the model is built, as make_analyzer would
+        from myoface.analysis.pipeline import PHOTOMETRIC_NEEDS_LANDMARKS, PHOTOMETRIC_NOT_PAPER
+
+        if args.tracker != "landmarks":
+            raise MyofaceValueError(PHOTOMETRIC_NEEDS_LANDMARKS)
+        if args.estimator in ("paper", "fiducials"):
+            raise MyofaceValueError(PHOTOMETRIC_NOT_PAPER)
     return {
         "tracker": args.tracker,
         "init": args.init or None,
@@ -227,6 +242,7 @@ def analysis_settings(args) -> dict:
         "sigma": args.sigma,
         "estimator": args.estimator,
         "flow": bool(args.flow),
+        "photometric": bool(args.photometric),
     }
 
 

@@ -12,8 +12,8 @@ under the output folder (named after the video; clip, clip-2, ... when names rep
 summarise them in OUT/summary.parquet and OUT/summary.csv: per video its path, status
 (ok / failed / skipped), error, frames, measured fraction, frames per second, wall time and
 the mean contraction of each muscle. The analysis options (--tracker, --init,
---calibration-frame, --max-frames, --sigma, --estimator, --refine, --flow) are those of
-`myoface analyze`, the same for every video.
+--calibration-frame, --max-frames, --sigma, --estimator, --refine, --flow, --photometric) are
+those of `myoface analyze`, the same for every video.
 
 Resumable: a folder holding a complete result (its done.json, written last, names the same
 video and settings) is skipped. A video that fails is recorded with its error and the batch

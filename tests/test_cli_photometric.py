@@ -1,0 +1,131 @@
+"""``--photometric`` (``myoface analyze``, ``myoface batch``): the 3-D fit's photometric term
+(:attr:`~myoface.analysis.weights.FitSettings.photometric`) switched on from the command line,
+as ``--flow`` is; refused where there is no 3-D fit (the snakes, ``--estimator paper``)."""
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from myoface.cli import main
+from myoface.errors import MyofaceValueError
+from tests.conftest import needs_mediapipe, shared_path
+
+SNAKES = (
+    "--photometric is a term of the landmark tracker's 3-D fit; use it with --tracker landmarks"
+)
+PAPER = "--photometric is for the 3-D fit, not --estimator paper"
+
+
+def _settings(*argv):
+    from myoface.cli import build_parser
+    from myoface.commands._common import analysis_settings
+
+    return analysis_settings(build_parser().parse_args(["analyze", "v.mp4", "-o", "o", *argv]))
+
+
+def test_the_option_reads_back_and_is_the_fits():
+    assert _settings("--tracker", "landmarks", "--photometric")["photometric"] is True
+    assert _settings("--tracker", "landmarks")["photometric"] is False
+    with pytest.raises(MyofaceValueError) as e:
+        _settings("--photometric")  # the snakes, the default tracker
+    assert str(e.value) == SNAKES
+    for est in ("paper", "fiducials"):
+        with pytest.raises(MyofaceValueError) as e:
+            _settings("--tracker", "landmarks", "--estimator", est, "--photometric")
+        assert str(e.value) == PAPER
+
+
+def test_make_analyzer_gives_the_fit_the_setting(monkeypatch):
+    """make_analyzer (the code path of analyze and of batch's workers) builds the FitTracker
+    with FitSettings(photometric=...), the refine given kept beside it."""
+    from myoface.analysis import pipeline
+
+    made = []
+    monkeypatch.setattr(pipeline, "FitTracker", lambda model, **kw: made.append(kw) or "fit")
+    video = SimpleNamespace(n_frames=10, fps=25.0)
+    for photometric in (True, False):
+        an, first = pipeline.make_analyzer(
+            None, video, "landmarks", calibration_frame=None, refine=2, photometric=photometric
+        )
+        assert (an, first) == ("fit", 0)
+    assert [kw["settings"].photometric for kw in made] == [True, False]
+    assert [kw["settings"].refine for kw in made] == [2, 2]
+    assert made[0]["fps"] == 25.0 and made[0]["synthesis"] is False
+    with pytest.raises(MyofaceValueError, match="--photometric is a term"):
+        pipeline.make_analyzer(None, video, "snakes", photometric=True)
+    with pytest.raises(MyofaceValueError, match="not --estimator paper"):
+        pipeline.make_analyzer(None, video, "landmarks", estimator="paper", photometric=True)
+    assert len(made) == 2
+
+
+def test_batch_refuses_it_before_any_video_is_analysed(tmp_path, capsys):
+    from myoface.analysis.batch import run_batch
+    from myoface.render import VideoWriter
+
+    video = tmp_path / "grey.mp4"
+    with VideoWriter(video, fps=10) as vw:
+        for _ in range(2):
+            vw.write(np.full((64, 64, 3), 128, np.uint8))
+    out = tmp_path / "out"
+    paper = ["--tracker", "landmarks", "--estimator", "paper", "--photometric"]
+    for argv, why in ((["--photometric"], SNAKES), (paper, PAPER)):
+        assert main(["analyze", str(video), "-o", str(out), *argv, "--quiet"]) == 1
+        assert capsys.readouterr().err.strip().splitlines() == [f"myoface analyze: error: {why}"]
+        assert main(["batch", str(video), "-o", str(out), *argv, "--quiet"]) == 1
+        assert capsys.readouterr().err.strip().splitlines() == [f"myoface batch: error: {why}"]
+        assert not out.exists()
+    with pytest.raises(MyofaceValueError, match="--photometric is a term"):
+        run_batch([video], out, photometric=True)
+    with pytest.raises(MyofaceValueError, match="True or False"):
+        run_batch([video], out, tracker="landmarks", photometric=1)
+    assert not out.exists()
+
+
+@needs_mediapipe
+@pytest.mark.shared_data
+@pytest.mark.slow  # 7.5-9 s on a loaded 2-core machine: the model, three short analyses
+def test_analyze_and_batch_with_photometric_on_the_sample_video(tmp_path):
+    """Four frames of single_face.mp4, calibrated on frame 0: with --photometric every frame
+    is measured, analysis.json records the fit's settings with the term on, and the
+    contractions differ from the default fit's on the same frames (the term acts; measured
+    2026-12-01: the largest difference over the muscles and the jaw 0 on the calibration
+    frame, 0.033, 0.089 and 0.145 on frames 1-3); batch records it in done.json and gives its
+    worker the same analysis."""
+    import csv
+
+    video = shared_path("video", "single_face.mp4")
+    argv = ["--tracker", "landmarks", "--max-frames", "4", "--calibration-frame", "0", "--quiet"]
+
+    def analysed(folder):
+        doc = json.loads((folder / "analysis.json").read_text())
+        with open(folder / "contractions.csv", newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        assert [r["quality"] for r in rows] == ["ok"] * 4, rows
+        skip = ("frame", "time_s", "quality", "residual_mm")
+        muscles = [k for k in rows[0] if k not in skip and not k.startswith("head_")]
+        return doc, np.array([[float(r[k]) for k in muscles] for r in rows])
+
+    assert main(["analyze", str(video), "-o", str(tmp_path / "photo"), *argv, "--photometric"]) == 0
+    assert main(["analyze", str(video), "-o", str(tmp_path / "default"), *argv]) == 0
+    doc, photo = analysed(tmp_path / "photo")
+    doc0, default = analysed(tmp_path / "default")
+    assert doc["fit_settings"]["photometric"] is True
+    assert doc0["fit_settings"]["photometric"] is False
+    assert {k: v for k, v in doc["fit_settings"].items() if k != "photometric"} == {
+        k: v for k, v in doc0["fit_settings"].items() if k != "photometric"
+    }
+    assert np.isfinite(photo).all()
+    np.testing.assert_array_equal(photo[0], default[0])  # the calibration frame: neutral
+    assert np.abs(photo[1:] - default[1:]).max() > 0.01
+
+    out = tmp_path / "batch"
+    assert (
+        main(["batch", str(video), "-o", str(out), "--workers", "1", *argv, "--photometric"]) == 0
+    )
+    done = json.loads((out / "single_face" / "done.json").read_text())["settings"]
+    assert done["photometric"] is True and done["tracker"] == "landmarks"
+    batch_doc, batch = analysed(out / "single_face")
+    assert batch_doc["fit_settings"] == doc["fit_settings"]
+    np.testing.assert_allclose(batch, photo, atol=1e-4)
