@@ -183,3 +183,43 @@ def test_a_hand_over_the_mouth_is_not_an_expression():
     zyg = [model.ids.index("zygomaticus_major_l"), model.ids.index("zygomaticus_major_r")]
     after = max(covered) + 1
     assert np.abs(measured[after].contractions[zyg] - true_c[after][zyg]).max() < 0.15
+
+
+@pytest.mark.shared_data
+@needs_mediapipe
+def test_a_looped_clip_does_not_drift():
+    """The known-warp smile (head moving) played six times over: the last loop is read as the
+    second was, and its apex as the first's (the appearance is always the calibration frame's, never the previous
+    frame's, so nothing accumulates), and every contraction stays in [0, 1]."""
+    from myoface.analysis.pipeline import Tracking
+    from myoface.analysis.sample import fetch_sample_video
+    from myoface.analysis.trackers.landmark_fit import FitTracker
+    from myoface.analysis.video import open_video
+    from myoface.analysis.weights import FitSettings
+    from myoface.bench.knownwarp import _Clip, make_clip
+    from myoface.facemesh import FaceMeshDetector
+
+    frame = next(iter(open_video(fetch_sample_video(quiet=True))))
+    with FaceMeshDetector(video=False) as det:
+        pts = det.detect(frame)
+    model = build_face_model()
+    clip, _, true_c = make_clip(frame, pts, model, "happiness", True, quick=True)
+    loops = 6
+    video = _Clip(clip * loops, 30.0)
+    tracker = FitTracker(model, fps=30.0, settings=FitSettings(photometric=True))
+    try:
+        first = tracker.calibrate(iter(video), 0)
+        measured = [m for _, m in Tracking(video, tracker, first)]
+    finally:
+        tracker.close()
+    c = np.array([m.contractions for m in measured])
+    assert all(m.quality == "ok" for m in measured)
+    assert np.nanmin(c) >= 0.0 and np.nanmax(c) <= 1.0
+    n = len(clip)
+    apex = int(np.argmax(true_c.sum(1)))
+    first_apex, last_apex = c[apex], c[(loops - 1) * n + apex]
+    assert np.abs(last_apex - first_apex).max() < 0.05, np.abs(last_apex - first_apex).max()
+    # every loop after the first (which starts from the calibration, not from the clip's
+    # last frame) is read frame for frame as the second was (measured: equal to 1e-3)
+    second, last = c[n : 2 * n], c[(loops - 1) * n :]
+    assert np.abs(last - second).max() < 0.02, np.abs(last - second).max()
