@@ -12,7 +12,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "myoface"
 
 #: the levels, lowest first: a module may import its own level's and lower levels' modules
 LEVELS = (
-    ("myoface.errors", "myoface._io", "myoface._threads", "myoface.facemesh"),
+    ("myoface.errors", "myoface._io", "myoface._threads", "myoface._signals", "myoface.facemesh"),
     ("myoface.face",),
     ("myoface.tissue", "myoface.muscles", "myoface.render"),
     ("myoface.model",),

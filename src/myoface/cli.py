@@ -15,7 +15,6 @@ removed, exit status 128 + the signal's number); warnings are one line each on s
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib
 import pkgutil
 import signal
@@ -24,6 +23,7 @@ import warnings
 
 import myoface
 import myoface.commands
+from myoface._signals import stop_signals
 from myoface.errors import MyofaceError, MyofaceWarning
 
 
@@ -47,36 +47,8 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-class Interrupted(KeyboardInterrupt):
-    """Raised in the main thread by SIGTERM / SIGHUP, as SIGINT raises KeyboardInterrupt, so the
-    same clean-up (temporary outputs removed) runs."""
-
-    def __init__(self, signum: int):
-        super().__init__(signum)
-        self.signum = signum
-
-
-def _raise_interrupted(signum, frame):
-    raise Interrupted(signum)
-
-
-@contextlib.contextmanager
-def _stop_signals():
-    """SIGTERM and SIGHUP raise :class:`Interrupted` in the block (main thread only)."""
-    old = {}
-    for name in ("SIGTERM", "SIGHUP"):
-        sig = getattr(signal, name, None)
-        if sig is None:
-            continue
-        try:
-            old[sig] = signal.signal(sig, _raise_interrupted)
-        except ValueError:  # not the main thread: leave the handlers alone
-            break
-    try:
-        yield
-    finally:
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
+# (SIGINT, SIGTERM and SIGHUP raise Interrupted, a KeyboardInterrupt: myoface._signals)
+_stop_signals = stop_signals
 
 
 def _one_line_warnings(prog: str):

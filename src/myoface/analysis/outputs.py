@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from myoface._io import atomic_output, output_dir
+from myoface._signals import clear_pending, raise_pending
 from myoface.analysis.contractions_csv import ContractionsCsvWriter
 from myoface.analysis.initfiles import load_init
 from myoface.analysis.pipeline import Tracking, make_analyzer
@@ -356,6 +357,7 @@ def _measure_into(run, model, out, show_progress):
             )
             try:
                 for frame, m in measured:
+                    raise_pending()  # (a stop signal Python swallowed somewhere)
                     # the row first: what the CSV holds was measured, whatever stops the run
                     csv.write(m)
                     log.append(m)
@@ -369,6 +371,7 @@ def _measure_into(run, model, out, show_progress):
                         extra[name].write(draw_contours(img, m.contours, color))
                     bar.update()
             except KeyboardInterrupt as exc:
+                clear_pending()
                 if not len(log) or not vw.n_frames:
                     raise  # nothing kept: as an error, nothing is left
                 interrupted = exc  # the writers close and keep the frames so far
