@@ -329,7 +329,8 @@ def test_batch_flow_fails_as_analyze_does(tmp_path, capsys, monkeypatch):
         for _ in range(2):
             vw.write(np.full((64, 64, 3), 128, np.uint8))
     out = tmp_path / "out"
-    assert main(["batch", str(video), "-o", str(out), "--flow", "--quiet"]) == 1
+    snakes = ["--tracker", "snakes", "--flow", "--quiet"]
+    assert main(["batch", str(video), "-o", str(out), *snakes]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [
         "myoface batch: error: --flow refines the landmark tracker's points; use it with "

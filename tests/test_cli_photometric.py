@@ -28,8 +28,9 @@ def _settings(*argv):
 def test_the_option_reads_back_and_is_the_fits():
     assert _settings("--tracker", "landmarks", "--photometric")["photometric"] is True
     assert _settings("--tracker", "landmarks")["photometric"] is False
+    assert _settings("--photometric")["tracker"] == "landmarks"  # (the default tracker)
     with pytest.raises(MyofaceValueError) as e:
-        _settings("--photometric")  # the snakes, the default tracker
+        _settings("--tracker", "snakes", "--photometric")
     assert str(e.value) == SNAKES
     for est in ("paper", "fiducials"):
         with pytest.raises(MyofaceValueError) as e:
@@ -70,7 +71,8 @@ def test_batch_refuses_it_before_any_video_is_analysed(tmp_path, capsys):
             vw.write(np.full((64, 64, 3), 128, np.uint8))
     out = tmp_path / "out"
     paper = ["--tracker", "landmarks", "--estimator", "paper", "--photometric"]
-    for argv, why in ((["--photometric"], SNAKES), (paper, PAPER)):
+    snakes = ["--tracker", "snakes", "--photometric"]
+    for argv, why in ((snakes, SNAKES), (paper, PAPER)):
         assert main(["analyze", str(video), "-o", str(out), *argv, "--quiet"]) == 1
         assert capsys.readouterr().err.strip().splitlines() == [f"myoface analyze: error: {why}"]
         assert main(["batch", str(video), "-o", str(out), *argv, "--quiet"]) == 1
