@@ -43,9 +43,11 @@ TARGETS = {
     "analysis.headmotion_rmse_median": [("<=", 0.06)],
     "analysis.headmotion_corr": [(">=", 0.85)],
     "analysis.headmotion_skin_mm": [("<=", 0.5)],
-    "analysis.headmotion_pose_deg": [("<=", 2)],
+    "analysis.headmotion_pose_deg": [("<=", 1)],
     "analysis.headmotion_still_rmse_median": [("<=", 0.06)],
     "analysis.headmotion_still_skin_mm": [("<=", 0.5)],
+    "analysis.known_warp_gain": [("in", 0.9, 1.1)],
+    "analysis.known_warp_explained": [(">=", 0.9)],
     "viewer.update_ms": [("<", 100)],
     "viewer.drag_updates_per_s": [(">=", 30)],
 }
