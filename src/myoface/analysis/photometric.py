@@ -117,6 +117,28 @@ def _zbuffer(uv, depth, tris, h, w):
     return z
 
 
+#: a sample nearer the face's projected outline than this many blurs (plus a pixel) weighs 0:
+#: its blurred pixel takes in what lies beyond the face (the background, the neck), which
+#: changes as the head turns and the calibration frame did not show. Measured 2026-12-01 on
+#: the degraded head-motion renders, head moving: without it the chin's outline samples
+#: pushed the mentalis to 1.0 while the head turned (worst RMSE of the 12 muscles and the jaw
+#: 0.61, skin 1.15 mm, head 0.90 degrees); with 1 blur 0.48, 1.05 mm, 0.81 degrees (with 2
+#: blurs 0.45, but the known-warp brows' gain fell from 0.91 to 0.88, with 1 to 0.89). The
+#: mentalis itself still reads 0.79 RMSE there: what drives it is not found yet
+OUTLINE_BLURS = 1.0
+
+
+def distance_to_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """Each point's (N, 2) distance to the closed polyline ``line`` (K, 2)."""
+    a = line
+    b = np.roll(line, -1, axis=0)
+    ab = b - a
+    t = ((points[:, None, :] - a[None]) * ab[None]).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12)
+    t = np.clip(t, 0.0, 1.0)
+    near = a[None] + t[..., None] * ab[None]
+    return np.sqrt(((points[:, None, :] - near) ** 2).sum(-1)).min(1)
+
+
 def unoccluded(samples, triangles, camera, camera_points, shape_hw, tol_mm=OCCLUSION_MM):
     """Which samples (S,) no other part of the face covers, by a z-buffer of the mesh at the
     vertices' camera-frame positions ``camera_points`` (V, 3) on an image of ``shape_hw``."""
@@ -260,6 +282,8 @@ class Appearance:
     #: per level, the albedo (S,): the brightness over the calibration frame's shading
     #: (:func:`shading_basis` of the normals there, its light fitted by least squares)
     albedo: list | None = None
+    #: the face's outline (its mesh's outer boundary loop, vertex indices)
+    outline: np.ndarray | None = None
 
     @classmethod
     def from_frame(cls, frame, face, camera, pose, shape, levels=BLUR_SCHEDULE_PX,
@@ -297,7 +321,15 @@ class Appearance:
         shade = np.maximum(shade, SHADE_FLOOR * float(np.mean(shade[ok])))
         albedo = [v / shade for v in values]
         prior = rim_weights(face, samples)
-        return cls(samples, tri, tuple(levels), values, region, spacing, prior, albedo)
+        loops = face.boundary_loops
+        outline = np.asarray(loops[0]) if loops else None
+        # (the calibration frame's own outline samples are not the skin's either)
+        if outline is not None:
+            d = distance_to_polyline(uv, uvv[outline])
+            for k, s in enumerate(levels):
+                values[k][d < OUTLINE_BLURS * s + 1.0] = np.nan
+                albedo[k][d < OUTLINE_BLURS * s + 1.0] = np.nan
+        return cls(samples, tri, tuple(levels), values, region, spacing, prior, albedo, outline)
 
 
 #: the weight of the samples on triangles with a vertex on the mouth's opening (the inner lip
@@ -462,6 +494,10 @@ class PhotometricTerm:
             )
         vis &= self._unoccluded
         ok = vis & np.isfinite(a) & np.isfinite(val)
+        if self.app.outline is not None:
+            blur = self.app.levels[self._level]
+            edge = distance_to_polyline(uv, self.camera.project(pc[self.app.outline]))
+            ok &= edge >= OUTLINE_BLURS * blur + 1.0
         self._light = self._fit_light(est, pc, val, ok if self._w is None else ok & (self._w > 0))
         r = np.where(ok, val - self._lit(np.arange(len(val))), 0.0) / self.sigma
         blur = self.app.levels[self._level]
