@@ -227,3 +227,11 @@ def test_a_looped_clip_does_not_drift():
     # last frame) is read frame for frame as the second was (measured: equal to 1e-3)
     second, last = c[n : 2 * n], c[(loops - 1) * n :]
     assert np.abs(last - second).max() < 0.02, np.abs(last - second).max()
+
+
+def test_distance_to_a_closed_polyline():
+    from myoface.analysis.photometric import distance_to_polyline
+
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+    pts = np.array([[0.5, 0.5], [2.0, 0.5], [0.5, -1.0], [0.0, 0.5], [2.0, 2.0]])
+    assert np.allclose(distance_to_polyline(pts, square), [0.5, 1.0, 1.0, 0.0, np.sqrt(2)])

@@ -129,14 +129,33 @@ OUTLINE_BLURS = 1.0
 
 
 def distance_to_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
-    """Each point's (N, 2) distance to the closed polyline ``line`` (K, 2)."""
-    a = line
-    b = np.roll(line, -1, axis=0)
-    ab = b - a
-    t = ((points[:, None, :] - a[None]) * ab[None]).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12)
-    t = np.clip(t, 0.0, 1.0)
-    near = a[None] + t[..., None] * ab[None]
-    return np.sqrt(((points[:, None, :] - near) ** 2).sum(-1)).min(1)
+    """Each point's (N, 2) distance to the closed polyline ``line`` (K, 2) (compiled: the
+    numpy version's (N, K, 2) temporaries took 6 ms a call, a fifth of the fit's time)."""
+    return _distance_to_polyline(
+        np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(line, dtype=np.float64)
+    )
+
+
+@njit(cache=True, nogil=True)
+def _distance_to_polyline(points, line):
+    n, k = points.shape[0], line.shape[0]
+    out = np.empty(n)
+    for i in range(n):
+        px, py = points[i, 0], points[i, 1]
+        best = np.inf
+        for j in range(k):
+            ax, ay = line[j, 0], line[j, 1]
+            bx, by = line[(j + 1) % k, 0], line[(j + 1) % k, 1]
+            dx, dy = bx - ax, by - ay
+            den = dx * dx + dy * dy
+            t = ((px - ax) * dx + (py - ay) * dy) / den if den > 1e-12 else 0.0
+            t = min(max(t, 0.0), 1.0)
+            ex, ey = px - (ax + t * dx), py - (ay + t * dy)
+            d = ex * ex + ey * ey
+            if d < best:
+                best = d
+        out[i] = np.sqrt(best)
+    return out
 
 
 def unoccluded(samples, triangles, camera, camera_points, shape_hw, tol_mm=OCCLUSION_MM):
@@ -436,7 +455,11 @@ class PhotometricTerm:
         x = np.column_stack([alb[:, None] * basis, onehot])
         if m.sum() < 40:
             return np.ones(len(val)), np.zeros(len(val))
-        sol, *_ = np.linalg.lstsq(x[m], val[m], rcond=None)
+        # (normal equations summed by einsum, not BLAS: OpenBLAS's threads, woken for this
+        # 2600 x 8 product, then spin on the second core that MediaPipe runs on)
+        xm = x[m]
+        gram = np.einsum("si,sj->ij", xm, xm) + 1e-9 * np.eye(x.shape[1])
+        sol = np.linalg.solve(gram, np.einsum("si,s->i", xm, val[m]))
         nb = basis.shape[1]
         scale = basis @ sol[:nb]
         return scale, sol[nb:][reg]
