@@ -47,10 +47,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-# (SIGINT, SIGTERM and SIGHUP raise Interrupted, a KeyboardInterrupt: myoface._signals)
-_stop_signals = stop_signals
-
-
 def _one_line_warnings(prog: str):
     def show(message, category, filename, lineno, file=None, line=None):
         text = " ".join(str(message).split())
@@ -105,7 +101,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     debug = getattr(args, "debug", False)
     prog = getattr(args, "_prog", f"myoface {args.command}")
-    with warnings.catch_warnings(), _stop_signals():
+    # (SIGINT, SIGTERM and SIGHUP raise Interrupted, a KeyboardInterrupt: myoface._signals)
+    with warnings.catch_warnings(), stop_signals():
         warnings.filterwarnings("default", category=MyofaceWarning)  # said, whatever -W says
         if not debug:
             warnings.showwarning = _one_line_warnings(prog)

@@ -56,6 +56,12 @@ class _Warp:
     def displacement(self, x: np.ndarray) -> np.ndarray:  # pragma: no cover (each warp has its own)
         raise NotImplementedError
 
+    def _check_head(self) -> None:
+        """The similarity's parameters checked, its pivot an array (frozen subclasses)."""
+        if not self.scale > 0:
+            raise MyofaceValueError(f"scale must be > 0; got {self.scale}")
+        object.__setattr__(self, "pivot", np.asarray(self.pivot, dtype=np.float64).reshape(2))
+
     def _similarity(self) -> tuple[np.ndarray, np.ndarray]:
         return _similarity(self.rotation_deg, self.scale, self.translation_px, self.pivot)
 
@@ -105,12 +111,10 @@ class KnownWarp(_Warp):
             raise MyofaceValueError("centres and shifts must be finite (K, 2) arrays alike")
         if not (r > 0).all():
             raise MyofaceValueError("the bumps' radius must be > 0 pixels")
-        if not self.scale > 0:
-            raise MyofaceValueError(f"scale must be > 0; got {self.scale}")
+        self._check_head()
         object.__setattr__(self, "centres", c)
         object.__setattr__(self, "shifts", s)
         object.__setattr__(self, "radius", r.copy())
-        object.__setattr__(self, "pivot", np.asarray(self.pivot, dtype=np.float64).reshape(2))
 
     # ------------------------------------------------------------------ the field
     def displacement(self, x: np.ndarray) -> np.ndarray:
@@ -213,19 +217,17 @@ class MeshWarp(_Warp):
 
     def __post_init__(self):
         from scipy.interpolate import LinearNDInterpolator
+        from scipy.spatial import Delaunay
 
         p = np.asarray(self.points, dtype=np.float64).reshape(-1, 2)
         s = np.asarray(self.shifts, dtype=np.float64).reshape(-1, 2)
         if len(p) < 3 or len(p) != len(s) or not (np.isfinite(p).all() and np.isfinite(s).all()):
             raise MyofaceValueError("points and shifts must be finite (N >= 3, 2) arrays alike")
-        if not self.scale > 0:
-            raise MyofaceValueError(f"scale must be > 0; got {self.scale}")
+        self._check_head()
         c = (p.max(0) + p.min(0)) / 2
         half = (p.max(0) - p.min(0)) / 2 * RING_SCALE
         t = np.linspace(0, 2 * np.pi, RING_POINTS, endpoint=False)
         ring = c + half * np.column_stack([np.cos(t), np.sin(t)])
-        from scipy.spatial import Delaunay
-
         nodes = np.vstack([p, ring])
         tri = Delaunay(nodes)
         vals = _unfold(nodes, np.vstack([s, np.zeros_like(ring)]), tri.simplices)
@@ -233,7 +235,6 @@ class MeshWarp(_Warp):
         spline = LinearNDInterpolator(tri, vals, fill_value=0.0)
         object.__setattr__(self, "points", p)
         object.__setattr__(self, "shifts", s)
-        object.__setattr__(self, "pivot", np.asarray(self.pivot, dtype=np.float64).reshape(2))
         object.__setattr__(self, "_spline", spline)
 
     def displacement(self, x: np.ndarray) -> np.ndarray:
@@ -245,14 +246,7 @@ class MeshWarp(_Warp):
         (> 0: the warp does not fold the frame)."""
         tri = self._spline.tri
         p, d = tri.points, self._spline.values
-        q = p + d
-        a, b, c = (tri.simplices[:, k] for k in range(3))
-
-        def area(x):
-            e1, e2 = x[b] - x[a], x[c] - x[a]
-            return e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-
-        return float((area(q) / area(p)).min())
+        return float((_signed_areas(p + d, tri.simplices) / _signed_areas(p, tri.simplices)).min())
 
     def apply(self, image: np.ndarray) -> np.ndarray:
         """The warped frame; the spline is evaluated once on the backward map's grid and
@@ -278,6 +272,13 @@ MIN_AREA_RATIO = 0.2
 UNFOLD_ROUNDS = 100
 
 
+def _signed_areas(x: np.ndarray, simplices: np.ndarray) -> np.ndarray:
+    """Twice the signed area (T,) of each triangle ``simplices`` (T, 3) of points ``x``."""
+    a, b, c = (simplices[:, k] for k in range(3))
+    e1, e2 = x[b] - x[a], x[c] - x[a]
+    return e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+
+
 def _unfold(points, shifts, simplices) -> np.ndarray:
     """``shifts`` (N, 2) at ``points`` (N, 2) with no triangle of ``simplices`` turned over:
     where one would be (its area after the shift below :data:`MIN_AREA_RATIO` of before), its
@@ -290,15 +291,9 @@ def _unfold(points, shifts, simplices) -> np.ndarray:
     3.8 px, 2026-12-01): the face model's lips are 6 px apart at rest where the person's are
     1.3 px (closed), and the model's smile closes its gap, which on closed lips crosses them."""
     d = np.array(shifts, dtype=np.float64)
-    a, b, c = (simplices[:, k] for k in range(3))
-
-    def area(x):
-        e1, e2 = x[b] - x[a], x[c] - x[a]
-        return e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-
-    a0 = area(points)
+    a0 = _signed_areas(points, simplices)
     for _ in range(UNFOLD_ROUNDS):
-        bad = np.flatnonzero(area(points + d) < MIN_AREA_RATIO * a0)
+        bad = np.flatnonzero(_signed_areas(points + d, simplices) < MIN_AREA_RATIO * a0)
         if not len(bad):
             break
         for t in bad:

@@ -236,6 +236,21 @@ class SurfaceSamples:
             object.__setattr__(self, "_matrix", cached)
         return cached
 
+    def membership(self, n_vertices: int):
+        """Which samples lie on a triangle of each vertex (V, S), sparse, of ones: a
+        vertex's patch (:meth:`PhotometricTerm.occlusion`)."""
+        from scipy import sparse
+
+        cached = getattr(self, "_membership", None)
+        if cached is None or cached.shape[0] != n_vertices:
+            cols = np.repeat(np.arange(len(self.tri)), 3)
+            cached = sparse.csr_matrix(
+                (np.ones(self.tri.size), (self.tri.ravel(), cols)),
+                shape=(n_vertices, len(self.tri)),
+            )
+            object.__setattr__(self, "_membership", cached)
+        return cached
+
     def points(self, vertices: np.ndarray) -> np.ndarray:
         """The samples' positions (S, 3) on ``vertices`` (V, 3)."""
         return self.matrix(len(vertices)) @ np.asarray(vertices, dtype=np.float64)
@@ -441,9 +456,9 @@ class PhotometricTerm:
     def _at(self, image, uv):
         return _sample(image, uv - self._origin)
 
-    def _fit_light(self, est, pc, val, use):
+    def _fit_light(self, pc, val, use):
         """The frame's light (least squares over the samples ``use``): brightness = albedo
-        times the shading of the samples' normals at ``est`` (:func:`shading_basis`, one
+        times the shading of the samples' normals at the vertices ``pc`` (camera frame) (:func:`shading_basis`, one
         light for the face: as the head turns under a lamp each point's shading changes with
         its normal), plus an offset per region (:data:`LIGHT_REGIONS`: a camera's flare, a
         second light's spill). Returns each sample's (scale (S,), offset (S,))."""
@@ -494,10 +509,10 @@ class PhotometricTerm:
         pc = est.pose.apply(est.shape)
         return pc, self.camera.project(self.app.samples.points(pc))
 
-    def _residual(self, uv, level, light):
-        img = self._images[level][0]
-        val = self._at(img, uv)
-        return val - self._lit(np.arange(len(val)))
+    def _residual(self, uv):
+        """Each sample's brightness at ``uv`` less its appearance under the frame's light
+        (this step's level)."""
+        return self._at(self._images[self._level][0], uv) - self._lit(slice(None))
 
     def prepare(self, est: Estimate) -> None:
         self._level = self._level_for(self._step)
@@ -517,13 +532,12 @@ class PhotometricTerm:
             )
         vis &= self._unoccluded
         ok = vis & np.isfinite(a) & np.isfinite(val)
+        blur = self.app.levels[self._level]
         if self.app.outline is not None:
-            blur = self.app.levels[self._level]
             edge = distance_to_polyline(uv, self.camera.project(pc[self.app.outline]))
             ok &= edge >= OUTLINE_BLURS * blur + 1.0
-        self._light = self._fit_light(est, pc, val, ok if self._w is None else ok & (self._w > 0))
-        r = np.where(ok, val - self._lit(np.arange(len(val))), 0.0) / self.sigma
-        blur = self.app.levels[self._level]
+        self._light = self._fit_light(pc, val, ok if self._w is None else ok & (self._w > 0))
+        r = np.where(ok, val - self._lit(slice(None)), 0.0) / self.sigma
         indep = min(1.0, (self.app.spacing_px / (2.0 * blur)) ** 2)
         hub = np.where(np.abs(r) > self.huber, self.huber / np.maximum(np.abs(r), 1e-12), 1.0)
         if not self.settling:
@@ -581,24 +595,16 @@ class PhotometricTerm:
         changed by more than :data:`CONTRAST_CHANGE` times either way (on the sample video's
         real smile, correlation alone counted up to 0.26 of the patches, a blob over the
         mouth 0.21; with the contrast, 0.086 and 0.17-0.18, 2026-12-01)."""
-        from scipy import sparse
-
         lev = len(self.app.levels) - 1
         if not self._images:
             self._crop(self._uv(est)[1])
         pc, uv = self._uv(est)
         a = self.app.values[lev]
         b = self._at(self._images[lev][0], uv)
-        vis = facing(self.app.samples, self.app.triangles, pc) > 0.2
+        vis = facing(self.app.samples, self.app.triangles, pc) > FACING_MIN
         ok = (vis & np.isfinite(a) & np.isfinite(b) & (self.app.prior > 0)).astype(np.float64)
         a, b = np.nan_to_num(a), np.nan_to_num(b)
-        nv = len(pc)
-        s = self.app.samples
-        rows = s.tri.ravel()
-        cols = np.repeat(np.arange(len(s)), 3)
-        g = sparse.csr_matrix(
-            (np.ones(len(rows)), (rows, cols)), shape=(nv, len(s))
-        ) @ sparse.diags(ok)
+        g = self.app.samples.membership(len(pc)).multiply(ok[None, :]).tocsr()
         n = np.asarray(g.sum(1)).ravel()
         ma, mb = g @ a / np.maximum(n, 1), g @ b / np.maximum(n, 1)
         va = g @ (a * a) / np.maximum(n, 1) - ma**2
@@ -614,5 +620,5 @@ class PhotometricTerm:
 
     def cost(self, est: Estimate) -> float:
         _, uv = self._uv(est)
-        r = np.nan_to_num(self._residual(uv, self._level, self._light)) / self.sigma
+        r = np.nan_to_num(self._residual(uv)) / self.sigma
         return float((self._w * r * r).sum())
