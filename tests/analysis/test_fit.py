@@ -210,10 +210,11 @@ def test_the_persons_neutral_carries_no_rigid_motion(fm):
     rot = vt.T @ np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
     assert np.degrees(np.linalg.norm(rotvec(rot))) < 0.05
     assert np.linalg.norm(a.mean(0) - b.mean(0)) < 0.05
-    # (about 0.7 degrees off, with or without the gauge: from one view, the offset's depth is
-    # the regulariser's guess)
+    # (about 1.1 degrees off, with or without the gauge: from one view, the offset's depth is
+    # the regulariser's guess; 0.7 while the jaw's reach counted in the model's error and the
+    # chin, which the offset moves most, weighed 0.16: FitSettings.model_error)
     err = np.degrees(np.linalg.norm(rotvec(cal.pose.rotation @ true.rotation.T)))
-    assert err < 1.0, err
+    assert err < 1.5, err
 
 
 def test_calibration_frame_given(fm):

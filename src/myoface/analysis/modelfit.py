@@ -81,6 +81,7 @@ from myoface.analysis.weights import (
 )
 from myoface.errors import MyofaceValueError
 from myoface.face.personal import fit_similarity_3d
+from myoface.muscles import JAW_ID
 from myoface.tissue import RelaxWarning
 
 #: seconds at the start of a video searched for the most neutral frame to calibrate on
@@ -187,10 +188,15 @@ class ModelFit:
         self.model_response = skin_response(model, self.ids)
         self.response = self.model_response
         self.lid_extra = np.zeros_like(self.model_response)
+        # the model's own error grows with what its muscles do to the soft tissue; the jaw is
+        # a rotation of bone that the chin's skin follows, so it does not count (with it, the
+        # chin and lower lip, which the jaw moves ~22 mm, weighed 0.16 and the fit raised them
+        # by 4.5 mm with the smile's zygomatici where the video's stayed or dropped)
+        soft = [k for k, mid in enumerate(self.ids) if mid != JAW_ID]
         self.base_weights = landmark_weights(
             model.face, self.settings.oval_weight
         ) * model_error_weights(
-            self.response, self.settings.model_error, self.settings.landmark_sigma_mm
+            self.response[:, :, soft], self.settings.model_error, self.settings.landmark_sigma_mm
         )
         self.identity_mm = np.zeros_like(self.neutral)
         #: the fit's own state of the model's tissue (each relax starts from the last)

@@ -31,14 +31,19 @@ class FitSettings:
     oval_weight : weight of the face oval's points (the mesh's outer rim), which MediaPipe
         puts on the face's silhouette, not on fixed skin, as the head turns.
     model_error : the model's own error at a point, as a fraction of the largest skin
-        displacement any one muscle (or the jaw) makes there at full contraction
+        displacement any one muscle makes there at full contraction
         (:func:`model_error_weights`): a point the muscles move far (lips, cheeks, chin) is
         known less well than one no muscle moves (eye corners, nose bridge), because the
         model's muscles and tissue are an approximation of the person's. Without it, what an
         expression moves that the model cannot (a broad smile's cheeks bulging up and out)
         is explained by moving the head: on the sample video's smile the head rose ~1.2 mm
         against its eye corners and nose bridge, the chin then seemed to drop, and the jaw
-        opened 0.13 rad behind closed teeth. 0: every point is known to
+        opened 0.13 rad behind closed teeth. The jaw does not count: it turns the mandible,
+        which the chin's skin follows closely; counted, it made the chin and the lower lip
+        (moved ~22 mm by the open jaw) weigh 0.16, and on the sample video's smile the fit
+        then let the zygomatici raise the chin 4.5 mm and the lower lip 6 mm, where the video's
+        chin stayed and its lower lip dropped as the lips parted (analysis.fidelity 0.18 with
+        the jaw counted, 0.34 without; 2026-12-01). 0: every point is known to
         :attr:`landmark_sigma_mm`.
     rate_per_s : temporal prior: a contraction changes by about this much per second (1 sd);
         a fast expression goes from 0 to 1 in a quarter of a second.
