@@ -441,6 +441,77 @@ def model_displacements(model, table, ok=None, regions=None) -> tuple[dict, dict
     return d, {"neutral_points": neutral, "unconverged": unconverged}
 
 
+#: :func:`model_reach`: Gauss-Newton rounds per frame (each relaxes the tissue once) and the
+#: ridge that keeps muscles the regions cannot see at rest (units of contraction, against
+#: displacements in inter-ocular distances)
+REACH_ROUNDS = 3
+REACH_RIDGE = 0.02
+
+
+def model_reach(
+    model, d_in: dict, show_progress: bool = False
+) -> tuple[FidelityResult, np.ndarray]:
+    """How much of the input's motion ``d_in`` ({region: (T, P, 2)}, as
+    :func:`fidelity_of_analysis` reads it) the model could reproduce at best: for each frame
+    the contractions (every muscle and the jaw, in [0, 1]) that bring the model's region
+    displacements (:func:`model_displacements`' side) nearest to the input's, in least squares
+    (bounded Gauss-Newton through the model's response at rest, the tissue relaxed at each
+    round's estimate, warm-started frame to frame), then scored exactly as the analysis is.
+
+    A diagnostic, not an analysis: it is fitted to the judge's own reading. It says which
+    stage holds the measure: where the analysis scores well below this, its fit (observations,
+    weights, priors) loses the motion; where this is low too, the model's muscles cannot make
+    the person's motion at these points whatever they do (or the reader misreads them: see
+    the forward-backward share). Returns the scores and the contractions (T, M)."""
+    from scipy.optimize import lsq_linear
+
+    from myoface.analysis.estimate import skin_response
+
+    names = list(d_in)
+    target = np.concatenate([d_in[k] for k in names], axis=1)  # (T, P, 2)
+    flip = np.array([1.0, -1.0])
+    idx = list(POINTS)
+    neutral = model.skin_vertices(model.rest_state())[idx, :2] * flip
+    iod = float(np.linalg.norm(neutral[_EYES[0]] - neutral[_EYES[1]]))
+    pos = [_POS[i] for k in names for i in REGIONS[k]]
+    ids = list(model.ids)
+    jac = skin_response(model, ids)[idx][pos][:, :2, :].reshape(-1, len(ids)) / iod
+    a = np.vstack([jac, REACH_RIDGE * np.eye(len(ids))])
+    zeros = np.zeros(len(ids))
+    table = np.full((len(target), len(ids)), np.nan)
+    c, state = zeros.copy(), None
+    for t in progress(range(len(target)), total=len(target), desc="model reach",
+                      enabled=show_progress):  # fmt: skip
+        want = target[t].reshape(-1)
+        if not np.isfinite(want).all():
+            continue
+        for _ in range(REACH_ROUNDS):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RelaxWarning)
+                res = model.relax(c, state, tol_mm=SYNTH_TOL_MM)
+            now = model.skin_vertices(res.state)[idx, :2] * flip
+            d = _region_displacements(neutral, now[None])
+            have = np.concatenate([d[k] for k in names], axis=1)[0].reshape(-1)
+            c = lsq_linear(a, np.concatenate([want - have + jac @ c, zeros]), bounds=(0, 1)).x
+        state = res.state
+        table[t] = c
+    d_out, _ = model_displacements(model, table, np.isfinite(table).all(1))
+    cat_in = np.concatenate([d_in[k] for k in names], axis=1)
+    cat_out = np.concatenate([d_out[k] for k in names], axis=1)
+    result = FidelityResult(
+        scores(cat_in, cat_out),
+        {k: scores(d_in[k], d_out[k]) for k in names},
+        0,
+        int(np.isfinite(table).all(1).sum()),
+        2,
+        d_in,
+        d_out,
+        method="the model's best: contractions fitted to the reader's own displacements",
+        labels=("input", "model at its best"),
+    )
+    return result, table
+
+
 def read_video_points(video_path, frames, calibration_frame: int, reader: str = READER,
                       detect_landmarks_too: bool = False):  # fmt: skip
     """The input's side: MediaPipe's face mesh (image mode) on the video's frame

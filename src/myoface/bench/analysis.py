@@ -324,9 +324,30 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
                 "overall": round(float(fid_f.overall.explained), 4),
                 "regions": {k: round(float(v.explained), 4) for k, v in fid_f.regions.items()},
             }
+    # which stage holds the measure: the best any contractions of the same face could do,
+    # fitted to the reader's own displacements (a diagnostic, never the analysis)
+    from myoface.analysis.fidelity import model_reach, person_model
+
+    reach, _ = model_reach(person_model(path, fid.reference)[0], fid.d_in)
     regions = {k: v.explained for k, v in fid.regions.items()}
     detail = {
         **_fidelity_detail(fid, doc),
+        "model_reach": {
+            "what": (
+                "the best explained fraction and gain any contractions of the same face reach, "
+                "fitted frame by frame to the reader's displacements (fidelity.model_reach): "
+                "where the analysis is far below it the fit loses the motion, where it is low "
+                "the model's muscles cannot make it"
+            ),
+            "overall": {
+                "explained": round(float(reach.overall.explained), 4),
+                "gain": round(float(reach.overall.gain), 4),
+            },
+            "regions": {
+                k: {"explained": round(float(v.explained), 4), "gain": round(float(v.gain), 4)}
+                for k, v in reach.regions.items()
+            },
+        },
         "target": FIDELITY_TARGET,
         "target_met": bool(
             fid.overall.explained >= FIDELITY_TARGET["overall"]
