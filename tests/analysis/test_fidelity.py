@@ -10,6 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from myoface.analysis.fidelity import (
+    JUDGED_REGIONS,
     REGIONS,
     RIGID_POINTS,
     align_sequence,
@@ -19,7 +20,7 @@ from myoface.analysis.fidelity import (
     scores,
 )
 from myoface.errors import MyofaceValueError
-from tests.conftest import needs_mediapipe
+from tests.conftest import needs_mediapipe, shared_path
 
 EXPRESSIVE = sorted({i for idx in REGIONS.values() for i in idx})
 
@@ -339,6 +340,73 @@ def test_the_true_contractions_read_from_their_own_render(smile_clip_384, tmp_pa
     assert "no face found" in how["face"]
 
 
+#: renders of the person's own face at known contractions: a smile baring the upper teeth, a
+#: mouth opening with raised inner brows, and two of the expressions (0.9)
+_RENDERED = {
+    "smile_teeth": {"zygomaticus_major_l": 0.8, "zygomaticus_major_r": 0.8,
+                    "levator_labii_superioris_l": 0.5, "levator_labii_superioris_r": 0.5,
+                    "orbicularis_oculi_l": 0.4, "orbicularis_oculi_r": 0.4, "jaw": 0.08},
+    "open_mouth": {"jaw": 0.35, "frontalis_inner_l": 0.6, "frontalis_inner_r": 0.6,
+                   "depressor_labii_inferioris_l": 0.4, "depressor_labii_inferioris_r": 0.4},
+    "happiness": None,
+    "surprise": None,
+}  # fmt: skip
+
+
+@needs_mediapipe
+@pytest.mark.slow
+@pytest.mark.shared_data
+def test_the_reader_on_renders_at_known_contractions(tmp_path):
+    """The reader against a second known answer, where appearance changes with the motion:
+    the person's own face (``face_from_photo`` on the sample video's first frame, its photo as
+    texture) rendered at known contractions rising and falling (:data:`_RENDERED`), read as a
+    video, its readings compared with the model's own vertices. Where a judged region moves by
+    0.015 IOD RMS or more, the reader reads the mouth corners at 0.8-1.1 of it and the lower
+    lip, chin and brows at 0.85-1.15 (measured 2026-12-01: corners 0.84-1.02, the others
+    0.91-1.09; sadness' and anger's corners, moving down and in, 0.67-0.68, not tested here);
+    the lips' centres, which the measure does not judge, are misread where the teeth come
+    out (inner lips 0.27-0.81 of their motion, explained below 0.75)."""
+    from myoface.analysis import fidelity
+    from myoface.analysis.motionreader import explained, gain
+    from myoface.analysis.resynthesis import resynthesis_frames
+    from myoface.control import expression_contractions
+    from myoface.render import VideoWriter
+
+    path = shared_path("video", "single_face.mp4")
+    if not path.exists():
+        pytest.skip("../shared/data/video/single_face.mp4 is not here")
+    fm, _ = fidelity.person_model(path, 0)
+    regions = {**JUDGED_REGIONS, "inner_lips": (13, 14)}
+    ramp = (0.0, 0.0, 0.3, 0.6, 0.9, 1.0, 1.0, 0.9, 0.6, 0.3, 0.0)
+    misread_inner = False
+    for name, apex in _RENDERED.items():
+        if apex is None:
+            c = expression_contractions(name, 0.9, fm.ids)
+            apex = {i: float(x) for i, x in zip(fm.ids, c, strict=True) if x > 0}
+        truth = np.array([fm.validate({k: x * a for k, x in apex.items()}) for a in ramp])
+        video = tmp_path / f"{name}.mp4"
+        with VideoWriter(video, fps=10) as vw:
+            for f in resynthesis_frames(fm, truth, 384):
+                vw.write(f)
+        ref, pts, _, _ = fidelity.read_video_points(video, list(range(len(ramp))), 0)
+        d_out, side = fidelity.model_displacements(fm, truth, regions=regions)
+        _, rot, _ = fidelity.similarity_2d(
+            ref[fidelity._RIGID], side["neutral_points"][fidelity._RIGID]
+        )
+        d_in = fidelity._region_displacements(ref, pts, regions, rotation=rot)
+        for region in JUDGED_REGIONS:
+            if region == "eyelids":
+                continue  # (the lids move by less than 0.015 IOD in all four)
+            a, b = d_in[region], d_out[region]
+            if np.sqrt(np.mean((b**2).sum(-1))) < 0.015:
+                continue
+            lo, hi = (0.8, 1.1) if region == "mouth_corners" else (0.85, 1.15)
+            assert lo <= gain(a, b) <= hi, (name, region, gain(a, b))
+        a, b = d_in["inner_lips"], d_out["inner_lips"]
+        misread_inner |= np.sqrt(np.mean((b**2).sum(-1))) >= 0.015 and explained(a, b) < 0.75
+    assert misread_inner
+
+
 @needs_mediapipe
 def test_frames_before_the_calibration_frame_are_read_back_from_it(smile_clip_384):
     """The reader follows the points from the calibration frame forward and back: reading the
@@ -387,15 +455,15 @@ def test_cli_report_and_openface(smile_clip_384, tmp_path, capsys):
     assert "fidelity: " in text and "the video read by DIS dense optical flow" in text, text
     assert "fidelity, MediaPipe's face mesh on both (earlier reports' measure" in text, text
     doc = json.loads((out / "fidelity.json").read_text())
-    assert set(doc["regions"]) == set(REGIONS)
+    assert set(doc["regions"]) == set(JUDGED_REGIONS)
     assert doc["frames_compared"] == len(frames)
     assert "face_from_photo" in doc["face"]
     assert doc["input_reader"]["method"] == "dis"
     assert doc["input_reader"]["validation"]["bounds"]["gain"] == [0.9, 1.1]
-    assert set(doc["mediapipe_on_both"]["regions"]) == set(REGIONS)
+    assert set(doc["mediapipe_on_both"]["regions"]) == set(JUDGED_REGIONS)
     mc = doc["regions"]["mouth_corners"]
     assert mc["corr"] > 0.8 and mc["gain"] > 0.4, doc
-    assert iio.imread(out / "fidelity.png").shape[0] > 100 * len(REGIONS)
+    assert iio.imread(out / "fidelity.png").shape[0] > 100 * len(JUDGED_REGIONS)
     with open(out / "openface.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert list(rows[0]) == list(OPENFACE_COLUMNS)

@@ -5,7 +5,7 @@ put a point where they say."""
 import numpy as np
 import pytest
 
-from myoface.analysis.fidelity import EYE_OUTER, REGIONS, RIGID_POINTS
+from myoface.analysis.fidelity import EYE_OUTER, JUDGED_REGIONS, REGIONS, RIGID_POINTS
 from myoface.analysis.knownwarp import KnownWarp, region_warp
 from myoface.analysis.motionreader import (
     aligned_displacements,
@@ -75,13 +75,17 @@ def test_the_reader_reads_known_warps_at_gain_one(method, head_moves):
     with FaceMeshDetector(video=False) as det:
         pts = det.detect(frame)
     iod = float(np.linalg.norm(pts[EYE_OUTER[0], :2] - pts[EYE_OUTER[1], :2]))
-    idx = sorted({i for v in REGIONS.values() for i in v} | set(RIGID_POINTS))
+    read_at = {
+        **REGIONS,
+        **JUDGED_REGIONS,
+    }  # (the bumps at REGIONS' points; the judged ones read too)
+    idx = sorted({i for v in read_at.values() for i in v} | set(RIGID_POINTS))
     pos = {i: k for k, i in enumerate(idx)}
     rigid = [pos[i] for i in RIGID_POINTS]
     eyes = (pos[EYE_OUTER[0]], pos[EYE_OUTER[1]])
     ref = pts[idx, :2]
     reader = make_reader(method, frame, ref, iod)
-    got = {r: ([], []) for r in REGIONS}
+    got = {r: ([], []) for r in read_at}
     n = 9
     for k in range(1, n):
         head = {}
@@ -95,7 +99,7 @@ def test_the_reader_reads_known_warps_at_gain_one(method, head_moves):
         q, _ = reader.read(warp.apply(frame))
         d_read = aligned_displacements(ref, q, rigid, eyes)
         d_true = aligned_displacements(ref, warp.moved(ref), rigid, eyes)
-        for r, ii in REGIONS.items():
+        for r, ii in read_at.items():
             j = [pos[i] for i in ii]
             got[r][0].append(d_read[j])
             got[r][1].append(d_true[j])

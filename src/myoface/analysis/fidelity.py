@@ -17,8 +17,8 @@ benchmark ``analysis.fidelity``) reads the two sides with instruments that are n
   (:func:`model_displacements`). Vertex i of the default face and of a face made from a photo
   is MediaPipe's point i. No renderer and no detector.
 
-On each side, the displacements of the expressive points (:data:`REGIONS`: mouth corners,
-lip centres, brows, eyelids, chin) from the reference (the calibration frame; the model's
+On each side, the displacements of the judged points (:data:`JUDGED_REGIONS`: mouth
+corners, the lower lip's outer edge, brows, eyelids, chin) from the reference (the calibration frame; the model's
 neutral, contractions 0) are taken with the head's motion in the image plane removed by a
 2-D similarity fitted to the *rigid* points, which no muscle moves (:data:`RIGID_POINTS`: eye
 corners, nose bridge), and divided by that side's own inter-ocular distance (outer eye
@@ -35,9 +35,22 @@ the input's motion to the model's: < 1 when the model moves too little) and ``co
 moves in proportion to the input whatever the gain). ``explained = 2 gain - sum |d_out|^2 /
 sum |d_in|^2``.
 
+**A second known answer: renders.** The reader was also run on renders of the person's own
+face (``face_from_photo`` on the sample video's first frame, its photo as texture, lit and
+shaded by the renderer, teeth and the mouth's inside drawn) at known contractions (the six
+expressions at 0.9, a smile baring the upper teeth, a mouth opening, a one-sided smile; 11
+frames each, ``tests/analysis/test_fidelity.py::test_the_reader_on_renders_at_known_
+contractions``), its readings against the model's own vertices: unlike a warp of a photo,
+the skin's shading, its folds and what the lips uncover change with the expression. Where a
+region moved by at least 0.015 inter-ocular distances RMS, the reader read the mouth corners
+at 0.84-1.02 (0.67-0.68 in sadness and anger, whose corners move down and in), the lower
+lip's outer edge at 0.91-1.07, the chin at 0.91-1.09, the brows at 0.87-1.07; the upper lip's
+outer edge at 0.60-1.62 and the inner lips at 0.27-0.81, so the lips' centres are not judged
+(:data:`JUDGED_REGIONS`; 2026-12-01).
+
 What the validation does not cover (measured on ``single_face.mp4``, 2026-12-01): where the
 lips part, the inner lip points (13, 14) sit on an edge that the teeth come out of, which no
-optical flow can follow through (at the smile's apex DIS and MediaPipe differ there by 5.2 and
+optical flow can follow through (hence not judged) (at the smile's apex DIS and MediaPipe differ there by 5.2 and
 9.6 px RMS, at the outer lip points by 1.1-1.5 px, at the mouth corners by 3.8-4.4 px of their
 ~25 px); the reader's forward-backward check flags such readings (fidelity.json's
 ``failing_forward_backward_check``: 62 % of the mouth corners' readings and 41 % of the lips'
@@ -99,6 +112,21 @@ REGIONS = {
     # chin boss and menton
     "chin": (200, 199, 175, 152),
 }
+#: the regions the fidelity measure judges: those its reader reads right on renders of the
+#: person's own textured face at known contractions (:data:`READER_VALIDATION`'s
+#: ``renders``). The lips' centres of :data:`REGIONS` are not among them: where the lips part
+#: or the upper lip rises, the teeth and the mouth's inside come out of the edge the flow
+#: follows, and it read 0.27-0.81 of the inner lips' motion and 0.60-1.62 of the upper lip's
+#: outer edge; the lower lip's outer edge (its centre and the points beside it) it read at
+#: 0.91-1.07 wherever it moved. What the measure cannot see there, it does not score.
+JUDGED_REGIONS = {
+    "mouth_corners": REGIONS["mouth_corners"],
+    "lower_lip": (17, 84, 314),
+    "brows": REGIONS["brows"],
+    "eyelids": REGIONS["eyelids"],
+    "chin": REGIONS["chin"],
+}
+_ALL_REGIONS = {**REGIONS, **JUDGED_REGIONS}
 #: a region below this sum of squared input displacements (IOD^2, over frames and points)
 #: did not move: its explained fraction is not defined (NaN). About 0.3 % of the IOD RMS over
 #: 10 points and 100 frames, MediaPipe's own jitter on a still face.
@@ -368,6 +396,21 @@ READER_VALIDATION = {
         "dis": {"gain": [0.96, 1.04], "explained": [0.988, 1.0]},
         "lk": {"gain": [0.96, 1.08], "explained": [0.92, 0.998]},
     },
+    # renders of the person's own face at known contractions (see the module), DIS, where a
+    # region moved by 0.015 IOD RMS or more
+    "renders": {
+        "test": (
+            "tests/analysis/test_fidelity.py::test_the_reader_on_renders_at_known_contractions"
+        ),
+        "gain": {
+            "mouth_corners": [0.67, 1.02],
+            "lower_lip": [0.91, 1.07],
+            "brows": [0.87, 1.07],
+            "chin": [0.91, 1.09],
+            "not judged: upper lip's outer edge": [0.60, 1.62],
+            "not judged: inner lips": [0.27, 0.81],
+        },
+    },
 }
 #: the reader's names in reports
 READER_NAMES = {
@@ -375,7 +418,7 @@ READER_NAMES = {
     "lk": "pyramidal Lucas-Kanade optical flow (OpenCV)",
 }
 #: the points read on both sides: every region's and the rigid ones (face mesh indices)
-POINTS = tuple(sorted({i for v in REGIONS.values() for i in v} | set(RIGID_POINTS)))
+POINTS = tuple(sorted({i for v in _ALL_REGIONS.values() for i in v} | set(RIGID_POINTS)))
 _POS = {i: k for k, i in enumerate(POINTS)}
 _RIGID = [_POS[i] for i in RIGID_POINTS]
 _EYES = (_POS[EYE_OUTER[0]], _POS[EYE_OUTER[1]])
@@ -473,7 +516,7 @@ def model_reach(
     idx = list(POINTS)
     neutral = model.skin_vertices(model.rest_state())[idx, :2] * flip
     iod = float(np.linalg.norm(neutral[_EYES[0]] - neutral[_EYES[1]]))
-    pos = [_POS[i] for k in names for i in REGIONS[k]]
+    pos = [_POS[i] for k in names for i in _ALL_REGIONS[k]]
     ids = list(model.ids)
     jac = skin_response(model, ids)[idx][pos][:, :2, :].reshape(-1, len(ids)) / iod
     a = np.vstack([jac, REACH_RIDGE * np.eye(len(ids))])
@@ -653,11 +696,11 @@ def fidelity_of_analysis(
         detect_landmarks_too=mediapipe_on_both,
     )
     t_in = time.perf_counter() - t0
-    d_out, side = model_displacements(model, table, ok)
+    d_out, side = model_displacements(model, table, ok, JUDGED_REGIONS)
     # the input's displacements in the face's frontal axes: the reference frame's rigid points
     # turned onto the model's neutral ones (the head's roll in the reference frame)
     _, rot, _ = similarity_2d(ref[_RIGID], side["neutral_points"][_RIGID])
-    d_in = _region_displacements(ref, pts_in, rotation=rot)
+    d_in = _region_displacements(ref, pts_in, JUDGED_REGIONS, rotation=rot)
     per = {k: scores(d_in[k], d_out[k]) for k in d_in}
     cat_in = np.concatenate(list(d_in.values()), axis=1)
     cat_out = np.concatenate(list(d_out.values()), axis=1)
@@ -693,13 +736,14 @@ def fidelity_of_analysis(
                     "overall": round(float(unsure[ok].mean()), 4),
                     **{
                         k: round(float(unsure[ok][:, [_POS[i] for i in v]].mean()), 4)
-                        for k, v in REGIONS.items()
+                        for k, v in JUDGED_REGIONS.items()
                     },
                 },
                 "validation": {
                     "test": READER_VALIDATION["test"],
                     "bounds": READER_VALIDATION["bounds"],
                     "measured": READER_VALIDATION["measured"].get(reader),
+                    "renders": READER_VALIDATION["renders"] if reader == "dis" else None,
                 },
             },
             "model_side": (
@@ -724,7 +768,7 @@ def fidelity_of_analysis(
         lm_out = detect_landmarks(rendered)
         lm_in[~ok] = np.nan  # frames the analysis did not measure are not compared
         lm_out[~ok] = np.nan
-        old = measure_fidelity(lm_in, lm_out, dims=2)
+        old = measure_fidelity(lm_in, lm_out, dims=2, regions=JUDGED_REGIONS)
         res.mediapipe_on_both = old
         how["mediapipe_on_both_how"] = {
             "frames_without_face_in_input": int((~np.isfinite(lm_in).all((1, 2)) & ok).sum()),
@@ -800,7 +844,7 @@ def write_fidelity_report(
         **res.as_dict(),
         **how,
         "rigid_points": list(RIGID_POINTS),
-        "regions_points": {k: list(v) for k, v in REGIONS.items()},
+        "regions_points": {k: list(v) for k, v in JUDGED_REGIONS.items()},
         "mediapipe_on_both": old,
     }
     with atomic_output(folder / "fidelity.json") as tmp:
