@@ -511,6 +511,7 @@ def model_reach(
     from myoface.analysis.estimate import skin_response
 
     names = list(d_in)
+    regions = {k: _ALL_REGIONS[k] for k in names}
     target = np.concatenate([d_in[k] for k in names], axis=1)  # (T, P, 2)
     flip = np.array([1.0, -1.0])
     idx = list(POINTS)
@@ -533,12 +534,12 @@ def model_reach(
                 warnings.simplefilter("ignore", RelaxWarning)
                 res = model.relax(c, state, tol_mm=SYNTH_TOL_MM)
             now = model.skin_vertices(res.state)[idx, :2] * flip
-            d = _region_displacements(neutral, now[None])
+            d = _region_displacements(neutral, now[None], regions)
             have = np.concatenate([d[k] for k in names], axis=1)[0].reshape(-1)
             c = lsq_linear(a, np.concatenate([want - have + jac @ c, zeros]), bounds=(0, 1)).x
         state = res.state
         table[t] = c
-    d_out, _ = model_displacements(model, table, np.isfinite(table).all(1))
+    d_out, _ = model_displacements(model, table, np.isfinite(table).all(1), regions)
     cat_in = np.concatenate([d_in[k] for k in names], axis=1)
     cat_out = np.concatenate([d_out[k] for k in names], axis=1)
     result = FidelityResult(
