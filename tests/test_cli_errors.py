@@ -416,16 +416,17 @@ def test_muscles_without_face(tmp_path, capsys):
 
 
 @pytest.mark.parametrize(
-    ("extra", "match"),
+    ("extra", "match", "code"),
     [
-        (["--au", "12=0.5", "--au", "12=0.7"], "--au 12 is given twice"),
-        (["--au", "12"], "takes NAME=VALUE"),
-        (["--au", "99=0.5"], "unknown action unit AU99"),
-        (["--muscle", "zygomaticus_major_l=nan"], "must be in [0, 1]"),
-        (["--au", "12=0.5", "--texture", "{tmp}/none.png"], "--texture: no such texture"),
+        # usage errors (exit status 2): the option's syntax, a number outside its limits
+        (["--au", "12=0.5", "--au", "12=0.7"], "--au 12 is given twice", 2),
+        (["--au", "12"], "argument --au: expected NAME=VALUE", 2),
+        (["--muscle", "zygomaticus_major_l=nan"], "must be in [0, 1]", 2),
+        (["--au", "99=0.5"], "unknown action unit AU99", 1),
+        (["--au", "12=0.5", "--texture", "{tmp}/none.png"], "--texture: no such texture", 1),
     ],
 )
-def test_synth_requests_checked_before_the_model(tmp_path, capsys, monkeypatch, extra, match):
+def test_synth_requests_checked_before_the_model(tmp_path, capsys, monkeypatch, extra, match, code):
     import myoface.commands.synth as synth_cmd
 
     def no_model(args):
@@ -433,7 +434,7 @@ def test_synth_requests_checked_before_the_model(tmp_path, capsys, monkeypatch, 
 
     monkeypatch.setattr(synth_cmd, "load_model", no_model)
     extra = [e.format(tmp=tmp_path) for e in extra]
-    one_line_error(capsys, ["synth", *extra, "-o", tmp_path / "x.png"], match)
+    one_line_error(capsys, ["synth", *extra, "-o", tmp_path / "x.png"], match, code=code)
 
 
 def test_resynth_warns_about_columns_of_no_muscle(tmp_path, capsys):
@@ -491,7 +492,9 @@ def test_mesh_far_from_millimetres_warns(tmp_path, capsys):
 
     f = load_default_face()
     big = tmp_path / "big.obj"
-    save_mesh(FaceMesh(f.vertices * 1e6, f.triangles, f.uv, None, name="big"), big)
+    # in micrometres (150 m across in mm): read, with a warning (1e6 would be refused: beyond
+    # the readers' bound, myoface.face.mesh.MAX_COORDINATE_MM)
+    save_mesh(FaceMesh(f.vertices * 1e3, f.triangles, f.uv, None, name="big"), big)
     code, out, err = run_cli(capsys, ["info", "--face", big])
     assert code == 0
     assert len(err) == 1 and "warning" in err[0] and "millimetres" in err[0], err

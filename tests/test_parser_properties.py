@@ -2,7 +2,9 @@
 MyofaceError comes out (the project's rule for bad input: one clear error), never a bare ValueError, TypeError, UnicodeDecodeError, ...
 
 Timelines, contractions CSVs, initial-contour JSON, landmark files, muscle files, AU keys,
-intensities and the ``--au`` / ``--muscle`` requests of ``myoface synth``.
+intensities and the ``--au`` / ``--muscle`` requests of ``myoface synth``; image files (any
+colour space), OBJ and geoface meshes (coordinates far beyond a head), head poses and
+resynthesis performances, the command line's number types and :func:`user_message`.
 """
 
 from __future__ import annotations
@@ -26,6 +28,9 @@ SETTINGS = settings(
     deadline=None,
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
+
+#: a number of 5000 digits (Python's int() refuses more than 4300)
+BIG = "1" * 5000
 
 #: JSON-like values, with the awkward ones: NaN, infinities, huge integers, deep nesting
 scalars = (
@@ -477,3 +482,228 @@ def test_face_file_of_any_content(scratch, data):
         assert tri.min() >= 0 and tri.max() < len(face.vertices)
         assert muscles is None or isinstance(muscles, str)
         assert isinstance(meta, dict)
+
+
+# --------------------------------------------------------------------------- image files
+
+
+@st.composite
+def image_files(draw) -> bytes:
+    """Any bytes, or an image that Pillow writes, in one of its modes (CMYK, palette, grey,
+    grey + alpha, 16-bit grey, 32-bit integer and float, ...), sometimes cut short."""
+    if draw(st.integers(0, 3)) == 0:
+        return draw(st.binary(max_size=300))
+    from PIL import Image
+
+    fmt, modes = draw(
+        st.sampled_from(
+            [
+                ("PNG", ["RGB", "RGBA", "P", "L", "LA", "1", "I;16"]),
+                ("JPEG", ["RGB", "L", "CMYK"]),
+                ("TIFF", ["RGB", "CMYK", "LAB", "F", "I", "I;16", "YCbCr"]),
+                ("BMP", ["RGB", "P", "L", "1"]),
+                ("GIF", ["P", "L"]),
+            ]
+        )
+    )
+    mode = draw(st.sampled_from(modes))
+    w, h = draw(st.integers(1, 12)), draw(st.integers(1, 12))
+    rng = np.random.default_rng(draw(st.integers(0, 2**16)))
+    im = Image.fromarray(rng.integers(0, 256, (h, w, 3), dtype=np.uint8)).convert(
+        "L" if mode in ("I;16", "I", "F") else "RGB"
+    )
+    im = im.convert(mode) if mode != "I;16" else Image.fromarray(np.asarray(im).astype(np.uint16))
+    buf = io.BytesIO()
+    try:
+        im.save(buf, format=fmt)
+    except (OSError, ValueError, KeyError):  # a mode this format cannot hold
+        buf = io.BytesIO()
+        im.convert("RGB").save(buf, format="PNG")
+    data = buf.getvalue()
+    if draw(st.integers(0, 4)) == 0:
+        data = data[: draw(st.integers(0, len(data)))]
+    return data
+
+
+@SETTINGS
+@given(data=image_files(), suffix=st.sampled_from([".png", ".jpg", ".tif", ".bmp", ".gif"]))
+def test_image_file_of_any_content(scratch, data, suffix):
+    """A MyofaceError, or an (H, W, 3) uint8 RGB image: whatever the bytes, the colour space
+    or the file's name (the one reader of images: photos, textures, a folder's frames)."""
+    from myoface.face.image import read_image
+    from myoface.render.renderer import load_texture
+
+    path = _write(scratch, data, suffix)
+    img = _or_none(read_image, path)
+    from_bytes = _or_none(lambda: read_image(data, "image", name="bytes"))
+    assert (from_bytes is None) == (img is None)  # the same reading from a file or bytes
+    if img is not None:
+        assert img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8 and img.size
+        np.testing.assert_array_equal(from_bytes, img)
+        small = read_image(path, max_side=4)
+        assert small.dtype == np.uint8 and small.shape[2] == 3 and max(small.shape[:2]) <= 4
+        tex = load_texture(img)
+        assert tex.dtype == np.float32 and tex.shape == img.shape
+        assert np.isfinite(tex).all() and (tex >= 0).all() and (tex <= 1).all()
+
+
+# ---------------------------------------------------------------------------- mesh files
+
+obj_numbers = st.sampled_from(
+    ["0", "1", "-1", "1e308", "-1e308", "1e400", "nan", "inf", "2e6", "999999", "1e-300", "x"]
+) | st.floats(allow_nan=True, allow_infinity=True).map(repr)
+obj_index = st.sampled_from(["1", "2", "3", "4", "-1", "0", "99", "1/1", "2/2", "3/9", "1//1"])
+
+
+@st.composite
+def obj_text(draw) -> str:
+    """OBJ text of vertices (numbers near and beyond the readers' bound, NaN, words), texture
+    coordinates and faces (indices in and out of range, negative, with uv)."""
+    lines = []
+    for _ in range(draw(st.integers(0, 8))):
+        kind = draw(st.sampled_from(["v", "v", "v", "vt", "f", "f", "#", ""]))
+        if kind == "v":
+            lines.append("v " + " ".join(draw(st.lists(obj_numbers, min_size=2, max_size=4))))
+        elif kind == "vt":
+            lines.append("vt " + " ".join(draw(st.lists(obj_numbers, min_size=1, max_size=3))))
+        elif kind == "f":
+            lines.append("f " + " ".join(draw(st.lists(obj_index, min_size=2, max_size=5))))
+        else:
+            lines.append(kind + draw(st.text(max_size=8)))
+    return "\n".join(lines) + "\n"
+
+
+@SETTINGS
+@given(
+    text=obj_text(),
+    scale=st.sampled_from([1.0, 10.0, 1e6, 1e-6]),
+    split=st.booleans(),
+)
+def test_obj_file_of_any_content(scratch, text, scale, split):
+    """A MyofaceError, or a mesh whose every coordinate is finite and within the readers'
+    bound, with triangles that index its vertices (and uv, when it has them, per vertex)."""
+    from myoface.face import load_mesh
+    from myoface.face.mesh import MAX_COORDINATE_MM
+
+    mesh = _or_none(
+        lambda: load_mesh(_write(scratch, text, ".obj"), scale_mm=scale, split_uv_seams=split)
+    )
+    if mesh is not None:
+        v = mesh.vertices
+        assert np.isfinite(v).all() and np.abs(v).max() <= MAX_COORDINATE_MM
+        assert mesh.triangles.min() >= 0 and mesh.triangles.max() < len(v)
+        assert mesh.uv is None or mesh.uv.shape == (len(v), 2)
+
+
+@SETTINGS
+@given(
+    faceline=st.binary(max_size=100)
+    | st.lists(obj_numbers, max_size=13).map(lambda xs: "3\n" + " ".join(xs)).map(str.encode),
+    index=st.binary(max_size=60)
+    | st.lists(obj_index, max_size=9).map(lambda xs: "2\n" + " ".join(xs)).map(str.encode),
+)
+def test_geoface_files_of_any_content(scratch, faceline, index):
+    from myoface.face.io import read_waters_geoface
+    from myoface.face.mesh import MAX_COORDINATE_MM
+
+    folder = scratch / "geoface"
+    folder.mkdir(exist_ok=True)
+    (folder / "faceline.dat").write_bytes(faceline)
+    (folder / "index.dat").write_bytes(index)
+    mesh = _or_none(read_waters_geoface, folder)
+    if mesh is not None:
+        assert np.isfinite(mesh.vertices).all()
+        assert np.abs(mesh.vertices).max() <= MAX_COORDINATE_MM
+
+
+# ------------------------------------------------------------------ head poses, resynthesis
+
+pose_cells = st.sampled_from(
+    ["", "0", "12.5", "-179", "180", "181", "1e9", "-1e9", "nan", "inf", "430", "1e5", "x", BIG]
+) | st.floats(allow_nan=True, allow_infinity=True).map(repr)
+
+
+@SETTINGS
+@given(
+    rows=st.lists(st.lists(pose_cells, min_size=6, max_size=6), min_size=1, max_size=4),
+    quality=st.lists(st.sampled_from(["ok", "no_face"]), min_size=4, max_size=4),
+    dt=st.sampled_from([0.0, 1 / 30, 0.001, 60.0, 61.0]),
+)
+def test_head_poses_and_performances_of_any_values(scratch, rows, quality, dt):
+    """A MyofaceError, or head poses that are rotations and translations within their bounds,
+    and a performance whose video is 1/240 to 60 s a frame and at most an hour long."""
+    import warnings
+    from types import SimpleNamespace
+
+    from myoface.analysis.camera import POSE_COLUMNS
+    from myoface.analysis.contractions_csv import (
+        MAX_POSE_TRANSLATION_MM,
+        display_poses,
+        read_head_poses,
+    )
+    from myoface.analysis.resynthesis import MAX_VIDEO_S, read_performance
+
+    header = ["time_s", "quality", "jaw", *POSE_COLUMNS]
+    lines = [",".join(header)]
+    for k, r in enumerate(rows):
+        jaw = "0.5" if quality[k] == "ok" else ""
+        lines.append(",".join([f"{k * dt:g}", quality[k], jaw, *r]))
+    path = _write(scratch, "\n".join(lines) + "\n", ".csv")
+    poses = _or_none(read_head_poses, path)
+    if poses is not None:
+        assert len(poses) == len(rows)
+        for rot, shift in display_poses(poses):
+            assert np.allclose(rot @ rot.T, np.eye(3), atol=1e-6)
+            assert np.isfinite(shift).all() and np.abs(shift).max() <= 2 * MAX_POSE_TRANSLATION_MM
+    model = SimpleNamespace(ids=("zygomaticus_major_l", "jaw"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a muscle without a column: a warning
+        perf = _or_none(read_performance, path, model)
+    if perf is not None:
+        assert 0 < perf.fps <= 240 and perf.n_frames / perf.fps <= MAX_VIDEO_S + 1e-9
+        assert np.isfinite(perf.contractions).all()
+
+
+# ---------------------------------------------------------- option values, messages
+
+
+@SETTINGS
+@given(
+    text=st.text(max_size=12)
+    | st.sampled_from(["12=1.5", "12=nan", "X=3", "L12=C", "=", "12==0.5", f"12={BIG}", BIG])
+)
+def test_option_values_of_any_text(text):
+    """The command line's number and request types: a value in its limits, or argparse's
+    usage error with a message of at most a line's length (never the 5000 digits)."""
+    import argparse
+
+    from myoface.commands._common import integer, number
+    from myoface.commands.synth import _request
+
+    for parse in (number(0.0, 1.0), integer(0, 10), integer(1), _request("au"), _request("muscle")):
+        try:
+            got = parse(text)
+        except argparse.ArgumentTypeError as exc:
+            assert len(str(exc)) < 300 and "\n" not in str(exc)
+            continue
+        if parse.__name__ == "number":
+            assert 0.0 <= got <= 1.0
+        elif parse.__name__ == "integer":
+            assert isinstance(got, int) and got >= 0
+        else:
+            assert got == text
+
+
+@SETTINGS
+@given(text=st.text(max_size=200) | st.sampled_from([BIG, f"[Errno 1094995529] {BIG}"]))
+def test_user_message_is_one_short_line(text):
+    from myoface.errors import user_message
+
+    exc = ValueError(text)
+    try:
+        int(text)
+    except ValueError as e:  # Python's own message for a huge integer among them
+        exc = e
+    line = user_message(exc, limit=120)
+    assert "\n" not in line and 0 < len(line) <= 120
+    assert "set_int_max_str_digits" not in line and "[Errno" not in line

@@ -6,16 +6,19 @@ library (the work itself, e.g. :func:`myoface.analysis.outputs.analyze_to_folder
 :func:`myoface.analysis.resynthesis.resynthesize`, is the library's; nothing below the
 commands imports them or this module). The library is imported inside ``run``: importing the
 renderer and the physics takes about 2 s, and ``myoface --help`` should not wait for it.
-Exit codes: 0 success, 2 usage error (an unknown option, a number outside its limits), 1 a
-:class:`~myoface.errors.MyofaceError` (one line on stderr; the traceback only with
-``--debug``). SIGINT, SIGTERM and SIGHUP stop a command cleanly (its temporary outputs
+Exit codes: 0 success, 2 usage error (an unknown option, a number outside its limits, options
+that do not go together: the parser's, or a :class:`~myoface.errors.MyofaceUsageError`), 1 a
+:class:`~myoface.errors.MyofaceError` or an error of the machine (a full disk names the file
+being written); one line on stderr, the traceback only with ``--debug``. SIGINT, SIGTERM and SIGHUP stop a command cleanly (its temporary outputs
 removed, exit status 128 + the signal's number); warnings are one line each on stderr.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
+import os
 import pkgutil
 import signal
 import sys
@@ -24,7 +27,7 @@ import warnings
 import myoface
 import myoface.commands
 from myoface._signals import stop_signals
-from myoface.errors import MyofaceError, MyofaceWarning
+from myoface.errors import MyofaceError, MyofaceUsageError, MyofaceWarning, user_message
 
 
 def _command_modules():
@@ -108,6 +111,11 @@ def main(argv: list[str] | None = None) -> int:
             warnings.showwarning = _one_line_warnings(prog)
         try:
             return int(args._run(args) or 0)
+        except MyofaceUsageError as exc:  # as the parser's own: exit status 2
+            if debug:
+                raise
+            print(f"{prog}: error: {_one_line(exc)} (see {prog} --help)", file=sys.stderr)
+            return 2
         except MyofaceError as exc:
             if debug:
                 raise
@@ -123,13 +131,37 @@ def main(argv: list[str] | None = None) -> int:
         except (OSError, MemoryError) as exc:  # the machine's, not the input's: no traceback
             if debug:
                 raise
-            what = "out of memory" if isinstance(exc, MemoryError) else _one_line(exc)
+            what = "out of memory" if isinstance(exc, MemoryError) else _os_error(exc, args)
             print(f"{prog}: error: {what}", file=sys.stderr)
             return 1
 
 
 def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
+    return user_message(exc, limit=4000)
+
+
+#: errors of a write that fails for want of room (no file name in them when a ``write`` or a
+#: ``close`` fails): the full disk is the output's
+_NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def _os_error(exc: OSError, args) -> str:
+    """An OSError as one line: its reason (no ``[Errno N]``) and the file it names; a full
+    disk that names no file is the command's output's (``-o``)."""
+    reason = exc.strerror or _one_line(exc)
+    if exc.filename is not None:
+        where = _name(exc.filename)
+        if exc.filename2 is not None:
+            where += f" -> {_name(exc.filename2)}"
+        return f"{where}: {reason}"
+    output = getattr(args, "output", None)
+    if exc.errno in _NO_ROOM and output:
+        return f"{reason} (writing {output})"
+    return reason
+
+
+def _name(filename) -> str:
+    return os.fsdecode(filename) if isinstance(filename, str | bytes) else str(filename)
 
 
 if __name__ == "__main__":  # pragma: no cover

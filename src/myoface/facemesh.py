@@ -19,6 +19,8 @@ import numpy as np
 
 from myoface.errors import MyofaceDependencyError, MyofaceValueError
 
+#: the most faces :class:`FaceMeshDetector` finds in one image (``max_faces``)
+MAX_FACES = 10
 #: how to install MediaPipe (the last release whose wheel ships solutions.face_mesh)
 PIP_HINT = 'pip install "myoface[mediapipe]"   (mediapipe==0.10.14)'
 
@@ -79,16 +81,20 @@ class FaceMeshDetector:
     pixels (column, row), z in pixels towards the camera negative; or None without a face.
 
     ``video=True`` tracks between successive frames (MediaPipe's own tracking mode), which is
-    faster on a video; ``video=False`` detects on every frame independently.
+    faster on a video; ``video=False`` detects on every frame independently. ``max_faces``:
+    how many faces :meth:`detect_all` finds at most (:meth:`detect` gives MediaPipe's first,
+    which with several faces is not necessarily the largest).
     """
 
-    def __init__(self, video: bool = False, min_confidence: float = 0.5):
+    def __init__(self, video: bool = False, min_confidence: float = 0.5, max_faces: int = 1):
+        if not (isinstance(max_faces, int) and 1 <= max_faces <= MAX_FACES):
+            raise MyofaceValueError(f"max_faces must be an integer in [1, {MAX_FACES}]")
         _, face_mesh = import_mediapipe()
         with warnings.catch_warnings(), _quiet_native_stderr():
             warnings.simplefilter("ignore")
             self._fm = face_mesh.FaceMesh(
                 static_image_mode=not video,
-                max_num_faces=1,
+                max_num_faces=max_faces,
                 refine_landmarks=False,
                 min_detection_confidence=min_confidence,
                 min_tracking_confidence=min_confidence,
@@ -97,6 +103,13 @@ class FaceMeshDetector:
             self._fm.process(np.zeros((64, 64, 3), dtype=np.uint8))
 
     def detect(self, frame) -> np.ndarray | None:
+        """(468, 3) points of the first face MediaPipe finds in ``frame``, or None."""
+        faces = self.detect_all(frame)
+        return faces[0] if faces else None
+
+    def detect_all(self, frame) -> list[np.ndarray]:
+        """(468, 3) points of each face found in ``frame`` (at most ``max_faces``), in
+        MediaPipe's order; an empty list without a face."""
         img = np.asarray(frame)
         if img.ndim == 2:
             img = np.repeat(img[:, :, None], 3, axis=2)
@@ -110,11 +123,13 @@ class FaceMeshDetector:
             warnings.simplefilter("ignore")
             res = self._fm.process(img)
         if not res.multi_face_landmarks:
-            return None
+            return []
         h, w = img.shape[:2]
-        lm = res.multi_face_landmarks[0].landmark
-        pts = np.array([(p.x, p.y, p.z) for p in lm], dtype=np.float64)[:468]
-        return pts * np.array([w, h, w])
+        scale = np.array([w, h, w])
+        return [
+            np.array([(p.x, p.y, p.z) for p in face.landmark], dtype=np.float64)[:468] * scale
+            for face in res.multi_face_landmarks
+        ]
 
     def close(self) -> None:
         self._fm.close()

@@ -17,6 +17,7 @@ from myoface.errors import (
     MyofaceFormatError,
     MyofaceValueError,
     MyofaceWarning,
+    writing,
 )
 
 #: the head columns of the snakes' (2-D head frame) rows in a contractions CSV
@@ -75,7 +76,7 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw) -> No
     lines = [",".join(cols)]
     angle = jaw_angle_function(jaw)
     lines += [contractions_csv_row(f, ids, angle) for f in frames]
-    with atomic_output(path) as tmp:
+    with writing(path), atomic_output(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
 
 
@@ -122,12 +123,13 @@ class ContractionsCsvWriter:
                 f"{self.path}: a {type(m).__name__} after {self._kind.__name__} rows"
             )
         row = contractions_csv_row(m, self.ids, self.jaw_angle)
-        if self._fh is None:
-            head = ",".join(contractions_csv_header(self.ids, m))
-            self._fh = self._publish(head + "\n" + row + "\n")
-        else:
-            self._fh.write(row + "\n")  # one write: a stop between rows, never inside one
-            self._fh.flush()
+        with writing(self.path):  # a full disk names the CSV
+            if self._fh is None:
+                head = ",".join(contractions_csv_header(self.ids, m))
+                self._fh = self._publish(head + "\n" + row + "\n")
+            else:
+                self._fh.write(row + "\n")  # one write: a stop between rows, never inside one
+                self._fh.flush()
         self.n_rows += 1
 
     def _publish(self, text: str):
@@ -193,14 +195,17 @@ CSV_OTHER_COLUMNS = (
 )
 
 
-def read_contractions_csv(path, muscle_ids) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def read_contractions_csv(
+    path, muscle_ids, *, warn_missing: bool = False
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """(times (T,), contractions (T, M) over ``muscle_ids``, quality).
 
     A muscle of ``muscle_ids`` without a column stays at rest (0): the analysis estimates the
     paper's 12 muscles and the jaw, fewer than a face model has. Columns that are neither a
     muscle of ``muscle_ids`` nor one of :data:`CSV_OTHER_COLUMNS` are ignored with a
     :class:`~myoface.errors.MyofaceWarning` that lists them (e.g. a CSV of another face
-    model's muscles).
+    model's muscles); with ``warn_missing`` (a resynthesis, which drives every muscle), the
+    one warning also names the muscles without a column.
 
     Raises a clear :class:`~myoface.errors.MyofaceFormatError` for a file that is not UTF-8
     CSV text, a missing time column, a header without any known muscle, a repeated column,
@@ -241,15 +246,18 @@ def read_contractions_csv(path, muscle_ids) -> tuple[np.ndarray, np.ndarray, lis
             f"{', '.join(ids[:6])}{', ...' if len(ids) > 6 else ''})"
         )
     unknown = [c for c in head if c not in CSV_OTHER_COLUMNS and c not in ids]
-    if unknown:
-        shown = ", ".join(repr(c[:40]) for c in unknown[:8]) + (", ..." if len(unknown) > 8 else "")
-        warnings.warn(
-            f"{p.name}: {len(unknown)} column(s) name no muscle of this face model and are "
-            f"ignored: {shown}; {len(ids) - len(known)} of its {len(ids)} muscles have no "
-            "column and stay at rest",
-            MyofaceWarning,
-            stacklevel=2,
-        )
+    missing = [m for m in ids if m not in col]
+    if unknown or (warn_missing and missing):
+        said = []
+        if unknown:
+            said.append(
+                f"{len(unknown)} column(s) name no muscle of this face model and are ignored: "
+                f"{_listed(unknown)}"
+            )
+        if missing:
+            rest = f"{len(missing)} of its {len(ids)} muscles have no column and stay at rest"
+            said.append(f"{rest}: {_listed(missing)}" if warn_missing else rest)
+        warnings.warn(f"{p.name}: {'; '.join(said)}", MyofaceWarning, stacklevel=2)
     times = np.empty(len(rows))
     table = np.zeros((len(rows), len(ids)))
     quality = []
@@ -290,6 +298,12 @@ def read_contractions_csv(path, muscle_ids) -> tuple[np.ndarray, np.ndarray, lis
     return times, table, quality
 
 
+def _listed(names, n: int = 8) -> str:
+    """Up to ``n`` of ``names``, quoted (each at most 40 characters), and "..." for more."""
+    shown = ", ".join(repr(c[:40]) for c in names[:n])
+    return shown + (f", ... ({len(names)} in all)" if len(names) > n else "")
+
+
 def hold_last_measured(table: np.ndarray) -> np.ndarray:
     """Fill the unmeasured rows (NaN) of a contraction table with the last measured row (zeros
     before the first), so a model can be driven through them; returns a new array."""
@@ -303,10 +317,19 @@ def hold_last_measured(table: np.ndarray) -> np.ndarray:
     return out
 
 
+#: the largest head angle (degrees) a contractions CSV's pose may give: a turn of the head is
+#: within a half turn of the camera (a yaw of 1e9 degrees is no pose)
+MAX_POSE_ANGLE_DEG = 180.0
+#: the largest head translation (mm) a contractions CSV's pose may give: a face 10 m from the
+#: camera is a few pixels wide
+MAX_POSE_TRANSLATION_MM = 10_000.0
+
+
 def read_head_poses(path) -> list:
     """The head poses of a contractions CSV written with the 3-D fit (its
     :data:`POSE_COLUMNS`): one :class:`HeadPose` per row, None where the row has none (no face
-    found)."""
+    found). Angles must be within :data:`MAX_POSE_ANGLE_DEG` degrees and translations within
+    :data:`MAX_POSE_TRANSLATION_MM` mm (else a :class:`MyofaceFormatError` saying the bound)."""
     p = Path(path)
     rows = list(csv.DictReader(read_text(p, "contractions CSV").splitlines()))
     missing = [c for c in POSE_COLUMNS if not rows or c not in rows[0]]
@@ -329,6 +352,16 @@ def read_head_poses(path) -> list:
             ) from None
         if not all(np.isfinite(v) for v in vals.values()):
             raise MyofaceFormatError(f"{p}: row {k + 2}: a head pose cell is not finite")
+        for c, v in vals.items():
+            bound, unit = (
+                (MAX_POSE_ANGLE_DEG, "degrees")
+                if c.endswith("_deg")
+                else (MAX_POSE_TRANSLATION_MM, "mm")
+            )
+            if abs(v) > bound:
+                raise MyofaceFormatError(
+                    f"{p}: row {k + 2}: {c} is {v:.4g}; a head pose's {unit} are within +-{bound:g}"
+                )
         out.append(HeadPose.from_columns(vals))
     return out
 

@@ -87,7 +87,10 @@ def make_analyzer(
     (:class:`~myoface.analysis.trackers.landmark_paper.PaperLandmarkTracker`). ``init`` must
     be None. ``refine`` defaults to 1 for the snakes, 0 for the paper's landmark scheme and
     :attr:`~myoface.analysis.weights.FitSettings.refine` for the fit; ``estimator`` for the
-    snakes: ``"curves"`` (default) or ``"fiducials"``. ``flow``: the 3-D fit's points refined
+    snakes: ``"curves"`` (default) or ``"fiducials"`` (with the landmark tracker the library
+    takes these for their counterparts, ``"fit"`` and ``"paper"``; the command line refuses
+    them there as a usage error, :func:`myoface.commands._common.analysis_settings`).
+    ``flow``: the 3-D fit's points refined
     by optical flow (:attr:`~myoface.analysis.weights.FitSettings.flow`). ``photometric``:
     the 3-D fit also reads the frame's pixels against the calibration frame's appearance
     (:attr:`~myoface.analysis.weights.FitSettings.photometric`); both are the fit's, refused
@@ -228,13 +231,16 @@ def analyze_video(
 
 
 class _Keeper:
-    """The frames of ``source`` as they are taken, kept (up to ``limit`` bytes) so that they
-    can be given again."""
+    """The frames of ``source`` (``(index, time_s, frame)`` items) as they are taken, the
+    frames alone handed on, kept (up to ``limit`` bytes) with their indices and times so that
+    they can be given again. :attr:`time_s` is the time of the frame last taken (a
+    calibration that spans a time, not a number of frames, can read it)."""
 
     def __init__(self, source, limit: int = KEEP_BYTES):
         self.source = source
         self.kept: deque = deque()
         self.taken = 0
+        self.time_s: float | None = None
         self.complete = True  # every frame taken is kept
         self._bytes = 0
         self._limit = limit
@@ -243,7 +249,8 @@ class _Keeper:
         return self
 
     def __next__(self):
-        frame = next(self.source)
+        item = next(self.source)
+        self.time_s, frame = item[1], item[2]
         self.taken += 1
         if self.complete:
             self._bytes += getattr(frame, "nbytes", 0)
@@ -251,8 +258,19 @@ class _Keeper:
                 self.complete = False
                 self.kept.clear()
             else:
-                self.kept.append(frame)
+                self.kept.append(item)
         return frame
+
+
+def timed_frames(video):
+    """``(time_s, frame)`` of each frame of ``video``: its own times
+    (:meth:`~myoface.analysis.video.Video.timed`: a movie's timestamps) where it has them,
+    else frame k at ``k / video.fps``."""
+    timed = getattr(video, "timed", None)
+    if timed is not None:
+        return timed()
+    fps = float(video.fps)
+    return ((k / fps, f) for k, f in enumerate(video))
 
 
 class Tracking:
@@ -262,7 +280,9 @@ class Tracking:
     The video is decoded from ``first`` on; the tracker's :meth:`calibrate` takes what it
     needs of those frames, and the frames from the one it names (:attr:`start`, known once
     iteration began) are measured, at most ``max_frames``: those the calibration took are
-    given again from memory, the rest decoded as measuring goes on. A tracker whose
+    given again from memory, the rest decoded as measuring goes on. Each measurement's time
+    is its frame's (:func:`timed_frames`: a movie's own timestamps, so that a video of
+    variable frame rate is timed as it was filmed). A tracker whose
     ``OBSERVES_AHEAD`` is true has its :meth:`observe` run on a worker thread a few frames
     ahead (:data:`~myoface.facemesh.DETECT_AHEAD_FRAMES`: MediaPipe tracks the next frames
     while this one is fitted); the results are the same as frame by frame (each frame is
@@ -284,14 +304,14 @@ class Tracking:
         self._decoded = None
 
     def _decoded_from(self, k0: int):
-        """``(index, frame)`` of the video's frames from ``k0`` on (its decoder stopped when
-        this generator is closed)."""
-        it = iter(self.video)
+        """``(index, time_s, frame)`` of the video's frames from ``k0`` on (its decoder
+        stopped when this generator is closed)."""
+        it = timed_frames(self.video)
         try:
-            for k, f in enumerate(it):
+            for k, (t, f) in enumerate(it):
                 self.decoded += 1
                 if k >= k0:
-                    yield k, f
+                    yield k, t, f
         finally:
             close = getattr(it, "close", None)
             if close is not None:
@@ -303,7 +323,7 @@ class Tracking:
         if self._source is not None:
             return self.start
         decoded = self._decoded_from(self.first)
-        keeper = _Keeper((f for _, f in decoded), self.keep_bytes)
+        keeper = _Keeper(decoded, self.keep_bytes)
         try:
             offset = int(self.tracker.calibrate(keeper, self.first))
         except BaseException:
@@ -325,11 +345,11 @@ class Tracking:
         source = self._source
         n = 0
         try:
-            for k, frame in source:
+            for k, t, frame in source:
                 if self.max_frames is not None and n >= self.max_frames:
                     return
                 n += 1
-                yield k, frame
+                yield k, t, frame
         finally:
             source.close()
             self._decoded.close()
@@ -337,31 +357,29 @@ class Tracking:
     def _replayed(self, kept: deque, decoded):
         """The kept frames from :attr:`start` on (released as they are given), then the rest
         of the decode."""
-        k = self.start
         while kept:
-            yield k, kept.popleft()
-            k += 1
+            yield kept.popleft()
         try:
             yield from decoded
         finally:
             decoded.close()
 
     def __iter__(self):
-        tr, fps = self.tracker, self.video.fps
+        tr = self.tracker
         frames = self._frames()
         if not tr.OBSERVES_AHEAD:
             try:
-                for k, frame in frames:
-                    yield frame, tr.measure(frame, k, k / fps)
+                for k, t, frame in frames:
+                    yield frame, tr.measure(frame, k, t)
             finally:
                 frames.close()
             return
         ahead = run_ahead(
-            frames, lambda kf: tr.observe(kf[1], kf[0]), DETECT_AHEAD_FRAMES, "myoface-detect"
+            frames, lambda ktf: tr.observe(ktf[2], ktf[0]), DETECT_AHEAD_FRAMES, "myoface-detect"
         )
         try:
-            for (k, frame), obs in ahead:
-                yield frame, tr.measure(frame, k, k / fps, observation=obs)
+            for (k, t, frame), obs in ahead:
+                yield frame, tr.measure(frame, k, t, observation=obs)
         finally:
             ahead.close()
 

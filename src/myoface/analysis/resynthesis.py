@@ -18,6 +18,7 @@ measured (:class:`PosedRenderer`). The same code serves ``myoface resynth`` (a v
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +30,7 @@ from myoface.analysis.contractions_csv import (
     read_head_poses,
 )
 from myoface.analysis.video import open_video
-from myoface.errors import MyofaceValueError
+from myoface.errors import MyofaceValueError, MyofaceWarning
 from myoface.render import Renderer
 from myoface.render.renderer import resize_nearest
 from myoface.synth import Synthesizer, make_camera
@@ -53,6 +54,8 @@ MAX_FPS = 240.0
 MAX_ROW_INTERVAL_S = 60.0
 #: the frame rate (frames per second) of a CSV of one row, which has no interval to go by
 ONE_ROW_FPS = 30.0
+#: the longest video (s) a resynthesis writes: one hour, as ``myoface synth``'s limit
+MAX_VIDEO_S = 3600.0
 
 
 @dataclass(frozen=True)
@@ -88,13 +91,28 @@ def read_performance(path: str | os.PathLike, model, *, pose: bool = False) -> P
     with ``pose``, also the head pose of each row (the 3-D fit's ``head_yaw_deg`` ...
     ``head_tz_mm`` columns; rows without one hold the last).
 
+    A muscle of the model without a column stays at rest, said in a warning that names them
+    (with the columns that name no muscle, in one line).
+
     Raises
     ------
     MyofaceError
-        For a CSV that cannot be read (see ``read_contractions_csv``), or whose rows are not
-        1/240 to 60 s apart (median).
+        For a CSV that cannot be read (see ``read_contractions_csv``; a head pose outside
+        its bounds, ``read_head_poses``), without a measured row (every row's quality other
+        than "ok": the video would show the face at rest throughout), whose rows are not
+        1/240 to 60 s apart (median), or whose video would last more than
+        :data:`MAX_VIDEO_S` s.
     """
-    times, table, quality = read_contractions_csv(path, list(model.ids))
+    with warnings.catch_warnings(record=True) as said:  # said after the checks, if they pass
+        warnings.simplefilter("always", MyofaceWarning)
+        times, table, quality = read_contractions_csv(path, list(model.ids), warn_missing=True)
+    measured = [q == "ok" and np.isfinite(row).all() for q, row in zip(quality, table, strict=True)]
+    if not any(measured):
+        said = sorted(set(quality))
+        raise MyofaceValueError(
+            f"{path}: no row was measured (quality {', '.join(repr(q[:20]) for q in said[:4])}"
+            f"{', ...' if len(said) > 4 else ''}, never 'ok'): nothing to resynthesize"
+        )
     poses = None
     if pose:
         poses = display_poses(read_head_poses(path))
@@ -105,6 +123,15 @@ def read_performance(path: str | os.PathLike, model, *, pose: bool = False) -> P
             f"{path}: its rows are {dt:.3g} s apart (median); a video's frames are "
             f"{1 / MAX_FPS:.3g} to {MAX_ROW_INTERVAL_S:g} s apart"
         )
+    length_s = len(times) * dt  # one frame per row, at 1 / dt frames per second
+    if length_s > MAX_VIDEO_S:
+        raise MyofaceValueError(
+            f"{path}: its {len(times)} rows, {dt:.3g} s apart, make a video of "
+            f"{length_s / 60:.0f} minutes; a video is at most {MAX_VIDEO_S / 3600:g} hour "
+            f"({MAX_VIDEO_S:g} s)"
+        )
+    for w in said:
+        warnings.warn(w.message, w.category, stacklevel=2)
     return Performance(np.asarray(times, dtype=np.float64), table, list(quality), 1.0 / dt, poses)
 
 

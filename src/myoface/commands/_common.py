@@ -9,7 +9,15 @@ value outside them is a usage error, exit status 2):
 - cylindrical map sides (``face maps --size``): :data:`MAP_SIDE` cells, at most
   :data:`MAX_MAP_CELLS` cells in all;
 - Gauss-Newton corrections (``analyze --refine``, ``batch --refine``): 0 to :data:`MAX_REFINE`;
-- ports (``view --port``): 0 (any free port) to 65535.
+- ports (``view --port``): 0 (any free port) to 65535;
+- intensities (``synth --au N=I``, ``--muscle ID=C``, ``--intensity``): in [0, 1] (or a FACS
+  letter A-E for an action unit);
+- faces of a photo (``face from-photo --face-index``): 0 to 9.
+
+Options that do not go together (e.g. ``synth --intensity`` without ``--expression`` or
+``--viseme``, an ``--estimator`` of the other tracker) are usage errors too
+(:class:`~myoface.errors.MyofaceUsageError`). A value echoed in a message is cut to 40
+characters (a number of 5000 digits is said by its length).
 """
 
 from __future__ import annotations
@@ -46,7 +54,9 @@ def number(lo: float, hi: float, *, lo_open: bool = False, unit: str = ""):
             v = math.nan
         ok = math.isfinite(v) and (lo < v if lo_open else lo <= v) and v <= hi
         if not ok:
-            raise argparse.ArgumentTypeError(f"expected a number in {interval}{unit}; got {text!r}")
+            raise argparse.ArgumentTypeError(
+                f"expected a number in {interval}{unit}; got {_shown(text)}"
+            )
         return v
 
     parse.__name__ = "number"
@@ -64,11 +74,19 @@ def integer(lo: int, hi: int | None = None, *, unit: str = ""):
             v = None
         if v is None or v < lo or (hi is not None and v > hi):
             what = f"an integer in {interval}" if hi is not None else f"an integer {interval}"
-            raise argparse.ArgumentTypeError(f"expected {what}{unit}; got {text!r}")
+            raise argparse.ArgumentTypeError(f"expected {what}{unit}; got {_shown(text)}")
         return v
 
     parse.__name__ = "integer"
     return parse
+
+
+def _shown(text: str, n: int = 40) -> str:
+    """``text`` quoted for a message, at most ``n`` characters of it (a number of 5000 digits
+    is said by its length)."""
+    if len(text) <= n:
+        return repr(text)
+    return f"{text[:n]!r}... ({len(text)} characters)"
 
 
 fps_type = number(0.0, MAX_FPS, lo_open=True, unit=" frames per second")
@@ -230,10 +248,15 @@ def analysis_settings(args) -> dict:
     MyofaceValueError
         For ``--init`` with the landmark tracker, which needs none, and ``--photometric``
         with the snakes or ``--estimator paper`` (it is a term of the landmarks' 3-D fit).
+    MyofaceUsageError
+        For an ``--estimator`` that is not the tracker's (:data:`TRACKER_ESTIMATORS`), e.g.
+        ``fiducials`` (the snakes') with the landmark tracker: a usage error (exit status 2),
+        where the library would take it for its counterpart (``paper``).
     """
     from myoface.errors import MyofaceValueError
 
-    if args.tracker is None:
+    defaulted = args.tracker is None
+    if defaulted:
         # the best measured analysis; initial contours are the snakes'
         args.tracker = "snakes" if args.init else DEFAULT_TRACKER
     if args.init and args.tracker == "landmarks":
@@ -245,6 +268,7 @@ def analysis_settings(args) -> dict:
             raise MyofaceValueError(PHOTOMETRIC_NEEDS_LANDMARKS)
         if args.estimator in ("paper", "fiducials"):
             raise MyofaceValueError(PHOTOMETRIC_NOT_PAPER)
+    _check_estimator(args.tracker, args.estimator, defaulted)
     return {
         "tracker": args.tracker,
         "init": args.init or None,
@@ -256,6 +280,37 @@ def analysis_settings(args) -> dict:
         "flow": bool(args.flow),
         "photometric": bool(args.photometric),
     }
+
+
+#: each tracker's estimators (``--estimator``)
+TRACKER_ESTIMATORS = {
+    "snakes": ("curves", "fiducials"),
+    "landmarks": ("fit", "fit-synthesis", "paper"),
+}
+
+
+def _check_estimator(tracker: str, estimator: str | None, defaulted: bool = False) -> None:
+    """A usage error for an ``--estimator`` of the other tracker (the library takes the
+    snakes' names for the landmarks' counterparts, "fiducials" for "paper": the command line
+    says so rather than change the estimator silently)."""
+    from myoface.errors import MyofaceUsageError
+
+    own = TRACKER_ESTIMATORS.get(tracker, ())
+    if estimator is None or estimator in own:
+        return
+    how = f"--tracker {tracker}"
+    if defaulted:  # (the landmarks, or the snakes given --init)
+        how = f"--tracker {tracker} (the default{' with --init' if tracker == 'snakes' else ''})"
+    hint = {
+        "fiducials": "; the paper's fiducial scheme on the landmarks is --estimator paper",
+        "curves": "; the landmarks' fit of the whole model is --estimator fit",
+        "paper": "; the paper's fiducials on the snakes are --estimator fiducials",
+        "fit": "; give --tracker landmarks for the 3-D fit",
+        "fit-synthesis": "; give --tracker landmarks for the 3-D fit",
+    }.get(estimator, "")
+    raise MyofaceUsageError(
+        f"--estimator {estimator} is not an estimator of {how}, whose are {', '.join(own)}{hint}"
+    )
 
 
 def default_analysis_settings(**given) -> dict:

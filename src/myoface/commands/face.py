@@ -24,6 +24,9 @@ DESCRIPTION = (
     "other command."
 )
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
+#: the largest ``--face-index``: MediaPipe is asked for at most 10 faces in a photo
+#: (:data:`myoface.face.personal.MAX_PHOTO_FACES`)
+MAX_FACE_INDEX = 9
 VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".webm")
 
 
@@ -53,6 +56,14 @@ def add_arguments(p):
     ph.add_argument("-o", "--output", required=True, help="the face file to write (.myoface)")
     ph.add_argument(
         "--frame", type=integer(0), default=0, help="frame of a video to use (default 0)"
+    )
+    ph.add_argument(
+        "--face-index",
+        type=integer(0, MAX_FACE_INDEX),
+        default=None,
+        metavar="N",
+        help="of a photo of several faces, numbered from 0 left to right, face N (default: "
+        "the largest, said on stderr)",
     )
     ph.add_argument(
         "--depth-blend",
@@ -286,8 +297,15 @@ def _from_scan(args) -> int:
 
 
 def _read_photo(path: Path, frame: int):
-    import numpy as np
+    """The photo ``path`` (an image, or frame ``frame`` of a video) as (H, W, 3) uint8 RGB:
+    any colour space (:func:`~myoface.face.image.read_image`), upright by its EXIF
+    orientation, at most :data:`~myoface.face.personal.PHOTO_MAX_SIDE` pixels a side (a
+    larger one scaled down as it is read, said on stdout)."""
+    from myoface.face.image import image_size, read_image
+    from myoface.face.personal import PHOTO_MAX_SIDE
 
+    if path.is_dir():
+        raise MyofaceValueError(f"the photo {path} is a folder; expected an image or a video")
     if not path.is_file():
         raise MyofaceFileNotFoundError(f"no such photo: {path}")
     if path.suffix.lower() in VIDEO_SUFFIXES:
@@ -295,20 +313,20 @@ def _read_photo(path: Path, frame: int):
 
         if frame < 0:
             raise MyofaceValueError(f"--frame must be >= 0; got {frame}")
-        frames = open_video(path).read_all(max_frames=frame + 1)
-        if len(frames) <= frame:
-            raise MyofaceValueError(f"{path} has {len(frames)} frames; no frame {frame}")
-        return frames[frame]
-    import imageio.v3 as iio
-
-    try:
-        img = iio.imread(path)
-    except Exception as exc:  # imageio raises many types for unreadable files
-        raise MyofaceValueError(f"cannot read {path} as an image: {exc}") from None
-    from myoface.render.renderer import _rgb01
-
-    rgb = _rgb01(np.asarray(img), f"the photo {path}")  # grey or colour, 8 or 16 bits
-    return (np.clip(rgb, 0, 1) * 255 + 0.5).astype(np.uint8)
+        n = 0
+        for k, img in enumerate(open_video(path)):  # one frame kept, not all up to it
+            n = k + 1
+            if k == frame:
+                return img
+        raise MyofaceValueError(f"{path} has {n} frames; no frame {frame}")
+    w, h = image_size(path, "photo")
+    img = read_image(path, "photo", max_side=PHOTO_MAX_SIDE, orient=True)
+    if max(w, h) > PHOTO_MAX_SIDE:
+        print(
+            f"photo      {w}x{h} px, read at {img.shape[1]}x{img.shape[0]} (at most "
+            f"{PHOTO_MAX_SIDE} px a side)"
+        )
+    return img
 
 
 def _from_photo(args) -> int:
@@ -319,18 +337,20 @@ def _from_photo(args) -> int:
         name=args.name,
         depth_blend=args.depth_blend,
         preview=args.preview,
+        face_index=args.face_index,
     )
     return 0
 
 
 def photo_face_file(
-    photo, output, *, frame: int = 0, name=None, depth_blend=None, preview=None
+    photo, output, *, frame: int = 0, name=None, depth_blend=None, preview=None, face_index=None
 ) -> None:
     """``myoface face from-photo``'s work (also the demo's): the face of the photograph
     ``photo`` (an image, or frame ``frame`` of a video) made by
     :func:`~myoface.face.personal.face_from_photo` (``depth_blend``: default
-    :data:`~myoface.face.personal.PHOTO_DEPTH_BLEND`), saved with the default muscles and its
-    provenance to the face file ``output`` (.myoface), and, with ``preview``, its contact
+    :data:`~myoface.face.personal.PHOTO_DEPTH_BLEND`; ``face_index``: which face of several,
+    numbered from 0 left to right, default the largest), saved with the default muscles and
+    its provenance to the face file ``output`` (.myoface), and, with ``preview``, its contact
     sheet (PNG); the command's lines printed. A failure leaves neither file."""
     import myoface
     from myoface.face.personal import PHOTO_DEPTH_BLEND, face_from_photo
@@ -341,10 +361,15 @@ def photo_face_file(
     src = Path(photo)
     img = _read_photo(src, frame)
     blend = PHOTO_DEPTH_BLEND if depth_blend is None else depth_blend
-    face, info = face_from_photo(img, name=name or src.stem, depth_blend=blend)
+    face, info = face_from_photo(
+        img, name=name or src.stem, depth_blend=blend, face_index=face_index
+    )
+    n_faces = info.get("n_faces", 1)
+    which = f" (face {info['face_index']} of {n_faces}, left to right)" if n_faces > 1 else ""
     print(
-        f"face found {info['face_width_px']:.0f} px wide; yaw {info['head_yaw_deg']:.1f} deg; "
-        f"{info['fit_rms_to_generic_mm']:.1f} mm RMS from the generic face's shape"
+        f"face found {info['face_width_px']:.0f} px wide{which}; yaw "
+        f"{info['head_yaw_deg']:.1f} deg; {info['fit_rms_to_generic_mm']:.1f} mm RMS from the "
+        "generic face's shape"
     )
     provenance = {
         "made_by": f"myoface {myoface.__version__} face from-photo",

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from myoface.commands._common import (
     MAX_VIDEO_S,
+    _shown,
     add_face_argument,
     check_video_size,
     fps_type,
@@ -14,7 +15,7 @@ from myoface.commands._common import (
     number,
     side_type,
 )
-from myoface.errors import MyofaceFileNotFoundError, MyofaceValueError
+from myoface.errors import MyofaceFileNotFoundError, MyofaceUsageError, MyofaceValueError
 
 NAME = "synth"
 HELP = "render an expression / action units / muscles / a timeline to an image or a video"
@@ -30,27 +31,55 @@ The output type follows the suffix: .png/.jpg for one image at the apex, .mp4 fo
 
 
 def _pairs(items, what):
+    """``{name: value text}`` of the ``--au`` / ``--muscle`` requests ``items``; a name given
+    twice is a usage error."""
     out = {}
     for it in items or []:
         if "=" not in it:
-            raise MyofaceValueError(f"--{what} takes NAME=VALUE (e.g. 12=0.7); got {it!r}")
+            raise MyofaceUsageError(f"--{what} takes NAME=VALUE (e.g. 12=0.7); got {_shown(it)}")
         k, v = it.split("=", 1)
         if k.strip() in out:
-            raise MyofaceValueError(f"--{what} {k.strip()} is given twice")
+            raise MyofaceUsageError(f"--{what} {k.strip()[:40]} is given twice")
         out[k.strip()] = v.strip()
     return out
 
 
-def _check_requests(args) -> None:
-    """The --au / --muscle requests' syntax, AU numbers and intensities, before the model is
-    built (the muscle names need the model)."""
-    from myoface.control.facs import parse_au, parse_intensity
+def _request(what: str):
+    """An argparse ``type`` for ``--au N=I`` (``what`` "au") and ``--muscle ID=C``
+    ("muscle"): the text as given, once its syntax and its intensity (in [0, 1], or a letter
+    A-E) are checked, so that a value outside its limits is a usage error (exit status 2).
+    The action unit and the muscle are checked after (:func:`_check_requests`; a muscle's
+    name needs the model)."""
 
-    for k, v in _pairs(args.au, "au").items():
+    def parse(text: str) -> str:
+        import argparse
+
+        from myoface.control.facs import parse_intensity
+        from myoface.errors import MyofaceError
+
+        if "=" not in text:
+            raise argparse.ArgumentTypeError(
+                f"expected NAME=VALUE (e.g. 12=0.7); got {_shown(text)}"
+            )
+        k, v = (x.strip() for x in text.split("=", 1))
+        try:
+            parse_intensity(v, f"AU{k}" if what == "au" else f"muscle {k}")
+        except MyofaceError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return text
+
+    parse.__name__ = f"{what} request"
+    return parse
+
+
+def _check_requests(args) -> None:
+    """The --au / --muscle requests: no name twice (a usage error) and known action units,
+    before the model is built (the muscle names need the model)."""
+    from myoface.control.facs import parse_au
+
+    for k in _pairs(args.au, "au"):
         parse_au(k)
-        parse_intensity(v, f"AU{k}")
-    for k, v in _pairs(args.muscle, "muscle").items():
-        parse_intensity(v, f"muscle {k}")
+    _pairs(args.muscle, "muscle")
 
 
 def add_arguments(p):
@@ -64,20 +93,22 @@ def add_arguments(p):
     src.add_argument(
         "--intensity",
         type=number(0.0, 1.0),
-        default=1.0,
-        help="emphasis of --expression / --viseme in [0, 1]",
+        default=None,
+        help="emphasis of --expression / --viseme in [0, 1] (default 1)",
     )
     src.add_argument(
         "--au",
         action="append",
+        type=_request("au"),
         metavar="N=I",
-        help="action unit N at intensity I (repeatable; L12/R12 for one side)",
+        help="action unit N at intensity I in [0, 1] or A-E (repeatable; L12/R12 for one side)",
     )
     src.add_argument(
         "--muscle",
         action="append",
+        type=_request("muscle"),
         metavar="ID=C",
-        help="muscle contraction (repeatable); see `myoface info --muscles-list`",
+        help="muscle contraction C in [0, 1] (repeatable); see `myoface info --muscles-list`",
     )
     src.add_argument("--viseme", metavar="NAME", help="a speech viseme (e.g. A, O, U, PBM, FV)")
     src.add_argument("--timeline", metavar="FILE", help="a timeline file (TOML/JSON) of events")
@@ -128,21 +159,22 @@ def _apex(args, fm):
 
     parts = []
     ids = fm.ids
+    intensity = 1.0 if args.intensity is None else args.intensity
     if args.expression:
         if args.expression in fm.expressions:  # the model's own (e.g. Waters' macros)
             from myoface.control.facs import parse_intensity
 
             parts.append(
-                fm.expressions[args.expression] * parse_intensity(args.intensity, "--intensity")
+                fm.expressions[args.expression] * parse_intensity(intensity, "--intensity")
             )
         else:
-            parts.append(expression_contractions(args.expression, args.intensity, ids))
+            parts.append(expression_contractions(args.expression, intensity, ids))
     if args.au:
         parts.append(au_contractions(_pairs(args.au, "au"), ids))
     if args.muscle:
         parts.append(muscle_contractions(_pairs(args.muscle, "muscle"), ids))
     if args.viseme:
-        parts.append(viseme_contractions(args.viseme, args.intensity, ids))
+        parts.append(viseme_contractions(args.viseme, intensity, ids))
     if not parts:  # no control: the neutral face
         return np.zeros(len(ids))
     keep = np.ones(len(ids))
@@ -165,7 +197,12 @@ def run(args) -> int:
     if not video and suffix not in (".png", ".jpg", ".jpeg"):
         raise MyofaceValueError(f"-o must end in .png, .jpg or .mp4; got {out.name}")
     if args.timeline and any((args.expression, args.au, args.muscle, args.viseme)):
-        raise MyofaceValueError("--timeline cannot be combined with other event options")
+        raise MyofaceUsageError("--timeline cannot be combined with other event options")
+    if args.intensity is not None and not (args.expression or args.viseme):
+        raise MyofaceUsageError(
+            "--intensity is the emphasis of --expression or --viseme; give one of them (an "
+            "action unit's or a muscle's value is in its --au N=I or --muscle ID=C)"
+        )
     if args.texture and not Path(args.texture).is_file():
         raise MyofaceFileNotFoundError(f"--texture: no such texture image: {args.texture}")
     _check_requests(args)

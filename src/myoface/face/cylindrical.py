@@ -33,7 +33,14 @@ import numba
 import numpy as np
 
 from myoface._io import atomic_output
-from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.errors import (
+    MyofaceFileNotFoundError,
+    MyofaceFormatError,
+    MyofaceValueError,
+    user_message,
+)
+from myoface.face.image import read_image
+from myoface.face.mesh import MAX_COORDINATE_MM
 
 #: map size of the Cyberware scanner the paper used (W angles x H heights), T&W 1993 §IV
 CYBERWARE_SHAPE = (256, 512)
@@ -253,9 +260,7 @@ def load_maps(path: str | os.PathLike) -> CylindricalMaps:
                 if not (path / name).is_file():
                     raise MyofaceFormatError(f"{path} has no {name}: not a maps folder")
             rng = iio.imread(path / "range.png")
-            rgb = iio.imread(path / "rgb.png")
-            if rgb.ndim == 3 and rgb.shape[2] == 4:
-                rgb = rgb[..., :3]
+            rgb = read_image(path / "rgb.png", "colour map")
             meta = json.loads((path / "maps.json").read_text())
             radius = np.where(rng == 0, np.nan, rng.astype(np.float64) * PNG_RADIUS_STEP_MM)
         else:
@@ -267,7 +272,16 @@ def load_maps(path: str | os.PathLike) -> CylindricalMaps:
     except (OSError, ValueError, KeyError) as exc:
         if isinstance(exc, MyofaceFormatError):
             raise
-        raise MyofaceFormatError(f"cannot read maps from {path}: {exc}") from None
+        raise MyofaceFormatError(f"cannot read maps from {path}: {user_message(exc)}") from None
+    radius = np.asarray(radius)
+    if radius.dtype.kind == "f":
+        with np.errstate(invalid="ignore"):
+            far = radius > MAX_COORDINATE_MM
+        if far.any():
+            raise MyofaceFormatError(
+                f"{path}: a radius of {float(radius[far].max()):.3g} mm; a head's maps have radii "
+                f"within {MAX_COORDINATE_MM:.0f} mm (1 km). Are they in millimetres?"
+            )
     try:
         return CylindricalMaps(
             radius,

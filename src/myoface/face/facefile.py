@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from myoface._io import atomic_output
-from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError
+from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, user_message, writing
+from myoface.face.image import read_image
 from myoface.face.io import load_mesh, save_mesh
 from myoface.face.mesh import FaceMesh
 
@@ -62,7 +63,7 @@ def save_face(
         "landmarks": {k: v.tolist() for k, v in face.landmarks.items()},
         "provenance": provenance or {},
     }
-    with atomic_output(path) as tmp:
+    with writing(path), atomic_output(path) as tmp:  # a full disk names the face file
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as z:
             z.writestr("face.json", json.dumps(meta, indent=1, default=_jsonable) + "\n")
             obj = tmp.with_name(tmp.stem + ".mesh.obj")
@@ -90,8 +91,6 @@ def _jsonable(x):
 
 def read_face(path: str | os.PathLike) -> tuple[FaceMesh, str | None, dict]:
     """Read a ``.myoface`` file: (face with texture and landmarks, muscle file text or None, meta)."""
-    import imageio.v3 as iio
-
     path = Path(path)
     if not path.is_file():
         raise MyofaceFileNotFoundError(f"no such face file: {path}")
@@ -121,12 +120,9 @@ def read_face(path: str | os.PathLike) -> tuple[FaceMesh, str | None, dict]:
                     raise MyofaceFormatError(f"{path}: mesh.obj: {exc}") from None
             texture = None
             if "texture.png" in names:
-                try:
-                    texture = iio.imread(z.read("texture.png"), extension=".png")
-                except Exception as exc:  # imageio raises many types for a bad image
-                    raise MyofaceFormatError(f"{path}: texture.png: {exc}") from None
-                if texture.ndim == 3 and texture.shape[2] == 4:
-                    texture = texture[..., :3]
+                texture = read_image(
+                    z.read("texture.png"), "texture image", name=f"{path}: texture.png"
+                )
             muscles = z.read("muscles.toml").decode() if "muscles.toml" in names else None
             groups = meta.get("landmarks", {})
             if not isinstance(groups, dict):
@@ -148,8 +144,7 @@ def read_face(path: str | os.PathLike) -> tuple[FaceMesh, str | None, dict]:
     ) as exc:  # json's, numpy's and zipfile's errors on damaged content
         if isinstance(exc, MyofaceFormatError):
             raise
-        msg = " ".join(str(exc).split())[:200]
-        raise MyofaceFormatError(f"{path}: damaged face file: {msg}") from None
+        raise MyofaceFormatError(f"{path}: damaged face file: {user_message(exc, 200)}") from None
     face = FaceMesh(
         mesh.vertices,
         mesh.triangles,

@@ -11,8 +11,14 @@ from pathlib import Path
 import numpy as np
 
 from myoface._io import atomic_output, read_text
-from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
-from myoface.face.mesh import FaceMesh, triangle_normals
+from myoface.errors import (
+    MyofaceFileNotFoundError,
+    MyofaceFormatError,
+    MyofaceValueError,
+    user_message,
+    writing,
+)
+from myoface.face.mesh import FaceMesh, check_vertices_mm, triangle_normals
 
 #: Waters' geoface coordinates are taken to be centimetres (the face is then 163 mm tall).
 WATERS_UNIT_MM = 10.0
@@ -76,8 +82,9 @@ def _check_file(path) -> Path:
     return path
 
 
-def _read_obj(path: Path, split_uv_seams: bool = False) -> FaceMesh:
-    """A small OBJ reader keeping vertex order and per-vertex uv (``f v/vt``) as written.
+def _read_obj(path: Path, split_uv_seams: bool = False, scale_mm: float = 1.0) -> FaceMesh:
+    """A small OBJ reader keeping vertex order and per-vertex uv (``f v/vt``) as written;
+    positions multiplied by ``scale_mm``, and checked (:func:`check_vertices_mm`).
 
     A vertex with several texture coordinates (on a seam of the texture atlas) keeps the last
     one, unless ``split_uv_seams``: then every distinct (vertex, uv) pair becomes a vertex of its
@@ -96,8 +103,12 @@ def _read_obj(path: Path, split_uv_seams: bool = False) -> FaceMesh:
         try:
             if parts[0] == "v":
                 verts.append([float(x) for x in parts[1:4]])
+                if len(verts[-1]) != 3:
+                    raise ValueError("a vertex needs x, y and z")
             elif parts[0] == "vt":
                 uvs.append([float(x) for x in parts[1:3]])
+                if len(uvs[-1]) != 2:
+                    raise ValueError("a texture coordinate needs u and v")
             elif parts[0] == "f":
                 idx = [p.split("/") for p in parts[1:]]
                 vi = [int(p[0]) for p in idx]
@@ -109,11 +120,20 @@ def _read_obj(path: Path, split_uv_seams: bool = False) -> FaceMesh:
             raise MyofaceFormatError(f"{path}:{ln}: cannot parse {line.strip()!r}") from exc
     if not verts or not faces:
         raise MyofaceFormatError(f"{path} has no vertices or no faces")
-    v = np.asarray(verts, float)
+    v = _checked(np.asarray(verts, float), path, scale_mm)
     f = np.asarray(faces, np.int64)
     f = np.where(f < 0, f + len(v) + 1, f) - 1  # OBJ is 1-based; negatives count from the end
+    if f.min() < 0 or f.max() >= len(v):
+        raise MyofaceFormatError(
+            f"{path}: a face refers to a vertex outside 1..{len(v)} (the file has {len(v)})"
+        )
     uv = None
     fu = np.asarray(face_uv, np.int64)
+    if uvs and fu.max() > len(uvs):
+        raise MyofaceFormatError(
+            f"{path}: a face refers to a texture coordinate outside 1..{len(uvs)} (the file "
+            f"has {len(uvs)})"
+        )
     if uvs and (fu > 0).all() and split_uv_seams:
         pairs, inv = np.unique(np.stack([f.ravel(), fu.ravel()], 1), axis=0, return_inverse=True)
         uva = np.asarray(uvs, float)
@@ -136,27 +156,34 @@ def load_mesh(
     """
     path = _check_file(path)
     if path.suffix.lower() == ".obj":
-        face = _read_obj(path, split_uv_seams)
-    else:
-        import trimesh
+        return _read_obj(path, split_uv_seams, scale_mm)
+    import trimesh
 
-        try:
-            m = trimesh.load(str(path), force="mesh", process=False)
-        except Exception as exc:  # trimesh raises many types for unreadable input
-            raise MyofaceFormatError(f"cannot read {path} as a mesh: {exc}") from exc
-        if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
-            raise MyofaceFormatError(f"{path} holds no triangle mesh")
-        uv = getattr(m.visual, "uv", None)
-        face = FaceMesh(np.asarray(m.vertices), np.asarray(m.faces), uv, name=path.stem)
-    if scale_mm != 1.0:
-        face = face.with_vertices(face.vertices * scale_mm)
-    return face
+    try:
+        m = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for unreadable input
+        raise MyofaceFormatError(f"cannot read {path} as a mesh: {user_message(exc)}") from exc
+    if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
+        raise MyofaceFormatError(f"{path} holds no triangle mesh")
+    uv = getattr(m.visual, "uv", None)
+    v = _checked(np.asarray(m.vertices, dtype=np.float64), path, scale_mm)
+    return FaceMesh(v, np.asarray(m.faces), uv, name=path.stem)
+
+
+def _checked(vertices: np.ndarray, path: Path, scale_mm: float) -> np.ndarray:
+    """The vertices of the file ``path`` in mm (times ``scale_mm``), checked."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        v = vertices * scale_mm if scale_mm != 1.0 else vertices
+    if v.ndim != 2 or v.shape[1:] != (3,):
+        raise MyofaceFormatError(f"{path}: vertices must have 3 coordinates each")
+    source = str(path) if scale_mm == 1.0 else f"{path} (at {scale_mm:g} mm per unit)"
+    return check_vertices_mm(v, source)
 
 
 def save_mesh(face: FaceMesh, path: str | os.PathLike) -> None:
     """Write ``face`` as OBJ (with uv if present) or, by suffix, any format trimesh writes."""
     path = Path(path)
-    with atomic_output(path) as tmp:
+    with writing(path), atomic_output(path) as tmp:  # a full disk names the mesh file
         if path.suffix.lower() == ".obj":
             lines = [f"# {face.name}, millimetres"]
             lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in face.vertices]
@@ -198,16 +225,20 @@ def read_waters_geoface(folder: str | os.PathLike) -> FaceMesh:
         npoly = int(it[0])
         rows = np.asarray(it[1 : 1 + 4 * npoly], np.int64).reshape(npoly, 4)
     except (ValueError, IndexError) as exc:
-        raise MyofaceFormatError(f"cannot parse geoface files in {folder}: {exc}") from exc
+        raise MyofaceFormatError(
+            f"cannot parse geoface files in {folder}: {user_message(exc)}"
+        ) from None
     tris = []
     for r in rows:
         if r[0] == 1000:
             tris.append([r[1], r[2], r[3]])
         else:
             tris += [[r[0], r[1], r[2]], [r[0], r[2], r[3]]]
+    with np.errstate(over="ignore"):
+        half = check_vertices_mm(half * WATERS_UNIT_MM, str(fl)) / WATERS_UNIT_MM
     tris = np.asarray(tris, np.int64) - 1
-    if tris.min() < 0 or tris.max() >= nv:
-        raise MyofaceFormatError(f"index.dat refers to vertices outside 1..{nv}")
+    if len(tris) == 0 or tris.min() < 0 or tris.max() >= nv:
+        raise MyofaceFormatError(f"{ix} refers to vertices outside 1..{nv}")
     on_mid = np.abs(half[:, 0]) < 1e-9
     mirror_idx = np.arange(nv)
     n_extra = int((~on_mid).sum())

@@ -13,7 +13,32 @@ from functools import cached_property
 import numba
 import numpy as np
 
-from myoface.errors import MyofaceValueError
+from myoface.errors import MyofaceFormatError, MyofaceValueError
+
+#: the largest magnitude (mm) of a coordinate of a mesh that the mesh readers accept: 1 km. A
+#: head is about 0.2 m across, and a scanner's frame puts it a few metres from its origin at
+#: most; far beyond that, the sums and squares of positions (centroids, k-d trees, normals)
+#: lose the face's every digit or overflow (a vertex at 1e308 crashed scipy's k-d tree)
+MAX_COORDINATE_MM = 1e6
+
+
+def check_vertices_mm(vertices, source: str) -> np.ndarray:
+    """``vertices`` (V, 3) as float64 positions in mm, once every coordinate is known to be
+    finite and within :data:`MAX_COORDINATE_MM`; else a :class:`MyofaceFormatError` naming
+    ``source`` (e.g. the file) and the first vertex outside (1-based, as in an OBJ file)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        v = np.asarray(vertices, dtype=np.float64)
+        bad = ~(np.abs(v) <= MAX_COORDINATE_MM)  # NaN and infinities too
+    if v.ndim == 2 and bad.any():
+        i, j = (int(k) for k in np.argwhere(bad)[0])
+        value = v[i, j]
+        where = "is not a finite number" if not np.isfinite(value) else f"is {value:.3g} mm"
+        raise MyofaceFormatError(
+            f"{source}: vertex {i + 1}'s {'xyz'[j] if j < 3 else j} coordinate {where}; a face "
+            f"mesh's coordinates are within {MAX_COORDINATE_MM:.0f} mm (1 km) of its origin. "
+            "Is it in millimetres?"
+        )
+    return v
 
 
 def triangle_normals(

@@ -34,11 +34,12 @@ from myoface.errors import (
     MyofaceFileNotFoundError,
     MyofaceFormatError,
     MyofaceValueError,
+    MyofaceWarning,
 )
 from myoface.face.cylindrical import CYBERWARE_SHAPE, CylindricalMaps, maps_from_mesh
 from myoface.face.io import load_default_face
 from myoface.face.mesh import FaceMesh, point_mesh_distance
-from myoface.facemesh import FaceMeshDetector
+from myoface.facemesh import MAX_FACES, FaceMeshDetector
 
 #: iBUG-68 index ranges of the label names of menpo's LJSON files (and their short forms)
 IBUG_LABELS = {
@@ -486,6 +487,15 @@ def find_landmarks_in_maps(maps: CylindricalMaps) -> np.ndarray:
 
 #: share of the generic face's depth mixed into the depth MediaPipe infers from one photo
 PHOTO_DEPTH_BLEND = 0.5
+#: the most faces looked for in one photo (:func:`photo_faces`)
+MAX_PHOTO_FACES = MAX_FACES
+#: a photo's longest side (pixels) as it is used: a larger one is scaled down to it, for the
+#: detection (MediaPipe's face mesh looks at the face through a 192 x 192 crop, whatever the
+#: photo's size) and for the texture (a face across a third of such a photo keeps 1300 px of
+#: texture, more than a render of it shows). Measured on a 12000 x 6750 photo: the whole
+#: command took 4.4 GB of memory before (the photo in float64, a 12000-px texture), 0.35 GB
+#: from a JPEG (decoded at a reduced scale) and 1.0 GB from a PNG (decoded whole) now
+PHOTO_MAX_SIDE = 4096
 #: MediaPipe's face mesh leaves its inner lip contours apart on closed lips (1.0-1.2 mm at the
 #: generic face's size along the whole mouth of the sample video's closed, resting lips), which
 #: a face made from the photo renders as parted lips with the mouth's dark inside between them.
@@ -517,12 +527,45 @@ def close_lips(vertices: np.ndarray, uv: np.ndarray, landmarks: dict, max_gap_mm
     return v, t, gap, True
 
 
+def photo_faces(image: np.ndarray, max_faces: int = MAX_PHOTO_FACES) -> list[np.ndarray]:
+    """The faces MediaPipe's face mesh finds in the RGB photo ``image``: (468, 3) points
+    each (x, y in pixels), numbered left to right (by their points' mean x); at most
+    ``max_faces``."""
+    with FaceMeshDetector(video=False, max_faces=max_faces) as det:
+        faces = det.detect_all(image)
+    return sorted(faces, key=lambda p: float(p[:, 0].mean()))
+
+
+def choose_face(faces: list[np.ndarray], face_index: int | None = None) -> int:
+    """Which of ``faces`` (numbered left to right, :func:`photo_faces`) a face is made of:
+    ``face_index``, or when it is None the largest (the widest span of points); a
+    :class:`MyofaceWarning` says which when there are several and none was asked for."""
+    n = len(faces)
+    if n == 0:
+        raise MyofaceValueError("no face found in the photo")
+    if face_index is not None:
+        if not (isinstance(face_index, int | np.integer) and 0 <= face_index < n):
+            what = "one face (0)" if n == 1 else f"{n} faces (0 to {n - 1}, left to right)"
+            raise MyofaceValueError(f"the photo has {what}; no face {face_index}")
+        return int(face_index)
+    k = int(np.argmax([float(np.ptp(p[:, 0])) for p in faces]))
+    if n > 1:
+        warnings.warn(
+            f"{n} faces in the photo; made of face {k}, the largest (numbered from 0, left to "
+            "right; --face-index N, or face_index=N, chooses one)",
+            MyofaceWarning,
+            stacklevel=3,
+        )
+    return k
+
+
 def face_from_photo(
     image: np.ndarray,
     *,
     generic: FaceMesh | None = None,
     name: str = "person",
     depth_blend: float = PHOTO_DEPTH_BLEND,
+    face_index: int | None = None,
 ) -> tuple[FaceMesh, dict]:
     """A personal face from one frontal photograph (RGB uint8 (H, W, 3)).
 
@@ -533,18 +576,25 @@ def face_from_photo(
     texture, each vertex's texture coordinate being where it was found in it. Lips that
     MediaPipe leaves a little apart (less than :data:`CLOSED_LIPS_MM`) are closed
     (:func:`close_lips`; ``info["lips_closed"]``).
+
+    A photo of several faces (up to :data:`MAX_PHOTO_FACES` are found): faces are numbered
+    from 0, left to right, and ``face_index`` chooses one; by default the largest, with a
+    warning (:func:`choose_face`). A photo larger than :data:`PHOTO_MAX_SIDE` pixels a side
+    is scaled down to it first (the texture needs no more; memory stays modest).
+    ``info`` says ``n_faces`` and ``face_index``.
     """
     img = np.asarray(image)
     if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
         raise MyofaceValueError(f"a photo must be an (H, W, 3) uint8 image; got {img.shape}")
-    img = np.ascontiguousarray(img[:, :, :3])
+    if img.shape[0] < 1 or img.shape[1] < 1:
+        raise MyofaceValueError(f"a photo must have pixels; got shape {img.shape}")
+    img = _bounded(np.ascontiguousarray(img[:, :, :3]), PHOTO_MAX_SIDE)
     if not 0 <= depth_blend <= 1:
         raise MyofaceValueError(f"depth_blend must be in [0, 1]; got {depth_blend}")
     generic = load_default_face() if generic is None else generic
-    with FaceMeshDetector(video=False) as det:
-        pts = det.detect(img)
-    if pts is None:
-        raise MyofaceValueError("no face found in the photo")
+    faces = photo_faces(img)
+    chosen = choose_face(faces, face_index)
+    pts = faces[chosen]
     h, w = img.shape[:2]
     found = np.column_stack([pts[:, 0], -pts[:, 1], -pts[:, 2]])  # right-handed, +z to camera
     s, r, t = fit_similarity_3d(generic.vertices, found)
@@ -563,5 +613,20 @@ def face_from_photo(
         "depth_blend": depth_blend,
         "lip_gap_mm": gap,
         "lips_closed": closed,
+        "n_faces": len(faces),
+        "face_index": chosen,
     }
     return face, info
+
+
+def _bounded(img: np.ndarray, max_side: int) -> np.ndarray:
+    """``img`` (H, W, 3) uint8, scaled down (Lanczos, aspect kept) when a side is longer
+    than ``max_side`` pixels."""
+    h, w = img.shape[:2]
+    if max(h, w) <= max_side:
+        return img
+    from PIL import Image
+
+    k = max_side / max(h, w)
+    size = (max(1, round(w * k)), max(1, round(h * k)))
+    return np.asarray(Image.fromarray(img).resize(size, Image.Resampling.LANCZOS))

@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numba
 import numpy as np
 
-from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
+from myoface.errors import MyofaceValueError
 from myoface.face import FaceMesh
 from myoface.face.eyes import eyeball_center
 from myoface.face.teeth import fit_dentition
@@ -121,23 +120,30 @@ def _check_pose(pose, what: str = "pose") -> tuple[np.ndarray, np.ndarray]:
     return rot, shift
 
 
+def _srgb_to_linear(t: np.ndarray) -> np.ndarray:
+    """sRGB values in [0, 1] -> linear light (IEC 61966-2-1)."""
+    return np.where(t <= 0.04045, t / 12.92, ((t + 0.055) / 1.055) ** 2.4)
+
+
+#: the linear light (float32) of each 8-bit sRGB code: an 8-bit texture is converted by lookup,
+#: without the float64 copies of the formula (the same values)
+_SRGB8_TO_LINEAR = _srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)
+
+
 def load_texture(texture) -> np.ndarray:
     """A texture as float32 linear RGB (H, W, 3) from an image array or a path: grey or colour,
-    with or without alpha, 8 or 16 bits per channel (or floats in [0, 1])."""
+    with or without alpha, 8 or 16 bits per channel (or floats in [0, 1]). A file is read by
+    :func:`~myoface.face.image.read_image` (any colour space: CMYK, palette, grey, ... as
+    RGB)."""
     if isinstance(texture, str | os.PathLike):
-        p = Path(texture)
-        if not p.is_file():
-            raise MyofaceFileNotFoundError(f"no such texture image: {p}")
-        import imageio.v3 as iio
+        from myoface.face.image import read_image
 
-        try:
-            texture = iio.imread(p)
-        except Exception as exc:  # imageio raises many types for unreadable images
-            raise MyofaceFormatError(f"cannot read texture image {p}: {exc}") from None
-    t = _rgb01(np.asarray(texture))
-    t = np.clip(t, 0, 1)
-    lin = np.where(t <= 0.04045, t / 12.92, ((t + 0.055) / 1.055) ** 2.4)
-    return np.ascontiguousarray(lin, dtype=np.float32)
+        texture = read_image(texture, "texture image")
+    a = np.asarray(texture)
+    if a.dtype == np.uint8 and a.ndim == 3 and a.shape[2] in (3, 4) and a.size:
+        return np.ascontiguousarray(_SRGB8_TO_LINEAR[a[:, :, :3]])
+    t = np.clip(_rgb01(a), 0, 1)
+    return np.ascontiguousarray(_srgb_to_linear(t), dtype=np.float32)
 
 
 def to_srgb8(linear: np.ndarray) -> np.ndarray:
