@@ -9,8 +9,8 @@ from myoface.cli import main
 from tests.conftest import REPO, needs_mediapipe, shared_path
 
 
-def one_line_error(capsys, argv, match):
-    assert main(argv) == 1
+def one_line_error(capsys, argv, match, code=1):
+    assert main(argv) == code
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and match in err[0], err
 
@@ -169,19 +169,20 @@ def test_synth_video_expression_and_timeline(model, tmp_path, capsys):
 
 
 @pytest.mark.parametrize(
-    ("extra", "match"),
+    ("extra", "match", "code"),
     [
-        (["--au", "3=0.5"], "unknown action unit AU3"),
-        (["--au", "12=3"], "must be in [0, 1]; got '3'"),
-        (["--expression", "joy"], "unknown expression 'joy'"),
-        (["--muscle", "zygomaticus=2"], "must be in [0, 1]"),
-        (["--au", "12=0.5", "--texture", "/nonexistent/skin.png"], "no such texture image"),
+        (["--au", "3=0.5"], "unknown action unit AU3", 1),
+        # a number outside its limits is a usage error (README: exit status 2)
+        (["--au", "12=3"], "must be in [0, 1]; got '3'", 2),
+        (["--expression", "joy"], "unknown expression 'joy'", 1),
+        (["--muscle", "zygomaticus=2"], "must be in [0, 1]", 2),
+        (["--au", "12=0.5", "--texture", "/nonexistent/skin.png"], "no such texture image", 1),
     ],
 )
-def test_synth_bad_input(tmp_path, capsys, extra, match):
+def test_synth_bad_input(tmp_path, capsys, extra, match, code):
     out = tmp_path / "x.png"
     one_line_error(
-        capsys, ["synth", *extra, "-o", str(out), "--width", "32", "--height", "32"], match
+        capsys, ["synth", *extra, "-o", str(out), "--width", "32", "--height", "32"], match, code
     )
     assert not out.exists() and not list(tmp_path.iterdir())
 
