@@ -1,50 +1,120 @@
-"""Stop signals are not lost where Python swallows their exception (myoface._signals)."""
+"""Stop signals are never lost (myoface._signals): one Python swallows in a finaliser is
+delivered again, a step in ``deferred`` is done whole, and a second signal in ``held`` waits."""
 
 import os
 import signal
 import sys
+import time
 
 import pytest
 
 from myoface import _signals
 
 
-def test_a_swallowed_signal_is_raised_at_the_next_check():
-    class Swallows:
-        def __del__(self):
-            os.kill(os.getpid(), signal.SIGTERM)  # raised inside __del__: printed, then lost
+def _spin(seconds: float = 0.0) -> None:
+    """Run bytecode (the handler runs at the next one) for at least ``seconds``."""
+    t_end = time.monotonic() + seconds
+    while True:
+        for _ in range(1000):
+            pass
+        if time.monotonic() >= t_end:
+            return
 
+
+class _Swallows:
+    """Sends ``signum`` to this process from its ``__del__``, where Python cannot raise the
+    handler's exception: it prints it as "Exception ignored" and goes on."""
+
+    def __init__(self, signum):
+        self.signum = signum
+
+    def __del__(self):
+        os.kill(os.getpid(), self.signum)
+        for _ in range(1000):  # (the handler runs here, inside __del__)
+            pass
+
+
+def test_a_swallowed_signal_is_delivered_again_outside_the_finaliser():
     seen = []
     hook, sys.unraisablehook = sys.unraisablehook, seen.append
     try:
         with _signals.stop_signals():
-            obj = Swallows()
-            del obj
-            for _ in range(1000):  # (the handler runs at the next bytecode: in __del__)
-                pass
-            assert seen and isinstance(seen[0].exc_value, _signals.Interrupted)
             with pytest.raises(_signals.Interrupted) as exc:
-                _signals.raise_pending()
+                obj = _Swallows(signal.SIGTERM)
+                del obj  # swallowed in __del__ ...
+                _spin(2.0)  # ... and raised here, without any raise_pending()
             assert exc.value.signum == signal.SIGTERM
+            _signals.clear_pending()
+            _spin(3 * _signals.REDELIVER_S)
             _signals.raise_pending()  # (seen once: nothing left)
+        assert seen == []  # not reported as "Exception ignored"
     finally:
         sys.unraisablehook = hook
+
+
+def test_a_swallowed_signal_is_raised_at_the_next_check_once():
+    with _signals.stop_signals():
+        obj = _Swallows(signal.SIGHUP)
+        with pytest.raises(_signals.Interrupted) as exc:
+            del obj
+            _signals.raise_pending()  # before it is delivered again
+        assert exc.value.signum == signal.SIGHUP
+        _signals.clear_pending()
+        _spin(5 * _signals.REDELIVER_S)  # and it is not delivered a second time
 
 
 def test_a_caught_signal_is_not_raised_again():
     with _signals.stop_signals():
         try:
             os.kill(os.getpid(), signal.SIGINT)
-            for _ in range(1000):  # (the handler runs at the next bytecode)
-                pass
+            _spin()
         except KeyboardInterrupt as exc:
             assert isinstance(exc, _signals.Interrupted) and exc.signum == signal.SIGINT
             _signals.clear_pending()
         _signals.raise_pending()  # nothing pending
 
 
-def test_the_handlers_are_restored_after_the_block():
-    before = signal.getsignal(signal.SIGINT)
+def test_a_deferred_step_is_done_whole_then_interrupted():
+    done = []
     with _signals.stop_signals():
-        assert signal.getsignal(signal.SIGINT) is not before
-    assert signal.getsignal(signal.SIGINT) is before
+        with pytest.raises(_signals.Interrupted) as exc:
+            with _signals.deferred():
+                os.kill(os.getpid(), signal.SIGTERM)
+                _spin(0.05)  # the handler ran: noted, not raised
+                done.append("step")
+            done.append("after")  # not reached
+        assert exc.value.signum == signal.SIGTERM and done == ["step"]
+        _signals.clear_pending()
+
+
+def test_a_signal_in_held_is_dropped():
+    with _signals.stop_signals():
+        with _signals.held():
+            os.kill(os.getpid(), signal.SIGINT)
+            _spin(0.05)
+        _signals.raise_pending()  # dropped
+        assert _signals.pending() is None
+
+
+def test_the_handlers_are_restored_after_the_block():
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    hook = sys.unraisablehook
+    with _signals.stop_signals():
+        assert signal.getsignal(signal.SIGINT) is not before[signal.SIGINT]
+        assert sys.unraisablehook is not hook
+    assert {s: signal.getsignal(s) for s in before} == before
+    assert sys.unraisablehook is hook
+
+
+def test_deferred_works_without_stop_signals_too():
+    """Used from a script (Python's own SIGINT handler), a deferred step is done whole too,
+    then KeyboardInterrupt is raised; the handler is Python's again after it."""
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    done = []
+    with pytest.raises(KeyboardInterrupt):
+        with _signals.deferred():
+            os.kill(os.getpid(), signal.SIGINT)
+            _spin(0.05)
+            done.append("step")
+    assert done == ["step"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -10,6 +10,12 @@ overlay.mp4         the contours on the frames (the paper's Fig. 7a)
 potential.mp4       (snakes) the contours on the image potential (the paper's Fig. 7b)
 ==================  ==========================================================================
 
+(and, from ``myoface analyze``, openface.csv and the fidelity report: :data:`ANALYSIS_FILES`.)
+The folder is written as one transaction (:func:`analyze_to_folder`, over
+:func:`~myoface._io.output_transaction`): a run replaces an earlier run's files when it
+succeeds, or is interrupted with frames measured, and leaves them byte for byte when it fails;
+the user's other files in the folder are never touched; one run at a time writes it.
+
 Image coordinates are (x, y) = (column, row) pixels.
 """
 
@@ -18,13 +24,13 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from myoface._io import atomic_output, output_dir
-from myoface._signals import clear_pending, raise_pending
+from myoface._io import atomic_output
+from myoface._signals import clear_pending, deferred, held, raise_pending
 from myoface.analysis.contractions_csv import ContractionsCsvWriter
 from myoface.analysis.initfiles import load_init
 from myoface.analysis.pipeline import Tracking, make_analyzer
@@ -163,6 +169,7 @@ class FolderResult:
     frames : :class:`FrameLog` — each analysed frame's index, time, quality and contractions,
         in order (``len(frames)`` frames).
     calibration_frame : int — the index of the neutral frame the analysis started on.
+    interrupted : str or None — where the run was interrupted, if it was.
     """
 
     folder: Path
@@ -170,6 +177,13 @@ class FolderResult:
     ids: tuple
     frames: FrameLog
     calibration_frame: int
+    #: None, or where the run was interrupted: ``"frames"``, ``"plots"``, or ``"finish"`` (or
+    #: what ``finish`` named its work in :attr:`stage`)
+    interrupted: str | None = None
+    #: what ``finish`` is doing, for analysis.json's ``"interrupted_in"`` (e.g. ``"report"``)
+    stage: str | None = None
+    #: what ``finish`` says of an interrupted run (what it did not make), for the note
+    notes: list = field(default_factory=list)
 
     @property
     def n_measured(self) -> int:
@@ -196,7 +210,7 @@ class FolderResult:
 
 def analyze_to_folder(
     video,
-    out: str | os.PathLike,
+    out,
     *,
     model=None,
     tracker: str = "snakes",
@@ -215,28 +229,39 @@ def analyze_to_folder(
     """Analyse ``video`` and write the analysis into the folder ``out`` (see the module's
     table); the code path of ``myoface analyze``.
 
+    The folder is written as one transaction (:func:`~myoface._io.output_transaction`): the
+    run writes into a fresh folder beside it, and its files replace the earlier run's
+    (:data:`ANALYSIS_FILES`) only when it succeeds, or is interrupted with some of the
+    frames measured; a failure leaves the folder as it was, byte for byte. Files of the
+    folder that an analysis does not write (the user's) are never touched. While it runs,
+    the folder's lock says who writes it, and a second run into it is refused.
+
     The analysis streams: each frame is decoded, tracked and fitted, and its row appended to
     contractions.csv (flushed at once; see
-    :class:`~myoface.analysis.contractions_csv.ContractionsCsvWriter`) and its picture to the overlay
-    videos before the next frame is read; of each frame only a compact record is kept
+    :class:`~myoface.analysis.contractions_csv.ContractionsCsvWriter`) and its pictures to the
+    overlay videos before the next frame is read, all of a frame or none of it (a stop
+    signal waits for the frame's outputs); of each frame only a compact record is kept
     (:class:`FrameLog`, for the plot and analysis.json), so memory does not grow with the
-    video's length. The overlay videos are written under temporary names (``.overlay.*.part.mp4``)
-    and renamed when they are closed.
+    video's length.
 
     An interruption (Ctrl-C, or SIGTERM / SIGHUP under ``myoface``: a
-    :class:`KeyboardInterrupt`) after the first frame keeps what was measured: the CSV with
-    every measured row, the overlay videos closed as they stand, analysis.json (with
-    ``"interrupted": true``) and the plot of those frames; no temporary file is left, and the
-    :class:`KeyboardInterrupt` is raised again with a note saying how many frames were kept
-    (``myoface`` prints it in its one line). An interruption before the first frame, or an
-    error, removes what this call wrote.
+    :class:`KeyboardInterrupt`) keeps what was complete, and stops within a second or two:
+    in the frames, the CSV with every measured row, the overlay videos of the same frames,
+    analysis.json, and the files ``finish`` derives from them (not the plot, which takes
+    seconds); later (the plot, ``finish``'s report), all the frames and whatever else was
+    finished. analysis.json then says
+    ``"interrupted": true`` and where (``"interrupted_in"``: ``"frames"``, ``"plots"`` or
+    ``"finish"``, or what ``finish`` named its work in ``result.stage``); the :class:`KeyboardInterrupt` is raised again with a note saying what
+    was kept (``myoface`` prints it in its one line). An interruption before the first frame
+    keeps nothing, as an error.
 
     Parameters
     ----------
     video : path or :class:`~myoface.analysis.video.Video`.
-    out : the output folder; created with its parents if missing. If the analysis fails, the
-        folders this call created are removed again (a folder that existed is left, and an
-        older contractions.csv in it is replaced when the first row is measured).
+    out : the output folder (created with its parents if missing), or an open
+        :class:`~myoface.analysis.outputs.OutputTransaction` of :func:`analysis_transaction`
+        (``myoface analyze`` opens it before it loads the model, so that a refused folder is
+        said at once).
     model : the :class:`~myoface.model.FaceModel` (never changed; may be shared with other
         threads); default: loaded from ``face``.
     tracker, calibration_frame, refine, sigma, estimator, flow, photometric : as in
@@ -248,18 +273,24 @@ def analyze_to_folder(
     face : the face model's file (``None``: the bundled face); recorded in analysis.json, and
         loaded when ``model`` is None.
     show_progress : a progress bar over the frames on stderr.
-    finish : ``finish(folder, result)`` is called once the analysis' files are written, inside
-        the folder's clean-up (if it fails, the folders this call created are removed): extra
-        outputs such as ``myoface analyze``'s ``--format openface`` and ``--report``. Not
-        called after an interruption.
+    finish : ``finish(folder, result)`` is called once the analysis' files are written into
+        ``folder`` (the transaction's, not yet in place), for extra outputs such as
+        ``myoface analyze``'s ``--format openface`` and ``--report``; if it fails, nothing
+        is kept. After an interruption in the frames or the plot it is called too, with
+        ``result.interrupted`` set, for the files made from the kept frames (it should then
+        make only quick ones). :attr:`FolderResult.folder` is where the files will be.
 
     Raises
     ------
     MyofaceError
-        On bad input, a video without frames, or when no frame could be measured.
+        On bad input, a video without frames, or when no frame could be measured;
+        :class:`~myoface._io.OutputConflictError` for an output folder that is (inside) the
+        input or that another run writes.
     KeyboardInterrupt
         When interrupted (see above).
     """
+    from myoface._io import OutputTransaction
+
     if not isinstance(video, Video):
         video = open_video(video)
     how_init = None
@@ -268,41 +299,117 @@ def analyze_to_folder(
     if isinstance(init, str | os.PathLike):
         how_init = str(Path(init).resolve())
         init = load_init(init)
-    if model is None:
-        pass
-
-        model = load_face_model(face)
-    an, first = make_analyzer(
-        model, video, tracker, init or None, calibration_frame, refine, sigma,
-        estimator=estimator, flow=flow, photometric=photometric,
-    )  # fmt: skip
-    release = None
-    try:
-        with output_dir(out) as folder:
-            run = Tracking(video, an, first, max_frames)
-            try:
-                log, interrupted, release = _measure_into(run, model, folder, show_progress)
-            finally:
-                an.close()
-            _write_results(run, folder, log, how_init, tracker, face, interrupted)
-            result = FolderResult(folder, Path(video.path), tuple(an.ids), log, run.start)
-            if finish is not None and interrupted is None:
+    if isinstance(out, OutputTransaction):
+        opened = contextlib.nullcontext(out)
+    else:
+        opened = analysis_transaction(out, video.path)
+    with contextlib.ExitStack() as keep, opened as tx:
+        if model is None:
+            model = load_face_model(face)
+        an, first = make_analyzer(
+            model, video, tracker, init or None, calibration_frame, refine, sigma,
+            estimator=estimator, flow=flow, photometric=photometric,
+        )  # fmt: skip
+        folder = tx.path
+        run = Tracking(video, an, first, max_frames)
+        try:
+            log, interrupted = _measure_into(run, model, folder, show_progress, keep)
+        except BaseException:
+            an.close()
+            raise
+        result = FolderResult(tx.target, Path(video.path), tuple(an.ids), log, run.start)
+        stage = "frames" if interrupted is not None else "plots"
+        side = (run, log, how_init, tracker, face)
+        try:
+            an.close()
+            if interrupted is None:
+                _write_results(folder, *side, interrupted=None)
+                stage = "finish"
+            else:  # (stop signals held: the kept frames' files are made whole; not the
+                # plot, which takes seconds on a busy machine: the run is stopping)
+                _write_results(folder, *side, interrupted="frames", plot=False)
+                result.interrupted = "frames"
+            if finish is not None:
                 finish(folder, result)
-    finally:
-        if release is not None:
-            release()
-    if interrupted is not None:
-        n_ok = result.n_measured
-        interrupted.add_note(
-            f"kept the {len(log)} frames analysed ({n_ok} measured) in {folder}"
-            f"{os.sep}contractions.csv"
-        )
-        raise interrupted
+            if interrupted is None:
+                stage = "commit"
+                tx.commit()  # (a stop signal in it is raised once it is done)
+        except KeyboardInterrupt as exc:
+            clear_pending()
+            keep.enter_context(held())  # the kept files are written whole
+            interrupted = exc
+            if stage in ("plots", "finish"):  # (the plot was made, or is what was cut)
+                if stage == "finish":
+                    stage = result.stage or stage
+                _write_results(folder, *side, interrupted=stage, plot=False)
+                result.interrupted = stage
+                if stage == "plots" and finish is not None:
+                    finish(folder, result)  # (its quick files, as after the frames)
+        if interrupted is not None:
+            if not tx.committed:
+                tx.commit()
+            interrupted.__notes__ = [
+                _kept_note(result, tx.target),
+                *getattr(interrupted, "__notes__", ()),  # (what ``finish`` did not make)
+                *result.notes,
+            ]
+            raise interrupted
     return result
 
 
-def _write_results(run, out, log, how_init, tracker, face, interrupted) -> None:
-    """analysis.json and contractions.png (contractions.csv is written as the frames are)."""
+def _kept_note(result: FolderResult, target) -> str:
+    """What an interrupted :func:`analyze_to_folder` kept, said in one line."""
+    n, n_ok = len(result.frames), result.n_measured
+    csv = Path(target) / "contractions.csv"
+    if result.interrupted == "frames":
+        return f"kept the {n} frames analysed ({n_ok} measured) in {csv} (not plotted)"
+    if result.interrupted is None:  # (it came as the outputs were put in place)
+        return f"the analysis was complete: {n} frames ({n_ok} measured) in {target}"
+    if result.interrupted == "plots":
+        return f"kept the analysis of all {n} frames ({n_ok} measured) in {csv} (not plotted)"
+    return f"kept the analysis of all {n} frames ({n_ok} measured) in {target}"
+
+
+#: every file an analysis folder may hold (:func:`analyze_to_folder`'s, ``myoface
+#: analyze``'s openface.csv and fidelity report): a run replaces the earlier run's and
+#: removes those it does not write, so the folder describes one run; any other file in it
+#: is the user's and stays
+ANALYSIS_FILES = (
+    *FOLDER_FILES,
+    "potential.mp4",
+    "openface.csv",
+    "fidelity.json",
+    "fidelity.png",
+)
+
+
+#: the fidelity report's files (``myoface analyze --report``): both or neither
+REPORT_FILES = ("fidelity.json", "fidelity.png")
+
+
+def analysis_transaction(
+    out, video_path, *, inputs: dict | None = None, what: str = "-o", command: str | None = None
+):
+    """The transaction of an analysis into the folder ``out``
+    (:func:`~myoface._io.output_transaction` over :data:`ANALYSIS_FILES`), refused when
+    ``out`` is the video ``video_path`` (a folder of images), inside it, or would write over
+    it (or over one of ``inputs``, ``{what: path}``), or when another run writes ``out``."""
+    from myoface._io import output_transaction
+
+    label = "the input folder" if Path(video_path).is_dir() else "the input video"
+    return output_transaction(
+        out,
+        ANALYSIS_FILES,
+        what=what,
+        inputs={label: video_path, **(inputs or {})},
+        command=command,
+    )
+
+
+def _write_results(out, run, log, how_init, tracker, face, *, interrupted, plot=True) -> None:
+    """analysis.json and contractions.png (contractions.csv is written as the frames are);
+    ``interrupted``: None, or where the run was interrupted (then said in analysis.json, and
+    the plot made unless ``plot`` is false)."""
     video, an = run.video, run.tracker
     side = {
         "video": str(Path(video.path).resolve()),
@@ -315,6 +422,7 @@ def _write_results(run, out, log, how_init, tracker, face, interrupted) -> None:
     }
     if interrupted is not None:
         side["interrupted"] = True
+        side["interrupted_in"] = interrupted
     side["frames"] = [
         {"frame": int(k), "quality": q, "iterations": int(it)}
         for k, q, it in zip(log.index, log.quality, log.iterations, strict=True)
@@ -326,20 +434,23 @@ def _write_results(run, out, log, how_init, tracker, face, interrupted) -> None:
     with atomic_output(out / "analysis.json") as tmp:
         with open(tmp, "w", encoding="utf-8") as fh:
             json.dump(side, fh, indent=1)
-    plot_contractions(out / "contractions.png", an.ids, log.times, log.contractions, log.quality)
+    if plot:
+        plot_contractions(
+            out / "contractions.png", an.ids, log.times, log.contractions, log.quality
+        )
 
 
-def _measure_into(run, model, out, show_progress):
+def _measure_into(run, model, out, show_progress, keep):
     """Measure every frame of ``run`` (a :class:`~myoface.analysis.pipeline.Tracking`),
     streaming each frame's CSV row and overlay pictures (the contours on the frame, and on
-    each of the tracker's :meth:`debug_images`, e.g. the snakes' potential); ``(FrameLog,
-    None)``, or ``(FrameLog, the KeyboardInterrupt)`` when interrupted after the first frame
-    (the CSV and the videos then closed with the frames so far). A clear error when nothing
-    could be measured (and then no file is left)."""
+    each of the tracker's :meth:`debug_images`, e.g. the snakes' potential), a frame's all
+    or none; ``(FrameLog, None)``, or ``(FrameLog, the KeyboardInterrupt)`` when interrupted
+    after the first frame (the CSV and the videos then closed with the frames so far, and
+    stop signals held in ``keep``, an ExitStack, until the caller has kept them). A clear
+    error when nothing could be measured."""
     video, an = run.video, run.tracker
     start = run.calibrate()  # (before the progress bar: its errors come alone)
     log = FrameLog(len(an.ids))
-    release = lambda: None  # noqa: E731
     n = video.n_frames
     if n is not None:
         n -= start
@@ -357,25 +468,27 @@ def _measure_into(run, model, out, show_progress):
             )
             try:
                 for frame, m in measured:
-                    raise_pending()  # (a stop signal Python swallowed somewhere)
-                    # the row first: what the CSV holds was measured, whatever stops the run
-                    csv.write(m)
-                    log.append(m)
+                    raise_pending()  # (a stop signal noted and not raised)
                     color = (255, 215, 0) if m.quality == "ok" else (230, 40, 40)
-                    vw.write(draw_contours(frame, m.contours, color))
+                    pictures = {"overlay": draw_contours(frame, m.contours, color)}
                     for name, img in an.debug_images(frame, m).items():
-                        if name not in extra:
-                            extra[name] = stack.enter_context(
-                                VideoWriter(out / f"{name}.mp4", fps=video.fps)
-                            )
-                        extra[name].write(draw_contours(img, m.contours, color))
+                        pictures[name] = draw_contours(img, m.contours, color)
+                    with deferred():  # the frame's row and pictures, all or none
+                        csv.write(m)
+                        log.append(m)
+                        for name, img in pictures.items():
+                            if name not in extra and name != "overlay":
+                                extra[name] = stack.enter_context(
+                                    VideoWriter(out / f"{name}.mp4", fps=video.fps)
+                                )
+                            (vw if name == "overlay" else extra[name]).write(img)
                     bar.update()
             except KeyboardInterrupt as exc:
                 clear_pending()
                 if not len(log) or not vw.n_frames:
                     raise  # nothing kept: as an error, nothing is left
                 interrupted = exc  # the writers close and keep the frames so far
-                release = _hold_signals()  # while they do, a second signal waits
+                keep.enter_context(held())  # while they do, a second signal waits
             if not len(log):
                 raise MyofaceValueError(f"{video.path}: the video has no frames")
             if interrupted is None and not any(q == "ok" for q in log.quality):
@@ -385,31 +498,7 @@ def _measure_into(run, model, out, show_progress):
     except BaseException:
         if interrupted is None:
             csv.discard()
-        release()
         raise
     finally:
         csv.close()
-    return log, interrupted, release
-
-
-def _hold_signals():
-    """Ignore SIGINT, SIGTERM and SIGHUP (main thread only) until the returned function is
-    called, which restores their handlers: after a first interruption, the kept frames are
-    written whole even when the user presses Ctrl-C again (the run is stopping anyway)."""
-    import signal
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        return lambda: None
-    old = {}
-    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
-        sig = getattr(signal, name, None)
-        if sig is not None:
-            old[sig] = signal.signal(sig, signal.SIG_IGN)
-
-    def release() -> None:
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
-        old.clear()
-
-    return release
+    return log, interrupted

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 from myoface.commands._common import (
     add_analysis_arguments,
     add_face_argument,
@@ -41,7 +44,15 @@ Writes into the output folder:
   fidelity.json/png  (--report) how much of the input's expression motion the model
                      reproduces, per region: the model's own vertices against the video read
                      by DIS optical flow (validated on known warps); beside it, labelled,
-                     the earlier measure (MediaPipe's face mesh on the video and the render)"""
+                     the earlier measure (MediaPipe's face mesh on the video and the render)
+
+The output folder is written as one transaction: the run writes into a temporary folder
+beside it (.NAME.myoface-run-*) and its files replace the earlier run's only when it succeeds
+(or is interrupted: then with what it completed, analysis.json saying "interrupted"); a
+failed run leaves the earlier results as they were. Other files in the folder (yours) are
+never touched. While a run writes the folder, its lock file (.myoface.lock) names it and a
+second run into the folder is refused; the folder may not be the input or inside it.
+Ctrl-C, SIGTERM or SIGHUP stop the run within a second or two and keep what was complete."""
 
 
 def add_arguments(p):
@@ -76,15 +87,45 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from myoface._io import check_output_dir, check_output_path
+    from myoface._io import OutputConflictError
+
+    try:
+        return _run(args)
+    except OutputConflictError as exc:  # a usage error, said before any work
+        return refuse(args, exc)
+
+
+def refuse(args, exc) -> int:
+    """Say ``exc`` (an :class:`~myoface._io.OutputConflictError`: an output that is an input,
+    or a folder another run writes) in one line, as the command line's usage errors are,
+    and return their exit status (2)."""
+    import sys
+
+    prog = getattr(args, "_prog", None) or f"myoface {getattr(args, 'command', NAME)}"
+    print(f"{prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+    return int(getattr(exc, "exit_status", 2))
+
+
+def _inputs(args) -> dict:
+    """The command's input files, by what they are (for :func:`~myoface._io.check_not_input`)."""
+    from pathlib import Path
+
+    video = "the input folder" if Path(args.video).is_dir() else "the input video"
+    return {video: args.video, "--init": args.init, "--face": args.face, "--muscles": args.muscles}
+
+
+def _run(args) -> int:
+    from myoface._io import check_not_input, check_output_dir, check_output_path
     from myoface.analysis.initfiles import load_init
-    from myoface.analysis.outputs import draw_contours
+    from myoface.analysis.outputs import ANALYSIS_FILES, analysis_transaction, draw_contours
     from myoface.analysis.video import open_video
     from myoface.render import write_image
 
     if args.check_init:
+        check_not_input(args.check_init, _inputs(args), "--check-init")
         check_output_path(args.check_init, "--check-init")
     elif args.output:
+        check_not_input(args.output, _inputs(args), "-o", names=ANALYSIS_FILES)
         check_output_dir(args.output, "-o")
     video = open_video(args.video)
     if args.check_init:
@@ -104,18 +145,20 @@ def run(args) -> int:
         load_init(settings["init"])  # a bad file fails before the model is built
     if args.report:
         check_report_possible()  # before the analysis, not after it
-    fm = load_model(args)
-    analyze_video(
-        video,
-        args.output,
-        model=fm,
-        settings=settings,
-        face=args.face,
-        fmt=args.format,
-        report=args.report,
-        quiet=args.quiet,
-        video_path=args.video,
-    )
+    # the output folder's lock and checks before the model is built: a refusal comes at once
+    with analysis_transaction(args.output, args.video, inputs=_inputs(args)) as tx:
+        fm = load_model(args)
+        analyze_video(
+            video,
+            tx,
+            model=fm,
+            settings=settings,
+            face=args.face,
+            fmt=args.format,
+            report=args.report,
+            quiet=args.quiet,
+            video_path=args.video,
+        )
     return 0
 
 
@@ -154,6 +197,7 @@ def analyze_video(
     from myoface.analysis.outputs import analyze_to_folder
 
     video_path = video if video_path is None else video_path
+    lines: list[str] = []  # the report's, said once its files are in place
     res = analyze_to_folder(
         video,
         output,
@@ -162,36 +206,87 @@ def analyze_video(
         face=face,
         show_progress=not quiet,
         finish=lambda folder, res: _extra_outputs(
-            folder, video_path, model, face=face, fmt=fmt, report=report, quiet=quiet
+            folder, res, video_path, model, face=face, fmt=fmt, report=report, quiet=quiet,
+            lines=lines,
         ),
-    )
-    print(
-        f"analysed {len(res.frames)} frames ({res.n_measured} measured); "
-        f"output folder: {res.folder.resolve()}"
-    )
+    )  # fmt: skip
+    try:
+        for line in lines:
+            print(line)
+        print(
+            f"analysed {len(res.frames)} frames ({res.n_measured} measured); "
+            f"output folder: {res.folder.resolve()}"
+        )
+    except KeyboardInterrupt as exc:  # (the outputs are in place)
+        exc.add_note(f"the analysis was complete: {res.folder}")
+        raise
     return res
 
 
-def _extra_outputs(folder, video_path, model, *, face, fmt, report, quiet) -> None:
+def _extra_outputs(folder, res, video_path, model, *, face, fmt, report, quiet, lines) -> None:
     """openface.csv (``--format openface``) and the fidelity report (``--report``), made from
-    the analysis' finished files in ``folder``."""
+    the analysis' finished files in ``folder`` (the transaction's; ``res.folder`` is where
+    they go); after an interruption in the frames (``res.interrupted``), openface.csv only.
+    The report's printed lines are added to ``lines``."""
     if fmt == "openface":
         from myoface.analysis.openface import write_openface_csv
 
-        write_openface_csv(folder / "contractions.csv", folder / "openface.csv")
-    if report:
-        from myoface.analysis.fidelity import write_fidelity_report
+        res.stage = "openface"
+        try:
+            write_openface_csv(folder / "contractions.csv", folder / "openface.csv")
+        except KeyboardInterrupt as exc:
+            exc.add_note("openface.csv (--format openface) was not made")
+            raise
+    if not report:
+        return
+    if res.interrupted is not None:
+        res.notes.append("the fidelity report (--report) was not made")
+        return
+    from myoface.analysis.fidelity import write_fidelity_report
 
+    res.stage = "report"
+    try:
         # the person's own face from the calibration frame, unless a face was given
-        res = write_fidelity_report(
+        fid = write_fidelity_report(
             folder,
             video_path,
             model=model if face else None,
             fallback_model=model,  # when no face is found on the calibration frame
             show_progress=not quiet,
         )
-        for line in fidelity_lines(res, folder / "fidelity.json"):
-            print(line)
+        _name_final_paths(folder / "fidelity.json", folder, res.folder)
+    except KeyboardInterrupt as exc:
+        from myoface.analysis.outputs import REPORT_FILES
+
+        for name in REPORT_FILES:  # a report is both files or none
+            (folder / name).unlink(missing_ok=True)
+        exc.add_note("the fidelity report (--report) was not made")
+        raise
+    lines.extend(fidelity_lines(fid, res.folder / "fidelity.json"))
+
+
+def _name_final_paths(path, folder, final) -> None:
+    """The JSON file ``path`` with the paths into ``folder`` (the transaction's) written as
+    into ``final``, where the files will be."""
+    import json
+
+    from myoface._io import atomic_output
+
+    src = str(Path(folder).resolve())
+    dst = str(Path(final).resolve())
+
+    def fix(v):
+        if isinstance(v, str) and (v == src or v.startswith(src + os.sep)):
+            return dst + v[len(src) :]
+        if isinstance(v, dict):
+            return {k: fix(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [fix(x) for x in v]
+        return v
+
+    doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(fix(doc), indent=1), encoding="utf-8")
 
 
 def fidelity_lines(res, path=None) -> list[str]:

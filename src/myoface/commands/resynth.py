@@ -29,8 +29,19 @@ def add_arguments(p):
 
 
 def run(args) -> int:
-    from myoface._io import check_output_path
+    from myoface._io import OutputConflictError, check_not_input, check_output_path
+    from myoface.commands.analyze import refuse
 
+    inputs = {
+        "the contractions CSV": args.csv,
+        "the --side-by-side video": args.side_by_side,
+        "--face": args.face,
+        "--muscles": args.muscles,
+    }
+    try:  # never over an input (or inside an input folder): a usage error, before any work
+        check_not_input(args.output, inputs, "-o")
+    except OutputConflictError as exc:
+        return refuse(args, exc)
     if not args.output.lower().endswith((".mp4", ".mov", ".mkv", ".avi")):
         raise MyofaceValueError(f"-o must be a video file (.mp4); got {args.output}")
     check_output_path(args.output, "-o")
