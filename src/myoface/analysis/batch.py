@@ -13,6 +13,12 @@ The output folder also gets ``summary.parquet`` and ``summary.csv``, one row per
 run (:data:`SUMMARY_COLUMNS`, then ``mean_<muscle>`` columns), each written whole (a
 temporary file renamed).
 
+A stop signal (Ctrl-C's SIGINT, SIGTERM, SIGHUP; in the main thread) stops the batch: no video
+starts after it, the videos being analysed are stopped (within :data:`STOP_GRACE_S`; each
+keeps what ``myoface analyze`` keeps when stopped, without done.json), the summary is written
+with every video that finished (in this run, or in an earlier one: ``skipped``), and
+:class:`~myoface._signals.Interrupted` is raised, noting what was kept.
+
 Engines:
 
 - ``"local"``: a pool of ``workers`` processes on this machine (plain calls in this process
@@ -33,18 +39,21 @@ analyze`` (:func:`~myoface.analysis.outputs.analyze_to_folder`), the same for ev
 
 from __future__ import annotations
 
+import concurrent.futures as cf
 import contextlib
 import glob
 import importlib
 import json
 import math
 import os
+import signal
 import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from myoface._io import atomic_output, ensure_output_dir, sha256_file
+from myoface._signals import STOP_SIGNALS, Interrupted, raise_pending, stop_signals
 from myoface.analysis.estimate import skin_response
 from myoface.analysis.initfiles import load_init
 from myoface.analysis.outputs import FolderResult, analyze_to_folder
@@ -64,8 +73,10 @@ from myoface.render import progress
 
 __all__ = [
     "ENGINES",
-    "FolderResult",
+    "STOP_GRACE_S",
     "SUMMARY_COLUMNS",
+    "FolderResult",
+    "LocalPool",
     "analyze_to_folder",
     "cached_model",
     "expand_videos",
@@ -280,14 +291,28 @@ def _error_text(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {msg}" if msg else type(exc).__name__
 
 
+def _thread_lock_for_bars() -> None:
+    """tqdm's lock in this worker process, unless it has one: a thread lock. Its default is
+    also a named semaphore, which a worker killed by the batch's stop (its Dask cluster closed,
+    its video past :data:`STOP_GRACE_S`) leaves behind, and which multiprocessing's resource
+    tracker then reports ("leaked semaphore objects") as the batch exits; a worker's progress
+    bars are off."""
+    import tqdm
+
+    if not hasattr(tqdm.tqdm, "_lock"):
+        tqdm.tqdm.set_lock(threading.RLock())
+
+
 def analyze_job(job: _Job) -> dict:
     """Analyse one video into its folder and return its summary row; never raises for a bad
-    video (the row says why it failed). Runs on a worker."""
+    video (the row says why it failed), only for an interruption (KeyboardInterrupt, after
+    which the folder has no done.json). Runs on a worker."""
     if job.single_thread:
         # one video per worker thread: the numba kernels use this thread only
         import numba
 
         numba.set_num_threads(1)
+        _thread_lock_for_bars()
 
     s = job.settings
     t0 = time.perf_counter()
@@ -332,97 +357,442 @@ def analyze_job(job: _Job) -> dict:
         return _failed_row(job, _error_text(exc), time.perf_counter() - t0)
 
 
+# ------------------------------------------------------------------------------ stopping
+
+# A stop signal (SIGINT, SIGTERM, SIGHUP: myoface._signals.STOP_SIGNALS) stops a batch so:
+# no video starts after it; the videos being analysed are stopped (each keeps what analyze
+# keeps when interrupted, and gets no done.json: the next run analyses it again); the
+# summary of every finished video is written; Interrupted is raised (myoface prints one line
+# and exits with 128 + the signal's number).
+#
+# - The process that schedules the videos must not have the signal raised where it lands (in
+#   a pool's submit, which starts a worker process, or in the summary being written): there
+#   it is only noted (_noted_stop_signals), and the scheduling loops look at it between their
+#   short waits (_POLL_S).
+# - A video analysed in this process (one worker) runs under _signals.stop_signals, as
+#   analyze's does: the signal raises Interrupted in it, except in the steps the analysis
+#   holds it off.
+# - A local pool's workers start with the stop signals blocked (the terminal's Ctrl-C goes
+#   to the whole process group: a second signal sent to them would cut the first one's
+#   clean-up); they take SIGTERM only, which this process sends once (LocalPool), and which
+#   stops a video as above. A Dask LocalCluster's workers keep SIGINT and SIGHUP blocked:
+#   closing the cluster stops them.
+
+#: how long (s) the videos being analysed get to stop after a stop signal, before their
+#: worker processes are killed (a video stops at its next frame, then writes what it kept)
+STOP_GRACE_S = 2.0
+#: how often (s) the loops that wait (for a video, for a scheduler) look for a stop signal
+_POLL_S = 0.1
+_STOP_SIGNALS = tuple(getattr(signal, n) for n in STOP_SIGNALS if hasattr(signal, n))
+#: the stop signals a terminal sends to every process of its foreground group
+_TERMINAL_SIGNALS = tuple(s for s in _STOP_SIGNALS if s != getattr(signal, "SIGTERM", None))
+
+
+class _Stop:
+    """A batch's stop: the number of its first stop signal, or None."""
+
+    signum: int | None = None
+
+
+_NOTED: list[_Stop] = []  # the batch whose stop signals this process notes (main thread)
+_WORKER_SIGNAL_AT = [-math.inf]  # in a pool worker: when a stop signal last came
+
+
+def _note_stop_signal(signum, frame):
+    """The stop signals' handler while a batch schedules its videos: the signal is noted."""
+    for stop in _NOTED[-1:]:
+        if stop.signum is None:
+            stop.signum = int(signum)
+
+
+def _on_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+@contextlib.contextmanager
+def _noted_stop_signals():
+    """A :class:`_Stop` whose ``signum`` the stop signals set in the block (main thread; a
+    signal the caller ignores or leaves to the system's default is left alone)."""
+    stop = _Stop()
+    if not _on_main_thread():  # (signals are the main thread's)
+        yield stop
+        return
+    raise_pending()  # a stop signal that came before and was not raised
+    old = {}
+    _NOTED.append(stop)
+    try:
+        for sig in _STOP_SIGNALS:
+            if callable(signal.getsignal(sig)):  # it raises (KeyboardInterrupt, Interrupted)
+                old[sig] = signal.signal(sig, _note_stop_signal)
+        yield stop
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        _NOTED.remove(stop)
+
+
+@contextlib.contextmanager
+def _signals_blocked(signals=_STOP_SIGNALS):
+    """``signals`` blocked in this thread for the block: a process started in it starts with
+    them blocked (as multiprocessing's resource tracker starts), as do the threads started in
+    it (the Dask cluster's event loop, which starts the cluster's workers)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    from multiprocessing import resource_tracker
+
+    # the tracker, started by the first process or lock of multiprocessing, unblocks SIGINT
+    # and SIGTERM in the thread that starts it: started here first
+    resource_tracker.ensure_running()
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, signals)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 # ------------------------------------------------------------------------------ engines
 
 
-def local_pool(workers: int, initializer=None, initargs=()):
+class LocalPool(cf.ProcessPoolExecutor):
+    """The local engine's pool of worker processes (:func:`local_pool`), which a batch stops
+    at a stop signal: its workers start with the stop signals blocked and then take SIGTERM
+    only, which stops the video a worker is analysing and is noted between videos."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        with _signals_blocked():  # (submit starts the worker processes)
+            return super().submit(fn, *args, **kwargs)
+
+    def _signal_workers(self, signum: int | None) -> None:
+        """Send ``signum`` to each worker process (None: kill them)."""
+        for proc in list((self._processes or {}).values()):  # (the base class's processes)
+            with contextlib.suppress(OSError, ValueError, AttributeError):
+                if signum is None:
+                    proc.kill()
+                elif proc.is_alive():
+                    os.kill(proc.pid, signum)
+
+
+def _note_worker_signal(signum, frame):
+    """A pool worker's SIGTERM handler between videos: noted (:func:`_pool_job`)."""
+    _WORKER_SIGNAL_AT[0] = time.monotonic()
+
+
+def _start_worker(initializer=None, initargs=()) -> None:
+    """A local pool worker's start (:class:`LocalPool`): SIGTERM noted and unblocked (the
+    terminal's signals stay blocked), then the pool's ``initializer(*initargs)``."""
+    term = getattr(signal, "SIGTERM", None)
+    if term is not None:
+        signal.signal(term, _note_worker_signal)
+        if hasattr(signal, "pthread_sigmask"):
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, [term])
+    if initializer is not None:
+        initializer(*initargs)
+
+
+def local_pool(workers: int, initializer=None, initargs=()) -> LocalPool:
     """A pool of ``workers`` processes for the local engine (spawned, not forked: this process
     may hold numba's and OpenMP's threads); ``initializer(*initargs)`` runs in each as it
-    starts (e.g. :func:`warm_model`, to build the model before the first video)."""
-    import concurrent.futures as cf
+    starts (e.g. :func:`warm_model`, to build the model before the first video). A batch's
+    stop signal stops the videos its workers are analysing (:class:`LocalPool`)."""
     import multiprocessing
 
     ctx = multiprocessing.get_context("spawn")
-    return cf.ProcessPoolExecutor(
-        max_workers=workers, mp_context=ctx, initializer=initializer, initargs=initargs
+    return LocalPool(
+        max_workers=workers,
+        mp_context=ctx,
+        initializer=_start_worker,
+        initargs=(initializer, initargs),
     )
 
 
-def _run_local(jobs: list[_Job], workers: int, record, executor=None) -> None:
-    """Run ``jobs`` (on ``executor``, a pool of ``workers`` processes, or in this process
-    when that is 1), calling ``record(k, row)`` as job ``k`` finishes."""
-    import concurrent.futures as cf
+def _pool_job(job: _Job) -> dict | None:
+    """:func:`analyze_job` in a pool's worker; None when a stop signal stopped the video, or
+    came (to the worker, between videos) in the last :data:`STOP_GRACE_S` s: it was sent as
+    this video was, to stop the batch that sent it."""
+    if _on_main_thread() and time.monotonic() - _WORKER_SIGNAL_AT[0] < STOP_GRACE_S:
+        return None
+    try:
+        with stop_signals():
+            row = analyze_job(job)
+            raise_pending()  # (a stop signal whose Interrupted a library made an error)
+            return row
+    except KeyboardInterrupt:
+        return None
 
+
+def _pool_row(fut, job: _Job) -> dict | None:
+    try:
+        return fut.result()
+    except KeyboardInterrupt:  # a worker of a pool not made by local_pool got a SIGINT
+        return None
+    except Exception as exc:  # the worker process died
+        return _failed_row(job, _error_text(exc))
+
+
+def _run_local(jobs: list[_Job], workers: int, record, stop: _Stop, closing, executor=None) -> None:
+    """Run ``jobs`` (on ``executor``, a pool of ``workers`` processes, or in this process
+    when that is 1), calling ``record(k, row)`` as job ``k`` finishes, until ``stop`` has a
+    stop signal (see "stopping" above). The pool this call starts is shut down by
+    ``closing`` (an ExitStack), after the summary is written (its workers take a second or
+    two to exit)."""
     if executor is None and (workers <= 1 or len(jobs) <= 1):
         for k, job in enumerate(jobs):
-            record(k, analyze_job(job))
+            if stop.signum is not None:
+                return
+            try:
+                with stop_signals():  # (the video is stopped as analyze's is)
+                    row = analyze_job(job)
+                    raise_pending()  # (a stop signal whose Interrupted a library made an error)
+            except KeyboardInterrupt as exc:
+                stop.signum = stop.signum or getattr(exc, "signum", signal.SIGINT)
+                return
+            record(k, row)
         return
     for job in jobs:
         job.single_thread = True
-    with contextlib.ExitStack() as stack:
-        if executor is None:
-            executor = stack.enter_context(local_pool(min(workers, len(jobs))))
-        futs = {executor.submit(analyze_job, job): k for k, job in enumerate(jobs)}
-        try:
-            for fut in cf.as_completed(futs):
-                k = futs[fut]
+    own = executor is None
+    if own:
+        executor = local_pool(min(workers, len(jobs)))
+        closing.callback(executor.shutdown, wait=True, cancel_futures=True)
+    # as many videos sent as there are workers to start them: the others are still here
+    # when a stop signal comes, and never start
+    slots = min(getattr(executor, "_max_workers", None) or workers, len(jobs))
+    waiting = list(range(len(jobs)))[::-1]
+    running: dict = {}
+    stop_by = None  # when the videos being analysed must have stopped
+    try:
+        while waiting or running:
+            if stop.signum is not None and stop_by is None:
+                waiting.clear()
+                stop_by = time.monotonic() + STOP_GRACE_S
+                if isinstance(executor, LocalPool):
+                    executor._signal_workers(signal.SIGTERM)
+            if stop_by is not None and time.monotonic() > stop_by:
+                break
+            while waiting and len(running) < slots:
+                k = waiting.pop()
                 try:
-                    row = fut.result()
-                except Exception as exc:  # the worker process died
-                    row = _failed_row(jobs[k], _error_text(exc))
-                record(k, row)
-        except BaseException:
-            for fut in futs:
-                fut.cancel()
-            raise
+                    running[executor.submit(_pool_job, jobs[k])] = k
+                except cf.BrokenExecutor as exc:  # a worker died: the pool takes no more
+                    for j in (k, *waiting[::-1]):
+                        record(j, _failed_row(jobs[j], _error_text(exc)))
+                    waiting.clear()
+            done, _ = cf.wait(running, timeout=_POLL_S, return_when=cf.FIRST_COMPLETED)
+            for fut in done:
+                k = running.pop(fut)
+                row = _pool_row(fut, jobs[k])
+                if row is None and stop.signum is None:
+                    row = _failed_row(jobs[k], "interrupted: its worker got a stop signal")
+                if row is not None:
+                    record(k, row)
+    finally:
+        for fut in running:
+            fut.cancel()
+        if own and running:  # still analysing after STOP_GRACE_S (or an error here)
+            executor._signal_workers(None)
+        if own and stop_by is not None:  # the workers exit (a second or two) as the summary
+            executor.shutdown(wait=False, cancel_futures=True)  # is written
 
 
-def connect(scheduler: str, timeout: float = SCHEDULER_TIMEOUT_S):
+def connect(scheduler: str, timeout: float = SCHEDULER_TIMEOUT_S, *, _stop: _Stop | None = None):
     """A ``distributed.Client`` of the scheduler at ``scheduler`` (e.g. ``tcp://host:8786``),
     once it has at least one worker; a :class:`MyofaceValueError` after ``timeout`` s
-    rather than a hang."""
+    (the whole wait: the scheduler's answer and its first worker) rather than a hang, and
+    one that names a peer that is not a Dask scheduler."""
     distributed = _require("distributed", "the dask engine")
+    from distributed.comm import parse_address, parse_host_port
+
+    stop = _stop or _Stop()
+    deadline = time.monotonic() + timeout
     try:
-        client = distributed.Client(scheduler, timeout=timeout)
+        scheme, loc = parse_address(scheduler)
+        host_port = parse_host_port(loc) if scheme == "tcp" else None
     except ValueError as exc:
         raise MyofaceValueError(f"--scheduler: not a scheduler address: {exc}") from None
-    except (OSError, TimeoutError) as exc:
-        raise MyofaceValueError(
-            f"--scheduler: no Dask scheduler answered at {scheduler} within {timeout:g} s ({exc})"
-        ) from None
-    try:
-        client.wait_for_workers(1, timeout=timeout)
-    except (OSError, TimeoutError):
-        client.close()
+    if host_port is not None:
+        _probe_scheduler(scheduler, host_port, timeout, deadline, stop)
+
+    # distributed.Client has no bound on its handshake's read (a peer that accepts and says
+    # nothing holds it for good): it is made in a thread, left behind at the deadline
+    box: dict = {"phase": "connect"}
+    lock = threading.Lock()
+
+    def make():
+        client = None
+        try:
+            client = distributed.Client(
+                scheduler, timeout=max(deadline - time.monotonic(), _POLL_S)
+            )
+            with lock:
+                box["phase"] = "workers"
+            client.wait_for_workers(1, timeout=max(deadline - time.monotonic(), _POLL_S))
+        except BaseException as exc:
+            with lock:
+                box["error"] = exc
+        with lock:
+            if "error" not in box and not box.get("abandoned"):
+                box["client"] = client
+                return
+        if client is not None:
+            with contextlib.suppress(Exception):
+                client.close()
+
+    t = threading.Thread(target=make, name="myoface-batch-connect", daemon=True)
+    t.start()
+    while t.is_alive() and time.monotonic() < deadline and stop.signum is None:
+        t.join(min(_POLL_S, max(deadline - time.monotonic(), 0)))
+    with lock:
+        if t.is_alive():
+            box["abandoned"] = True
+        phase, exc, client = box["phase"], box.get("error"), box.get("client")
+    if stop.signum is not None:
+        if client is not None:
+            with contextlib.suppress(Exception):
+                client.close()
+        raise Interrupted(stop.signum)
+    if client is not None:
+        return client
+    if phase == "workers" and (exc is None or isinstance(exc, TimeoutError)):
         raise MyofaceValueError(
             f"--scheduler: the Dask scheduler at {scheduler} has no worker after {timeout:g} s"
+        )
+    if exc is None:  # still waiting for its answer at the deadline
+        raise MyofaceValueError(
+            f"--scheduler: no Dask scheduler answered at {scheduler} within {timeout:g} s"
+        )
+    if phase == "workers":
+        raise MyofaceValueError(
+            f"--scheduler: the Dask scheduler at {scheduler} failed as batch waited for a "
+            f"worker ({_error_text(exc)})"
         ) from None
-    return client
+    if isinstance(exc, ValueError):
+        raise MyofaceValueError(f"--scheduler: not a scheduler address: {exc}") from None
+    if isinstance(exc, MemoryError):  # a length read from another protocol's bytes
+        raise MyofaceValueError(
+            f"--scheduler: {scheduler} is not a Dask scheduler (its answer is not Dask's)"
+        ) from None
+    raise MyofaceValueError(
+        f"--scheduler: no Dask scheduler answered at {scheduler} within {timeout:g} s "
+        f"({_error_text(exc)})"
+    ) from None
+
+
+#: the most bytes a Dask scheduler's first message (its handshake) may announce: it is a few
+#: hundred bytes; another protocol's greeting read as Dask's length is much more (an SSH
+#: banner's "SSH-2.0-" reads as 3e18 bytes: distributed fails with MemoryError)
+_MAX_HANDSHAKE_BYTES = 1 << 20
+
+
+def _probe_scheduler(scheduler, host_port, timeout, deadline, stop) -> None:
+    """Check, by ``deadline``, that the peer at ``host_port`` speaks first as a Dask
+    scheduler does: on a new connection it sends its handshake, which starts with the
+    8-byte little-endian length of what follows. A refused connection is tried again (the
+    scheduler may be starting)."""
+    import socket
+
+    def left() -> float:
+        return deadline - time.monotonic()
+
+    def check_stop() -> None:
+        if stop.signum is not None:
+            raise Interrupted(stop.signum)
+
+    why = ""
+    while True:
+        check_stop()
+        if left() <= 0:
+            raise MyofaceValueError(
+                f"--scheduler: no Dask scheduler answered at {scheduler} within {timeout:g} s"
+                f"{f' ({why})' if why else ''}"
+            )
+        try:
+            sock = socket.create_connection(host_port, timeout=min(left(), 1.0))
+            break
+        except OSError as exc:  # refused, unreachable, a name not found, timed out
+            why = " ".join((exc.strerror or str(exc) or type(exc).__name__).split())
+            time.sleep(max(min(_POLL_S * 2, left()), 0))
+    with sock:
+        data = b""
+        while len(data) < 8:
+            check_stop()
+            if left() <= 0:
+                raise MyofaceValueError(
+                    f"--scheduler: no Dask scheduler answered at {scheduler} within "
+                    f"{timeout:g} s (it accepted the connection and sent nothing"
+                    f"{f' but {data!r}' if data else ''})"
+                )
+            sock.settimeout(max(min(_POLL_S, left()), 0.001))
+            try:
+                chunk = sock.recv(256)
+            except TimeoutError:
+                continue
+            except OSError as exc:
+                raise MyofaceValueError(
+                    f"--scheduler: {scheduler} is not a Dask scheduler (the connection "
+                    f"failed before its answer: {exc.strerror or exc})"
+                ) from None
+            if not chunk:
+                raise MyofaceValueError(
+                    f"--scheduler: {scheduler} is not a Dask scheduler (it closed the "
+                    f"connection{f' after sending {data!r}' if data else ' without a word'})"
+                )
+            data += chunk
+        if int.from_bytes(data[:8], "little") > _MAX_HANDSHAKE_BYTES:
+            sock.settimeout(0.05)  # the rest of a greeting line, to show it whole
+            with contextlib.suppress(OSError):
+                while len(data) < 80 and b"\n" not in data:
+                    chunk = sock.recv(256)
+                    if not chunk:
+                        break
+                    data += chunk
+            shown = data[:80] + (b"..." if len(data) > 80 else b"")
+            raise MyofaceValueError(
+                f"--scheduler: {scheduler} is not a Dask scheduler (it answered {shown!r})"
+            )
 
 
 def start_local_cluster(workers: int):
     """A ``distributed.LocalCluster`` of ``workers`` single-threaded worker processes (its
-    dashboard on a free port) and its client."""
+    dashboard on a free port) and its client. Its processes start with SIGINT and SIGHUP
+    blocked: a terminal's Ctrl-C and hang-up, sent to all of them, would print Dask's
+    tracebacks; a stopped batch closes the cluster (:func:`_close_now`)."""
     import logging
 
     distributed = _require("distributed", "the dask engine")
-    cluster = distributed.LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=":0",
-        silence_logs=logging.ERROR,
-    )
-    return cluster, distributed.Client(cluster)
+    with _signals_blocked(_TERMINAL_SIGNALS):
+        cluster = distributed.LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=":0",
+            silence_logs=logging.CRITICAL,  # (its failures are in the rows; a stop is no error)
+        )
+        return cluster, distributed.Client(cluster)
 
 
-def _run_dask(jobs: list[_Job], client, record) -> None:
+async def _close_workers(workers, timeout: float) -> None:
+    import asyncio
+
+    await asyncio.gather(*(w.close(timeout=timeout) for w in workers), return_exceptions=True)
+
+
+def _close_now(cluster) -> None:
+    """Close the workers of ``cluster`` (a LocalCluster of a stopped batch) giving their
+    tasks :data:`STOP_GRACE_S` to end, not the 4 s of Dask's default, before they are killed
+    (a Dask task cannot be stopped)."""
+    cluster.sync(_close_workers, list(cluster.workers.values()), STOP_GRACE_S)
+
+
+def _run_dask(jobs: list[_Job], client, record, stop: _Stop) -> None:
     """Run ``jobs`` on the cluster of ``client``, calling ``record(k, row)`` as job ``k``
-    finishes."""
+    finishes, until ``stop`` has a stop signal: then the videos not finished
+    are cancelled (Dask does not stop a task that has started: on a cluster of the caller's,
+    its video goes on and is complete for the next run)."""
     import uuid
 
-    from distributed import as_completed
-
+    if stop.signum is not None:  # (it came as the cluster started)
+        return
     for job in jobs:
         job.single_thread = True
     tag = uuid.uuid4().hex[:8]
@@ -430,22 +800,27 @@ def _run_dask(jobs: list[_Job], client, record) -> None:
         client.submit(analyze_job, job, key=f"myoface-batch-{tag}-{i}", pure=False, retries=0): i
         for i, job in enumerate(jobs)
     }
+    pending = dict(futs)
     try:
-        for fut in as_completed(futs):
-            k = futs[fut]
-            if fut.status == "finished":
-                row = fut.result()
-            else:  # the worker died (KilledWorker), myoface is missing there, ...
-                try:
-                    exc = fut.exception()
-                except Exception as err:  # cancelled (e.g. by the cluster's owner)
-                    exc = err
-                row = _failed_row(jobs[k], _error_text(exc))
-            fut.release()
-            record(k, row)
-    except BaseException:
-        client.cancel(list(futs))
-        raise
+        while pending and stop.signum is None:
+            done = [f for f in pending if f.done()]
+            if not done:
+                time.sleep(_POLL_S)
+            for fut in done:
+                k = pending.pop(fut)
+                if fut.status == "finished":
+                    row = fut.result()
+                else:  # the worker died (KilledWorker), myoface is missing there, ...
+                    try:
+                        exc = fut.exception()
+                    except Exception as err:  # cancelled (e.g. by the cluster's owner)
+                        exc = err
+                    row = _failed_row(jobs[k], _error_text(exc))
+                fut.release()
+                record(k, row)
+    finally:
+        if pending:
+            client.cancel(list(pending))
 
 
 # ------------------------------------------------------------------------------ summary
@@ -534,7 +909,7 @@ def run_batch(
     workers : processes (local) or LocalCluster workers (dask); default: the cores of this
         machine. Not used with ``scheduler`` or ``client``.
     scheduler : the address of a running Dask scheduler (``tcp://host:8786``) to use instead
-        of a LocalCluster; ``timeout`` s to reach it and find a worker.
+        of a LocalCluster; ``timeout`` s, in all, for it to answer and have a worker.
     client : a ``distributed.Client`` to use (left open).
     executor : for the local engine, a ``concurrent.futures`` executor to use (left open),
         e.g. a :func:`local_pool` kept for several batches.
@@ -549,6 +924,15 @@ def run_batch(
     -------
     list of dict — the summary rows, in the order of ``videos``: the keys of
     :data:`SUMMARY_COLUMNS` and ``means`` ({muscle: mean contraction}).
+
+    Raises
+    ------
+    Interrupted
+        (a KeyboardInterrupt) after a stop signal, once the summary of the videos that
+        finished is written (module docstring); its note says what was kept.
+    MyofaceValueError
+        For a bad argument, and for a ``scheduler`` that does not answer, is not a Dask
+        scheduler or has no worker within ``timeout`` s (nothing is written then).
     """
     if engine not in ENGINES:
         raise MyofaceValueError(f"engine must be one of {ENGINES}; got {engine!r}")
@@ -593,10 +977,14 @@ def run_batch(
         raise MyofaceValueError(PHOTOMETRIC_NOT_PAPER)
     if workers is None:
         workers = os.cpu_count() or 1
-    if not (isinstance(workers, int) and workers >= 1):
+    if not (_is_int(workers) and workers >= 1):
         raise MyofaceValueError(f"workers must be an integer >= 1; got {workers!r}")
-    if not (isinstance(timeout, int | float) and timeout > 0):
-        raise MyofaceValueError(f"timeout must be > 0 s; got {timeout!r}")
+    if not (
+        isinstance(timeout, int | float)
+        and not isinstance(timeout, bool)
+        and 0 < timeout < math.inf
+    ):
+        raise MyofaceValueError(f"timeout must be a number of seconds > 0; got {timeout!r}")
     if (scheduler is not None or client is not None) and engine != "dask":
         raise MyofaceValueError("a Dask scheduler or client needs engine='dask'")
     if executor is not None and engine != "local":
@@ -604,7 +992,7 @@ def run_batch(
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise MyofaceValueError(f"-o: {out} exists and is not a folder")
-    _require("pyarrow", "the batch summary")
+    _require("pyarrow.parquet", "the batch summary")  # (loaded now: not when a stop is due)
     if engine == "dask":
         _require("distributed", "the dask engine")
     if muscles is not None and face is None:
@@ -646,11 +1034,14 @@ def run_batch(
 
     paths = expand_videos([videos] if isinstance(videos, str | os.PathLike) else videos, out)
     own: list = []  # the client / cluster this call opened, closed at the end
-    if engine == "dask" and client is None and scheduler is not None:
-        client = connect(scheduler, timeout)  # fail before anything is written
-        own.append(client)
+    cluster = None
     rows: dict[int, dict] = {}
-    try:
+    with _noted_stop_signals() as stop, contextlib.ExitStack() as closing:
+        closing.callback(lambda: [thing.close() for thing in reversed(own)])
+        if engine == "dask" and client is None and scheduler is not None:
+            # fail (or stop) before anything is written
+            client = connect(scheduler, timeout, _stop=stop)
+            own.append(client)
         out = ensure_output_dir(out)
         names = result_folders(paths, out)
         todo: list[tuple[int, _Job]] = []
@@ -669,18 +1060,38 @@ def run_batch(
 
         try:
             jobs = [j for _, j in todo]
-            if jobs and engine == "local":
-                _run_local(jobs, workers, record, executor)
-            elif jobs:
+            if jobs and stop.signum is None and engine == "local":
+                _run_local(jobs, workers, record, stop, closing, executor)
+            elif jobs and stop.signum is None:
                 if client is None:
                     cluster, client = start_local_cluster(min(workers, len(jobs)))
-                    own += [client, cluster]
-                _run_dask(jobs, client, record)
+                    own += [cluster, client]
+                _run_dask(jobs, client, record, stop)
         finally:
             bar.close()
+            signum = stop.signum
+            if signum is not None:
+                # a stop signal: the cluster this call started goes first (its workers
+                # killed), then every video that finished is summarised, those whose row
+                # did not come back (killed once finished) from their done.json
+                for thing in reversed(own):
+                    with contextlib.suppress(Exception):
+                        if thing is cluster:
+                            _close_now(cluster)
+                        thing.close()
+                own.clear()
+                for i, (p, name) in enumerate(zip(paths, names, strict=True)):
+                    if i not in rows and (row := _is_done(out / name, p, settings)) is not None:
+                        rows[i] = {**row, "path": str(p), "folder": name}
             # what is known so far (all of it, unless interrupted)
             write_summary([rows[i] for i in sorted(rows)], out)
-    finally:
-        for thing in own:
-            thing.close()
+        if signum is not None:
+            n = {s: sum(r["status"] == s for r in rows.values()) for s in STATUSES}
+            exc = Interrupted(signum)
+            exc.add_note(
+                f"{len(paths)} videos: {n['ok']} analysed, {n['skipped']} already done, "
+                f"{n['failed']} failed, {len(paths) - len(rows)} not finished (run the same "
+                f"command again to resume); summary: {out.resolve() / 'summary.csv'}"
+            )
+            raise exc
     return [rows[i] for i in range(len(paths))]

@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
-from myoface.commands._common import add_analysis_arguments, add_face_argument, analysis_settings
+from myoface.commands._common import (
+    add_analysis_arguments,
+    add_face_argument,
+    analysis_settings,
+    integer,
+    number,
+)
 from myoface.errors import MyofaceValueError
 
 NAME = "batch"
 HELP = "analyse many videos (files or glob patterns), on this machine or on a Dask cluster"
+#: the most worker processes ``--workers`` starts
+MAX_WORKERS = 1024
+#: the longest ``--timeout``, s (a day: a cluster's workers may wait in a queue for hours)
+MAX_TIMEOUT_S = 86400.0
 DESCRIPTION = """Analyse many face videos as `myoface analyze` does, one result folder per video
 under the output folder (named after the video; clip, clip-2, ... when names repeat), and
 summarise them in OUT/summary.parquet and OUT/summary.csv: per video its path, status
@@ -18,6 +28,14 @@ those of `myoface analyze`, the same for every video.
 Resumable: a folder holding a complete result (its done.json, written last, names the same
 video and settings) is skipped. A video that fails is recorded with its error and the batch
 goes on; the exit status is then 1.
+
+Stopping: at Ctrl-C (SIGINT), SIGTERM or SIGHUP no video starts any more, those being
+analysed stop (within about 2 s; each keeps what analyze keeps when stopped, and is analysed
+again by the next run), the summary is written with every video finished (in this run or an
+earlier one), and batch exits with status 128 + the signal's number.
+
+--timeout bounds the whole wait for --scheduler: its answer and its first worker. A peer that
+is not a Dask scheduler (e.g. an SSH server) is named as such.
 
 Engines (pip install "myoface[batch]"):
   local  a pool of --workers processes on this machine (default)
@@ -52,16 +70,16 @@ def add_arguments(p):
     )
     p.add_argument(
         "--workers",
-        type=int,
+        type=integer(1, MAX_WORKERS),
         metavar="N",
         help="worker processes on this machine (default: the number of cores)",
     )
     p.add_argument(
         "--timeout",
-        type=float,
+        type=number(0.0, MAX_TIMEOUT_S, lo_open=True, unit=" s"),
         default=None,
         metavar="S",
-        help="seconds to wait for --scheduler and a worker of it (default 10)",
+        help="seconds to wait, in all, for --scheduler to answer and to have a worker (default 10)",
     )
     add_analysis_arguments(p.add_argument_group("the analysis of each video (as myoface analyze)"))
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -83,11 +101,8 @@ def run(args) -> int:
             "--workers sizes the cluster batch starts; with --scheduler the cluster's own "
             "workers are used"
         )
-    if args.workers is not None and args.workers < 1:
-        raise MyofaceValueError(f"--workers must be >= 1; got {args.workers}")
+    # (--workers and --timeout are in their limits: the parser's types, exit status 2)
     timeout = SCHEDULER_TIMEOUT_S if args.timeout is None else args.timeout
-    if not timeout > 0:
-        raise MyofaceValueError(f"--timeout must be > 0 s; got {args.timeout}")
     if args.timeout is not None and not args.scheduler:
         raise MyofaceValueError("--timeout is for --scheduler")
     settings = analysis_settings(args)
