@@ -303,6 +303,18 @@ SCENARIOS = {
         _stage("resynthesis", "SIGINT"),
     ),
     "stage:end": ([*ANALYZE, "{clip.mp4}", *REPORT, "-o", "out"], _stage("end", "SIGINT")),
+    # resynth: the signal comes as its third frame is encoded
+    "resynth": (
+        ["resynth", "out/contractions.csv", "--side-by-side", "{clip.mp4}"]
+        + ["-o", "out/resynth.mp4", "--quiet"],
+        {
+            "target": "myoface.render.io:VideoWriter.write",
+            "nth": 3,
+            "signal": "SIGHUP",
+            "delay": 0.3,
+            "pause": 5.0,
+        },
+    ),
     # the signal comes as the fourth frame's overlay picture is written (after its row)
     "snakes": (
         [*_SNAKES, "{clip.mp4}", "-o", "out"],
@@ -347,7 +359,12 @@ def runs(request, inputs, earlier_run, tmp_path_factory):
     def run(name):
         argv, stage = SCENARIOS[name]
         d = tmp_path_factory.mktemp(name.replace(":", "-"))
+        if name == "resynth":  # (an earlier resynthesis, which it is to replace)
+            shutil.copy(inputs / "clip.mp4", earlier_copy := d / "resynth.mp4")
         out, before = _copy_earlier(earlier_run, d)
+        if name == "resynth":
+            earlier_copy.rename(out / "resynth.mp4")
+            before = snapshot(out)
         argv = [
             str(inputs / a[1:-1]) if a.startswith("{") else a for a in argv
         ]  # (the inputs' paths)
@@ -515,6 +532,21 @@ def test_an_interrupted_snakes_run_keeps_as_many_pictures_as_rows(runs, scenario
     assert _rows(out / "contractions.csv") == _rows(out / "openface.csv") == 4
     assert _video_frames(out / "overlay.mp4") == _video_frames(out / "potential.mp4") == 4
     _check_user_files(out)
+
+
+@needs_mediapipe
+@pytest.mark.parametrize("scenario", ["resynth"])
+def test_an_interrupted_resynth_leaves_the_earlier_video(runs, scenario):
+    """``myoface resynth`` stopped (SIGHUP) as it renders: exit status 129 within 2 s, one
+    line, the earlier video at ``-o`` byte-identical and no temporary file left (a video is
+    complete only when all its frames are)."""
+    code, _, err, rec, out, before = runs[scenario].result()
+    assert code == 128 + signal.SIGHUP and rec is not None, err
+    assert _one_line(err, "myoface resynth: interrupted (SIGHUP)") == (
+        "myoface resynth: interrupted (SIGHUP)"
+    )
+    assert rec["returned"] - (rec["reached"] + 0.3) < 2.0
+    assert snapshot(out) == before
 
 
 # ------------------------------------------------------- #6: one writer per folder
