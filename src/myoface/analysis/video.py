@@ -76,7 +76,12 @@ class Video:
         A movie whose frames end before the number its container declares (a file cut
         short or damaged; a decoding error after the first frame ends it too) gives the
         frames there are and warns (a :class:`~myoface.errors.MyofaceWarning` naming both
-        counts); stopped early (closed), it says nothing."""
+        counts); stopped early (closed), it says nothing. A subclass that gives its frames
+        by its own ``__iter__`` (frames made in memory) has them ``1 / fps`` apart."""
+        if type(self).__iter__ is not Video.__iter__:
+            for k, f in enumerate(self):
+                yield k / self.fps, f
+            return
         if self._files is not None:
             from myoface.face.image import read_image
 
