@@ -1,6 +1,6 @@
-"""Teeth in the mouth: visible in a broad smile, the upper edges between parted lips at rest, the
-lower ones with the jaw; the lips never pass through the teeth or each other (hypothesis,
-relaxed tissue)."""
+"""Teeth in the mouth: hidden behind the closed lips at rest, visible in a broad smile and when the
+lips part, the lower ones with the jaw; the lips never pass through the teeth or each other
+(hypothesis, relaxed tissue)."""
 
 import numpy as np
 import pytest
@@ -40,33 +40,39 @@ def _teeth_pixels(renderer, fm, state) -> int:
     return int(((g > BRIGHT_GREEN) & (r - g < 30)).sum())
 
 
-def test_upper_incisors_show_between_parted_lips_at_rest(fm, renderer):
-    """The default face rests with its lips 5.5 mm apart: the upper incisors' edges show
-    below the upper lip (REST_DISPLAY_MM, Vig & Brundo 1978), the lower ones do not."""
-    from myoface.face.teeth import REST_DISPLAY_MM
+def test_closed_lips_hide_the_teeth_at_rest(fm, renderer):
+    """The default face rests with its lips together (issue 34): no tooth shows. The upper
+    incisal edge lies REST_DISPLAY_MM below the upper lip's margin (Vig & Brundo 1978), behind
+    the lower lip; the lower one behind the lower lip, INCISAL_REST_GAP_MM below the upper."""
+    from myoface.face.teeth import INCISAL_REST_GAP_MM, REST_DISPLAY_MM
 
-    assert _teeth_pixels(renderer, fm, fm.rest_state()) > 0
+    assert _teeth_pixels(renderer, fm, fm.rest_state()) == 0
     d = renderer.dentition
     lm = fm.face.landmarks
     v = fm.face.vertices
     mid_u = v[lm["lip_upper_inner"][len(lm["lip_upper_inner"]) // 2], 1]
     mid_l = v[lm["lip_lower_inner"][len(lm["lip_lower_inner"]) // 2], 1]
     assert mid_u - d.upper.edge_y == pytest.approx(REST_DISPLAY_MM * d.scale)
-    assert d.lower.edge_y < mid_l  # behind the lower lip
+    assert d.upper.edge_y < mid_l  # below the lower lip's margin: the lower lip covers it
+    assert d.upper.edge_y - d.lower.edge_y == pytest.approx(INCISAL_REST_GAP_MM * d.scale)
 
 
-def test_lips_that_meet_hide_the_teeth(fm):
-    """A face whose lips meet at rest: the upper incisal edge stays behind the lips."""
-    from myoface.face.teeth import EDGE_HIDDEN_MM, fit_dentition
+def test_upper_incisors_show_when_the_lips_part(fm, renderer):
+    """Lips parted at rest (the default face's lower lip lowered by 5 mm, as the canonical
+    mesh's was): the upper incisors show below the upper lip, the lower ones stay behind the
+    lower lip."""
+    from myoface.face.teeth import EDGE_HIDDEN_MM, REST_DISPLAY_MM, fit_dentition
 
     lm = fm.face.landmarks
     v = fm.face.vertices.copy()
     ui, li = lm["lip_upper_inner"], lm["lip_lower_inner"]
-    gap = v[ui[len(ui) // 2], 1] - v[li[len(li) // 2], 1]
-    v[np.r_[li, lm["lip_lower_outer"]], 1] += gap - 0.1  # the lower lip raised to the upper
+    lower = np.r_[li[1:-1], lm["lip_lower_outer"][1:-1]]
+    v[lower, 1] -= 5.0
     d = fit_dentition(fm.face.with_vertices(v))
-    assert d.upper.edge_y >= v[li[len(li) // 2], 1] + EDGE_HIDDEN_MM - 1e-9
-    assert d.upper.edge_y <= v[ui[len(ui) // 2], 1] + EDGE_HIDDEN_MM + 1e-9
+    mid_u, mid_l = v[ui[len(ui) // 2], 1], v[li[len(li) // 2], 1]
+    assert mid_u - d.upper.edge_y == pytest.approx(REST_DISPLAY_MM * d.scale)
+    assert d.upper.edge_y > mid_l  # between the lips
+    assert d.lower.edge_y == pytest.approx(mid_l - EDGE_HIDDEN_MM)
 
 
 def test_teeth_visible_in_a_broad_smile(fm, renderer):
@@ -165,8 +171,17 @@ def test_teeth_placed_from_the_lips_of_any_face(fm):
     assert d1.upper.z0 == pytest.approx(1.2 * (d0.upper.z0 + g) - g + 2.0)
     # the upper edge a display proportional to the mouth's size below the lip's margin
     assert d1.upper.edge_y == pytest.approx(1.2 * d0.upper.edge_y - 5.0)
-    e = EDGE_HIDDEN_MM  # the lower edge a fixed distance below the lower lip's margin
-    assert d1.lower.edge_y == pytest.approx(1.2 * (d0.lower.edge_y + e) - e - 5.0)
+    # with the lips closed, the lower edge a rest gap proportional to the mouth's size below
+    # the upper edge (the lower lip's margin is above it)
+    assert d1.lower.edge_y == pytest.approx(1.2 * d0.lower.edge_y - 5.0)
+    # with the lips apart, a fixed distance below the lower lip's margin
+    lm = face.landmarks
+    v = face.vertices.copy()
+    v[np.r_[lm["lip_lower_inner"][1:-1], lm["lip_lower_outer"][1:-1]], 1] -= 5.0
+    d2 = fit_dentition(face.with_vertices(v))
+    d3 = fit_dentition(face.with_vertices(1.2 * v + np.array([3.0, -5.0, 2.0])))
+    e = EDGE_HIDDEN_MM
+    assert d3.lower.edge_y == pytest.approx(1.2 * (d2.lower.edge_y + e) - e - 5.0)
     # no lip landmarks, no teeth
     from myoface.face import FaceMesh
 

@@ -104,6 +104,9 @@ def test_symmetric_face_renders_symmetric():
 
 
 def test_rendered_face_has_eyes_and_dark_mouth():
+    """The default face rests with its lips together (issue 34): at rest the mouth's centre
+    shows the lips; with the lower lip lowered 6 mm (about as the canonical mesh's rested)
+    the mouth's inside shows there, dark."""
     face = load_default_face()
     cam = Camera.front(face.vertices, width=128, height=128)
     r = Renderer(face, cam)
@@ -116,7 +119,14 @@ def test_rendered_face_has_eyes_and_dark_mouth():
     eye = p[face.landmark("eye_l")].mean(axis=0)
     skin = p[face.landmark("cheek_l")].mean(axis=0)
     px = lambda q: img[int(q[1]), int(q[0])].astype(int)  # noqa: E731
-    assert px(mouth).sum() < px(skin).sum() * 0.5  # the mouth interior is dark
+    assert px(mouth).sum() > px(skin).sum() * 0.6  # closed: the lips, not the mouth's inside
+    lm = face.landmarks
+    v = face.vertices.copy()
+    v[np.r_[lm["lip_lower_inner"][1:-1], lm["lip_lower_outer"][1:-1]], 1] -= 6.0
+    opened = r.render(v)
+    q = cam.project(v)
+    mouth = 0.5 * (q[lm["lip_upper_inner"]].mean(axis=0) + q[lm["lip_lower_inner"]].mean(axis=0))
+    assert opened[int(mouth[1]), int(mouth[0])].astype(int).sum() < px(skin).sum() * 0.5
     # no background shows through the eye opening: the eye region is sclera/iris, not background
     ey, ex = int(eye[1]), int(eye[0])
     region = img[ey - 2 : ey + 3, ex - 6 : ex + 7].astype(int).sum(axis=2)

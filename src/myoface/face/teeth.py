@@ -12,10 +12,11 @@ with the teeth between it and ``thickness_mm`` behind it, from the incisal edge 
 down (lower) over the crowns and the gums. The arch is placed from the lips at rest: its front
 ``LABIAL_GAP_MM`` behind the lips' meeting line at the midline and ``CORNER_GAP_MM`` behind the
 mouth corners, the upper incisal edge ``REST_DISPLAY_MM`` below the upper lip's inner margin
-(the upper incisors' display of a relaxed face with parted lips; never lower than
-``EDGE_HIDDEN_MM`` above the lower lip's margin, so lips that meet at rest hide them) and the
-lower one ``EDGE_HIDDEN_MM`` below the lower lip's (hidden at rest; a smile or speech shows
-both).
+(the upper incisors' display of a relaxed face when its lips part; lips that meet at rest, as
+the default face's do, cover it with the lower lip) and the lower one ``EDGE_HIDDEN_MM`` below
+the lower lip's margin, but at least ``INCISAL_REST_GAP_MM`` below the upper edge (the jaw at
+rest holds the teeth apart: with lips that meet, the lower lip's margin is above the upper
+incisal edge). Hidden at rest; parted lips, a smile or speech show them.
 
 The contact (:func:`lip_contact`) is a projection of the relaxed skin: lip vertices inside a
 tooth band are moved out through its front, and where the upper lip's margin would pass below
@@ -41,10 +42,16 @@ CORNER_GAP_MM = 4.5
 #: men, 3.40 mm in women, decreasing with age (R. G. Vig, G. C. Brundo, "The kinetics of
 #: anterior tooth display", J. Prosthet. Dent. 39(5):502-504, 1978)
 REST_DISPLAY_MM = 2.0
-#: a hidden incisal edge lies this far inside the lip's inner margin at rest (mm): the lower
-#: incisors behind the lower lip (their display at rest is about 0.5-1.2 mm, same source:
-#: left at zero), the upper ones when the lips meet
+#: the lower incisal edge lies this far inside the lower lip's inner margin at rest (mm): the
+#: lower incisors hidden behind the lower lip (their display at rest is about 0.5-1.2 mm, same
+#: source: left at zero)
 EDGE_HIDDEN_MM = 0.2
+#: at rest the lower incisal edge lies at least this far below the upper one (mm): the mandible
+#: at rest holds the teeth apart by the freeway space, 2-4 mm in most adults (about 3 mm: M. E.
+#: Niswonger, "The rest position of the mandible and the centric relation", J. Am. Dent. Assoc.
+#: 21:1572-1582, 1934), less the incisors' vertical overlap when they close (the overbite, about
+#: 2 mm in a normal bite): the edges about 1 mm apart, the lower behind the upper (overjet)
+INCISAL_REST_GAP_MM = 1.0
 #: the lower arch lies this far behind the upper (overjet, mm)
 OVERJET_MM = 2.0
 #: labio-lingual depth of the tooth band (mm): incisors are about 7 mm thick
@@ -165,15 +172,14 @@ def fit_dentition(face) -> Dentition | None:
     # the arch reaches back to the first molars, about 30 mm behind the incisors (scaled)
     back = 30.0 * scale
     half_w = float(np.sqrt(back / b))
-    # the upper incisal edge: REST_DISPLAY_MM below the upper lip, but hidden behind the lower
-    # lip when the lips (nearly) meet at rest
-    edge_u = max(float(mid_u[1]) - REST_DISPLAY_MM * scale, float(mid_l[1]) + EDGE_HIDDEN_MM)
-    edge_u = min(edge_u, float(mid_u[1]) + EDGE_HIDDEN_MM)
+    # the upper incisal edge REST_DISPLAY_MM below the upper lip (behind the lower lip when the
+    # lips meet at rest); the lower one behind the lower lip and below the upper edge
+    edge_u = float(mid_u[1]) - REST_DISPLAY_MM * scale
+    edge_l = min(float(mid_l[1]) - EDGE_HIDDEN_MM, edge_u - INCISAL_REST_GAP_MM * scale)
     upper = Arch(xc, z0, b, half_w, edge_u, 0.012, 22.0 * scale, 1.0)  # crowns ~10.5 mm + gums
     lb = b * 1.08
     lower = Arch(
-        xc, z0 - OVERJET_MM, lb, float(np.sqrt(back / lb)), float(mid_l[1]) - EDGE_HIDDEN_MM, 0.006,
-        20.0 * scale, -1.0,
+        xc, z0 - OVERJET_MM, lb, float(np.sqrt(back / lb)), edge_l, 0.006, 20.0 * scale, -1.0,
     )  # fmt: skip
     inner_u, inner_l = ui[1:-1], li[1:-1]
     n = min(len(inner_u), len(inner_l))
