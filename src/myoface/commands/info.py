@@ -1,4 +1,5 @@
-"""``myoface info``: describe a face model (mesh, lattice, muscles) and this installation."""
+"""``myoface info``: describe a face model (mesh, lips at rest, lattice, muscles) and this
+installation."""
 
 from __future__ import annotations
 
@@ -7,7 +8,10 @@ import platform
 from myoface.commands._common import add_face_argument, load_model
 
 NAME = "info"
-HELP = "describe a face model: mesh, tissue lattice (element and spring counts), muscles"
+HELP = (
+    "describe a face model: mesh, the lips' gap at rest, tissue lattice (element and spring "
+    "counts), muscles"
+)
 
 
 def add_arguments(p):
@@ -20,6 +24,7 @@ def run(args) -> int:
     import numpy as np
 
     import myoface
+    from myoface.face.lips import rest_lip_gap
 
     fm = load_model(args)
     t = fm.tissue
@@ -32,6 +37,9 @@ def run(args) -> int:
         f"{fm.face.n_triangles} triangles, {len(fm.face.boundary_loops)} boundary loops "
         f"{[len(b) for b in fm.face.boundary_loops]}"
     )
+    gap = rest_lip_gap(fm.face)
+    lips = "no mouth opening found" if gap is None else f"inner lips at rest {gap.text()}"
+    print(f"lips       {lips}")
     print(
         f"lattice    {t.n_nodes} nodes ({int(t.kinematic.sum())} kinematic: bone + "
         f"{len(fm.driven_nodes)} muscle-driven fascia nodes)"
