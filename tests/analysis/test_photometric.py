@@ -121,16 +121,26 @@ def test_the_expression_warp_is_the_models_motion():
     every vertex by the model's skin displacement in pixels. The smile's skin folds in the
     image (the cheek bulges over the nasolabial fold: 12 % of the vertices measured
     2026-12-01), which a warp of one frame cannot show; there the shifts are drawn together
-    until the warp does not fold, and everywhere else they are the model's."""
+    until the warp does not fold, and everywhere else they are the model's. The lips' red
+    is left out: the face rests with its lips together (0.2 mm apart), and
+    surprise's open jaw parts them, a motion that tears the image between them, which a
+    warp cannot do; their shifts, and those of the lips' red around them (two rings of
+    triangles), are drawn together (on surprise, 32 vertices, 2026-12-02)."""
     model = build_face_model()
     rest = model.skin_vertices()
+    lm = model.face.landmarks
+    lips = np.union1d(lm["lip_upper_inner"], lm["lip_lower_inner"])
+    tri = np.asarray(model.face.triangles)
+    for _ in range(2):
+        lips = np.unique(tri[np.isin(tri, lips).any(axis=1)])
+    away = np.setdiff1d(np.arange(len(rest)), lips)
     pts = rest[:, :2] * [4.0, -4.0] + [320.0, 240.0]  # 4 px per mm, y down
     for name, unchanged in (("surprise", 1.0), ("happiness", 0.8)):
         c = expression_contractions(name, 0.8, model.ids)
         warp, state = expression_warp(pts, model, c)
         want = (model.skin_vertices(state) - rest)[:, :2] * [4.0, -4.0]
         got = warp.displacement(pts)
-        same = np.linalg.norm(got - want, axis=1) <= 0.05
+        same = (np.linalg.norm(got - want, axis=1) <= 0.05)[away]
         assert same.mean() >= unchanged, (name, same.mean())
         assert np.abs(want).max() > 4, name  # (it moves the face by millimetres)
         assert warp.min_jacobian() >= 0.2 - 1e-9, name

@@ -277,8 +277,9 @@ def test_cli_from_photo_and_a_photo_without_a_face(tmp_path, capsys):
 
 def test_lips_a_little_apart_are_closed_and_an_open_mouth_is_left(default_face):
     """close_lips: inner lip contours 1 mm apart meet at their midpoints (texture
-    coordinates too; the corners and every other vertex unchanged); 5 mm apart (the default
-    face's own open mouth) they are left as they are."""
+    coordinates too; the corners and every other vertex unchanged); 5 mm further apart (an
+    open mouth: the default face's lower lip lowered; the face itself rests with its lips
+    closed) they are left as they are."""
     from myoface.face.personal import close_lips
 
     lm = default_face.landmarks
@@ -286,7 +287,9 @@ def test_lips_a_little_apart_are_closed_and_an_open_mouth_is_left(default_face):
     up, lo = up[up != lo], lo[up != lo]  # (the corners are shared)
     v = default_face.vertices.astype(np.float64)
     uv = np.asarray(default_face.uv, dtype=np.float64)
-    _, _, gap, closed = close_lips(v, uv, lm, 2.0)
+    open_mouth = v.copy()
+    open_mouth[lo, 1] -= 5.0
+    _, _, gap, closed = close_lips(open_mouth, uv, lm, 2.0)
     assert gap > 4.0 and not closed
     apart = v.copy()
     mid = 0.5 * (v[up] + v[lo])
