@@ -208,6 +208,11 @@ def _save(face, out: Path, provenance: dict) -> None:
     muscles = (resources.files("myoface") / "data" / DEFAULT_MUSCLES_FILE).read_text()
     save_face(out, face, muscles_toml=muscles, provenance=provenance)
     print(f"wrote {out}")
+    from myoface.face.lips import rest_lip_gap
+
+    gap = rest_lip_gap(face)
+    if gap is not None:
+        print(f"lips       inner lips at rest {gap.text()}")
 
 
 # --------------------------------------------------------------------------- actions
