@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from myoface._io import STAGING_MARK
+from myoface._io import STAGING_MARK, live_folder
 from myoface.analysis.outputs import ANALYSIS_FILES, FOLDER_FILES, REPORT_FILES
 from myoface.cli import main
 from tests.conftest import needs_mediapipe
@@ -583,6 +583,8 @@ def test_one_writer_per_folder_and_a_stale_lock_is_taken_over(inputs, earlier, t
         lock = json.loads((out / ".myoface.lock").read_text())
         assert lock["pid"] == first.pid and lock["host"] == socket.gethostname()
         assert "analyze" in lock["command"] and lock["started"]
+        live = live_folder(out)  # where it writes meanwhile: beside the folder
+        assert live is not None and live.parent == out.parent and STAGING_MARK in live.name
         t0 = time.perf_counter()
         code, _, err, _ = _cli(argv, cwd=tmp_path)
         assert code == 2

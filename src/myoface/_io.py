@@ -531,6 +531,18 @@ def release_lock(lock: OutputLock) -> None:
         os.close(lock._fd)
 
 
+def live_folder(folder) -> Path | None:
+    """Where a run of :func:`output_transaction` writing the output folder ``folder`` is
+    writing its files now (its temporary folder, named in the folder's lock file), or None
+    when no run is: e.g. to follow a long analysis' contractions.csv as its rows come."""
+    try:
+        doc = json.loads((Path(folder) / LOCK_NAME).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    where = doc.get("writing") if isinstance(doc, dict) else None
+    return Path(where) if isinstance(where, str) and Path(where).is_dir() else None
+
+
 @contextlib.contextmanager
 def output_lock(folder, command: str | None = None, what: str = "-o") -> Iterator[OutputLock]:
     """The lock of the output folder ``folder`` for the block (:func:`acquire_lock`)."""
