@@ -11,6 +11,7 @@ import numpy as np
 
 from myoface._io import atomic_output, check_output_path, read_text
 from myoface.analysis.camera import POSE_COLUMNS, HeadPose
+from myoface.analysis.gaze import GAZE_COLUMNS, GAZE_STATE_COLUMNS, GAZE_STATES
 from myoface.analysis.trackers.base import FrameMeasurement
 from myoface.errors import (
     MyofaceFileNotFoundError,
@@ -64,8 +65,12 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw) -> No
     face was not found). With the 3-D fit's measurements
     (:class:`~myoface.analysis.trackers.landmark_fit.FitMeasurement`) the head columns are the 3-D pose and the
     fit's residual: ``head_yaw_deg, head_pitch_deg, head_roll_deg, head_tx_mm, head_ty_mm,
-    head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.camera.HeadPose`). Written whole
-    (atomically); :class:`ContractionsCsvWriter` writes the same rows one by one."""
+    head_tz_mm, residual_mm`` (see :class:`~myoface.analysis.camera.HeadPose`), then each eye's
+    gaze, ``gaze_l_yaw_deg, gaze_l_pitch_deg, gaze_r_yaw_deg, gaze_r_pitch_deg`` (degrees, head
+    frame: yaw towards the subject's left, pitch up; empty where the eye was not read) and
+    ``gaze_l_state, gaze_r_state`` (``ok``, ``closed``, ``hidden`` or ``not_found``; see
+    :mod:`myoface.analysis.gaze`). Written whole (atomically); :class:`ContractionsCsvWriter`
+    writes the same rows one by one."""
     ids = list(ids)
     kinds = {type(f) for f in frames}
     if len(kinds) > 1:
@@ -192,6 +197,9 @@ CSV_OTHER_COLUMNS = (
     # the 3-D fit's (myoface.analysis.trackers.landmark_fit.FitMeasurement.HEAD_COLUMNS)
     *POSE_COLUMNS,
     "residual_mm",
+    # ... and its gaze (myoface.analysis.gaze)
+    *GAZE_COLUMNS,
+    *GAZE_STATE_COLUMNS,
 )
 
 
@@ -363,6 +371,78 @@ def read_head_poses(path) -> list:
                     f"{p}: row {k + 2}: {c} is {v:.4g}; a head pose's {unit} are within +-{bound:g}"
                 )
         out.append(HeadPose.from_columns(vals))
+    return out
+
+
+#: the largest gaze angle (degrees) a contractions CSV may give: an eye looks forward of its
+#: head (the reader's own range is +-45, :data:`myoface.analysis.gaze.MAX_GAZE_DEG`)
+MAX_GAZE_ANGLE_DEG = 90.0
+
+
+def read_gaze(path) -> tuple[np.ndarray, list[tuple[str, str]]] | None:
+    """The eyes' gaze of a contractions CSV written with the 3-D fit: ``(angles (T, 4)
+    degrees in :data:`~myoface.analysis.gaze.GAZE_COLUMNS`' order, NaN where an eye was not
+    read, states (T,) of ``(left, right)``)``; None when the CSV has no gaze columns (older
+    CSVs, the snakes'). A state is "ok" where both angles are given, else as written (empty:
+    the frame was not measured). An angle beyond :data:`MAX_GAZE_ANGLE_DEG`, not a number,
+    or missing beside an "ok" state is a :class:`MyofaceFormatError`."""
+    p = Path(path)
+    rows = list(csv.DictReader(read_text(p, "contractions CSV").splitlines()))
+    if not rows or not all(c in rows[0] for c in GAZE_COLUMNS):
+        return None
+    angles = np.full((len(rows), len(GAZE_COLUMNS)), np.nan)
+    states = []
+    for k, r in enumerate(rows):
+        cells = [(r.get(c) or "").strip() for c in GAZE_COLUMNS]
+        st = [(r.get(c) or "").strip() for c in GAZE_STATE_COLUMNS]
+        for j, c in enumerate(cells):
+            if c == "":
+                continue
+            try:
+                v = float(c)
+            except ValueError:
+                raise MyofaceFormatError(
+                    f"{p}: row {k + 2}: {GAZE_COLUMNS[j]} is not a number: {c[:40]!r}"
+                ) from None
+            if not (np.isfinite(v) and abs(v) <= MAX_GAZE_ANGLE_DEG):
+                raise MyofaceFormatError(
+                    f"{p}: row {k + 2}: {GAZE_COLUMNS[j]} must be within "
+                    f"+-{MAX_GAZE_ANGLE_DEG:g} degrees; got {c[:40]!r}"
+                )
+            angles[k, j] = v
+        for e, side in enumerate(("l", "r")):
+            both = np.isfinite(angles[k, 2 * e : 2 * e + 2])
+            if st[e] == "ok" and not both.all():
+                raise MyofaceFormatError(
+                    f"{p}: row {k + 2}: gaze_{side}_state is ok without angles"
+                )
+            if st[e] not in ("", *GAZE_STATES):
+                raise MyofaceFormatError(
+                    f"{p}: row {k + 2}: gaze_{side}_state must be one of {GAZE_STATES}; "
+                    f"got {st[e][:40]!r}"
+                )
+            if not both.all():
+                angles[k, 2 * e : 2 * e + 2] = np.nan
+            elif not st[e]:
+                st[e] = "ok"
+        states.append((st[0], st[1]))
+    return angles, states
+
+
+def display_gaze(angles) -> np.ndarray:
+    """The eyes' common gaze (T, 2) rad, ``(yaw, pitch)`` for the renderer (which turns both
+    eyes alike) from :func:`read_gaze`'s angles (T, 4) degrees: the mean of the eyes read in
+    each row; a row with neither (closed lids, no face) holds the last (straight ahead before
+    the first); within the renderer's range (+-45 degrees)."""
+    a = np.asarray(angles, dtype=np.float64).reshape(-1, 2, 2)
+    out = np.zeros((len(a), 2))
+    last = np.zeros(2)
+    lim = np.radians(45.0)
+    for k, row in enumerate(a):
+        read = row[np.isfinite(row).all(axis=1)]
+        if len(read):
+            last = np.clip(np.radians(read.mean(axis=0)), -lim, lim)
+        out[k] = last
     return out
 
 

@@ -14,6 +14,7 @@ import numpy as np
 from myoface._threads import run_ahead
 from myoface.analysis.camera import POSE_COLUMNS, HeadPose, PinholeCamera
 from myoface.analysis.flow import FlowDetector, FlowRefiner
+from myoface.analysis.gaze import GAZE_COLUMNS, GAZE_STATE_COLUMNS, Gaze, GazeEstimator
 from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, Calibration, ModelFit
 from myoface.analysis.sections import SECTIONS, section_vertices
 from myoface.analysis.synthesis import LandmarkSynthesis
@@ -71,15 +72,21 @@ class FitMeasurement(Measurement):
     #: the photometric term's share of patches that do not look as they did at calibration
     #: (:attr:`~myoface.analysis.modelfit.FrameFit.occlusion`)
     occlusion: float = float("nan")
+    #: each eye's gaze (:class:`~myoface.analysis.gaze.GazeEstimator`), on measured frames
+    gaze: Gaze | None = None
 
-    HEAD_COLUMNS: ClassVar[tuple] = (*POSE_COLUMNS, "residual_mm")
+    HEAD_COLUMNS: ClassVar[tuple] = (
+        *POSE_COLUMNS, "residual_mm", *GAZE_COLUMNS, *GAZE_STATE_COLUMNS,
+    )  # fmt: skip
 
     def head_cells(self) -> list[str]:
         """The values of :data:`HEAD_COLUMNS` as CSV cells (empty when not measured)."""
         if self.pose is None:
             return [""] * len(self.HEAD_COLUMNS)
         vals = [*self.pose.columns().values(), self.residual_mm]
-        return ["" if not np.isfinite(v) else f"{v:.3f}" for v in vals]
+        cells = ["" if not np.isfinite(v) else f"{v:.3f}" for v in vals]
+        n_gaze = len(GAZE_COLUMNS) + len(GAZE_STATE_COLUMNS)
+        return cells + (self.gaze.cells() if self.gaze is not None else [""] * n_gaze)
 
 
 class FitTracker(TrackerBase):
@@ -119,7 +126,7 @@ class FitTracker(TrackerBase):
     def __init__(self, model, fps: float = 30.0, camera: PinholeCamera | None = None,
                  settings: FitSettings | None = None, detector=None,
                  synthesis: bool = False, deferred_relax: bool = False,
-                 calibration_frame: int | None = None):  # fmt: skip
+                 calibration_frame: int | None = None, gaze: bool = True):  # fmt: skip
         if model.face.n_vertices != 468:
             raise MyofaceValueError(
                 "the landmark tracker needs a face model with MediaPipe's 468-point topology "
@@ -164,6 +171,8 @@ class FitTracker(TrackerBase):
         #: (s; its MediaPipe, scores and identity fit), and the detector's wall time (s) and
         #: count on the frames after it (on the thread that runs :meth:`observe`)
         self.timings = {"calibration_s": 0.0, "detections": 0, "detect_s": 0.0}
+        #: each eye's gaze on the measured frames (None: not read)
+        self.gaze = GazeEstimator(model.face) if gaze else None
 
     @property
     def detector(self):
@@ -346,6 +355,8 @@ class FitTracker(TrackerBase):
                 raise MyofaceValueError("the calibration frame was not kept")
             self.fit.set_appearance(frame)
         self.calibration_frame = first_index + self.calibration.index
+        if self.gaze is not None:  # the person's eyeballs and open lids
+            self.gaze.calibrate(self.fit.neutral + self.fit.identity_mm)
         self.timings["calibration_s"] += time.perf_counter() - t_start
         return self.calibration_frame
 
@@ -371,7 +382,7 @@ class FitTracker(TrackerBase):
         obs = self.observe(frame, index) if observation is NOT_OBSERVED else observation
         nan = np.full(len(self.ids), np.nan)
         if obs is None:
-            fit.lose_track()
+            self._lose_track()
             return FitMeasurement(index, time_s, "no_face", nan, None, float("nan"))
         prev = fit._prev
         try:
@@ -380,34 +391,48 @@ class FitTracker(TrackerBase):
                 image=frame if self.settings.photometric else None,
             )  # fmt: skip
         except (np.linalg.LinAlgError, MyofaceValueError):
-            fit.lose_track()
+            self._lose_track()
             return FitMeasurement(index, time_s, "fit_failed", nan, None, float("nan"))
-        uv = fit.camera.project(r.pose.apply(fit.shape(r.contractions)))
+        shape = fit.shape(r.contractions)
+        uv = fit.camera.project(r.pose.apply(shape))
         contours = {s: uv[v] for s, v in self._sections.items()}
         if r.occlusion > OCCLUDED_FRACTION:
+            if self.gaze is not None:
+                self.gaze.reset()  # (its filter averages measured frames only)
             fit._prev = prev  # (the next frame starts from the last measured one)
             return FitMeasurement(
                 index, time_s, "occluded", nan, r.pose, r.residual_mm, contours, r.iterations,
                 r.occlusion,
             )  # fmt: skip
         if not r.residual_mm <= MISFIT_RMS_MM:
-            fit.lose_track()
+            self._lose_track()
             return FitMeasurement(
                 index, time_s, "misfit", nan, r.pose, r.residual_mm, contours, r.iterations
             )
+        gaze = None
+        if self.gaze is not None:
+            gaze = self.gaze.measure(frame, fit.camera, r.pose, shape, obs.points)
         return FitMeasurement(
             index, time_s, "ok", r.contractions, r.pose, r.residual_mm, contours, r.iterations,
-            r.occlusion,
+            r.occlusion, gaze,
         )  # fmt: skip
 
+    def _lose_track(self) -> None:
+        """After a frame not measured: the fit and the gaze's filter start again."""
+        self.fit.lose_track()
+        if self.gaze is not None:
+            self.gaze.reset()
+
     def describe(self) -> dict:
-        """For analysis.json: the estimator, the calibration, the camera and the weights."""
+        """For analysis.json: the estimator, the calibration, the camera, the weights and the
+        gaze's settings."""
         out = {
             "init": self.how,
             "mm_per_px": self.mm_per_px,
             "refine": self.refine,
             "estimator": "fit-synthesis" if self.use_synthesis else "fit",
             "fit_settings": asdict(self.settings),
+            "gaze": None if self.gaze is None else self.gaze.describe(),
         }
         if self._refiner is not None:
             # the optical flow's points (FitSettings.flow): tracked from the first frame,

@@ -1,0 +1,643 @@
+"""Where the eyes look: each eyeball's rotation read from the frame, on the model's own eyes.
+
+The face model's eyeball (:mod:`myoface.face.eyes`) is a sphere of radius
+:data:`~myoface.face.eyes.EYE_RADIUS_MM` behind each eye opening, fixed in the head; its iris
+is the cap within :data:`IRIS_DEG` of its axis (the renderer draws the same eye,
+:func:`myoface.render.dressing.eyeball`), so the limbus, the iris' edge, is a circle of radius
+:data:`IRIS_RADIUS_MM` whose centre lies :data:`IRIS_DEPTH_MM` in front of the eyeball's
+centre. Turning the eye by ``(yaw, pitch)`` (:func:`myoface.render.renderer.gaze_rotation`:
+yaw towards the subject's left, pitch up, in the head frame) moves that circle on the sphere.
+
+A frame's gaze (:class:`GazeEstimator`) is read photometrically, on the fit's terms: with the
+head pose and the skin the 3-D fit found (:class:`~myoface.analysis.modelfit.ModelFit`), the
+eyeball's centre is placed in the camera frame and the lid margins are projected into the
+image (the fitted model's, or MediaPipe's points). Inside the opening, the pixels' brightness
+is modelled as the eyeball seen there: a plane of brightness (the sclera and its shading),
+a darker band along each lid margin (the lashes, the lid's shadow), and the iris, the
+projection of the limbus for a candidate gaze (an ellipse, its edge softened by
+:attr:`GazeSettings.edge_px`). For each candidate the brightness coefficients are a linear
+least-squares fit; the gaze is the candidate with the least residual (its iris darker than the
+sclera), found on a grid from coarse to fine, both eyes together on the coarse grid (the eyes
+turn together; each is then refined alone). No gaze is read where the lids are closed
+(:attr:`GazeSettings.closed_ratio` of the person's open aperture, in the head frame: the
+row says ``closed``), where the eye faces away from the camera or too little of it shows
+(``hidden``), or where no iris is found (``not_found``).
+
+A temporal filter (:class:`GazeSmoother`) averages each eye's last frames with weights that
+fall with their distance from the newest reading: within a fixation the reading's noise is
+averaged, a saccade (a jump of many times the noise between two frames) passes at once.
+
+Why not MediaPipe's iris points (``refine_landmarks=True``, points 468-477): measured
+2026-12-02 on renders of a personal face at known gaze with the true head pose and eyeball
+centres, their centres give 4.4-8.0 deg RMS yaw and 6.7-10.7 deg pitch (a downward look of
+-14.5 deg read as +4); the photometric reader here 0.6-1.4 and 2.1-2.4 deg on the same frames.
+The refined face mesh also moves every one of the 468 points the fit consumes (median 1.6 px,
+at most 6.3 px on single_face.mp4) and costs 8.5 ms a frame against 7.2 ms (tracking mode), so
+it would have to run as a second graph beside the first: it is not run at all.
+
+What limits the reading is where the eyeball's centre is: it comes from the fitted head pose
+and the person's neutral, placed by MediaPipe's points, and a millimetre of error there is
+5 degrees of gaze (the iris' centre is 10.5 mm from the eyeball's). See
+:mod:`myoface.bench.gaze` for the numbers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+
+from myoface.errors import MyofaceValueError
+from myoface.face.eyes import EYE_RADIUS_MM, eye_loop, eyeball_center
+from myoface.render.dressing import IRIS_DEG
+
+#: the eyes, as (side, the face's landmark group of the opening's margin)
+EYES = (("l", "eye_l"), ("r", "eye_r"))
+#: the contractions CSV's gaze columns (degrees, head frame): yaw towards the subject's left,
+#: pitch up, as :func:`myoface.render.renderer.gaze_rotation` turns the model's eyes
+GAZE_COLUMNS = ("gaze_l_yaw_deg", "gaze_l_pitch_deg", "gaze_r_yaw_deg", "gaze_r_pitch_deg")
+#: the CSV's per-eye state columns (:data:`GAZE_STATES`), beside :data:`GAZE_COLUMNS`
+GAZE_STATE_COLUMNS = ("gaze_l_state", "gaze_r_state")
+#: an eye's state: its gaze was read (``ok``), or why not: the lids are closed, the eye faces
+#: away from the camera or too little of it shows, no iris was found in the opening
+GAZE_STATES = ("ok", "closed", "hidden", "not_found")
+#: the iris cap's half angle (degrees) on the model's eyeball: the renderer's
+IRIS_DEG = float(IRIS_DEG)
+#: the limbus' radius (mm): 5.82 mm on the model's eyeball, the adult's horizontal visible iris
+#: diameter being 11.7 +- 0.5 mm (Khng & Osher, "Evaluation of the relationship between corneal
+#: diameter and lens diameter", J. Cataract Refract. Surg. 34, 2008)
+IRIS_RADIUS_MM = EYE_RADIUS_MM * float(np.sin(np.radians(IRIS_DEG)))
+#: the limbus circle's centre in front of the eyeball's centre (mm)
+IRIS_DEPTH_MM = EYE_RADIUS_MM * float(np.cos(np.radians(IRIS_DEG)))
+#: the largest gaze angle read (degrees), each way: the renderer's range
+#: (:data:`myoface.render.renderer.MAX_GAZE_RAD`)
+MAX_GAZE_DEG = 45.0
+#: BT.601 luma weights of (R, G, B): the brightness the reader models
+LUMA = np.array([0.299, 0.587, 0.114])
+
+
+@dataclass(frozen=True)
+class GazeSettings:
+    """The reader's settings (measured 2026-12-02 on renders of the sample person's face at
+    known gaze and pose, see :mod:`myoface.bench.gaze`).
+
+    Attributes
+    ----------
+    coarse_deg, fine : the grid: steps of ``coarse_deg`` over +-:data:`MAX_GAZE_DEG`, then for
+        each ``(step, half-width)`` of ``fine`` a grid around the best so far.
+    edge_px : the softness (px) of the iris' edge in the model: the renders' anti-aliasing and
+        a webcam's blur are about a pixel wide (1.0 px read 2-6 deg worse on sharp renders).
+    upper_margin, lower_margin : pixels this close to the upper / lower lid margin, in iris
+        radii, are not read (the lashes and the margin's own error; 0.1 and 0.05 against none:
+        the worst reading 61 -> 3 deg yaw on one eye).
+    band : the width (iris radii) of the darker band the model allows along each margin.
+    closed_ratio : the lids are closed below this share of the person's neutral aperture
+        (the mean gap between the margins in the head frame, the fitted model's).
+    closed_contrast, contrast_frames : the lids are also closed where the iris read is less
+        dark against the sclera than ``closed_contrast`` of the eye's usual contrast (the
+        90th percentile of its last ``contrast_frames`` readings: the open eye's are the
+        strongest). MediaPipe does not close its lids on a blink: on single_face.mp4's blink
+        (frames 26-28, the eyes shut) the fitted aperture fell only to 0.48-0.55 of the open
+        one, but the contrast to 0.07-0.14 from 0.34-0.46.
+    min_pixels : an opening with fewer pixels to read is ``hidden``.
+    max_view_deg : an eyeball whose axis at rest is farther than this from the line to the
+        camera is ``hidden`` (it faces away: the nose hides it).
+    min_explained : the least share of the opening's brightness variance the iris must explain
+        beyond the plane and bands, else ``not_found``.
+    lids : whose lid margins bound the opening: ``"model"`` (the fitted model's, projected:
+        on the renders 4.3-4.6 deg RMS against 6.8-7.0 with MediaPipe's points when the fit
+        is good, fit-synthesis or photometric; alike, 9.1-9.4, with the default fit's) or
+        ``"landmarks"`` (MediaPipe's points).
+    smooth_frames, smooth_deg : the temporal filter (:class:`GazeSmoother`): how many past
+        frames, and the distance (deg) at which a past reading's weight falls to e^-1/2.
+    """
+
+    coarse_deg: float = 4.0
+    fine: tuple = ((1.0, 6.0), (0.25, 1.0))
+    edge_px: float = 0.6
+    upper_margin: float = 0.1
+    lower_margin: float = 0.05
+    band: float = 0.4
+    closed_ratio: float = 0.3
+    closed_contrast: float = 0.5
+    contrast_frames: int = 60
+    min_pixels: int = 12
+    max_view_deg: float = 75.0
+    min_explained: float = 0.05
+    lids: str = "model"
+    smooth_frames: int = 3
+    smooth_deg: float = 2.0
+
+    def __post_init__(self):
+        if self.lids not in ("model", "landmarks"):
+            raise MyofaceValueError(f"lids must be 'model' or 'landmarks'; got {self.lids!r}")
+        if not (self.coarse_deg > 0 and self.edge_px > 0 and self.smooth_deg > 0):
+            raise MyofaceValueError("coarse_deg, edge_px and smooth_deg must be > 0")
+        if int(self.smooth_frames) < 0:
+            raise MyofaceValueError(f"smooth_frames must be >= 0; got {self.smooth_frames}")
+
+
+@dataclass(frozen=True)
+class EyeGaze:
+    """One eye's reading: ``yaw_deg`` (towards the subject's left) and ``pitch_deg`` (up) in the
+    head frame, NaN unless ``state`` is ``"ok"``; ``explained``: the share of the opening's
+    brightness variance the iris explains, and ``contrast`` its brightness less the sclera's
+    (NaN when not read)."""
+
+    yaw_deg: float = float("nan")
+    pitch_deg: float = float("nan")
+    state: str = "not_found"
+    explained: float = float("nan")
+    #: the iris' brightness less the sclera's (luma, < 0), NaN when not read
+    contrast: float = float("nan")
+
+    @property
+    def ok(self) -> bool:
+        return self.state == "ok"
+
+    @property
+    def angles_rad(self) -> tuple[float, float]:
+        return float(np.radians(self.yaw_deg)), float(np.radians(self.pitch_deg))
+
+
+@dataclass(frozen=True)
+class Gaze:
+    """Both eyes' readings of a frame (:class:`EyeGaze`), the subject's ``left`` and ``right``."""
+
+    left: EyeGaze = field(default_factory=EyeGaze)
+    right: EyeGaze = field(default_factory=EyeGaze)
+
+    def eye(self, side: str) -> EyeGaze:
+        return self.left if side == "l" else self.right
+
+    def cells(self) -> list[str]:
+        """The values of :data:`GAZE_COLUMNS` then :data:`GAZE_STATE_COLUMNS` as CSV cells
+        (empty angles where an eye was not read)."""
+        out = []
+        for e in (self.left, self.right):
+            out += ["" if not e.ok else f"{v:.2f}" for v in (e.yaw_deg, e.pitch_deg)]
+        return [*out, self.left.state, self.right.state]
+
+    def common_rad(self) -> tuple[float, float] | None:
+        """The eyes' common gaze ``(yaw, pitch)`` rad for the renderer (which turns both eyes
+        alike): the mean of the eyes read, None when neither was."""
+        read = [e for e in (self.left, self.right) if e.ok]
+        if not read:
+            return None
+        return tuple(float(np.radians(np.mean([getattr(e, a) for e in read]))) for a in
+                     ("yaw_deg", "pitch_deg"))  # fmt: skip
+
+
+# ------------------------------------------------------------------ geometry
+
+
+def gaze_directions(yaw_deg, pitch_deg) -> np.ndarray:
+    """Unit vectors (..., 3), head frame, of gazes ``(yaw, pitch)`` degrees: straight ahead
+    (+z) turned as :func:`myoface.render.renderer.gaze_rotation` turns the eyeball."""
+    y = np.radians(np.asarray(yaw_deg, dtype=np.float64))
+    p = np.radians(np.asarray(pitch_deg, dtype=np.float64))
+    return np.stack([np.sin(y) * np.cos(p), np.sin(p), np.cos(y) * np.cos(p)], axis=-1)
+
+
+def gaze_angles(directions) -> np.ndarray:
+    """``(yaw, pitch)`` degrees (..., 2) of unit vectors (..., 3), head frame: the inverse of
+    :func:`gaze_directions`."""
+    d = np.asarray(directions, dtype=np.float64)
+    yaw = np.degrees(np.arctan2(d[..., 0], d[..., 2]))
+    pitch = np.degrees(np.arcsin(np.clip(d[..., 1], -1.0, 1.0)))
+    return np.stack([yaw, pitch], axis=-1)
+
+
+def iris_ellipses(camera, centre_mm, directions) -> tuple[np.ndarray, ...]:
+    """The limbus' image (an ellipse, pixels) for each gaze ``directions`` (K, 3), camera
+    frame, of an eyeball centred at ``centre_mm`` (3,), camera frame.
+
+    Returns ``(centres (K, 2) px, tilt (K, 2) unit image direction of the axis' tilt,
+    major (K,) px, minor (K,) px, facing (K,) bool)``: the circle seen at its centre's depth
+    (weak perspective over the eye: its 12 mm against the head's 300+ mm), its minor axis
+    along the image of the gaze direction, shortened by the cosine between the gaze and the
+    line to the camera; ``facing`` where that cosine exceeds 0.05 (the iris faces the camera).
+    """
+    g = np.asarray(directions, dtype=np.float64)
+    d = np.asarray(centre_mm, dtype=np.float64)[None, :] + IRIS_DEPTH_MM * g
+    c2 = camera.project(d)
+    tip = camera.project(d + 0.5 * g)
+    t = tip - c2
+    n = np.linalg.norm(t, axis=1, keepdims=True)
+    t = np.where(n > 1e-9, t / np.maximum(n, 1e-12), np.array([[1.0, 0.0]]))
+    view = -d / np.linalg.norm(d, axis=1, keepdims=True)
+    cos = (g * view).sum(axis=1)
+    scale = camera.focal_px / np.maximum(-d[:, 2], 1e-6)
+    major = IRIS_RADIUS_MM * scale
+    minor = major * np.maximum(np.abs(cos), 0.05)
+    return c2, t, major, minor, cos > 0.05
+
+
+def iris_cover(px, centres, tilt, major, minor, edge_px) -> np.ndarray:
+    """How much of each pixel (N,) the iris of each candidate (K,) covers, (K, N) in [0, 1]: a
+    logistic of the signed distance (px, along the ray from the ellipse's centre) to its edge,
+    of scale ``edge_px``. The reference of :func:`_candidates_rss`'s kernel."""
+    d = px[None, :, :] - centres[:, None, :]
+    ut = (d * tilt[:, None, :]).sum(-1)
+    normal = np.stack([-tilt[:, 1], tilt[:, 0]], axis=-1)
+    un = (d * normal[:, None, :]).sum(-1)
+    rho = np.sqrt((ut / minor[:, None]) ** 2 + (un / major[:, None]) ** 2)
+    r = np.sqrt(ut**2 + un**2)
+    dist = np.where(rho > 1e-9, r * (1.0 - rho) / np.maximum(rho, 1e-9), major[:, None])
+    return 1.0 / (1.0 + np.exp(-np.clip(dist / edge_px, -50.0, 50.0)))
+
+
+def _rss_numpy(px, bright, fixed, proj, centres, tilt, major, minor, edge_px):
+    """Per candidate: the residual sum of squares of ``bright`` (N,) fitted by the ``fixed``
+    columns (N, m) and the candidate's iris cover, and the iris column's coefficient (plain
+    numpy; :func:`_rss_numba` is the same)."""
+    cover = iris_cover(px, centres, tilt, major, minor, edge_px)
+    gti = fixed.T @ bright
+    base = bright @ bright - gti @ proj @ gti
+    u = cover @ fixed  # (K, m)
+    s = (cover * cover).sum(1) - np.einsum("km,mn,kn->k", u, proj, u)
+    r = cover @ bright - u @ (proj @ gti)
+    s = np.maximum(s, 1e-12)
+    return base - r * r / s, r / s
+
+
+@numba.njit(cache=True)
+def _rss_numba(px, bright, fixed, proj, centres, tilt, major, minor, edge_px):  # pragma: no cover
+    n, m = fixed.shape
+    k_all = centres.shape[0]
+    gti = np.zeros(m)
+    for i in range(n):
+        for j in range(m):
+            gti[j] += fixed[i, j] * bright[i]
+    pg = proj @ gti
+    base = bright @ bright - gti @ pg
+    rss = np.empty(k_all)
+    coef = np.empty(k_all)
+    u = np.zeros(m)
+    for k in range(k_all):
+        cx, cy = centres[k, 0], centres[k, 1]
+        tx, ty = tilt[k, 0], tilt[k, 1]
+        a, b = major[k], minor[k]
+        u[:] = 0.0
+        ii = 0.0
+        ib = 0.0
+        for i in range(n):
+            dx = px[i, 0] - cx
+            dy = px[i, 1] - cy
+            ut = dx * tx + dy * ty
+            un = -dx * ty + dy * tx
+            rho = np.sqrt((ut / b) ** 2 + (un / a) ** 2)
+            if rho > 1e-9:
+                dist = np.sqrt(ut * ut + un * un) * (1.0 - rho) / rho
+            else:
+                dist = a
+            z = min(max(dist / edge_px, -50.0), 50.0)
+            c = 1.0 / (1.0 + np.exp(-z))
+            ii += c * c
+            ib += c * bright[i]
+            for j in range(m):
+                u[j] += c * fixed[i, j]
+        pu = proj @ u
+        s = max(ii - u @ pu, 1e-12)
+        r = ib - u @ pg
+        rss[k] = base - r * r / s
+        coef[k] = r / s
+    return rss, coef
+
+
+def _candidates_rss(*args):
+    """:func:`_rss_numpy`, compiled (:func:`_rss_numba`)."""
+    return _rss_numba(*args)
+
+
+# ------------------------------------------------------------------ the opening's pixels
+
+
+def _inside_polygon(px, poly) -> np.ndarray:
+    """Whether each point (N, 2) is inside the closed polygon (M, 2) (even-odd rule)."""
+    x, y = px[:, 0:1], px[:, 1:2]
+    x0, y0 = poly[:, 0][None], poly[:, 1][None]
+    x1, y1 = np.roll(poly[:, 0], -1)[None], np.roll(poly[:, 1], -1)[None]
+    crosses = (y0 > y) != (y1 > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+    return (crosses & (x < xc)).sum(axis=1) % 2 == 1
+
+
+def _chain_distance(px, chain) -> np.ndarray:
+    """Distance (N,) of points (N, 2) to the polyline ``chain`` (M, 2)."""
+    a, b = chain[:-1][None], chain[1:][None]
+    p = px[:, None, :]
+    ab = b - a
+    t = np.clip(((p - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0.0, 1.0)
+    q = a + t[..., None] * ab
+    return np.sqrt(((p - q) ** 2).sum(-1)).min(axis=1)
+
+
+@dataclass
+class EyeSamples:
+    """The pixels read of one eye's opening: centres ``px`` (N, 2) (x, y) px, brightness (N,)
+    in [0, 1], and the fixed columns (N, m) of the brightness model (the plane and the bands),
+    with ``proj`` the inverse of their normal matrix."""
+
+    px: np.ndarray
+    bright: np.ndarray
+    fixed: np.ndarray
+    proj: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.px)
+
+    def base_rss(self) -> float:
+        """The residual sum of squares without an iris."""
+        g = self.fixed.T @ self.bright
+        return float(self.bright @ self.bright - g @ self.proj @ g)
+
+
+def eye_samples(frame, upper, lower, iris_px: float, settings: GazeSettings) -> EyeSamples:
+    """The pixels of ``frame`` (H, W, 3) inside the opening bounded by the lid margins
+    ``upper`` and ``lower`` (each (M, 2) px, from corner to corner, the same corners), away from
+    the margins by :attr:`GazeSettings.upper_margin` / ``lower_margin`` iris radii
+    (``iris_px``); pixel (row, col) is read at (col + 0.5, row + 0.5)."""
+    poly = np.concatenate([upper, lower[::-1][1:-1]])
+    h, w = frame.shape[:2]
+    x0, y0 = np.maximum(np.floor(poly.min(axis=0)).astype(int) - 1, 0)
+    x1, y1 = np.minimum(np.ceil(poly.max(axis=0)).astype(int) + 1, [w - 1, h - 1])
+    empty = EyeSamples(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 5)), np.eye(5))
+    if x1 < x0 or y1 < y0:
+        return empty
+    cols, rows = np.meshgrid(np.arange(x0, x1 + 1), np.arange(y0, y1 + 1))
+    px = np.column_stack([cols.ravel(), rows.ravel()]).astype(np.float64) + 0.5
+    inside = _inside_polygon(px, poly)
+    px = px[inside]
+    du, dl = _chain_distance(px, upper), _chain_distance(px, lower)
+    keep = (du > settings.upper_margin * iris_px) & (dl > settings.lower_margin * iris_px)
+    px, du, dl = px[keep], du[keep], dl[keep]
+    if len(px) < 6:
+        return empty
+    rgb = np.asarray(frame)[px[:, 1].astype(int), px[:, 0].astype(int), :3]
+    bright = rgb.astype(np.float64) @ LUMA / (255.0 if rgb.dtype == np.uint8 else 1.0)
+    xy = (px - px.mean(axis=0)) / max(iris_px, 1.0)
+    band = settings.band * iris_px
+    fixed = np.column_stack(
+        [np.ones(len(px)), xy[:, 0], xy[:, 1], np.exp(-du / band), np.exp(-dl / band)]
+    )
+    ata = fixed.T @ fixed
+    proj = np.linalg.pinv(ata)
+    return EyeSamples(px, bright, np.ascontiguousarray(fixed), proj)
+
+
+# ------------------------------------------------------------------ the reader
+
+
+def _grid(centre, step, half) -> tuple[np.ndarray, np.ndarray]:
+    """(yaw, pitch) degrees of a square grid of ``step`` within ``half`` of ``centre``, inside
+    +-:data:`MAX_GAZE_DEG`."""
+    a = np.arange(-half, half + 1e-9, step)
+    yaw, pitch = np.meshgrid(centre[0] + a, centre[1] + a, indexing="ij")
+    yaw, pitch = yaw.ravel(), pitch.ravel()
+    ok = (np.abs(yaw) <= MAX_GAZE_DEG) & (np.abs(pitch) <= MAX_GAZE_DEG)
+    return yaw[ok], pitch[ok]
+
+
+@dataclass
+class _Eye:
+    """One eye as the reader sees it in a frame."""
+
+    side: str
+    centre: np.ndarray  # (3,) mm, camera frame
+    samples: EyeSamples
+    iris_px: float
+
+    def rss(self, camera, rotation, yaw, pitch, settings) -> tuple[np.ndarray, ...]:
+        """The residual (K,) of each candidate, inf where its iris is not darker than the
+        sclera or does not face the camera, the explained share (K,) and the iris'
+        coefficient (K,)."""
+        dirs = gaze_directions(yaw, pitch) @ np.asarray(rotation).T
+        c2, t, a, b, facing = iris_ellipses(camera, self.centre, dirs)
+        s = self.samples
+        rss, coef = _candidates_rss(s.px, s.bright, s.fixed, s.proj, c2, t, a, b, settings.edge_px)
+        base = max(s.base_rss(), 1e-12)
+        rss = np.where((coef < 0) & facing, rss, np.inf)
+        return rss, 1.0 - rss / base, coef
+
+
+class GazeEstimator:
+    """Each eye's gaze on the frames of a video, from the 3-D fit's head pose and skin (see the
+    module's docstring).
+
+    Parameters
+    ----------
+    face : FaceMesh in the default (MediaPipe) topology with the ``eye_l`` / ``eye_r``
+        landmark groups (the model's face; never changed).
+    settings : GazeSettings.
+
+    Call :meth:`calibrate` with the person's neutral skin (head frame: the fit's
+    ``neutral + identity_mm``), then :meth:`measure` on each frame in order; :meth:`reset`
+    after frames without a reading (the temporal filter starts again).
+    """
+
+    def __init__(self, face, settings: GazeSettings | None = None):
+        self.settings = settings or GazeSettings()
+        self._eyes = {}
+        for side, group in EYES:
+            loop = eye_loop(face, group)
+            if loop is None or group not in face.landmarks:
+                raise MyofaceValueError(f"the gaze needs the face's {group!r} eye opening")
+            ring = np.asarray(face.landmarks[group], dtype=np.int64)
+            self._eyes[side] = (loop, *self._chains(face.vertices, ring))
+        self.centres_mm: dict[str, np.ndarray] = {}
+        self.aperture_mm: dict[str, float] = {}
+        self.calibrate(face.vertices)
+        self.smoother = GazeSmoother(self.settings)
+        #: each eye's last contrasts read (for :attr:`GazeSettings.closed_contrast`)
+        self._contrasts: dict[str, list] = {"l": [], "r": []}
+        #: where the time goes: frames read and the seconds they took
+        self.timings = {"frames": 0, "seconds": 0.0}
+
+    @staticmethod
+    def _chains(vertices, ring) -> tuple[np.ndarray, np.ndarray]:
+        """The opening's margin ``ring`` (vertex indices in order around it) split at its two
+        corners (its extremes in x) into the upper and the lower lid's chains, each from the
+        first corner to the second."""
+        x = vertices[ring, 0]
+        i, j = sorted((int(np.argmin(x)), int(np.argmax(x))))
+        one = ring[i : j + 1]
+        other = np.concatenate([ring[j:], ring[: i + 1]])[::-1]
+        if vertices[one, 1].mean() < vertices[other, 1].mean():
+            one, other = other, one
+        return one, other
+
+    def calibrate(self, neutral) -> None:
+        """Take the person's neutral skin (V, 3) mm, head frame: each eyeball's centre
+        (:func:`~myoface.face.eyes.eyeball_center`, where the renderer draws it for that face)
+        and the open lids' aperture."""
+        v = np.asarray(neutral, dtype=np.float64)
+        for side, (loop, upper, lower) in self._eyes.items():
+            self.centres_mm[side] = eyeball_center(v, loop)
+            self.aperture_mm[side] = self._aperture(v, upper, lower)
+
+    @staticmethod
+    def _aperture(v, upper, lower) -> float:
+        """The mean gap (mm) between the upper and the lower lid's margins of skin ``v``."""
+        xs = np.linspace(0.2, 0.8, 7)
+
+        def along(chain):
+            p = v[chain]
+            s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]
+            s /= max(s[-1], 1e-9)
+            return np.column_stack([np.interp(xs, s, p[:, k]) for k in range(3)])
+
+        return float(np.linalg.norm(along(upper) - along(lower), axis=1).mean())
+
+    def reset(self) -> None:
+        """Forget the past readings (after a frame without a face)."""
+        self.smoother.reset()
+
+    def read(self, frame, camera, pose, shape, points=None) -> Gaze:
+        """Each eye's reading on ``frame`` (H, W, 3) for the fit's ``pose``
+        (:class:`~myoface.analysis.camera.HeadPose`) and ``shape`` (V, 3) mm, head frame (the
+        fitted skin, its lids too), through ``camera``; ``points``: MediaPipe's (V, 3) points
+        (the lid margins when :attr:`GazeSettings.lids` is ``"landmarks"``). Unfiltered
+        (:meth:`measure` filters it)."""
+        import time
+
+        t0 = time.perf_counter()
+        st = self.settings
+        rot = np.asarray(pose.rotation, dtype=np.float64)
+        shape = np.asarray(shape, dtype=np.float64)
+        if st.lids == "landmarks" and points is None:
+            raise MyofaceValueError("lids='landmarks' needs MediaPipe's points")
+        out: dict[str, EyeGaze] = {}
+        eyes: list[_Eye] = []
+        for side, (_, upper, lower) in self._eyes.items():
+            centre = pose.apply(self.centres_mm[side][None])[0]
+            if self._aperture(shape, upper, lower) < st.closed_ratio * self.aperture_mm[side]:
+                out[side] = EyeGaze(state="closed")
+                continue
+            axis = rot[:, 2]
+            view = -centre / np.linalg.norm(centre)
+            if np.degrees(np.arccos(np.clip(axis @ view, -1.0, 1.0))) > st.max_view_deg:
+                out[side] = EyeGaze(state="hidden")
+                continue
+            if st.lids == "landmarks":
+                up2, lo2 = (np.asarray(points)[c, :2] for c in (upper, lower))
+            else:
+                up2, lo2 = (camera.project(pose.apply(shape[c])) for c in (upper, lower))
+            iris_px = IRIS_RADIUS_MM * camera.focal_px / max(-centre[2], 1e-6)
+            samples = eye_samples(frame, up2, lo2, iris_px, st)
+            if samples.n < st.min_pixels:
+                out[side] = EyeGaze(state="hidden")
+                continue
+            eyes.append(_Eye(side, centre, samples, iris_px))
+        if eyes:
+            # the coarse grid for both eyes together (their residuals relative to each eye's
+            # own without an iris), then each eye alone around the best
+            yaw, pitch = _grid((0.0, 0.0), st.coarse_deg, MAX_GAZE_DEG)
+            total = np.zeros(len(yaw))
+            for e in eyes:
+                rss = e.rss(camera, rot, yaw, pitch, st)[0]
+                total += rss / max(e.samples.base_rss(), 1e-12)
+            k = int(np.argmin(total))
+            start = (float(yaw[k]), float(pitch[k])) if np.isfinite(total[k]) else None
+            for e in eyes:
+                out[e.side] = self._closed_by_contrast(e.side, self._refine(e, camera, rot, start))
+        self.timings["frames"] += 1
+        self.timings["seconds"] += time.perf_counter() - t0
+        return Gaze(out["l"], out["r"])
+
+    def _refine(self, eye: _Eye, camera, rot, start) -> EyeGaze:
+        st = self.settings
+        if start is None:
+            return EyeGaze(state="not_found")
+        best, explained, contrast = start, float("nan"), float("nan")
+        for step, half in st.fine:
+            yaw, pitch = _grid(best, step, half)
+            rss, expl, coef = eye.rss(camera, rot, yaw, pitch, st)
+            k = int(np.argmin(rss))
+            if not np.isfinite(rss[k]):
+                return EyeGaze(state="not_found")
+            best, explained, contrast = (
+                (float(yaw[k]), float(pitch[k])),
+                float(expl[k]),
+                float(coef[k]),
+            )
+        if not explained >= st.min_explained:
+            return EyeGaze(state="not_found", explained=explained, contrast=contrast)
+        return EyeGaze(best[0], best[1], "ok", explained, contrast)
+
+    def _closed_by_contrast(self, side: str, eye: EyeGaze) -> EyeGaze:
+        """``eye``, or ``closed`` when its iris is too faint against the eye's usual contrast
+        (:attr:`GazeSettings.closed_contrast`)."""
+        if not np.isfinite(eye.contrast):
+            return eye
+        past = self._contrasts[side]
+        past.append(abs(eye.contrast))
+        del past[: max(0, len(past) - int(self.settings.contrast_frames))]
+        usual = float(np.percentile(past, 90))
+        if eye.ok and abs(eye.contrast) < self.settings.closed_contrast * usual:
+            return EyeGaze(state="closed", explained=eye.explained, contrast=eye.contrast)
+        return eye
+
+    def measure(self, frame, camera, pose, shape, points=None) -> Gaze:
+        """:meth:`read`, filtered in time (:class:`GazeSmoother`)."""
+        return self.smoother.update(self.read(frame, camera, pose, shape, points))
+
+    def describe(self) -> dict:
+        """For analysis.json: the settings and the time a frame's reading took."""
+        from dataclasses import asdict
+
+        n = self.timings["frames"]
+        return {
+            "settings": asdict(self.settings),
+            "ms_per_frame": None if n == 0 else 1e3 * self.timings["seconds"] / n,
+        }
+
+
+class GazeSmoother:
+    """A causal filter of each eye's readings that keeps saccades: the output is the weighted
+    mean of the newest reading and up to :attr:`GazeSettings.smooth_frames` before it (of the
+    same fixation: every one read), each weighted by ``exp(-d^2 / (2 s^2))`` with ``d`` its
+    angular distance (deg) from the newest and ``s`` :attr:`GazeSettings.smooth_deg`. A jump
+    of ``4 s`` between frames gives the older readings a weight of e^-8: the saccade passes
+    whole, on its frame. An eye that is not read empties its history."""
+
+    def __init__(self, settings: GazeSettings | None = None):
+        self.settings = settings or GazeSettings()
+        self._past: dict[str, list] = {"l": [], "r": []}
+
+    def reset(self) -> None:
+        for v in self._past.values():
+            v.clear()
+
+    def update(self, gaze: Gaze) -> Gaze:
+        out = {}
+        for side in ("l", "r"):
+            e = gaze.eye(side)
+            past = self._past[side]
+            if not e.ok:
+                past.clear()
+                out[side] = e
+                continue
+            now = np.array([e.yaw_deg, e.pitch_deg])
+            past.append(now)
+            del past[: max(0, len(past) - 1 - int(self.settings.smooth_frames))]
+            p = np.array(past)
+            d2 = ((p - now) ** 2).sum(axis=1)
+            w = np.exp(-0.5 * d2 / self.settings.smooth_deg**2)
+            m = (w[:, None] * p).sum(axis=0) / w.sum()
+            out[side] = EyeGaze(float(m[0]), float(m[1]), "ok", e.explained, e.contrast)
+        return Gaze(out["l"], out["r"])
+
+
+def gaze_camera_vectors(pose, gaze: Gaze) -> dict[str, np.ndarray | None]:
+    """Each eye's gaze as a unit vector (3,) in the camera frame of ``pose`` (myoface's: x right,
+    y up, z towards the viewer), None where the eye was not read."""
+    rot = np.asarray(pose.rotation, dtype=np.float64)
+    out = {}
+    for side in ("l", "r"):
+        e = gaze.eye(side)
+        out[side] = rot @ gaze_directions(e.yaw_deg, e.pitch_deg) if e.ok else None
+    return out
