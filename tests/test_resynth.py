@@ -9,7 +9,10 @@ SIZE = 128
 #: H.264 (libx264, crf 18, yuv420p) changes a 128x128 face render by about 2 grey levels on
 #: average (the RGB -> YUV 4:2:0 -> RGB round trip and the quantisation): the tolerance of a
 #: frame against the direct render
-CODEC_MAD_LEVELS = 3.0
+CODEC_MAD_LEVELS = 3.5
+# (3.0 until the default face rested with its lips closed: the lips' edge, now drawn at rest,
+# left a frame of the resynthesis 3.007 levels from its direct render, 2026-12-02; each frame
+# is still nearer its own render than any other frame is, which the test checks too)
 
 
 @pytest.fixture(scope="module")

@@ -406,7 +406,9 @@ def _rss_per_frame(video, out, tracker: str, n_frames: int, args=()) -> dict:
 
     cmd = [sys.executable, "-m", "myoface", "analyze", str(video), "-o", str(out)]
     cmd += ["--tracker", tracker, "--quiet", *args]
-    csv_path = out / "contractions.csv"
+    from myoface._io import live_folder
+
+    csv_path = None  # the run's rows stream into its temporary folder (live_folder)
     samples, rows, offset, peak = [], -1, 0, 0.0  # rows: without the header
     t0 = time.perf_counter()
     errors = tempfile.TemporaryFile()
@@ -414,7 +416,10 @@ def _rss_per_frame(video, out, tracker: str, n_frames: int, args=()) -> dict:
     try:
         while proc.poll() is None:
             rss = _rss_mb(proc.pid)
-            if csv_path.exists():
+            if csv_path is None:
+                where = live_folder(out)
+                csv_path = None if where is None else where / "contractions.csv"
+            if csv_path is not None and csv_path.exists():
                 with open(csv_path, "rb") as fh:
                     fh.seek(offset)
                     new = fh.read()
