@@ -6,12 +6,15 @@ import numpy as np
 import pytest
 
 from myoface.analysis.camera import HeadPose, PinholeCamera
+from myoface.analysis.gaze import EyeGaze, Gaze
 from myoface.analysis.openface import (
     OPENFACE_AUS,
     OPENFACE_COLUMNS,
+    OPENFACE_GAZE_COLUMNS,
     UNMEASURED_AUS,
     au_basis,
     au_intensities,
+    openface_gaze,
     openface_pose,
     write_openface_csv,
 )
@@ -30,16 +33,23 @@ def ids():
 MEASURED = [n for n in OPENFACE_AUS if n not in UNMEASURED_AUS]
 
 
+#: the pose columns
+POSE = [f"pose_{a}" for a in ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")]
+
+
 def test_columns_and_their_order():
     """OpenFace 2.2's sequence header (RecorderCSV.cpp: frame,face_id,timestamp,confidence,
-    success, then the pose, then the AU intensities sorted by name), without the columns
-    myoface does not measure."""
+    success, then the gaze vectors and angles, then the pose, then the AU intensities sorted by
+    name), without the columns myoface does not measure (the eye landmarks between the gaze and
+    the pose, ...)."""
     aus = "01 02 04 05 06 07 09 10 12 14 15 17 20 23 25 26 45".split()
     expected = ["frame", "face_id", "timestamp", "confidence", "success"]
-    expected += [f"pose_{a}" for a in ("Tx", "Ty", "Tz", "Rx", "Ry", "Rz")]
+    expected += ["gaze_0_x", "gaze_0_y", "gaze_0_z", "gaze_1_x", "gaze_1_y", "gaze_1_z"]
+    expected += ["gaze_angle_x", "gaze_angle_y", *POSE]
     expected += [f"AU{a}_r" for a in aus]
     assert list(OPENFACE_COLUMNS) == expected
-    assert sorted(OPENFACE_COLUMNS[11:]) == list(OPENFACE_COLUMNS[11:])
+    assert list(OPENFACE_GAZE_COLUMNS) == expected[5:13]
+    assert sorted(OPENFACE_COLUMNS[19:]) == list(OPENFACE_COLUMNS[19:])
 
 
 def test_the_basis_has_full_rank(ids):
@@ -170,7 +180,7 @@ def test_write_openface_csv_from_the_3d_fit(tmp_path, ids):
     assert float(row["AU01_r"]) == pytest.approx(0.0, abs=0.01)
     assert row["AU07_r"] == "" and float(row["AU45_r"]) == pytest.approx(0.0, abs=0.01)
     want = openface_pose(pose)
-    got = [float(row[c]) for c in OPENFACE_COLUMNS[5:11]]
+    got = [float(row[c]) for c in POSE]
     np.testing.assert_allclose(got[:3], want[:3], atol=0.06)  # mm, 1 decimal
     np.testing.assert_allclose(got[3:], want[3:], atol=6e-4)  # rad, 3 decimals
 
@@ -189,7 +199,85 @@ def test_write_openface_csv_without_a_3d_pose(tmp_path, ids):
     src.write_text(text)
     head, rows = _read(write_openface_csv(src, tmp_path / "openface.csv"))
     row = dict(zip(head, rows[0], strict=True))
-    assert all(row[c] == "" for c in OPENFACE_COLUMNS[5:11])
+    assert all(row[c] == "" for c in POSE)
+    assert all(row[c] == "" for c in OPENFACE_GAZE_COLUMNS)  # no gaze without a 3-D fit
     assert row["AU04_r"] == "" and row["AU06_r"] == "" and row["AU45_r"] == ""
     assert float(row["AU12_r"]) == pytest.approx(3.0, abs=0.01)
     assert float(row["AU01_r"]) == pytest.approx(0.0, abs=0.01)
+
+
+def _deg(yaw_l, pitch_l, yaw_r, pitch_r):
+    return np.array([yaw_l, pitch_l, yaw_r, pitch_r], dtype=float)
+
+
+def test_gaze_into_the_camera_is_straight_ahead():
+    """OpenFace's documented convention (wiki "Output Format", GazeEstimation.cpp): camera
+    frame x right, y down, z away from the camera; a frontal face looking straight ahead gives
+    (0, 0, -1) for both eyes and angles 0."""
+    pose = HeadPose.from_euler(0, 0, 0, (0, 0, -500))
+    g = openface_gaze(pose, _deg(0, 0, 0, 0))
+    np.testing.assert_allclose(g[:3], [0, 0, -1], atol=1e-12)
+    np.testing.assert_allclose(g[3:6], [0, 0, -1], atol=1e-12)
+    np.testing.assert_allclose(g[6:], [0, 0], atol=1e-12)
+
+
+@pytest.mark.parametrize("yaw, pitch", [(20.0, 0.0), (-15.0, 0.0), (0.0, 10.0), (12.0, -8.0)])
+def test_a_known_gaze_gives_the_documented_vector(yaw, pitch):
+    """A frontal face whose eyes turn towards the person's left (the image's right) by ``yaw``
+    and up by ``pitch``: x = sin(yaw) cos(pitch) > 0 to the right, y = -sin(pitch) (y down),
+    z = -cos(yaw) cos(pitch) (towards the camera); gaze_angle_x = atan2(x, -z) = yaw and
+    gaze_angle_y = atan2(y, -z), negative looking up (the wiki: up-down goes from negative to
+    positive)."""
+    pose = HeadPose.from_euler(0, 0, 0, (0, 0, -500))
+    g = openface_gaze(pose, _deg(yaw, pitch, yaw, pitch))
+    y, p = np.radians(yaw), np.radians(pitch)
+    want = [np.sin(y) * np.cos(p), -np.sin(p), -np.cos(y) * np.cos(p)]
+    np.testing.assert_allclose(g[:3], want, atol=1e-12)
+    np.testing.assert_allclose(g[3:6], want, atol=1e-12)
+    assert g[6] == pytest.approx(y, abs=1e-12)
+    assert g[7] == pytest.approx(np.arctan2(-np.sin(p), np.cos(y) * np.cos(p)), abs=1e-12)
+    assert np.sign(g[7]) == -np.sign(pitch) or pitch == 0
+
+
+def test_gaze_turns_with_the_head_and_eye_0_is_the_right_eye():
+    """The vectors are in the camera frame: eyes straight ahead in a head turned 30 deg to the
+    person's left point 30 deg to the image's right. Eye 0 (the leftmost in the image) is the
+    person's right eye: with only the left eye read, gaze_0 is NaN and the angles are the left
+    eye's."""
+    pose = HeadPose.from_euler(30, 0, 0, (0, 0, -500))
+    g = openface_gaze(pose, _deg(0, 0, 0, 0))
+    np.testing.assert_allclose(g[:3], [0.5, 0, -np.sqrt(3) / 2], atol=1e-12)
+    assert g[6] == pytest.approx(np.radians(30), abs=1e-12)
+    only_left = openface_gaze(HeadPose.from_euler(0, 0, 0), _deg(10, 0, np.nan, np.nan))
+    assert np.isnan(only_left[:3]).all()
+    np.testing.assert_allclose(only_left[3:6], [np.sin(np.radians(10)), 0, -np.cos(np.radians(10))])
+    assert only_left[6] == pytest.approx(np.radians(10))
+    none = openface_gaze(HeadPose.from_euler(0, 0, 0), np.full(4, np.nan))
+    assert np.isnan(none).all()
+
+
+def test_write_openface_csv_gaze_cells(tmp_path, ids):
+    """The gaze of the 3-D fit's rows in the CSV: 6 decimals for the vectors, 3 for the angles;
+    an eye whose lids are closed has empty cells, a frame not measured zeros."""
+    from myoface.analysis.contractions_csv import write_contractions_csv
+
+    pose = HeadPose.from_euler(0, 0, 0, (0, 0, -500))
+    both = Gaze(EyeGaze(20.0, 0.0, "ok"), EyeGaze(20.0, 0.0, "ok"))
+    wink = Gaze(EyeGaze(0.0, 10.0, "ok"), EyeGaze(state="closed"))
+    zero = np.zeros(len(ids))
+    frames = [
+        FitMeasurement(0, 0.0, "ok", zero, pose, 0.3, gaze=both),
+        FitMeasurement(1, 0.04, "ok", zero, pose, 0.3, gaze=wink),
+        FitMeasurement(2, 0.08, "no_face", np.full(len(ids), np.nan), None, float("nan")),
+    ]
+    src = tmp_path / "contractions.csv"
+    write_contractions_csv(src, ids, frames, 0.3)
+    head, rows = _read(write_openface_csv(src, tmp_path / "openface.csv"))
+    r0, r1, r2 = (dict(zip(head, r, strict=True)) for r in rows)
+    s, c = np.sin(np.radians(20)), np.cos(np.radians(20))
+    assert [r0[f"gaze_0_{a}"] for a in "xyz"] == [f"{s:.6f}", "0.000000", f"{-c:.6f}"]
+    assert r0["gaze_angle_x"] == f"{np.radians(20):.3f}" and r0["gaze_angle_y"] == "0.000"
+    assert all(r1[f"gaze_0_{a}"] == "" for a in "xyz")  # the right eye: closed
+    assert float(r1["gaze_1_y"]) == pytest.approx(-np.sin(np.radians(10)), abs=1e-6)
+    assert float(r1["gaze_angle_y"]) == pytest.approx(-np.radians(10), abs=6e-4)
+    assert all(float(r2[col]) == 0.0 for col in OPENFACE_GAZE_COLUMNS)
