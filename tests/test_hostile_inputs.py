@@ -430,6 +430,23 @@ def test_variable_frame_rate_video_is_analysed_at_its_own_times(tmp_path, capsys
     assert rows[35]["time_s"] == "1.1667"
 
 
+@needs_mediapipe
+@pytest.mark.slow
+def test_the_calibration_window_is_two_seconds_of_the_videos_own_times(tmp_path, sample_frames):
+    """A video slow at first (20 frames at 10 fps, then 40 at 30 fps): the calibration's
+    "first 2 s" are its frames up to the first at or after 2 s (23 of them), not 2 s at the
+    average rate (about 40 frames, 2.6 s)."""
+    import json
+
+    times = np.concatenate([np.arange(20) / 10, 1.9 + np.arange(1, 41) / 30])
+    video = tmp_path / "slow_start.mp4"
+    _write_vfr(video, np.resize(sample_frames, (len(times), *sample_frames.shape[1:])), times)
+    assert main(["analyze", str(video), "-o", str(tmp_path / "out"), "--quiet"]) == 0
+    doc = json.loads((tmp_path / "out" / "analysis.json").read_text())
+    want = int(np.flatnonzero(times >= 2.0 - 1e-9)[0]) + 1
+    assert len(doc["calibration"]["scores_mm"]) == want, len(doc["calibration"]["scores_mm"])
+
+
 def _truncated_copy(src, path, keep: float):
     """``src`` remuxed with its index first ("faststart": the container declares every
     frame), then cut to the first ``keep`` of its bytes: a download or a copy interrupted."""

@@ -251,6 +251,7 @@ class FitTracker(TrackerBase):
             self._flow = self._refiner = FlowRefiner()
         # the frames up to the first there is (its size makes the fit's camera); the rest are
         # taken as they come (``frames`` may be decoding meanwhile), on the detector's thread
+        timed = frames  # (a driver's frames carry the time of the frame last taken, time_s)
         frames = iter(frames)
         head: list = []
         for frame in frames:
@@ -272,13 +273,27 @@ class FitTracker(TrackerBase):
             # (runs on the detector's thread, which detects each frame before taking the next)
             it = itertools.chain(head, frames)
             k = 0
+            times: list = []
             while window is None or not first_face or k - first_face[0] < window:
                 frame = next(it, end)
                 if frame is end:
                     break
+                # the window is CALIBRATION_WINDOW_S seconds of the video's own times where
+                # the frames have them (a variable frame rate spaces frames unevenly), else
+                # ``window`` frames
+                t = getattr(timed, "time_s", None)
+                times.append(t)
                 images.append(frame)
                 yield k, frame
                 k += 1
+                if (
+                    window is not None
+                    and first_face
+                    and t is not None
+                    and times[first_face[0]] is not None
+                    and t - times[first_face[0]] >= CALIBRATION_WINDOW_S - 1e-9
+                ):
+                    break
             if window is not None and not first_face:
                 raise MyofaceValueError(
                     f"no face found in the {k} frames of the video (MediaPipe face mesh)"
