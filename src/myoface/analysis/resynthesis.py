@@ -6,13 +6,15 @@ contractions per frame to ``contractions.csv``; the resynthesis reads them back
 (:func:`read_performance`), relaxes the model to each row's equilibrium, warm-started from the
 previous row's, and renders it front on, ``size`` x ``size`` pixels
 (:func:`resynthesis_renderer`), optionally turned and moved by the head pose the 3-D fit
-measured (:class:`PosedRenderer`). The same code serves ``myoface resynth`` (a video,
+measured (:class:`PosedRenderer`), its eyes turned where the analysis read the person's gaze
+(:attr:`Performance.gaze`: the renderer turns both eyes alike, by the mean of the two eyes
+read; through a blink the eyes hold where they last looked). The same code serves ``myoface resynth`` (a video,
 :func:`resynthesize`), the fidelity measure (the frames, :func:`resynthesis_frames`, in
 :mod:`myoface.analysis.fidelity`) and the resynthesis benchmark (``synth.resynth_fps_512``)::
 
     perf = read_performance("out/contractions.csv", model, pose=True)
     resynthesize(model, perf.times, perf.contractions, "resynth.mp4", perf.fps,
-                 poses=perf.poses)
+                 poses=perf.poses, gaze=perf.gaze)
 """
 
 from __future__ import annotations
@@ -24,9 +26,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from myoface.analysis.contractions_csv import (
+    display_gaze,
     display_poses,
     hold_last_measured,
     read_contractions_csv,
+    read_gaze,
     read_head_poses,
 )
 from myoface.analysis.video import open_video
@@ -71,6 +75,9 @@ class Performance:
     fps : float — frames per second: 1 / the median interval between rows.
     poses : list of (rotation (3, 3), translation (3,) mm), or None — the head pose per row
         for the renderer (:func:`~myoface.analysis.contractions_csv.display_poses`), when asked for.
+    gaze : (T, 2) ndarray rad, or None — the eyes' ``(yaw, pitch)`` per row for the renderer
+        (:func:`~myoface.analysis.contractions_csv.display_gaze`: the eyes read averaged, held
+        through rows without a reading), when the CSV has the gaze columns.
     """
 
     times: np.ndarray
@@ -78,18 +85,23 @@ class Performance:
     quality: list
     fps: float
     poses: list | None = None
+    gaze: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
         return len(self.contractions)
 
 
-def read_performance(path: str | os.PathLike, model, *, pose: bool = False) -> Performance:
+def read_performance(
+    path: str | os.PathLike, model, *, pose: bool = False, gaze: bool = True
+) -> Performance:
     """The contractions of the analysis' CSV ``path`` (``contractions.csv``, as
     :func:`~myoface.analysis.contractions_csv.read_contractions_csv` reads it) over
     ``model.ids``, each unmeasured row holding the last measured one, at the CSV's frame rate;
     with ``pose``, also the head pose of each row (the 3-D fit's ``head_yaw_deg`` ...
-    ``head_tz_mm`` columns; rows without one hold the last).
+    ``head_tz_mm`` columns; rows without one hold the last); with ``gaze`` (default), the
+    eyes' gaze of each row where the CSV has it (the 3-D fit's ``gaze_l_yaw_deg`` ...
+    columns, :func:`~myoface.analysis.contractions_csv.read_gaze`; None without them).
 
     A muscle of the model without a column stays at rest, said in a warning that names them
     (with the columns that name no muscle, in one line).
@@ -116,6 +128,8 @@ def read_performance(path: str | os.PathLike, model, *, pose: bool = False) -> P
     poses = None
     if pose:
         poses = display_poses(read_head_poses(path))
+    eyes = read_gaze(path) if gaze else None
+    eyes = None if eyes is None else display_gaze(eyes[0])
     table = hold_last_measured(table)
     dt = float(np.median(np.diff(times))) if len(times) > 1 else 1.0 / ONE_ROW_FPS
     if not 1.0 / MAX_FPS <= dt <= MAX_ROW_INTERVAL_S:
@@ -132,7 +146,9 @@ def read_performance(path: str | os.PathLike, model, *, pose: bool = False) -> P
         )
     for w in said:
         warnings.warn(w.message, w.category, stacklevel=2)
-    return Performance(np.asarray(times, dtype=np.float64), table, list(quality), 1.0 / dt, poses)
+    return Performance(
+        np.asarray(times, dtype=np.float64), table, list(quality), 1.0 / dt, poses, eyes
+    )
 
 
 class PosedRenderer:
@@ -159,13 +175,30 @@ def resynthesis_renderer(model, size: int = DEFAULT_SIZE, poses=None):
     return renderer if poses is None else PosedRenderer(renderer, poses)
 
 
-def resynthesis_frames(model, table, size: int = DEFAULT_SIZE, *, poses=None):
+def resynthesis_frames(model, table, size: int = DEFAULT_SIZE, *, poses=None, gaze=None):
     """The model driven by ``table`` (T, M) contractions over ``model.ids`` (rows with NaN
-    hold the last measured row), rendered by :func:`resynthesis_renderer`: a generator of
-    ``size`` x ``size`` RGB uint8 images, the frames :func:`resynthesize` encodes."""
+    hold the last measured row), rendered by :func:`resynthesis_renderer`, the eyes turned by
+    ``gaze`` (T, 2) rad if given: a generator of ``size`` x ``size`` RGB uint8 images, the
+    frames :func:`resynthesize` encodes."""
     syn = Synthesizer(model, resynthesis_renderer(model, size, poses))
     table = hold_last_measured(np.asarray(table, dtype=np.float64))
-    yield from syn.frames(table, np.arange(len(table), dtype=np.float64))
+    gaze = _check_gaze(gaze, len(table))
+    yield from syn.frames(table, np.arange(len(table), dtype=np.float64), gaze)
+
+
+def _check_gaze(gaze, n: int):
+    """``gaze`` as a finite (n, 2) array rad within the renderer's range, or None."""
+    if gaze is None:
+        return None
+    from myoface.render.renderer import MAX_GAZE_RAD
+
+    g = np.asarray(gaze, dtype=np.float64)
+    if g.shape != (n, 2) or not np.isfinite(g).all():
+        raise MyofaceValueError(
+            f"gaze must be finite (T, 2) (yaw, pitch) rad, one row per frame ({n}); got "
+            f"shape {g.shape}"
+        )
+    return np.clip(g, -MAX_GAZE_RAD, MAX_GAZE_RAD)
 
 
 def resynthesize(
@@ -179,6 +212,7 @@ def resynthesize(
     side_by_side=None,
     show_progress: bool = True,
     poses=None,
+    gaze=None,
 ):
     """Render ``model`` driven by the contractions ``table`` (T, M) at ``times`` (T,) s to the
     video ``output`` at ``fps``: one ``size`` x ``size`` frame per row (front view), each the
@@ -186,6 +220,8 @@ def resynthesize(
     with the frames of the video ``side_by_side`` (scaled to ``size`` rows) on the left.
     ``poses``: per row ``(rotation, translation mm)`` of the head
     (:func:`~myoface.analysis.contractions_csv.display_poses`), or None for the still front view.
+    ``gaze``: per row the eyes' ``(yaw, pitch)`` rad (:attr:`Performance.gaze`), or None for
+    eyes looking straight ahead.
 
     Returns the :class:`~myoface.synth.Synthesizer`, whose ``stats`` hold the per-frame times
     of the physics, the rendering and the encoding.
@@ -197,6 +233,7 @@ def resynthesize(
         then not written).
     """
     h = int(size)
+    gaze = _check_gaze(gaze, len(table))
     syn = Synthesizer(model, resynthesis_renderer(model, h, poses))
     compose = None
     if side_by_side:
@@ -216,5 +253,6 @@ def resynthesize(
         compose=compose,
         show_progress=show_progress,
         desc="resynthesizing",
+        gaze=gaze,
     )
     return syn
