@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from myoface.cli import main
@@ -111,3 +112,29 @@ def test_every_benchmark_runs_quick(tmp_path):
     out = tmp_path / "all.json"
     assert main(["bench", "--quick", "--json", str(out)]) == 0
     assert all(r["value"] == r["value"] for r in json.loads(out.read_text()))  # no NaN
+
+
+def test_bench_list_has_the_gaze_benchmark(capsys):
+    assert main(["bench", "--list"]) == 0
+    assert "analysis.gaze_error_deg" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_gaze_benchmark_runs_quick(tmp_path):
+    """``analysis.gaze_error_deg`` on its quick clip (30 frames): a finite value in degrees and
+    the detail's parts (each eye on the analysis and on the reader alone, the blinks)."""
+    from myoface.facemesh import mediapipe_available
+
+    if not mediapipe_available():
+        pytest.skip('needs pip install "myoface[mediapipe]"')
+    out = tmp_path / "gaze.json"
+    assert main(["bench", "--quick", "--only", "analysis.gaze", "--json", str(out)]) == 0
+    (rec,) = json.loads(out.read_text())
+    assert rec["name"] == "analysis.gaze_error_deg" and rec["unit"] == "deg"
+    assert np.isfinite(rec["value"]) and 0 < rec["value"] < 45 and rec["n"] == 30
+    detail = json.loads(out.with_suffix(".detail.json").read_text())
+    fit = detail.get("analysis.gaze_error_deg", detail)["fit"]
+    assert set(fit["per_eye"]) == {"l", "r"} == set(fit["reader_on_true_geometry"])
+    assert fit["value"] == pytest.approx(rec["value"], abs=1e-6)
+    for eye in fit["per_eye"].values():
+        assert eye["open_frames_read"] > 0.8 and eye["shut_frames_said_closed"] is not None
