@@ -285,3 +285,58 @@ def test_resynthesis_turns_the_eyes(tmp_path, ids, default_face):
     assert read_performance(path, model, gaze=False).gaze is None
     with pytest.raises(MyofaceValueError, match="gaze"):
         list(resynthesis_frames(model, perf.contractions, 96, gaze=np.zeros((2, 2))))
+
+
+# ------------------------------------------------------------------ the viewer's playback
+
+
+def test_viewer_playback_carries_the_gaze(tmp_path, ids):
+    """A contractions.csv with gaze, and a timeline with gaze events, play with the eyes
+    turned; a CSV without gaze leaves them straight ahead."""
+    from myoface.analysis.contractions_csv import write_contractions_csv
+    from myoface.model import build_face_model
+    from myoface.viewer.state import ViewerState
+
+    st = ViewerState(build_face_model())
+    path = tmp_path / "contractions.csv"
+    write_contractions_csv(path, ids, _measurements(ids), 0.3)
+    st.load_playback(path)
+    assert np.degrees(st.gaze_at(0.0)) == pytest.approx((11, 1.5))
+    assert np.degrees(st.gaze_at(0.04)) == pytest.approx((11, 1.5))  # the blink holds
+    assert np.degrees(st.gaze_at(10.0)) == pytest.approx((-20, -5))
+    tl = tmp_path / "look.toml"
+    tl.write_text(
+        '[[event]]\nkind = "gaze"\nyaw_deg = 20\npitch_deg = 0\nstart = 0.0\nduration = 1.0\n'
+        "onset = 0.2\noffset = 0.2\n"
+    )
+    st.load_playback(tl)
+    assert np.degrees(st.gaze_at(0.5)[0]) == pytest.approx(20, abs=0.5)
+    plain = tmp_path / "plain.csv"
+    plain.write_text("time_s,quality,jaw\n0,ok,0.1\n1.0,ok,0.6\n")
+    st.load_playback(plain)
+    assert st.gaze_at(0.5) is None
+
+
+def test_viewer_scene_turns_the_eyes():
+    """The scene's eyeballs turn about their own centres by the gaze (viser's handles: one per
+    eye, placed at its centre)."""
+    pytest.importorskip("viser")
+    from myoface.model import build_face_model
+    from myoface.viewer.app import FaceViewer
+    from myoface.viewer.scene import _quaternion_wxyz
+
+    v = FaceViewer(build_face_model(), port=0)
+    try:
+        sc = v.scene
+        assert len(sc.eyes) == 2
+        for eye, (_, _, centre) in zip(sc.eyes, v.renderer._eyeballs, strict=True):
+            np.testing.assert_allclose(eye.position, centre * 1e-3, atol=1e-9)
+        g = (np.radians(15.0), np.radians(-5.0))
+        sc.set_gaze(g)
+        want = _quaternion_wxyz(gaze_rotation(g))
+        for eye in sc.eyes:
+            np.testing.assert_allclose(eye.wxyz, want, atol=1e-9)
+        sc.set_gaze(None)
+        np.testing.assert_allclose(sc.eyes[0].wxyz, (1, 0, 0, 0), atol=1e-12)
+    finally:
+        v.close()

@@ -240,7 +240,9 @@ class FaceViewer:
         syn = Synthesizer(self.model, Renderer(self.model.face, camera, texture=self._texture8))
         with VideoWriter(path, fps) as vw:
             for k in range(n):
-                vw.write(syn.image(self.state.frame_at(times[0] + k / fps)))
+                t = times[0] + k / fps
+                syn.gaze = self.state.gaze_at(t)  # (the playback's eyes, if it has them)
+                vw.write(syn.image(self.state.frame_at(t)))
                 if on_frame is not None:
                     on_frame(k + 1, n)
         return Path(path)
@@ -514,6 +516,7 @@ class FaceViewer:
 
     def _scrub(self) -> None:
         if self.state.playback is not None:
+            self.scene.set_gaze(self.state.gaze_at(self._time.value))
             self.worker.request(self.state.frame_at(self._time.value))
 
     def _play(self) -> None:

@@ -250,9 +250,19 @@ class FaceScene:
                 color=_srgb8(sc.vcol[first + len(loop)]),
                 side="double",
             )
-        # fixed in the head: eyeballs and upper teeth; carried by the jaw: lower teeth, tongue
-        self.eyes = self._static_mesh("/face/dressing/eyes", pos, sc.n_dynamic, sc.n_jaw_first)
+        # fixed in the head: the eyeballs (each turned about its centre by the gaze,
+        # :meth:`set_gaze`) and the upper teeth; carried by the jaw: lower teeth, tongue
+        self.eyes = []
+        end = sc.n_dynamic
+        for k, (a, b, centre) in enumerate(renderer._eyeballs):
+            eye = self._static_mesh(f"/face/dressing/eye_{k}", pos, a, b, origin=centre)
+            if eye is not None:
+                self.eyes.append(eye)
+            end = max(end, b)
+        self.upper_teeth = self._static_mesh("/face/dressing/upper_teeth", pos, end, sc.n_jaw_first)
         self.jaw = self._static_mesh("/face/dressing/jaw", pos, sc.n_jaw_first, len(pos))
+        #: the eyes' gaze shown, ``(yaw, pitch)`` rad (None: straight ahead)
+        self.gaze = None
         ins, org = muscle_segments(model)
         self.vectors = scene_api.add_line_segments(
             "/muscles",
@@ -289,8 +299,10 @@ class FaceScene:
             visible=False,
         )
 
-    def _static_mesh(self, name, pos, lo, hi):
-        """A vertex-coloured mesh of the scene's rigid vertices lo..hi-1 (None when empty)."""
+    def _static_mesh(self, name, pos, lo, hi, origin=None):
+        """A vertex-coloured mesh of the scene's rigid vertices lo..hi-1 (None when empty);
+        ``origin`` (3,) mm: its vertices relative to that point, the handle placed there (so
+        that a rotation of the handle turns the mesh about it)."""
         sc = self.renderer.scene
         tris = sc.tris[(sc.tris.min(axis=1) >= lo) & (sc.tris.max(axis=1) < hi)] - lo
         if hi <= lo or not len(tris):
@@ -298,13 +310,14 @@ class FaceScene:
         import trimesh
 
         col = to_srgb8(sc.vcol[lo:hi].reshape(1, -1, 3))[0]
+        o = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
         mesh = trimesh.Trimesh(
-            pos[lo:hi] * MM,
+            (pos[lo:hi] - o) * MM,
             tris,
             vertex_colors=np.column_stack([col, np.full(len(col), 255, np.uint8)]),
             process=False,
         )
-        return self.api.add_mesh_trimesh(name, mesh)
+        return self.api.add_mesh_trimesh(name, mesh, position=tuple(float(c) for c in o * MM))
 
     def _segments(self, x, sel) -> np.ndarray:
         t = self.model.tissue
@@ -339,6 +352,16 @@ class FaceScene:
         self.bones.visible = bool(on)
 
     # ------------------------------------------------------------------ updates
+    def set_gaze(self, gaze=None) -> None:
+        """Turn both eyeballs about their centres to ``gaze`` ``(yaw_rad, pitch_rad)`` (as the
+        renderer's ``gaze=``: yaw towards the subject's left, pitch up), or straight ahead."""
+        from myoface.render.renderer import gaze_rotation
+
+        rot = np.eye(3) if gaze is None else gaze_rotation(gaze)
+        self.gaze = None if gaze is None else tuple(float(g) for g in gaze)
+        for eye in self.eyes:
+            eye.wxyz = _quaternion_wxyz(rot)
+
     def update(self, x: np.ndarray, jaw=None) -> None:
         """Move everything visible to the tissue node positions ``x`` (N, 3) mm and the
         mandible's rigid motion ``jaw`` (:meth:`myoface.model.FaceModel.jaw_pose`; None:

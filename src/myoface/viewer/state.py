@@ -10,7 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
-from myoface.analysis.contractions_csv import hold_last_measured, read_contractions_csv
+from myoface.analysis.contractions_csv import (
+    display_gaze,
+    hold_last_measured,
+    read_contractions_csv,
+    read_gaze,
+)
 from myoface.control import (
     au_contractions,
     expression_contractions,
@@ -54,6 +59,8 @@ class ViewerState:
         self.expression: tuple[str, float] | None = None
         self.linked = True
         self.playback: tuple[np.ndarray, np.ndarray] | None = None  # times, table
+        #: the playback's gaze (T, 2) rad, (yaw, pitch) per row, or None (no gaze in it)
+        self.playback_gaze: np.ndarray | None = None
         self.version = 0
         self._lock = threading.Lock()
         self.presets: dict[str, np.ndarray] = self.builtin_presets()
@@ -177,25 +184,42 @@ class ViewerState:
 
     # ------------------------------------------------------------------ playback
     def load_playback(self, path) -> float:
-        """Load a ``contractions.csv`` or a timeline file; returns its duration (s)."""
+        """Load a ``contractions.csv`` or a timeline file; returns its duration (s). The eyes'
+        gaze comes with it where it has one (an analysis' gaze columns, the eyes read
+        averaged and held through blinks; a timeline's gaze events): :meth:`gaze_at`."""
         p = Path(path)
+        gaze = None
         if p.suffix.lower() == ".csv":
             times, table, _ = read_contractions_csv(p, list(self.ids))
             table = hold_last_measured(table)
+            read = read_gaze(p)
+            gaze = None if read is None else display_gaze(read[0])
         else:
             tl = load_timeline(p)
             times = np.linspace(0, tl.duration, max(2, int(tl.duration * 30) + 1))
             table = tl.contractions(times, self.ids, strict=False)
+            gaze = tl.gaze(times) if tl.has_gaze else None
         self.playback = (times, table)
+        self.playback_gaze = gaze
         self._bump()
         return float(times[-1] - times[0])
 
-    def frame_at(self, t: float) -> np.ndarray:
+    def _row_at(self, t: float) -> int:
         if self.playback is None:
             raise MyofaceValueError("no playback loaded")
-        times, table = self.playback
-        k = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1))
-        return table[k].copy()
+        times = self.playback[0]
+        return int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1))
+
+    def frame_at(self, t: float) -> np.ndarray:
+        return self.playback[1][self._row_at(t)].copy()
+
+    def gaze_at(self, t: float) -> tuple[float, float] | None:
+        """The playback's gaze ``(yaw, pitch)`` rad at time ``t`` (s), or None when it has
+        none."""
+        k = self._row_at(t)
+        if self.playback_gaze is None:
+            return None
+        return tuple(float(g) for g in self.playback_gaze[k])
 
 
 class PhysicsWorker(threading.Thread):
