@@ -26,10 +26,10 @@ loaded 2-core machine, ``--quick`` 8 s), at 1dde7d8 (the default face's new lips
 analysis 8.8 deg (the worse eye; left 7.4: yaw 4.8, pitch 9.3; right 8.6-8.8: yaw 6.6, pitch
 10.3), with analysis by synthesis 6.9, with the photometric term 9.5 (5.3 and 6.3 before the
 lips changed: those two variants move most with the fit); the reader alone on the true
-geometry 3.2 and 2.8 (yaw 2.1 and 1.8, pitch 4.0 and 3.6). The target (<= 3 deg) is not met, and what holds it is the eyeball's place:
-the fit puts the eyeballs' centres 1.5-1.6 px RMS from the truth in the image (0.85-2.1 with
-the photometric term, 1.1-1.7 with synthesis), and the iris' centre being 10.5 mm in front of the
-eyeball's, a pixel (0.76 mm here) is 4 deg. MediaPipe's own eye contour is no better a guide
+geometry 3.2 and 2.8 (yaw 2.1 and 1.8, pitch 4.0 and 3.6). The target (<= 3 deg) is not
+met, and what holds it is the eyeball's place: the fit puts the eyeballs' centres 1.5-1.6 px
+RMS from the truth in the image (0.85-2.1 with the photometric term, 1.1-1.7 with synthesis),
+and the iris' centre being 10.5 mm in front of the eyeball's, a pixel (0.76 mm here) is 4 deg. MediaPipe's own eye contour is no better a guide
 (its centroid 1.2-1.8 px from the truth's). Open eyes are read on 99-100 % of their frames, the
 shut frames all said closed, 0-1 % of the open ones. The reader costs 9-11 ms a frame.
 """
