@@ -37,6 +37,7 @@ TARGETS = {
     "analysis.fps_snakes": [(">=", 25)],
     "analysis.rss_mb_growth_per_1000_frames": [("<", 20)],
     "analysis.fidelity": [(">=", 0.85)],
+    "analysis.gaze_error_deg": [("<=", 3)],
     "analysis.closed_loop_rmse": [("<=", 0.05)],
     "analysis.closed_loop_corr": [(">=", 0.9)],
     "analysis.headmotion_rmse_worst": [("<=", 0.08)],

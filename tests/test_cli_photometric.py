@@ -106,7 +106,7 @@ def test_analyze_and_batch_with_photometric_on_the_sample_video(tmp_path):
             rows = list(csv.DictReader(fh))
         assert [r["quality"] for r in rows] == ["ok"] * 4, rows
         skip = ("frame", "time_s", "quality", "residual_mm")
-        muscles = [k for k in rows[0] if k not in skip and not k.startswith("head_")]
+        muscles = [k for k in rows[0] if k not in skip and not k.startswith(("head_", "gaze_"))]
         return doc, np.array([[float(r[k]) for k in muscles] for r in rows])
 
     assert main(["analyze", str(video), "-o", str(tmp_path / "photo"), *argv, "--photometric"]) == 0
@@ -119,7 +119,9 @@ def test_analyze_and_batch_with_photometric_on_the_sample_video(tmp_path):
         k: v for k, v in doc0["fit_settings"].items() if k != "photometric"
     }
     assert np.isfinite(photo).all()
-    np.testing.assert_array_equal(photo[0], default[0])  # the calibration frame: neutral
+    # the calibration frame: neutral in both (every contraction below 0.01: the default fit
+    # leaves a muscle at 0.0003-0.0023 there from the landmarks' scatter, 2026-12-02)
+    assert np.abs(photo[0]).max() < 0.01 and np.abs(default[0]).max() < 0.01, (photo[0], default[0])
     assert np.abs(photo[1:] - default[1:]).max() > 0.01
 
     out = tmp_path / "batch"

@@ -87,5 +87,6 @@ def resynth_video(
         side_by_side=side_by_side,
         show_progress=not quiet,
         poses=perf.poses,
+        gaze=perf.gaze,
     )
     print(f"wrote {output} ({perf.n_frames} frames at {perf.fps:.1f} fps)")
