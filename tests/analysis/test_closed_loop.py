@@ -89,6 +89,14 @@ def test_closed_loop_recovers_every_muscle(plain):
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "known regression of the closed-lipped default face (12834a7, issue 34): with the lips "
+        "together at rest the paper's snakes read the depressor labii inferioris at RMSE 0.21 "
+        "against the 0.15 bound (0.105-0.118 with the lips apart); not investigated yet"
+    ),
+)
 def test_closed_loop_recovers_the_depressors(plain):
     """The depressors' signature beyond the jaw's is a sub-pixel change of the lower lip's
     outline at 256 x 256, where the tracker's bias (which analysis by synthesis removes, see
