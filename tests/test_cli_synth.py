@@ -265,6 +265,7 @@ def test_demo_real_video(model, tmp_path, monkeypatch, capsys):
         "face found ",
         f"wrote {ana / 'person.png'}",
         f"wrote {ana / 'person.myoface'}",
+        "lips       inner lips at rest ",  # (issue 34: the person's rest gap)
         f"wrote {ana / 'resynth_person.mp4'} (72 frames at 30.0 fps)",
     ]
     lines = text.splitlines()
