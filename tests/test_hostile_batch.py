@@ -8,6 +8,7 @@ clips cut from the sample video; the peers are socket servers in a thread of the
 import csv
 import math
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -61,8 +62,13 @@ def _myoface(*argv) -> list[str]:
     return [sys.executable, "-m", "myoface", *map(str, argv)]
 
 
+#: MediaPipe's own C++ log lines (absl: "W0000 00:00:... file.cc:114] ..."), which its graph
+#: writes to stderr from a worker process that has just started it; not myoface's output
+_MEDIAPIPE_LOG = re.compile(r"^[IWE]\d{4} \d\d:\d\d:\S+\s+\d+ \S+\.cc:\d+\]")
+
+
 def _one_line(err: str) -> str:
-    lines = err.strip().splitlines()
+    lines = [ln for ln in err.strip().splitlines() if not _MEDIAPIPE_LOG.match(ln)]
     assert len(lines) == 1 and "Traceback" not in err, err
     return lines[0]
 
