@@ -178,10 +178,9 @@ def _noting_sigint():
 
 
 @contextlib.contextmanager
-def deferred():
-    """A step done whole or not at all: a stop signal in the block is noted and raised as
-    :class:`Interrupted` when the block ends (main thread; elsewhere signals are not raised
-    anyway). Keep the block short (it delays the stop by its length)."""
+def _deferring(drop: bool):
+    """The block of :func:`deferred` and :func:`held` (main thread only): stop signals noted,
+    not raised; with ``drop`` those noted are dropped when the outermost such block ends."""
     global _defer_depth
     if not _on_main_thread():
         yield
@@ -192,7 +191,19 @@ def deferred():
             yield
         finally:
             _defer_depth -= 1
-    raise_pending()
+            if drop and not _defer_depth:
+                _pending.clear()
+
+
+@contextlib.contextmanager
+def deferred():
+    """A step done whole or not at all: a stop signal in the block is noted and raised as
+    :class:`Interrupted` when the block ends (main thread; elsewhere signals are not raised
+    anyway). Keep the block short (it delays the stop by its length)."""
+    with _deferring(drop=False):
+        yield
+    if _on_main_thread():
+        raise_pending()
 
 
 @contextlib.contextmanager
@@ -200,15 +211,5 @@ def held():
     """As :func:`deferred`, but a stop signal in the block is dropped: for the work that
     completes a run that is stopping already (its kept frames, its commit), so that a second
     Ctrl-C does not cut it short."""
-    global _defer_depth
-    if not _on_main_thread():
+    with _deferring(drop=True):
         yield
-        return
-    with _noting_sigint():
-        _defer_depth += 1
-        try:
-            yield
-        finally:
-            _defer_depth -= 1
-            if not _defer_depth:
-                _pending.clear()
