@@ -64,6 +64,7 @@ def test_analyze_then_resynth(smile_video, tmp_path, capsys):
     import imageio.v3 as iio
     from scipy.spatial import cKDTree
 
+    from myoface.analysis.expressions import EXPRESSION_COLUMNS
     from myoface.analysis.initfiles import load_init
     from myoface.analysis.sections import PAPER_MUSCLES
     from myoface.model import build_face_model
@@ -74,7 +75,8 @@ def test_analyze_then_resynth(smile_video, tmp_path, capsys):
     # contractions.csv: its documented columns, one row per frame, every frame measured
     cols, rows = _read_csv(out / "contractions.csv")
     head = ["head_dx_px", "head_dy_px", "head_scale", "head_rot_deg"]
-    assert cols == ["frame", "time_s", "quality", *PAPER_MUSCLES, "jaw_angle_rad", *head]
+    expr = [*EXPRESSION_COLUMNS, "expression"]  # (myoface.analysis.expressions)
+    assert cols == ["frame", "time_s", "quality", *PAPER_MUSCLES, "jaw_angle_rad", *head, *expr]
     assert [int(r["frame"]) for r in rows] == list(range(len(SMILE)))
     np.testing.assert_allclose([float(r["time_s"]) for r in rows], np.arange(len(SMILE)) / FPS)
     assert all(r["quality"] == "ok" for r in rows)

@@ -11,6 +11,7 @@ import numpy as np
 
 from myoface._io import atomic_output, check_output_path, read_text
 from myoface.analysis.camera import POSE_COLUMNS, HeadPose
+from myoface.analysis.expressions import EXPRESSION_COLUMNS, LABEL_COLUMN, expression_cells
 from myoface.analysis.gaze import GAZE_COLUMNS, GAZE_STATE_COLUMNS, GAZE_STATES
 from myoface.analysis.trackers.base import FrameMeasurement
 from myoface.errors import (
@@ -30,7 +31,8 @@ def contractions_csv_header(ids, first=None) -> list[str]:
     :func:`write_contractions_csv`): each kind names its head columns (``HEAD_COLUMNS``);
     without a measurement, the 2-D head frame's."""
     head = HEAD_2D_COLUMNS if first is None else first.HEAD_COLUMNS
-    return ["frame", "time_s", "quality", *ids, "jaw_angle_rad", *head]
+    expr = [*EXPRESSION_COLUMNS, LABEL_COLUMN]  # (myoface.analysis.expressions)
+    return ["frame", "time_s", "quality", *ids, "jaw_angle_rad", *head, *expr]
 
 
 def jaw_angle_function(jaw):
@@ -56,7 +58,9 @@ def contractions_csv_row(f, ids, jaw) -> str:
     if "jaw" in ids and np.isfinite(f.contractions[ids.index("jaw")]):
         jaw_cell = f"{angle(float(f.contractions[ids.index('jaw')])):.5f}"
     head = f.head_cells()
-    return ",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw_cell, *head])
+    ok = f.quality == "ok"
+    expr = expression_cells(f.contractions if ok else [np.nan], ids)
+    return ",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw_cell, *head, *expr])
 
 
 def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw) -> None:
@@ -69,7 +73,11 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw) -> No
     gaze, ``gaze_l_yaw_deg, gaze_l_pitch_deg, gaze_r_yaw_deg, gaze_r_pitch_deg`` (degrees, head
     frame: yaw towards the subject's left, pitch up; empty where the eye was not read) and
     ``gaze_l_state, gaze_r_state`` (``ok``, ``closed``, ``hidden`` or ``not_found``; see
-    :mod:`myoface.analysis.gaze`). Written whole (atomically); :class:`ContractionsCsvWriter`
+    :mod:`myoface.analysis.gaze`). Last, with every tracker, the expressions read from the
+    contractions (:mod:`myoface.analysis.expressions`): ``expr_happiness, expr_sadness,
+    expr_surprise, expr_fear, expr_anger, expr_disgust, expr_neutral`` (strengths in [0, 1])
+    and ``expression`` (the label; empty where the frame was not measured). Written whole
+    (atomically); :class:`ContractionsCsvWriter`
     writes the same rows one by one."""
     ids = list(ids)
     kinds = {type(f) for f in frames}
@@ -200,6 +208,9 @@ CSV_OTHER_COLUMNS = (
     # ... and its gaze (myoface.analysis.gaze)
     *GAZE_COLUMNS,
     *GAZE_STATE_COLUMNS,
+    # ... and the expressions read from the contractions (myoface.analysis.expressions)
+    *EXPRESSION_COLUMNS,
+    LABEL_COLUMN,
 )
 
 

@@ -1,0 +1,364 @@
+"""The expression level, read backward: how strongly each of the six basic expressions (and
+neutral) is present in a frame, from its fitted contractions.
+
+The paper's hierarchy runs expression -> FACS action units -> muscles -> physics -> images;
+its discussion proposes running it backward "all the way up to the expression level". This
+module is that last step: an explainable rule over action units, not a classifier trained on
+appearance. Per frame:
+
+1. **AU intensities.** The fitted contractions are read as FACS action units through the
+   project's AU table (``data/facs_action_units.toml``), exactly as the OpenFace CSV's
+   ``AUxx_r`` columns are (:func:`myoface.analysis.openface.au_intensities`), divided by 5:
+   ``x_a`` in [0, 1], FACS's letters A-E at 0.2-1.0.
+2. **Prototypes.** Each expression is a list of AU combinations, the EMFACS prototypes and
+   major variants of P. Ekman, W. V. Friesen & J. C. Hager, *Facial Action Coding System:
+   Investigator's Guide* (2002), table 10-1 ("EMFACS predictions"; EMFACS-7 is W. V. Friesen
+   & P. Ekman, 1983), restricted to the AUs the analysis reads (:data:`PROTOTYPES`; what
+   was left out and why, :data:`LEFT_OUT`).
+3. **A prototype's match** is the mean intensity of its AUs times a gate per AU that opens
+   from half a trace (0.1) to a trace (FACS's A, 0.2; for ``12>=C`` from C - 0.1 to C): a
+   coder scores a prototype only when every one of its AUs is there, and then it is as
+   strong as its AUs are.
+4. **An expression's strength** (``expr_<name>``, in [0, 1]) is its best prototype's match
+   times its *coverage*: the share of the frame's AU activity (sum of ``x_a**2``) that lies
+   in the AUs of that expression's prototypes and variants, or in the AUs that go with any
+   expression (:data:`ANY_EXPRESSION_AUS`: lips part, jaw drop, blink). A face that shows
+   the AUs of surprise and, besides, the brow lowerer and the lip stretcher of fear is
+   mostly explained by fear: its surprise is discounted by what surprise leaves unexplained.
+5. **Neutral** (``expr_neutral``) is ``1 - `` the strongest expression's strength, and the
+   **label** (``expression``) is the strongest expression when its strength reaches a trace
+   (:data:`LABEL_MIN`, 0.2), else ``neutral``; empty on a frame that was not measured.
+
+Limits (see docs/expressions.md): sadness and fear share AU1 and AU4 (told apart by AU15
+against AU2, AU5 and AU20); surprise's AUs are a subset of fear's (told apart by coverage);
+AU7 is not read (its muscles are AU6's and AU45's, :data:`~myoface.analysis.openface.UNMEASURED_AUS`),
+so anger's prototypes are its table variants without AU7; AU11, AU16, AU22, AU24 and AU27
+are not among the AUs read (AU16's depressor is read as AU25, AU27's jaw as AU26); the
+model's muscles cannot make AU22 (lip funneler) at all. A contraction vector from the
+snakes (the paper's 12 muscles and the jaw) has no corrugators: AU4 is not measured, and a
+prototype with an AU that is not measured is not scored (an expression with none left is
+NaN).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+#: the six basic expressions, in the columns' order
+EXPRESSIONS = ("happiness", "sadness", "surprise", "fear", "anger", "disgust")
+#: the label of a frame that shows none of them
+NEUTRAL = "neutral"
+#: contractions.csv's (and openface.csv's) expression columns, in order
+EXPRESSION_COLUMNS = (*(f"expr_{e}" for e in EXPRESSIONS), f"expr_{NEUTRAL}")
+#: the column of the per-frame label
+LABEL_COLUMN = "expression"
+
+#: FACS intensity letters as AU intensities in [0, 1] (as :data:`myoface.control.facs.LETTERS`)
+_LETTERS = {"A": 0.2, "B": 0.4, "C": 0.6, "D": 0.8, "E": 1.0}
+#: an AU is present from a trace (FACS's A: 0.2 in [0, 1], 1 on OpenFace's 0-5 scale); its
+#: gate opens over the half-trace below (Ekman, Friesen & Hager 2002, ch. 1: A, "trace")
+TRACE = _LETTERS["A"]
+#: the label is an expression when its strength reaches a trace, else neutral
+LABEL_MIN = TRACE
+
+#: The EMFACS prototypes and major variants (Ekman, Friesen & Hager 2002, FACS
+#: Investigator's Guide, table 10-1) over the AUs the analysis reads. ``a+b+c``: every AU
+#: present; ``12>=C``: AU12 at C or more. The table's intensity marks that describe the
+#: prototype (5B, 15B: slight; ``*``: any intensity) are not minimums and are dropped; its
+#: "25, 26 or 27" and "with or without 54+64" options are in :data:`ANY_EXPRESSION_AUS` or
+#: not read (head and eye positions); AU27 (mouth stretch) is read as AU26.
+PROTOTYPES = {
+    # 6+12*; 12C/D
+    "happiness": ("6+12", "12>=C"),
+    # 1+4+15*, 1+4+15B (+17); 6+15*  (1+4+11, 11+15B, 11+17: AU11 not read)
+    "sadness": ("1+4+15", "1+4+15+17", "6+15"),
+    # 1+2+5B+26/27; variants 1+2+5B, 1+2+26/27, 5B+26/27
+    "surprise": ("1+2+5+26", "1+2+5", "1+2+26", "5+26"),
+    # 1+2+4+5*+20*+25/26/27, 1+2+4+5*+25/26/27; variants 1+2+4+5*, 5*+20*
+    # (1+2+5Z: an intensity mark we do not read; L/R20: the rule is bilateral)
+    "fear": ("1+2+4+5+20", "1+2+4+5", "5+20"),
+    # 4+5*+7+23, 4+5*+7+10*+23, 4+5*+7+17+23 (+25/26), and the table's variants "without any
+    # one of 4, 5, 7 or 10": without AU7, which is not read (4+5*+7+17+24: AU24 not read)
+    "anger": ("4+5+23", "4+5+10+23", "4+5+17+23"),
+    # 9; 9+16+15/26; 9+17; 10*; 10*+16+25/26; 10+17  (AU16 not read: its depressor is AU25)
+    "disgust": ("9", "9+15", "9+17", "10", "10+17"),
+}
+#: AUs of the table's prototypes and variants that the analysis does not read, and why; the
+#: prototypes above leave them out (they still count as the expression's own in its coverage)
+LEFT_OUT = {
+    7: "lid tightener: its muscles are AU6's and AU45's (openface.UNMEASURED_AUS)",
+    11: "nasolabial deepener: not among OpenFace's AUs, which the analysis reads",
+    16: "lower lip depressor: its muscle is read as AU25 (lips part) with the jaw",
+    22: "lip funneler: not in the AU table; the model's muscles cannot make it",
+    24: "lip pressor: not among OpenFace's AUs",
+    27: "mouth stretch: the jaw alone, read as AU26 (jaw drop)",
+}
+#: AUs that go with any expression: the lips parting and the jaw dropping ("25 or 26 may
+#: occur with all prototypes or major variants", table 10-1), and a blink
+ANY_EXPRESSION_AUS = (25, 26, 45)
+#: every AU of each expression's table entries (prototypes and variants, read or not): what
+#: counts as explained by the expression (its coverage). AU7 is read as AU6 and AU45, so
+#: fear and anger (AU7 in their prototypes) own AU6 too.
+EXPRESSION_AUS = {
+    "happiness": (6, 12),
+    "sadness": (1, 4, 6, 11, 15, 17),
+    "surprise": (1, 2, 5, 27),
+    "fear": (1, 2, 4, 5, 6, 7, 20, 27),
+    "anger": (4, 5, 6, 7, 10, 17, 22, 23, 24),
+    "disgust": (9, 10, 15, 16, 17),
+}
+
+
+@dataclass(frozen=True)
+class Prototype:
+    """One AU combination of an expression: its AUs and the least intensity (in [0, 1]) at
+    which each counts as present (:data:`TRACE` unless the table says more)."""
+
+    expression: str
+    aus: tuple
+    least: tuple
+
+    @property
+    def text(self) -> str:
+        return "+".join(
+            f"{a}" if t == TRACE else f"{a}>={_letter(t)}"
+            for a, t in zip(self.aus, self.least, strict=True)
+        )
+
+
+def _letter(v: float) -> str:
+    return next(k for k, x in _LETTERS.items() if x == v)
+
+
+def _parse(expression: str, text: str) -> Prototype:
+    aus, least = [], []
+    for term in text.split("+"):
+        num, _, letter = term.partition(">=")
+        aus.append(int(num))
+        least.append(_LETTERS[letter] if letter else TRACE)
+    return Prototype(expression, tuple(aus), tuple(least))
+
+
+@lru_cache(maxsize=1)
+def prototypes() -> dict[str, tuple[Prototype, ...]]:
+    """:data:`PROTOTYPES` parsed: ``{expression: (Prototype, ...)}``."""
+    return {e: tuple(_parse(e, t) for t in PROTOTYPES[e]) for e in EXPRESSIONS}
+
+
+def rule_aus() -> tuple[int, ...]:
+    """The AUs the rule reads: OpenFace's (:data:`~myoface.analysis.openface.OPENFACE_AUS`),
+    the ones the OpenFace CSV reports."""
+    from myoface.analysis.openface import OPENFACE_AUS
+
+    return OPENFACE_AUS
+
+
+def _gate(x: np.ndarray, least: float) -> np.ndarray:
+    """0 below ``least - TRACE / 2``, 1 from ``least``, linear between."""
+    return np.clip((x - (least - TRACE / 2)) / (TRACE / 2), 0.0, 1.0)
+
+
+def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
+    """The rule on AU intensities: ``(T, 7)`` strengths in [0, 1] in :data:`EXPRESSION_COLUMNS`'
+    order (the six expressions, then neutral) from ``intensities`` (T, len(aus)) in [0, 1]
+    (FACS's A-E at 0.2-1.0; OpenFace's ``AUxx_r`` / 5) over the AU numbers ``aus`` (default
+    :func:`rule_aus`); NaN for an AU that was not measured. One frame: (len(aus),) -> (7,).
+
+    An expression's strength is its best prototype's match (the mean of its AUs' intensities
+    times each AU's presence gate) times its coverage (the share of ``sum x**2`` in its own
+    AUs and :data:`ANY_EXPRESSION_AUS`); a prototype with an unmeasured AU is not scored, an
+    expression with no prototype scored is NaN. Neutral is 1 minus the strongest (NaN when
+    none was scored). A row with no AU measured is NaN throughout.
+    """
+    aus = tuple(rule_aus() if aus is None else aus)
+    x = np.asarray(intensities, dtype=np.float64)
+    one = x.ndim == 1
+    x = np.atleast_2d(x)
+    if x.shape[1] != len(aus):
+        raise ValueError(f"intensities must be (T, {len(aus)}) over aus; got shape {x.shape}")
+    col = {a: j for j, a in enumerate(aus)}
+    x = np.clip(x, 0.0, 1.0)  # (NaN stays NaN)
+    energy = np.nansum(x**2, axis=1)
+    out = np.full((len(x), len(EXPRESSION_COLUMNS)), np.nan)
+    for i, e in enumerate(EXPRESSIONS):
+        own = [col[a] for a in {*EXPRESSION_AUS[e], *ANY_EXPRESSION_AUS} if a in col]
+        explained = np.nansum(x[:, own] ** 2, axis=1)
+        coverage = np.where(energy > 0, explained / np.where(energy > 0, energy, 1.0), 1.0)
+        best = np.full(len(x), np.nan)
+        for p in prototypes()[e]:
+            if not all(a in col for a in p.aus):
+                continue
+            v = x[:, [col[a] for a in p.aus]]
+            gates = np.prod(
+                [_gate(v[:, k], t) for k, t in enumerate(p.least)], axis=0
+            )  # NaN where an AU is unmeasured
+            match = gates * v.mean(axis=1)
+            best = np.fmax(best, match)
+        out[:, i] = best * coverage
+    strongest = np.nanmax(np.where(np.isnan(out[:, :-1]), -np.inf, out[:, :-1]), axis=1)
+    out[:, -1] = np.where(np.isfinite(strongest), 1.0 - strongest, np.nan)
+    out[~np.isfinite(x).any(axis=1)] = np.nan
+    return out[0] if one else out
+
+
+def expression_labels(scores) -> list[str]:
+    """The label of each row of ``scores`` (T, 7) (:func:`expression_scores_from_aus`): the
+    strongest expression when its strength is at least :data:`LABEL_MIN`, else ``neutral``;
+    ``""`` for a row without any score (a frame not measured)."""
+    s = np.atleast_2d(np.asarray(scores, dtype=np.float64))[:, : len(EXPRESSIONS)]
+    out = []
+    for row in s:
+        if not np.isfinite(row).any():
+            out.append("")
+            continue
+        k = int(np.nanargmax(row))
+        out.append(EXPRESSIONS[k] if row[k] >= LABEL_MIN else NEUTRAL)
+    return out
+
+
+@lru_cache(maxsize=8)
+def _basis(ids: tuple):
+    from myoface.analysis.openface import au_basis
+
+    return au_basis(list(ids), rule_aus())
+
+
+def au_fractions(contractions, muscle_ids) -> np.ndarray:
+    """AU intensities (T, len(:func:`rule_aus`)) in [0, 1] of contractions (T, M) over
+    ``muscle_ids``: :func:`~myoface.analysis.openface.au_intensities` / 5 (NaN for an AU not
+    measured, and for a frame whose contractions are not all finite)."""
+    from myoface.analysis.openface import OPENFACE_SCALE, au_intensities
+
+    return au_intensities(contractions, list(muscle_ids), rule_aus()) / OPENFACE_SCALE
+
+
+def expression_scores(contractions, muscle_ids) -> np.ndarray:
+    """The expressions' strengths (T, 7) in :data:`EXPRESSION_COLUMNS`' order of contractions
+    (T, M) over ``muscle_ids`` (one frame: (M,) -> (7,)): the AU table, then the EMFACS rule
+    (:func:`expression_scores_from_aus`; see the module's docstring). NaN rows for frames
+    whose contractions are not all finite.
+
+    >>> from myoface.control import expression_contractions  # doctest: +SKIP
+    >>> s = expression_scores(expression_contractions("happiness", 1.0, ids), ids)
+    >>> expression_labels(s)
+    ['happiness']
+    """
+    c = np.asarray(contractions, dtype=np.float64)
+    one = c.ndim == 1
+    x = au_fractions(np.atleast_2d(c), muscle_ids)
+    s = expression_scores_from_aus(x)
+    return s[0] if one else s
+
+
+def expression_cells(contractions, muscle_ids) -> list[str]:
+    """One frame's expression cells for contractions.csv (:data:`EXPRESSION_COLUMNS` with 3
+    decimals, then the label); all empty when the contractions are not all finite."""
+    c = np.asarray(contractions, dtype=np.float64)
+    if not np.isfinite(c).all():
+        return [""] * (len(EXPRESSION_COLUMNS) + 1)
+    s = expression_scores(c, tuple(muscle_ids))
+    return [*("" if not np.isfinite(v) else f"{v:.3f}" for v in s), expression_labels(s)[0]]
+
+
+def read_expressions(path, table=None, muscle_ids=None) -> tuple[np.ndarray, list[str]]:
+    """The expressions of a contractions CSV: ``(scores (T, 7), labels (T,))`` from its
+    :data:`EXPRESSION_COLUMNS` and :data:`LABEL_COLUMN`; a CSV without them (written before
+    they were) has them computed from its contractions ``table`` (T, M) over ``muscle_ids``
+    (from :func:`~myoface.analysis.contractions_csv.read_contractions_csv`), or raises a
+    :class:`~myoface.errors.MyofaceFormatError` when those are not given."""
+    import csv
+    from pathlib import Path
+
+    from myoface._io import read_text
+    from myoface.errors import MyofaceFormatError
+
+    p = Path(path)
+    rows = [r for r in csv.DictReader(read_text(p, "contractions CSV").splitlines()) if r]
+    if rows and all(c in rows[0] for c in (*EXPRESSION_COLUMNS, LABEL_COLUMN)):
+        scores = np.full((len(rows), len(EXPRESSION_COLUMNS)), np.nan)
+        labels = []
+        for k, r in enumerate(rows):
+            for j, c in enumerate(EXPRESSION_COLUMNS):
+                cell = (r.get(c) or "").strip()
+                if cell:
+                    try:
+                        scores[k, j] = float(cell)
+                    except ValueError:
+                        raise MyofaceFormatError(
+                            f"{p}: row {k + 2}: {c} is not a number: {cell[:40]!r}"
+                        ) from None
+            lab = (r.get(LABEL_COLUMN) or "").strip()
+            if lab not in ("", NEUTRAL, *EXPRESSIONS):
+                raise MyofaceFormatError(
+                    f"{p}: row {k + 2}: {LABEL_COLUMN} must be one of "
+                    f"{', '.join((*EXPRESSIONS, NEUTRAL))} or empty; got {lab[:40]!r}"
+                )
+            labels.append(lab)
+        return scores, labels
+    if table is None or muscle_ids is None:
+        raise MyofaceFormatError(f"{p}: no expression columns ({', '.join(EXPRESSION_COLUMNS)})")
+    scores = expression_scores(table, muscle_ids)
+    return scores, expression_labels(scores)
+
+
+#: the plot's colour per expression (and grey for neutral)
+COLORS = {
+    "happiness": "#e6a100",
+    "sadness": "#3a6fd8",
+    "surprise": "#19a7a0",
+    "fear": "#8a4fc7",
+    "anger": "#d62728",
+    "disgust": "#5b8c2a",
+    NEUTRAL: "0.55",
+}
+
+
+def plot_expressions(path, times, scores, labels, quality) -> None:
+    """``expressions.png``: the six expressions' strengths and neutral (``scores`` (T, 7))
+    over ``times`` (T,) s, and below them the label of each frame as a coloured band; frames
+    whose ``quality`` is not "ok" shaded grey. Written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from myoface._io import atomic_output
+
+    t = np.asarray(times, dtype=np.float64)
+    s = np.asarray(scores, dtype=np.float64).reshape(len(t), len(EXPRESSION_COLUMNS))
+    fig, (ax, band) = plt.subplots(
+        2, 1, figsize=(8, 3.6), sharex=True, gridspec_kw={"height_ratios": [5, 1]}
+    )
+    names = (*EXPRESSIONS, NEUTRAL)
+    for j, e in enumerate(names):
+        ax.plot(t, s[:, j], color=COLORS[e], lw=1.2 if e != NEUTRAL else 1.0,
+                ls="-" if e != NEUTRAL else "--", label=e)  # fmt: skip
+    ax.axhline(LABEL_MIN, color="0.3", lw=0.6, ls=":", zorder=0)
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_ylabel("strength", fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.legend(loc="upper left", fontsize=7, ncol=7, frameon=False, bbox_to_anchor=(0, 1.16))
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / 30
+    for k, (lab, q) in enumerate(zip(labels, quality, strict=True)):
+        if q != "ok" or not lab:
+            for a in (ax, band):
+                a.axvspan(t[k] - dt / 2, t[k] + dt / 2, color="0.88", lw=0, zorder=0)
+            continue
+        band.axvspan(t[k] - dt / 2, t[k] + dt / 2, color=COLORS[lab], lw=0)
+    band.set_yticks([])
+    band.set_ylabel("label", rotation=0, ha="right", va="center", fontsize=8)
+    band.set_xlabel("time (s)")
+    band.tick_params(labelsize=7)
+    fig.suptitle(
+        "expressions from the fitted contractions (EMFACS prototypes over the AU table; "
+        f"dotted: the label's threshold {LABEL_MIN:g}; grey: not measured)",
+        fontsize=8,
+        y=0.995,
+    )
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, dpi=100)
+    plt.close(fig)
