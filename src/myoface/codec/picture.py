@@ -1,0 +1,628 @@
+"""The receiver's picture: the calibration frame moved by the person's model
+(:class:`PictureModel`), what ``myoface decode`` shows and what animates a still photo
+(``myoface synth --in-photo``).
+
+A frame's parameters (:class:`~myoface.codec.params.FrameParams`: head pose, contractions,
+gaze) drive the model; the model's skin, posed and seen through the camera, is projected now
+and at calibration, and the calibration picture is warped by that motion, piecewise affinely
+over the projected triangles (:mod:`myoface.codec.warp`; one :func:`cv2.remap` of the
+picture). The warp is continued outside the face by rings of nodes around the face's rim that
+move with the head (hair, ears, neck: the head's rigid motion), then with less of it, then not
+at all: the picture's border and everything far from the head stay still.
+
+What the picture cannot supply is the model's:
+
+- the inside of the mouth: where the lips part more than at calibration, the model's mouth
+  (cavity, teeth, tongue; :class:`~myoface.render.Renderer`, the jaw's pose) rendered through
+  the same camera shows through the opening, faded in with the opening (the calibration's own
+  mouth at the calibration's opening);
+- the eyelids: the lid skin is skin (the model's lids, :mod:`myoface.muscles.lids`, close the
+  opening): a blink draws the calibration's lid over the eye;
+- the eyes turned by gaze: each eyeball is a cap of nodes on the model's eyeball sphere, its
+  material points turned by the gaze now and at calibration, so the iris of the calibration
+  picture moves across the eye; the eyeball's part under the lids at calibration (never seen)
+  is filled with the sclera's colour.
+
+The physics per frame is the synthesis' (:mod:`myoface.synth`): the tissue relaxed at the
+frame's contractions, warm-started from the previous frame's (``physics="relax"``); or, for a
+fixed cost, the skin's linear response to each contraction about the calibration, computed once
+(``physics="linear"``, :func:`myoface.analysis.estimate.skin_response`; the lids and the lips'
+contact with the teeth are applied on it as on the relaxed skin).
+
+Image coordinates are (x, y) = (column, row), pixels, pixel centres at half-integers (the
+camera's, :class:`~myoface.analysis.camera.PinholeCamera`); the head frame and the camera
+frame are the analysis' (:mod:`myoface.analysis.camera`); mm.
+
+A still photo has no camera: :func:`photo_picture` aligns the model to the face MediaPipe finds
+in it, as ``myoface face from-photo`` does, and makes its camera (a far pinhole, nearly
+orthographic, as the alignment's similarity is) and its calibration parameters.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from myoface.analysis.camera import PinholeCamera
+from myoface.codec.params import FrameParams
+from myoface.codec.warp import raster_warp
+from myoface.errors import MyofaceValueError
+
+__all__ = [
+    "PHYSICS",
+    "PictureModel",
+    "PictureStats",
+    "photo_picture",
+    "photo_setup",
+]
+
+PHYSICS = ("relax", "linear")
+
+#: labels of the warp's layers in :attr:`PictureModel.last_label`
+LABEL_STILL, LABEL_AROUND, LABEL_EYE, LABEL_MOUTH, LABEL_SKIN = 0, 1, 2, 3, 4
+
+#: the rings of nodes around the face's rim (:class:`PictureModel`): each ring is the rim
+#: scaled by ``scale`` about its centre in the head frame (x, y), ``back_mm`` behind it (the
+#: head's sides curve away from the camera), and moves with ``weight`` of the head's motion
+#: (1: rigidly with the head; 0: still). Above the mouth's level the rings carry the hair and
+#: the ears; below it (the neck, the shoulders, which follow the head less) the weights of the
+#: outer rings are ``below`` instead
+RINGS = (
+    # scale, back_mm, weight, below
+    (1.30, 15.0, 1.0, 1.0),
+    (1.75, 35.0, 0.55, 0.15),
+    (2.50, 60.0, 0.0, 0.0),
+)
+#: nodes on the picture's border every this many pixels (still)
+BORDER_STEP_PX = 64
+#: the eyeball's cap of nodes reaches this far (degrees) from the eye's forward direction
+CAP_DEG = 80.0
+#: ... in this many rings of this many nodes each
+CAP_RINGS, CAP_SEGMENTS = 7, 20
+#: the model's mouth is shown through lips parted more than at calibration: faded in from
+#: ``MOUTH_FADE_MM[0]`` to ``MOUTH_FADE_MM[1]`` of extra mean gap between the inner lip
+#: margins (mm; below it the calibration's own mouth is stretched, a dark line at closed lips)
+MOUTH_FADE_MM = (0.3, 1.5)
+#: the mouth's edge is feathered over this many pixels (a Gaussian of this sigma)
+MOUTH_FEATHER_PX = 1.0
+#: the sclera's colour is the mean of the brightest share of the calibration's eye opening
+SCLERA_SHARE = 0.3
+#: the atlas' eye patches have this many pixels of margin around the eyeball's projection
+ATLAS_MARGIN_PX = 4
+#: a still picture's pinhole: this far (mm) from the head, a focal length that gives the
+#: alignment's pixels per mm there; at 10 m the perspective moves a face's points by under
+#: 0.5% of their distance from its centre (under a pixel for a face 200 px wide)
+PHOTO_DISTANCE_MM = 10_000.0
+#: equilibrium tolerance (mm) of the per-frame relax (the synthesis')
+RELAX_TOL_MM = 2e-2
+
+
+@dataclass
+class PictureStats:
+    """Wall times (ms) per :meth:`PictureModel.render`: the physics, the warp's geometry and
+    raster, the remap, the mouth; and relaxes that did not converge."""
+
+    physics_ms: list
+    warp_ms: list
+    remap_ms: list
+    mouth_ms: list
+    total_ms: list
+    unconverged: int = 0
+
+
+def _rim_and_openings(face):
+    from myoface.render.dressing import find_openings
+
+    loops = face.boundary_loops
+    if not loops:
+        raise MyofaceValueError("the face model's mesh has no boundary: no rim to warp around")
+    rim = np.asarray(max(loops, key=len), dtype=np.int64)
+    openings = {op.name: np.asarray(op.loop, dtype=np.int64) for op in find_openings(face)}
+    return rim, openings
+
+
+def _cap_mesh():
+    """Unit directions (n, 3) of an eyeball's cap about +z and its triangles."""
+    th = np.deg2rad(np.linspace(0.0, CAP_DEG, CAP_RINGS + 1)[1:])
+    ph = np.linspace(0.0, 2 * np.pi, CAP_SEGMENTS, endpoint=False)
+    dirs = [np.array([0.0, 0.0, 1.0])]
+    for t in th:
+        for p in ph:
+            dirs.append([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+    tris = []
+    s = CAP_SEGMENTS
+    for j in range(s):
+        tris.append((0, 1 + j, 1 + (j + 1) % s))
+    for r in range(CAP_RINGS - 1):
+        a0, b0 = 1 + r * s, 1 + (r + 1) * s
+        for j in range(s):
+            j1 = (j + 1) % s
+            tris.append((a0 + j, b0 + j, b0 + j1))
+            tris.append((a0 + j, b0 + j1, a0 + j1))
+    return np.array(dirs, dtype=np.float64), np.array(tris, dtype=np.int64)
+
+
+def _fan(loop: np.ndarray, center: int) -> np.ndarray:
+    k = len(loop)
+    return np.column_stack([loop, np.roll(loop, -1), np.full(k, center)]).astype(np.int64)
+
+
+def _polygon_mask(shape, pts: np.ndarray) -> np.ndarray:
+    import cv2
+
+    m = np.zeros(shape, np.uint8)
+    poly = np.round((np.asarray(pts) - 0.5) * 16).astype(np.int32)
+    cv2.fillPoly(m, [poly], 1, lineType=cv2.LINE_8, shift=4)
+    return m.astype(bool)
+
+
+def _gaze_matrix(yaw: float, pitch: float) -> np.ndarray:
+    from myoface.render.renderer import MAX_GAZE_RAD, gaze_rotation
+
+    lim = float(MAX_GAZE_RAD)
+    return gaze_rotation((float(np.clip(yaw, -lim, lim)), float(np.clip(pitch, -lim, lim))))
+
+
+class PictureModel:
+    """The calibration frame moved by the person's model (see the module's docstring).
+
+    Parameters
+    ----------
+    model : FaceModel — the person's model (:mod:`myoface.model`); its rest skin is the
+        person's neutral (the better it matches the picture, the better the warp follows it).
+    camera : PinholeCamera — the picture's camera (:mod:`myoface.analysis.camera`).
+    calibration_frame : (H, W, 3) uint8 RGB — the picture.
+    calibration : FrameParams — the parameters at that picture (its pose, its contractions,
+        its gaze; NaN gaze: straight ahead).
+    physics : {"relax", "linear"} — the tissue relaxed per frame (default), or its linear
+        response about the calibration (fixed cost; see the module's docstring).
+
+    :meth:`render` keeps the tissue's state from one call to the next (a warm start), and the
+    last gaze read of each eye (an eye not read, e.g. closed, holds it): a PictureModel is
+    one receiver's, not to be shared between threads.
+    """
+
+    def __init__(self, model, camera: PinholeCamera, calibration_frame, calibration: FrameParams,
+                 *, physics: str = "relax"):  # fmt: skip
+        import cv2
+
+        if physics not in PHYSICS:
+            raise MyofaceValueError(f"physics must be one of {PHYSICS}; got {physics!r}")
+        frame = np.asarray(calibration_frame)
+        if (
+            frame.ndim != 3
+            or frame.shape[2] != 3
+            or frame.dtype != np.uint8
+            or min(frame.shape[:2]) < 2
+        ):
+            raise MyofaceValueError(
+                "the calibration frame must be an (H, W, 3) uint8 RGB image of at least 2x2 "
+                f"pixels; got {frame.dtype} {frame.shape}"
+            )
+        if not isinstance(camera, PinholeCamera):
+            raise MyofaceValueError(
+                f"camera must be a PinholeCamera (myoface.analysis.camera); got {type(camera).__name__}"
+            )
+        self.model = model
+        self.camera = camera
+        self.physics = physics
+        self.height, self.width = frame.shape[:2]
+        h, w = self.height, self.width
+        self.calibration = self._check(calibration)
+        self.stats = PictureStats([], [], [], [], [])
+        face = model.face
+        nv = face.n_vertices
+        self._rim, self._openings = _rim_and_openings(face)
+        self._face_tris = np.ascontiguousarray(face.triangles, dtype=np.int64)
+
+        # ---- the skin at calibration
+        cal = self.calibration
+        self._c_cal = cal.contractions.copy()
+        self._state_cal = self._relaxed(cal.contractions, model.rest_state())
+        self._state = self._state_cal
+        self._settled = self._state_cal
+        self._skin_cal = model.skin_vertices(self._state_cal)
+        if physics == "linear":
+            from myoface.analysis.estimate import skin_response
+
+            self._response = skin_response(model, model.ids)  # (V, 3, M)
+            self._x_cal = np.array(self._state_cal.x[:nv])
+
+        # ---- the nodes: skin, rings, border, fan centres, eye caps
+        rim3 = self._skin_cal[self._rim]
+        centre = rim3.mean(axis=0)
+        mouth_loop = self._openings.get("mouth")
+        mouth_y = (
+            float(self._skin_cal[mouth_loop, 1].mean()) if mouth_loop is not None else centre[1]
+        )
+        rings, weights = [], []
+        below = rim3[:, 1] < mouth_y
+        for scale, back, wt, wt_below in RINGS:
+            p = rim3.copy()
+            p[:, :2] = centre[:2] + scale * (rim3[:, :2] - centre[:2])
+            p[:, 2] -= back
+            rings.append(p)
+            weights.append(np.where(below, wt_below, wt))
+        self._ring3 = np.concatenate(rings)
+        self._ring_w = np.concatenate(weights)
+        cal_pose = cal.pose
+        ring_cal = camera.project(cal_pose.apply(self._ring3))
+        skin_cal_px = camera.project(cal_pose.apply(self._skin_cal))
+        # the border's nodes, those inside the second ring's outline dropped (they would
+        # pin the moving head to the frame's edge)
+        bx = np.unique(np.r_[np.arange(0, w, BORDER_STEP_PX), w])
+        by = np.unique(np.r_[np.arange(0, h, BORDER_STEP_PX), h])
+        border = np.concatenate([
+            np.column_stack([bx, np.zeros_like(bx)]), np.column_stack([bx, np.full_like(bx, h)]),
+            np.column_stack([np.zeros_like(by), by]), np.column_stack([np.full_like(by, w), by]),
+        ]).astype(np.float64)  # fmt: skip
+        border = np.unique(border, axis=0)
+        k = len(self._rim)
+        from matplotlib.path import Path as MplPath
+
+        outline2 = MplPath(ring_cal[k : 2 * k])
+        border = border[~outline2.contains_points(border)]
+        self._n_ring = len(self._ring3)
+        self._i_ring = nv
+        self._i_border = nv + self._n_ring
+        self._i_fans = self._i_border + len(border)
+        fan_names = [n for n in ("mouth", "eye_l", "eye_r") if n in self._openings]
+        self._fan_centre = {n: self._i_fans + j for j, n in enumerate(fan_names)}
+        self._i_caps = self._i_fans + len(fan_names)
+        cap_dirs, cap_tris = _cap_mesh()
+        self._cap_dirs = cap_dirs
+        self._eyes = []  # (name, loop, centre (3,), first node, gaze index)
+        from myoface.face.eyes import EYE_RADIUS_MM, eyeball_center
+
+        self._eye_radius = EYE_RADIUS_MM
+        first = self._i_caps
+        for name, gi in (("eye_l", 0), ("eye_r", 1)):
+            if name not in self._openings:
+                continue
+            c = eyeball_center(face.vertices, self._openings[name])
+            self._eyes.append((name, self._openings[name], c, first, gi))
+            first += len(cap_dirs)
+        self._n_nodes = first
+        n = self._n_nodes
+
+        # ---- the source positions (the calibration's) and the still nodes' destinations
+        self._src = np.zeros((n, 2))
+        self._src[:nv] = skin_cal_px
+        self._src[self._i_ring : self._i_border] = ring_cal
+        self._src[self._i_border : self._i_fans] = border
+        for name, j in self._fan_centre.items():
+            self._src[j] = skin_cal_px[self._openings[name]].mean(axis=0)
+        g_cal = np.nan_to_num(cal.gaze.reshape(2, 2), nan=0.0)
+        self._gaze_cal = g_cal.copy()
+        self._gaze_last = g_cal.copy()
+        for _, _, c, i0, gi in self._eyes:
+            pts = c + self._eye_radius * cap_dirs @ _gaze_matrix(*g_cal[gi]).T
+            self._src[i0 : i0 + len(cap_dirs)] = camera.project(cal_pose.apply(pts))
+        self._dst = np.zeros((n, 2))
+        self._depth = np.zeros(n)
+
+        # ---- the triangles: around the face (a Delaunay triangulation of the rim, the rings
+        # and the border at calibration, without the face inside the rim), the fans, the caps
+        from scipy.spatial import Delaunay
+
+        around_nodes = np.r_[self._rim, np.arange(self._i_ring, self._i_fans)]
+        tri = Delaunay(self._src[around_nodes]).simplices
+        tri = around_nodes[tri]
+        cen = self._src[tri].mean(axis=1)
+        inside = MplPath(skin_cal_px[self._rim]).contains_points(cen)
+        tri = tri[~inside]
+        weight = np.zeros(n)
+        weight[: self._i_ring] = 1.0
+        weight[self._i_ring : self._i_border] = self._ring_w
+        moving = weight[tri].max(axis=1) > 0
+        self._around_tris = np.ascontiguousarray(tri[moving])
+        self._node_weight = weight
+        self._fan_tris = {
+            name: _fan(self._openings[name], j) for name, j in self._fan_centre.items()
+        }
+        self._cap_tris = [cap_tris + e[3] for e in self._eyes]
+
+        # ---- the source picture: the frame, and beside it the eyes' patches with the
+        # eyeball's unseen part filled with the sclera's colour
+        self._frame = np.ascontiguousarray(frame)
+        patches, self._atlas_shift = [], []
+        x_at = w
+        for _name, loop, _c, i0, _gi in self._eyes:
+            cap_px = self._src[i0 : i0 + len(cap_dirs)]
+            x0 = int(np.floor(cap_px[:, 0].min())) - ATLAS_MARGIN_PX
+            y0 = int(np.floor(cap_px[:, 1].min())) - ATLAS_MARGIN_PX
+            x1 = int(np.ceil(cap_px[:, 0].max())) + ATLAS_MARGIN_PX
+            y1 = int(np.ceil(cap_px[:, 1].max())) + ATLAS_MARGIN_PX
+            pw, ph = max(x1 - x0, 1), max(y1 - y0, 1)
+            if pw > w or ph > h:  # an eye larger than the picture: no patch
+                self._atlas_shift.append((0.0, 0.0))
+                continue
+            ys = np.clip(np.arange(y0, y1), 0, h - 1)
+            xs = np.clip(np.arange(x0, x1), 0, w - 1)
+            patch = frame[ys][:, xs].copy()
+            opening = _polygon_mask((ph, pw), skin_cal_px[loop] - [x0, y0])
+            seen = patch[opening].reshape(-1, 3).astype(np.float64)
+            if len(seen) >= 4:
+                bright = seen.sum(axis=1)
+                top = bright >= np.quantile(bright, 1.0 - SCLERA_SHARE)
+                sclera = seen[top].mean(axis=0)
+            else:
+                sclera = np.array([200.0, 190.0, 180.0])
+            # the picture kept a little beyond the opening (the warp's edge pixels read it),
+            # the sclera's colour faded in outside
+            keep = cv2.dilate(opening.astype(np.uint8), np.ones((3, 3), np.uint8))
+            soft = np.maximum(cv2.GaussianBlur(keep.astype(np.float32), (0, 0), 1.0), keep)
+            soft = soft[:, :, None]
+            patch = (soft * patch + (1 - soft) * sclera).round().astype(np.uint8)
+            patches.append((patch, x_at))
+            self._atlas_shift.append((float(x_at - x0), float(-y0)))
+            x_at += pw
+        canvas = np.zeros((h, x_at, 3), np.uint8)
+        canvas[:, :w] = frame
+        for patch, xa in patches:
+            canvas[: patch.shape[0], xa : xa + patch.shape[1]] = patch
+        self._canvas = np.ascontiguousarray(canvas)
+        if x_at > 32767:
+            raise MyofaceValueError(f"the picture is too wide to warp ({w} px)")
+
+        # ---- buffers
+        ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+        self._ident_x, self._ident_y = xs, ys
+        self._map_x = np.empty((h, w), np.float32)
+        self._map_y = np.empty((h, w), np.float32)
+        self._label = np.empty((h, w), np.uint8)
+        self._zbuf = np.empty((h, w), np.float32)
+        #: the layer each pixel of the last render came from (``LABEL_*``)
+        self.last_label = self._label
+        self._mouth_renderer = None
+        lm = face.landmarks
+        up = np.asarray(lm.get("lip_upper_inner", ()), dtype=np.int64)
+        lo = np.asarray(lm.get("lip_lower_inner", ()), dtype=np.int64)
+        pairs = [(a, b) for a, b in zip(up, lo, strict=False) if a != b]
+        self._lip_pairs = (
+            np.array(pairs, dtype=np.int64).T if pairs and len(up) == len(lo) else None
+        )
+        self._gap_cal = self._lip_gap(self._skin_cal)
+
+    # ------------------------------------------------------------------ checks
+    def _check(self, params) -> FrameParams:
+        if not isinstance(params, FrameParams):
+            raise MyofaceValueError(f"params must be a FrameParams; got {type(params).__name__}")
+        m = self.model.n_muscles
+        if params.contractions.shape != (m,):
+            raise MyofaceValueError(
+                f"params.contractions must have {m} entries (the model's ids); got "
+                f"{params.contractions.shape[0]}"
+            )
+        rot, t = params.rotation, params.translation
+        if not (np.isfinite(rot).all() and np.isfinite(t).all()) or not np.allclose(
+            rot @ rot.T, np.eye(3), atol=1e-5
+        ):
+            raise MyofaceValueError("params.rotation must be a finite rotation matrix and "
+                                    "params.translation finite (mm)")  # fmt: skip
+        if not t[2] < 0:
+            raise MyofaceValueError(
+                f"the head must be in front of the camera (translation z < 0 mm); got {t[2]:g}"
+            )
+        return params
+
+    # ------------------------------------------------------------------ physics
+    def _relaxed(self, c, state):
+        from myoface.tissue import RelaxWarning
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RelaxWarning)
+            res = self.model.relax(c, state, tol_mm=RELAX_TOL_MM)
+        ok = res.converged and not any(issubclass(x.category, RelaxWarning) for x in caught)
+        if not ok and hasattr(self, "stats"):
+            self.stats.unconverged += 1
+        return res.state
+
+    def skin(self, contractions) -> np.ndarray:
+        """The model's skin (V, 3) mm, head frame, at ``contractions`` (M,): relaxed from the
+        last call's state (``physics="relax"``) or the linear response about the calibration
+        (``"linear"``), the lids and the lips' contact applied."""
+        model = self.model
+        c = model.validate(contractions)
+        if np.array_equal(c, self._c_cal):
+            self._state = self._state_cal
+            return self._skin_cal
+        if self.physics == "relax":
+            if not (self._state is self._settled and np.array_equal(c, self._state.contractions)):
+                self._state = self._relaxed(c, self._state)
+                self._settled = self._state
+            return model.skin_vertices(self._state)
+        from myoface.model import FaceState
+
+        x = np.array(self._state_cal.x)
+        nv = model.face.n_vertices
+        x[:nv] = self._x_cal + self._response @ (c - self._c_cal)
+        state = FaceState(x, self._state_cal.v, c)
+        return model.skin_vertices(state)
+
+    def _lip_gap(self, skin) -> float:
+        if self._lip_pairs is None:
+            return 0.0
+        a, b = self._lip_pairs
+        return float((skin[a, 1] - skin[b, 1]).mean())
+
+    # ------------------------------------------------------------------ render
+    def render(self, params: FrameParams) -> np.ndarray:
+        """The picture (H, W, 3) uint8 RGB at ``params`` (the calibration frame's size)."""
+        import cv2
+
+        t0 = time.perf_counter()
+        p = self._check(params)
+        skin = self.skin(p.contractions)
+        t1 = time.perf_counter()
+        dst, depth = self._dst, self._depth
+        pose = p.pose
+        cam = self.camera
+        nv = self.model.face.n_vertices
+        cam_pts = pose.apply(skin)
+        dst[:nv] = cam.project(cam_pts)
+        depth[:nv] = -cam_pts[:, 2]
+        ring_now = cam.project(pose.apply(self._ring3))
+        s = slice(self._i_ring, self._i_border)
+        dst[s] = self._src[s] + self._ring_w[:, None] * (ring_now - self._src[s])
+        dst[self._i_border : self._i_fans] = self._src[self._i_border : self._i_fans]
+        for name, j in self._fan_centre.items():
+            dst[j] = dst[self._openings[name]].mean(axis=0)
+        g_now = p.gaze.reshape(2, 2)
+        for _, _, c, i0, gi in self._eyes:
+            g = g_now[gi]
+            if not np.isfinite(g).all():
+                other = g_now[1 - gi]
+                g = other if np.isfinite(other).all() else self._gaze_last[gi]
+            self._gaze_last[gi] = g
+            pts = pose.apply(c + self._eye_radius * self._cap_dirs @ _gaze_matrix(*g).T)
+            dst[i0 : i0 + len(self._cap_dirs)] = cam.project(pts)
+            depth[i0 : i0 + len(self._cap_dirs)] = -pts[:, 2]
+        mx, my, lab, zb = self._map_x, self._map_y, self._label, self._zbuf
+        np.copyto(mx, self._ident_x)
+        np.copyto(my, self._ident_y)
+        lab.fill(LABEL_STILL)
+        src = self._src
+        raster_warp(
+            dst, src, depth, self._around_tris, mx, my, lab, LABEL_AROUND, zb, False, 0.0, 0.0
+        )
+        for name in ("eye_l", "eye_r"):
+            if name in self._fan_tris:
+                raster_warp(dst, src, depth, self._fan_tris[name], mx, my, lab, LABEL_EYE, zb,
+                            False, 0.0, 0.0)  # fmt: skip
+        zb.fill(np.inf)
+        for (_, _, _, _, _), tris, (dx, dy) in zip(self._eyes, self._cap_tris, self._atlas_shift,
+                                                   strict=True):  # fmt: skip
+            raster_warp(dst, src, depth, tris, mx, my, lab, LABEL_EYE, zb, True, dx, dy)
+        if "mouth" in self._fan_tris:
+            raster_warp(dst, src, depth, self._fan_tris["mouth"], mx, my, lab, LABEL_MOUTH, zb,
+                        False, 0.0, 0.0)  # fmt: skip
+        zb.fill(np.inf)
+        raster_warp(dst, src, depth, self._face_tris, mx, my, lab, LABEL_SKIN, zb, True, 0.0, 0.0)
+        t2 = time.perf_counter()
+        out = cv2.remap(self._canvas, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        t3 = time.perf_counter()
+        self._mouth(out, skin, p, dst)
+        t4 = time.perf_counter()
+        st = self.stats
+        st.physics_ms.append((t1 - t0) * 1e3)
+        st.warp_ms.append((t2 - t1) * 1e3)
+        st.remap_ms.append((t3 - t2) * 1e3)
+        st.mouth_ms.append((t4 - t3) * 1e3)
+        st.total_ms.append((t4 - t0) * 1e3)
+        return out
+
+    def mouth_alpha(self, skin) -> float:
+        """How much of the model's rendered mouth shows through the lips of ``skin`` (V, 3):
+        0 at the calibration's lip gap, 1 from :data:`MOUTH_FADE_MM` [1] mm more."""
+        extra = self._lip_gap(skin) - self._gap_cal
+        lo, hi = MOUTH_FADE_MM
+        return float(np.clip((extra - lo) / (hi - lo), 0.0, 1.0))
+
+    def _mouth(self, out, skin, p: FrameParams, dst) -> None:
+        """The model's mouth rendered into ``out`` where the lips part (see the module)."""
+        import cv2
+
+        if "mouth" not in self._openings or self.model.dentition is None:
+            return
+        alpha = self.mouth_alpha(skin)
+        if alpha <= 0:
+            return
+        h, w = self.height, self.width
+        loop = dst[self._openings["mouth"]]
+        pad = 3
+        x0 = max(int(np.floor(loop[:, 0].min())) - pad, 0)
+        x1 = min(int(np.ceil(loop[:, 0].max())) + pad, w)
+        y0 = max(int(np.floor(loop[:, 1].min())) - pad, 0)
+        y1 = min(int(np.ceil(loop[:, 1].max())) + pad, h)
+        if x0 >= x1 or y0 >= y1:
+            return
+        mask = (self._label[y0:y1, x0:x1] == LABEL_MOUTH).astype(np.float32)
+        if not mask.any():
+            return
+        r, (dx, dy) = self._renderer()
+        state = self._state
+        img = r.render(skin, pose=(p.rotation, p.translation), jaw=self.model.jaw_pose(state))
+        ry = np.clip(np.arange(y0, y1) - dy, 0, h - 1)
+        rx = np.clip(np.arange(x0, x1) - dx, 0, w - 1)
+        crop = img[ry][:, rx].astype(np.float32)
+        soft = cv2.GaussianBlur(mask, (0, 0), MOUTH_FEATHER_PX) * mask
+        a = (alpha * soft)[:, :, None]
+        region = out[y0:y1, x0:x1].astype(np.float32)
+        out[y0:y1, x0:x1] = (a * crop + (1 - a) * region + 0.5).astype(np.uint8)
+
+    def _renderer(self):
+        """The model's renderer through this camera (built on first use) and the pixel
+        shift from its image to the camera's (a principal point off the centre)."""
+        if self._mouth_renderer is None:
+            from myoface.render import Camera, Renderer
+
+            cam = self.camera
+            h, w = self.height, self.width
+            fov = float(np.degrees(2 * np.arctan(0.5 * h / cam.focal_px)))
+            rc = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), (0.0, 1.0, 0.0), w, h,
+                        max(fov, 0.1))  # fmt: skip
+            r = Renderer(self.model.face, rc, ssaa=1, wrinkles=False)
+            shift = (int(round(cam.cx - 0.5 * w)), int(round(cam.cy - 0.5 * h)))
+            self._mouth_renderer = (r, shift)
+        return self._mouth_renderer
+
+
+# ---------------------------------------------------------------------- a still photo
+
+
+def photo_setup(model, points: np.ndarray, width: int, height: int):
+    """The camera and the calibration parameters of a still picture ``width`` x ``height``
+    in which the face's 468 points (MediaPipe's, (468, 3) x, y px, z relative depth px;
+    the default topology, as ``model``'s) were found: the similarity that takes the model's
+    rest skin onto them (:func:`~myoface.face.personal.fit_similarity_3d`, as ``myoface face
+    from-photo`` aligns the generic face), read as a pinhole :data:`PHOTO_DISTANCE_MM` away
+    whose focal length gives the similarity's scale there. Returns (PinholeCamera,
+    FrameParams at rest with the eyes straight ahead)."""
+    from myoface.face.personal import fit_similarity_3d
+
+    pts = np.asarray(points, dtype=np.float64)
+    nv = model.face.n_vertices
+    if pts.shape != (nv, 3) or not np.isfinite(pts).all():
+        raise MyofaceValueError(
+            f"the photo's face points must be finite ({nv}, 3) (the model's topology); got "
+            f"shape {pts.shape}"
+        )
+    found = np.column_stack([pts[:, 0], -pts[:, 1], -pts[:, 2]])  # +y up, +z to the camera
+    s, r, t = fit_similarity_3d(model.skin_vertices(), found)
+    if not s > 0:
+        raise MyofaceValueError("the photo's face points are degenerate: cannot place the model")
+    d = PHOTO_DISTANCE_MM
+    cx, cy = 0.5 * width, 0.5 * height
+    cam = PinholeCamera(float(s * d), cx, cy)
+    # pixel x = cx + s P_x (P_z ~ -d): P_x = (r X)_x + (t_x - cx) / s; y likewise, flipped
+    trans = np.array([(t[0] - cx) / s, (t[1] + cy) / s, -d])
+    params = FrameParams(r, trans, np.zeros(model.n_muscles), np.zeros(4))
+    return cam, params
+
+
+def photo_picture(model, image: np.ndarray, *, face_index: int | None = None,
+                  physics: str = "relax") -> PictureModel:  # fmt: skip
+    """A :class:`PictureModel` of a still photo ``image`` (H, W, 3) uint8 RGB: the face that
+    MediaPipe finds in it (``face_index`` of several, numbered left to right; default the
+    largest, :func:`~myoface.face.personal.choose_face`) with ``model`` aligned to it
+    (:func:`photo_setup`). Needs the ``mediapipe`` extra."""
+    from myoface.face.personal import choose_face, photo_faces
+
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
+        raise MyofaceValueError(f"a photo must be an (H, W, 3) uint8 image; got {img.shape}")
+    img = np.ascontiguousarray(img[:, :, :3])
+    if model.face.n_vertices != 468:
+        raise MyofaceValueError(
+            "animating a photo needs a face model in MediaPipe's 468-point topology (the "
+            f"default face or a personal face made from it); this one has "
+            f"{model.face.n_vertices} vertices"
+        )
+    faces = photo_faces(img)
+    pts = faces[choose_face(faces, face_index)]
+    cam, params = photo_setup(model, pts, img.shape[1], img.shape[0])
+    return PictureModel(model, cam, img, params, physics=physics)
