@@ -49,6 +49,7 @@ TARGETS = {
     "analysis.headmotion_still_skin_mm": [("<=", 0.5)],
     "analysis.known_warp_gain": [("in", 0.9, 1.1)],
     "analysis.known_warp_explained": [(">=", 0.9)],
+    "analysis.expression_accuracy": [(">=", 0.9)],
     "viewer.update_ms": [("<", 100)],
     "viewer.drag_updates_per_s": [(">=", 30)],
 }

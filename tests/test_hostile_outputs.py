@@ -513,7 +513,8 @@ def test_a_stop_signal_in_each_stage_keeps_what_was_complete(runs, scenario):
     else:
         assert f"kept the analysis of all {n} frames ({n} measured) in out" in line
     assert "the fidelity report (--report) was not made" in line
-    unplotted = {"contractions.png"} if stage in ("frames", "plots") else set()
+    plots = {"contractions.png", "expressions.png"}
+    unplotted = plots if stage in ("frames", "plots") else set()
     assert _analysis_files(out) == {*FOLDER_FILES, "openface.csv"} - unplotted
     assert _rows(out / "openface.csv") == n
 

@@ -20,11 +20,14 @@ appearance. Per frame:
    coder scores a prototype only when every one of its AUs is there, and then it is as
    strong as its AUs are.
 4. **An expression's strength** (``expr_<name>``, in [0, 1]) is its best prototype's match
-   times its *coverage*: the share of the frame's AU activity (sum of ``x_a**2``) that lies
-   in the AUs of that expression's prototypes and variants, or in the AUs that go with any
-   expression (:data:`ANY_EXPRESSION_AUS`: lips part, jaw drop, blink). A face that shows
-   the AUs of surprise and, besides, the brow lowerer and the lip stretcher of fear is
-   mostly explained by fear: its surprise is discounted by what surprise leaves unexplained.
+   times its *coverage*, ``E / (E + U)``: ``E`` the frame's AU activity (sum of ``x_a**2``)
+   in the AUs of that expression's prototypes and variants (:data:`EXPRESSION_AUS`) or in
+   the AUs that go with any expression (:data:`ANY_EXPRESSION_AUS`: lips part, jaw drop,
+   blink), ``U`` the activity it leaves unexplained, each AU weighted by how specific a sign
+   it is (:func:`specificity`: 1 / the number of expressions that use it). A face that
+   shows the AUs of surprise and, besides, the lip stretcher of fear is mostly explained
+   by fear; an AU that several other expressions share (AU10: disgust, anger) speaks
+   against an expression less than one that only another has (AU12: happiness).
 5. **Neutral** (``expr_neutral``) is ``1 - `` the strongest expression's strength, and the
    **label** (``expression``) is the strongest expression when its strength reaches a trace
    (:data:`LABEL_MIN`, 0.2), else ``neutral``; empty on a frame that was not measured.
@@ -156,6 +159,14 @@ def rule_aus() -> tuple[int, ...]:
     return OPENFACE_AUS
 
 
+def specificity(aus) -> np.ndarray:
+    """How specific a sign of an expression each AU of ``aus`` is: 1 / the number of
+    expressions whose table entries use it (:data:`EXPRESSION_AUS`; AU12 is happiness's
+    alone: 1; AU10 disgust's and anger's: 1/2); 1 for an AU that none uses (e.g. AU14)."""
+    n = [sum(a in EXPRESSION_AUS[e] for e in EXPRESSIONS) for a in aus]
+    return np.array([1.0 / k if k else 1.0 for k in n])
+
+
 def _gate(x: np.ndarray, least: float) -> np.ndarray:
     """0 below ``least - TRACE / 2``, 1 from ``least``, linear between."""
     return np.clip((x - (least - TRACE / 2)) / (TRACE / 2), 0.0, 1.0)
@@ -181,12 +192,17 @@ def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
         raise ValueError(f"intensities must be (T, {len(aus)}) over aus; got shape {x.shape}")
     col = {a: j for j, a in enumerate(aus)}
     x = np.clip(x, 0.0, 1.0)  # (NaN stays NaN)
-    energy = np.nansum(x**2, axis=1)
+    sq = np.where(np.isfinite(x), x**2, 0.0)
+    sign = specificity(aus)
     out = np.full((len(x), len(EXPRESSION_COLUMNS)), np.nan)
     for i, e in enumerate(EXPRESSIONS):
-        own = [col[a] for a in {*EXPRESSION_AUS[e], *ANY_EXPRESSION_AUS} if a in col]
-        explained = np.nansum(x[:, own] ** 2, axis=1)
-        coverage = np.where(energy > 0, explained / np.where(energy > 0, energy, 1.0), 1.0)
+        mine = {*EXPRESSION_AUS[e], *ANY_EXPRESSION_AUS}
+        own = [j for j, a in enumerate(aus) if a in mine]
+        other = [j for j, a in enumerate(aus) if a not in mine]
+        explained = sq[:, own].sum(axis=1)
+        against = (sq[:, other] * sign[other]).sum(axis=1)
+        total = explained + against
+        coverage = np.where(total > 0, explained / np.where(total > 0, total, 1.0), 1.0)
         best = np.full(len(x), np.nan)
         for p in prototypes()[e]:
             if not all(a in col for a in p.aus):

@@ -6,6 +6,8 @@ contractions.csv    frame, time_s, quality, one column per muscle, jaw_angle_rad
                     (:func:`~myoface.analysis.contractions_csv.write_contractions_csv`)
 analysis.json       settings, calibration and per-frame diagnostics
 contractions.png    the contractions over time (the paper's Fig. 8)
+expressions.png     the six basic expressions and neutral over time, read from the contractions
+                    (:mod:`~myoface.analysis.expressions`; their columns are in the CSV)
 overlay.mp4         the contours on the frames (the paper's Fig. 7a)
 potential.mp4       (snakes) the contours on the image potential (the paper's Fig. 7b)
 ==================  ==========================================================================
@@ -40,7 +42,13 @@ from myoface.model import load_face_model
 from myoface.render import VideoWriter, progress
 
 #: the files :func:`analyze_to_folder` writes for every tracker
-FOLDER_FILES = ("contractions.csv", "analysis.json", "contractions.png", "overlay.mp4")
+FOLDER_FILES = (
+    "contractions.csv",
+    "analysis.json",
+    "contractions.png",
+    "expressions.png",
+    "overlay.mp4",
+)
 
 
 def draw_contours(frame: np.ndarray, contours: dict, color=(255, 215, 0)) -> np.ndarray:
@@ -407,7 +415,8 @@ def analysis_transaction(
 
 
 def _write_results(out, run, log, how_init, tracker, face, *, interrupted, plot=True) -> None:
-    """analysis.json and contractions.png (contractions.csv is written as the frames are);
+    """analysis.json, contractions.png and expressions.png (contractions.csv is written as
+    the frames are; the expressions' plot is of its expression columns);
     ``interrupted``: None, or where the run was interrupted (then said in analysis.json, and
     the plot made unless ``plot`` is false)."""
     video, an = run.video, run.tracker
@@ -438,6 +447,10 @@ def _write_results(out, run, log, how_init, tracker, face, *, interrupted, plot=
         plot_contractions(
             out / "contractions.png", an.ids, log.times, log.contractions, log.quality
         )
+        from myoface.analysis.expressions import plot_expressions, read_expressions
+
+        scores, labels = read_expressions(out / "contractions.csv")
+        plot_expressions(out / "expressions.png", log.times, scores, labels, log.quality)
 
 
 def _measure_into(run, model, out, show_progress, keep):
