@@ -8,6 +8,7 @@ import pytest
 from myoface.analysis.camera import HeadPose, PinholeCamera
 from myoface.analysis.gaze import EyeGaze, Gaze
 from myoface.analysis.openface import (
+    MYOFACE_COLUMNS,
     OPENFACE_AUS,
     OPENFACE_COLUMNS,
     OPENFACE_GAZE_COLUMNS,
@@ -167,13 +168,15 @@ def test_write_openface_csv_from_the_3d_fit(tmp_path, ids):
     write_contractions_csv(src, ids, frames, 0.3)
     out = write_openface_csv(src, tmp_path / "openface.csv")
     head, rows = _read(out)
-    assert head == list(OPENFACE_COLUMNS)
+    assert head == [*OPENFACE_COLUMNS, *MYOFACE_COLUMNS]  # (the expressions after OpenFace's)
     assert [r[0] for r in rows] == ["1", "2", "3"]  # OpenFace counts frames from 1
     assert [r[4] for r in rows] == ["1", "0", "1"]  # success
     assert [float(r[3]) for r in rows] == [1.0, 0.0, 1.0]
     assert [float(r[2]) for r in rows] == [0.0, 0.04, 0.08]
     # a frame that could not be measured: zeros, as OpenFace writes them
-    assert rows[1][1] == "0" and all(float(x) == 0.0 for x in rows[1][3:])
+    n = len(OPENFACE_COLUMNS)
+    assert rows[1][1] == "0" and all(float(x) == 0.0 for x in rows[1][3:n])
+    assert rows[1][n:] == [""] * len(MYOFACE_COLUMNS)  # (myoface's: not measured)
     row = dict(zip(head, rows[2], strict=True))
     assert float(row["AU12_r"]) == pytest.approx(4.0, abs=0.01)
     assert float(row["AU06_r"]) == pytest.approx(2.0, abs=0.01)

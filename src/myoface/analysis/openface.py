@@ -58,6 +58,15 @@ Columns (see also the README):
   two sides. ``AU07_r`` is empty (see :data:`UNMEASURED_AUS`), as is an AU whose principal
   muscles are not in the CSV (e.g. AU04 from the snakes, which do not estimate the
   corrugators).
+
+After OpenFace's columns, myoface's expressions (:mod:`myoface.analysis.expressions`):
+``expr_happiness, expr_sadness, expr_surprise, expr_fear, expr_anger, expr_disgust,
+expr_neutral`` (strengths in [0, 1], 3 decimals) and ``expression`` (the label), as in
+``contractions.csv``. OpenFace 2.2 writes no expression or emotion columns (its CSV has
+landmarks, pose, gaze, shape parameters and AUs only), so there is no convention to follow;
+they come last, so that a reader that takes OpenFace's columns by name or by position up to
+``AU45_r`` reads the file as OpenFace's. Empty on a frame that was not measured
+(``success`` 0).
 """
 
 from __future__ import annotations
@@ -76,6 +85,7 @@ from myoface.analysis.contractions_csv import (
     read_gaze,
     read_head_poses,
 )
+from myoface.analysis.expressions import EXPRESSION_COLUMNS, LABEL_COLUMN
 from myoface.control.facs import au_table
 from myoface.errors import MyofaceFormatError
 
@@ -106,6 +116,9 @@ OPENFACE_COLUMNS = (
     "pose_Rz",
     *(f"AU{n:02d}_r" for n in OPENFACE_AUS),
 )
+#: myoface's columns after OpenFace's (OpenFace 2.2 has no expression columns): the
+#: expressions of :mod:`myoface.analysis.expressions`
+MYOFACE_COLUMNS = (*EXPRESSION_COLUMNS, LABEL_COLUMN)
 #: OpenFace AUs that myoface does not measure, always empty, and why
 UNMEASURED_AUS = {
     7: "lid tightener: in the AU table it is the orbital sphincter (orbicularis oculi, 0.5) "
@@ -338,18 +351,29 @@ def read_for_openface(path):
     return frames, times, list(quality), table, ids, poses, None if gaze is None else gaze[0]
 
 
-def openface_rows(frames, times, quality, table, ids, poses=None, gaze=None) -> list[list[str]]:
-    """The OpenFace CSV's rows (cells as text, :data:`OPENFACE_COLUMNS`) of an analysis;
-    ``gaze``: the eyes' angles (T, 4) deg (:func:`~myoface.analysis.contractions_csv.read_gaze`)
-    or None."""
+def openface_rows(
+    frames, times, quality, table, ids, poses=None, gaze=None, expressions=None
+) -> list[list[str]]:
+    """The OpenFace CSV's rows (cells as text, :data:`OPENFACE_COLUMNS` then
+    :data:`MYOFACE_COLUMNS`) of an analysis; ``gaze``: the eyes' angles (T, 4) deg
+    (:func:`~myoface.analysis.contractions_csv.read_gaze`) or None; ``expressions``:
+    ``(scores (T, 7), labels)`` (:func:`~myoface.analysis.expressions.read_expressions`), or
+    None: computed from ``table``."""
+    from myoface.analysis.expressions import expression_labels, expression_scores
+
     aus = au_intensities(table, ids)
+    if expressions is None:
+        s = expression_scores(table, ids)
+        expressions = (s, expression_labels(s))
+    escores, elabels = expressions
     out = []
     for k, (f, t, q) in enumerate(zip(frames, times, quality, strict=True)):
         ok = q == "ok" and np.isfinite(table[k]).all()
         head = [str(int(f) + 1), "0", f"{t:.3f}"]
         if not ok:  # OpenFace's row for a frame it could not track: zeros, success 0
             zeros = [*(["0.000000"] * 6), *(["0.000"] * 2), *(["0.0"] * 3), *(["0.000"] * 3)]
-            out.append([*head, "0.00", "0", *zeros, *(["0.00"] * 17)])
+            mine = [""] * len(MYOFACE_COLUMNS)  # (myoface's expressions: not measured)
+            out.append([*head, "0.00", "0", *zeros, *(["0.00"] * 17), *mine])
             continue
         pose = poses[k] if poses is not None else None
         gcells = [""] * len(OPENFACE_GAZE_COLUMNS)
@@ -362,7 +386,8 @@ def openface_rows(frames, times, quality, table, ids, poses=None, gaze=None) -> 
                 g = openface_gaze(pose, gaze[k])
                 gcells = [_cell(x, 6) for x in g[:6]] + [_cell(x, 3) for x in g[6:]]
         acells = ["" if not np.isfinite(a) else f"{a:.2f}" for a in aus[k]]
-        out.append([*head, "1.00", "1", *gcells, *pcells, *acells])
+        ecells = [*(_cell(x, 3) for x in escores[k]), elabels[k]]
+        out.append([*head, "1.00", "1", *gcells, *pcells, *acells, *ecells])
     return out
 
 
@@ -374,8 +399,12 @@ def write_openface_csv(contractions_csv, path: str | os.PathLike) -> Path:
     """Write the OpenFace-2.2-compatible CSV (:data:`OPENFACE_COLUMNS`; see the module's
     docstring) of the analysis in ``contractions_csv`` to ``path`` (replaced whole); returns
     ``path``."""
-    rows = openface_rows(*read_for_openface(contractions_csv))
-    lines = [",".join(OPENFACE_COLUMNS), *(",".join(r) for r in rows)]
+    from myoface.analysis.expressions import read_expressions
+
+    read = read_for_openface(contractions_csv)
+    expr = read_expressions(contractions_csv, read[3], read[4])
+    rows = openface_rows(*read, expressions=expr)
+    lines = [",".join((*OPENFACE_COLUMNS, *MYOFACE_COLUMNS)), *(",".join(r) for r in rows)]
     with atomic_output(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
     return Path(path)
