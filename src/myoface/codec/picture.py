@@ -33,9 +33,10 @@ Image coordinates are (x, y) = (column, row), pixels, pixel centres at half-inte
 camera's, :class:`~myoface.analysis.camera.PinholeCamera`); the head frame and the camera
 frame are the analysis' (:mod:`myoface.analysis.camera`); mm.
 
-A still photo has no camera: :func:`photo_picture` aligns the model to the face MediaPipe finds
+A still photo has no camera: :func:`photo_setup` aligns the model to the face MediaPipe found
 in it, as ``myoface face from-photo`` does, and makes its camera (a far pinhole, nearly
-orthographic, as the alignment's similarity is) and its calibration parameters.
+orthographic, as the alignment's similarity is) and its calibration parameters
+(:mod:`myoface.codec.photo` animates a photo with it).
 """
 
 from __future__ import annotations
@@ -55,7 +56,6 @@ __all__ = [
     "PHYSICS",
     "PictureModel",
     "PictureStats",
-    "photo_picture",
     "photo_setup",
 ]
 
@@ -88,6 +88,11 @@ CAP_RINGS, CAP_SEGMENTS = 7, 20
 MOUTH_FADE_MM = (0.3, 1.5)
 #: the mouth's edge is feathered over this many pixels (a Gaussian of this sigma)
 MOUTH_FEATHER_PX = 1.0
+#: the model's mouth is rendered at this scale of the picture (its inside has no fine detail;
+#: the render's cost is its pixels), unless that would make it less than this many pixels high
+MOUTH_RENDER_SCALE, MOUTH_RENDER_MIN_PX = 0.5, 180
+#: the render's brightness is matched to the picture's lips by a gain within these bounds
+MOUTH_GAIN = (0.5, 2.5)
 #: the sclera's colour is the mean of the brightest share of the calibration's eye opening
 SCLERA_SHARE = 0.3
 #: the atlas' eye patches have this many pixels of margin around the eyeball's projection
@@ -543,31 +548,43 @@ class PictureModel:
         mask = (self._label[y0:y1, x0:x1] == LABEL_MOUTH).astype(np.float32)
         if not mask.any():
             return
-        r, (dx, dy) = self._renderer()
-        state = self._state
-        img = r.render(skin, pose=(p.rotation, p.translation), jaw=self.model.jaw_pose(state))
-        ry = np.clip(np.arange(y0, y1) - dy, 0, h - 1)
-        rx = np.clip(np.arange(x0, x1) - dx, 0, w - 1)
-        crop = img[ry][:, rx].astype(np.float32)
+        r, (dx, dy), k = self._renderer()
+        img = r.render(skin, pose=(p.rotation, p.translation), jaw=self.model.jaw_pose(self._state))
+        # the render's pixel under each pixel of the box (its camera k times smaller)
+        rh, rw = img.shape[:2]
+        gx = ((np.arange(x0, x1) + 0.5 - dx) - 0.5 * w) * k + 0.5 * rw - 0.5
+        gy = ((np.arange(y0, y1) + 0.5 - dy) - 0.5 * h) * k + 0.5 * rh - 0.5
+        mx, my = np.meshgrid(gx.astype(np.float32), gy.astype(np.float32))
+        crop = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        crop = crop.astype(np.float32)
+        region = out[y0:y1, x0:x1].astype(np.float32)
+        # the render's light matched to the picture's: the brightness of the lips around the
+        # opening in the picture over the render's (one grey gain: the colours are the model's)
+        lips = (self._label[y0:y1, x0:x1] == LABEL_SKIN) & (mask == 0)
+        if lips.sum() >= 8:
+            gain = float(region[lips].mean()) / max(float(crop[lips].mean()), 1.0)
+            crop *= float(np.clip(gain, *MOUTH_GAIN))
         soft = cv2.GaussianBlur(mask, (0, 0), MOUTH_FEATHER_PX) * mask
         a = (alpha * soft)[:, :, None]
-        region = out[y0:y1, x0:x1].astype(np.float32)
-        out[y0:y1, x0:x1] = (a * crop + (1 - a) * region + 0.5).astype(np.uint8)
+        out[y0:y1, x0:x1] = np.clip(a * crop + (1 - a) * region + 0.5, 0, 255).astype(np.uint8)
 
     def _renderer(self):
-        """The model's renderer through this camera (built on first use) and the pixel
-        shift from its image to the camera's (a principal point off the centre)."""
+        """The model's renderer through this camera (built on first use), the shift (px) of
+        the camera's principal point from the picture's centre, and the render's scale."""
         if self._mouth_renderer is None:
             from myoface.render import Camera, Renderer
 
             cam = self.camera
             h, w = self.height, self.width
+            k = MOUTH_RENDER_SCALE if h >= MOUTH_RENDER_MIN_PX / MOUTH_RENDER_SCALE else 1.0
+            hs, ws = max(int(round(h * k)), 8), max(int(round(w * k)), 8)
+            k = hs / h  # the render's pixels per the picture's (square pixels)
             fov = float(np.degrees(2 * np.arctan(0.5 * h / cam.focal_px)))
-            rc = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), (0.0, 1.0, 0.0), w, h,
+            rc = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), (0.0, 1.0, 0.0), ws, hs,
                         max(fov, 0.1))  # fmt: skip
             r = Renderer(self.model.face, rc, ssaa=1, wrinkles=False)
-            shift = (int(round(cam.cx - 0.5 * w)), int(round(cam.cy - 0.5 * h)))
-            self._mouth_renderer = (r, shift)
+            shift = (cam.cx - 0.5 * w, cam.cy - 0.5 * h)
+            self._mouth_renderer = (r, shift, k)
         return self._mouth_renderer
 
 
@@ -602,27 +619,3 @@ def photo_setup(model, points: np.ndarray, width: int, height: int):
     trans = np.array([(t[0] - cx) / s, (t[1] + cy) / s, -d])
     params = FrameParams(r, trans, np.zeros(model.n_muscles), np.zeros(4))
     return cam, params
-
-
-def photo_picture(model, image: np.ndarray, *, face_index: int | None = None,
-                  physics: str = "relax") -> PictureModel:  # fmt: skip
-    """A :class:`PictureModel` of a still photo ``image`` (H, W, 3) uint8 RGB: the face that
-    MediaPipe finds in it (``face_index`` of several, numbered left to right; default the
-    largest, :func:`~myoface.face.personal.choose_face`) with ``model`` aligned to it
-    (:func:`photo_setup`). Needs the ``mediapipe`` extra."""
-    from myoface.face.personal import choose_face, photo_faces
-
-    img = np.asarray(image)
-    if img.ndim != 3 or img.shape[2] not in (3, 4) or img.dtype != np.uint8:
-        raise MyofaceValueError(f"a photo must be an (H, W, 3) uint8 image; got {img.shape}")
-    img = np.ascontiguousarray(img[:, :, :3])
-    if model.face.n_vertices != 468:
-        raise MyofaceValueError(
-            "animating a photo needs a face model in MediaPipe's 468-point topology (the "
-            f"default face or a personal face made from it); this one has "
-            f"{model.face.n_vertices} vertices"
-        )
-    faces = photo_faces(img)
-    pts = faces[choose_face(faces, face_index)]
-    cam, params = photo_setup(model, pts, img.shape[1], img.shape[0])
-    return PictureModel(model, cam, img, params, physics=physics)

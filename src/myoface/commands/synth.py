@@ -26,6 +26,8 @@ Examples:
   myoface synth --au 12=0.7 --au 6=0.4 -o smile.png
   myoface synth --muscle zygomaticus_major_l=0.6 -o half-smile.png
   myoface synth --timeline examples/talk.toml -o talk.mp4
+  myoface synth --in-photo me.jpg --expression happiness -o me-smiling.png
+  myoface synth --in-photo me.jpg --face me.myoface --timeline examples/talk.toml -o me.mp4
 
 The output type follows the suffix: .png/.jpg for one image at the apex, .mp4 for a video."""
 
@@ -145,6 +147,15 @@ def add_arguments(p):
     )
     out.add_argument("--quiet", action="store_true", help="no progress bar")
     add_face_argument(p)
+    ph = p.add_argument_group("a photo, animated (needs the mediapipe extra)")
+    ph.add_argument(
+        "--in-photo",
+        metavar="IMAGE",
+        help="animate this photo of a face instead of rendering the model: the photo smiles, "
+        "frowns, talks, blinks, looks around (the output has the photo's size, at most 1920 px "
+        "a side; --width/--height/--view/--ssaa do not apply). --face: the person's model "
+        "(default: one made from the photo, as `myoface face from-photo` makes it)",
+    )
 
 
 def _apex(args, fm):
@@ -212,6 +223,8 @@ def run(args) -> int:
             f"--timeline {args.timeline} lasts {timeline.duration:g} s; a video is at most "
             f"{MAX_VIDEO_S:g} s"
         )
+    if args.in_photo:
+        return _run_photo(args, out, video, timeline)
     if video:
         check_video_size(out, args.width, args.height)
     fm = load_model(args)
@@ -243,6 +256,58 @@ def run(args) -> int:
         print(
             f"note: the tissue did not fully converge on {st.unconverged} frame(s)", file=sys.stderr
         )
+    return 0
+
+
+def _run_photo(args, out, video: bool, timeline) -> int:
+    """``--in-photo``: the photo moved by the model (:mod:`myoface.codec.photo`)."""
+    import numpy as np
+
+    from myoface.codec.photo import PhotoAnimation, read_photo
+    from myoface.render import VideoWriter, progress, write_image
+
+    for given, what in ((args.texture, "--texture"), (args.overlay, "--overlay")):
+        if given:
+            raise MyofaceUsageError(
+                f"{what} does not apply to --in-photo (the photo is the picture)"
+            )
+    if args.view != "front" or args.dynamics != "quasistatic":
+        raise MyofaceUsageError("--view and --dynamics do not apply to --in-photo")
+    photo = read_photo(args.in_photo)
+    fm = load_model(args) if args.face else None
+    anim = PhotoAnimation.from_image(photo, fm)
+    h, w = photo.shape[:2]
+    how = "a face made from the photo" if anim.made_face else f"--face {args.face}"
+    print(f"photo      {w}x{h} px, the model ({how}) aligned to its face")
+    ids = anim.model.ids
+    if not video:
+        if timeline is not None:
+            t_apex = max(timeline.events, key=lambda e: e.intensity)
+            a0, a1 = t_apex.apex_interval()
+            t = 0.5 * (a0 + a1)
+            apex = timeline.contractions([t], ids)[0]
+            gaze = timeline.gaze([t])[0] if timeline.has_gaze else None
+        else:
+            apex, gaze = _apex(args, anim.model), None
+        write_image(out, anim.image(apex, gaze))
+        print(f"wrote {out}")
+        return 0
+    check_video_size(out, w, h)
+    if timeline is None:
+        timeline = _ApexTimeline(_apex(args, anim.model), args.duration, ids)
+    n = max(1, int(round(timeline.duration * args.fps)) + 1)
+    times = np.arange(n) / args.fps
+    table = timeline.contractions(times, ids)
+    gaze = timeline.gaze(times) if getattr(timeline, "has_gaze", False) else None
+    frames = progress(anim.frames(table, gaze), total=n, desc="animating", enabled=not args.quiet)
+    with VideoWriter(out, args.fps, background=True) as vw:
+        for img in frames:
+            vw.write(img)
+    st = anim.picture.stats
+    print(
+        f"wrote {out} ({n} frame(s); median {np.median(st.total_ms):.0f} ms per frame, the "
+        f"physics {np.median(st.physics_ms):.0f} ms)"
+    )
     return 0
 
 
