@@ -1,0 +1,295 @@
+"""The packets' quantiser, prediction and adaptive entropy coding (docs/codec-format.md).
+
+A frame's parameters (:class:`~myoface.codec.params.FrameParams`) become integers on a uniform
+grid of the header's steps (:class:`Steps`): the head's rotation as a rotation vector (rad),
+its translation (mm), every contraction, and each eye's gaze (rad). Each integer is predicted
+by the same channel's value in the previous frame (the last frame measured; for an eye, the
+last frame it was read), and the residual is coded with an adaptive categorical model:
+one table of counts per channel and context (the context: the channel's previous residual,
+0, +-1 or more), updated after each symbol on both sides (so the model needs no side
+information), coded by `constriction <https://bamler-lab.github.io/constriction/>`_'s range
+coder (:class:`RangeIO`). Residuals beyond +-:data:`RESIDUAL_RANGE` are coded as an escape
+symbol and 16 uniform bits.
+
+The encoder's quantiser holds a channel's value while the parameter stays within
+:data:`HOLD` steps of it (hysteresis): the fit's jitter then costs no bits; every decoded
+value is within one step of the encoder's input (:meth:`ParamCoder.quantise`).
+
+The same code decodes: :class:`ParamCoder` codes a frame through a :class:`RangeIO`, which
+either encodes the symbols given or decodes them (and re-encodes them into a mirror of the
+encoder, whose position tells the stream reader how many words the frame needed).
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from myoface.analysis.camera import rotmat, rotvec
+from myoface.codec.params import FrameParams
+from myoface.errors import MyofaceFormatError
+
+#: residuals coded directly (beyond: an escape and 16 bits)
+RESIDUAL_RANGE = 12
+#: the residual alphabet: escape-negative, -R..R, escape-positive
+ALPHABET = 2 * RESIDUAL_RANGE + 3
+ESC_NEG, ESC_POS = 0, ALPHABET - 1
+#: an escape's payload: |residual| - R - 1 in [0, 2**16)
+ESCAPE_BITS = 16
+#: the adaptive tables: each use adds this to the symbol's count; a table whose total passes
+#: :data:`COUNT_LIMIT` is halved (older statistics fade)
+COUNT_STEP = 32
+COUNT_LIMIT = 1 << 13
+#: contexts per channel: the channel's previous residual 0, +-1, or larger
+N_CONTEXTS = 3
+#: the quantiser holds a value while the input stays within this many steps of it
+HOLD = 0.75
+#: the quantised values' bound (so that a residual's escape fits ESCAPE_BITS)
+Q_LIMIT = 32000
+#: the binary models: kind (frame / end), measured, left eye read, right eye read
+BIN_KIND, BIN_MEASURED, BIN_EYE_L, BIN_EYE_R = range(4)
+N_BINARY = 4
+KIND_FRAME, KIND_END = 0, 1
+
+
+@dataclass(frozen=True)
+class Steps:
+    """The quantiser's steps: rotation (rad, of the rotation vector), translation (mm),
+    contractions (in [0, 1]) and gaze (rad)."""
+
+    rotation_rad: float
+    translation_mm: float
+    contraction: float
+    gaze_rad: float
+
+    def as_tuple(self) -> tuple[float, float, float, float]:
+        return (self.rotation_rad, self.translation_mm, self.contraction, self.gaze_rad)
+
+    def check(self) -> None:
+        """A clear error unless every step is finite, positive and its channel's range fits
+        :data:`Q_LIMIT` steps."""
+        lims = (np.pi, 5000.0, 1.0, np.pi / 2)
+        for name, s, lim in zip(
+            ("rotation", "translation", "contraction", "gaze"), self.as_tuple(), lims, strict=True
+        ):
+            if not (np.isfinite(s) and s > 0 and lim / s <= Q_LIMIT):
+                raise MyofaceFormatError(
+                    f"the {name} step must be in [{lim / Q_LIMIT:g}, ...); got {s}"
+                )
+
+
+#: the quality settings (``myoface encode --quality``): the steps and the calibration
+#: picture's target PSNR-Y (dB) the image codec's quality is searched for
+QUALITIES = {
+    "low": (Steps(0.004, 1.0, 0.05, 0.04), 33.0),
+    "medium": (Steps(0.002, 0.5, 0.025, 0.02), 36.0),
+    "high": (Steps(0.001, 0.25, 0.0125, 0.01), 39.0),
+    "max": (Steps(0.0005, 0.1, 0.006, 0.005), 42.0),
+}
+DEFAULT_QUALITY = "medium"
+
+
+def _family():
+    import constriction
+
+    return constriction.stream.model.Categorical(perfect=False)
+
+
+class RangeIO:
+    """One segment's range coder: :meth:`categorical` encodes the symbols given, or, with a
+    ``decoder``, decodes them and encodes them again into :attr:`encoder` (the encoder's
+    mirror: its position is the encoder's)."""
+
+    def __init__(self, decoder=None, encoder=None, crc: int = 0):
+        import constriction
+
+        q = constriction.stream.queue
+        self.encoder = encoder if encoder is not None else q.RangeEncoder()
+        self.decoder = decoder
+        self._cat = _family()
+        self._uniform = constriction.stream.model.Uniform(1 << ESCAPE_BITS)
+        #: a CRC-32 of every symbol coded in the segment (its check, :meth:`check_value`)
+        self.crc = int(crc)
+
+    def categorical(self, probs: np.ndarray, symbols=None) -> np.ndarray:
+        """Code ``len(probs)`` symbols, symbol k under the counts ``probs[k]``."""
+        probs = np.ascontiguousarray(probs, dtype=np.float64)
+        if len(probs) == 0:
+            return np.zeros(0, dtype=np.int32)
+        if self.decoder is not None:
+            symbols = np.asarray(self.decoder.decode(self._cat, probs), dtype=np.int32)
+        symbols = np.ascontiguousarray(symbols, dtype=np.int32)
+        self.encoder.encode(symbols, self._cat, probs)
+        self.crc = zlib.crc32(symbols.astype("<i4").tobytes(), self.crc)
+        return symbols
+
+    def uniform(self, n: int, symbols=None) -> np.ndarray:
+        """Code ``n`` symbols of :data:`ESCAPE_BITS` uniform bits."""
+        if n == 0:
+            return np.zeros(0, dtype=np.int32)
+        if self.decoder is not None:
+            symbols = np.asarray(self.decoder.decode(self._uniform, n), dtype=np.int32)
+        symbols = np.ascontiguousarray(symbols, dtype=np.int32).reshape(n)
+        self.encoder.encode(symbols, self._uniform)
+        self.crc = zlib.crc32(symbols.astype("<i4").tobytes(), self.crc)
+        return symbols
+
+    def check_value(self) -> int:
+        """A 16-bit check of every symbol coded so far in the segment."""
+        return self.crc & 0xFFFF
+
+
+def _prior() -> np.ndarray:
+    r = np.abs(np.arange(ALPHABET) - (RESIDUAL_RANGE + 1))
+    c = np.maximum(1, np.round(256 * 0.5**r)).astype(np.int64)
+    c[[ESC_NEG, ESC_POS]] = 1
+    return c
+
+
+class ParamCoder:
+    """The prediction and adaptive models of one stream (both sides keep one, in step).
+
+    Channels: the rotation vector (3), the translation (3), the ``n_contractions``
+    contractions, then the gaze (4: each eye's yaw and pitch). :meth:`encode_frame` codes a
+    frame and returns what the decoder will decode; :meth:`decode_frame` decodes one
+    (None at the end marker)."""
+
+    def __init__(self, n_contractions: int, steps: Steps, calibration: FrameParams):
+        steps.check()
+        self.m = int(n_contractions)
+        self.steps = steps
+        self.n_main = 6 + self.m
+        n = self.n_main + 4
+        self.step = np.array(
+            [steps.rotation_rad] * 3 + [steps.translation_mm] * 3 + [steps.contraction] * self.m
+            + [steps.gaze_rad] * 4
+        )  # fmt: skip
+        self.counts = np.tile(_prior(), (n * N_CONTEXTS, 1))
+        self.bin_counts = np.full((N_BINARY, 2), 4, dtype=np.int64)
+        self.bin_counts[BIN_KIND] = (256, 1)
+        # the prediction: the last value of each channel (quantised), its last residual
+        self.prev = self._q_of(calibration)
+        self.prev[self.n_main :] = np.where(
+            np.isfinite(calibration.gaze), self.prev[self.n_main :], 0
+        )
+        self.ctx = np.zeros(n, dtype=np.int64)
+        self.last = self.dequantise(self.prev, np.isfinite(calibration.gaze))
+
+    # -------------------------------------------------------------- state
+
+    def snapshot(self):
+        return (self.counts.copy(), self.bin_counts.copy(), self.prev.copy(), self.ctx.copy(),
+                self.last.copy())  # fmt: skip
+
+    def restore(self, snap) -> None:
+        self.counts, self.bin_counts, self.prev, self.ctx, last = (a.copy() for a in snap)
+        self.last = last
+
+    # -------------------------------------------------------------- quantiser
+
+    def _values(self, p: FrameParams) -> np.ndarray:
+        g = np.nan_to_num(p.gaze, nan=0.0)
+        return np.concatenate([rotvec(p.rotation), p.translation, p.contractions, g])
+
+    def _q_of(self, p: FrameParams) -> np.ndarray:
+        if len(p.contractions) != self.m:
+            raise MyofaceFormatError(
+                f"a frame has {len(p.contractions)} contractions; the stream has {self.m}"
+            )
+        q = np.round(self._values(p) / self.step)
+        return np.clip(q, -Q_LIMIT, Q_LIMIT).astype(np.int64)
+
+    def quantise(self, p: FrameParams) -> np.ndarray:
+        """``p``'s integers: each channel held at its last value while ``p`` stays within
+        :data:`HOLD` steps of it, else rounded (every value within one step of ``p``'s;
+        contractions clipped to [0, 1])."""
+        v = self._values(p)
+        v[6 : self.n_main] = np.clip(v[6 : self.n_main], 0.0, 1.0)
+        x = v / self.step
+        q = np.where(np.abs(x - self.prev) <= HOLD, self.prev, np.round(x))
+        return np.clip(q, -Q_LIMIT, Q_LIMIT).astype(np.int64)
+
+    def dequantise(self, q: np.ndarray, read=(True, True)) -> FrameParams:
+        v = q * self.step
+        gaze = v[self.n_main :].copy()
+        for k, ok in enumerate(read):
+            if not ok:
+                gaze[2 * k : 2 * k + 2] = np.nan
+        return FrameParams(rotmat(v[:3]), v[3:6], v[6 : self.n_main], gaze)
+
+    # -------------------------------------------------------------- coding
+
+    def _binary(self, io: RangeIO, which, bits=None) -> np.ndarray:
+        which = np.atleast_1d(which)
+        out = io.categorical(self.bin_counts[which], bits)
+        for w, b in zip(which, out, strict=True):
+            self.bin_counts[w, b] += COUNT_STEP
+            if self.bin_counts[w].sum() > COUNT_LIMIT:
+                self.bin_counts[w] = (self.bin_counts[w] + 1) // 2
+        return out
+
+    def _residuals(self, io: RangeIO, chans: np.ndarray, q=None) -> np.ndarray:
+        """Code channels ``chans``' values (``q``; None: decode) against their prediction."""
+        slots = chans * N_CONTEXTS + self.ctx[chans]
+        syms = None
+        pay = None
+        if q is not None:
+            r = q[chans] - self.prev[chans]
+            syms = np.clip(r + RESIDUAL_RANGE + 1, ESC_NEG, ESC_POS)
+            big = (syms == ESC_NEG) | (syms == ESC_POS)
+            pay = np.abs(r[big]) - RESIDUAL_RANGE - 1
+        syms = io.categorical(self.counts[slots], syms)
+        big = (syms == ESC_NEG) | (syms == ESC_POS)
+        pay = io.uniform(int(big.sum()), pay)
+        r = syms.astype(np.int64) - RESIDUAL_RANGE - 1
+        r[big] = np.where(syms[big] == ESC_POS, 1, -1) * (pay.astype(np.int64) + RESIDUAL_RANGE + 1)
+        val = self.prev[chans] + r
+        if np.any(np.abs(val) > Q_LIMIT):
+            raise MyofaceFormatError("corrupted stream: a parameter beyond its range")
+        # the models learn
+        np.add.at(self.counts, (slots, syms), COUNT_STEP)
+        full = self.counts[slots].sum(axis=1) > COUNT_LIMIT
+        if full.any():
+            s = np.unique(slots[full])
+            self.counts[s] = (self.counts[s] + 1) // 2
+        self.prev[chans] = val
+        self.ctx[chans] = np.minimum(np.abs(r), N_CONTEXTS - 1)
+        return val
+
+    def _code(self, io: RangeIO, kind=None, measured=False, q=None, read=None):
+        """The frame's symbols in order (see docs/codec-format.md, "Packet"); ``kind`` None:
+        decode them."""
+        bits = None if kind is None else np.array([kind, int(bool(measured))])
+        kind, measured = (int(b) for b in self._binary(io, [BIN_KIND, BIN_MEASURED], bits))
+        if kind == KIND_END:
+            return None
+        if not measured:
+            held = self.last.copy()
+            held.measured = False
+            return held
+        main = np.arange(self.n_main)
+        self._residuals(io, main, q)
+        rbits = None if q is None else np.array([int(bool(r)) for r in read])  # (q: encoding)
+        read = self._binary(io, [BIN_EYE_L, BIN_EYE_R], rbits).astype(bool)
+        eyes = [self.n_main + 2 * k + j for k in (0, 1) if read[k] for j in (0, 1)]
+        if eyes:
+            self._residuals(io, np.array(eyes), q)
+        self.last = self.dequantise(self.prev, read)
+        return self.last.copy()
+
+    def encode_frame(self, io: RangeIO, p: FrameParams) -> FrameParams:
+        """Code frame ``p``; returns the decoder's :class:`FrameParams` (dequantised)."""
+        if not p.measured:
+            return self._code(io, KIND_FRAME, False, None)
+        read = np.isfinite(p.gaze).reshape(2, 2).all(axis=1)
+        q = self.quantise(p)
+        q[self.n_main :] = np.where(np.repeat(read, 2), q[self.n_main :], 0)
+        return self._code(io, KIND_FRAME, True, q, read)
+
+    def encode_end(self, io: RangeIO) -> None:
+        self._code(io, KIND_END)
+
+    def decode_frame(self, io: RangeIO) -> FrameParams | None:
+        return self._code(io)
