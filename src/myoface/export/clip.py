@@ -59,7 +59,9 @@ class Clip:
                 raise MyofaceValueError(f"gaze must be finite ({len(c)}, 2) rad; got {g.shape}")
             object.__setattr__(self, "gaze", g)
         if self.poses is not None and len(self.poses) != len(c):
-            raise MyofaceValueError(f"poses must be one per frame ({len(c)}); got {len(self.poses)}")
+            raise MyofaceValueError(
+                f"poses must be one per frame ({len(c)}); got {len(self.poses)}"
+            )
 
     @property
     def n_frames(self) -> int:
@@ -188,7 +190,9 @@ def simulate_clip(model, clip: Clip, *, show_progress: bool = False) -> Simulate
     settled = state
     skin = np.empty((clip.n_frames, model.face.n_vertices, 3))
     jaw, unconverged = [], 0
-    rows = progress(clip.contractions, total=clip.n_frames, desc="simulating", enabled=show_progress)
+    rows = progress(
+        clip.contractions, total=clip.n_frames, desc="simulating", enabled=show_progress
+    )
     for k, c in enumerate(rows):
         c = model.validate(c)
         if not (state is settled and np.array_equal(c, state.contractions)):

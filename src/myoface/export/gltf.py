@@ -305,8 +305,9 @@ def write_glb(path: str | os.PathLike, model, clip, sim, morph) -> Path:
             moved = dress.positions(rest + d)
             d_targets.append(
                 {
-                    "POSITION": blob.accessor((moved - d_rest) * s, "VEC3", target=_ARRAY,
-                                              minmax=True),  # fmt: skip
+                    "POSITION": blob.accessor(
+                        (moved - d_rest) * s, "VEC3", target=_ARRAY, minmax=True
+                    ),  # fmt: skip
                     "NORMAL": blob.accessor(
                         _normals(moved, dress.triangles) - dn0, "VEC3", target=_ARRAY
                     ),
@@ -365,8 +366,10 @@ def write_glb(path: str | os.PathLike, model, clip, sim, morph) -> Path:
                             COLOR_0=blob.accessor(part.colors, "VEC3", target=_ARRAY),
                         ),
                         indices=blob.accessor(
-                            np.asarray(part.triangles).reshape(-1), "SCALAR",
-                            target=_ELEMENTS, ints=True,
+                            np.asarray(part.triangles).reshape(-1),
+                            "SCALAR",
+                            target=_ELEMENTS,
+                            ints=True,
                         ),  # fmt: skip
                         material=mat,
                     )

@@ -62,7 +62,7 @@ class MorphAnimation:
     rest : (V, 3) mm — the base mesh.
     targets : (K, V, 3) mm — displacements from ``rest``.
     weights : (T, K) — per frame.
-    names : list of str — one per target (muscle ids, then ``corrective_NN``).
+    names : list of str — one per target (muscle ids, then ``corrective_NNp`` / ``NNn``).
     n_muscle_targets : int — the first this many are the muscles' responses.
     frame_rms_mm : (T,) — each frame's RMS from the skin it was fitted to.
     linear_rms_mm : (T,) — each frame's RMS with the muscle targets alone (the tissue's
@@ -98,8 +98,10 @@ def fit_morph_animation(
 ) -> MorphAnimation:
     """Morph targets reproducing ``skin`` (T, V, 3) mm: the muscle ``responses`` (M, V, 3)
     weighted by the ``contractions`` (T, M), plus the fewest principal components of the
-    residual that bring every frame within ``tol_mm`` RMS (each scaled so that its weights
-    stay within [-1, 1]). Muscles that never contract in the clip get no target."""
+    residual that bring every frame within ``tol_mm`` RMS, each scaled so that its weights stay
+    within [-1, 1] and split into a positive and a negative target (``corrective_NNp``,
+    ``corrective_NNn``) so that every weight is in [0, 1]. Muscles that never contract in the
+    clip get no target."""
     skin = np.asarray(skin, dtype=np.float64)
     rest = np.asarray(rest, dtype=np.float64)
     c = np.asarray(contractions, dtype=np.float64)
@@ -130,9 +132,18 @@ def fit_morph_animation(
         w = u[:, :k] * s[None, :k]  # (T, k)
         scale = np.abs(w).max(axis=0)
         scale[scale == 0] = 1.0
-        targets.append((vt[:k] * scale[:, None]).reshape(k, n_v, 3))
-        weights.append(w / scale[None])
-        corr_names = [f"corrective_{j:02d}" for j in range(k)]
+        comp = (vt[:k] * scale[:, None]).reshape(k, n_v, 3)
+        w = w / scale[None]
+        # each component as two targets, +D and -D, each weighted in [0, 1]: clients that
+        # clamp weights to [0, 1] (Unity's default; Blender 3.4's importer clamps below the
+        # first keyframe's value) play it as written; a half never used is left out
+        for j in range(k):
+            for sign, tag in ((1.0, "p"), (-1.0, "n")):
+                wj = np.maximum(sign * w[:, j], 0.0)
+                if wj.max() > 0:
+                    targets.append(sign * comp[j : j + 1])
+                    weights.append(wj[:, None])
+                    corr_names.append(f"corrective_{j:02d}{tag}")
     names = [str(names[i]) for i in used] + corr_names
     m = MorphAnimation(
         rest,
