@@ -6,4 +6,17 @@ takes 0.85 s and the tissue model 0.7 s (measured 2026-12-01 on this project's 2
 machine). Everything below the commands imports at module level."""
 
 # the order in which ``myoface --help`` lists them
-ORDER = ["demo", "synth", "analyze", "batch", "resynth", "export", "view", "face", "info", "bench"]
+ORDER = [
+    "demo",
+    "synth",
+    "analyze",
+    "batch",
+    "resynth",
+    "encode",
+    "decode",
+    "export",
+    "view",
+    "face",
+    "info",
+    "bench",
+]
