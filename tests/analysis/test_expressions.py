@@ -1,0 +1,310 @@
+"""Expressions read from the contractions (``myoface.analysis.expressions``): the EMFACS rule
+over the AU table, its CSV columns, its plot, and one clip analysed end to end."""
+
+import csv
+import warnings
+
+import numpy as np
+import pytest
+
+from myoface.analysis.expressions import (
+    EXPRESSION_COLUMNS,
+    EXPRESSIONS,
+    LABEL_COLUMN,
+    LABEL_MIN,
+    NEUTRAL,
+    expression_labels,
+    expression_scores,
+    expression_scores_from_aus,
+    plot_expressions,
+    prototypes,
+    read_expressions,
+    rule_aus,
+    specificity,
+)
+from myoface.control import expression_aus, expression_contractions
+from myoface.control.facs import au_contractions
+from tests.conftest import needs_mediapipe
+
+
+@pytest.fixture(scope="module")
+def ids():
+    from myoface.muscles.io import load_default_muscles
+
+    return list(load_default_muscles().ids)
+
+
+def _aus(**kw) -> np.ndarray:
+    """AU intensities in [0, 1] over :func:`rule_aus` from ``AU12=0.9``-style keywords."""
+    aus = rule_aus()
+    x = np.zeros(len(aus))
+    for k, v in kw.items():
+        x[aus.index(int(k[2:]))] = v
+    return x
+
+
+# ------------------------------------------------------------------------------ the rule
+
+
+@pytest.mark.parametrize("name", EXPRESSIONS)
+@pytest.mark.parametrize("intensity", [0.5, 0.75, 1.0])
+def test_each_expressions_facs_command_gives_its_label(ids, name, intensity):
+    """The expression's own FACS command (data/expressions.toml) through the AU table: the
+    rule labels it that expression, and it is the strongest of the six by a margin."""
+    s = expression_scores(expression_contractions(name, intensity, ids), ids)
+    assert expression_labels(s) == [name]
+    j = EXPRESSIONS.index(name)
+    others = np.delete(s[: len(EXPRESSIONS)], j)
+    assert s[j] >= LABEL_MIN and s[j] > others.max() + 0.1, s
+    assert s[-1] == pytest.approx(1.0 - s[j])
+
+
+def test_neutral_at_rest(ids):
+    s = expression_scores(np.zeros(len(ids)), ids)
+    np.testing.assert_array_equal(s, [0, 0, 0, 0, 0, 0, 1])
+    assert expression_labels(s) == [NEUTRAL]
+
+
+def test_a_trace_of_one_au_is_neutral(ids):
+    """A single AU below a trace (FACS's A) opens no prototype's gate."""
+    s = expression_scores(au_contractions({12: 0.09}, ids), ids)
+    assert s[: len(EXPRESSIONS)].max() == 0 and expression_labels(s) == [NEUTRAL]
+
+
+def test_a_mixture_of_two_expressions(ids):
+    """Happiness at apex with surprise at half: both present (each discounted by the other's
+    AUs, which it leaves unexplained), happiness the stronger and the label; swapped,
+    surprise."""
+    keep = (1 - expression_contractions("happiness", 1.0, ids)) * (
+        1 - expression_contractions("surprise", 0.5, ids)
+    )
+    s = expression_scores(1 - keep, ids)
+    h, su = s[EXPRESSIONS.index("happiness")], s[EXPRESSIONS.index("surprise")]
+    assert h > su > 0 and expression_labels(s) == ["happiness"]
+    keep = (1 - expression_contractions("happiness", 0.4, ids)) * (
+        1 - expression_contractions("surprise", 1.0, ids)
+    )
+    s = expression_scores(1 - keep, ids)
+    h, su = s[EXPRESSIONS.index("happiness")], s[EXPRESSIONS.index("surprise")]
+    assert su > h > 0 and expression_labels(s) == ["surprise"]
+
+
+def test_the_rule_by_hand():
+    """The documented arithmetic on given AU intensities: happiness's prototypes 6+12 (mean
+    0.75) and 12>=C (0.9), the best 0.9; AU20 (fear's alone: specificity 1) unexplained."""
+    s = expression_scores_from_aus(_aus(AU06=0.6, AU12=0.9))
+    assert s[0] == pytest.approx(0.9) and s[-1] == pytest.approx(0.1)
+    s = expression_scores_from_aus(_aus(AU06=0.6, AU12=0.9, AU20=0.5))
+    assert s[0] == pytest.approx(0.9 * (0.36 + 0.81) / (0.36 + 0.81 + 0.25))
+    # AU12 below C: only 6+12 matches
+    s = expression_scores_from_aus(_aus(AU06=0.3, AU12=0.5))
+    assert s[0] == pytest.approx(0.4)
+    # the gate: AU6 at 0.15 is half open (0.1 -> 0.2)
+    s = expression_scores_from_aus(_aus(AU06=0.15, AU12=0.5))
+    assert s[0] == pytest.approx(0.5 * (0.15 + 0.5) / 2)
+    # AU10 (disgust's and anger's: specificity 1/2) speaks against happiness at half weight
+    s = expression_scores_from_aus(_aus(AU12=1.0, AU10=1.0))
+    assert s[0] == pytest.approx(1.0 / (1.0 + 0.5))
+    assert s[EXPRESSIONS.index("disgust")] == pytest.approx(1.0 / (1.0 + 1.0))
+    assert expression_labels(s) == ["happiness"]
+
+
+def test_sadness_and_fear_share_au1_and_au4():
+    """1+4+15 is sadness; 1+2+4+5+20 fear; 1+4 alone is neither (no prototype of either)."""
+    assert expression_labels(expression_scores_from_aus(_aus(AU01=0.8, AU04=0.6, AU15=0.7))) == [
+        "sadness"
+    ]
+    fear = _aus(AU01=0.8, AU02=0.6, AU04=0.5, AU05=0.6, AU20=0.7)
+    assert expression_labels(expression_scores_from_aus(fear)) == ["fear"]
+    s = expression_scores_from_aus(_aus(AU01=0.8, AU04=0.6))
+    assert s[EXPRESSIONS.index("sadness")] == 0 and s[EXPRESSIONS.index("fear")] == 0
+    assert expression_labels(s) == [NEUTRAL]
+
+
+def test_surprise_with_fears_aus_is_fear():
+    """Surprise's AUs are a subset of fear's: with fear's brow lowerer and lip stretcher
+    besides, fear is the stronger (surprise leaves them unexplained)."""
+    x = _aus(AU01=0.8, AU02=0.8, AU05=0.6, AU26=0.6)
+    assert expression_labels(expression_scores_from_aus(x)) == ["surprise"]
+    x = _aus(AU01=0.8, AU02=0.8, AU04=0.5, AU05=0.6, AU20=0.7, AU26=0.6)
+    s = expression_scores_from_aus(x)
+    assert expression_labels(s) == ["fear"] and s[2] > 0  # surprise still partly there
+
+
+def test_an_au_not_measured_skips_its_prototypes(ids):
+    """The snakes' CSV (the paper's 12 muscles and the jaw) measures AU1, 2, 9, 12, 25 and 26
+    only: sadness, fear and anger (every prototype needs an AU it lacks) are NaN, never a
+    label; happiness, surprise and disgust are scored on the prototypes it can read."""
+    from myoface.analysis.sections import PAPER_MUSCLES
+
+    paper = list(PAPER_MUSCLES)
+    pick = [ids.index(m) for m in paper]
+    s = expression_scores(au_contractions({1: 0.9, 4: 0.6, 15: 0.8}, ids)[pick], paper)
+    for e in ("sadness", "fear", "anger"):
+        assert np.isnan(s[EXPRESSIONS.index(e)]), e
+    assert expression_labels(s) == [NEUTRAL]  # (1 alone: no prototype)
+    s = expression_scores(expression_contractions("surprise", 1.0, ids)[pick], paper)
+    assert expression_labels(s) == ["surprise"]  # 1+2+26
+
+
+def test_not_measured_frames_are_empty(ids):
+    s = expression_scores(np.full((2, len(ids)), np.nan), ids)
+    assert np.isnan(s).all() and expression_labels(s) == ["", ""]
+
+
+def test_prototypes_read_only_aus_the_analysis_reads():
+    aus = set(rule_aus())
+    for e in EXPRESSIONS:
+        assert prototypes()[e], e
+        for p in prototypes()[e]:
+            assert set(p.aus) <= aus, (e, p.text)
+    # the data's apex AUs of each expression are among its own (the table's) AUs
+    from myoface.analysis.expressions import ANY_EXPRESSION_AUS, EXPRESSION_AUS
+
+    for e in EXPRESSIONS:
+        assert set(expression_aus(e)) <= {*EXPRESSION_AUS[e], *ANY_EXPRESSION_AUS}, e
+    sp = specificity((12, 10, 4, 14))
+    np.testing.assert_allclose(sp, [1.0, 0.5, 1 / 3, 1.0])
+
+
+# ---------------------------------------------------------------------- CSV and plot
+
+
+def _frames(ids):
+    from myoface.analysis.camera import HeadPose
+    from myoface.analysis.trackers.landmark_fit import FitMeasurement
+
+    pose = HeadPose.from_euler(5, 0, 0, (0, 0, -500))
+    played = ["neutral", "happiness", None, "sadness", "anger"]
+    out = []
+    for k, name in enumerate(played):
+        if name is None:
+            c = np.full(len(ids), np.nan)
+            out.append(FitMeasurement(k, k / 30, "no_face", c, None, float("nan")))
+            continue
+        c = np.zeros(len(ids)) if name == NEUTRAL else expression_contractions(name, 0.8, ids)
+        out.append(FitMeasurement(k, k / 30, "ok", c, pose, 0.3))
+    return out, played
+
+
+@pytest.mark.parametrize("streamed", [False, True])
+def test_csv_columns_round_trip(tmp_path, ids, streamed):
+    """The expression columns after the head columns; read back as written, equal to the
+    rule on the row's contractions; empty on the frame not measured; and the readers of
+    the contractions (resynthesis, the viewer) ignore them without a warning."""
+    from myoface.analysis.contractions_csv import (
+        ContractionsCsvWriter,
+        read_contractions_csv,
+        write_contractions_csv,
+    )
+
+    frames, played = _frames(ids)
+    path = tmp_path / "contractions.csv"
+    if streamed:
+        with ContractionsCsvWriter(path, ids, 0.3) as w:
+            for f in frames:
+                w.write(f)
+    else:
+        write_contractions_csv(path, ids, frames, 0.3)
+    head = next(csv.reader(path.read_text().splitlines()))
+    assert head[-8:] == [*EXPRESSION_COLUMNS, LABEL_COLUMN]
+    scores, labels = read_expressions(path)
+    assert labels == [p or "" for p in played]
+    want = expression_scores(np.array([f.contractions for f in frames]), ids)
+    np.testing.assert_allclose(scores, want, atol=5e-4)  # 3 decimals
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        times, table, quality = read_contractions_csv(path, ids)
+    assert quality == ["ok", "ok", "no_face", "ok", "ok"]
+    np.testing.assert_allclose(table[1], frames[1].contractions, atol=1e-5)
+    # computed from the contractions for a CSV without the columns (an older analysis)
+    old = tmp_path / "old.csv"
+    rows = list(csv.reader(path.read_text().splitlines()))
+    old.write_text("\n".join(",".join(r[:-8]) for r in rows) + "\n")
+    s2, l2 = read_expressions(old, table, ids)
+    assert l2 == labels
+    np.testing.assert_allclose(s2, want, atol=2e-4)
+
+
+def test_resynth_reads_a_csv_with_the_expression_columns(tmp_path, ids):
+    from myoface.analysis.contractions_csv import write_contractions_csv
+    from myoface.analysis.resynthesis import read_performance
+    from myoface.model import load_face_model
+
+    frames, _ = _frames(ids)
+    path = tmp_path / "contractions.csv"
+    write_contractions_csv(path, ids, frames, 0.3)
+    perf = read_performance(path, load_face_model(None), pose=True)
+    np.testing.assert_allclose(perf.contractions[1], frames[1].contractions, atol=1e-5)
+
+
+def test_bad_label_is_a_clear_error(tmp_path, ids):
+    from myoface.analysis.contractions_csv import write_contractions_csv
+    from myoface.errors import MyofaceFormatError
+
+    frames, _ = _frames(ids)
+    path = tmp_path / "contractions.csv"
+    write_contractions_csv(path, ids, frames, 0.3)
+    text = path.read_text().replace(",happiness\n", ",joy\n")
+    path.write_text(text)
+    with pytest.raises(MyofaceFormatError, match="row 3: expression must be one of"):
+        read_expressions(path)
+
+
+def test_plot_written(tmp_path):
+    """expressions.png: the strengths and a band of the labels' colours (happiness' amber
+    where it is labelled); grey where not measured."""
+    import imageio.v3 as iio
+
+    from myoface.analysis.expressions import COLORS
+
+    t = np.arange(30) / 30
+    x = np.zeros((30, len(rule_aus())))
+    x[10:20, rule_aus().index(12)] = 0.9
+    s = expression_scores_from_aus(x)
+    s[25] = np.nan
+    labels = expression_labels(s)
+    quality = ["ok"] * 25 + ["no_face"] + ["ok"] * 4
+    path = tmp_path / "expressions.png"
+    plot_expressions(path, t, s, labels, quality)
+    img = iio.imread(path)[..., :3].astype(int)
+    assert img.shape[:2] == (360, 800)
+    amber = np.array([int(COLORS["happiness"][i : i + 2], 16) for i in (1, 3, 5)])
+    assert (np.abs(img - amber).sum(axis=2) < 10).sum() > 1000  # the band and the curve
+    assert labels[:10] == [NEUTRAL] * 10 and labels[12] == "happiness" and labels[25] == ""
+
+
+# --------------------------------------------------------------------------- end to end
+
+
+@needs_mediapipe
+@pytest.mark.slow
+def test_analyze_labels_a_rendered_smile(tmp_path):
+    """A rendered clip of the default face, at rest then smiling (happiness at 1.0), analysed
+    as ``myoface analyze --tracker landmarks``: neutral at rest, happiness at the apex, and
+    the plot beside contractions.png."""
+    from myoface.analysis.outputs import analyze_to_folder
+    from myoface.analysis.video import open_video
+    from myoface.bench.headmotion import camera_renderer
+    from myoface.model import load_face_model
+    from myoface.render import VideoWriter
+
+    fm = load_face_model(None)
+    ren = camera_renderer(fm.face, size=(320, 240), fov_deg=25.0)
+    rot, tr = np.eye(3), np.array([0.0, 0.0, -500.0])
+    smile = expression_contractions("happiness", 1.0, fm.ids)
+    state, frames = fm.rest_state(), []
+    truth = [np.zeros(fm.n_muscles)] * 6 + [smile] * 6
+    for c in truth:
+        state = fm.relax(c, state).state
+        frames.append(ren.render(fm.skin_vertices(state), pose=(rot, tr)))
+    video = tmp_path / "smile.mp4"
+    with VideoWriter(video, fps=30) as w:
+        for f in frames:
+            w.write(f)
+    out = tmp_path / "ana"
+    analyze_to_folder(open_video(video), out, model=fm, tracker="landmarks")
+    assert (out / "expressions.png").is_file() and (out / "contractions.png").is_file()
+    _, labels = read_expressions(out / "contractions.csv")
+    assert labels[:5] == [NEUTRAL] * 5, labels
+    assert labels[8:] == ["happiness"] * 4, labels
