@@ -29,8 +29,8 @@ from myoface.codec.stream import (
     SEGMENT_FRAMES,
     Header,
     StreamWriter,
-    encode_image,
     decode_image,
+    encode_image,
     ids_checksum,
     image_codecs,
 )

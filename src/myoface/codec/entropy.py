@@ -217,7 +217,8 @@ class ParamCoder:
         for k, ok in enumerate(read):
             if not ok:
                 gaze[2 * k : 2 * k + 2] = np.nan
-        return FrameParams(rotmat(v[:3]), v[3:6], v[6 : self.n_main], gaze)
+        c = np.clip(v[6 : self.n_main], 0.0, 1.0)  # (a step's multiple may round past 1)
+        return FrameParams(rotmat(v[:3]), v[3:6], c, gaze)
 
     # -------------------------------------------------------------- coding
 
