@@ -76,6 +76,12 @@ RINGS = (
     (1.75, 35.0, 0.55, 0.15),
     (2.50, 60.0, 0.0, 0.0),
 )
+#: as an eye closes, its margin's source in the picture moves this far (px) out of the
+#: opening, times the share of the opening's area gone: the lids drawn over the eye read lid
+#: skin, not the thin band of white that the margin's points leave inside the opening
+#: (MediaPipe's points lie a little inside the lashes). At calibration (the calibration's
+#: opening) nothing moves: the warp stays the identity
+LID_SOURCE_SHIFT_PX = 2.0
 #: nodes on the picture's border every this many pixels (still)
 BORDER_STEP_PX = 64
 #: the eyeball's cap of nodes reaches this far (degrees) from the eye's forward direction
@@ -148,6 +154,12 @@ def _cap_mesh():
             tris.append((a0 + j, b0 + j, b0 + j1))
             tris.append((a0 + j, b0 + j1, a0 + j1))
     return np.array(dirs, dtype=np.float64), np.array(tris, dtype=np.int64)
+
+
+def _area(pts: np.ndarray) -> float:
+    """The area (px^2) of the polygon ``pts`` (K, 2) (shoelace; either orientation)."""
+    x, y = pts[:, 0], pts[:, 1]
+    return 0.5 * abs(float(x @ np.roll(y, -1) - y @ np.roll(x, -1)))
 
 
 def _fan(loop: np.ndarray, center: int) -> np.ndarray:
@@ -329,6 +341,14 @@ class PictureModel:
             name: _fan(self._openings[name], j) for name, j in self._fan_centre.items()
         }
         self._cap_tris = [cap_tris + e[3] for e in self._eyes]
+        # the eyes' margins: their calibration area on screen, and the outward shift their
+        # source takes as the eye closes (see :data:`LID_SOURCE_SHIFT_PX`)
+        self._margins = []
+        for _name, loop, _c, _i0, _gi in self._eyes:
+            pts = self._src[loop]
+            out = pts - pts.mean(axis=0)
+            out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-9)
+            self._margins.append((loop, pts.copy(), _area(pts), LID_SOURCE_SHIFT_PX * out))
 
         # ---- the source picture: the frame, and beside it the eyes' patches with the
         # eyeball's unseen part filled with the sclera's colour
@@ -474,6 +494,9 @@ class PictureModel:
         s = slice(self._i_ring, self._i_border)
         dst[s] = self._src[s] + self._ring_w[:, None] * (ring_now - self._src[s])
         dst[self._i_border : self._i_fans] = self._src[self._i_border : self._i_fans]
+        for loop, src0, area0, shift in self._margins:
+            shut = 1.0 - _area(dst[loop]) / area0 if area0 > 1.0 else 0.0
+            self._src[loop] = src0 + float(np.clip(shut, 0.0, 1.0)) * shift
         for name, j in self._fan_centre.items():
             dst[j] = dst[self._openings[name]].mean(axis=0)
         g_now = p.gaze.reshape(2, 2)
