@@ -38,6 +38,7 @@ TARGETS = {
     "analysis.rss_mb_growth_per_1000_frames": [("<", 20)],
     "analysis.fidelity": [(">=", 0.85)],
     "analysis.gaze_error_deg": [("<=", 3)],
+    "export.max_skin_error_mm": [("<=", 0.5)],
     "analysis.closed_loop_rmse": [("<=", 0.05)],
     "analysis.closed_loop_corr": [(">=", 0.9)],
     "analysis.headmotion_rmse_worst": [("<=", 0.08)],

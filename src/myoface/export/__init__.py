@@ -76,6 +76,8 @@ class ExportReport:
     linear_rms_mm : (T,) — the same for the muscle targets alone (how far from linear).
     size_bytes : int — the file's size.
     sim : SimulatedClip — the simulated skin it was made from.
+    animation_bytes : int — the part of the file that grows with the clip's length (the
+        keyframes); the rest (meshes, morph targets, texture) does not.
     """
 
     path: Path
@@ -87,6 +89,7 @@ class ExportReport:
     linear_rms_mm: np.ndarray
     size_bytes: int
     sim: SimulatedClip
+    animation_bytes: int = 0
 
     @property
     def max_rms_mm(self) -> float:
@@ -100,6 +103,12 @@ class ExportReport:
     def bytes_per_s(self) -> float:
         """The file's size per second of animation (a clip of one frame: per 1 / fps s)."""
         return self.size_bytes / max(self.duration_s, 1.0 / self.fps)
+
+    @property
+    def animation_bytes_per_s(self) -> float:
+        """What one more second of this animation adds to the file: its keyframes' bytes per
+        second (the weights of every target, the jaw's, the eyes' and the head's motion)."""
+        return self.animation_bytes / max(self.duration_s, 1.0 / self.fps)
 
     def summary(self) -> str:
         return (
@@ -145,4 +154,5 @@ def export_glb(
         morph.linear_rms_mm,
         out.stat().st_size,
         sim,
+        back.animation_bytes,
     )

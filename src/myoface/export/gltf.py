@@ -205,7 +205,7 @@ def _png(image_srgb8: np.ndarray) -> bytes:
     from PIL import Image
 
     buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(image_srgb8)).save(buf, format="PNG", optimize=True)
+    Image.fromarray(np.ascontiguousarray(image_srgb8)).save(buf, format="PNG")
     return buf.getvalue()
 
 
@@ -250,7 +250,9 @@ def write_glb(path: str | os.PathLike, model, clip, sim, morph) -> Path:
         pbrMetallicRoughness=gl.PbrMetallicRoughness(metallicFactor=0.0, roughnessFactor=0.6),
     )
     if dress.texture is not None and face.uv is not None:
-        img = blob.view(_png(to_srgb8(dress.texture)))
+        # the same texture for every export of this model: encoded once
+        png = model.memo(("export.texture_png",), lambda: _png(to_srgb8(dress.texture)))
+        img = blob.view(png)
         g.images.append(gl.Image(bufferView=img, mimeType="image/png", name="skin"))
         g.samplers.append(gl.Sampler(magFilter=9729, minFilter=9987, wrapS=33071, wrapT=33071))
         g.textures.append(gl.Texture(sampler=0, source=0, name="skin"))
@@ -431,6 +433,9 @@ class GlbSkin:
     times: np.ndarray
     skin: np.ndarray
     names: list
+    #: the bytes of the animation's keyframes (times and values of every sampler): what grows
+    #: with the clip's length, where the meshes, targets and texture do not
+    animation_bytes: int = 0
 
 
 def _read(g, blob: bytes, index: int) -> np.ndarray:
@@ -463,16 +468,18 @@ def read_glb_skin(path: str | os.PathLike) -> GlbSkin:
     anim = next((a for a in g.animations if a.name == ANIMATION_NAME), None)
     if anim is None:
         raise MyofaceFormatError(f"{path}: no '{ANIMATION_NAME}' animation")
+    seen = {i for a in g.animations for smp in a.samplers for i in (smp.input, smp.output)}
+    anim_bytes = sum(g.bufferViews[g.accessors[i].bufferView].byteLength for i in seen)
     skin_index = g.nodes.index(node)
     ch = [c for c in anim.channels if c.target.node == skin_index and c.target.path == "weights"]
     if not ch:  # no morph target: the skin stays at rest
         smp = anim.samplers[anim.channels[0].sampler] if anim.channels else None
         times = _read(g, blob, smp.input).astype(np.float64) if smp else np.zeros(1)
-        return GlbSkin(times, np.repeat(base[None], len(times), axis=0), names)
+        return GlbSkin(times, np.repeat(base[None], len(times), axis=0), names, anim_bytes)
     smp = anim.samplers[ch[0].sampler]
     times = _read(g, blob, smp.input).astype(np.float64)
     w = _read(g, blob, smp.output).astype(np.float64).reshape(len(times), len(targets))
     if not targets:
         raise MyofaceValueError(f"{path}: weights animated but no morph target")
     skin = base[None] + np.einsum("tk,kvc->tvc", w, np.array(targets))
-    return GlbSkin(times, skin, names)
+    return GlbSkin(times, skin, names, anim_bytes)
