@@ -306,6 +306,44 @@ class FaceViewer:
 
         threading.Thread(target=work, daemon=True).start()
 
+    def gltf_export(self, path) -> Path:
+        """The loaded playback (its file, as ``myoface export FILE`` exports it: a CSV's head
+        pose and gaze included), or without one the face as it is now (one frame), as a binary
+        glTF at ``path`` (:func:`myoface.export.export_glb`); returns the path."""
+        from myoface.export import Clip, clip_from_csv, clip_from_timeline, export_glb
+
+        src = self.state.playback_path if self.state.playback is not None else None
+        if src is None:
+            clip = Clip(self.state.contractions()[None], VIDEO_FPS, source="viewer")
+        elif src.suffix.lower() == ".csv":
+            clip = clip_from_csv(src, self.model)
+        else:
+            from myoface.control import load_timeline
+
+            clip = clip_from_timeline(load_timeline(src), self.model, VIDEO_FPS)
+        return export_glb(self.model, clip, path).path
+
+    def _export_gltf(self, event) -> None:
+        if self._exporting:
+            raise MyofaceValueError("an export is already running")
+
+        def work():
+            self._exporting = True
+            try:
+                with tempfile.TemporaryDirectory() as tmp:
+                    self._status.content = "exporting glTF ..."
+                    path = self.gltf_export(Path(tmp) / "myoface_animation.glb")
+                    self._status.content = "glTF ready"
+                    self._download(event, path.name, path.read_bytes())
+            except MyofaceError as exc:
+                self._notify(str(exc))
+            except Exception as exc:  # noqa: BLE001 - reported; the server keeps running
+                self._notify(f"glTF export failed: {exc}")
+            finally:
+                self._exporting = False
+
+        threading.Thread(target=work, daemon=True).start()
+
     # ------------------------------------------------------------------ GUI
     def _build_gui(self) -> None:
         gui = self.server.gui
@@ -340,6 +378,8 @@ class FaceViewer:
             b.on_click(self._guard(self._export_screenshot))
             b = gui.add_button("render this view on the CPU (PNG)")
             b.on_click(self._guard(self._export_render))
+            b = gui.add_button("animation of the playback, or this face (glTF .glb)")
+            b.on_click(self._guard(self._export_gltf))
 
     def _expression_gui(self, gui) -> None:
         with gui.add_folder("expression", expand_by_default=False):

@@ -59,6 +59,8 @@ class ViewerState:
         self.expression: tuple[str, float] | None = None
         self.linked = True
         self.playback: tuple[np.ndarray, np.ndarray] | None = None  # times, table
+        #: the file the playback was loaded from (for the glTF export), or None
+        self.playback_path: Path | None = None
         #: the playback's gaze (T, 2) rad, (yaw, pitch) per row, or None (no gaze in it)
         self.playback_gaze: np.ndarray | None = None
         self.version = 0
@@ -201,6 +203,7 @@ class ViewerState:
             gaze = tl.gaze(times) if tl.has_gaze else None
         self.playback = (times, table)
         self.playback_gaze = gaze
+        self.playback_path = p
         self._bump()
         return float(times[-1] - times[0])
 
