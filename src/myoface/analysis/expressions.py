@@ -335,11 +335,12 @@ COLORS = {
 def plot_expressions(path, times, scores, labels, quality) -> None:
     """``expressions.png``: the six expressions' strengths and neutral (``scores`` (T, 7))
     over ``times`` (T,) s, and below them the label of each frame as a coloured band; frames
-    whose ``quality`` is not "ok" shaded grey. Written atomically."""
+    whose ``quality`` is not "ok" (or without a label) hatched. Written atomically."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
 
     from myoface._io import atomic_output
 
@@ -350,29 +351,37 @@ def plot_expressions(path, times, scores, labels, quality) -> None:
     )
     names = (*EXPRESSIONS, NEUTRAL)
     for j, e in enumerate(names):
-        ax.plot(t, s[:, j], color=COLORS[e], lw=1.2 if e != NEUTRAL else 1.0,
+        ax.plot(t, s[:, j], color=COLORS[e], lw=1.4 if e != NEUTRAL else 1.0,
                 ls="-" if e != NEUTRAL else "--", label=e)  # fmt: skip
     ax.axhline(LABEL_MIN, color="0.3", lw=0.6, ls=":", zorder=0)
     ax.set_ylim(-0.02, 1.02)
     ax.set_ylabel("strength", fontsize=8)
     ax.tick_params(labelsize=7)
-    ax.legend(loc="upper left", fontsize=7, ncol=7, frameon=False, bbox_to_anchor=(0, 1.16))
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / 30
+    lost = False
     for k, (lab, q) in enumerate(zip(labels, quality, strict=True)):
+        span = (t[k] - dt / 2, t[k] + dt / 2)
         if q != "ok" or not lab:
+            lost = True
             for a in (ax, band):
-                a.axvspan(t[k] - dt / 2, t[k] + dt / 2, color="0.88", lw=0, zorder=0)
+                a.axvspan(*span, facecolor="white", edgecolor="#c44", hatch="////", lw=0)
             continue
-        band.axvspan(t[k] - dt / 2, t[k] + dt / 2, color=COLORS[lab], lw=0)
+        band.axvspan(*span, color=COLORS[lab], lw=0)
+    handles, _ = ax.get_legend_handles_labels()
+    if lost:
+        handles.append(
+            Patch(facecolor="white", edgecolor="#c44", hatch="////", label="not measured")
+        )
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+              frameon=False, title="expression", title_fontsize=7)  # fmt: skip
     band.set_yticks([])
     band.set_ylabel("label", rotation=0, ha="right", va="center", fontsize=8)
-    band.set_xlabel("time (s)")
+    band.set_xlabel("time (s)", fontsize=8)
     band.tick_params(labelsize=7)
-    fig.suptitle(
-        "expressions from the fitted contractions (EMFACS prototypes over the AU table; "
-        f"dotted: the label's threshold {LABEL_MIN:g}; grey: not measured)",
+    ax.set_title(
+        "expressions read from the fitted contractions (EMFACS prototypes over the AU table)\n"
+        f"label: the strongest expression from {LABEL_MIN:g} (dotted), else neutral",
         fontsize=8,
-        y=0.995,
     )
     fig.tight_layout()
     with atomic_output(path) as tmp:
