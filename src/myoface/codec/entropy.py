@@ -70,7 +70,7 @@ class Steps:
     def check(self) -> None:
         """A clear error unless every step is finite, positive and its channel's range fits
         :data:`Q_LIMIT` steps."""
-        lims = (np.pi, 5000.0, 1.0, np.pi / 2)
+        lims = (np.pi, 3000.0, 1.0, np.pi / 2)
         for name, s, lim in zip(
             ("rotation", "translation", "contraction", "gaze"), self.as_tuple(), lims, strict=True
         ):

@@ -206,7 +206,7 @@ class Header:
         gz = np.array(r.unpack("<4f"), dtype=np.float64)
         if not (np.isfinite(rv).all() and np.isfinite(tr).all()) or np.linalg.norm(rv) > 4:
             raise MyofaceFormatError("corrupted header: the calibration pose")
-        if np.any(np.abs(tr) > 5000) or np.any(np.abs(gz[np.isfinite(gz)]) > np.pi / 2):
+        if np.any(np.abs(tr) > 3000) or np.any(np.abs(gz[np.isfinite(gz)]) > np.pi / 2):
             raise MyofaceFormatError("corrupted header: the calibration pose")
         c_q = np.frombuffer(r.take(2 * m), dtype="<u2").astype(np.float64)
         if np.any(c_q * steps.contraction > 1 + steps.contraction):
