@@ -167,9 +167,25 @@ def specificity(aus) -> np.ndarray:
     return np.array([1.0 / k if k else 1.0 for k in n])
 
 
-def _gate(x: np.ndarray, least: float) -> np.ndarray:
-    """0 below ``least - TRACE / 2``, 1 from ``least``, linear between."""
-    return np.clip((x - (least - TRACE / 2)) / (TRACE / 2), 0.0, 1.0)
+@lru_cache(maxsize=8)
+def _plan(aus: tuple):
+    """Per expression: the columns of its own AUs (and those of any expression), the others'
+    with their :func:`specificity`, and its prototypes that ``aus`` can score, as
+    ``(columns, least)`` arrays."""
+    col = {a: j for j, a in enumerate(aus)}
+    sign = specificity(aus)
+    plan = []
+    for e in EXPRESSIONS:
+        mine = {*EXPRESSION_AUS[e], *ANY_EXPRESSION_AUS}
+        own = np.array([j for j, a in enumerate(aus) if a in mine], dtype=int)
+        other = np.array([j for j, a in enumerate(aus) if a not in mine], dtype=int)
+        protos = [
+            (np.array([col[a] for a in p.aus]), np.array(p.least))
+            for p in prototypes()[e]
+            if all(a in col for a in p.aus)
+        ]
+        plan.append((own, other, sign[other], protos))
+    return plan
 
 
 def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
@@ -179,10 +195,11 @@ def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
     :func:`rule_aus`); NaN for an AU that was not measured. One frame: (len(aus),) -> (7,).
 
     An expression's strength is its best prototype's match (the mean of its AUs' intensities
-    times each AU's presence gate) times its coverage (the share of ``sum x**2`` in its own
-    AUs and :data:`ANY_EXPRESSION_AUS`); a prototype with an unmeasured AU is not scored, an
-    expression with no prototype scored is NaN. Neutral is 1 minus the strongest (NaN when
-    none was scored). A row with no AU measured is NaN throughout.
+    times each AU's presence gate) times its coverage (``E / (E + U)``: the activity, sum of
+    ``x**2``, in its own AUs and :data:`ANY_EXPRESSION_AUS`, against the activity it leaves
+    unexplained weighted by :func:`specificity`); a prototype with an unmeasured AU is not
+    scored, an expression with no prototype scored is NaN. Neutral is 1 minus the strongest
+    (NaN when none was scored). A row with no AU measured is NaN throughout.
     """
     aus = tuple(rule_aus() if aus is None else aus)
     x = np.asarray(intensities, dtype=np.float64)
@@ -190,32 +207,23 @@ def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
     x = np.atleast_2d(x)
     if x.shape[1] != len(aus):
         raise ValueError(f"intensities must be (T, {len(aus)}) over aus; got shape {x.shape}")
-    col = {a: j for j, a in enumerate(aus)}
     x = np.clip(x, 0.0, 1.0)  # (NaN stays NaN)
     sq = np.where(np.isfinite(x), x**2, 0.0)
-    sign = specificity(aus)
     out = np.full((len(x), len(EXPRESSION_COLUMNS)), np.nan)
-    for i, e in enumerate(EXPRESSIONS):
-        mine = {*EXPRESSION_AUS[e], *ANY_EXPRESSION_AUS}
-        own = [j for j, a in enumerate(aus) if a in mine]
-        other = [j for j, a in enumerate(aus) if a not in mine]
+    for i, (own, other, sign, protos) in enumerate(_plan(aus)):
         explained = sq[:, own].sum(axis=1)
-        against = (sq[:, other] * sign[other]).sum(axis=1)
-        total = explained + against
+        total = explained + sq[:, other] @ sign
         coverage = np.where(total > 0, explained / np.where(total > 0, total, 1.0), 1.0)
         best = np.full(len(x), np.nan)
-        for p in prototypes()[e]:
-            if not all(a in col for a in p.aus):
-                continue
-            v = x[:, [col[a] for a in p.aus]]
-            gates = np.prod(
-                [_gate(v[:, k], t) for k, t in enumerate(p.least)], axis=0
-            )  # NaN where an AU is unmeasured
-            match = gates * v.mean(axis=1)
-            best = np.fmax(best, match)
+        for cols, least in protos:
+            v = x[:, cols]  # (NaN where an AU is unmeasured: the match is NaN)
+            gates = np.clip((v - (least - TRACE / 2)) / (TRACE / 2), 0.0, 1.0).prod(axis=1)
+            best = np.fmax(best, gates * v.mean(axis=1))
         out[:, i] = best * coverage
-    strongest = np.nanmax(np.where(np.isnan(out[:, :-1]), -np.inf, out[:, :-1]), axis=1)
-    out[:, -1] = np.where(np.isfinite(strongest), 1.0 - strongest, np.nan)
+    six = out[:, :-1]
+    scored = np.isfinite(six).any(axis=1)
+    strongest = np.where(scored, np.nanmax(np.where(np.isnan(six), -np.inf, six), axis=1), np.nan)
+    out[:, -1] = 1.0 - strongest
     out[~np.isfinite(x).any(axis=1)] = np.nan
     return out[0] if one else out
 
@@ -248,7 +256,9 @@ def au_fractions(contractions, muscle_ids) -> np.ndarray:
     measured, and for a frame whose contractions are not all finite)."""
     from myoface.analysis.openface import OPENFACE_SCALE, au_intensities
 
-    return au_intensities(contractions, list(muscle_ids), rule_aus()) / OPENFACE_SCALE
+    ids = tuple(muscle_ids)
+    x = au_intensities(contractions, list(ids), rule_aus(), basis=_basis(ids))
+    return x / OPENFACE_SCALE
 
 
 def expression_scores(contractions, muscle_ids) -> np.ndarray:

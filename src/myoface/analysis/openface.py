@@ -202,10 +202,11 @@ def _mix_jacobian(w: np.ndarray, a: np.ndarray) -> np.ndarray:
     """d contractions / d a (M, K) of :func:`_mix`: ``w[:, k]`` times the product of the other
     units' ``1 - w a``."""
     p = 1.0 - w * a[None, :]
-    jac = np.empty_like(w)
-    for k in range(w.shape[1]):
-        jac[:, k] = w[:, k] * np.prod(np.delete(p, k, axis=1), axis=1)
-    return jac
+    ones = np.ones((len(p), 1))
+    # the product of the other units' factors: of those before k times of those after k
+    before = np.cumprod(np.hstack([ones, p[:, :-1]]), axis=1)
+    after = np.cumprod(np.hstack([ones, p[:, :0:-1]]), axis=1)[:, ::-1]
+    return w * before * after
 
 
 def fit_units(contractions: np.ndarray, basis: AUBasis) -> np.ndarray:
@@ -237,7 +238,7 @@ def fit_units(contractions: np.ndarray, basis: AUBasis) -> np.ndarray:
     return np.clip(res.x, 0.0, 1.0)
 
 
-def au_intensities(contractions, muscle_ids, aus=OPENFACE_AUS) -> np.ndarray:
+def au_intensities(contractions, muscle_ids, aus=OPENFACE_AUS, *, basis=None) -> np.ndarray:
     """OpenFace-style AU intensities (T, len(aus)) on 0-5 from contractions (T, M) over
     ``muscle_ids`` (or one frame, (M,) -> (len(aus),)).
 
@@ -254,7 +255,8 @@ def au_intensities(contractions, muscle_ids, aus=OPENFACE_AUS) -> np.ndarray:
     contraction of a muscle that only AUs outside OpenFace's list drive (e.g. the zygomaticus
     minor of AU11) is explained by the listed AUs as well as they can, or left unexplained.
     NaN for an AU that is not measured (:func:`au_basis`) and for a frame whose contractions
-    are not all finite.
+    are not all finite. ``basis``: :func:`au_basis` of ``muscle_ids`` and ``aus``, when the
+    caller keeps it (it is made here otherwise).
     """
     c = np.asarray(contractions, dtype=np.float64)
     one = c.ndim == 1
@@ -264,7 +266,7 @@ def au_intensities(contractions, muscle_ids, aus=OPENFACE_AUS) -> np.ndarray:
         raise MyofaceFormatError(
             f"contractions must be (T, {len(ids)}) over muscle_ids; got shape {c.shape}"
         )
-    basis = au_basis(ids, aus)
+    basis = au_basis(ids, aus) if basis is None else basis
     out = np.full((len(c), len(aus)), np.nan)
     col = {n: j for j, n in enumerate(aus)}
     for t, row in enumerate(c):
