@@ -19,6 +19,7 @@ LEVELS = (
     ("myoface.control",),
     ("myoface.synth",),
     ("myoface.analysis",),
+    ("myoface.export",),
     ("myoface.viewer",),
     ("myoface.bench",),
     ("myoface.commands",),
