@@ -25,9 +25,10 @@ What the picture cannot supply is the model's:
 
 The physics per frame is the synthesis' (:mod:`myoface.synth`): the tissue relaxed at the
 frame's contractions, warm-started from the previous frame's (``physics="relax"``); or, for a
-fixed cost, the skin's linear response to each contraction about the calibration, computed once
-(``physics="linear"``, :func:`myoface.analysis.estimate.skin_response`; the lids and the lips'
-contact with the teeth are applied on it as on the relaxed skin).
+fixed cost, the tissue's response to each muscle alone (quadratic in its contraction) and its
+tabulated response to the jaw, summed, computed once per model and made exact at the calibration (``physics="linear"``,
+:func:`tissue_response`; the lids and the lips' contact with the teeth are applied on it as on
+the relaxed skin).
 
 Image coordinates are (x, y) = (column, row), pixels, pixel centres at half-integers (the
 camera's, :class:`~myoface.analysis.camera.PinholeCamera`); the head frame and the camera
@@ -72,10 +73,29 @@ LABEL_STILL, LABEL_AROUND, LABEL_EYE, LABEL_MOUTH, LABEL_SKIN = 0, 1, 2, 3, 4
 #: outer rings are ``below`` instead
 RINGS = (
     # scale, back_mm, weight, below
-    (1.30, 15.0, 1.0, 1.0),
+    (1.30, 15.0, 1.0, 0.8),
     (1.75, 35.0, 0.55, 0.15),
     (2.50, 60.0, 0.0, 0.0),
 )
+#: ... the second ring's weight above the mouth when the person is told from the background
+#: (:func:`person_mask`): the head and its hair move as one, the background behind them
+#: staying still whatever the warp does there
+SEGMENTED_RING2_WEIGHT = 1.0
+#: the person is told from the background by GrabCut (Rother, Kolmogorov & Blake 2004,
+#: OpenCV's :func:`cv2.grabCut`) at this scale of the picture, in this many iterations: the
+#: face (inside the rim) is the person, the second ring's outline and a band below the chin
+#: may be, everything beyond the third ring is background
+SEGMENT_SCALE, SEGMENT_ITERATIONS = 0.5, 4
+#: the background behind the head (what shows where it moves away) is made down to this
+#: many face widths below the chin (the neck); the body below is its own background
+SEGMENT_NECK = 0.35
+#: ... within this many face widths of the face's centre line (the neck; beside it the
+#: shoulders, which stay)
+SEGMENT_NECK_HALF_WIDTH = 0.4
+#: the head's outline is widened by this many pixels (see :func:`person_mask`)
+SEGMENT_MARGIN_PX = 4
+#: the mask's edge is softened outwards over this many pixels (a Gaussian's sigma)
+SEGMENT_SOFT_PX = 1.5
 #: as an eye closes, its margin's source in the picture moves this far (px) out of the
 #: opening, times the share of the opening's area gone: the lids drawn over the eye read lid
 #: skin, not the thin band of white that the margin's points leave inside the opening
@@ -196,6 +216,10 @@ class PictureModel:
         its gaze; NaN gaze: straight ahead).
     physics : {"relax", "linear"} — the tissue relaxed per frame (default), or its linear
         response about the calibration (fixed cost; see the module's docstring).
+    segment : bool — tell the person from the background in the calibration frame
+        (:func:`person_mask`, about half a second at 640x360), so that the background behind
+        a moving head stays still (default); without it, the background near the head moves
+        with the warp's rings.
 
     :meth:`render` keeps the tissue's state from one call to the next (a warm start), and the
     last gaze read of each eye (an eye not read, e.g. closed, holds it): a PictureModel is
@@ -203,7 +227,7 @@ class PictureModel:
     """
 
     def __init__(self, model, camera: PinholeCamera, calibration_frame, calibration: FrameParams,
-                 *, physics: str = "relax"):  # fmt: skip
+                 *, physics: str = "relax", segment: bool = True):  # fmt: skip
         import cv2
 
         if physics not in PHYSICS:
@@ -243,10 +267,9 @@ class PictureModel:
         self._settled = self._state_cal
         self._skin_cal = model.skin_vertices(self._state_cal)
         if physics == "linear":
-            from myoface.analysis.estimate import skin_response
-
-            self._response = skin_response(model, model.ids)  # (V, 3, M)
-            self._x_cal = np.array(self._state_cal.x[:nv])
+            self._response, self._jaw_table = tissue_response(model)
+            # the linear model made exact at the calibration: its error there, carried
+            self._x_fix = np.array(self._state_cal.x[:nv]) - self._linear_x(cal.contractions)
 
         # ---- the nodes: skin, rings, border, fan centres, eye caps
         rim3 = self._skin_cal[self._rim]
@@ -255,19 +278,32 @@ class PictureModel:
         mouth_y = (
             float(self._skin_cal[mouth_loop, 1].mean()) if mouth_loop is not None else centre[1]
         )
-        rings, weights = [], []
+        rings = []
         below = rim3[:, 1] < mouth_y
-        for scale, back, wt, wt_below in RINGS:
+        for scale, back, _wt, _wt_below in RINGS:
             p = rim3.copy()
             p[:, :2] = centre[:2] + scale * (rim3[:, :2] - centre[:2])
             p[:, 2] -= back
             rings.append(p)
-            weights.append(np.where(below, wt_below, wt))
         self._ring3 = np.concatenate(rings)
-        self._ring_w = np.concatenate(weights)
         cal_pose = cal.pose
         ring_cal = camera.project(cal_pose.apply(self._ring3))
         skin_cal_px = camera.project(cal_pose.apply(self._skin_cal))
+        k = len(self._rim)
+        #: the person (1) against the background (0), (H, W) float32 in [0, 1], from the
+        #: calibration frame (:func:`person_mask`); None when not segmented
+        self.person = None
+        self._plate = None
+        if segment:
+            self.person, self._plate = person_mask(
+                frame, skin_cal_px[self._rim], ring_cal[k : 2 * k], ring_cal[2 * k :]
+            )
+        weights = []
+        for j, (_scale, _back, wt, wt_below) in enumerate(RINGS):
+            if j == 1 and self.person is not None:
+                wt = SEGMENTED_RING2_WEIGHT
+            weights.append(np.where(below, wt_below, wt))
+        self._ring_w = np.concatenate(weights)
         # the border's nodes, those inside the second ring's outline dropped (they would
         # pin the moving head to the frame's edge)
         bx = np.unique(np.r_[np.arange(0, w, BORDER_STEP_PX), w])
@@ -277,7 +313,6 @@ class PictureModel:
             np.column_stack([np.zeros_like(by), by]), np.column_stack([np.full_like(by, w), by]),
         ]).astype(np.float64)  # fmt: skip
         border = np.unique(border, axis=0)
-        k = len(self._rim)
         from matplotlib.path import Path as MplPath
 
         outline2 = MplPath(ring_cal[k : 2 * k])
@@ -334,8 +369,13 @@ class PictureModel:
         weight = np.zeros(n)
         weight[: self._i_ring] = 1.0
         weight[self._i_ring : self._i_border] = self._ring_w
+        weight[self._i_fans :] = 1.0
         moving = weight[tri].max(axis=1) > 0
         self._around_tris = np.ascontiguousarray(tri[moving])
+        #: the nodes whose triangles the warp moves: outside their box it is the identity
+        self._moving_nodes = np.union1d(
+            np.unique(self._around_tris), np.r_[np.arange(nv), np.arange(self._i_fans, n)]
+        )
         self._node_weight = weight
         self._fan_tris = {
             name: _fan(self._openings[name], j) for name, j in self._fan_centre.items()
@@ -385,10 +425,14 @@ class PictureModel:
             patches.append((patch, x_at))
             self._atlas_shift.append((float(x_at - x0), float(-y0)))
             x_at += pw
-        canvas = np.zeros((h, x_at, 3), np.uint8)
-        canvas[:, :w] = frame
+        nch = 3 if self.person is None else 4
+        canvas = np.zeros((h, x_at, nch), np.uint8)
+        canvas[:, :w, :3] = frame
+        if self.person is not None:  # the person's mask rides in the fourth channel
+            canvas[:, :w, 3] = np.round(self.person * 255).astype(np.uint8)
+            canvas[:, w:, 3] = 255
         for patch, xa in patches:
-            canvas[: patch.shape[0], xa : xa + patch.shape[1]] = patch
+            canvas[: patch.shape[0], xa : xa + patch.shape[1], :3] = patch
         self._canvas = np.ascontiguousarray(canvas)
         if x_at > 32767:
             raise MyofaceValueError(f"the picture is too wide to warp ({w} px)")
@@ -464,9 +508,22 @@ class PictureModel:
 
         x = np.array(self._state_cal.x)
         nv = model.face.n_vertices
-        x[:nv] = self._x_cal + self._response @ (c - self._c_cal)
-        state = FaceState(x, self._state_cal.v, c)
-        return model.skin_vertices(state)
+        x[:nv] = self._linear_x(c) + self._x_fix
+        self._state = FaceState(x, self._state_cal.v, c)
+        return model.skin_vertices(self._state)
+
+    def _linear_x(self, c) -> np.ndarray:
+        """The tissue's skin nodes (V, 3) mm at ``c`` by :func:`tissue_response`: the rest
+        plus each muscle's response times its contraction plus the jaw's displacement at its
+        opening (interpolated in the table)."""
+        model = self.model
+        j = model.muscles.jaw_index
+        soft = np.array(c, dtype=np.float64)
+        x = np.array(model.tissue.rest_positions[: model.face.n_vertices])
+        if j is not None:
+            x += _interp_table(self._jaw_table, float(soft[j]))
+            soft[j] = 0.0
+        return x + self._response[0] @ soft + self._response[1] @ (soft * soft)
 
     def _lip_gap(self, skin) -> float:
         if self._lip_pairs is None:
@@ -532,6 +589,8 @@ class PictureModel:
         raster_warp(dst, src, depth, self._face_tris, mx, my, lab, LABEL_SKIN, zb, True, 0.0, 0.0)
         t2 = time.perf_counter()
         out = cv2.remap(self._canvas, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        if self._plate is not None:
+            out = self._over_plate(out, dst)
         t3 = time.perf_counter()
         self._mouth(out, skin, p, dst)
         t4 = time.perf_counter()
@@ -541,6 +600,27 @@ class PictureModel:
         st.remap_ms.append((t3 - t2) * 1e3)
         st.mouth_ms.append((t4 - t3) * 1e3)
         st.total_ms.append((t4 - t0) * 1e3)
+        return out
+
+    def _over_plate(self, warped, dst) -> np.ndarray:
+        """The warped person (RGB + mask, (H, W, 4)) over the still background plate: where
+        the head has moved away, the background shows (the frame's own, or beneath the
+        person's calibration outline the nearest background's colour)."""
+        import cv2
+
+        h, w = self.height, self.width
+        moving = self._moving_nodes
+        both = np.concatenate([dst[moving], self._src[moving]])
+        x0, y0 = np.maximum(np.floor(both.min(axis=0)).astype(int) - 1, 0)
+        x1, y1 = np.ceil(both.max(axis=0)).astype(int) + 2
+        x1, y1 = min(x1, w), min(y1, h)
+        out = np.ascontiguousarray(warped[:, :, :3])
+        if x0 >= x1 or y0 >= y1:
+            return out
+        a = warped[y0:y1, x0:x1, 3].astype(np.float32) * (1.0 / 255.0)
+        fg = np.ascontiguousarray(out[y0:y1, x0:x1])
+        bg = self._plate[y0:y1, x0:x1]
+        out[y0:y1, x0:x1] = cv2.blendLinear(fg, bg, a, 1.0 - a)
         return out
 
     def mouth_alpha(self, skin) -> float:
@@ -609,6 +689,159 @@ class PictureModel:
             shift = (cam.cx - 0.5 * w, cam.cy - 0.5 * h)
             self._mouth_renderer = (r, shift, k)
         return self._mouth_renderer
+
+
+# ---------------------------------------------------------------------- the physics
+
+#: the jaw's displacement of the skin is tabulated at these openings and interpolated (it is
+#: a rotation of the bone: far from linear over its range)
+JAW_TABLE = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+def tissue_response(model):
+    """The tissue's skin nodes' displacement by each muscle alone, ``a c + b c^2`` mm through
+    its relaxed displacements at c = 1/2 and 1 (``(2, V, 3, M)``: a, b; the jaw's columns
+    zero; a muscle's pull saturates as the tissue stiffens), and the jaw's displacement at
+    each opening of :data:`JAW_TABLE` ((J, V, 3) mm): what ``physics="linear"`` sums. Computed once per model (:meth:`~myoface.model.FaceModel.memo`;
+    a relax per muscle and per opening). The lids and the lips' contact are not in it: they
+    are applied on the sum as on a relaxed skin (:meth:`~myoface.model.FaceModel.skin_vertices`)."""
+
+    def compute():
+        nv = model.face.n_vertices
+        rest = model.tissue.rest_positions[:nv]
+        j = model.muscles.jaw_index
+        resp = np.zeros((2, nv, 3, model.n_muscles))
+        for k, mid in enumerate(model.ids):
+            if k == j:
+                continue
+            half = model.relax({mid: 0.5}, tol_mm=RELAX_TOL_MM).state
+            full = model.relax({mid: 1.0}, half, tol_mm=RELAX_TOL_MM).state
+            d_half, d_full = half.x[:nv] - rest, full.x[:nv] - rest
+            # d(c) = a c + b c^2 through d(1/2) and d(1)
+            resp[0, :, :, k] = 4.0 * d_half - d_full
+            resp[1, :, :, k] = 2.0 * d_full - 4.0 * d_half
+        table = np.zeros((len(JAW_TABLE), nv, 3))
+        if j is not None:
+            for i, a in enumerate(JAW_TABLE):
+                if a > 0:
+                    x = model.relax({model.ids[j]: a}, tol_mm=RELAX_TOL_MM).state.x[:nv]
+                    table[i] = x - rest
+        resp.flags.writeable = False
+        table.flags.writeable = False
+        return resp, table
+
+    return model.memo(("picture.tissue_response", JAW_TABLE), compute)
+
+
+def _interp_table(table: np.ndarray, a: float) -> np.ndarray:
+    grid = np.asarray(JAW_TABLE)
+    i = int(np.clip(np.searchsorted(grid, a) - 1, 0, len(grid) - 2))
+    t = float(np.clip((a - grid[i]) / (grid[i + 1] - grid[i]), 0.0, 1.0))
+    return (1 - t) * table[i] + t * table[i + 1]
+
+
+# ---------------------------------------------------------------------- the person
+
+
+def person_mask(frame: np.ndarray, rim_px, ring2_px, ring3_px):
+    """The person in ``frame`` (H, W, 3) uint8 against the background, from the face's rim
+    and the rings around it projected in it ((K, 2) px each): GrabCut (:func:`cv2.grabCut`,
+    at :data:`SEGMENT_SCALE`) with the inside of the rim the person, the second ring's outline
+    and a band below the chin (the neck, the body) probably the person, the rest inside the
+    third ring probably background, beyond it background.
+
+    Returns (mask, plate): ``mask`` (H, W) float32 in [0, 1], 1 on the person and softened
+    outwards by :data:`SEGMENT_SOFT_PX` (so that it is 1 wherever the hard mask is), and
+    ``plate`` (H, W, 3) uint8, the frame with the head's pixels (down to :data:`SEGMENT_NECK`
+    below the chin) filled from the background around them (:func:`fill_holes`; what shows
+    where the head moves away); (None, None)
+    when GrabCut finds no person beyond the face or no background."""
+    import cv2
+
+    h, w = frame.shape[:2]
+    k = SEGMENT_SCALE
+    hs, ws = max(int(round(h * k)), 8), max(int(round(w * k)), 8)
+    sx, sy = ws / w, hs / h
+    small = cv2.resize(frame, (ws, hs), interpolation=cv2.INTER_AREA)
+    init = np.full((hs, ws), cv2.GC_BGD, np.uint8)
+
+    def fill(poly, value):
+        pts = np.round(np.asarray(poly) * [sx, sy] - 0.5).astype(np.int32)
+        cv2.fillPoly(init, [pts], int(value))
+
+    rim = np.asarray(rim_px, dtype=np.float64)
+    c = rim.mean(axis=0)
+    fw = float(np.ptp(rim[:, 0]))
+    chin = float(rim[:, 1].max())
+    # the neck under the chin, widening to the shoulders
+    top, low = chin + 0.15 * fw, chin + 0.45 * fw
+    body = np.array([[c[0] - 0.35 * fw, chin], [c[0] + 0.35 * fw, chin],
+                     [c[0] + 0.45 * fw, top], [c[0] + 1.6 * fw, low], [c[0] + 1.6 * fw, h],
+                     [c[0] - 1.6 * fw, h], [c[0] - 1.6 * fw, low], [c[0] - 0.45 * fw, top]])  # fmt: skip
+    fill(ring3_px, cv2.GC_PR_BGD)
+    fill(ring2_px, cv2.GC_PR_FGD)
+    fill(body, cv2.GC_PR_FGD)
+    fill(rim, cv2.GC_FGD)
+    if not (init == cv2.GC_BGD).any() and not (init == cv2.GC_PR_BGD).any():
+        return None, None
+    bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
+    try:
+        cv2.grabCut(
+            cv2.cvtColor(small, cv2.COLOR_RGB2BGR), init, None, bgd, fgd, SEGMENT_ITERATIONS,
+            cv2.GC_INIT_WITH_MASK,
+        )  # fmt: skip
+    except cv2.error:  # a degenerate picture (one colour): no model of either side
+        return None, None
+    fg_small = ((init == cv2.GC_FGD) | (init == cv2.GC_PR_FGD)).astype(np.float32)
+    hard = cv2.resize(fg_small, (w, h), interpolation=cv2.INTER_LINEAR) >= 0.5
+    face = _polygon_mask((h, w), rim)
+    n_face, n_person = int(face.sum()), int(hard.sum())
+    if n_person <= 1.05 * n_face or n_person >= h * w - 16:
+        return None, None
+    # the plate: the head's pixels (down to the collar; the body below hardly moves, it stays
+    # itself) filled from the background around them
+    head = hard.copy()
+    head[min(max(int(chin + SEGMENT_NECK * fw), 0), h) :] = False
+    xs = np.arange(w) + 0.5
+    beside = np.abs(xs - c[0]) > SEGMENT_NECK_HALF_WIDTH * fw  # the shoulders, not the neck
+    head[max(int(chin), 0) :, beside] = False
+    # GrabCut's outline leaves the hair's finest wisps out: the head's hole, and the person
+    # with it, reach SEGMENT_MARGIN_PX beyond it (the wisps move with the head, not left
+    # behind as a ghost of its outline; a thin band of the background moves with them)
+    d = 2 * SEGMENT_MARGIN_PX + 1
+    hole = cv2.dilate(head.astype(np.uint8), np.ones((d, d), np.uint8)).astype(bool)
+    plate = frame.copy()
+    plate[hole] = fill_holes(frame, ~hole)[hole]
+    person = hard | hole
+    soft = cv2.GaussianBlur(person.astype(np.float32), (0, 0), SEGMENT_SOFT_PX)
+    mask = np.maximum(soft, person.astype(np.float32))
+    return mask.astype(np.float32), plate
+
+
+def fill_holes(image: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """``image`` (H, W, 3) uint8 with its pixels outside ``known`` (H, W) bool filled smoothly
+    from the known ones around them (push-pull: the known pixels averaged over a pyramid of
+    halvings, each level filled from the coarser one; Gortler et al., "The Lumigraph", 1996);
+    the known pixels unchanged. Returns a new uint8 image."""
+    import cv2
+
+    c = image.astype(np.float32) * known[:, :, None]
+    wt = known.astype(np.float32)
+    levels = [(c, wt)]
+    while min(c.shape[:2]) > 1:
+        size = (max(c.shape[1] // 2, 1), max(c.shape[0] // 2, 1))
+        c = cv2.resize(c, size, interpolation=cv2.INTER_AREA)
+        wt = cv2.resize(wt, size, interpolation=cv2.INTER_AREA)
+        levels.append((c, wt))
+    c, wt = levels[-1]
+    filled = c / np.maximum(wt, 1e-6)[:, :, None]
+    for c, wt in reversed(levels[:-1]):
+        up = cv2.resize(filled, (c.shape[1], c.shape[0]), interpolation=cv2.INTER_LINEAR)
+        a = np.clip(wt, 0.0, 1.0)[:, :, None]
+        filled = a * (c / np.maximum(wt, 1e-6)[:, :, None]) + (1 - a) * up
+    out = np.clip(filled + 0.5, 0, 255).astype(np.uint8)
+    out[known] = image[known]
+    return out
 
 
 # ---------------------------------------------------------------------- a still photo
