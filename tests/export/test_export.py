@@ -244,3 +244,31 @@ def test_the_command_refuses_another_suffix_and_its_own_input(tmp_path, capsys):
     csv.write_bytes(DEMO_CSV.read_bytes())
     assert main(["export", str(csv), "-o", str(csv)]) == 2
     assert csv.read_bytes() == DEMO_CSV.read_bytes()
+
+
+def test_a_csv_without_head_pose_and_gaze_exports_a_still_head_looking_ahead(
+    export_model, tmp_path
+):
+    import csv
+
+    from myoface.analysis.contractions_csv import POSE_COLUMNS
+    from myoface.export import clip_from_csv, export_glb
+
+    rows = list(csv.DictReader(DEMO_CSV.read_text().splitlines()))[:12]
+    drop = set(POSE_COLUMNS) | {c for c in rows[0] if c.startswith("gaze_")}
+    keep = [c for c in rows[0] if c not in drop]
+    path = tmp_path / "contractions.csv"
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, keep, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    clip = clip_from_csv(path, export_model)
+    assert clip.poses is None and clip.gaze is None and clip.n_frames == 12
+    report = export_glb(export_model, clip, tmp_path / "still.glb")
+    assert report.max_rms_mm <= TARGET_MM
+    g, blob = _gltf(report.path)
+    ch = _channels(g, blob)
+    assert ("myoface_head", "rotation") not in ch
+    np.testing.assert_allclose(np.abs(ch[("eye_r", "rotation")][1][:, 3]), 1.0, atol=1e-6)
+    with pytest.raises(ValueError, match="tol_mm"):
+        export_glb(export_model, clip, tmp_path / "x.glb", tol_mm=0.0)

@@ -29,7 +29,6 @@ def add_arguments(p):
     import argparse
 
     p.formatter_class = argparse.RawDescriptionHelpFormatter
-    p.description = DESCRIPTION
     src = p.add_argument_group("what to export (one of)")
     src.add_argument("csv", nargs="?", help="a contractions.csv written by myoface analyze")
     src.add_argument("--timeline", metavar="FILE", help="a timeline file (TOML/JSON) of events")

@@ -131,7 +131,9 @@ def export_glb(
     frame (:func:`fit_morph_animation`), write the binary glTF ``path`` (:func:`write_glb`),
     and read it back to measure each frame against the simulated skin."""
     if not (np.isfinite(tol_mm) and tol_mm > 0):
-        raise ValueError(f"tol_mm must be > 0; got {tol_mm}")
+        from myoface.errors import MyofaceValueError
+
+        raise MyofaceValueError(f"tol_mm must be a finite number > 0 (mm); got {tol_mm}")
     sim = simulate_clip(model, clip, show_progress=show_progress)
     morph = fit_morph_animation(
         sim.skin,
