@@ -230,8 +230,9 @@ def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
 
 def expression_labels(scores) -> list[str]:
     """The label of each row of ``scores`` (T, 7) (:func:`expression_scores_from_aus`): the
-    strongest expression when its strength is at least :data:`LABEL_MIN`, else ``neutral``;
-    ``""`` for a row without any score (a frame not measured)."""
+    strongest expression when its strength is at least :data:`LABEL_MIN`, else ``neutral``
+    (of two equally strong, the first in :data:`EXPRESSIONS`' order); ``""`` for a row
+    without any score (a frame not measured)."""
     s = np.atleast_2d(np.asarray(scores, dtype=np.float64))[:, : len(EXPRESSIONS)]
     out = []
     for row in s:
@@ -361,8 +362,9 @@ def plot_expressions(path, times, scores, labels, quality) -> None:
     )
     names = (*EXPRESSIONS, NEUTRAL)
     for j, e in enumerate(names):
+        label = e if np.isfinite(s[:, j]).any() else f"{e} (not read)"
         ax.plot(t, s[:, j], color=COLORS[e], lw=1.4 if e != NEUTRAL else 1.0,
-                ls="-" if e != NEUTRAL else "--", label=e)  # fmt: skip
+                ls="-" if e != NEUTRAL else "--", label=label)  # fmt: skip
     ax.axhline(LABEL_MIN, color="0.3", lw=0.6, ls=":", zorder=0)
     ax.set_ylim(-0.02, 1.02)
     ax.set_ylabel("strength", fontsize=8)
