@@ -156,3 +156,19 @@ def fit_morph_animation(
     )
     object.__setattr__(m, "frame_rms_mm", frame_rms_mm(m.evaluate(), skin))
     return m
+
+
+def least_squares_rms_mm(skin, rest, contractions, responses) -> np.ndarray:
+    """The best a linear basis of the muscles' responses can do: per frame (T,), the RMS (mm)
+    of ``skin`` (T, V, 3) from ``rest`` + the responses of the muscles that contract in the
+    clip weighted by the least-squares weights of that frame (free, not the contractions)."""
+    skin = np.asarray(skin, dtype=np.float64)
+    c = np.asarray(contractions, dtype=np.float64)
+    used = np.flatnonzero(np.abs(c).max(axis=0) > 0)
+    d = (skin - np.asarray(rest)[None]).reshape(len(skin), -1)
+    if not len(used):
+        return frame_rms_mm(skin, np.broadcast_to(rest, skin.shape))
+    a = np.asarray(responses)[used].reshape(len(used), -1)  # (K, 3V)
+    w, *_ = np.linalg.lstsq(a.T, d.T, rcond=None)
+    fit = (w.T @ a).reshape(skin.shape) + np.asarray(rest)[None]
+    return frame_rms_mm(fit, skin)
