@@ -117,6 +117,9 @@ MOUTH_FEATHER_PX = 1.0
 #: the model's mouth is rendered at this scale of the picture (its inside has no fine detail;
 #: the render's cost is its pixels), unless that would make it less than this many pixels high
 MOUTH_RENDER_SCALE, MOUTH_RENDER_MIN_PX = 0.5, 180
+#: ... only the face around the mouth: within this many of the mouth's half widths of its
+#: centre across and up (an ellipse in the rest head frame)
+MOUTH_PART = (1.6, 1.2)
 #: the render's brightness is matched to the picture's lips by a gain within these bounds
 MOUTH_GAIN = (0.5, 2.5)
 #: the sclera's colour is the mean of the brightest share of the calibration's eye opening
@@ -295,9 +298,13 @@ class PictureModel:
         self.person = None
         self._plate = None
         if segment:
-            self.person, self._plate = person_mask(
+            self.person, plate = person_mask(
                 frame, skin_cal_px[self._rim], ring_cal[k : 2 * k], ring_cal[2 * k :]
             )
+            if plate is not None:  # RGBA, as the warped canvas
+                self._plate = np.ascontiguousarray(
+                    np.dstack([plate, np.full((h, w), 255, np.uint8)])
+                )
         weights = []
         for j, (_scale, _back, wt, wt_below) in enumerate(RINGS):
             if j == 1 and self.person is not None:
@@ -566,9 +573,17 @@ class PictureModel:
             pts = pose.apply(c + self._eye_radius * self._cap_dirs @ _gaze_matrix(*g).T)
             dst[i0 : i0 + len(self._cap_dirs)] = cam.project(pts)
             depth[i0 : i0 + len(self._cap_dirs)] = -pts[:, 2]
+        # the box the warp moves anything in (outside it the picture is the frame itself)
+        h, w = self.height, self.width
+        moving = self._moving_nodes
+        both = np.concatenate([dst[moving], self._src[moving]])
+        x0, y0 = np.maximum(np.floor(both.min(axis=0)).astype(int) - 1, 0)
+        x1, y1 = np.ceil(both.max(axis=0)).astype(int) + 2
+        x1, y1 = min(int(x1), w), min(int(y1), h)
+        box = (slice(y0, max(y1, y0)), slice(x0, max(x1, x0)))
         mx, my, lab, zb = self._map_x, self._map_y, self._label, self._zbuf
-        np.copyto(mx, self._ident_x)
-        np.copyto(my, self._ident_y)
+        mx[box] = self._ident_x[box]
+        my[box] = self._ident_y[box]
         lab.fill(LABEL_STILL)
         src = self._src
         raster_warp(
@@ -588,9 +603,17 @@ class PictureModel:
         zb.fill(np.inf)
         raster_warp(dst, src, depth, self._face_tris, mx, my, lab, LABEL_SKIN, zb, True, 0.0, 0.0)
         t2 = time.perf_counter()
-        out = cv2.remap(self._canvas, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        if self._plate is not None:
-            out = self._over_plate(out, dst)
+        out = self._frame.copy()
+        if x1 > x0 and y1 > y0:
+            warped = cv2.remap(
+                self._canvas, mx[box], my[box], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+            )
+            if self._plate is None:
+                out[box] = warped
+            else:  # the warped person over the still background
+                a = warped[:, :, 3].astype(np.float32) * (1.0 / 255.0)
+                mixed = cv2.blendLinear(warped, self._plate[box], a, 1.0 - a)
+                out[box] = cv2.cvtColor(mixed, cv2.COLOR_RGBA2RGB)
         t3 = time.perf_counter()
         self._mouth(out, skin, p, dst)
         t4 = time.perf_counter()
@@ -600,27 +623,6 @@ class PictureModel:
         st.remap_ms.append((t3 - t2) * 1e3)
         st.mouth_ms.append((t4 - t3) * 1e3)
         st.total_ms.append((t4 - t0) * 1e3)
-        return out
-
-    def _over_plate(self, warped, dst) -> np.ndarray:
-        """The warped person (RGB + mask, (H, W, 4)) over the still background plate: where
-        the head has moved away, the background shows (the frame's own, or beneath the
-        person's calibration outline the nearest background's colour)."""
-        import cv2
-
-        h, w = self.height, self.width
-        moving = self._moving_nodes
-        both = np.concatenate([dst[moving], self._src[moving]])
-        x0, y0 = np.maximum(np.floor(both.min(axis=0)).astype(int) - 1, 0)
-        x1, y1 = np.ceil(both.max(axis=0)).astype(int) + 2
-        x1, y1 = min(x1, w), min(y1, h)
-        out = np.ascontiguousarray(warped[:, :, :3])
-        if x0 >= x1 or y0 >= y1:
-            return out
-        a = warped[y0:y1, x0:x1, 3].astype(np.float32) * (1.0 / 255.0)
-        fg = np.ascontiguousarray(out[y0:y1, x0:x1])
-        bg = self._plate[y0:y1, x0:x1]
-        out[y0:y1, x0:x1] = cv2.blendLinear(fg, bg, a, 1.0 - a)
         return out
 
     def mouth_alpha(self, skin) -> float:
@@ -651,8 +653,10 @@ class PictureModel:
         mask = (self._label[y0:y1, x0:x1] == LABEL_MOUTH).astype(np.float32)
         if not mask.any():
             return
-        r, (dx, dy), k = self._renderer()
-        img = r.render(skin, pose=(p.rotation, p.translation), jaw=self.model.jaw_pose(self._state))
+        r, (dx, dy), k, keep = self._renderer()
+        img = r.render(
+            skin[keep], pose=(p.rotation, p.translation), jaw=self.model.jaw_pose(self._state)
+        )
         # the render's pixel under each pixel of the box (its camera k times smaller)
         rh, rw = img.shape[:2]
         gx = ((np.arange(x0, x1) + 0.5 - dx) - 0.5 * w) * k + 0.5 * rw - 0.5
@@ -685,10 +689,47 @@ class PictureModel:
             fov = float(np.degrees(2 * np.arctan(0.5 * h / cam.focal_px)))
             rc = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), (0.0, 1.0, 0.0), ws, hs,
                         max(fov, 0.1))  # fmt: skip
-            r = Renderer(self.model.face, rc, ssaa=1, wrinkles=False)
+            face, keep = _mouth_face(self.model.face)
+            tex = self.model.face.texture
+            if tex is None:
+                from myoface.render import to_srgb8
+                from myoface.render.dressing import default_skin_texture
+
+                tex = to_srgb8(default_skin_texture(self.model.face))
+            r = Renderer(face, rc, texture=tex, ssaa=1, wrinkles=False)
             shift = (cam.cx - 0.5 * w, cam.cy - 0.5 * h)
-            self._mouth_renderer = (r, shift, k)
+            self._mouth_renderer = (r, shift, k, keep)
         return self._mouth_renderer
+
+
+def _mouth_face(face):
+    """The part of ``face`` around the mouth (its triangles within :data:`MOUTH_PART` of
+    the mouth's half width from its centre, rest head frame x, y), what the mouth's render
+    draws (the rest of the face is the picture's), with its lip landmark groups; and the
+    indices of its vertices in ``face``. The whole face when the part would not hold the lips.
+    """
+    from myoface.face import FaceMesh
+    from myoface.face.teeth import LIP_GROUPS
+
+    lm = face.landmarks
+    if not all(g in lm for g in LIP_GROUPS):
+        return face, np.arange(face.n_vertices)
+    lips = np.unique(np.concatenate([np.asarray(lm[g]) for g in LIP_GROUPS]))
+    v = face.vertices
+    m = v[lips, :2].mean(axis=0)
+    half = 0.5 * float(np.ptp(v[lips, 0]))
+    rx, ry = MOUTH_PART
+    inside = ((v[:, 0] - m[0]) / (rx * half)) ** 2 + ((v[:, 1] - m[1]) / (ry * half)) ** 2 <= 1
+    tris = face.triangles[inside[face.triangles].all(axis=1)]
+    keep = np.unique(tris)
+    if not np.isin(lips, keep).all():
+        return face, np.arange(face.n_vertices)
+    new = np.full(face.n_vertices, -1, np.int64)
+    new[keep] = np.arange(len(keep))
+    groups = {g: new[np.asarray(lm[g])] for g in LIP_GROUPS}
+    uv = None if face.uv is None else face.uv[keep]
+    part = FaceMesh(v[keep], new[tris], uv, face.texture, groups, name=f"{face.name} mouth")
+    return part, keep
 
 
 # ---------------------------------------------------------------------- the physics

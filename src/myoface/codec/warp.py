@@ -74,9 +74,27 @@ def raster_warp(dst, src, depth, tris, map_x, map_y, label, lab, zbuf, ztest, sr
         sx1, sy1 = src[i1, 0] - 0.5 + src_dx, src[i1, 1] - 0.5 + src_dy
         sx2, sy2 = src[i2, 0] - 0.5 + src_dx, src[i2, 1] - 0.5 + src_dy
         d0, d1, d2 = depth[i0], depth[i1], depth[i2]
+        a0 = -(a1 + a2)
         for py in range(ya, yb + 1):
             yc = py + 0.5
-            for px in range(xa, xb + 1):
+            # the row's span: each barycentric b = a x + k(y) >= -EDGE_EPS bounds x on one side
+            q1 = c1 * yc + k1
+            q2 = c2 * yc + k2
+            q0 = 1.0 - q1 - q2
+            lo, hi = lo_x - 1.0, hi_x + 1.0
+            empty = False
+            for a, q in ((a0, q0), (a1, q1), (a2, q2)):
+                if a > 0.0:
+                    lo = max(lo, (-EDGE_EPS - q) / a)
+                elif a < 0.0:
+                    hi = min(hi, (-EDGE_EPS - q) / a)
+                elif q < -EDGE_EPS:
+                    empty = True
+            if empty:
+                continue
+            pa = max(int(math.ceil(lo - 0.5)) - 1, xa)
+            pb = min(int(math.floor(hi - 0.5)) + 1, xb)
+            for px in range(pa, pb + 1):
                 xc = px + 0.5
                 b1 = a1 * xc + c1 * yc + k1
                 b2 = a2 * xc + c2 * yc + k2
