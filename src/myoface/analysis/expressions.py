@@ -37,10 +37,16 @@ against AU2, AU5 and AU20); surprise's AUs are a subset of fear's (told apart by
 AU7 is not read (its muscles are AU6's and AU45's, :data:`~myoface.analysis.openface.UNMEASURED_AUS`),
 so anger's prototypes are its table variants without AU7; AU11, AU16, AU22, AU24 and AU27
 are not among the AUs read (AU16's depressor is read as AU25, AU27's jaw as AU26); the
-model's muscles cannot make AU22 (lip funneler) at all. A contraction vector from the
-snakes (the paper's 12 muscles and the jaw) has no corrugators: AU4 is not measured, and a
-prototype with an AU that is not measured is not scored (an expression with none left is
-NaN).
+model's muscles cannot make AU22 (lip funneler) at all. A prototype with an AU that is not
+measured is not scored, and an expression with none left is NaN: the snakes (the paper's 12
+muscles and the jaw) measure AU1, 2, 9, 12, 25 and 26 only, so sadness, fear and anger are
+NaN with them.
+
+References: P. Ekman, W. V. Friesen & J. C. Hager, Facial Action Coding System: The Manual
+and Investigator's Guide (Research Nexus, 2002), Investigator's Guide table 10-1; W. V.
+Friesen & P. Ekman, EMFACS-7: Emotional Facial Action Coding System (unpublished manuscript,
+University of California, San Francisco, 1983); Terzopoulos & Waters 1993, Section II (the
+hierarchy).
 """
 
 from __future__ import annotations
