@@ -273,7 +273,7 @@ def _x264(clip: _Frames, bit_rate: float, scale: float) -> tuple[int, list]:
     out = av.open(buf, "w", format="mp4")
     s = out.add_stream("libx264", rate=int(round(clip.fps)))
     s.width, s.height, s.pix_fmt = sw, sh, "yuv420p"
-    s.bit_rate = int(bit_rate)
+    s.bit_rate = max(1000, int(bit_rate))  # (libx264 takes kbit/s: at least 1)
     s.options = {"preset": "medium", "x264-params": "keyint=infinite:qpmax=69"}
     n_bytes = 0
     for f in clip:
@@ -308,7 +308,7 @@ def _x264_point(kind: str, quick: bool, bit_rate: float, scale: float, ssim: boo
     return _cache[key]
 
 
-def _bisect_rate(kind, quick, scale, ok, lo=500.0, hi=2e6, steps=9) -> dict | None:
+def _bisect_rate(kind, quick, scale, ok, lo=1000.0, hi=2e6, steps=8) -> dict | None:
     """The lowest average bit rate (log bisection) whose point satisfies ``ok`` (None when even
     ``hi`` does not)."""
     best = None
@@ -324,21 +324,39 @@ def _bisect_rate(kind, quick, scale, ok, lo=500.0, hi=2e6, steps=9) -> dict | No
     return best or _x264_point(kind, quick, hi, scale, False)
 
 
-def _x264_at_bytes(kind: str, quick: bool, target: int) -> dict:
-    """x264 at (about) ``target`` bytes, at the size that does best there."""
+def _rate_for_bytes(kind, quick, scale, target: int, tries: int = 6) -> dict | None:
+    """x264's point at ``scale`` whose bytes are within :data:`BYTES_TOLERANCE` of ``target``
+    (the average bit rate corrected by the bytes it gave, secant-wise), None when x264
+    cannot get down to them at that size (its bytes stop falling)."""
+    a = _analysed(kind, quick)
+    seconds = len(a["clip"]) / a["clip"].fps
+    rate = max(1000.0, 8 * target / seconds)
+    best = None
+    for _ in range(tries):
+        p = _x264_point(kind, quick, rate, scale, False)
+        err = p["bytes"] / target - 1
+        if best is None or abs(err) < abs(best[0]):
+            best = (err, p)
+        if abs(err) <= BYTES_TOLERANCE:
+            return p
+        if p["bytes"] > target and rate <= 1000.0:
+            return None  # (its floor)
+        new = max(1000.0, rate * target / p["bytes"])
+        if abs(new - rate) < 1.0:
+            break
+        rate = new
+    return best[1] if abs(best[0]) <= BYTES_TOLERANCE else None
+
+
+def _x264_at_bytes(kind: str, quick: bool, target: int) -> dict | None:
+    """x264 at (about) ``target`` bytes, at the size that does best there (None: at no size)."""
     key = ("x264_bytes", kind, bool(quick), target)
     if key not in _cache:
         tried = {}
         for scale in X264_SCALES:
-            p = _bisect_rate(kind, quick, scale, lambda p: p["bytes"] >= target)
-            if p is None:
-                continue
-            # the rate just below the target's bytes, or just above when within the tolerance
-            lo = _x264_point(kind, quick, p["bit_rate"] * 0.97, scale, False)
-            cands = [c for c in (p, lo) if abs(c["bytes"] - target) <= BYTES_TOLERANCE * target]
-            if cands:
-                c = min(cands, key=lambda c: abs(c["bytes"] - target))
-                tried[scale] = _x264_point(kind, quick, c["bit_rate"], scale, True)
+            p = _rate_for_bytes(kind, quick, scale, target)
+            if p is not None:
+                tried[scale] = _x264_point(kind, quick, p["bit_rate"], scale, True)
         if not tried:
             _cache[key] = None
         else:
@@ -355,7 +373,7 @@ def _x264_for_psnr(kind: str, quick: bool, target_db: float) -> dict | None:
         found = []
         for scale in X264_SCALES:
             p = _bisect_rate(kind, quick, scale, lambda p: p["face_psnr_db"] >= target_db,
-                             hi=4e6)  # fmt: skip
+                             hi=2e6, steps=7)  # fmt: skip
             if p is not None:
                 found.append(p)
         _cache[key] = min(found, key=lambda p: p["bytes"]) if found else None

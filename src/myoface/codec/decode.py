@@ -79,14 +79,18 @@ class Decoder:
         from myoface.codec.picture import PictureModel
 
         t0 = time.perf_counter()
-        self.reader = StreamReader(source)
-        self.header = self.reader.header
-        h = self.header
-        self.picture = h.picture()
-        self.model = person_model(h)
-        self.picture_model = PictureModel(
-            self.model, h.camera, self.picture, h.calibration, physics=physics
-        )
+        try:
+            self.reader = StreamReader(source)
+            self.header = self.reader.header
+            h = self.header
+            self.picture = h.picture()
+            self.model = person_model(h)
+            self.picture_model = PictureModel(
+                self.model, h.camera, self.picture, h.calibration, physics=physics
+            )
+        except BaseException:
+            source.close()
+            raise
         self.stats = DecodeStats(setup_seconds=time.perf_counter() - t0)
 
     def params(self):
