@@ -353,7 +353,7 @@ def _x264_at_bytes(kind: str, quick: bool, target: int) -> dict | None:
     key = ("x264_bytes", kind, bool(quick), target)
     if key not in _cache:
         tried = {}
-        for scale in X264_SCALES:
+        for scale in _scales(quick):
             p = _rate_for_bytes(kind, quick, scale, target)
             if p is not None:
                 tried[scale] = _x264_point(kind, quick, p["bit_rate"], scale, True)
@@ -371,9 +371,9 @@ def _x264_for_psnr(kind: str, quick: bool, target_db: float) -> dict | None:
     key = ("x264_psnr", kind, bool(quick), round(target_db, 3))
     if key not in _cache:
         found = []
-        for scale in X264_SCALES:
+        for scale in _scales(quick):
             p = _bisect_rate(kind, quick, scale, lambda p: p["face_psnr_db"] >= target_db,
-                             hi=2e6, steps=7)  # fmt: skip
+                             hi=2e6, steps=4 if quick else 7)  # fmt: skip
             if p is not None:
                 found.append(p)
         _cache[key] = min(found, key=lambda p: p["bytes"]) if found else None
@@ -381,6 +381,11 @@ def _x264_for_psnr(kind: str, quick: bool, target_db: float) -> dict | None:
 
 
 # ------------------------------------------------------------------ the comparison
+
+
+def _scales(quick: bool) -> tuple[float, ...]:
+    """x264's frame sizes tried (a quick run: half size only)."""
+    return (0.5,) if quick else X264_SCALES
 
 
 def _qualities(quick: bool) -> tuple[str, ...]:
