@@ -272,3 +272,23 @@ def test_a_csv_without_head_pose_and_gaze_exports_a_still_head_looking_ahead(
     np.testing.assert_allclose(np.abs(ch[("eye_r", "rotation")][1][:, 3]), 1.0, atol=1e-6)
     with pytest.raises(ValueError, match="tol_mm"):
         export_glb(export_model, clip, tmp_path / "x.glb", tol_mm=0.0)
+
+
+@pytest.mark.shared_data
+def test_waters_face_exports_its_own_expressions(tmp_path):
+    """Waters' geoface (no UVs, no lip landmarks: no texture, no teeth) with his own
+    expression macros, as ``myoface synth --expression`` plays them."""
+    from myoface.export import clip_from_expressions, export_glb
+    from myoface.model import load_face_model
+    from tests.conftest import shared_path
+
+    model = load_face_model(shared_path("waters-geoface"))
+    clip = clip_from_expressions([("happiness", 1.0)], model, fps=10.0)
+    apex = clip.contractions[len(clip.contractions) // 2]
+    np.testing.assert_allclose(apex, np.clip(model.expressions["happiness"], 0, 1), atol=1e-9)
+    report = export_glb(model, clip, tmp_path / "waters.glb")
+    assert report.max_rms_mm <= TARGET_MM
+    g, _ = _gltf(report.path)
+    names = {n.name for n in g.nodes}
+    assert {"skin", "eye_l", "eye_r"} <= names and "teeth_lower" not in names
+    assert not g.images

@@ -145,10 +145,24 @@ def clip_from_expressions(
     expressions, model, fps: float = DEFAULT_FPS, duration_s: float = EXPRESSION_S
 ) -> Clip:
     """The clip of ``expressions`` (``[(name, intensity)]``) played one after another
-    (:func:`expressions_timeline`) at ``fps``."""
+    (:func:`expressions_timeline`) at ``fps``. An expression the model brings itself (e.g.
+    Waters' macros of his geoface, ``model.expressions``) is played as the model has it, under
+    the same envelope, as ``myoface synth --expression`` does."""
     if not expressions:
         raise MyofaceValueError("give at least one expression")
-    return clip_from_timeline(expressions_timeline(expressions, duration_s), model, fps)
+    timeline = expressions_timeline(expressions, duration_s)
+    if not any(name in model.expressions for name, _ in expressions):
+        return clip_from_timeline(timeline, model, fps)
+    n = max(1, int(round(timeline.duration * fps)) + 1)
+    times = np.arange(n) / fps
+    keep = np.ones((n, model.n_muscles))
+    for event, (name, k) in zip(timeline.events, expressions, strict=True):
+        if name in model.expressions:
+            c = np.clip(np.asarray(model.expressions[name], dtype=np.float64) * k, 0.0, 1.0)
+        else:
+            c = event.contractions(model.ids)
+        keep *= 1.0 - event.weight(times)[:, None] * c[None, :]
+    return Clip(1.0 - keep, float(fps), None, None, timeline.source)
 
 
 @dataclass(frozen=True, eq=False)
