@@ -296,5 +296,14 @@ class VideoParams:
             identity_mm=np.asarray(fit.identity_mm, dtype=np.float64).copy(),
             calibration_index=int(m.index - self.start), calibration=calib,
             picture=np.ascontiguousarray(frame, dtype=np.uint8),
-            n_frames_hint=0 if n is None else int(n - self.start),
+            n_frames_hint=_hint(n, self.start, self.max_frames),
         )  # fmt: skip
+
+
+def _hint(n_video: int | None, start: int, max_frames: int | None) -> int:
+    """The frames a stream expects: the video's from ``start``, at most ``max_frames``
+    (0: not known)."""
+    n = None if n_video is None else n_video - start
+    if max_frames is not None:
+        n = max_frames if n is None else min(n, max_frames)
+    return 0 if n is None else int(n)

@@ -50,7 +50,10 @@ def add_arguments(p):
     )
     p.add_argument("--max-frames", type=int, metavar="N", help="encode at most N frames")
     p.add_argument(
-        "--live", action="store_true", help="write the file in place as it grows (no rename)"
+        "--live",
+        action="store_true",
+        help="write the file in place as it grows (no rename; an encode that fails leaves a "
+        "truncated stream, decodable up to there)",
     )
     p.add_argument("--quiet", action="store_true")
 
