@@ -23,7 +23,7 @@ from myoface.codec.params import FrameParams
 from myoface.codec.picture import PictureModel, photo_setup
 from myoface.errors import MyofaceValueError
 
-__all__ = ["ANIMATE_MAX_SIDE", "PhotoAnimation", "read_photo"]
+__all__ = ["ANIMATE_MAX_SIDE", "SHOWCASE", "PhotoAnimation", "read_photo"]
 
 #: a photo is animated at most this many pixels a side (a larger one is scaled down first):
 #: a video of a 4096-px photo would be a 4K video, and every frame's warp costs its pixels
@@ -44,6 +44,17 @@ def read_photo(path: str | os.PathLike, max_side: int = ANIMATE_MAX_SIDE) -> np.
         raise MyofaceFileNotFoundError(f"--in-photo: no such photo: {p}")
     img = read_image(p, "photo", max_side=2 * max_side, orient=True)
     return _bounded(img, max_side)
+
+
+#: the panels of :meth:`PhotoAnimation.showcase`: (title, kind, name, intensity, gaze rad)
+SHOWCASE = (
+    ("the photo", None, None, 0.0, None),
+    ("smiling (happiness)", "expression", "happiness", 1.0, None),
+    ("frowning (anger)", "expression", "anger", 1.0, None),
+    ("talking (viseme A)", "viseme", "A", 1.0, None),
+    ("blinking (AU45)", "au", "45", 1.0, None),
+    ("looking aside (20 deg)", None, None, 0.0, (0.35, 0.0)),
+)
 
 
 class PhotoAnimation:
@@ -97,6 +108,39 @@ class PhotoAnimation:
     def image(self, contractions, gaze=None) -> np.ndarray:
         """The photo (H, W, 3) uint8 at ``contractions`` (see :meth:`params`)."""
         return self.picture.render(self.params(contractions, gaze))
+
+    def head_box(self, margin: float = 0.25) -> tuple[slice, slice]:
+        """(rows, columns) of the photo around the head: the face's rim at calibration,
+        ``margin`` of its size wider each side (clipped to the photo)."""
+        pm = self.picture
+        rim = pm._src[pm._rim]
+        (x0, y0), (x1, y1) = rim.min(axis=0), rim.max(axis=0)
+        mx, my = margin * (x1 - x0), margin * (y1 - y0)
+        h, w = pm.height, pm.width
+        rows = slice(max(int(y0 - 1.3 * my), 0), min(int(y1 + my) + 1, h))
+        cols = slice(max(int(x0 - mx), 0), min(int(x1 + mx) + 1, w))
+        return rows, cols
+
+    def showcase(self) -> dict[str, np.ndarray]:
+        """The photo as it is and smiling, frowning, talking, blinking and looking aside
+        (:data:`SHOWCASE`), each cropped around the head (:meth:`head_box`): a contact
+        sheet's panels."""
+        from myoface.control import au_contractions, expression_contractions, viseme_contractions
+
+        ids = self.model.ids
+        box = self.head_box()
+        out = {}
+        for name, kind, what, value, gaze in SHOWCASE:
+            if kind == "expression":
+                c = expression_contractions(what, value, ids)
+            elif kind == "viseme":
+                c = viseme_contractions(what, value, ids)
+            elif kind == "au":
+                c = au_contractions({what: value}, ids)
+            else:
+                c = np.zeros(len(ids))
+            out[name] = self.image(c, gaze)[box]
+        return out
 
     def frames(self, table: np.ndarray, gaze: np.ndarray | None = None):
         """A generator of the photo at each row of ``table`` (T, M), the eyes at ``gaze``

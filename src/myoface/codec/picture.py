@@ -120,6 +120,9 @@ MOUTH_RENDER_SCALE, MOUTH_RENDER_MIN_PX = 0.5, 180
 #: ... only the face around the mouth: within this many of the mouth's half widths of its
 #: centre across and up (an ellipse in the rest head frame)
 MOUTH_PART = (1.6, 1.2)
+#: the mouth's inside is at least this share of the lips' colour (the render's cavity is
+#: lit by the model's lights only, near black in its depth: a hole, not a mouth)
+MOUTH_AMBIENT = 0.3
 #: the render's brightness is matched to the picture's lips by a gain within these bounds
 MOUTH_GAIN = (0.5, 2.5)
 #: the sclera's colour is the mean of the brightest share of the calibration's eye opening
@@ -669,8 +672,11 @@ class PictureModel:
         # opening in the picture over the render's (one grey gain: the colours are the model's)
         lips = (self._label[y0:y1, x0:x1] == LABEL_SKIN) & (mask == 0)
         if lips.sum() >= 8:
-            gain = float(region[lips].mean()) / max(float(crop[lips].mean()), 1.0)
+            lip_rgb = region[lips].mean(axis=0)
+            gain = float(lip_rgb.mean()) / max(float(crop[lips].mean()), 1.0)
             crop *= float(np.clip(gain, *MOUTH_GAIN))
+            # the inside is lit a little by the light the lips and teeth scatter into it
+            np.maximum(crop, MOUTH_AMBIENT * lip_rgb, out=crop)
         soft = cv2.GaussianBlur(mask, (0, 0), MOUTH_FEATHER_PX) * mask
         a = (alpha * soft)[:, :, None]
         out[y0:y1, x0:x1] = np.clip(a * crop + (1 - a) * region + 0.5, 0, 255).astype(np.uint8)
