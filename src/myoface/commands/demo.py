@@ -30,6 +30,8 @@ and, for the real video, the person's own face built from the calibration frame 
 from-photo) driven by the same contractions:
 
   person.myoface, person.png, resynth_person.mp4
+  photo_animated.png  the calibration frame itself moved by the person's model: smiling,
+                    frowning, talking, blinking, looking aside (myoface synth --in-photo)
   fidelity.json, fidelity.png   how much of the video's expression motion the person's
                     model reproduces, per region: its vertices against the video read by DIS
                     optical flow, and MediaPipe on both as before (myoface analyze --report)"""
@@ -210,3 +212,17 @@ def analysis_loop(folder: Path, args) -> None:
             side_by_side=video,
             quiet=args.quiet,
         )
+        # the calibration frame animated (myoface synth --in-photo FRAME --face PERSON ...)
+        from myoface.analysis.video import open_video
+        from myoface.codec.photo import PhotoAnimation
+        from myoface.commands._common import contact_sheet
+
+        frame = None
+        for k, img in enumerate(open_video(video)):
+            if k == start:
+                frame = img
+                break
+        anim = PhotoAnimation.from_image(frame, load_face_model_option(person))
+        sheet = folder / "photo_animated.png"
+        contact_sheet(anim.showcase(), sheet, "the calibration frame moved by the person's model")
+        print(f"wrote {sheet}")
