@@ -25,6 +25,9 @@ import numpy as np
 DEFAULT_TOL_MM = 0.1
 #: at most this many corrective targets (beyond it the frames themselves are cheaper)
 MAX_CORRECTIVES = 256
+#: a corrective's half (its positive or negative side) whose weights never pass this is left
+#: out: at most this fraction of the component (a few mm at most) is lost, under a micrometre
+UNUSED_WEIGHT = 1e-4
 
 
 def frame_rms_mm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -136,11 +139,13 @@ def fit_morph_animation(
         w = w / scale[None]
         # each component as two targets, +D and -D, each weighted in [0, 1]: clients that
         # clamp weights to [0, 1] (Unity's default; Blender 3.4's importer clamps below the
-        # first keyframe's value) play it as written; a half never used is left out
+        # first keyframe's value) play it as written; a half never used (no weight above
+        # UNUSED_WEIGHT: rounding's, which would otherwise make the count vary between runs)
+        # is left out
         for j in range(k):
             for sign, tag in ((1.0, "p"), (-1.0, "n")):
                 wj = np.maximum(sign * w[:, j], 0.0)
-                if wj.max() > 0:
+                if wj.max() > UNUSED_WEIGHT:
                     targets.append(sign * comp[j : j + 1])
                     weights.append(wj[:, None])
                     corr_names.append(f"corrective_{j:02d}{tag}")
