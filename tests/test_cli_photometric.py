@@ -106,7 +106,11 @@ def test_analyze_and_batch_with_photometric_on_the_sample_video(tmp_path):
             rows = list(csv.DictReader(fh))
         assert [r["quality"] for r in rows] == ["ok"] * 4, rows
         skip = ("frame", "time_s", "quality", "residual_mm")
-        muscles = [k for k in rows[0] if k not in skip and not k.startswith(("head_", "gaze_"))]
+        # (the expression columns, expr_* and the label, are not contractions)
+        skip += ("expression",)
+        muscles = [
+            k for k in rows[0] if k not in skip and not k.startswith(("head_", "gaze_", "expr_"))
+        ]
         return doc, np.array([[float(r[k]) for k in muscles] for r in rows])
 
     assert main(["analyze", str(video), "-o", str(tmp_path / "photo"), *argv, "--photometric"]) == 0

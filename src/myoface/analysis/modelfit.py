@@ -193,6 +193,7 @@ class ModelFit:
         # chin and lower lip, which the jaw moves ~22 mm, weighed 0.16 and the fit raised them
         # by 4.5 mm with the smile's zygomatici where the video's stayed or dropped)
         soft = [k for k, mid in enumerate(self.ids) if mid != JAW_ID]
+        self._soft = soft
         self.base_weights = landmark_weights(
             model.face, self.settings.oval_weight
         ) * model_error_weights(
@@ -457,6 +458,14 @@ class ModelFit:
             frame, self.model.face, self.camera, self.calibration.pose,
             self.neutral + self.identity_mm,
         )  # fmt: skip
+        # the samples weigh less where the muscles move the skin (FitSettings.photo_model_error)
+        s = self.settings
+        per_vertex = model_error_weights(
+            self.model_response[:, :, self._soft], s.photo_model_error, s.landmark_sigma_mm
+        )
+        own = self.appearance.samples.matrix(len(per_vertex)) @ per_vertex
+        prior = self.appearance.prior
+        self.appearance.prior = own if prior is None else prior * own
 
     def photometric_term(self, image) -> PhotometricTerm | None:
         """The photometric term of ``image`` (None without an image or an appearance)."""

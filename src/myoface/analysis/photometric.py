@@ -311,7 +311,8 @@ class Appearance:
     region: np.ndarray
     spacing_px: float
     #: each sample's own weight (S,): :data:`MOUTH_RIM_WEIGHT` on the triangles at the
-    #: mouth's opening, 1 elsewhere
+    #: mouth's opening, 1 elsewhere (the fit then lowers it where the muscles move the skin:
+    #: :attr:`~myoface.analysis.weights.FitSettings.photo_model_error`)
     prior: np.ndarray | None = None
     #: per level, the albedo (S,): the brightness over the calibration frame's shading
     #: (:func:`shading_basis` of the normals there, its light fitted by least squares)

@@ -121,6 +121,21 @@ class FitSettings:
     photo_sigma: float = 8.0
     photo_huber: float = 2.0
     photo_landmark_weight: float = 0.1
+    #: the photometric samples' weight for the model's own error, as :attr:`model_error` is
+    #: the landmarks' (:func:`model_error_weights` at each sample: 1 where no muscle moves the
+    #: skin, 0.5 where one moves it 2 mm at full contraction). The calibration frame's
+    #: appearance does not change as the skin moves, a person's skin does (its folds, shading
+    #: and stretch): weighed in full where the muscles move it, the pixels drove the muscles
+    #: that explain a change of look best, not the motion. Measured 2026-12-02 (0 / 0.5 / 1):
+    #: degraded head-motion renders, head moving, skin 1.64 / 1.03 / 1.18 mm, head 1.52 / 1.22 /
+    #: 1.17 deg, worst RMSE 0.67 / 0.24 / 0.29; head still, skin 0.50 / 0.65 / 0.89 mm, worst
+    #: correlation -0.08 / 0.94 / 0.89; single_face.mp4's analysis.fidelity 0.33 / 0.50 / 0.53
+    #: (without the photometric term 0.58); the known warps (a real frame warped, its look
+    #: otherwise unchanged: what favours reading the moving skin) lower, brows' gain 0.88 /
+    #: 0.74, mouth corners' 0.79 / 0.72, leak 0.063 / 0.13. Fixing the pose from the rigid
+    #: skin's pixels first and the muscles from all of them then (two stages) took the head to
+    #: 1.22-1.30 deg but the skin to 1.80-2.05 mm: not done.
+    photo_model_error: float = 0.5
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
     identity_edge_sigma_mm: float = 1.0
