@@ -22,11 +22,14 @@ head still on the clean renders (what the camera costs).
 
 **The sample video** (``single_face.mp4``, 72 frames at 30 fps: a man at rest who smiles):
 analysed as ``myoface analyze --tracker landmarks`` does (:func:`~myoface.analysis.outputs.analyze_to_folder`),
-its labels read from the CSV. Rest and smile were judged by eye on the frames (2026-12-02):
-frames 0-16 are at rest (lips closed, lip corners still); from 17 the lip corners rise, the
-teeth show from 20, and from 22 to the end the smile is held (broad, teeth apart, one blink
-at 26). Scored: rest = frames 0-15 labelled neutral, smile = frames 22-71 labelled
-happiness (the onset 16-21 is not scored). A quick run analyses the first 40 frames.
+its labels read from the CSV. Rest and smile were judged by eye on the frames (2026-12-02:
+every 6th frame, then every frame of the onset, 12-27, and of the end, 64-71): frames 0-16
+are at rest (lips closed, lip corners still); from 17 the lip corners rise, the teeth show
+from 20, and from 22 to 68 the smile is held (broad, teeth apart, one blink at 26); at 69 it
+fades, at 70 the lips close and at 71 the face is nearly back at rest. Scored: rest = frames
+0-15 labelled neutral, smile = frames 22-68 labelled happiness (the onset 16-21 and the
+offset 69-71 are not scored; the detail has their labels). A quick run analyses the first
+40 frames.
 
 The rule was written from the FACS Investigator's Guide's table (see
 :mod:`myoface.analysis.expressions`), not fitted to these clips.
@@ -65,7 +68,7 @@ PHASES = (20, 6, 8, 6, 8)
 QUICK_PHASES = (12, 3, 4, 3, 4)
 #: the sample video's rest and smile frames (judged by eye; see the module's docstring)
 SAMPLE_REST = range(0, 16)
-SAMPLE_SMILE = range(22, 72)
+SAMPLE_SMILE = range(22, 69)
 SAMPLE_QUICK_FRAMES = 40
 
 
@@ -274,6 +277,10 @@ def _sample(quick: bool) -> dict:
         "smile_happiness": float(np.mean([lab == "happiness" for lab in smile])),
         "rest_labels": dict(Counter(rest).most_common()),
         "smile_labels": dict(Counter(smile).most_common()),
+        "onset_labels (16-21)": "".join((by_frame.get(k) or "-")[0] for k in range(16, 22)),
+        "offset_labels (69-71)": "".join(
+            (by_frame.get(k) or "-")[0] for k in range(69, 72) if k in by_frame
+        ),
         "labels": "".join((lab or "-")[0] for lab in labels),
         "seconds": round(time.perf_counter() - t0, 1),
     }
