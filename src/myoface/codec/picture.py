@@ -25,8 +25,8 @@ What the picture cannot supply is the model's:
 
 The physics per frame is the synthesis' (:mod:`myoface.synth`): the tissue relaxed at the
 frame's contractions, warm-started from the previous frame's (``physics="relax"``); or, for a
-fixed cost, the tissue's response to each muscle alone (quadratic in its contraction) and its
-tabulated response to the jaw, summed, computed once per model and made exact at the calibration (``physics="linear"``,
+fixed cost (the default: real time), the tissue's linear response to each muscle and its tabulated response to the
+jaw, summed, computed once per model and made exact at the calibration (``physics="linear"``,
 :func:`tissue_response`; the lids and the lips' contact with the teeth are applied on it as on
 the relaxed skin).
 
@@ -60,7 +60,7 @@ __all__ = [
     "photo_setup",
 ]
 
-PHYSICS = ("relax", "linear")
+PHYSICS = ("linear", "relax")
 
 #: labels of the warp's layers in :attr:`PictureModel.last_label`
 LABEL_STILL, LABEL_AROUND, LABEL_EYE, LABEL_MOUTH, LABEL_SKIN = 0, 1, 2, 3, 4
@@ -220,8 +220,10 @@ class PictureModel:
     calibration_frame : (H, W, 3) uint8 RGB — the picture.
     calibration : FrameParams — the parameters at that picture (its pose, its contractions,
         its gaze; NaN gaze: straight ahead).
-    physics : {"relax", "linear"} — the tissue relaxed per frame (default), or its linear
-        response about the calibration (fixed cost; see the module's docstring).
+    physics : {"linear", "relax"} — the tissue's responses summed (default: a fixed cost
+        of about 2 ms a frame, within a pixel of the relaxed tissue; see the module's
+        docstring), or the tissue relaxed per frame (exact; 5-20 ms a frame on a loaded
+        2-core machine, what a real-time decoder cannot always spend).
     segment : bool — tell the person from the background in the calibration frame
         (:func:`person_mask`, about half a second at 640x360), so that the background behind
         a moving head stays still (default); without it, the background near the head moves
@@ -233,7 +235,7 @@ class PictureModel:
     """
 
     def __init__(self, model, camera: PinholeCamera, calibration_frame, calibration: FrameParams,
-                 *, physics: str = "relax", segment: bool = True):  # fmt: skip
+                 *, physics: str = "linear", segment: bool = True):  # fmt: skip
         import cv2
 
         if physics not in PHYSICS:
@@ -533,7 +535,7 @@ class PictureModel:
         if j is not None:
             x += _interp_table(self._jaw_table, float(soft[j]))
             soft[j] = 0.0
-        return x + self._response[0] @ soft + self._response[1] @ (soft * soft)
+        return x + self._response @ soft
 
     def _lip_gap(self, skin) -> float:
         if self._lip_pairs is None:
@@ -740,16 +742,21 @@ def _mouth_face(face):
 
 # ---------------------------------------------------------------------- the physics
 
+#: the tissue's response to each muscle is read at this contraction (the analysis' probe)
+RESPONSE_PROBE = 0.5
 #: the jaw's displacement of the skin is tabulated at these openings and interpolated (it is
 #: a rotation of the bone: far from linear over its range)
 JAW_TABLE = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 
 def tissue_response(model):
-    """The tissue's skin nodes' displacement by each muscle alone, ``a c + b c^2`` mm through
-    its relaxed displacements at c = 1/2 and 1 (``(2, V, 3, M)``: a, b; the jaw's columns
-    zero; a muscle's pull saturates as the tissue stiffens), and the jaw's displacement at
-    each opening of :data:`JAW_TABLE` ((J, V, 3) mm): what ``physics="linear"`` sums. Computed once per model (:meth:`~myoface.model.FaceModel.memo`;
+    """The tissue's skin nodes' displacement (V, 3, M) mm per unit contraction of each
+    muscle (the jaw's column zero), each relaxed from rest at :data:`RESPONSE_PROBE` (as the
+    analysis' response, :func:`myoface.analysis.estimate.skin_response`, but of the tissue, the
+    lids and the lips' contact left out), and the jaw's displacement at each opening of
+    :data:`JAW_TABLE` ((J, V, 3) mm): what ``physics="linear"`` sums. (A quadratic in each
+    contraction, through c = 1/2 and 1, took twice the relaxes for 0.62 px against 0.65 px on
+    the sample photo's sequence: the error left is the muscles' interplay, not each one's.) Computed once per model (:meth:`~myoface.model.FaceModel.memo`;
     a relax per muscle and per opening). The lids and the lips' contact are not in it: they
     are applied on the sum as on a relaxed skin (:meth:`~myoface.model.FaceModel.skin_vertices`)."""
 
@@ -757,16 +764,12 @@ def tissue_response(model):
         nv = model.face.n_vertices
         rest = model.tissue.rest_positions[:nv]
         j = model.muscles.jaw_index
-        resp = np.zeros((2, nv, 3, model.n_muscles))
+        resp = np.zeros((nv, 3, model.n_muscles))
         for k, mid in enumerate(model.ids):
             if k == j:
                 continue
-            half = model.relax({mid: 0.5}, tol_mm=RELAX_TOL_MM).state
-            full = model.relax({mid: 1.0}, half, tol_mm=RELAX_TOL_MM).state
-            d_half, d_full = half.x[:nv] - rest, full.x[:nv] - rest
-            # d(c) = a c + b c^2 through d(1/2) and d(1)
-            resp[0, :, :, k] = 4.0 * d_half - d_full
-            resp[1, :, :, k] = 2.0 * d_full - 4.0 * d_half
+            x = model.relax({mid: RESPONSE_PROBE}, tol_mm=RELAX_TOL_MM).state.x[:nv]
+            resp[:, :, k] = (x - rest) / RESPONSE_PROBE
         table = np.zeros((len(JAW_TABLE), nv, 3))
         if j is not None:
             for i, a in enumerate(JAW_TABLE):
@@ -777,7 +780,7 @@ def tissue_response(model):
         table.flags.writeable = False
         return resp, table
 
-    return model.memo(("picture.tissue_response", JAW_TABLE), compute)
+    return model.memo(("picture.tissue_response", RESPONSE_PROBE, JAW_TABLE), compute)
 
 
 def _interp_table(table: np.ndarray, a: float) -> np.ndarray:
