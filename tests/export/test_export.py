@@ -98,6 +98,13 @@ def test_the_morph_fit_is_exact_on_a_linear_response_and_bounded_on_a_nonlinear_
     assert tight.n_targets > loose.n_targets > 3
     assert all(n.startswith("corrective_") for n in tight.names[3:])
     assert tight.weights.min() >= 0.0 and tight.weights.max() <= 1.0 + 1e-12
+    # too few correctives allowed for the tolerance: said, not hidden
+    from myoface.errors import MyofaceWarning
+
+    with pytest.warns(MyofaceWarning, match="above the 0.05 mm"):
+        short = fit_morph_animation(skin, rest, c, resp, list("abcd"), tol_mm=0.05,
+                                    max_correctives=1)  # fmt: skip
+    assert short.frame_rms_mm.max() > 0.05
 
 
 # ---------------------------------------------------------------------------- the file

@@ -15,9 +15,12 @@ Lengths are millimetres here; the glTF writer converts to metres.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
+
+from myoface.errors import MyofaceWarning
 
 #: default largest RMS (mm) over the skin's vertices that any exported frame may be from the
 #: simulated skin: a fifth of the 0.5 mm the export promises (issue 33), so the float32 of the
@@ -128,6 +131,13 @@ def fit_morph_animation(
             rms = np.sqrt(np.maximum(left - cum[:, k - 1], 0.0) / n_v)
             if rms.max() <= tol_mm:
                 break
+        if rms.max() > tol_mm:
+            warnings.warn(
+                f"{k} corrective targets (the most) leave a frame {rms.max():.3f} mm RMS from "
+                f"the simulated skin, above the {tol_mm:g} mm asked for",
+                MyofaceWarning,
+                stacklevel=2,
+            )
     targets = [lin_targets]
     weights = [lin_w]
     corr_names = []
