@@ -148,10 +148,10 @@ def fit_morph_animation(
         comp = (vt[:k] * scale[:, None]).reshape(k, n_v, 3)
         w = w / scale[None]
         # each component as two targets, +D and -D, each weighted in [0, 1]: clients that
-        # clamp weights to [0, 1] (Unity's default; Blender 3.4's importer clamps below the
-        # first keyframe's value) play it as written; a half never used (no weight above
-        # UNUSED_WEIGHT: rounding's, which would otherwise make the count vary between runs)
-        # is left out
+        # clamp weights to a range (Unity's legacyClampBlendShapeWeights; Blender 3.4's
+        # importer clamps below the first keyframe's value) play it as written; a half never
+        # used (no weight above UNUSED_WEIGHT: rounding's, which would otherwise make the count
+        # vary between runs) is left out
         for j in range(k):
             for sign, tag in ((1.0, "p"), (-1.0, "n")):
                 wj = np.maximum(sign * w[:, j], 0.0)
