@@ -210,11 +210,13 @@ def test_smile_moves_the_mouth_corners_as_the_model_does(model, camera, calibrat
     # the dots moved with them (within the dots' blur across the stretched triangles)
     for k in range(2):
         np.testing.assert_allclose(_centroid(out, after[k], half=5), after[k], atol=1.0)
-    # exactly: the pixel nearest each corner now reads the picture next to where it was
+    # the map itself: the pixel holding each corner now reads the picture next to where the
+    # corner was (its centre is within 0.71 px of the corner, and about the corner the warp
+    # stretches the picture up to 2 times as the lips part: within 1.5 px)
     for k in range(2):
         x, y = np.floor(after[k]).astype(int)
         src = np.array([pm._map_x[y, x], pm._map_y[y, x]]) + 0.5
-        assert np.linalg.norm(src - before[k]) < 1.0
+        assert np.linalg.norm(src - before[k]) < 1.5
 
 
 def test_mouth_interior_appears_when_the_jaw_opens(model, camera, calibration):
