@@ -299,8 +299,9 @@ def bench_expression_accuracy(quick: bool) -> Measurement:
     rule on the true contractions, what the fit makes of each AU (its gain and its reading
     where the AU is absent), the same with the head still (not in a quick run), and the
     sample video's (``single_face.mp4``) share of rest frames labelled neutral and of smile
-    frames labelled happiness. Full run: about 4 minutes on a loaded 2-core machine; quick
-    (one run of 96 frames at 0.75, the sample's first 40 frames): about 1 minute."""
+    frames labelled happiness. Full run: 3 minutes on a loaded 2-core machine (2.2 GB at
+    its peak); quick (33 frames of three expressions at 0.75, the head moving; the sample's
+    first 40 frames): 34 s."""
     syn = _synthetic(quick)
     detail = {"synthetic": syn}
     if not quick:  # the same with the head still (what the head's motion costs), and on
