@@ -308,3 +308,45 @@ def test_analyze_labels_a_rendered_smile(tmp_path):
     _, labels = read_expressions(out / "contractions.csv")
     assert labels[:5] == [NEUTRAL] * 5, labels
     assert labels[8:] == ["happiness"] * 4, labels
+
+
+# ------------------------------------------------------------------- the benchmark's parts
+
+
+def test_episode_programme(ids):
+    """Rest (zeros) first and between episodes, the apex held at the expression's
+    contractions, onset and offset strictly between."""
+    from myoface.bench.expression import episode_programme
+
+    eps = (("happiness", 1.0), ("fear", 0.5))
+    phases = (4, 2, 3, 2, 1)
+    truth, played, phase = episode_programme(ids, eps, phases)
+    assert len(truth) == 4 + 2 * (2 + 3 + 2 + 1) == len(played) == len(phase)
+    assert phase[:6] == ["rest"] * 4 + ["onset"] * 2 and played[4] == "happiness"
+    for k, (p, name) in enumerate(zip(phase, played, strict=True)):
+        if p == "rest":
+            assert not truth[k].any() and name == NEUTRAL
+        elif p == "apex":
+            want = expression_contractions(name, 1.0 if name == "happiness" else 0.5, ids)
+            np.testing.assert_array_equal(truth[k], want)
+        else:
+            apex = expression_contractions(name, 1.0 if name == "happiness" else 0.5, ids)
+            big = apex > 0
+            assert np.all(truth[k][big] < apex[big]) and np.all(truth[k][big] > 0)
+
+
+def test_score_labels():
+    from myoface.bench.expression import score_labels
+
+    played = ["neutral", "happiness", "happiness", "fear", "fear", "neutral"]
+    phase = ["rest", "apex", "apex", "apex", "onset", "rest"]
+    labels = ["neutral", "happiness", "neutral", "", "fear", "disgust"]
+    r = score_labels(labels, played, phase, [0, 1, 1, 0.5, 0.5, 0])
+    assert r["apex_accuracy"] == pytest.approx(1 / 3) and r["rest_accuracy"] == 0.5
+    assert r["apex_frames"] == 3 and r["rest_frames"] == 2
+    assert r["confusion"] == {
+        "happiness": {"happiness": 1, "neutral": 1},
+        "fear": {"not measured": 1},
+        "neutral": {"neutral": 1, "disgust": 1},
+    }
+    assert r["apex_accuracy_per_episode"] == {"happiness 1": 0.5, "fear 0.5": 0.0}
