@@ -325,3 +325,43 @@ def test_photo_setup_projects_the_model_onto_the_points(model):
     cam, params = photo_setup(model, pts, 600, 400)
     xy = cam.project(params.pose.apply(v))
     assert np.abs(xy - pts[:, :2]).max() < 1.0
+
+
+def test_a_turning_head_leaves_the_background_beside_it_still(model, camera, calibration):
+    """A rendered face in front of a textured blue wall: with the person told from the
+    background (the default), the wall next to the head, where the rings around the face
+    move the warp, stays as it was; without it, the warp drags the wall along."""
+    from scipy.spatial.transform import Rotation
+
+    from myoface.render import Camera, Renderer
+
+    fov = float(np.degrees(2 * np.arctan(0.5 * H / camera.focal_px)))
+    rc = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), (0.0, 1.0, 0.0), W, H, fov)
+    r = Renderer(model.face, rc, ssaa=1)
+
+    def scene(params):
+        img = r.render(model.skin_vertices(), pose=(params.rotation, params.translation))
+        face = r.triangle_ids() >= 0
+        return img, face
+
+    wall = _pattern(6)
+    wall[:, :, 2] = 220  # blue: unlike the face
+    wall[:, :, 0] //= 3
+    img, face = scene(calibration)
+    frame = np.where(face[:, :, None], img, wall)
+    moved = _params(calibration, rotation=Rotation.from_euler("Y", 8.0, degrees=True).as_matrix())
+    _, face_now = scene(moved)
+    import cv2
+
+    near = cv2.dilate((face | face_now).astype(np.uint8), np.ones((21, 21), np.uint8)) > 0
+    head = cv2.dilate(face.astype(np.uint8), np.ones((71, 71), np.uint8)) > 0
+    # the wall within 35 px of the face, 10 px clear of it (the person reaches 4 px beyond
+    # its outline, softened over 1.5 px: SEGMENT_MARGIN_PX, SEGMENT_SOFT_PX)
+    beside = head & ~near
+    assert beside.sum() > 500
+    still = PictureModel(model, camera, frame, calibration).render(moved)
+    dragged = PictureModel(model, camera, frame, calibration, segment=False).render(moved)
+    diff_still = np.abs(still.astype(int) - frame)[beside].max(axis=1)
+    diff_dragged = np.abs(dragged.astype(int) - frame)[beside].max(axis=1)
+    assert (diff_still <= 2).mean() > 0.99  # measured: 1.0
+    assert (diff_dragged > 10).mean() > 0.3  # measured: 0.65

@@ -804,8 +804,7 @@ def person_mask(frame: np.ndarray, rim_px, ring2_px, ring3_px):
     outwards by :data:`SEGMENT_SOFT_PX` (so that it is 1 wherever the hard mask is), and
     ``plate`` (H, W, 3) uint8, the frame with the head's pixels (down to :data:`SEGMENT_NECK`
     below the chin) filled from the background around them (:func:`fill_holes`; what shows
-    where the head moves away); (None, None)
-    when GrabCut finds no person beyond the face or no background."""
+    where the head moves away); (None, None) when GrabCut finds no background."""
     import cv2
 
     h, w = frame.shape[:2]
@@ -844,9 +843,8 @@ def person_mask(frame: np.ndarray, rim_px, ring2_px, ring3_px):
         return None, None
     fg_small = ((init == cv2.GC_FGD) | (init == cv2.GC_PR_FGD)).astype(np.float32)
     hard = cv2.resize(fg_small, (w, h), interpolation=cv2.INTER_LINEAR) >= 0.5
-    face = _polygon_mask((h, w), rim)
-    n_face, n_person = int(face.sum()), int(hard.sum())
-    if n_person <= 1.05 * n_face or n_person >= h * w - 16:
+    hard |= _polygon_mask((h, w), rim)  # the face is the person, whatever GrabCut says
+    if int(hard.sum()) >= h * w - 16:  # no background found: nothing to keep still
         return None, None
     # the plate: the head's pixels (down to the collar; the body below hardly moves, it stays
     # itself) filled from the background around them
