@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from tests.conftest import needs_mediapipe, shared_path
 
 from myoface.cli import main
+from tests.conftest import needs_mediapipe, shared_path
 
 
 @pytest.fixture(scope="module")
