@@ -124,7 +124,7 @@ MOUTH_PART = (1.6, 1.2)
 #: lit by the model's lights only, near black in its depth: a hole, not a mouth)
 MOUTH_AMBIENT = 0.3
 #: the render's brightness is matched to the picture's lips by a gain within these bounds
-MOUTH_GAIN = (0.5, 2.5)
+MOUTH_GAIN = (0.5, 1.0)
 #: the sclera's colour is the mean of the brightest share of the calibration's eye opening
 SCLERA_SHARE = 0.3
 #: the atlas' eye patches have this many pixels of margin around the eyeball's projection
@@ -697,31 +697,32 @@ class PictureModel:
             fov = float(np.degrees(2 * np.arctan(0.5 * h / cam.focal_px)))
             rc = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), (0.0, 1.0, 0.0), ws, hs,
                         max(fov, 0.1))  # fmt: skip
-            face, keep = _mouth_face(self.model.face)
-            tex = self.model.face.texture
-            if tex is None:
-                from myoface.render import to_srgb8
-                from myoface.render.dressing import default_skin_texture
-
-                tex = to_srgb8(default_skin_texture(self.model.face))
-            r = Renderer(face, rc, texture=tex, ssaa=1, wrinkles=False)
+            # the skin's texture is the picture itself, where the calibration projects it:
+            # the render's lips are the person's, and its light is matched on them
+            nv = self.model.face.n_vertices
+            xy = self._src[:nv]
+            uv = np.column_stack([xy[:, 0] / w, 1.0 - xy[:, 1] / h])
+            face, keep = _mouth_face(self.model.face, uv, self._frame)
+            r = Renderer(face, rc, ssaa=1, wrinkles=False)
             shift = (cam.cx - 0.5 * w, cam.cy - 0.5 * h)
             self._mouth_renderer = (r, shift, k, keep)
         return self._mouth_renderer
 
 
-def _mouth_face(face):
+def _mouth_face(face, uv: np.ndarray, texture: np.ndarray):
     """The part of ``face`` around the mouth (its triangles within :data:`MOUTH_PART` of
     the mouth's half width from its centre, rest head frame x, y), what the mouth's render
-    draws (the rest of the face is the picture's), with its lip landmark groups; and the
-    indices of its vertices in ``face``. The whole face when the part would not hold the lips.
+    draws (the rest of the face is the picture's), with its lip landmark groups, textured by
+    ``texture`` at ``uv`` (V, 2) (the face's vertices'); and the indices of its vertices in
+    ``face``. The whole face when the part would not hold the lips.
     """
     from myoface.face import FaceMesh
     from myoface.face.teeth import LIP_GROUPS
 
     lm = face.landmarks
+    everything = FaceMesh(face.vertices, face.triangles, uv, texture, lm, name=face.name)
     if not all(g in lm for g in LIP_GROUPS):
-        return face, np.arange(face.n_vertices)
+        return everything, np.arange(face.n_vertices)
     lips = np.unique(np.concatenate([np.asarray(lm[g]) for g in LIP_GROUPS]))
     v = face.vertices
     m = v[lips, :2].mean(axis=0)
@@ -731,12 +732,11 @@ def _mouth_face(face):
     tris = face.triangles[inside[face.triangles].all(axis=1)]
     keep = np.unique(tris)
     if not np.isin(lips, keep).all():
-        return face, np.arange(face.n_vertices)
+        return everything, np.arange(face.n_vertices)
     new = np.full(face.n_vertices, -1, np.int64)
     new[keep] = np.arange(len(keep))
     groups = {g: new[np.asarray(lm[g])] for g in LIP_GROUPS}
-    uv = None if face.uv is None else face.uv[keep]
-    part = FaceMesh(v[keep], new[tris], uv, face.texture, groups, name=f"{face.name} mouth")
+    part = FaceMesh(v[keep], new[tris], uv[keep], texture, groups, name=f"{face.name} mouth")
     return part, keep
 
 
