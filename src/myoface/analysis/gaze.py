@@ -92,7 +92,10 @@ class GazeSettings:
     coarse_deg, fine : the grid: steps of ``coarse_deg`` over +-:data:`MAX_GAZE_DEG` (on every
         other pixel: the iris spans 29 deg of the eyeball either way), then for each ``(step,
         half-width)`` of ``fine`` a grid around the best so far (every other pixel but for the
-        last: on the renders the same readings to 0.01 deg, in 40 % less time).
+        last: on the renders the same readings to 0.01 deg, in 40 % less time; a first fine
+        step of 1.5 deg over +-4.5 rather than 1 over +-5 read the benchmark's renders on the
+        true geometry the same to 0.01 deg, 1.94 / 3.78 deg RMS yaw / pitch, in a fifth less
+        time, 2026-12-02).
     edge_px : the softness (px) of the iris' edge in the model: the renders' anti-aliasing and
         a webcam's blur are about a pixel wide (1.0 px read 2-6 deg worse on sharp renders).
     upper_margin, lower_margin : pixels this close to the upper / lower lid margin, in iris
@@ -126,7 +129,7 @@ class GazeSettings:
     """
 
     coarse_deg: float = 6.0
-    fine: tuple = ((1.0, 5.0), (0.25, 1.0))
+    fine: tuple = ((1.5, 4.5), (0.25, 1.0))
     edge_px: float = 0.6
     upper_margin: float = 0.1
     lower_margin: float = 0.05
@@ -339,8 +342,57 @@ def _candidates_rss(*args):
 # ------------------------------------------------------------------ the opening's pixels
 
 
+@numba.njit(cache=True)
+def _opening_pixels(x0, y0, x1, y1, poly, upper, lower):  # pragma: no cover
+    """The pixels (col, row) of the box ``x0..x1, y0..y1`` whose centres (col + 0.5, row +
+    0.5) lie inside the closed polygon ``poly`` (M, 2) (even-odd rule), as (N, 2) centres,
+    with each one's distance (N,) to the polylines ``upper`` and ``lower``: what
+    :func:`_inside_polygon` and :func:`_chain_distance` give, in one pass (they took 6 ms of
+    the reader's 20 a frame, in numpy's temporaries)."""
+    nmax = (x1 - x0 + 1) * (y1 - y0 + 1)
+    px = np.empty((nmax, 2))
+    du = np.empty(nmax)
+    dl = np.empty(nmax)
+    m = poly.shape[0]
+    n = 0
+    for row in range(y0, y1 + 1):
+        y = row + 0.5
+        for col in range(x0, x1 + 1):
+            x = col + 0.5
+            inside = False
+            for i in range(m):
+                ax, ay = poly[i, 0], poly[i, 1]
+                bx, by = poly[(i + 1) % m, 0], poly[(i + 1) % m, 1]
+                if (ay > y) != (by > y):
+                    if x < ax + (y - ay) * (bx - ax) / (by - ay):
+                        inside = not inside
+            if not inside:
+                continue
+            px[n, 0], px[n, 1] = x, y
+            du[n] = _polyline_distance(x, y, upper)
+            dl[n] = _polyline_distance(x, y, lower)
+            n += 1
+    return px[:n], du[:n], dl[:n]
+
+
+@numba.njit(cache=True)
+def _polyline_distance(x, y, chain):  # pragma: no cover
+    best = np.inf
+    for i in range(chain.shape[0] - 1):
+        ax, ay = chain[i, 0], chain[i, 1]
+        ex, ey = chain[i + 1, 0] - ax, chain[i + 1, 1] - ay
+        t = ((x - ax) * ex + (y - ay) * ey) / max(ex * ex + ey * ey, 1e-12)
+        t = min(max(t, 0.0), 1.0)
+        dx, dy = x - (ax + t * ex), y - (ay + t * ey)
+        d = dx * dx + dy * dy
+        if d < best:
+            best = d
+    return np.sqrt(best)
+
+
 def _inside_polygon(px, poly) -> np.ndarray:
-    """Whether each point (N, 2) is inside the closed polygon (M, 2) (even-odd rule)."""
+    """Whether each point (N, 2) is inside the closed polygon (M, 2) (even-odd rule; the
+    reference of :func:`_opening_pixels`)."""
     x, y = px[:, 0:1], px[:, 1:2]
     x0, y0 = poly[:, 0][None], poly[:, 1][None]
     x1, y1 = np.roll(poly[:, 0], -1)[None], np.roll(poly[:, 1], -1)[None]
@@ -351,7 +403,8 @@ def _inside_polygon(px, poly) -> np.ndarray:
 
 
 def _chain_distance(px, chain) -> np.ndarray:
-    """Distance (N,) of points (N, 2) to the polyline ``chain`` (M, 2)."""
+    """Distance (N,) of points (N, 2) to the polyline ``chain`` (M, 2) (the reference of
+    :func:`_opening_pixels`)."""
     a, b = chain[:-1][None], chain[1:][None]
     p = px[:, None, :]
     ab = b - a
@@ -399,11 +452,10 @@ def eye_samples(frame, upper, lower, iris_px: float, settings: GazeSettings) -> 
     empty = EyeSamples(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 5)), np.eye(5))
     if x1 < x0 or y1 < y0:
         return empty
-    cols, rows = np.meshgrid(np.arange(x0, x1 + 1), np.arange(y0, y1 + 1))
-    px = np.column_stack([cols.ravel(), rows.ravel()]).astype(np.float64) + 0.5
-    inside = _inside_polygon(px, poly)
-    px = px[inside]
-    du, dl = _chain_distance(px, upper), _chain_distance(px, lower)
+    px, du, dl = _opening_pixels(
+        int(x0), int(y0), int(x1), int(y1), *(np.ascontiguousarray(a, dtype=np.float64)
+                                              for a in (poly, upper, lower))
+    )  # fmt: skip
     keep = (du > settings.upper_margin * iris_px) & (dl > settings.lower_margin * iris_px)
     px, du, dl = px[keep], du[keep], dl[keep]
     if len(px) < 6:
