@@ -121,6 +121,16 @@ def test_sadness_and_fear_share_au1_and_au4():
     assert expression_labels(s) == [NEUTRAL]
 
 
+def test_the_fear_brow_alone_is_fear():
+    """1+2+4 (brows raised and drawn together) is fear; with AU15 besides and AU2 faint
+    (0.25: its gate open) it is sadness, whose AU15 fear leaves unexplained."""
+    x = _aus(AU01=0.6, AU02=0.5, AU04=0.5)
+    assert expression_labels(expression_scores_from_aus(x)) == ["fear"]
+    x = _aus(AU01=0.8, AU02=0.25, AU04=0.6, AU15=0.7)
+    s = expression_scores_from_aus(x)
+    assert expression_labels(s) == ["sadness"] and s[EXPRESSIONS.index("fear")] > 0
+
+
 def test_surprise_with_fears_aus_is_fear():
     """Surprise's AUs are a subset of fear's: with fear's brow lowerer and lip stretcher
     besides, fear is the stronger (surprise leaves them unexplained)."""
@@ -350,3 +360,19 @@ def test_score_labels():
         "neutral": {"neutral": 1, "disgust": 1},
     }
     assert r["apex_accuracy_per_episode"] == {"happiness 1": 0.5, "fear 0.5": 0.0}
+
+
+def test_model_landmarks_project_the_skin(ids):
+    """The benchmark's perfect detector: the posed vertices through the fit's camera (a
+    frontal head 500 mm away lands its nose tip near the image's centre)."""
+    from myoface.analysis.camera import HeadPose
+    from myoface.bench.expression import model_landmarks
+    from myoface.bench.headmotion import SIZE
+    from myoface.face import load_default_face
+
+    face = load_default_face()
+    pose = HeadPose.from_euler(0, 0, 0, (0, 0, -500))
+    (pts,) = model_landmarks([pose], [face.vertices])
+    assert pts.shape == (face.n_vertices, 2) and np.isfinite(pts).all()
+    nose = pts[np.argmax(face.vertices[:, 2])]  # the vertex nearest the camera
+    assert abs(nose[0] - SIZE[0] / 2) < 20 and abs(nose[1] - SIZE[1] / 2) < 60

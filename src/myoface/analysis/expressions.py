@@ -87,8 +87,10 @@ PROTOTYPES = {
     # 1+2+5B+26/27; variants 1+2+5B, 1+2+26/27, 5B+26/27
     "surprise": ("1+2+5+26", "1+2+5", "1+2+26", "5+26"),
     # 1+2+4+5*+20*+25/26/27, 1+2+4+5*+25/26/27; variants 1+2+4+5*, 5*+20*
-    # (1+2+5Z: an intensity mark we do not read; L/R20: the rule is bilateral)
-    "fear": ("1+2+4+5+20", "1+2+4+5", "5+20"),
+    # (1+2+5Z: an intensity mark we do not read; L/R20: the rule is bilateral); and the fear
+    # brow 1+2+4 alone (raised and drawn together: Ekman & Friesen, Unmasking the Face, 1975,
+    # ch. 5; the CK+ emotion criteria, Lucey et al. 2010, table 2, ask for 1+2+4)
+    "fear": ("1+2+4+5+20", "1+2+4+5", "5+20", "1+2+4"),
     # 4+5*+7+23, 4+5*+7+10*+23, 4+5*+7+17+23 (+25/26), and the table's variants "without any
     # one of 4, 5, 7 or 10": without AU7, which is not read (4+5*+7+17+24: AU24 not read)
     "anger": ("4+5+23", "4+5+10+23", "4+5+17+23"),
