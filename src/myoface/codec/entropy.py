@@ -294,3 +294,73 @@ class ParamCoder:
 
     def decode_frame(self, io: RangeIO) -> FrameParams | None:
         return self._code(io)
+
+
+# ------------------------------------------------------------------ the identity (header)
+
+
+def identity_order(triangles: np.ndarray, n_vertices: int) -> tuple[np.ndarray, list]:
+    """The order the identity's vertices are coded in and, for each, its neighbours coded
+    before it: breadth first over the mesh from vertex 0 (neighbours by increasing index;
+    a vertex on no triangle starts a new search)."""
+    nbrs: list[set] = [set() for _ in range(n_vertices)]
+    for a, b, c in np.asarray(triangles, dtype=np.int64):
+        nbrs[a] |= {b, c}
+        nbrs[b] |= {a, c}
+        nbrs[c] |= {a, b}
+    seen = np.zeros(n_vertices, bool)
+    order: list[int] = []
+    for root in range(n_vertices):
+        if seen[root]:
+            continue
+        seen[root] = True
+        queue = [root]
+        while queue:
+            v = queue.pop(0)
+            order.append(v)
+            for u in sorted(nbrs[v]):
+                if not seen[u]:
+                    seen[u] = True
+                    queue.append(u)
+    pos = np.empty(n_vertices, np.int64)
+    pos[order] = np.arange(n_vertices)
+    before = [np.array(sorted(u for u in nbrs[v] if pos[u] < pos[v]), np.int64) for v in order]
+    return np.array(order, np.int64), before
+
+
+def code_identity(io: RangeIO, order: np.ndarray, before: list, q=None) -> np.ndarray:
+    """Code the identity's integers ``q`` (V, 3) (None: decode them): each vertex predicted
+    by the rounded mean of its neighbours coded before it (0 for the first), its x, y, z
+    residuals coded as the packets' are, with an adaptive table per axis and context."""
+    n = len(order)
+    counts = np.tile(_prior(), (3 * N_CONTEXTS, 1))
+    ctx = np.zeros(3, np.int64)
+    out = np.zeros((n, 3), np.int64)
+    for v, nb in zip(order, before, strict=True):
+        if len(nb):
+            s = out[nb].sum(axis=0)
+            pred = (2 * s + len(nb)) // (2 * len(nb))  # (integer rounding: the same anywhere)
+        else:
+            pred = np.zeros(3, np.int64)
+        slots = np.arange(3) * N_CONTEXTS + ctx
+        syms = pay = None
+        if q is not None:
+            r = np.asarray(q[v], np.int64) - pred
+            syms = np.clip(r + RESIDUAL_RANGE + 1, ESC_NEG, ESC_POS)
+            big = (syms == ESC_NEG) | (syms == ESC_POS)
+            pay = np.abs(r[big]) - RESIDUAL_RANGE - 1
+        syms = io.categorical(counts[slots], syms)
+        big = (syms == ESC_NEG) | (syms == ESC_POS)
+        pay = io.uniform(int(big.sum()), pay)
+        r = syms.astype(np.int64) - RESIDUAL_RANGE - 1
+        r[big] = np.where(syms[big] == ESC_POS, 1, -1) * (pay.astype(np.int64) + RESIDUAL_RANGE + 1)
+        val = pred + r
+        if np.any(np.abs(val) > 32767):
+            raise MyofaceFormatError("corrupted header: the identity's data")
+        out[v] = val
+        counts[slots, syms] += COUNT_STEP
+        full = counts[slots].sum(axis=1) > COUNT_LIMIT
+        if full.any():
+            counts[slots[full]] = (counts[slots[full]] + 1) // 2
+        ctx = np.minimum(np.abs(r), N_CONTEXTS - 1)
+    return out

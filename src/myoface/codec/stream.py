@@ -23,7 +23,6 @@ segment's words against :data:`MAX_SEGMENT_WORDS_PER_FRAME`.
 from __future__ import annotations
 
 import io
-import lzma
 import os
 import struct
 import sys
@@ -34,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from myoface.analysis.camera import PinholeCamera, rotmat, rotvec
-from myoface.codec.entropy import ParamCoder, RangeIO, Steps
+from myoface.codec.entropy import ParamCoder, RangeIO, Steps, code_identity, identity_order
 from myoface.codec.params import FrameParams
 from myoface.errors import MyofaceFormatError
 
@@ -142,8 +141,8 @@ class Header:
         cal = self.calibration
         c_q = np.round(np.clip(cal.contractions, 0, 1) / st.contraction).astype("<u2")
         ident = np.round(self.identity_mm / self.identity_step_mm)
-        ident = np.clip(ident, -32768, 32767).astype("<i2")
-        packed = lzma.compress(ident.tobytes(), format=lzma.FORMAT_RAW, filters=_LZMA)
+        ident = np.clip(ident, -32767, 32767).astype(np.int64)
+        packed = _pack_identity(ident, self.face)
         out = io.BytesIO()
         w = out.write
         w(struct.pack("<HHfIB", self.width, self.height, self.fps, self.n_frames_hint,
@@ -217,7 +216,7 @@ class Header:
             raise MyofaceFormatError("corrupted header: the identity's size")
         if not (np.isfinite(id_step) and 1e-4 <= id_step <= 10):
             raise MyofaceFormatError("corrupted header: the identity's step")
-        ident = _unpack_identity(r.take(n_packed), n_v) * float(id_step)
+        ident = _unpack_identity(r.take(n_packed), n_v, FACES[face]) * float(id_step)
         (bg,) = r.unpack("<B")
         if bg not in BACKGROUNDS:
             raise MyofaceFormatError(f"corrupted header: background {bg}")
@@ -241,19 +240,47 @@ class Header:
         return decode_image(self.image, self.image_codec, (self.width, self.height))
 
 
-_LZMA = [{"id": lzma.FILTER_LZMA2, "preset": 9 | lzma.PRESET_EXTREME}]
+_TOPOLOGY: dict = {}
 
 
-def _unpack_identity(data: bytes, n_v: int) -> np.ndarray:
-    want = n_v * 3 * 2
-    d = lzma.LZMADecompressor(format=lzma.FORMAT_RAW, filters=_LZMA)
-    try:
-        raw = d.decompress(data, max_length=want)
-    except lzma.LZMAError:
-        raise MyofaceFormatError("corrupted header: the identity's data") from None
-    if len(raw) != want or not d.eof:
+def _topology(face: str):
+    """The identity's coding order over ``face``'s mesh (:func:`identity_order`), cached."""
+    if face not in _TOPOLOGY:
+        from myoface.face import load_default_face
+
+        mesh = load_default_face()
+        _TOPOLOGY[face] = (mesh.n_vertices, *identity_order(mesh.triangles, mesh.n_vertices))
+    return _TOPOLOGY[face]
+
+
+def _pack_identity(q: np.ndarray, face: str) -> bytes:
+    n, order, before = _topology(face)
+    if q.shape != (n, 3):
+        raise MyofaceFormatError(f"the identity has {len(q)} vertices; the {face} face {n}")
+    io_ = RangeIO()
+    code_identity(io_, order, before, q)
+    return io_.encoder.get_compressed().astype("<u4").tobytes()
+
+
+def _unpack_identity(data: bytes, n_v: int, face: str) -> np.ndarray:
+    """The identity's integers (V, 3) from its range-coded words; a clear error unless they
+    are exactly what coding them again gives."""
+    n, order, before = _topology(face)
+    if n_v != n:
+        raise MyofaceFormatError(f"corrupted header: an identity of {n_v} vertices ({face}: {n})")
+    if len(data) % 4 or not data:
         raise MyofaceFormatError("corrupted header: the identity's data")
-    return np.frombuffer(raw, dtype="<i2").astype(np.float64).reshape(n_v, 3)
+    import constriction
+
+    words = np.frombuffer(data, dtype="<u4").astype(np.uint32)
+    io_ = RangeIO(constriction.stream.queue.RangeDecoder(words.copy()))
+    try:
+        q = code_identity(io_, order, before)
+    except (MyofaceFormatError, *_decode_errors()):
+        raise MyofaceFormatError("corrupted header: the identity's data") from None
+    if not np.array_equal(io_.encoder.get_compressed(), words):
+        raise MyofaceFormatError("corrupted header: the identity's data")
+    return q.astype(np.float64)
 
 
 class _Fields:
