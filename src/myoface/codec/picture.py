@@ -467,6 +467,8 @@ class PictureModel:
             np.array(pairs, dtype=np.int64).T if pairs and len(up) == len(lo) else None
         )
         self._gap_cal = self._lip_gap(self._skin_cal)
+        if "mouth" in self._openings and model.dentition is not None:
+            self._renderer()  # built now: not a stall at the first frame that opens the lips
 
     # ------------------------------------------------------------------ checks
     def _check(self, params) -> FrameParams:
