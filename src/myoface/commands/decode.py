@@ -50,6 +50,12 @@ def run(args) -> int:
     if not args.output.lower().endswith((".mp4", ".mov", ".mkv", ".avi")):
         raise MyofaceValueError(f"-o must be a video file (.mp4); got {args.output}")
     if args.stream != "-":
+        if args.follow:  # (a live encode may not have made it yet)
+            import time
+
+            t0 = time.monotonic()
+            while not Path(args.stream).exists() and time.monotonic() - t0 < args.timeout:
+                time.sleep(0.05)
         if not Path(args.stream).is_file():
             raise MyofaceFileNotFoundError(f"no such stream: {args.stream}")
         try:

@@ -74,12 +74,21 @@ def run(args) -> int:
         except OutputConflictError as exc:
             return refuse(args, exc)
         check_output_path(args.output, "-o")
-    vp = VideoParams(
-        args.video,
-        calibration_frame=args.calibration_frame,
-        max_frames=args.max_frames,
-        show_progress=not args.quiet,
-    )
+    live = None
+    if args.live and not to_stdout:  # (there at once: a reader may follow it from the start)
+        live = open(args.output, "wb")  # noqa: SIM115 (closed below)
+    try:
+        vp = VideoParams(
+            args.video,
+            calibration_frame=args.calibration_frame,
+            max_frames=args.max_frames,
+            show_progress=not args.quiet,
+        )
+    except BaseException:
+        if live is not None:
+            live.close()
+            Path(args.output).unlink(missing_ok=True)  # (nothing was written)
+        raise
 
     def encode(fh):
         return encode_params(
@@ -90,9 +99,9 @@ def run(args) -> int:
     try:
         if to_stdout:
             stats = encode(sys.stdout.buffer)
-        elif args.live:
-            with open(args.output, "wb") as fh:
-                stats = encode(fh)
+        elif live is not None:
+            with live:
+                stats = encode(live)
         else:
             with atomic_output(args.output) as tmp:
                 try:
