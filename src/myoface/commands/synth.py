@@ -278,7 +278,11 @@ def _run_photo(args, out, video: bool, timeline) -> int:
     anim = PhotoAnimation.from_image(photo, fm)
     h, w = photo.shape[:2]
     how = "a face made from the photo" if anim.made_face else f"--face {args.face}"
-    print(f"photo      {w}x{h} px, the model ({how}) aligned to its face")
+    from myoface.face.image import image_size
+
+    w0, h0 = image_size(args.in_photo, "photo")
+    size = f"{w}x{h} px" if (w0, h0) == (w, h) else f"{w0}x{h0} px, animated at {w}x{h}"
+    print(f"photo      {size}, the model ({how}) aligned to its face")
     ids = anim.model.ids
     if not video:
         if timeline is not None:
