@@ -76,7 +76,7 @@ def bench_picture_fps(quick: bool) -> Measurement:
         pm = PictureModel(model, cam, frame, cal, physics=physics)
         for p in perf[: max(n // 6, 3)]:  # warm-up: the JIT, the mouth's renderer
             pm.render(p)
-        pm.stats = type(pm.stats)([], [], [], [], [])
+        pm.stats = type(pm.stats)()
         skins[physics] = []
         for p in perf:
             pm.render(p)

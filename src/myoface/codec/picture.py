@@ -44,7 +44,8 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -133,20 +134,23 @@ ATLAS_MARGIN_PX = 4
 #: alignment's pixels per mm there; at 10 m the perspective moves a face's points by under
 #: 0.5% of their distance from its centre (under a pixel for a face 200 px wide)
 PHOTO_DISTANCE_MM = 10_000.0
+#: :class:`PictureStats` keeps the times of this many renders (a long stream's last ones)
+STATS_FRAMES = 10_000
 #: equilibrium tolerance (mm) of the per-frame relax (the synthesis')
 RELAX_TOL_MM = 2e-2
 
 
 @dataclass
 class PictureStats:
-    """Wall times (ms) per :meth:`PictureModel.render`: the physics, the warp's geometry and
-    raster, the remap, the mouth; and relaxes that did not converge."""
+    """Wall times (ms) of the last :data:`STATS_FRAMES` :meth:`PictureModel.render` calls:
+    the physics, the warp's geometry and raster, the remap over the background, the mouth,
+    the whole; and the relaxes that did not converge."""
 
-    physics_ms: list
-    warp_ms: list
-    remap_ms: list
-    mouth_ms: list
-    total_ms: list
+    physics_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_FRAMES))
+    warp_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_FRAMES))
+    remap_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_FRAMES))
+    mouth_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_FRAMES))
+    total_ms: deque = field(default_factory=lambda: deque(maxlen=STATS_FRAMES))
     unconverged: int = 0
 
 
@@ -261,7 +265,7 @@ class PictureModel:
         self.height, self.width = frame.shape[:2]
         h, w = self.height, self.width
         self.calibration = self._check(calibration)
-        self.stats = PictureStats([], [], [], [], [])
+        self.stats = PictureStats()
         face = model.face
         nv = face.n_vertices
         self._rim, self._openings = _rim_and_openings(face)
