@@ -288,11 +288,10 @@ def test_plot_written(tmp_path):
 
 
 @needs_mediapipe
-@pytest.mark.slow
 def test_analyze_labels_a_rendered_smile(tmp_path):
     """A rendered clip of the default face, at rest then smiling (happiness at 1.0), analysed
     as ``myoface analyze --tracker landmarks``: neutral at rest, happiness at the apex, and
-    the plot beside contractions.png."""
+    the plot beside contractions.png (4 s; 19 s on a loaded 2-core machine)."""
     from myoface.analysis.outputs import analyze_to_folder
     from myoface.analysis.video import open_video
     from myoface.bench.headmotion import camera_renderer
