@@ -311,27 +311,34 @@ def read_expressions(path, table=None, muscle_ids=None) -> tuple[np.ndarray, lis
     from myoface.errors import MyofaceFormatError
 
     p = Path(path)
-    rows = [r for r in csv.DictReader(read_text(p, "contractions CSV").splitlines()) if r]
-    if rows and all(c in rows[0] for c in (*EXPRESSION_COLUMNS, LABEL_COLUMN)):
-        scores = np.full((len(rows), len(EXPRESSION_COLUMNS)), np.nan)
-        labels = []
-        for k, r in enumerate(rows):
-            for j, c in enumerate(EXPRESSION_COLUMNS):
-                cell = (r.get(c) or "").strip()
-                if cell:
-                    try:
-                        scores[k, j] = float(cell)
-                    except ValueError:
-                        raise MyofaceFormatError(
-                            f"{p}: row {k + 2}: {c} is not a number: {cell[:40]!r}"
-                        ) from None
-            lab = (r.get(LABEL_COLUMN) or "").strip()
+    lines = read_text(p, "contractions CSV").splitlines()
+    reader = csv.reader(lines)
+    head = [c.strip() for c in next(reader, [])]
+    wanted = (*EXPRESSION_COLUMNS, LABEL_COLUMN)
+    if all(c in head for c in wanted):
+        cols = [head.index(c) for c in wanted]
+        values, labels = [], []  # (only the expression cells of each row are kept)
+        for k, r in enumerate(reader, start=2):
+            if not any(c.strip() for c in r):
+                continue
+            cells = [r[i].strip() if i < len(r) else "" for i in cols]
+            row = []
+            for c, cell in zip(EXPRESSION_COLUMNS, cells, strict=False):
+                try:
+                    row.append(float(cell) if cell else np.nan)
+                except ValueError:
+                    raise MyofaceFormatError(
+                        f"{p}: row {k}: {c} is not a number: {cell[:40]!r}"
+                    ) from None
+            lab = cells[-1]
             if lab not in ("", NEUTRAL, *EXPRESSIONS):
                 raise MyofaceFormatError(
-                    f"{p}: row {k + 2}: {LABEL_COLUMN} must be one of "
+                    f"{p}: row {k}: {LABEL_COLUMN} must be one of "
                     f"{', '.join((*EXPRESSIONS, NEUTRAL))} or empty; got {lab[:40]!r}"
                 )
+            values.append(row)
             labels.append(lab)
+        scores = np.array(values, dtype=np.float64).reshape(-1, len(EXPRESSION_COLUMNS))
         return scores, labels
     if table is None or muscle_ids is None:
         raise MyofaceFormatError(f"{p}: no expression columns ({', '.join(EXPRESSION_COLUMNS)})")
