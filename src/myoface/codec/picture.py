@@ -106,9 +106,14 @@ LID_SOURCE_SHIFT_PX = 2.0
 #: nodes on the picture's border every this many pixels (still)
 BORDER_STEP_PX = 64
 #: the eyeball's cap of nodes reaches this far (degrees) from the eye's forward direction
-CAP_DEG = 80.0
-#: ... in this many rings of this many nodes each
-CAP_RINGS, CAP_SEGMENTS = 7, 20
+CAP_DEG = 125.0
+#: ... in this many rings of this many nodes each (the cap turned by a gaze of up to 45
+#: degrees still covers the eyeball's whole visible disc; its far side is hidden by depth)
+CAP_RINGS, CAP_SEGMENTS = 10, 20
+#: a point of the cap whose normal's cosine with the way to the camera was at most this at
+#: calibration was not seen there (0: the sphere's far side; the cap's rings, 12.5 degrees
+#: apart, put the last seen one at 87.5: the calibration's pixels are left as they were)
+CAP_SEEN_COS = 0.0
 #: the model's mouth is shown through lips parted more than at calibration: faded in from
 #: ``MOUTH_FADE_MM[0]`` to ``MOUTH_FADE_MM[1]`` of extra mean gap between the inner lip
 #: margins (mm; below it the calibration's own mouth is stretched, a dark line at closed lips)
@@ -367,8 +372,20 @@ class PictureModel:
         self._gaze_cal = g_cal.copy()
         self._gaze_last = g_cal.copy()
         for _, _, c, i0, gi in self._eyes:
-            pts = c + self._eye_radius * cap_dirs @ _gaze_matrix(*g_cal[gi]).T
-            self._src[i0 : i0 + len(cap_dirs)] = camera.project(cal_pose.apply(pts))
+            pts = cal_pose.apply(c + self._eye_radius * cap_dirs @ _gaze_matrix(*g_cal[gi]).T)
+            xy = camera.project(pts)
+            # the eyeball's part the calibration did not see (turned away from the camera):
+            # its source is just outside the eyeball's outline, where the atlas has the
+            # sclera's colour (on the sphere's far side it would read the front's pixels)
+            centre = cal_pose.apply(c[None])[0]
+            normal = (pts - centre) / self._eye_radius
+            seen = -(normal * pts).sum(axis=1) / np.linalg.norm(pts, axis=1) > CAP_SEEN_COS
+            cxy = camera.project(centre[None])[0]
+            r_px = camera.focal_px * self._eye_radius / max(-centre[2], 1e-6)
+            out = xy - cxy
+            out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-9)
+            xy[~seen] = cxy + (r_px + 1.5) * out[~seen]
+            self._src[i0 : i0 + len(cap_dirs)] = xy
         self._dst = np.zeros((n, 2))
         self._depth = np.zeros(n)
 
