@@ -16,6 +16,7 @@ from myoface.codec.picture import (
     LABEL_EYE,
     LABEL_MOUTH,
     PictureModel,
+    fill_holes,
     photo_setup,
 )
 from myoface.codec.warp import raster_warp, raster_warp_reference
@@ -365,3 +366,18 @@ def test_a_turning_head_leaves_the_background_beside_it_still(model, camera, cal
     diff_dragged = np.abs(dragged.astype(int) - frame)[beside].max(axis=1)
     assert (diff_still <= 2).mean() > 0.99  # measured: 1.0
     assert (diff_dragged > 10).mean() > 0.3  # measured: 0.65
+
+
+def test_fill_holes_keeps_what_is_known_and_fills_the_rest_smoothly():
+    """A smooth ramp with a hole: the known pixels stay, the hole is filled from around it
+    (push-pull: within 3 grey levels of the ramp it cut out on average, no value outside the
+    known ones' range)."""
+    ys, xs = np.mgrid[0:64, 0:96]
+    ramp = np.repeat((40 + 1.5 * xs + 0.5 * ys).astype(np.uint8)[:, :, None], 3, axis=2)
+    known = np.ones((64, 96), bool)
+    known[20:44, 30:60] = False
+    out = fill_holes(ramp, known)
+    np.testing.assert_array_equal(out[known], ramp[known])
+    hole = ~known
+    assert out[hole].min() >= ramp[known].min() and out[hole].max() <= ramp[known].max()
+    assert np.abs(out[hole].astype(int) - ramp[hole]).mean() < 3.0  # measured: 0.9
