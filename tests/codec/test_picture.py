@@ -17,6 +17,7 @@ from myoface.codec.picture import (
     LABEL_MOUTH,
     PictureModel,
     fill_holes,
+    fill_rows,
     photo_setup,
 )
 from myoface.codec.warp import raster_warp, raster_warp_reference
@@ -381,3 +382,20 @@ def test_fill_holes_keeps_what_is_known_and_fills_the_rest_smoothly():
     hole = ~known
     assert out[hole].min() >= ramp[known].min() and out[hole].max() <= ramp[known].max()
     assert np.abs(out[hole].astype(int) - ramp[hole]).mean() < 3.0  # measured: 0.9
+
+
+def test_fill_rows_continues_the_background_beside_a_hole():
+    """A white door with a dark frame 10 px left of a hole (where a head was) and a vertical
+    trim line through it: away from the trim the hole is filled with the door's white from
+    beside it (measured: 230, the door's own), not a blend with the frame's dark
+    (:func:`fill_holes`' push-pull: down to 175 here)."""
+    img = np.full((80, 120, 3), 230, np.uint8)
+    img[:, :20] = 20  # the frame
+    img[:, 60:62] = 150  # the trim
+    known = np.ones((80, 120), bool)
+    known[20:60, 30:70] = False
+    out = fill_rows(img, known)
+    np.testing.assert_array_equal(out[known], img[known])
+    hole = out[20:60, 30:70].astype(int)
+    away = np.r_[0:26, 36:40]  # the hole's columns 4 px or more from the trim
+    assert hole[:, away].min() >= 215

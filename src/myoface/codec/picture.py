@@ -11,7 +11,7 @@ move with the head (hair, ears, neck: the head's rigid motion), then with less o
 at all: the picture's border and everything far from the head stay still. Nearer the head, the
 person is told from the background once, in the calibration frame (GrabCut,
 :func:`person_mask`): the warped person is laid over a still background plate, filled where the
-head was (:func:`fill_holes`), so the room behind a turning head is not dragged along.
+head was (:func:`fill_rows`), so the room behind a turning head is not dragged along.
 
 What the picture cannot supply is the model's:
 
@@ -62,6 +62,7 @@ __all__ = [
     "PictureModel",
     "PictureStats",
     "fill_holes",
+    "fill_rows",
     "person_mask",
     "photo_setup",
     "tissue_response",
@@ -80,7 +81,7 @@ LABEL_STILL, LABEL_AROUND, LABEL_EYE, LABEL_MOUTH, LABEL_SKIN = 0, 1, 2, 3, 4
 #: outer rings are ``below`` instead
 RINGS = (
     # scale, back_mm, weight, below
-    (1.30, 15.0, 1.0, 0.8),
+    (1.30, 15.0, 1.0, 0.6),
     (1.75, 35.0, 0.55, 0.15),
     (2.50, 60.0, 0.0, 0.0),
 )
@@ -834,7 +835,7 @@ def person_mask(frame: np.ndarray, rim_px, ring2_px, ring3_px):
     Returns (mask, plate): ``mask`` (H, W) float32 in [0, 1], 1 on the person and softened
     outwards by :data:`SEGMENT_SOFT_PX` (so that it is 1 wherever the hard mask is), and
     ``plate`` (H, W, 3) uint8, the frame with the head's pixels (down to :data:`SEGMENT_NECK`
-    below the chin) filled from the background around them (:func:`fill_holes`; what shows
+    below the chin) filled from the background beside them (:func:`fill_rows`; what shows
     where the head moves away); (None, None) when GrabCut finds no background."""
     import cv2
 
@@ -890,11 +891,58 @@ def person_mask(frame: np.ndarray, rim_px, ring2_px, ring3_px):
     d = 2 * SEGMENT_MARGIN_PX + 1
     hole = cv2.dilate(head.astype(np.uint8), np.ones((d, d), np.uint8)).astype(bool)
     plate = frame.copy()
-    plate[hole] = fill_holes(frame, ~hole)[hole]
+    plate[hole] = fill_rows(frame, ~(hole | hard))[hole]  # from the background alone
     person = hard | hole
     soft = cv2.GaussianBlur(person.astype(np.float32), (0, 0), SEGMENT_SOFT_PX)
     mask = np.maximum(soft, person.astype(np.float32))
     return mask.astype(np.float32), plate
+
+
+def _fill_along_rows(img: np.ndarray, known: np.ndarray):
+    """Each unknown pixel of ``img`` (H, W, C) float32 interpolated linearly between the
+    nearest known pixels left and right on its row (the one there where a side has none), and
+    its distance (px) to the nearer of them (inf on a row without any)."""
+    h, w = known.shape
+    cols = np.arange(w)
+    left = np.maximum.accumulate(np.where(known, cols, -1), axis=1)
+    right = np.minimum.accumulate(np.where(known, cols, w)[:, ::-1], axis=1)[:, ::-1]
+    rows = np.arange(h)[:, None]
+    has_l, has_r = left >= 0, right < w
+    vl = img[rows, np.clip(left, 0, w - 1)]
+    vr = img[rows, np.clip(right, 0, w - 1)]
+    span = np.maximum(right - left, 1).astype(np.float32)
+    t = np.clip((cols[None, :] - left) / span, 0.0, 1.0)[:, :, None]
+    both = (has_l & has_r)[:, :, None]
+    out = np.where(both, (1 - t) * vl + t * vr, np.where(has_l[:, :, None], vl, vr))
+    dist = np.minimum(np.where(has_l, cols - left, np.inf), np.where(has_r, right - cols, np.inf))
+    return out, dist.astype(np.float32)
+
+
+def fill_rows(image: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """``image`` (H, W, 3) uint8 with its pixels outside ``known`` (H, W) bool filled from
+    the known pixels on the same row and the same column: each direction's linear
+    interpolation between the nearest known pixels on either side, weighed by the inverse of
+    its distance to them (near a hole's side its row decides, near its top its column), then
+    softened inside the holes (a Gaussian of 1.5 px). Behind a head, the background beside and
+    above it is what is most likely there: a door's edges, a wall's colour, continued, not a
+    blend of the whole room's. The known pixels unchanged; :func:`fill_holes` where neither
+    direction has a known pixel. Returns a new uint8 image."""
+    import cv2
+
+    img = image.astype(np.float32)
+    by_row, d_row = _fill_along_rows(img, known)
+    by_col, d_col = _fill_along_rows(img.transpose(1, 0, 2), known.T)
+    by_col, d_col = by_col.transpose(1, 0, 2), d_col.T
+    w_row = np.where(np.isfinite(d_row), 1.0 / np.maximum(d_row, 1.0), 0.0)[:, :, None]
+    w_col = np.where(np.isfinite(d_col), 1.0 / np.maximum(d_col, 1.0), 0.0)[:, :, None]
+    total = w_row + w_col
+    out = (w_row * by_row + w_col * by_col) / np.maximum(total, 1e-12)
+    none = total[:, :, 0] == 0
+    if none.any():
+        out[none] = fill_holes(image, known)[none]
+    soft = cv2.GaussianBlur(out.astype(np.float32), (0, 0), 1.5)
+    out = np.where(known[:, :, None], img, soft)
+    return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 
 def fill_holes(image: np.ndarray, known: np.ndarray) -> np.ndarray:
