@@ -449,7 +449,7 @@ def test_cli_report_and_openface(smile_clip_384, tmp_path, capsys):
 
     import imageio.v3 as iio
 
-    from myoface.analysis.openface import OPENFACE_COLUMNS
+    from myoface.analysis.openface import MYOFACE_COLUMNS, OPENFACE_COLUMNS
     from myoface.cli import main
 
     video, frames = smile_clip_384[:2]
@@ -471,7 +471,7 @@ def test_cli_report_and_openface(smile_clip_384, tmp_path, capsys):
     assert iio.imread(out / "fidelity.png").shape[0] > 100 * len(JUDGED_REGIONS)
     with open(out / "openface.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    assert list(rows[0]) == list(OPENFACE_COLUMNS)
+    assert list(rows[0]) == [*OPENFACE_COLUMNS, *MYOFACE_COLUMNS]  # (the expressions last)
     assert len(rows) == len(frames) and all(r["success"] == "1" for r in rows)
     au12 = [float(r["AU12_r"]) for r in rows]
     assert au12[4] > au12[0] + 1.0  # the smile's apex against the neutral start

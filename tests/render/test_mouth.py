@@ -2,6 +2,9 @@
 lips part, the lower ones with the jaw; the lips never pass through the teeth or each other
 (hypothesis, relaxed tissue)."""
 
+from dataclasses import replace
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -132,6 +135,61 @@ def test_lips_never_pass_through_the_teeth_or_each_other(fm, values, on):
     st_ = fm.relax(c).state
     v = contact_violations(fm.skin_vertices(st_), fm.dentition, fm.jaw_pose(st_))
     assert v == {"in_upper": 0, "in_lower": 0, "lip_cross_mm": 0.0}
+
+
+def _lower_teeth_through_skin(fm, skin, jaw_pose, res_mm: float = 0.25) -> float:
+    """How far (mm) the lower arch's front surface (a 60 x 40 grid of its crowns and gums),
+    carried by the jaw, lies in front of the skin seen straight on (an orthographic z-buffer
+    of the skin's triangles, ``res_mm`` a pixel; the mouth's opening has no skin, so the teeth
+    seen through it do not count): 0 when the skin covers them."""
+    from myoface.analysis.photometric import _zbuffer
+    from myoface.face.teeth import _rigid_apply
+
+    arch = fm.dentition.lower
+    xs, hs = np.meshgrid(
+        np.linspace(arch.xc - arch.half_width, arch.xc + arch.half_width, 60),
+        np.linspace(0.0, arch.height_mm, 40),
+    )
+    x, h = xs.ravel(), hs.ravel()
+    front = np.column_stack([x, arch.edge(x) + arch.direction * h, arch.front_z(x)])
+    teeth = _rigid_apply(jaw_pose, front)
+    lo = skin[:, :2].min(axis=0) - 1.0
+    uv = np.ascontiguousarray((skin[:, :2] - lo) / res_mm)
+    w, hgt = (int(v) + 2 for v in uv.max(axis=0))
+    tris = np.asarray(fm.face.triangles)
+    zb = _zbuffer(uv, np.ascontiguousarray(-skin[:, 2]), tris, hgt, w)
+    q = ((teeth[:, :2] - lo) / res_mm).astype(int)
+    on = (q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < hgt)
+    skin_z = np.full(len(teeth), -np.inf)
+    skin_z[on] = -zb[q[on, 1], q[on, 0]]
+    over = teeth[:, 2] - skin_z
+    over = over[np.isfinite(over)]
+    return float(max(over.max(), 0.0)) if len(over) else 0.0
+
+
+def test_the_lower_teeth_never_show_through_the_chin(fm):
+    """The skin below the lower lip covers the lower teeth (face.teeth.CHIN_CLEARANCE_MM): on
+    the sample video's analysed smile (the 3-D fit's contractions, the lower lip drawn down
+    and back) the coarse mesh's triangles passed inside the arch by up to 1.1 mm without it,
+    which a glTF client shows (myoface export)."""
+    from myoface.analysis.resynthesis import read_performance
+
+    csv = Path(__file__).parents[1] / "export" / "data" / "single_face_contractions.csv"
+    from myoface.face.teeth import lip_contact
+
+    perf = read_performance(csv, fm)
+    lips_only = replace(fm.dentition, chin=np.zeros(0, np.int64), chin_clearance=np.zeros(0))
+    state = fm.rest_state()
+    for k in (30, 45, 60):
+        state = fm.relax(perf.contractions[k], state).state
+        pose = fm.jaw_pose(state)
+        assert _lower_teeth_through_skin(fm, fm.skin_vertices(state), pose) == 0.0, k
+        # (the chin's clearance is what does it: the lips' contact alone lets them through)
+        raw = np.array(state.x[: fm.face.n_vertices])
+        assert _lower_teeth_through_skin(fm, lip_contact(raw, lips_only, pose), pose) > 0.3, k
+    for aus in ({12: 1.0, 25: 0.8, 26: 0.6}, {15: 1.0, 16: 1.0, 26: 0.5}, {17: 1.0, 24: 1.0}):
+        st_ = fm.relax(mf.au_contractions(aus, fm.ids)).state
+        assert _lower_teeth_through_skin(fm, fm.skin_vertices(st_), fm.jaw_pose(st_)) == 0.0, aus
 
 
 def test_contact_acts_where_the_tissue_alone_interpenetrates(fm):
