@@ -33,9 +33,10 @@ ANIMATE_MAX_SIDE = 1920
 def read_photo(path: str | os.PathLike, max_side: int = ANIMATE_MAX_SIDE) -> np.ndarray:
     """The photo at ``path`` as (H, W, 3) uint8 RGB, upright by its EXIF orientation, at most
     ``max_side`` pixels a side (scaled down, aspect kept)."""
+    import cv2
+
     from myoface.errors import MyofaceFileNotFoundError
     from myoface.face.image import read_image
-    from myoface.face.personal import _bounded
 
     p = Path(path)
     if p.is_dir():
@@ -43,7 +44,12 @@ def read_photo(path: str | os.PathLike, max_side: int = ANIMATE_MAX_SIDE) -> np.
     if not p.is_file():
         raise MyofaceFileNotFoundError(f"--in-photo: no such photo: {p}")
     img = read_image(p, "photo", max_side=2 * max_side, orient=True)
-    return _bounded(img, max_side)
+    h, w = img.shape[:2]
+    if max(h, w) <= max_side:
+        return img
+    k = max_side / max(h, w)
+    size = (max(1, round(w * k)), max(1, round(h * k)))
+    return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
 
 
 #: the panels of :meth:`PhotoAnimation.showcase`: (title, kind, name, intensity, gaze rad)
@@ -113,7 +119,7 @@ class PhotoAnimation:
         """(rows, columns) of the photo around the head: the face's rim at calibration,
         ``margin`` of its size wider each side (clipped to the photo)."""
         pm = self.picture
-        rim = pm._src[pm._rim]
+        rim = pm.face_outline()
         (x0, y0), (x1, y1) = rim.min(axis=0), rim.max(axis=0)
         mx, my = margin * (x1 - x0), margin * (y1 - y0)
         h, w = pm.height, pm.width

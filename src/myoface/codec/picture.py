@@ -500,6 +500,10 @@ class PictureModel:
         if "mouth" in self._openings and model.dentition is not None:
             self._renderer()  # built now: not a stall at the first frame that opens the lips
 
+    def face_outline(self) -> np.ndarray:
+        """The face's rim (K, 2) px (x, y) in the calibration frame, where the model put it."""
+        return self._src[self._rim].copy()
+
     # ------------------------------------------------------------------ checks
     def _check(self, params) -> FrameParams:
         if not isinstance(params, FrameParams):
