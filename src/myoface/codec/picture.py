@@ -125,6 +125,9 @@ CAP_SEEN_COS = 0.0
 #: ``MOUTH_FADE_MM[0]`` to ``MOUTH_FADE_MM[1]`` of extra mean gap between the inner lip
 #: margins (mm; below it the calibration's own mouth is stretched, a dark line at closed lips)
 MOUTH_FADE_MM = (0.3, 1.5)
+#: the model's mouth is softened by a Gaussian of this sigma (px of the picture): a camera's
+#: optics and a video codec blur the picture's own lips and teeth about as much
+MOUTH_SOFT_PX = 0.7
 #: the mouth's edge is feathered over this many pixels (a Gaussian of this sigma)
 MOUTH_FEATHER_PX = 1.0
 #: the model's mouth is rendered at this scale of the picture (its inside has no fine detail;
@@ -704,7 +707,8 @@ class PictureModel:
         gy = ((np.arange(y0, y1) + 0.5 - dy) - 0.5 * h) * k + 0.5 * rh - 0.5
         mx, my = np.meshgrid(gx.astype(np.float32), gy.astype(np.float32))
         crop = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        crop = crop.astype(np.float32)
+        # as a camera would see it: the model's crisp gaps between the teeth softened
+        crop = cv2.GaussianBlur(crop.astype(np.float32), (0, 0), MOUTH_SOFT_PX)
         region = out[y0:y1, x0:x1].astype(np.float32)
         # the render's light matched to the picture's: the brightness of the lips around the
         # opening in the picture over the render's (one grey gain: the colours are the model's)
