@@ -138,21 +138,16 @@ def test_lips_never_pass_through_the_teeth_or_each_other(fm, values, on):
 
 
 def _lower_teeth_through_skin(fm, skin, jaw_pose, res_mm: float = 0.25) -> float:
-    """How far (mm) the lower arch's front surface (a 60 x 40 grid of its crowns and gums),
-    carried by the jaw, lies in front of the skin seen straight on (an orthographic z-buffer
-    of the skin's triangles, ``res_mm`` a pixel; the mouth's opening has no skin, so the teeth
-    seen through it do not count): 0 when the skin covers them."""
+    """How far (mm) the vertices of the lower teeth, gums and tongue as the renderer and the
+    glTF export draw them (render.mouth.mouth_meshes), carried by the jaw, lie in front of the
+    skin seen straight on (an orthographic z-buffer of the skin's triangles, ``res_mm`` a
+    pixel; the mouth's opening has no skin, so the teeth seen through it do not count): 0 when
+    the skin covers them."""
     from myoface.analysis.photometric import _zbuffer
     from myoface.face.teeth import _rigid_apply
+    from myoface.render.mouth import mouth_meshes
 
-    arch = fm.dentition.lower
-    xs, hs = np.meshgrid(
-        np.linspace(arch.xc - arch.half_width, arch.xc + arch.half_width, 60),
-        np.linspace(0.0, arch.height_mm, 40),
-    )
-    x, h = xs.ravel(), hs.ravel()
-    front = np.column_stack([x, arch.edge(x) + arch.direction * h, arch.front_z(x)])
-    teeth = _rigid_apply(jaw_pose, front)
+    teeth = _rigid_apply(jaw_pose, mouth_meshes(fm.dentition).lower[0])
     lo = skin[:, :2].min(axis=0) - 1.0
     uv = np.ascontiguousarray((skin[:, :2] - lo) / res_mm)
     w, hgt = (int(v) + 2 for v in uv.max(axis=0))
@@ -170,8 +165,8 @@ def _lower_teeth_through_skin(fm, skin, jaw_pose, res_mm: float = 0.25) -> float
 def test_the_lower_teeth_never_show_through_the_chin(fm):
     """The skin below the lower lip covers the lower teeth (face.teeth.CHIN_CLEARANCE_MM): on
     the sample video's analysed smile (the 3-D fit's contractions, the lower lip drawn down
-    and back) the coarse mesh's triangles passed inside the arch by up to 1.1 mm without it,
-    which a glTF client shows (myoface export)."""
+    and back) the coarse mesh's triangles passed in front of the lower teeth and gums by up to
+    1.85 mm without it, which a glTF client shows (myoface export)."""
     from myoface.analysis.resynthesis import read_performance
 
     csv = Path(__file__).parents[1] / "export" / "data" / "single_face_contractions.csv"

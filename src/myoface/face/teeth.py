@@ -63,12 +63,12 @@ CONTACT_MARGIN_MM = 0.3
 #: that is less: it covers the lower teeth with soft tissue several mm thick, but the face
 #: mesh is coarse there (a dozen vertices) and its flat triangles pass inside the curved arch
 #: when the vertices are only just out of it. On the sample video's analysed smile the
-#: triangles then showed the lower teeth through the chin by up to 1.1 mm over 300 of 2400
-#: points of the arch's front (a glTF client, which draws the teeth where they are, showed
+#: triangles then passed behind the lower teeth and gums as drawn (render.mouth) by up to
+#: 1.86 mm on 17 of 24 frames (a glTF client, which draws the teeth where they are, showed
 #: them; myoface's renderer draws the mouth's inside only within the lips' opening). 1.5 mm
-#: covers them there (1 mm left 0.04 mm on 2 of 24 frames); 2 mm pushed the skin beside the
-#: chin's judged points far enough that DIS read the chin on a render of known contractions at
-#: a correlation of 0.89 against 0.93 (tests/analysis/test_fidelity.py)
+#: (with the gums 0.45 mm proud of the crowns) covers them on every frame; 2 mm pushed the
+#: skin beside the chin's judged points far enough that DIS read the chin on a render of known
+#: contractions at a correlation of 0.89 against 0.93 (tests/analysis/test_fidelity.py)
 CHIN_CLEARANCE_MM = 1.5
 #: projection rounds (teeth and lips alternate; the lower arch's push has a vertical part)
 CONTACT_ROUNDS = 4
