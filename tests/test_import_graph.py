@@ -20,6 +20,7 @@ LEVELS = (
     ("myoface.synth",),
     ("myoface.analysis",),
     ("myoface.export",),
+    ("myoface.codec",),
     ("myoface.viewer",),
     ("myoface.bench",),
     ("myoface.commands",),
