@@ -446,9 +446,9 @@ def _plot(quick: bool) -> str | None:
         ours = [c["qualities"][q]["ours"] for q in _qualities(quick)]
         ax.plot([o["total_bytes"] / 1e3 for o in ours], [o["face_psnr_db"] for o in ours],
                 "o-", color="C0", label="myoface codec (low..max)")  # fmt: skip
-        for o in ours:
+        for k, o in enumerate(ours):
             ax.annotate(o["quality"], (o["total_bytes"] / 1e3, o["face_psnr_db"]), fontsize=7,
-                        xytext=(3, -9), textcoords="offset points")  # fmt: skip
+                        xytext=(-6, -11 if k % 2 else 6), textcoords="offset points")  # fmt: skip
         # x264's curve: its best size at each rate measured
         pts = {}
         for k, v in _cache.items():
@@ -461,6 +461,8 @@ def _plot(quick: bool) -> str | None:
         zr = ours[0]["zero_rate"]["face_psnr_db"]
         ax.axhline(zr, color="0.5", ls="--", label="zero rate (calibration frame)")
         ax.set_xscale("log")
+        lo = min(o["total_bytes"] for o in ours) / 1e3
+        ax.set_xlim(lo / 1.5, max(o["total_bytes"] for o in ours) / 1e3 * 12)
         ax.set_xlabel("total bytes (kB, log)")
         ax.set_ylabel("face region PSNR-Y (dB)")
         ax.set_title(f"{c['clip']}: {c['frames']} frames {c['size'][0]}x{c['size'][1]}",
