@@ -209,8 +209,12 @@ def fit_dentition(face) -> Dentition | None:
 #: the skin over the lower arch that keeps its clearance (:func:`_chin_region`): vertices at
 #: rest no more than this far in front of the arch (mm), ...
 CHIN_REACH_MM = 15.0
-#: ... and from this far above its incisal edge (mm) down over its crowns and gums
+#: ... and from this far above its incisal edge (mm) down over its crowns and gums, to this
+#: far below the band (mm): the triangles from a vertex inside the band's height to one below
+#: it pass over the gums' lowest part (on the face made from the sample video's photo, by up to
+#: 0.6 mm with the vertices below the band left free)
 CHIN_ABOVE_EDGE_MM = 2.0
+CHIN_BELOW_BAND_MM = 6.0
 
 
 def _chin_region(v: np.ndarray, lower: Arch, lips: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -222,7 +226,7 @@ def _chin_region(v: np.ndarray, lower: Arch, lips: np.ndarray) -> tuple[np.ndarr
     near = (
         (np.abs(v[:, 0] - lower.xc) <= lower.half_width)
         & (h > -CHIN_ABOVE_EDGE_MM)
-        & (h < lower.height_mm)
+        & (h < lower.height_mm + CHIN_BELOW_BAND_MM)
         & (depth > 0.0)
         & (depth < CHIN_REACH_MM)
     )
@@ -311,7 +315,8 @@ def lip_contact(skin: np.ndarray, dentition: Dentition, jaw_pose=None) -> np.nda
 
 
 def _keep_clear(arch: Arch, p: np.ndarray, clearance: np.ndarray) -> np.ndarray:
-    """Points (N, 3) over the arch's band (within its width and height) and less than
+    """Points (N, 3) over the arch's band (within its width and height, and down to
+    :data:`CHIN_BELOW_BAND_MM` below it) and less than
     ``clearance`` (N,) mm in front of it (or inside it) moved forward to ``clearance``."""
     out = np.array(p, dtype=np.float64)
     depth = arch.signed_depth(out)
@@ -319,7 +324,7 @@ def _keep_clear(arch: Arch, p: np.ndarray, clearance: np.ndarray) -> np.ndarray:
     over = (
         (np.abs(out[:, 0] - arch.xc) <= arch.half_width)
         & (h > -CHIN_ABOVE_EDGE_MM)
-        & (h < arch.height_mm)
+        & (h < arch.height_mm + CHIN_BELOW_BAND_MM)
         & (depth > -arch.thickness_mm)
         & (depth < clearance)
     )
