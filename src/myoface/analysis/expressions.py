@@ -162,7 +162,7 @@ def prototypes() -> dict[str, tuple[Prototype, ...]]:
 def rule_aus() -> tuple[int, ...]:
     """The AUs the rule reads: OpenFace's (:data:`~myoface.analysis.openface.OPENFACE_AUS`),
     the ones the OpenFace CSV reports."""
-    from myoface.analysis.openface import OPENFACE_AUS
+    from myoface.analysis.au_intensity import OPENFACE_AUS
 
     return OPENFACE_AUS
 
@@ -254,7 +254,7 @@ def expression_labels(scores) -> list[str]:
 
 @lru_cache(maxsize=8)
 def _basis(ids: tuple):
-    from myoface.analysis.openface import au_basis
+    from myoface.analysis.au_intensity import au_basis
 
     return au_basis(list(ids), rule_aus())
 
@@ -263,7 +263,7 @@ def au_fractions(contractions, muscle_ids) -> np.ndarray:
     """AU intensities (T, len(:func:`rule_aus`)) in [0, 1] of contractions (T, M) over
     ``muscle_ids``: :func:`~myoface.analysis.openface.au_intensities` / 5 (NaN for an AU not
     measured, and for a frame whose contractions are not all finite)."""
-    from myoface.analysis.openface import OPENFACE_SCALE, au_intensities
+    from myoface.analysis.au_intensity import OPENFACE_SCALE, au_intensities
 
     ids = tuple(muscle_ids)
     x = au_intensities(contractions, list(ids), rule_aus(), basis=_basis(ids))
