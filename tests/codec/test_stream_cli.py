@@ -103,3 +103,41 @@ def test_a_bad_stream_ends_in_one_line_and_no_video(encoded, tmp_path, capsys, w
     assert "\n" not in err
     assert ("corrupted stream" if what == "corrupted" else "format version 9") in err
     assert not out.exists()
+
+
+def test_an_interrupted_encode_keeps_a_complete_stream(tmp_path):
+    """SIGINT once packets are being written: exit status 130, and the stream under the
+    user's name is complete (its end marker written) with the frames encoded before."""
+    import os
+    import signal
+    import time
+
+    from myoface.codec.stream import FileSource, StreamReader
+
+    video = shared_path("video", "single_face.mp4")
+    out = tmp_path / "int.myo"
+    p = subprocess.Popen(
+        [sys.executable, "-m", "myoface", "encode", str(video), "-o", str(out), "--quiet"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    t0 = time.monotonic()
+    part = None
+    while time.monotonic() - t0 < 240 and p.poll() is None:
+        parts = list(tmp_path.glob(".int.*.part.myo"))
+        if parts and parts[0].stat().st_size > 2000:  # (the header and some packets)
+            part = parts[0]
+            break
+        time.sleep(0.02)
+    assert part is not None, "the encode wrote no packets"
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 128 + signal.SIGINT, err
+    assert "interrupted (SIGINT)" in err and "is complete with the frames encoded" in err
+    assert not list(tmp_path.glob(".int.*"))  # (no temporary file left)
+    src = FileSource(out)
+    try:
+        frames = list(StreamReader(src))  # (a truncated stream would raise)
+    finally:
+        src.close()
+    assert 1 <= len(frames) < 72
+    assert os.path.getsize(out) > 2000
