@@ -475,3 +475,25 @@ def test_cli_report_and_openface(smile_clip_384, tmp_path, capsys):
     assert len(rows) == len(frames) and all(r["success"] == "1" for r in rows)
     au12 = [float(r["AU12_r"]) for r in rows]
     assert au12[4] > au12[0] + 1.0  # the smile's apex against the neutral start
+
+
+@needs_mediapipe
+def test_a_video_against_itself_and_against_a_still_one(smile_clip_384, tmp_path):
+    """fidelity_of_video (what a decoder makes of a video, the codec's measure): a video
+    against itself explains all of its motion at gain 1; against its first frame held (a
+    still reconstruction) none of it."""
+    from myoface.analysis.fidelity import fidelity_of_video
+    from myoface.render import VideoWriter
+
+    video, frames, _, _ = smile_clip_384
+    same = fidelity_of_video(video, video, 0)
+    assert same.n_frames == len(frames) and same.overall.rms_in > 0.01
+    assert same.overall.explained == pytest.approx(1.0, abs=1e-9)
+    assert same.overall.gain == pytest.approx(1.0, abs=1e-9)
+    still_path = tmp_path / "still.mp4"
+    with VideoWriter(still_path, fps=10) as vw:
+        for _ in frames:
+            vw.write(frames[0])
+    still = fidelity_of_video(video, still_path, 0)
+    assert abs(still.overall.gain) < 0.05 and abs(still.overall.explained) < 0.05, still.overall
+    assert "dis" in still.method

@@ -634,6 +634,36 @@ def read_video_points(video_path, frames, calibration_frame: int, reader: str = 
     return ref, out, unsure, lm
 
 
+def fidelity_of_video(
+    video_in, video_out, calibration_frame: int, frames=None, reader: str = READER
+) -> FidelityResult:
+    """How much of ``video_in``'s expression motion ``video_out`` shows, e.g. what a decoder
+    made of it (``myoface decode``): both read by the same motion reader from their own frame
+    ``calibration_frame`` (:func:`read_video_points`: MediaPipe's points there, followed by
+    ``reader``), the head's motion in the image taken out of each, the displacements of the
+    judged regions (:data:`JUDGED_REGIONS`) compared frame by frame (``frames``: video frame
+    indices, default every frame of ``video_out``). A reconstruction made by moving the
+    calibration picture is a real frame warped by a smooth field, where the reader's gain was
+    validated (0.96-1.04, :data:`READER_VALIDATION`)."""
+    if frames is None:
+        frames = list(range(open_video(video_out).n_frames))
+    frames = [int(f) for f in frames]
+    ref_in, pts_in, _, _ = read_video_points(video_in, frames, calibration_frame, reader)
+    ref_out, pts_out, _, _ = read_video_points(video_out, frames, calibration_frame, reader)
+    d_in = _region_displacements(ref_in, pts_in, JUDGED_REGIONS)
+    d_out = _region_displacements(ref_out, pts_out, JUDGED_REGIONS)
+    per = {k: scores(d_in[k], d_out[k]) for k in d_in}
+    cat_in = np.concatenate(list(d_in.values()), axis=1)
+    cat_out = np.concatenate(list(d_out.values()), axis=1)
+    both = np.isfinite(cat_in).reshape(len(frames), -1).all(1) & np.isfinite(cat_out).reshape(
+        len(frames), -1
+    ).all(1)
+    how = f"the same motion reader ({reader}) on both videos, from their frame {calibration_frame}"
+    return FidelityResult(
+        scores(cat_in, cat_out), per, int(calibration_frame), int(both.sum()), 2, d_in, d_out, how
+    )
+
+
 def fidelity_of_analysis(
     video_path,
     contractions_csv,
