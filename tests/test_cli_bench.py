@@ -39,10 +39,20 @@ def test_bench_unknown_prefix(capsys):
     assert main(["bench", "--only", "nothing."]) == 1
 
 
-def test_bench_json_record_schema(tmp_path, capsys):
-    out = tmp_path / "b.json"
-    assert main(["bench", "--quick", "--only", "tissue.rk2", "--json", str(out)]) == 0
-    rec = json.loads(out.read_text())
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    """Every benchmark in quick mode, once for the module (``myoface bench --quick --json``):
+    the records and their detail (each benchmark's JIT compilation and models cost most of a
+    quick run; the tests below read this one run rather than start their own)."""
+    out = tmp_path_factory.mktemp("bench") / "all.json"
+    assert main(["bench", "--quick", "--json", str(out)]) == 0
+    records = json.loads(out.read_text())
+    return records, json.loads(out.with_suffix(".detail.json").read_text())
+
+
+@pytest.mark.slow
+def test_bench_json_record_schema(quick_run):
+    rec = [r for r in quick_run[0] if r["name"] == "tissue.rk2_steps_per_s"]
     assert len(rec) == 1
     r = rec[0]
     assert set(r) == {
@@ -108,10 +118,12 @@ def test_benchmarks_md_generator(tmp_path):
 
 
 @pytest.mark.slow
-def test_every_benchmark_runs_quick(tmp_path):
-    out = tmp_path / "all.json"
-    assert main(["bench", "--quick", "--json", str(out)]) == 0
-    assert all(r["value"] == r["value"] for r in json.loads(out.read_text()))  # no NaN
+def test_every_benchmark_runs_quick(quick_run):
+    from myoface.bench import load_all
+
+    records = quick_run[0]
+    assert {r["name"] for r in records} == set(load_all())
+    assert all(r["value"] == r["value"] for r in records)  # no NaN
 
 
 def test_bench_list_has_the_gaze_benchmark(capsys):
@@ -120,20 +132,18 @@ def test_bench_list_has_the_gaze_benchmark(capsys):
 
 
 @pytest.mark.slow
-def test_gaze_benchmark_runs_quick(tmp_path):
+def test_gaze_benchmark_runs_quick(quick_run):
     """``analysis.gaze_error_deg`` on its quick clip (30 frames): a finite value in degrees and
     the detail's parts (each eye on the analysis and on the reader alone, the blinks)."""
     from myoface.facemesh import mediapipe_available
 
     if not mediapipe_available():
         pytest.skip('needs pip install "myoface[mediapipe]"')
-    out = tmp_path / "gaze.json"
-    assert main(["bench", "--quick", "--only", "analysis.gaze", "--json", str(out)]) == 0
-    (rec,) = json.loads(out.read_text())
-    assert rec["name"] == "analysis.gaze_error_deg" and rec["unit"] == "deg"
+    records, detail = quick_run
+    (rec,) = [r for r in records if r["name"] == "analysis.gaze_error_deg"]
+    assert rec["unit"] == "deg"
     assert np.isfinite(rec["value"]) and 0 < rec["value"] < 45 and rec["n"] == 30
-    detail = json.loads(out.with_suffix(".detail.json").read_text())
-    fit = detail.get("analysis.gaze_error_deg", detail)["fit"]
+    fit = detail["analysis.gaze_error_deg"]["fit"]
     assert set(fit["per_eye"]) == {"l", "r"} == set(fit["reader_on_true_geometry"])
     assert fit["value"] == pytest.approx(rec["value"], abs=1e-6)
     for eye in fit["per_eye"].values():
