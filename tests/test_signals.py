@@ -121,3 +121,21 @@ def test_deferred_works_without_stop_signals_too():
     assert done == ["step"]
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     signal.signal(signal.SIGINT, before)
+
+
+def test_an_interrupt_inside_a_c_callback_is_still_an_interrupt():
+    """A stop signal that lands inside a C extension's callback (numba unpickling a compiled
+    function, seen in CI) comes out as a SystemError caused by the Interrupted: the CLI reads
+    the interrupt from the chain (exit 128 + the signal), anything else stays an error."""
+    from myoface._signals import Interrupted
+    from myoface.cli import _interrupt_in
+
+    inner = Interrupted(signal.SIGINT)
+    try:
+        try:
+            raise inner
+        except KeyboardInterrupt as e:
+            raise SystemError("returned a result with an exception set") from e
+    except SystemError as outer:
+        assert _interrupt_in(outer) is inner
+    assert _interrupt_in(SystemError("other")) is None

@@ -121,7 +121,12 @@ def main(argv: list[str] | None = None) -> int:
                 raise
             print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
             return 1
-        except KeyboardInterrupt as exc:
+        except (KeyboardInterrupt, SystemError) as err:
+            # (a signal that lands inside a C extension's callback, e.g. numba unpickling a
+            # compiled function, comes out as a SystemError caused by the Interrupted)
+            exc = _interrupt_in(err)
+            if exc is None:
+                raise
             signum = getattr(exc, "signum", signal.SIGINT)
             name = signal.Signals(signum).name
             # what the command kept, if it says (e.g. analyze's measured rows)
@@ -134,6 +139,18 @@ def main(argv: list[str] | None = None) -> int:
             what = "out of memory" if isinstance(exc, MemoryError) else _os_error(exc, args)
             print(f"{prog}: error: {what}", file=sys.stderr)
             return 1
+
+
+def _interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
+    """``exc`` if it is a KeyboardInterrupt, else the first one among its causes and
+    contexts (None if there is none)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 def _one_line(exc: BaseException) -> str:
