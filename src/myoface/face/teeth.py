@@ -222,14 +222,7 @@ def _chin_region(v: np.ndarray, lower: Arch, lips: np.ndarray) -> tuple[np.ndarr
     :data:`CHIN_REACH_MM` in front of it, and the depth each keeps
     (:data:`CHIN_CLEARANCE_MM`, or its depth at rest when that is less)."""
     depth = lower.signed_depth(v)
-    h = lower.direction * (v[:, 1] - lower.edge(v[:, 0]))
-    near = (
-        (np.abs(v[:, 0] - lower.xc) <= lower.half_width)
-        & (h > -CHIN_ABOVE_EDGE_MM)
-        & (h < lower.height_mm + CHIN_BELOW_BAND_MM)
-        & (depth > 0.0)
-        & (depth < CHIN_REACH_MM)
-    )
+    near = _over_chin_band(lower, v) & (depth > 0.0) & (depth < CHIN_REACH_MM)
     near[lips] = False
     chin = np.flatnonzero(near).astype(np.int64)
     return chin, np.minimum(CHIN_CLEARANCE_MM, depth[chin])
@@ -314,20 +307,24 @@ def lip_contact(skin: np.ndarray, dentition: Dentition, jaw_pose=None) -> np.nda
     return out
 
 
+def _over_chin_band(arch: Arch, p: np.ndarray) -> np.ndarray:
+    """Which points (N, 3) lie within the arch's width and from :data:`CHIN_ABOVE_EDGE_MM`
+    above its edge down to :data:`CHIN_BELOW_BAND_MM` below its band (at any depth)."""
+    h = arch.direction * (p[:, 1] - arch.edge(p[:, 0]))
+    return (
+        (np.abs(p[:, 0] - arch.xc) <= arch.half_width)
+        & (h > -CHIN_ABOVE_EDGE_MM)
+        & (h < arch.height_mm + CHIN_BELOW_BAND_MM)
+    )
+
+
 def _keep_clear(arch: Arch, p: np.ndarray, clearance: np.ndarray) -> np.ndarray:
     """Points (N, 3) over the arch's band (within its width and height, and down to
     :data:`CHIN_BELOW_BAND_MM` below it) and less than
     ``clearance`` (N,) mm in front of it (or inside it) moved forward to ``clearance``."""
     out = np.array(p, dtype=np.float64)
     depth = arch.signed_depth(out)
-    h = arch.direction * (out[:, 1] - arch.edge(out[:, 0]))
-    over = (
-        (np.abs(out[:, 0] - arch.xc) <= arch.half_width)
-        & (h > -CHIN_ABOVE_EDGE_MM)
-        & (h < arch.height_mm + CHIN_BELOW_BAND_MM)
-        & (depth > -arch.thickness_mm)
-        & (depth < clearance)
-    )
+    over = _over_chin_band(arch, out) & (depth > -arch.thickness_mm) & (depth < clearance)
     if over.any():
         q = out[over]
         out[over] = q + (clearance[over] - depth[over])[:, None] * arch.normal(q)
@@ -346,5 +343,6 @@ def contact_violations(skin: np.ndarray, dentition: Dentition, jaw_pose=None) ->
     return {
         "in_upper": int(d.upper.inside(p).sum()),
         "in_lower": int(d.lower.inside(low).sum()),
-        "lip_cross_mm": float(max(drop.max(), 0.0)) if len(drop) else 0.0,
+        # (a drop within rounding, 1e-9 mm, of the margins met halfway is no cross)
+        "lip_cross_mm": float(drop.max()) if len(drop) and drop.max() > 1e-9 else 0.0,
     }
