@@ -128,7 +128,7 @@ def test_an_interrupt_inside_a_c_callback_is_still_an_interrupt():
     function, seen in CI) comes out as a SystemError caused by the Interrupted: the CLI reads
     the interrupt from the chain (exit 128 + the signal), anything else stays an error."""
     from myoface._signals import Interrupted
-    from myoface.cli import _interrupt_in
+    from myoface._signals import interrupt_in as _interrupt_in
 
     inner = Interrupted(signal.SIGINT)
     try:

@@ -54,6 +54,20 @@ class Interrupted(KeyboardInterrupt):
         self.signum = signum
 
 
+def interrupt_in(exc: BaseException | None) -> KeyboardInterrupt | None:
+    """``exc`` if it is a KeyboardInterrupt, else the first one among its causes and contexts
+    (None if there is none): a stop signal that lands inside a C extension's callback (numba
+    unpickling a compiled function, seen in CI) comes out as a SystemError caused by the
+    :class:`Interrupted`, and is still an interruption."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def _signals() -> list[int]:
     return [getattr(signal, n) for n in STOP_SIGNALS if hasattr(signal, n)]
 

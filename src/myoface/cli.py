@@ -26,7 +26,7 @@ import warnings
 
 import myoface
 import myoface.commands
-from myoface._signals import stop_signals
+from myoface._signals import interrupt_in, stop_signals
 from myoface.errors import MyofaceError, MyofaceUsageError, MyofaceWarning, user_message
 
 
@@ -124,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
         except (KeyboardInterrupt, SystemError) as err:
             # (a signal that lands inside a C extension's callback, e.g. numba unpickling a
             # compiled function, comes out as a SystemError caused by the Interrupted)
-            exc = _interrupt_in(err)
+            exc = interrupt_in(err)
             if exc is None:
                 raise
             signum = getattr(exc, "signum", signal.SIGINT)
@@ -139,18 +139,6 @@ def main(argv: list[str] | None = None) -> int:
             what = "out of memory" if isinstance(exc, MemoryError) else _os_error(exc, args)
             print(f"{prog}: error: {what}", file=sys.stderr)
             return 1
-
-
-def _interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
-    """``exc`` if it is a KeyboardInterrupt, else the first one among its causes and
-    contexts (None if there is none)."""
-    seen = set()
-    while exc is not None and id(exc) not in seen:
-        if isinstance(exc, KeyboardInterrupt):
-            return exc
-        seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
-    return None
 
 
 def _one_line(exc: BaseException) -> str:

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from myoface._io import atomic_output
-from myoface._signals import clear_pending, deferred, held, raise_pending
+from myoface._signals import clear_pending, deferred, held, interrupt_in, raise_pending
 from myoface.analysis.contractions_csv import ContractionsCsvWriter
 from myoface.analysis.initfiles import load_init
 from myoface.analysis.pipeline import Tracking, make_analyzer
@@ -342,7 +342,10 @@ def analyze_to_folder(
             if interrupted is None:
                 stage = "commit"
                 tx.commit()  # (a stop signal in it is raised once it is done)
-        except KeyboardInterrupt as exc:
+        except BaseException as err:
+            exc = interrupt_in(err)  # (also one wrapped by a C callback it landed in)
+            if exc is None:
+                raise
             clear_pending()
             keep.enter_context(held())  # the kept files are written whole
             interrupted = exc
@@ -496,7 +499,10 @@ def _measure_into(run, model, out, show_progress, keep):
                                 )
                             (vw if name == "overlay" else extra[name]).write(img)
                     bar.update()
-            except KeyboardInterrupt as exc:
+            except BaseException as err:
+                exc = interrupt_in(err)  # (also one wrapped by a C callback it landed in)
+                if exc is None:
+                    raise
                 clear_pending()
                 if not len(log) or not vw.n_frames:
                     raise  # nothing kept: as an error, nothing is left

@@ -170,7 +170,7 @@ def encode_params(fh, frames, setup_of, quality: str = DEFAULT_QUALITY,
     before it are held, then written after the header). The stream is closed (end marker,
     trailer) when ``frames`` ends, and also when it is interrupted (KeyboardInterrupt: the
     stream is then complete with the frames written; ``stats.interrupted``)."""
-    from myoface._signals import deferred, held
+    from myoface._signals import deferred, held, interrupt_in
 
     stats = stats or EncodeStats()
     t0 = time.perf_counter()
@@ -203,7 +203,10 @@ def encode_params(fh, frames, setup_of, quality: str = DEFAULT_QUALITY,
                 held_frames = []
             else:
                 put(p)
-    except KeyboardInterrupt:
+    except BaseException as err:
+        # (a stop signal, also one wrapped in a SystemError by a C callback it landed in)
+        if interrupt_in(err) is None:
+            raise
         stats.interrupted = True
         if writer is None:
             raise

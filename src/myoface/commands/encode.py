@@ -60,6 +60,7 @@ def add_arguments(p):
 
 def run(args) -> int:
     from myoface._io import OutputConflictError, atomic_output, check_not_input, check_output_path
+    from myoface._signals import interrupt_in
     from myoface.codec.encode import VideoParams, encode_params
     from myoface.commands.analyze import refuse
 
@@ -107,16 +108,20 @@ def run(args) -> int:
                 try:
                     with open(tmp, "wb") as fh:
                         stats = encode(fh)
-                except KeyboardInterrupt:
-                    if tmp.stat().st_size == 0:
+                except BaseException as err:
+                    if interrupt_in(err) is None or tmp.stat().st_size == 0:
                         raise
                     # the stream was ended with the frames encoded: keep it (renamed below)
                     import os
 
                     os.replace(tmp, args.output)
                     raise
-    except KeyboardInterrupt as exc:
-        exc.add_note(f"the stream {where} is complete with the frames encoded before the stop")
+    except BaseException as err:
+        # (an interrupt may come wrapped: a SystemError from a C callback it landed in)
+        stop = interrupt_in(err)
+        if stop is None:
+            raise
+        stop.add_note(f"the stream {where} is complete with the frames encoded before the stop")
         raise
     out = sys.stderr if to_stdout else sys.stdout
     print(
