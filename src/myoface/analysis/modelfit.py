@@ -213,6 +213,9 @@ class ModelFit:
         self.calibration: Calibration | None = None
         #: the person's appearance for the photometric term (:meth:`set_appearance`)
         self.appearance: Appearance | None = None
+        #: the detector's offsets on this face by view (:meth:`set_offsets`), taken off the
+        #: points of every frame (None: the points as given)
+        self.offsets = None
         #: tissue relaxes that did not converge (see :meth:`_relax`)
         self.unconverged_relaxes = 0
         #: where the time goes (for the benchmark's breakdown): the fits' thread CPU (s) and
@@ -341,6 +344,8 @@ class ModelFit:
         if flow is not None:
             flow = (np.asarray(flow[0], dtype=np.float64), np.asarray(flow[1], dtype=bool))
         prev = self._prev
+        if self.offsets is not None and synthesis is None:
+            p = self._corrected(p, None if prev is None else prev.pose)
         self._collect()
         refine = 0 if deferred else self.settings.refine
         res = self._fit(p, prev, refine=refine, flow=flow, photo=photo)
@@ -430,6 +435,8 @@ class ModelFit:
             ]
             use += [int(k) for k in near[: CALIBRATION_FRAMES - 1]]
         pts = [check_points(frames[k], len(self.neutral)) for k in use]
+        if self.offsets is not None and synthesis is None:
+            pts = [self._corrected(p) for p in pts]
         identity, poses, resid = self._fit_identity(pts)
         if synthesis is not None:
             # the tracker's own error on the neutral, rendered, is not the person's shape
@@ -466,6 +473,23 @@ class ModelFit:
         own = self.appearance.samples.matrix(len(per_vertex)) @ per_vertex
         prior = self.appearance.prior
         self.appearance.prior = own if prior is None else prior * own
+
+    def set_offsets(self, offsets) -> None:
+        """Take the detector's offsets on this face off every frame's points from now on
+        (``offsets``: :class:`~myoface.analysis.landmarks.TrackerOffsets`, or None: not);
+        before :meth:`calibrate`, so that the calibration reads corrected points too. Not
+        with analysis by synthesis (which measures the offsets at each frame's estimate)."""
+        self.offsets = offsets
+
+    def _corrected(self, p, pose: HeadPose | None = None) -> np.ndarray:
+        """``p`` with :attr:`offsets` taken off at ``pose`` (the previous frame's; without
+        one, the pose of the person's neutral fitted to ``p``, then to the points corrected
+        there)."""
+        base = self.neutral + self.identity_mm
+        if pose is None:
+            pose = self._pose_only(p, initial_pose(base, p, self.camera), base)
+            pose = self._pose_only(self.offsets.correct(p, pose, base), pose, base)
+        return self.offsets.correct(p, pose, base)
 
     def photometric_term(self, image) -> PhotometricTerm | None:
         """The photometric term of ``image`` (None without an image or an appearance)."""

@@ -140,6 +140,12 @@ class FitSettings:
     #: sd) and the offset itself (mm, 1 sd)
     identity_edge_sigma_mm: float = 1.0
     identity_sigma_mm: float = 10.0
+    #: take the detector's own offsets on this face off its points
+    #: (:class:`~myoface.analysis.landmarks.TrackerOffsets`: the person's model, with its own
+    #: texture, rendered neutral from each view direction it is seen from and read by
+    #: MediaPipe; a model without a texture: not done). See that class for why and what was
+    #: measured.
+    tracker_offsets: bool = True
 
 
 # ------------------------------------------------------------------ the model's structure

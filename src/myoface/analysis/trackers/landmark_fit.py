@@ -15,6 +15,7 @@ from myoface._threads import run_ahead
 from myoface.analysis.camera import POSE_COLUMNS, HeadPose, PinholeCamera
 from myoface.analysis.flow import FlowDetector, FlowRefiner
 from myoface.analysis.gaze import GAZE_COLUMNS, GAZE_STATE_COLUMNS, Gaze, GazeEstimator
+from myoface.analysis.landmarks import TrackerOffsets
 from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, Calibration, ModelFit
 from myoface.analysis.sections import SECTIONS, section_vertices
 from myoface.analysis.synthesis import LandmarkSynthesis
@@ -206,6 +207,29 @@ class FitTracker(TrackerBase):
             self.fit = ModelFit(self.model, cam, self.settings, fps=self.fps)
         return self.fit
 
+    def _ensure_offsets(self, shape) -> None:
+        """The detector's offsets on the person's face (:attr:`FitSettings.tracker_offsets`:
+        :class:`~myoface.analysis.landmarks.TrackerOffsets`), given to the fit before it
+        calibrates: with a model that has its own texture, without analysis by synthesis
+        (which measures them at each frame) and with MediaPipe as the detector (the offsets
+        are its own)."""
+        fit = self.fit
+        if (
+            fit.offsets is not None
+            or not self.settings.tracker_offsets
+            or self.use_synthesis
+            or not self._own_detector
+            or self.model.face.texture is None
+        ):
+            return
+        h, w = shape[:2]
+        try:
+            syn = LandmarkSynthesis(self.model.face, fit.camera, (w, h),
+                                    tracking=self.settings.tracking)  # fmt: skip
+        except MyofaceValueError:  # (a camera whose principal point is off the centre)
+            return
+        fit.set_offsets(TrackerOffsets(syn, fit.neutral, fit.camera))
+
     def calibrate(self, frames, first_index: int = 0) -> int:
         """The protocol's calibration: on ``frames`` (the video's from ``first_index`` on),
         the most neutral frame of the first :data:`CALIBRATION_WINDOW_S` s from the first
@@ -261,6 +285,7 @@ class FitTracker(TrackerBase):
         if not head or head[-1] is None:
             raise MyofaceValueError("the video has no frames to calibrate on")
         self._ensure_fit(np.shape(head[-1]))
+        self._ensure_offsets(np.shape(head[-1]))
         images: list = []
         points: list = []  # the landmarks the calibration reads
         observed: list = []  # what observe() would give on those frames
@@ -481,3 +506,5 @@ class FitTracker(TrackerBase):
             self._detector.close()
         if self.synthesis is not None:
             self.synthesis.close()
+        if self.fit is not None and self.fit.offsets is not None:
+            self.fit.offsets.synthesis.close()
