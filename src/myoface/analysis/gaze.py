@@ -144,6 +144,14 @@ class GazeSettings:
     smooth_frames: int = 3
     smooth_deg: float = 2.0
     prior: float = 0.05
+    socket: bool = True
+    socket_half_mm: tuple = (20.0, 13.0)
+    socket_step_mm: float = 0.5
+    socket_iris_px: float = 1.5
+    socket_min_frames: int = 3
+    socket_max_mm: float = 4.0
+    socket_iterations: int = 15
+    socket_open: float = 0.8
 
     def __post_init__(self):
         if self.lids not in ("model", "landmarks"):
@@ -472,6 +480,197 @@ def eye_samples(frame, upper, lower, iris_px: float, settings: GazeSettings) -> 
     return EyeSamples(px, bright, np.ascontiguousarray(fixed), proj)
 
 
+# ------------------------------------------------------------------ the eye's socket, learned
+
+
+@numba.njit(cache=True)
+def _bilinear(img, r, c):  # pragma: no cover
+    """``img`` (H, W) at (row ``r``, column ``c``), NaN outside or where a corner is NaN."""
+    h, w = img.shape
+    if r < 0.0 or c < 0.0 or r > h - 1 or c > w - 1:
+        return np.nan
+    r0 = min(int(r), h - 2)
+    c0 = min(int(c), w - 2)
+    fr, fc = r - r0, c - c0
+    return ((1 - fr) * ((1 - fc) * img[r0, c0] + fc * img[r0, c0 + 1])
+            + fr * ((1 - fc) * img[r0 + 1, c0] + fc * img[r0 + 1, c0 + 1]))  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _align_translation(patch, tmpl, gx, gy, iterations, limit):  # pragma: no cover
+    """The translation ``d`` (2,) (columns, rows) that makes ``patch`` sampled at ``x + d``
+    match ``tmpl`` at ``x`` (Lucas-Kanade on the template's gradient ``gx``, ``gy``; NaN
+    pixels of either are not compared; each side's mean brightness is free), within +-limit;
+    the number of pixels compared (0: too few)."""
+    h, w = tmpl.shape
+    d0, d1 = 0.0, 0.0
+    used = 0
+    for _ in range(iterations):
+        n = 0
+        sr = 0.0
+        sa0 = 0.0
+        sa1 = 0.0
+        s00 = 0.0
+        s01 = 0.0
+        s11 = 0.0
+        s0r = 0.0
+        s1r = 0.0
+        for i in range(h):
+            for j in range(w):
+                t = tmpl[i, j]
+                a0 = gx[i, j]
+                a1 = gy[i, j]
+                if np.isnan(t) or np.isnan(a0) or np.isnan(a1):
+                    continue
+                p = _bilinear(patch, i + d1, j + d0)
+                if np.isnan(p):
+                    continue
+                r = p - t
+                n += 1
+                sr += r
+                sa0 += a0
+                sa1 += a1
+                s00 += a0 * a0
+                s01 += a0 * a1
+                s11 += a1 * a1
+                s0r += a0 * r
+                s1r += a1 * r
+        if n < 30:
+            return np.zeros(2), 0
+        # centred (a free offset of brightness)
+        m00 = s00 - sa0 * sa0 / n
+        m01 = s01 - sa0 * sa1 / n
+        m11 = s11 - sa1 * sa1 / n
+        b0 = -(s0r - sa0 * sr / n)
+        b1 = -(s1r - sa1 * sr / n)
+        det = m00 * m11 - m01 * m01
+        if det <= 1e-12:
+            return np.zeros(2), 0
+        st0 = (m11 * b0 - m01 * b1) / det
+        st1 = (m00 * b1 - m01 * b0) / det
+        st0 = min(max(st0, -2.0), 2.0)
+        st1 = min(max(st1, -2.0), 2.0)
+        d0 = min(max(d0 + st0, -limit), limit)
+        d1 = min(max(d1 + st1, -limit), limit)
+        used = n
+        if abs(st0) < 0.01 and abs(st1) < 0.01:
+            break
+    out = np.empty(2)
+    out[0], out[1] = d0, d1
+    return out, used
+
+
+class EyeSocket:
+    """Where one eye's socket is in a frame, relative to where the fit put it: its appearance
+    learned over the frames in the head frame, and each frame's offset found against it.
+
+    The region around the eye (:attr:`GazeSettings.socket_half_mm` about the eyeball's
+    centre, on a grid of :attr:`GazeSettings.socket_step_mm`, head frame) lies on the
+    person's neutral skin and, inside the eye's opening, on the eyeball's sphere (what shows
+    there: the sclera; with the skin's surface across the opening instead, the parallax of
+    its 3-5 mm of depth at the head's 30 deg of yaw moved the offsets by 2 px). Each frame
+    samples the image at the fit's projection of that grid (:meth:`sample`): a patch in which
+    the fit's error of pose shows as a shift. The template is the mean of the patches
+    (:meth:`learn`), each pixel over the frames where the iris did not cover it (the iris
+    moves with the gaze, the socket does not): since the fit's errors change from frame to
+    frame about a small mean, the template is registered to that mean. A frame's offset
+    (:meth:`offset`, mm, head frame x and y) is the translation of its patch onto the
+    template (Lucas-Kanade, the iris masked out), by which the eyeball's centre and the lids'
+    margins are moved before the gaze is read.
+    """
+
+    def __init__(self, neutral, centre, upper, lower, settings):
+        from scipy.spatial import cKDTree
+
+        from myoface.face.eyes import EYE_RADIUS_MM
+
+        st = settings
+        v = np.asarray(neutral, dtype=np.float64)
+        c = np.asarray(centre, dtype=np.float64)
+        hx, hy = st.socket_half_mm
+        xs = np.arange(c[0] - hx, c[0] + hx + 1e-9, st.socket_step_mm)
+        ys = np.arange(c[1] - hy, c[1] + hy + 1e-9, st.socket_step_mm)
+        x, y = np.meshgrid(xs, ys)
+        near = (np.abs(v[:, 0] - c[0]) < hx + 10) & (np.abs(v[:, 1] - c[1]) < hy + 10)
+        near &= v[:, 2] > c[2]
+        pts = np.column_stack([x.ravel(), y.ravel()])
+        # the skin's depth: inverse-distance weights of its nearest vertices (none beyond
+        # 3 mm of one: off the face)
+        dist, idx = cKDTree(v[near, :2]).query(pts, k=4)
+        w = 1.0 / np.maximum(dist, 1e-6) ** 2
+        z = (w * v[near, 2][idx]).sum(axis=1) / w.sum(axis=1)
+        z = np.where(dist[:, 0] < 3.0, z, np.nan).reshape(x.shape)
+        poly = np.concatenate([v[upper, :2], v[lower[::-1][1:-1], :2]])
+        inside = _inside_polygon(pts, poly).reshape(x.shape)
+        sphere = c[2] + np.sqrt(np.maximum(EYE_RADIUS_MM**2 - (x - c[0]) ** 2 - (y - c[1]) ** 2, 0))
+        z = np.where(inside, sphere, z)
+        #: the grid's points (N, 3) mm, head frame, and where the face is (H, W) bool
+        self.points = np.column_stack([pts, np.nan_to_num(z.ravel(), nan=c[2])])
+        self.valid = np.isfinite(z)
+        self.shape = x.shape
+        self.settings = st
+        self._sum = np.zeros(self.shape)
+        self._count = np.zeros(self.shape)
+        self._template = None  # (the mean, its gradients), kept until the next frame learnt
+
+    @property
+    def ready(self) -> bool:
+        """Whether the template has seen enough frames to align to."""
+        return int((self._count >= self.settings.socket_min_frames).sum()) >= 50
+
+    def sample(self, frame, camera, pose) -> tuple[np.ndarray, np.ndarray]:
+        """The frame's patch (H, W) (luma, bilinear) at the projection of the grid by ``pose``,
+        and the grid's image points (H, W, 2) px."""
+        from scipy.ndimage import map_coordinates
+
+        uv = camera.project(pose.apply(self.points))
+        img = np.asarray(frame)[..., :3]
+        scale = 255.0 if img.dtype == np.uint8 else 1.0
+        x0, y0 = np.maximum(np.floor(uv.min(axis=0)).astype(int) - 2, 0)
+        x1, y1 = np.minimum(np.ceil(uv.max(axis=0)).astype(int) + 2,
+                            [img.shape[1] - 1, img.shape[0] - 1])  # fmt: skip
+        if x1 <= x0 or y1 <= y0:
+            return np.full(self.shape, np.nan), uv.reshape(*self.shape, 2)
+        crop = img[y0 : y1 + 1, x0 : x1 + 1].astype(np.float64) @ LUMA / scale
+        coords = np.stack([uv[:, 1] - 0.5 - y0, uv[:, 0] - 0.5 - x0])
+        patch = map_coordinates(crop, coords, order=1, mode="nearest", cval=np.nan)
+        outside = (uv[:, 0] < 0.5) | (uv[:, 1] < 0.5) | (uv[:, 0] > img.shape[1] - 0.5)
+        outside |= uv[:, 1] > img.shape[0] - 0.5
+        patch[outside] = np.nan
+        return patch.reshape(self.shape), uv.reshape(*self.shape, 2)
+
+    def usable(self, uv, iris_centre, iris_radius_px) -> np.ndarray:
+        """The patch's pixels (H, W) bool to compare: on the face and off the iris read
+        (:attr:`GazeSettings.socket_iris_px` beyond its radius)."""
+        far = np.linalg.norm(uv - np.asarray(iris_centre), axis=-1)
+        return self.valid & (far > iris_radius_px + self.settings.socket_iris_px)
+
+    def learn(self, patch, usable) -> None:
+        """Add a frame's patch (its usable pixels) to the template."""
+        ok = usable & np.isfinite(patch)
+        self._sum[ok] += patch[ok]
+        self._count[ok] += 1
+        self._template = None
+
+    def offset(self, patch, usable) -> np.ndarray | None:
+        """The shift (2,) mm, head frame (x, y), that moves the patch onto the template
+        (:func:`_align_translation`, the ``usable`` pixels of the patch), or None while the
+        template has too few frames."""
+        st = self.settings
+        if self._template is None:
+            if not self.ready:
+                return None
+            seen = self._count >= st.socket_min_frames
+            tmpl = np.where(seen, self._sum / np.maximum(self._count, 1), np.nan)
+            gy, gx = np.gradient(tmpl)
+            self._template = (tmpl, gx, gy)
+        tmpl, gx, gy = self._template
+        p = np.where(usable, patch, np.nan)
+        d, used = _align_translation(p, tmpl, gx, gy, int(st.socket_iterations),
+                                     st.socket_max_mm / st.socket_step_mm)  # fmt: skip
+        return None if used == 0 else d * st.socket_step_mm
+
+
 # ------------------------------------------------------------------ the reader
 
 
@@ -493,6 +692,8 @@ class _Eye:
     centre: np.ndarray  # (3,) mm, camera frame
     samples: EyeSamples
     iris_px: float
+    upper: np.ndarray | None = None  # the lid margins (M, 2) px
+    lower: np.ndarray | None = None
     coarse: EyeSamples | None = None  # every other pixel, for the coarse grid
 
     def rss(self, camera, rotation, yaw, pitch, settings, coarse: bool = False) -> tuple:
@@ -535,6 +736,10 @@ class GazeEstimator:
             ring = np.asarray(face.landmarks[group], dtype=np.int64)
             self._eyes[side] = (loop, *self._chains(face.vertices, ring))
         self.centres_mm: dict[str, np.ndarray] = {}
+        #: each eye's socket (:class:`EyeSocket`, when :attr:`GazeSettings.socket`)
+        self.sockets: dict[str, EyeSocket] = {}
+        #: each eye's last offset of its socket (mm, head frame x and y; None: none found)
+        self.offsets: dict[str, np.ndarray | None] = {"l": None, "r": None}
         self.aperture_mm: dict[str, float] = {}
         self.calibrate(face.vertices)
         self.smoother = GazeSmoother(self.settings)
@@ -566,6 +771,9 @@ class GazeEstimator:
         for side, (loop, upper, lower) in self._eyes.items():
             self.centres_mm[side] = eyeball_center(v, loop)
             self.aperture_mm[side] = self._aperture(v, upper, lower)
+            if self.settings.socket:
+                self.sockets[side] = EyeSocket(v, self.centres_mm[side], upper, lower,
+                                               self.settings)  # fmt: skip
 
     @staticmethod
     def _aperture(v, upper, lower) -> float:
@@ -599,11 +807,14 @@ class GazeEstimator:
         shape = np.asarray(shape, dtype=np.float64)
         if st.lids == "landmarks" and points is None:
             raise MyofaceValueError("lids='landmarks' needs MediaPipe's points")
+        self.offsets = {"l": None, "r": None}
         out: dict[str, EyeGaze] = {}
+        opening: dict[str, float] = {}  # each eye's aperture, of the open one's
         eyes: list[_Eye] = []
         for side, (_, upper, lower) in self._eyes.items():
-            centre = pose.apply(self.centres_mm[side][None])[0]
-            if self._aperture(shape, upper, lower) < st.closed_ratio * self.aperture_mm[side]:
+            centre, up2, lo2 = self._placement(side, camera, pose, shape, points)
+            opening[side] = self._aperture(shape, upper, lower) / self.aperture_mm[side]
+            if opening[side] < st.closed_ratio:
                 out[side] = EyeGaze(state="closed")
                 continue
             axis = rot[:, 2]
@@ -611,32 +822,30 @@ class GazeEstimator:
             if np.degrees(np.arccos(np.clip(axis @ view, -1.0, 1.0))) > st.max_view_deg:
                 out[side] = EyeGaze(state="hidden")
                 continue
-            if st.lids == "landmarks":
-                up2, lo2 = (np.asarray(points)[c, :2] for c in (upper, lower))
-            else:
-                up2, lo2 = (camera.project(pose.apply(shape[c])) for c in (upper, lower))
             iris_px = IRIS_RADIUS_MM * camera.focal_px / max(-centre[2], 1e-6)
             samples = eye_samples(frame, up2, lo2, iris_px, st)
             if samples.n < st.min_pixels:
                 out[side] = EyeGaze(state="hidden")
                 continue
-            eyes.append(_Eye(side, centre, samples, iris_px))
+            eyes.append(_Eye(side, centre, samples, iris_px, up2, lo2))
         if eyes:
-            # the coarse grid for both eyes together (their residuals relative to each eye's
-            # own without an iris), then each eye alone around the best
-            yaw, pitch = _grid((0.0, 0.0), st.coarse_deg, MAX_GAZE_DEG)
-            total = np.zeros(len(yaw))
-            for e in eyes:
-                rss = e.rss(camera, rot, yaw, pitch, st, coarse=True)[0]
-                total += rss / max(e.coarse.base_rss(), 1e-12)
-            if self._last is not None and st.prior > 0:
-                # the last frame's gaze breaks near-ties between far apart minima
-                d2 = (yaw - self._last[0]) ** 2 + (pitch - self._last[1]) ** 2
-                total = total + st.prior * len(eyes) * d2 / MAX_GAZE_DEG**2
-            k = int(np.argmin(total))
-            start = (float(yaw[k]), float(pitch[k])) if np.isfinite(total[k]) else None
+            start = self._coarse(eyes, camera, rot)
+            patches: dict[str, tuple] = {}
+            if st.socket and start is not None:
+                # each eye moved to where its socket is, then the coarse grid again there
+                for i, e in enumerate(eyes):
+                    if opening[e.side] < st.socket_open:  # (the lids cross the template)
+                        continue
+                    eyes[i], patches[e.side] = self._socket(
+                        e, frame, camera, pose, shape, points, start
+                    )
+                if any(self.offsets[e.side] is not None for e in eyes):
+                    start = self._coarse(eyes, camera, rot)
             for e in eyes:
                 out[e.side] = self._closed_by_contrast(e.side, self._refine(e, camera, rot, start))
+                patch = patches.get(e.side)
+                if patch is not None and self._wide_open(e.side, out[e.side], opening[e.side]):
+                    self._learn(e, camera, rot, out[e.side], *patch)
         read = [out[s] for s in ("l", "r") if s in out and out[s].ok]
         self._last = (
             (np.mean([e.yaw_deg for e in read]), np.mean([e.pitch_deg for e in read]))
@@ -646,14 +855,94 @@ class GazeEstimator:
         self.timings["seconds"] += time.perf_counter() - t0
         return Gaze(out["l"], out["r"])
 
-    def _refine(self, eye: _Eye, camera, rot, start) -> EyeGaze:
+    def _coarse(self, eyes: list[_Eye], camera, rot) -> tuple | None:
+        """The coarse grid's best gaze for the eyes together (their residuals relative to each
+        eye's own without an iris; each eye is then refined alone around it), None if none."""
         st = self.settings
+        yaw, pitch = _grid((0.0, 0.0), st.coarse_deg, MAX_GAZE_DEG)
+        total = np.zeros(len(yaw))
+        for e in eyes:
+            rss = e.rss(camera, rot, yaw, pitch, st, coarse=True)[0]
+            total += rss / max(e.coarse.base_rss(), 1e-12)
+        if self._last is not None and st.prior > 0:
+            # the last frame's gaze breaks near-ties between far apart minima
+            d2 = (yaw - self._last[0]) ** 2 + (pitch - self._last[1]) ** 2
+            total = total + st.prior * len(eyes) * d2 / MAX_GAZE_DEG**2
+        k = int(np.argmin(total))
+        return (float(yaw[k]), float(pitch[k])) if np.isfinite(total[k]) else None
+
+    def _placement(self, side, camera, pose, shape, points) -> tuple:
+        """Where the fit puts eye ``side`` in the frame: its eyeball's centre (3,) mm, camera
+        frame, and its upper and lower lid margins (each (M, 2) px, corner to corner). (The
+        benchmark's oracle swaps replace it with the truth's, :mod:`myoface.bench.gaze`.)"""
+        _, upper, lower = self._eyes[side]
+        centre = pose.apply(self.centres_mm[side][None])[0]
+        if self.settings.lids == "landmarks":
+            up2, lo2 = (np.asarray(points)[c, :2] for c in (upper, lower))
+        else:
+            up2, lo2 = (camera.project(pose.apply(shape[c])) for c in (upper, lower))
+        return centre, up2, lo2
+
+    def _iris_image(self, eye: _Eye, camera, rot, yaw, pitch) -> tuple[np.ndarray, float]:
+        """The iris' centre (2,) px and radius (px) in the image for the gaze ``(yaw, pitch)``."""
+        g = gaze_directions(yaw, pitch) @ np.asarray(rot).T
+        c2, _, major, _, _ = iris_ellipses(camera, eye.centre, g[None])
+        return c2[0], float(major[0])
+
+    def _socket(self, eye: _Eye, frame, camera, pose, shape, points, start) -> tuple:
+        """``eye`` moved by its socket's offset in ``frame`` (:class:`EyeSocket`: the eyeball's
+        centre and the lids' margins; ``eye`` itself while the template is too young), and the
+        frame's patch and its pixels' image points (for :meth:`_learn`). The iris, masked out
+        of the comparison, is where the coarse grid's gaze ``start`` puts it."""
+        st = self.settings
+        rot = np.asarray(pose.rotation, dtype=np.float64)
+        sock = self.sockets[eye.side]
+        patch, uv = sock.sample(frame, camera, pose)
+        iris_c, iris_r = self._iris_image(eye, camera, rot, *start)
+        d = sock.offset(patch, sock.usable(uv, iris_c, iris_r))
+        if d is None:
+            return eye, (patch, uv)
+        move = np.array([d[0], d[1], 0.0])
+        centre = pose.apply((self.centres_mm[eye.side] + move)[None])[0]
+        _, upper, lower = self._eyes[eye.side]
+        if st.lids == "landmarks":
+            shift = camera.project(centre[None])[0] - camera.project(eye.centre[None])[0]
+            up2, lo2 = eye.upper + shift, eye.lower + shift
+        else:
+            up2, lo2 = (camera.project(pose.apply(shape[c] + move)) for c in (upper, lower))
+        samples = eye_samples(frame, up2, lo2, eye.iris_px, st)
+        if samples.n < st.min_pixels:
+            return eye, (patch, uv)
+        self.offsets[eye.side] = d
+        return _Eye(eye.side, centre, samples, eye.iris_px, up2, lo2), (patch, uv)
+
+    def _wide_open(self, side: str, read: EyeGaze, opening: float) -> bool:
+        """Whether a frame's eye is open enough to teach its socket's template: read, its
+        lids at least :attr:`GazeSettings.socket_open` of their open aperture apart and its
+        iris at least that share of its usual contrast (the lids close over the template's
+        region in a blink)."""
+        st = self.settings
+        if not read.ok or opening < st.socket_open:
+            return False
+        past = self._contrasts[side]
+        usual = float(np.percentile(past, 90)) if past else 0.0
+        return abs(read.contrast) >= st.socket_open * usual
+
+    def _learn(self, eye: _Eye, camera, rot, read: EyeGaze, patch, uv) -> None:
+        """The frame's patch into the socket's template, off the iris read."""
+        sock = self.sockets[eye.side]
+        iris_c, iris_r = self._iris_image(eye, camera, rot, read.yaw_deg, read.pitch_deg)
+        sock.learn(patch, sock.usable(uv, iris_c, iris_r))
+
+    def _refine(self, eye: _Eye, camera, rot, start, fine=None) -> EyeGaze:
+        st = self.settings
+        fine = st.fine if fine is None else fine
         if start is None:
             return EyeGaze(state="not_found")
         best, explained, contrast = start, float("nan"), float("nan")
-        for i, (step, half) in enumerate(st.fine):
+        for i, (step, half) in enumerate(fine):
             yaw, pitch = _grid(best, step, half)
-            last = i == len(st.fine) - 1  # (the steps before the last on every other pixel)
+            last = i == len(fine) - 1  # (the steps before the last on every other pixel)
             rss, expl, coef = eye.rss(camera, rot, yaw, pitch, st, coarse=not last)
             k = int(np.argmin(rss))
             if not np.isfinite(rss[k]):
