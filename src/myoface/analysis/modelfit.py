@@ -28,6 +28,11 @@ in units of its standard deviation:
   depth over focal length), so that the priors weigh the same whatever the face's size in the
   image; the face oval's points (which MediaPipe slides along the silhouette as the head turns)
   and points turned away from the camera weigh less; a Huber weight takes out outliers;
+- the points themselves first lose the detector's own offsets on this face at the frame's
+  view (:meth:`ModelFit.set_offsets`, :class:`~myoface.analysis.landmarks.TrackerOffsets`:
+  the person's model rendered neutral from each view and read by MediaPipe), which otherwise
+  tilt the head: given the true skin, MediaPipe's points put a still frontal head 4.5 deg
+  off in pitch on the head-motion loop's renders;
 - landmark z: MediaPipe's relative depth, mean removed (it has no absolute depth), with a
   larger deviation (monocular depth is its weakest coordinate);
 - temporal: each contraction and the pose may change from the previous frame by about a
