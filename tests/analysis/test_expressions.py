@@ -90,18 +90,26 @@ def test_a_mixture_of_two_expressions(ids):
 
 
 def test_the_rule_by_hand():
-    """The documented arithmetic on given AU intensities: happiness's prototypes 6+12 (mean
-    0.75) and 12>=C (0.9), the best 0.9; AU20 (fear's alone: specificity 1) unexplained."""
+    """The documented arithmetic on given AU intensities. AU6 0.6 and AU12 0.9: relative to
+    the strongest (AU12), 0.67 and 1; happiness's 6+12 matches 0.83 and 12>=C 1, the best 1;
+    AU20 (fear's alone: specificity 1) unexplained."""
     s = expression_scores_from_aus(_aus(AU06=0.6, AU12=0.9))
-    assert s[0] == pytest.approx(0.9) and s[-1] == pytest.approx(0.1)
+    assert s[0] == pytest.approx(1.0) and s[-1] == pytest.approx(0.0)
     s = expression_scores_from_aus(_aus(AU06=0.6, AU12=0.9, AU20=0.5))
-    assert s[0] == pytest.approx(0.9 * (0.36 + 0.81) / (0.36 + 0.81 + 0.25))
-    # AU12 below C: only 6+12 matches
-    s = expression_scores_from_aus(_aus(AU06=0.3, AU12=0.5))
-    assert s[0] == pytest.approx(0.4)
-    # the gate: AU6 at 0.15 is half open (0.1 -> 0.2)
-    s = expression_scores_from_aus(_aus(AU06=0.15, AU12=0.5))
-    assert s[0] == pytest.approx(0.5 * (0.15 + 0.5) / 2)
+    assert s[0] == pytest.approx((0.36 + 0.81) / (0.36 + 0.81 + 0.25))
+    # the same pattern read at a third of its strength (its strongest AU above a trace)
+    # scores the same: the rule compares the AUs with each other
+    for x in (_aus(AU01=0.8, AU04=0.5, AU15=0.7), _aus(AU06=0.6, AU12=0.9, AU20=0.5)):
+        np.testing.assert_allclose(expression_scores_from_aus(x / 3), expression_scores_from_aus(x))
+    # ... but nothing is an expression until the strongest AU reaches a trace
+    s = expression_scores_from_aus(_aus(AU06=0.1, AU12=0.15))
+    assert s[: len(EXPRESSIONS)].max() == 0 and expression_labels(s) == [NEUTRAL]
+    # the gate: AU4 at 0.15 of the strongest (AU1) is half open (0.1 -> 0.2)
+    s = expression_scores_from_aus(_aus(AU01=0.8, AU04=0.12, AU15=0.6))
+    assert s[EXPRESSIONS.index("sadness")] == pytest.approx(0.5 * (1 + 0.15 + 0.75) / 3)
+    # AU12 at half the strongest AU is below C: 12>=C is shut, 6+12 (AU6 at 0.25 of it) opens
+    s = expression_scores_from_aus(_aus(AU06=0.2, AU12=0.4, AU14=0.8))
+    assert s[0] == pytest.approx((0.25 + 0.5) / 2 * (0.04 + 0.16) / (0.04 + 0.16 + 0.64))
     # AU10 (disgust's and anger's: specificity 1/2) speaks against happiness at half weight
     s = expression_scores_from_aus(_aus(AU12=1.0, AU10=1.0))
     assert s[0] == pytest.approx(1.0 / (1.0 + 0.5))
@@ -139,6 +147,26 @@ def test_surprise_with_fears_aus_is_fear():
     x = _aus(AU01=0.8, AU02=0.8, AU04=0.5, AU05=0.6, AU20=0.7, AU26=0.6)
     s = expression_scores_from_aus(x)
     assert expression_labels(s) == ["fear"] and s[2] > 0  # surprise still partly there
+
+
+def test_a_glare_without_the_upper_lid_raised_is_anger(ids):
+    """Anger's table variant without AU5, 4+7+23: AU7 (lid tightener) is not measured, and
+    the AU table makes it of the orbital sphincter (0.5, AU6's muscle) and the lid's part
+    (0.3), so its prototypes read it as AU6. The brows lowered, the lids tightened and the
+    lips tightened, made through the AU table and read back, are anger; without the lip
+    tightener, 4+7 is no prototype (neutral); and a measured AU7 at 0 is not replaced by
+    AU6 (4+6+23 then opens no anger prototype)."""
+    c = au_contractions({4: 0.8, 7: 0.8, 23: 0.7}, ids)
+    assert expression_labels(expression_scores(c, ids)) == ["anger"]
+    c = au_contractions({4: 0.8, 7: 0.8}, ids)
+    assert expression_labels(expression_scores(c, ids)) == [NEUTRAL]
+    x = _aus(AU04=0.8, AU06=0.4, AU23=0.6)
+    x[rule_aus().index(7)] = np.nan  # (as the analysis gives it)
+    assert expression_labels(expression_scores_from_aus(x)) == ["anger"]
+    x[rule_aus().index(7)] = 0.0
+    assert expression_scores_from_aus(x)[EXPRESSIONS.index("anger")] == 0
+    # happiness's 6+12 keeps its label with AU6 standing in for AU7
+    assert expression_labels(expression_scores_from_aus(_aus(AU06=0.6, AU12=0.9))) == ["happiness"]
 
 
 def test_an_au_not_measured_skips_its_prototypes(ids):
@@ -375,3 +403,41 @@ def test_model_landmarks_project_the_skin(ids):
     assert pts.shape == (face.n_vertices, 2) and np.isfinite(pts).all()
     nose = pts[np.argmax(face.vertices[:, 2])]  # the vertex nearest the camera
     assert abs(nose[0] - SIZE[0] / 2) < 20 and abs(nose[1] - SIZE[1] / 2) < 60
+
+
+def test_pattern_agreement_is_blind_to_a_gain(ids):
+    """The benchmark's diagnosis: the fit's readings at a third of the truth keep every
+    expression's pattern (cosine 1, every apex frame nearest its own pattern); readings that
+    swap two expressions' patterns have it for neither."""
+    from myoface.bench.expression import pattern_agreement
+
+    names = ("happiness", "sadness", "surprise")
+    truth = np.array([expression_contractions(n, 0.9, ids) for n in names])
+    played, phase, level = list(names), ["apex"] * 3, [0.9] * 3
+    r = pattern_agreement(truth * 0.3, truth, ids, played, phase, level)
+    assert r["nearest_true_pattern"] == 1.0
+    assert min(r["cosine"].values()) > 0.99, r
+    swapped = truth[[1, 0, 2]] * 0.3
+    r = pattern_agreement(swapped, truth, ids, played, phase, level)
+    assert r["nearest_true_pattern_per_expression"] == {
+        "happiness": 0.0,
+        "sadness": 0.0,
+        "surprise": 1.0,
+    }
+    assert r["cosine"]["happiness 0.9"] < 0.5
+
+
+def test_readings_by_class(ids):
+    """The truth's AUs of the played expression against the readings, the AUs read that were
+    not played, and the readings at rest."""
+    from myoface.bench.expression import readings_by_class
+
+    smile = expression_contractions("happiness", 1.0, ids)
+    brow = au_contractions({4: 0.5}, ids)
+    truth = np.array([np.zeros(len(ids)), smile])
+    est = np.array([brow, 1 - (1 - 0.5 * smile) * (1 - brow)])  # half the smile, and AU4
+    r = readings_by_class(est, truth, ids, ["neutral", "happiness"], ["rest", "apex"])
+    t12, e12 = (float(v) for v in r["happiness"]["played"]["AU12"].split(" -> "))
+    assert t12 > 0.5 and e12 == pytest.approx(t12 / 2, abs=0.05)
+    assert set(r["happiness"]["read, not played"]) == {"AU4"}
+    assert r["rest"]["AU4"].startswith("0.50") and r["rest"]["AU12"].startswith("0.00")

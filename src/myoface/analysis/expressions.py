@@ -15,19 +15,25 @@ appearance. Per frame:
    Investigator's Guide* (2002), table 10-1 ("EMFACS predictions"; EMFACS-7 is W. V. Friesen
    & P. Ekman, 1983), restricted to the AUs the analysis reads (:data:`PROTOTYPES`; what
    was left out and why, :data:`LEFT_OUT`).
-3. **A prototype's match** is the mean intensity of its AUs times a gate per AU that opens
-   from half a trace (0.1) to a trace (FACS's A, 0.2; for ``12>=C`` from C - 0.1 to C): a
-   coder scores a prototype only when every one of its AUs is there, and then it is as
-   strong as its AUs are.
+3. **A prototype's match** reads the AUs as a *pattern*: each frame's intensities over its
+   strongest AU (``r_a = x_a / max x``). It is the mean of its AUs' ``r_a`` times a gate per
+   AU that opens from half a trace (0.1) to a trace (FACS's A, 0.2; for ``12>=C`` from
+   C - 0.1 to C) of that scale: a coder scores a prototype only when every one of its AUs is
+   there. The fit reads AUs at a fraction of their strength (a gain of 0.1-0.6 from
+   MediaPipe's points, docs/expressions.md), so an absolute trace would miss whole
+   expressions; the pattern is the same at any gain. An AU7 that is not measured is read as
+   AU6 (:data:`READ_AS`).
 4. **An expression's strength** (``expr_<name>``, in [0, 1]) is its best prototype's match
-   times its *coverage*, ``E / (E + U)``: ``E`` the frame's AU activity (sum of ``x_a**2``)
-   in the AUs of that expression's prototypes and variants (:data:`EXPRESSION_AUS`) or in
-   the AUs that go with any expression (:data:`ANY_EXPRESSION_AUS`: lips part, jaw drop,
-   blink), ``U`` the activity it leaves unexplained, each AU weighted by how specific a sign
-   it is (:func:`specificity`: 1 / the number of expressions that use it). A face that
-   shows the AUs of surprise and, besides, the lip stretcher of fear is mostly explained
-   by fear; an AU that several other expressions share (AU10: disgust, anger) speaks
-   against an expression less than one that only another has (AU12: happiness).
+   times its *coverage*, ``E / (E + U)``, and 0 on a frame whose strongest AU is below a
+   trace (:data:`LEVEL_MIN`: FACS scores nothing below A): ``E`` the frame's AU activity
+   (sum of ``x_a**2``) in the AUs of that expression's prototypes and variants
+   (:data:`EXPRESSION_AUS`) or in the AUs that go with any expression
+   (:data:`ANY_EXPRESSION_AUS`: lips part, jaw drop, blink), ``U`` the activity it leaves
+   unexplained, each AU weighted by how specific a sign it is (:func:`specificity`: 1 / the
+   number of expressions that use it). A face that shows the AUs of surprise and, besides,
+   the lip stretcher of fear is mostly explained by fear; an AU that several other
+   expressions share (AU10: disgust, anger) speaks against an expression less than one that
+   only another has (AU12: happiness).
 5. **Neutral** (``expr_neutral``) is ``1 - `` the strongest expression's strength, and the
    **label** (``expression``) is the strongest expression when its strength reaches a trace
    (:data:`LABEL_MIN`, 0.2), else ``neutral``; empty on a frame that was not measured.
@@ -35,11 +41,12 @@ appearance. Per frame:
 Limits (see docs/expressions.md): sadness and fear share AU1 and AU4 (told apart by AU15
 against AU2, AU5 and AU20); surprise's AUs are a subset of fear's (told apart by coverage);
 AU7 is not read (its muscles are AU6's and AU45's, :data:`~myoface.analysis.openface.UNMEASURED_AUS`),
-so anger's prototypes are its table variants without AU7; AU11, AU16, AU22, AU24 and AU27
-are not among the AUs read (AU16's depressor is read as AU25, AU27's jaw as AU26); the
-model's muscles cannot make AU22 (lip funneler) at all. A prototype with an AU that is not
-measured is not scored, and an expression with none left is NaN: the snakes (the paper's 12
-muscles and the jaw) measure AU1, 2, 9, 12, 25 and 26 only, so sadness, fear and anger are
+so anger's prototypes are its table variants without AU7 and, with AU7 read as AU6 (the
+orbital sphincter, its larger muscle: :data:`READ_AS`), those without AU5; AU11, AU16, AU22,
+AU24 and AU27 are not among the AUs read (AU16's depressor is read as AU25, AU27's jaw as
+AU26); the model's muscles cannot make AU22 (lip funneler) at all. A prototype with an AU that
+is not measured is not scored, and an expression with none left is NaN: the snakes (the paper's
+12 muscles and the jaw) measure AU1, 2, 9, 12, 25 and 26 only, so sadness, fear and anger are
 NaN with them.
 
 References: P. Ekman, W. V. Friesen & J. C. Hager, Facial Action Coding System: The Manual
@@ -72,6 +79,11 @@ _LETTERS = {"A": 0.2, "B": 0.4, "C": 0.6, "D": 0.8, "E": 1.0}
 TRACE = _LETTERS["A"]
 #: the label is an expression when its strength reaches a trace, else neutral
 LABEL_MIN = TRACE
+#: a frame shows an expression only when its strongest AU reaches a trace: FACS scores no AU
+#: below A (Ekman, Friesen & Hager 2002, ch. 1), and the prototypes compare the AUs with the
+#: strongest (so a pattern read at any gain matches), which says nothing of whether the face
+#: moved at all
+LEVEL_MIN = TRACE
 
 #: The EMFACS prototypes and major variants (Ekman, Friesen & Hager 2002, FACS
 #: Investigator's Guide, table 10-1) over the AUs the analysis reads. ``a+b+c``: every AU
@@ -92,21 +104,29 @@ PROTOTYPES = {
     # ch. 5; the CK+ emotion criteria, Lucey et al. 2010, table 2, ask for 1+2+4)
     "fear": ("1+2+4+5+20", "1+2+4+5", "5+20", "1+2+4"),
     # 4+5*+7+23, 4+5*+7+10*+23, 4+5*+7+17+23 (+25/26), and the table's variants "without any
-    # one of 4, 5, 7 or 10": without AU7, which is not read (4+5*+7+17+24: AU24 not read)
-    "anger": ("4+5+23", "4+5+10+23", "4+5+17+23"),
+    # one of 4, 5, 7 or 10": without AU7, and without AU5 with AU7 read as AU6 (READ_AS)
+    # (4+5*+7+17+24: AU24 not read)
+    "anger": ("4+5+23", "4+5+10+23", "4+5+17+23", "4+7+23", "4+7+10+23", "4+7+17+23"),
     # 9; 9+16+15/26; 9+17; 10*; 10*+16+25/26; 10+17  (AU16 not read: its depressor is AU25)
     "disgust": ("9", "9+15", "9+17", "10", "10+17"),
 }
 #: AUs of the table's prototypes and variants that the analysis does not read, and why; the
 #: prototypes above leave them out (they still count as the expression's own in its coverage)
 LEFT_OUT = {
-    7: "lid tightener: its muscles are AU6's and AU45's (openface.UNMEASURED_AUS)",
+    7: "lid tightener: its muscles are AU6's and AU45's (openface.UNMEASURED_AUS); where a "
+    "prototype has it, it is read as AU6 (READ_AS)",
     11: "nasolabial deepener: not among OpenFace's AUs, which the analysis reads",
     16: "lower lip depressor: its muscle is read as AU25 (lips part) with the jaw",
     22: "lip funneler: not in the AU table; the model's muscles cannot make it",
     24: "lip pressor: not among OpenFace's AUs",
     27: "mouth stretch: the jaw alone, read as AU26 (jaw drop)",
 }
+#: AUs of a prototype that the analysis does not measure, read from the AU that holds their
+#: largest muscle: AU7 (lid tightener) is the orbital sphincter at 0.5 with the lid's
+#: palpebral part at 0.3 in the AU table, and the sphincter is what AU6 (cheek raiser) is read
+#: from, so a lid tightened shows as AU6 (with a little AU45). Used only where the AU itself
+#: is not measured (NaN).
+READ_AS = {7: 6}
 #: AUs that go with any expression: the lips parting and the jaw dropping ("25 or 26 may
 #: occur with all prototypes or major variants", table 10-1), and a blink
 ANY_EXPRESSION_AUS = (25, 26, 45)
@@ -188,12 +208,24 @@ def _plan(aus: tuple):
         own = np.array([j for j, a in enumerate(aus) if a in mine], dtype=int)
         other = np.array([j for j, a in enumerate(aus) if a not in mine], dtype=int)
         protos = [
-            (np.array([col[a] for a in p.aus]), np.array(p.least))
+            (np.array([col.get(a, col.get(READ_AS.get(a))) for a in p.aus]), np.array(p.least))
             for p in prototypes()[e]
-            if all(a in col for a in p.aus)
+            if all(a in col or READ_AS.get(a) in col for a in p.aus)
         ]
         plan.append((own, other, sign[other], protos))
     return plan
+
+
+def _read_as(x: np.ndarray, aus: tuple) -> np.ndarray:
+    """``x`` (T, len(aus)) with each AU of :data:`READ_AS` that is not measured (NaN) read
+    from the AU that holds its largest muscle (AU7 from AU6)."""
+    col = {a: j for j, a in enumerate(aus)}
+    out = x
+    for a, b in READ_AS.items():
+        if a in col and b in col:
+            out = out.copy() if out is x else out
+            out[:, col[a]] = np.where(np.isnan(x[:, col[a]]), x[:, col[b]], x[:, col[a]])
+    return out
 
 
 def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
@@ -203,9 +235,11 @@ def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
     :func:`rule_aus`); NaN for an AU that was not measured. One frame: (len(aus),) -> (7,).
 
     An expression's strength is its best prototype's match (the mean of its AUs' intensities
-    times each AU's presence gate) times its coverage (``E / (E + U)``: the activity, sum of
-    ``x**2``, in its own AUs and :data:`ANY_EXPRESSION_AUS`, against the activity it leaves
-    unexplained weighted by :func:`specificity`); a prototype with an unmeasured AU is not
+    relative to the frame's strongest AU, times each AU's presence gate on that relative
+    intensity) times its coverage (``E / (E + U)``: the activity, sum of ``x**2``, in its
+    own AUs and :data:`ANY_EXPRESSION_AUS`, against the activity it leaves unexplained
+    weighted by :func:`specificity`), and 0 when the frame's strongest AU is below
+    :data:`LEVEL_MIN` (a trace); a prototype with an unmeasured AU is not
     scored, an expression with no prototype scored is NaN. Neutral is 1 minus the strongest
     (NaN when none was scored). A row with no AU measured is NaN throughout.
     """
@@ -217,6 +251,11 @@ def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
         raise ValueError(f"intensities must be (T, {len(aus)}) over aus; got shape {x.shape}")
     x = np.clip(x, 0.0, 1.0)  # (NaN stays NaN)
     sq = np.where(np.isfinite(x), x**2, 0.0)
+    # the frame's scale: its strongest AU; the prototypes read each AU relative to it (an
+    # unmeasured AU7 read as AU6), and nothing is an expression until it reaches a trace
+    top = np.max(np.where(np.isfinite(x), x, 0.0), axis=1)
+    rel = np.minimum(_read_as(x, aus) / np.where(top > 0, top, 1.0)[:, None], 1.0)
+    present = (top >= LEVEL_MIN).astype(np.float64)
     out = np.full((len(x), len(EXPRESSION_COLUMNS)), np.nan)
     for i, (own, other, sign, protos) in enumerate(_plan(aus)):
         explained = sq[:, own].sum(axis=1)
@@ -224,10 +263,10 @@ def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
         coverage = np.where(total > 0, explained / np.where(total > 0, total, 1.0), 1.0)
         best = np.full(len(x), np.nan)
         for cols, least in protos:
-            v = x[:, cols]  # (NaN where an AU is unmeasured: the match is NaN)
+            v = rel[:, cols]  # (NaN where an AU is unmeasured: the match is NaN)
             gates = np.clip((v - (least - TRACE / 2)) / (TRACE / 2), 0.0, 1.0).prod(axis=1)
             best = np.fmax(best, gates * v.mean(axis=1))
-        out[:, i] = best * coverage
+        out[:, i] = best * coverage * present
     six = out[:, :-1]
     scored = np.isfinite(six).any(axis=1)
     strongest = np.where(scored, np.nanmax(np.where(np.isnan(six), -np.inf, six), axis=1), np.nan)
