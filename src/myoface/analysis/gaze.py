@@ -152,6 +152,9 @@ class GazeSettings:
     socket_max_mm: float = 4.0
     socket_iterations: int = 15
     socket_open: float = 0.8
+    socket_robust: float = 2.0
+    socket_prior_mm: float = 1.5
+    socket_window_deg: float = 18.0
 
     def __post_init__(self):
         if self.lids not in ("model", "landmarks"):
@@ -497,67 +500,98 @@ def _bilinear(img, r, c):  # pragma: no cover
 
 
 @numba.njit(cache=True)
-def _align_translation(patch, tmpl, gx, gy, iterations, limit):  # pragma: no cover
-    """The translation ``d`` (2,) (columns, rows) that makes ``patch`` sampled at ``x + d``
-    match ``tmpl`` at ``x`` (Lucas-Kanade on the template's gradient ``gx``, ``gy``; NaN
-    pixels of either are not compared; each side's mean brightness is free), within +-limit;
-    the number of pixels compared (0: too few)."""
-    h, w = tmpl.shape
-    d0, d1 = 0.0, 0.0
+def _bilinear_at(img, rows, cols):  # pragma: no cover
+    """:func:`_bilinear` at each of the points (N,)."""
+    out = np.empty(rows.shape[0])
+    for k in range(rows.shape[0]):
+        out[k] = _bilinear(img, rows[k], cols[k])
+    return out
+
+
+@numba.njit(cache=True)
+def _align_socket(img, x0, y0, points, rot, trans, f, cx, cy, tmpl, gx, gy, step_mm,
+                  iris_c, iris_r, iterations, limit_mm, robust, prior_mm):  # pragma: no cover  # fmt: skip
+    """The shift ``d`` (2,) mm (head frame x, y) by which the socket's grid ``points`` (N, 3),
+    moved rigidly and projected by the pose (``rot``, ``trans``) and the camera (``f``,
+    ``cx``, ``cy``), sample the image ``img`` (luma, its pixel (0, 0) the frame's
+    (``x0``, ``y0``)) as the template ``tmpl`` (N,) shows them, up to a gain and an offset of
+    brightness: Lucas-Kanade on the template's gradient (``gx``, ``gy`` (N,), per grid step
+    ``step_mm``), the image resampled at each step (a pose misplaced by a translation is
+    undone exactly, the skin's relief and all); points that fall within ``iris_r`` px of
+    ``iris_c`` (the iris) or on NaN are not compared. Also the number of points compared
+    (0: too few, or none converged)."""
+    n = points.shape[0]
+    d = np.zeros(2)
     used = 0
-    for _ in range(iterations):
-        n = 0
-        sr = 0.0
-        sa0 = 0.0
-        sa1 = 0.0
-        s00 = 0.0
-        s01 = 0.0
-        s11 = 0.0
-        s0r = 0.0
-        s1r = 0.0
-        for i in range(h):
-            for j in range(w):
-                t = tmpl[i, j]
-                a0 = gx[i, j]
-                a1 = gy[i, j]
-                if np.isnan(t) or np.isnan(a0) or np.isnan(a1):
-                    continue
-                p = _bilinear(patch, i + d1, j + d0)
-                if np.isnan(p):
-                    continue
-                r = p - t
-                n += 1
-                sr += r
-                sa0 += a0
-                sa1 += a1
-                s00 += a0 * a0
-                s01 += a0 * a1
-                s11 += a1 * a1
-                s0r += a0 * r
-                s1r += a1 * r
-        if n < 30:
+    ata = np.empty((4, 4))
+    atb = np.empty(4)
+    col = np.empty(4)
+    res = np.empty(n)
+    samp = np.empty(n)
+    gain, offset, scale = 1.0, 0.0, np.inf
+    for it in range(iterations):
+        # the image at the moved points, and each point's residual against the template
+        m = 0
+        for k in range(n):
+            samp[k] = np.nan
+            t = tmpl[k]
+            if np.isnan(t) or np.isnan(gx[k]) or np.isnan(gy[k]):
+                continue
+            px = points[k, 0] + d[0]
+            py = points[k, 1] + d[1]
+            pz = points[k, 2]
+            qx = rot[0, 0] * px + rot[0, 1] * py + rot[0, 2] * pz + trans[0]
+            qy = rot[1, 0] * px + rot[1, 1] * py + rot[1, 2] * pz + trans[1]
+            qz = rot[2, 0] * px + rot[2, 1] * py + rot[2, 2] * pz + trans[2]
+            depth = max(-qz, 1e-6)
+            u = cx + f * qx / depth
+            v = cy - f * qy / depth
+            if (u - iris_c[0]) ** 2 + (v - iris_c[1]) ** 2 < iris_r * iris_r:
+                continue
+            p = _bilinear(img, v - 0.5 - y0, u - 0.5 - x0)
+            if np.isnan(p):
+                continue
+            samp[k] = p
+            res[m] = abs(p - gain * t - offset)
+            m += 1
+        if m < 30:
             return np.zeros(2), 0
-        # centred (a free offset of brightness)
-        m00 = s00 - sa0 * sa0 / n
-        m01 = s01 - sa0 * sa1 / n
-        m11 = s11 - sa1 * sa1 / n
-        b0 = -(s0r - sa0 * sr / n)
-        b1 = -(s1r - sa1 * sr / n)
-        det = m00 * m11 - m01 * m01
-        if det <= 1e-12:
-            return np.zeros(2), 0
-        st0 = (m11 * b0 - m01 * b1) / det
-        st1 = (m00 * b1 - m01 * b0) / det
-        st0 = min(max(st0, -2.0), 2.0)
-        st1 = min(max(st1, -2.0), 2.0)
-        d0 = min(max(d0 + st0, -limit), limit)
-        d1 = min(max(d1 + st1, -limit), limit)
-        used = n
-        if abs(st0) < 0.01 and abs(st1) < 0.01:
+        sigma = 1.4826 * np.median(res[:m])  # (the residuals' robust scale)
+        if it > 0:
+            scale = sigma * robust
+        ata[:] = 0.0
+        atb[:] = 0.0
+        for k in range(n):
+            p = samp[k]
+            if np.isnan(p):
+                continue
+            t = tmpl[k]
+            r = p - gain * t - offset
+            wt = 1.0 if abs(r) <= scale else scale / abs(r)  # (Huber's)
+            col[0], col[1], col[2], col[3] = gain * gx[k] / step_mm, gain * gy[k] / step_mm, t, 1.0
+            for a in range(4):
+                atb[a] += wt * col[a] * r
+                for b in range(4):
+                    ata[a, b] += wt * col[a] * col[b]
+        for a in range(4):
+            ata[a, a] += 1e-9
+        # the prior on the shift (the unknowns are minus its step): lam |d - x|^2
+        lam = m * sigma * sigma / (prior_mm * prior_mm * 4.0)
+        for a in range(2):
+            ata[a, a] += lam
+            atb[a] += lam * d[a]
+        step = np.linalg.solve(ata, atb)
+        # (p ~ gain t + offset - gain grad . delta: the step moves the points by -delta)
+        s0 = min(max(-step[0], -1.0), 1.0)
+        s1 = min(max(-step[1], -1.0), 1.0)
+        gain += step[2]
+        offset += step[3]
+        d[0] = min(max(d[0] + s0, -limit_mm), limit_mm)
+        d[1] = min(max(d[1] + s1, -limit_mm), limit_mm)
+        used = m
+        if abs(s0) < 0.005 and abs(s1) < 0.005 and it > 0:
             break
-    out = np.empty(2)
-    out[0], out[1] = d0, d1
-    return out, used
+    return d, used
 
 
 class EyeSocket:
@@ -604,7 +638,7 @@ class EyeSocket:
         inside = _inside_polygon(pts, poly).reshape(x.shape)
         sphere = c[2] + np.sqrt(np.maximum(EYE_RADIUS_MM**2 - (x - c[0]) ** 2 - (y - c[1]) ** 2, 0))
         z = np.where(inside, sphere, z)
-        #: the grid's points (N, 3) mm, head frame, and where the face is (H, W) bool
+        #: the grid's points (N, 3) mm, head frame, and those on the face (H, W) bool
         self.points = np.column_stack([pts, np.nan_to_num(z.ravel(), nan=c[2])])
         self.valid = np.isfinite(z)
         self.shape = x.shape
@@ -618,29 +652,33 @@ class EyeSocket:
         """Whether the template has seen enough frames to align to."""
         return int((self._count >= self.settings.socket_min_frames).sum()) >= 50
 
-    def sample(self, frame, camera, pose) -> tuple[np.ndarray, np.ndarray]:
-        """The frame's patch (H, W) (luma, bilinear) at the projection of the grid by ``pose``,
-        and the grid's image points (H, W, 2) px."""
-        from scipy.ndimage import map_coordinates
-
-        uv = camera.project(pose.apply(self.points))
+    def _luma(self, frame, uv):
+        """The frame's luma about the image points ``uv`` (N, 2) (a margin of 2 px plus the
+        largest offset), and its top-left pixel; None off the frame."""
         img = np.asarray(frame)[..., :3]
-        scale = 255.0 if img.dtype == np.uint8 else 1.0
-        x0, y0 = np.maximum(np.floor(uv.min(axis=0)).astype(int) - 2, 0)
-        x1, y1 = np.minimum(np.ceil(uv.max(axis=0)).astype(int) + 2,
+        m = 2 + int(np.ceil(self.settings.socket_max_mm * 2))  # (px per mm < 2 here)
+        x0, y0 = np.maximum(np.floor(uv.min(axis=0)).astype(int) - m, 0)
+        x1, y1 = np.minimum(np.ceil(uv.max(axis=0)).astype(int) + m,
                             [img.shape[1] - 1, img.shape[0] - 1])  # fmt: skip
-        if x1 <= x0 or y1 <= y0:
-            return np.full(self.shape, np.nan), uv.reshape(*self.shape, 2)
-        crop = img[y0 : y1 + 1, x0 : x1 + 1].astype(np.float64) @ LUMA / scale
-        coords = np.stack([uv[:, 1] - 0.5 - y0, uv[:, 0] - 0.5 - x0])
-        patch = map_coordinates(crop, coords, order=1, mode="nearest", cval=np.nan)
-        outside = (uv[:, 0] < 0.5) | (uv[:, 1] < 0.5) | (uv[:, 0] > img.shape[1] - 0.5)
-        outside |= uv[:, 1] > img.shape[0] - 0.5
-        patch[outside] = np.nan
+        if x1 <= x0 + 1 or y1 <= y0 + 1:
+            return None
+        scale = 255.0 if img.dtype == np.uint8 else 1.0
+        return img[y0 : y1 + 1, x0 : x1 + 1].astype(np.float64) @ LUMA / scale, int(x0), int(y0)
+
+    def sample(self, frame, camera, pose) -> tuple[np.ndarray, np.ndarray]:
+        """The frame's patch (H, W) (luma, bilinear; NaN off the face or the frame) at the
+        projection of the grid by ``pose``, and the grid's image points (H, W, 2) px."""
+        uv = camera.project(pose.apply(self.points))
+        patch = np.full(len(uv), np.nan)
+        got = self._luma(frame, uv)
+        if got is not None:
+            img, x0, y0 = got
+            patch = _bilinear_at(img, uv[:, 1] - 0.5 - y0, uv[:, 0] - 0.5 - x0)
+            patch[~self.valid.ravel()] = np.nan
         return patch.reshape(self.shape), uv.reshape(*self.shape, 2)
 
     def usable(self, uv, iris_centre, iris_radius_px) -> np.ndarray:
-        """The patch's pixels (H, W) bool to compare: on the face and off the iris read
+        """The patch's pixels (H, W) bool to learn from: on the face and off the iris read
         (:attr:`GazeSettings.socket_iris_px` beyond its radius)."""
         far = np.linalg.norm(uv - np.asarray(iris_centre), axis=-1)
         return self.valid & (far > iris_radius_px + self.settings.socket_iris_px)
@@ -652,23 +690,33 @@ class EyeSocket:
         self._count[ok] += 1
         self._template = None
 
-    def offset(self, patch, usable) -> np.ndarray | None:
-        """The shift (2,) mm, head frame (x, y), that moves the patch onto the template
-        (:func:`_align_translation`, the ``usable`` pixels of the patch), or None while the
-        template has too few frames."""
+    def offset(self, frame, camera, pose, iris_centre, iris_radius_px) -> np.ndarray | None:
+        """The shift (2,) mm, head frame (x, y), of the eye from where ``pose`` puts it: the
+        grid moved by it and projected by ``pose`` sees the template
+        (:func:`_align_socket`; the iris, centred at ``iris_centre`` px with radius
+        ``iris_radius_px``, masked out); None while the template has too few frames or the
+        frame too few of its points."""
         st = self.settings
+        if not self.ready:
+            return None
         if self._template is None:
-            if not self.ready:
-                return None
-            seen = self._count >= st.socket_min_frames
+            seen = (self._count >= st.socket_min_frames) & self.valid
             tmpl = np.where(seen, self._sum / np.maximum(self._count, 1), np.nan)
             gy, gx = np.gradient(tmpl)
-            self._template = (tmpl, gx, gy)
-        tmpl, gx, gy = self._template
-        p = np.where(usable, patch, np.nan)
-        d, used = _align_translation(p, tmpl, gx, gy, int(st.socket_iterations),
-                                     st.socket_max_mm / st.socket_step_mm)  # fmt: skip
-        return None if used == 0 else d * st.socket_step_mm
+            self._template = tuple(np.ascontiguousarray(a.ravel()) for a in (tmpl, gx, gy))
+        uv = camera.project(pose.apply(self.points))
+        got = self._luma(frame, uv)
+        if got is None:
+            return None
+        img, x0, y0 = got
+        d, used = _align_socket(
+            img, x0, y0, self.points, np.asarray(pose.rotation, dtype=np.float64),
+            np.asarray(pose.translation_mm, dtype=np.float64), camera.focal_px, camera.cx,
+            camera.cy, *self._template, st.socket_step_mm, np.asarray(iris_centre, float),
+            iris_radius_px + st.socket_iris_px, int(st.socket_iterations), st.socket_max_mm,
+            st.socket_robust, st.socket_prior_mm,
+        )  # fmt: skip
+        return None if used == 0 else d
 
 
 # ------------------------------------------------------------------ the reader
@@ -840,7 +888,7 @@ class GazeEstimator:
                         e, frame, camera, pose, shape, points, start
                     )
                 if any(self.offsets[e.side] is not None for e in eyes):
-                    start = self._coarse(eyes, camera, rot)
+                    start = self._coarse(eyes, camera, rot, start, st.socket_window_deg)
             for e in eyes:
                 out[e.side] = self._closed_by_contrast(e.side, self._refine(e, camera, rot, start))
                 patch = patches.get(e.side)
@@ -855,11 +903,13 @@ class GazeEstimator:
         self.timings["seconds"] += time.perf_counter() - t0
         return Gaze(out["l"], out["r"])
 
-    def _coarse(self, eyes: list[_Eye], camera, rot) -> tuple | None:
+    def _coarse(self, eyes: list[_Eye], camera, rot, centre=(0.0, 0.0),
+                half: float = MAX_GAZE_DEG) -> tuple | None:  # fmt: skip
         """The coarse grid's best gaze for the eyes together (their residuals relative to each
-        eye's own without an iris; each eye is then refined alone around it), None if none."""
+        eye's own without an iris; each eye is then refined alone around it), None if none;
+        the grid within ``half`` (deg) of ``centre``."""
         st = self.settings
-        yaw, pitch = _grid((0.0, 0.0), st.coarse_deg, MAX_GAZE_DEG)
+        yaw, pitch = _grid(centre, st.coarse_deg, half)
         total = np.zeros(len(yaw))
         for e in eyes:
             rss = e.rss(camera, rot, yaw, pitch, st, coarse=True)[0]
@@ -899,7 +949,7 @@ class GazeEstimator:
         sock = self.sockets[eye.side]
         patch, uv = sock.sample(frame, camera, pose)
         iris_c, iris_r = self._iris_image(eye, camera, rot, *start)
-        d = sock.offset(patch, sock.usable(uv, iris_c, iris_r))
+        d = sock.offset(frame, camera, pose, iris_c, iris_r)
         if d is None:
             return eye, (patch, uv)
         move = np.array([d[0], d[1], 0.0])
