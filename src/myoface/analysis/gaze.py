@@ -37,10 +37,24 @@ it would have to run as a second graph beside the first: it is not run at all.
 
 What limits the reading is where the eyeball's centre is: it comes from the fitted head pose
 and the person's neutral, placed by MediaPipe's points, and a millimetre of error there is
-5 degrees of gaze (the iris' centre is 10.5 mm from the eyeball's). On the benchmark's renders
-(:mod:`myoface.bench.gaze`, 2026-12-02) the reader alone, on the true pose, skin and camera,
-is off by 2.8-3.2 deg RMS; end to end 8.6 deg with the default fit, 6.3 with analysis by
-synthesis, 5.3 with the photometric term. On single_face.mp4, where the person looks at the
+5 degrees of gaze (the iris' centre is 10.5 mm from the eyeball's). The gaze is the eye's
+rotation in the head, so each eye is read against its own socket in the frame
+(:class:`EyeSocket`): the region around the eye (skin, lid margins, lashes, brow, and in the
+opening the eyeball's sphere) is learnt in the head frame as the mean of the open frames'
+patches, each sampled through the fit's pose (the iris left out: it moves with the gaze), and
+each frame's patch is aligned to it: the shift found moves the eyeball's centre and the lids'
+margins before the iris is read. The fit's misplacement changes from frame to frame about a
+small mean, so the template sits at that mean and the alignment takes the rest away: on the
+benchmark's recorded fit (2026-12-02) the eyeballs' centres 1.6-1.8 -> 0.7-1.2 px RMS in the
+image (without the prior of :attr:`GazeSettings.socket_prior_mm`). Measured by oracle swaps
+on the same frames (the reader without the socket, the worse eye's RMS): the fit's everything
+8.7 deg; the eyeball's centre put at the truth's place in the image 6.1; and the lids' margins
+the truth's too 3.7; and the head's true rotation (the head frame the gaze is given in) 2.3.
+The socket takes the first step and part of the second (it moves the lids with the eye; their
+own shape stays the fit's): 5.9 deg, 5.5 on a second clip. What is left is the lids' shape
+(the fit's opening too open or too closed by 1-2.5 px, most at a blink's start, where the
+truth counts the eye open to half closed) and the head's rotation error, which no local
+offset removes. On the true geometry the reader alone is off by 2.7-2.9 deg RMS. On single_face.mp4, where the person looks at the
 phone's screen throughout, the reading holds within 0.8-1.6 deg (SD) and the blink's frames
 say closed; its absolute direction (16 and 9.5 deg to the person's right, 6-8 up) cannot be
 checked there (the screen's place beside the camera is not known).
@@ -126,6 +140,35 @@ class GazeSettings:
         readings of 8; on the benchmark 0.05 moved the error 8.77 -> 8.64 deg, 0.1 8.72).
     smooth_frames, smooth_deg : the temporal filter (:class:`GazeSmoother`): how many past
         frames, and the distance (deg) at which a past reading's weight falls to e^-1/2.
+    socket : move each eye to where its socket is in the frame (:class:`EyeSocket`) before
+        reading it (False: where the fit puts it). On the benchmark's recorded fit, replayed
+        (2026-12-02), the worse eye 8.73 -> 5.94 deg and on a second clip (another gaze
+        programme and camera noise) 7.72 -> 5.52; on the true geometry 3.18 / 2.82 -> 2.86
+        / 2.80 and 4.10 / 4.66 -> 3.90 / 4.43 (left / right).
+    socket_half_mm, socket_step_mm : the socket's region, +-(x, y) mm about the eyeball's
+        centre (the opening is 29 mm wide, 12 tall on the sample person; the brows' lower
+        edge and the cheek's upper are in), and its grid's step (0.66 px at 500 mm).
+    socket_iris_px : the iris is left out of the socket's comparison this far (px) beyond its
+        radius (its edge is blurred; where the coarse grid put it is a grid step off).
+    socket_min_frames : a template pixel is used once this many frames have shown it.
+    socket_max_mm, socket_iterations : the largest offset looked for, and the alignment's
+        most steps.
+    socket_open : only frames whose lids are at least this share of their open aperture apart
+        (and whose iris is as dark against the sclera as that share of its usual contrast)
+        teach the template or are aligned to it (a blink's lids cross the template's region:
+        aligned, a frame at 0.35 of a blink read 35 deg off).
+    socket_robust : the alignment's Huber weights (the residual beyond this many robust SDs
+        counts linearly: the iris' remainder, a reflection; on the second clip 6.43 deg
+        without, 5.52 with).
+    socket_prior_mm : the prior SD (mm, each of x and y) of the fit's misplacement (measured
+        1.2-1.8 px RMS at 500 mm: 0.9-1.4 mm), against the residuals' robust variance per 4
+        grid points (about one independent sample of a blurred image). Along the lids' long
+        edges a horizontal shift changes little: without the prior it ran away on the second
+        clip, 7.72 -> 8.86 deg; with 1 mm the worse eye 6.61 / 5.83 (the two clips), with 2
+        mm 5.60 / 5.95.
+    socket_window_deg : after the move, the coarse grid again within this of its first best
+        (a millimetre moves the gaze about 5 deg; the full grid read within 0.9 deg of it,
+        better on one clip and worse on the other, for 4.6 times the candidates).
     """
 
     coarse_deg: float = 6.0

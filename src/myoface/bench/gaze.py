@@ -181,7 +181,10 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
         photometric=photometric,
     )  # fmt: skip
     try:
-        measured = [m for _, m in Tracking(clip, an, first)]
+        measured, offsets = [], []
+        for _, m in Tracking(clip, an, first):
+            measured.append(m)
+            offsets.append({s: an.gaze.offsets.get(s) for s in ("l", "r")})
         reader = an.gaze
         centres = {s: reader.centres_mm[s] for s in ("l", "r")}
         cam = an.fit.camera
@@ -190,7 +193,7 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
     seconds = time.perf_counter() - t0
     est = {s: np.full((n, 2), np.nan) for s in ("l", "r")}
     states = {s: [""] * n for s in ("l", "r")}
-    centre_err = []
+    centre_err, socket_err, found = [], [], []
     true_cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
     from myoface.face.eyes import eye_loop, eyeball_center
 
@@ -198,7 +201,7 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
         s: eyeball_center(model.face.vertices, eye_loop(model.face, g))
         for s, g in (("l", "eye_l"), ("r", "eye_r"))
     }
-    for m in measured:
+    for m, off in zip(measured, offsets, strict=True):
         if m.gaze is None:
             continue
         for s in ("l", "r"):
@@ -209,6 +212,11 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
             got = cam.project(m.pose.apply(centres[s][None]))[0]
             want = true_cam.project(poses[m.index].apply(true_c[s][None]))[0]
             centre_err.append(got - want)
+            if e.ok:  # where the reader put the eyeball (its socket's offset, if found)
+                d = np.zeros(3) if off[s] is None else np.array([*off[s], 0.0])
+                moved = cam.project(m.pose.apply((centres[s] + d)[None]))[0]
+                socket_err.append(moved - want)
+                found.append(off[s] is not None)
     # the reader alone, on the true pose, skin and camera
     alone = GazeEstimator(model.face)
     alone_est = {s: np.full((n, 2), np.nan) for s in ("l", "r")}
@@ -236,6 +244,11 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
         )  # fmt: skip
     ce = np.array(centre_err) if centre_err else np.full((1, 2), np.nan)
     out["eyeball_centre_px_rms"] = [round(float(v), 3) for v in np.sqrt(np.mean(ce**2, axis=0))]
+    se = np.array(socket_err) if socket_err else np.full((1, 2), np.nan)
+    out["eyeball_centre_read_px_rms"] = [
+        round(float(v), 3) for v in np.sqrt(np.mean(se**2, axis=0))
+    ]
+    out["socket_found"] = round(float(np.mean(found)), 3) if found else None
     out["gaze_ms_per_frame"] = reader.describe()["ms_per_frame"]
     out["analysis_seconds"] = round(seconds, 2)
     out["estimator"] = estimator + (" + photometric" if photometric else "")
