@@ -446,7 +446,7 @@ class SymmetricPattern:
 # every kernel below is one of them or both.
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _add_sym6(arr, slot, h0, h1, h2, h4, h5, h8):
     """Add the symmetric block [[h0, h1, h2], [h1, h4, h5], [h2, h5, h8]] to block ``slot``
     of ``arr`` (nothing if slot < 0)."""
@@ -463,7 +463,7 @@ def _add_sym6(arr, slot, h0, h1, h2, h4, h5, h8):
         arr[o + 8] += h8
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _add_upper6(arr, slot, h0, h1, h2, h4, h5, h8):
     """Add the upper triangle of the symmetric block [[h0, h1, h2], [h1, h4, h5], [h2, h5, h8]]
     to diagonal block ``slot`` of ``arr`` (nothing if slot < 0); its lower triangle is left
@@ -606,14 +606,14 @@ def _prism_pass(x, prisms, grad, want_g, dvals, lvals, want_h):
     return en
 
 
-@njit(cache=True, nogil=True, fastmath=True, inline="always")
+@njit(cache=True, nogil=True, fastmath=True)
 def _add_outer(dvals, fa, a0, a1, a2):
     """Add the upper triangle of ``a a^T`` to diagonal block ``fa`` of ``dvals`` (nothing if
     fa < 0; the lower one is left for :func:`symmetrize_diagonal`)."""
     _add_upper6(dvals, fa, a0 * a0, a0 * a1, a0 * a2, a1 * a1, a1 * a2, a2 * a2)
 
 
-@njit(cache=True, nogil=True, fastmath=True, inline="always")
+@njit(cache=True, nogil=True, fastmath=True)
 def _add_pair(lvals, slot, rev, a0, a1, a2, b0, b1, b2, w0, w1, w2):
     """Add ``H_ab = a b^T + [w]x`` (``[w]x`` the cross-product matrix of w) to lower block
     ``slot`` of ``lvals``, or its transpose ``H_ba`` if ``rev``; nothing if slot < 0."""
@@ -641,7 +641,7 @@ def _add_pair(lvals, slot, rev, a0, a1, a2, b0, b1, b2, w0, w1, w2):
             lvals[o + 8] += a2 * b2
 
 
-@njit(cache=True, nogil=True, fastmath=True, inline="always")
+@njit(cache=True, nogil=True, fastmath=True)
 def add_one_prism_hessian(pts, gr, dv, kvq, vsign, fr, sl, rv, dvals, lvals):
     """One prism's Hessian ``2 kv (dV/dx_a)(dV/dx_b)^T + 2 kv (V - V0) d2V/dx_a dx_b`` (the
     second a skew 3x3 block, zero on the diagonal) added to the symmetric storage: its nodes
@@ -739,7 +739,7 @@ def add_one_prism_hessian(pts, gr, dv, kvq, vsign, fr, sl, rv, dvals, lvals):
 PRISM_CHUNK = 64
 
 
-@njit(cache=True, nogil=True, fastmath=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
 def _chunk_tet(w, q, o0, o1, o2, o3):
     """:func:`~myoface.tissue.forces._tet_gradient` of the tetrahedron whose nodes' coordinates
     are rows 3 o0 .. 3 o3 + 2 of the chunk ``w``, lane q."""

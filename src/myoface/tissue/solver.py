@@ -249,7 +249,7 @@ def ldl_solve(ptr, rows, vals, diag, dinv, perm, b, out, y):
         out[p + 2] = y[3 * J + 2]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True)
 def _inverse_spd3(a, o, out):
     """The inverse of the symmetric 3x3 block ``a[o:o+9]`` into ``out[o:o+9]`` (its adjugate over
     its determinant) if the block is positive definite (its leading minors positive: Sylvester's
