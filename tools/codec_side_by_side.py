@@ -33,7 +33,7 @@ a = C._analysed("sample", False)
 clip, hulls = a["clip"], a["hulls"]
 ours = C._ours("sample", False, QUALITY)
 buf = io.BytesIO()
-encode_params(buf, a["params"], lambda: a["setup"], quality=QUALITY)
+encode_params(buf, a["params"], lambda: a["setup"], quality=QUALITY, images=clip)
 decoded = [f.copy() for f in Decoder(BytesSource(buf.getvalue())).frames()]
 x = C._x264_at_bytes("sample", False, ours["total_bytes"])
 x_bytes, x_frames = C._x264(clip, x["bit_rate"], x["scale"])

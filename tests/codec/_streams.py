@@ -8,7 +8,7 @@ import numpy as np
 
 from myoface.analysis.camera import PinholeCamera, rotmat
 from myoface.codec.entropy import QUALITIES
-from myoface.codec.params import FrameParams
+from myoface.codec.params import APPEARANCE_LIMITS, N_APPEARANCE, FrameParams
 from myoface.codec.stream import Header, StreamWriter, encode_image
 
 M = 35  # the default face's contractions
@@ -31,13 +31,15 @@ def header(quality: str = "medium", segment_frames: int = 16, width=48, height=3
 
 
 def frames(n: int, seed: int = 0) -> list[FrameParams]:
-    """A random walk of head pose, contractions and gaze, with jumps (escapes), unmeasured
-    frames and closed eyes."""
+    """A random walk of head pose, contractions, gaze and appearance, with jumps (escapes),
+    unmeasured frames and closed eyes."""
     rng = np.random.default_rng(seed)
     c = np.zeros(M)
     rv = np.zeros(3)
     tr = np.array([0.0, 0.0, -600.0])
     g = np.array([0.05, 0.0, 0.05, 0.0])
+    lim = np.asarray(APPEARANCE_LIMITS)
+    app = np.zeros(N_APPEARANCE)
     out = []
     for k in range(n):
         c = np.clip(c + rng.normal(0, 0.02, M) * (rng.random(M) < 0.4), 0, 1)
@@ -51,7 +53,11 @@ def frames(n: int, seed: int = 0) -> list[FrameParams]:
             gaze[:2] = np.nan
         if rng.random() < 0.05:
             gaze[:] = np.nan
-        out.append(FrameParams(rotmat(rv), tr, c, gaze, measured=rng.random() > 0.05))
+        app = np.clip(app + rng.normal(0, 0.03, N_APPEARANCE) * lim, -lim, lim)
+        if k % 41 == 7:
+            app = rng.uniform(-lim, lim)  # (beyond the residuals coded directly)
+        out.append(FrameParams(rotmat(rv), tr, c, gaze, measured=rng.random() > 0.05,
+                               appearance=app))  # fmt: skip
     return out
 
 

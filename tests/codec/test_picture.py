@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from myoface.analysis.camera import HeadPose, PinholeCamera
-from myoface.codec.params import FrameParams
+from myoface.codec.params import APPEARANCE_FIELDS, APPEARANCE_STEPS, N_APPEARANCE, FrameParams
 from myoface.codec.picture import (
     LABEL_EYE,
     LABEL_MOUTH,
@@ -241,6 +241,68 @@ def test_mouth_interior_appears_when_the_jaw_opens(model, camera, calibration):
     assert np.median(diff[inner]) > 100
     assert (diff[~cv2.dilate(mouth.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)]
             == 0).all()  # fmt: skip
+
+
+def test_appearance_brightens_the_mouth_and_shades_the_face_only(model, camera, calibration):
+    """The appearance terms (format version 2): the mouth's gain and offset act on the
+    mouth's layer (and its 1-px feather) only; the face's gain on the face's layers only,
+    nothing beyond a few pixels of them; the decoder's render with the terms is the render
+    without them, then the terms applied (what the encoder fits on)."""
+    import cv2
+
+    pm = PictureModel(model, camera, _pattern(3), calibration, segment=False)
+    p = _params(calibration, _contractions(model, jaw=0.6))
+    base = pm.render(p)
+    mouth = pm.last_label == LABEL_MOUTH
+    face = pm.last_label >= LABEL_EYE
+    a = np.zeros(N_APPEARANCE)
+    a[APPEARANCE_FIELDS.index("mouth_offset")] = 40.0
+    out = pm.apply_appearance(base.copy(), a)
+    changed = np.abs(out.astype(int) - base).sum(axis=2) > 0
+    assert changed[mouth].mean() > 0.95
+    near = cv2.dilate(mouth.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
+    assert not changed[~near].any()
+    a[:] = 0.0
+    a[APPEARANCE_FIELDS.index("face_gain_log2")] = 0.25  # 19 % brighter
+    out = pm.apply_appearance(base.copy(), a)
+    inner = cv2.erode(face.astype(np.uint8), np.ones((25, 25), np.uint8)).astype(bool)
+    ratio = (out[inner].astype(float) + 0.5) / (base[inner].astype(float) + 0.5)
+    lit = base[inner] > 40  # (rounding: a dark pixel's ratio is coarse)
+    assert np.median(ratio[lit]) == pytest.approx(2**0.25, abs=0.01)
+    far = ~cv2.dilate(face.astype(np.uint8), np.ones((33, 33), np.uint8)).astype(bool)
+    assert np.array_equal(out[far], base[far])
+    q = p.copy()
+    q.appearance = a
+    assert np.array_equal(pm.render(q), out)
+
+
+def test_the_encoders_fit_reads_back_the_appearance_it_is_shown(model, camera, calibration):
+    """A picture made by the terms (a brighter mouth, a darker face, one bump of light): the
+    encoder's fit (:meth:`PictureModel.estimate_appearance`) on it against the render
+    without them, quantised as a packet carries it, brings the render to within a tenth of
+    the terms' squared difference, on the mouth and on the face; on the render itself it
+    finds none."""
+    pm = PictureModel(model, camera, _pattern(4), calibration, segment=False)
+    p = _params(calibration, _contractions(model, jaw=0.6))
+    base = pm.render(p)
+    steps = np.array(APPEARANCE_STEPS)
+    assert np.all(np.abs(pm.estimate_appearance(base, base)) < 0.5 * steps)
+    mouth = pm.last_label == LABEL_MOUTH
+    face = pm.last_label >= LABEL_EYE
+    a = np.zeros(N_APPEARANCE)
+    a[APPEARANCE_FIELDS.index("mouth_gain_log2")] = 0.5
+    a[APPEARANCE_FIELDS.index("mouth_offset")] = -16.0
+    a[APPEARANCE_FIELDS.index("face_gain_log2")] = -0.25
+    a[APPEARANCE_FIELDS.index("shading_3_log2")] = 0.25
+    shown = pm.apply_appearance(base.copy(), a)
+    est = np.round(pm.estimate_appearance(base, shown) / steps) * steps
+    fitted = pm.apply_appearance(base.copy(), est)
+
+    def se(x, where):
+        return float(((x.astype(float) - shown)[where] ** 2).sum())
+
+    for where in (mouth, face & ~mouth):
+        assert se(fitted, where) < 0.1 * se(base, where)
 
 
 def test_a_blink_closes_the_eyes_and_gaze_moves_the_iris(model, camera, calibration):

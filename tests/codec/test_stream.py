@@ -16,6 +16,7 @@ import pytest
 from myoface.analysis.camera import rotvec
 from myoface.codec.encode import EncodeStats, Setup, encode_params
 from myoface.codec.entropy import HOLD, ParamCoder
+from myoface.codec.params import APPEARANCE_STEPS, N_APPEARANCE
 from myoface.codec.stream import (
     MAGIC,
     VERSION,
@@ -25,6 +26,7 @@ from myoface.codec.stream import (
     Header,
     StreamReader,
     StreamTruncated,
+    StreamWriter,
     decode_image,
     encode_image,
 )
@@ -39,6 +41,7 @@ def _same(a, b) -> bool:
         and np.array_equal(a.translation, b.translation)
         and np.array_equal(a.contractions, b.contractions)
         and np.array_equal(a.gaze, b.gaze, equal_nan=True)
+        and np.array_equal(a.appearance, b.appearance)
     )
 
 
@@ -67,6 +70,48 @@ def test_every_decoded_value_is_within_the_quantisers_step(quality):
         read = np.isfinite(p.gaze)
         assert np.array_equal(np.isfinite(d.gaze), read)  # an eye not read stays not read
         assert np.abs(d.gaze[read] - p.gaze[read]).max(initial=0) <= tol * steps.gaze_rad
+        assert np.all(np.abs(d.appearance - p.appearance) <= tol * np.array(APPEARANCE_STEPS))
+
+
+def test_a_version_1_stream_is_read_without_appearance():
+    h = header()
+    h.version = 1
+    buf = io.BytesIO()
+    w = StreamWriter(buf, h)
+    written = [w.write(p) for p in frames(40, seed=2)]
+    w.close()
+    data = buf.getvalue()
+    assert data[4] == 1
+    out = list(StreamReader(BytesSource(data)))
+    assert all(_same(a, b) for a, b in zip(written, out, strict=True))
+    assert not any(p.appearance.any() for p in out)  # (version 1 carries none)
+    # the same frames in version 2 carry their appearance, in more bytes
+    data2, decoded2, _ = stream(40, seed=2)
+    assert data2[4] == VERSION == 2 and len(data2) > len(data)
+    assert any(p.appearance.any() for p in decoded2)
+
+
+def test_the_encoders_appearance_fit_sees_the_quantised_frame_without_appearance():
+    h = header()
+    w = StreamWriter(io.BytesIO(), h)
+    seen = []
+
+    def fit(base):
+        seen.append(base)
+        return np.full(N_APPEARANCE, 0.3)
+
+    for p in frames(20, seed=4):
+        out = w.write(p, fit)
+        if not p.measured:
+            continue
+        base = seen[-1]
+        assert not base.appearance.any()
+        # what the fit saw is what the decoder renders, but for the appearance
+        assert np.array_equal(base.contractions, out.contractions)
+        assert np.array_equal(base.rotation, out.rotation)
+        assert np.array_equal(base.gaze, out.gaze, equal_nan=True)
+        assert np.all(np.abs(out.appearance - 0.3) <= HOLD * np.array(APPEARANCE_STEPS) + 1e-12)
+    assert len(seen) == sum(p.measured for p in frames(20, seed=4))
 
 
 def test_quality_trades_bits_for_fidelity():
@@ -164,7 +209,7 @@ def test_a_corrupted_stream_is_refused_in_one_line():
 def test_another_version_or_not_a_stream():
     data, _, _ = stream(5)
     newer = data[:4] + bytes([VERSION + 1]) + data[5:]
-    with pytest.raises(MyofaceFormatError, match="version 2; this myoface reads version 1"):
+    with pytest.raises(MyofaceFormatError, match="version 3; this myoface reads versions 1 and 2"):
         _read_all(newer)
     with pytest.raises(MyofaceFormatError, match="not a myoface stream"):
         _read_all(b"RIFF" + data[4:])

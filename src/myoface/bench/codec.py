@@ -223,7 +223,8 @@ def _ours(kind: str, quick: bool, quality: str) -> dict:
         setup = a["setup"]
         buf = io.BytesIO()
         t0 = time.perf_counter()
-        stats = encode_params(buf, a["params"], lambda: setup, quality=quality)
+        stats = encode_params(buf, a["params"], lambda: setup, quality=quality,
+                              images=a["clip"])  # fmt: skip
         code_s = time.perf_counter() - t0
         data = buf.getvalue()
         q = _Quality(a["clip"], a["hulls"])
@@ -516,7 +517,7 @@ def _decoded_fidelity(quick: bool) -> dict:
         clip = a["clip"]
         n = min(len(clip.unique), len(clip))
         buf = io.BytesIO()
-        encode_params(buf, a["params"], lambda: a["setup"], quality="medium")
+        encode_params(buf, a["params"], lambda: a["setup"], quality="medium", images=clip)
         t0 = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "decoded.mp4"

@@ -42,6 +42,18 @@ def person_model(header: Header):
     return build_face_model(person)
 
 
+def picture_model_of(header: Header, physics: str = DECODE_PHYSICS):
+    """The receiver's picture of ``header`` (its picture, the person's model, the camera and
+    the calibration): the decoder's, and the encoder's for fitting the appearance terms on
+    what the decoder will show. Returns (picture (H, W, 3) uint8, model, PictureModel)."""
+    from myoface.codec.picture import PictureModel
+
+    picture = header.picture()
+    model = person_model(header)
+    pm = PictureModel(model, header.camera, picture, header.calibration, physics=physics)
+    return picture, model, pm
+
+
 _IDS: list = []
 
 
@@ -76,18 +88,11 @@ class Decoder:
     parameters alone."""
 
     def __init__(self, source: ByteSource, physics: str = DECODE_PHYSICS):
-        from myoface.codec.picture import PictureModel
-
         t0 = time.perf_counter()
         try:
             self.reader = StreamReader(source)
             self.header = self.reader.header
-            h = self.header
-            self.picture = h.picture()
-            self.model = person_model(h)
-            self.picture_model = PictureModel(
-                self.model, h.camera, self.picture, h.calibration, physics=physics
-            )
+            self.picture, self.model, self.picture_model = picture_model_of(self.header, physics)
         except BaseException:
             source.close()
             raise

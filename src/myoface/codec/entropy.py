@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from myoface.analysis.camera import rotmat, rotvec
-from myoface.codec.params import FrameParams
+from myoface.codec.params import APPEARANCE_LIMITS, APPEARANCE_STEPS, N_APPEARANCE, FrameParams
 from myoface.errors import MyofaceFormatError
 
 #: residuals coded directly (beyond: an escape and 16 bits)
@@ -152,25 +152,41 @@ class ParamCoder:
     """The prediction and adaptive models of one stream (both sides keep one, in step).
 
     Channels: the rotation vector (3), the translation (3), the ``n_contractions``
-    contractions, then the gaze (4: each eye's yaw and pitch). :meth:`encode_frame` codes a
-    frame and returns what the decoder will decode; :meth:`decode_frame` decodes one
-    (None at the end marker)."""
+    contractions, the ``n_appearance`` appearance terms (:data:`APPEARANCE_FIELDS
+    <myoface.codec.params.APPEARANCE_FIELDS>`; format version 2: all of them, version 1:
+    none), then the gaze (4: each eye's yaw and pitch). :meth:`encode_frame` codes a frame and
+    returns what the decoder will decode; :meth:`decode_frame` decodes one (None at the end
+    marker)."""
 
-    def __init__(self, n_contractions: int, steps: Steps, calibration: FrameParams):
+    def __init__(self, n_contractions: int, steps: Steps, calibration: FrameParams,
+                 n_appearance: int = N_APPEARANCE):  # fmt: skip
         steps.check()
+        if n_appearance not in (0, N_APPEARANCE):
+            raise MyofaceFormatError(
+                f"n_appearance must be 0 or {N_APPEARANCE}; got {n_appearance}"
+            )
         self.m = int(n_contractions)
+        self.n_app = int(n_appearance)
         self.steps = steps
-        self.n_main = 6 + self.m
+        self.i_app = 6 + self.m
+        self.n_main = self.i_app + self.n_app
         n = self.n_main + 4
         self.step = np.array(
             [steps.rotation_rad] * 3 + [steps.translation_mm] * 3 + [steps.contraction] * self.m
-            + [steps.gaze_rad] * 4
+            + list(APPEARANCE_STEPS[: self.n_app]) + [steps.gaze_rad] * 4
         )  # fmt: skip
+        lim = np.full(n, float(Q_LIMIT))
+        lim[self.i_app : self.n_main] = np.round(
+            np.asarray(APPEARANCE_LIMITS[: self.n_app]) / APPEARANCE_STEPS[: self.n_app]
+        )
+        #: each channel's bound on its integers
+        self.q_limit = lim.astype(np.int64)
         self.counts = np.tile(_prior(), (n * N_CONTEXTS, 1))
         self.bin_counts = np.full((N_BINARY, 2), 4, dtype=np.int64)
         self.bin_counts[BIN_KIND] = (256, 1)
         # the prediction: the last value of each channel (quantised), its last residual
         self.prev = self._q_of(calibration)
+        self.prev[self.i_app : self.n_main] = 0  # (the calibration picture's own appearance)
         self.prev[self.n_main :] = np.where(
             np.isfinite(calibration.gaze), self.prev[self.n_main :], 0
         )
@@ -191,7 +207,8 @@ class ParamCoder:
 
     def _values(self, p: FrameParams) -> np.ndarray:
         g = np.nan_to_num(p.gaze, nan=0.0)
-        return np.concatenate([rotvec(p.rotation), p.translation, p.contractions, g])
+        app = np.nan_to_num(p.appearance[: self.n_app], nan=0.0)
+        return np.concatenate([rotvec(p.rotation), p.translation, p.contractions, app, g])
 
     def _q_of(self, p: FrameParams) -> np.ndarray:
         if len(p.contractions) != self.m:
@@ -199,17 +216,17 @@ class ParamCoder:
                 f"a frame has {len(p.contractions)} contractions; the stream has {self.m}"
             )
         q = np.round(self._values(p) / self.step)
-        return np.clip(q, -Q_LIMIT, Q_LIMIT).astype(np.int64)
+        return np.clip(q, -self.q_limit, self.q_limit).astype(np.int64)
 
     def quantise(self, p: FrameParams) -> np.ndarray:
         """``p``'s integers: each channel held at its last value while ``p`` stays within
         :data:`HOLD` steps of it, else rounded (every value within one step of ``p``'s;
-        contractions clipped to [0, 1])."""
+        contractions clipped to [0, 1]; the appearance to its bounds)."""
         v = self._values(p)
-        v[6 : self.n_main] = np.clip(v[6 : self.n_main], 0.0, 1.0)
+        v[6 : self.i_app] = np.clip(v[6 : self.i_app], 0.0, 1.0)
         x = v / self.step
         q = np.where(np.abs(x - self.prev) <= HOLD, self.prev, np.round(x))
-        return np.clip(q, -Q_LIMIT, Q_LIMIT).astype(np.int64)
+        return np.clip(q, -self.q_limit, self.q_limit).astype(np.int64)
 
     def dequantise(self, q: np.ndarray, read=(True, True)) -> FrameParams:
         v = q * self.step
@@ -217,8 +234,10 @@ class ParamCoder:
         for k, ok in enumerate(read):
             if not ok:
                 gaze[2 * k : 2 * k + 2] = np.nan
-        c = np.clip(v[6 : self.n_main], 0.0, 1.0)  # (a step's multiple may round past 1)
-        return FrameParams(rotmat(v[:3]), v[3:6], c, gaze)
+        c = np.clip(v[6 : self.i_app], 0.0, 1.0)  # (a step's multiple may round past 1)
+        app = np.zeros(N_APPEARANCE)
+        app[: self.n_app] = v[self.i_app : self.n_main]
+        return FrameParams(rotmat(v[:3]), v[3:6], c, gaze, appearance=app)
 
     # -------------------------------------------------------------- coding
 
@@ -247,7 +266,7 @@ class ParamCoder:
         r = syms.astype(np.int64) - RESIDUAL_RANGE - 1
         r[big] = np.where(syms[big] == ESC_POS, 1, -1) * (pay.astype(np.int64) + RESIDUAL_RANGE + 1)
         val = self.prev[chans] + r
-        if np.any(np.abs(val) > Q_LIMIT):
+        if np.any(np.abs(val) > self.q_limit[chans]):
             raise MyofaceFormatError("corrupted stream: a parameter beyond its range")
         # the models learn
         np.add.at(self.counts, (slots, syms), COUNT_STEP)
@@ -280,11 +299,21 @@ class ParamCoder:
         self.last = self.dequantise(self.prev, read)
         return self.last.copy()
 
-    def encode_frame(self, io: RangeIO, p: FrameParams) -> FrameParams:
-        """Code frame ``p``; returns the decoder's :class:`FrameParams` (dequantised)."""
+    def encode_frame(self, io: RangeIO, p: FrameParams, appearance_of=None) -> FrameParams:
+        """Code frame ``p``; returns the decoder's :class:`FrameParams` (dequantised).
+
+        ``appearance_of``: a function of the decoder's parameters of the frame without
+        appearance (its head pose, contractions and gaze as quantised) that gives the frame's
+        appearance terms (the encoder's fit on the picture those render); None: ``p``'s own.
+        """
         if not p.measured:
             return self._code(io, KIND_FRAME, False, None)
         read = np.isfinite(p.gaze).reshape(2, 2).all(axis=1)
+        if appearance_of is not None and self.n_app:
+            base = self.dequantise(self.quantise(p), read)
+            base.appearance[:] = 0.0
+            p = p.copy()
+            p.appearance = np.asarray(appearance_of(base), dtype=np.float64).reshape(N_APPEARANCE)
         q = self.quantise(p)
         q[self.n_main :] = np.where(np.repeat(read, 2), q[self.n_main :], 0)
         return self._code(io, KIND_FRAME, True, q, read)

@@ -28,6 +28,25 @@ from myoface.analysis.camera import HeadPose
 #: the gaze vector's entries, in order
 GAZE_FIELDS = ("left_yaw_rad", "left_pitch_rad", "right_yaw_rad", "right_pitch_rad")
 
+#: the face's shading terms (:mod:`myoface.codec.picture`, "Appearance"): a log2 gain over the
+#: whole face, then one per smooth bump of the shading basis
+N_SHADING_BUMPS = 12
+#: the appearance vector's entries, in order (format version 2; docs/codec-format.md): the
+#: inside of the mouth's luma gain (log2) and offset (8-bit levels), the face's shading (log2
+#: gains: the whole face, then each bump)
+APPEARANCE_FIELDS = (
+    "mouth_gain_log2",
+    "mouth_offset",
+    "face_gain_log2",
+    *(f"shading_{k}_log2" for k in range(N_SHADING_BUMPS)),
+)
+N_APPEARANCE = len(APPEARANCE_FIELDS)
+#: the appearance's quantiser steps (fixed by the format; every quality the same)
+APPEARANCE_STEPS = (1 / 4, 8.0) + (1 / 16,) * (1 + N_SHADING_BUMPS)
+#: each appearance entry's bound (the encoder clips to it; a decoded value beyond it is a
+#: corrupted stream)
+APPEARANCE_LIMITS = (2.0, 128.0) + (1.0,) * (1 + N_SHADING_BUMPS)
+
 
 @dataclass
 class FrameParams:
@@ -43,6 +62,10 @@ class FrameParams:
     measured : False when the analysis did not measure the frame (no face, a misfit, an
         occluder): the other fields then repeat the last measured frame's (the decoder holds
         it).
+    appearance : (:data:`N_APPEARANCE`,) the picture's appearance terms
+        (:data:`APPEARANCE_FIELDS`: the mouth's inside, the face's shading), which the encoder
+        measures on the frame against the decoder's picture; zeros (None given): the
+        calibration picture's own.
     """
 
     rotation: np.ndarray
@@ -50,6 +73,7 @@ class FrameParams:
     contractions: np.ndarray
     gaze: np.ndarray
     measured: bool = True
+    appearance: np.ndarray | None = None
 
     def __post_init__(self):
         self.rotation = np.asarray(self.rotation, dtype=np.float64).reshape(3, 3)
@@ -57,6 +81,8 @@ class FrameParams:
         self.contractions = np.asarray(self.contractions, dtype=np.float64).reshape(-1)
         self.gaze = np.asarray(self.gaze, dtype=np.float64).reshape(4)
         self.measured = bool(self.measured)
+        a = np.zeros(N_APPEARANCE) if self.appearance is None else self.appearance
+        self.appearance = np.asarray(a, dtype=np.float64).reshape(N_APPEARANCE)
 
     @property
     def pose(self) -> HeadPose:
@@ -88,7 +114,8 @@ class FrameParams:
         None: a neutral face at the default pose)."""
         if m.quality != "ok" or m.pose is None or not np.isfinite(m.contractions).all():
             base = last if last is not None else cls.neutral(len(m.contractions))
-            return cls(base.rotation, base.translation, base.contractions, base.gaze, False)
+            return cls(base.rotation, base.translation, base.contractions, base.gaze, False,
+                       base.appearance)  # fmt: skip
         gaze = np.full(4, np.nan)
         if m.gaze is not None:
             for k, eye in enumerate((m.gaze.left, m.gaze.right)):
@@ -103,4 +130,5 @@ class FrameParams:
             self.contractions.copy(),
             self.gaze.copy(),
             self.measured,
+            self.appearance.copy(),
         )

@@ -53,7 +53,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from myoface.analysis.camera import PinholeCamera
-from myoface.codec.params import FrameParams
+from myoface.codec.params import (
+    APPEARANCE_LIMITS,
+    N_APPEARANCE,
+    N_SHADING_BUMPS,
+    FrameParams,
+)
 from myoface.codec.warp import raster_warp
 from myoface.errors import MyofaceValueError
 
@@ -154,6 +159,23 @@ PHOTO_DISTANCE_MM = 10_000.0
 STATS_FRAMES = 10_000
 #: equilibrium tolerance (mm) of the per-frame relax (the synthesis')
 RELAX_TOL_MM = 2e-2
+#: the shading basis' bumps (:meth:`PictureModel.apply_appearance`): Gaussians of this sigma
+#: (a share of the face's width, at the face's distance), centred on face vertices picked
+#: farthest apart (in the rest face's x, y) among those off the rim
+SHADING_SIGMA_FACE = 0.15
+#: the shading is faded out from the face's edge over this many pixels (a Gaussian's sigma
+#: over the face's layers): no step at the rim
+SHADING_FEATHER_PX = 4.0
+#: the encoder's fits (:meth:`PictureModel.estimate_appearance`): the inside of the mouth
+#: needs this many pixels; its gain and offset are pulled towards 1 and 0 by a ridge of this
+#: share of the data's weight; the shading reads every this-many-th pixel of the skin, its
+#: bumps pulled towards 0 by this ridge (per pixel), each pixel's log ratio clipped to this
+#: (log2: misplaced edges are not light)
+APPEARANCE_MIN_MOUTH_PX = 12
+APPEARANCE_MOUTH_RIDGE = 0.01
+APPEARANCE_SHADING_STRIDE = 2
+APPEARANCE_SHADING_RIDGE = 0.02
+APPEARANCE_LOG_CLIP = 0.5
 
 
 @dataclass
@@ -500,6 +522,8 @@ class PictureModel:
             np.array(pairs, dtype=np.int64).T if pairs and len(up) == len(lo) else None
         )
         self._gap_cal = self._lip_gap(self._skin_cal)
+        self._shade_nodes = _shading_nodes(self._skin_cal, self._rim, N_SHADING_BUMPS)
+        self._face_width_mm = float(np.ptp(self._skin_cal[:, 0]))
         if "mouth" in self._openings and model.dentition is not None:
             self._renderer()  # built now: not a stall at the first frame that opens the lips
 
@@ -660,6 +684,7 @@ class PictureModel:
                 out[box] = cv2.cvtColor(mixed, cv2.COLOR_RGBA2RGB)
         t3 = time.perf_counter()
         self._mouth(out, skin, p, dst)
+        self.apply_appearance(out, p.appearance)
         t4 = time.perf_counter()
         st = self.stats
         st.physics_ms.append((t1 - t0) * 1e3)
@@ -668,6 +693,151 @@ class PictureModel:
         st.mouth_ms.append((t4 - t3) * 1e3)
         st.total_ms.append((t4 - t0) * 1e3)
         return out
+
+    # ------------------------------------------------------------------ appearance
+    def _shading_basis(self, box):
+        """The shading bumps over ``box`` of the last render, separably: (bh, K) along the
+        rows and (K, bw) along the columns (a bump is their outer product)."""
+        nodes = self._shade_nodes
+        c = self._dst[nodes]
+        depth = float(np.median(self._depth[nodes]))
+        sigma = SHADING_SIGMA_FACE * self._face_width_mm * self.camera.focal_px / max(depth, 1.0)
+        ys = np.arange(box[0].start, box[0].stop) + 0.5
+        xs = np.arange(box[1].start, box[1].stop) + 0.5
+        k = -0.5 / max(sigma, 1.0) ** 2
+        ey = np.exp(k * (ys[:, None] - c[None, :, 1]) ** 2)
+        ex = np.exp(k * (xs[None, :] - c[:, 0, None]) ** 2)
+        return ey, ex
+
+    def _face_weight(self, lab) -> np.ndarray:
+        """Where the shading applies: the face's layers of the last render (skin, eyes,
+        mouth) in ``lab``, faded out over :data:`SHADING_FEATHER_PX` (nothing beyond them)."""
+        import cv2
+
+        face = (lab >= LABEL_EYE).astype(np.float32)  # (eye, mouth, skin)
+        soft = cv2.GaussianBlur(face, (0, 0), SHADING_FEATHER_PX, borderType=cv2.BORDER_CONSTANT)
+        return soft * face
+
+    @staticmethod
+    def _mouth_feather(lab) -> np.ndarray:
+        """The mouth's layer in ``lab``, feathered (a Gaussian of :data:`MOUTH_FEATHER_PX`)."""
+        import cv2
+
+        m = (lab == LABEL_MOUTH).astype(np.float32)
+        return cv2.GaussianBlur(m, (0, 0), MOUTH_FEATHER_PX, borderType=cv2.BORDER_CONSTANT)
+
+    @staticmethod
+    def _mouth_pivot(rgb, soft) -> np.float32:
+        """The luma (BT.601) about which the mouth's gain acts: the mean of ``rgb`` (the
+        render without the terms) over the mouth's feathered layer ``soft`` (so that the gain
+        and the offset are apart: contrast and level)."""
+        lum = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+        w = float(soft.sum())
+        return np.float32(float((rgb @ lum * soft).sum()) / w if w > 0 else 0.0)
+
+    def _part_box(self, nodes, pad: int):
+        """The box (rows, cols) of the last render's ``nodes`` (their destinations), ``pad``
+        pixels wider, within the picture."""
+        d = self._dst[nodes]
+        x0, y0 = np.maximum(np.floor(d.min(axis=0)).astype(int) - pad, 0)
+        x1, y1 = np.ceil(d.max(axis=0)).astype(int) + pad + 1
+        x1, y1 = min(int(x1), self.width), min(int(y1), self.height)
+        return slice(y0, max(y0, y1)), slice(x0, max(x0, x1))
+
+    def _face_box(self):
+        """The box of the face's layers in the last render (its skin, the eyes' caps)."""
+        nv = self.model.face.n_vertices
+        return self._part_box(np.r_[np.arange(nv), np.arange(self._i_caps, self._n_nodes)], 2)
+
+    def _mouth_box(self):
+        """The box of the mouth's layer in the last render, with room for its feather."""
+        pad = int(np.ceil(4 * MOUTH_FEATHER_PX)) + 1
+        return self._part_box(self._openings["mouth"], pad)
+
+    def apply_appearance(self, img: np.ndarray, appearance) -> np.ndarray:
+        """The appearance terms ``appearance`` (:data:`~myoface.codec.params.APPEARANCE_FIELDS`)
+        applied in place to ``img`` (H, W, 3) uint8, the last render's picture: the inside of
+        the mouth (the mouth's layer, feathered) ``y + (2**gain - 1) (y - c) + offset`` (``c``:
+        :meth:`_mouth_pivot`, the layer's mean luma), then the face's
+        shading, ``y * 2**(w (g + sum_k a_k bump_k))`` (``w``: :meth:`_face_weight`).
+        Returns ``img``."""
+
+        a = np.asarray(appearance, dtype=np.float64)
+        if (a[0] or a[1]) and "mouth" in self._openings:
+            box = self._mouth_box()
+            lab = self._label[box]
+            if lab.size and (lab == LABEL_MOUTH).any():
+                soft = self._mouth_feather(lab)
+                f = img[box].astype(np.float32)
+                c = self._mouth_pivot(f, soft)
+                g1 = np.float32(2.0 ** a[0] - 1.0)
+                f += soft[:, :, None] * (g1 * (f - c) + np.float32(a[1]))
+                img[box] = np.clip(f + 0.5, 0, 255).astype(np.uint8)
+        if a[2:].any():
+            box = self._face_box()
+            lab = self._label[box]
+            if lab.size:
+                ey, ex = self._shading_basis(box)
+                e = (a[2] + (ey * a[3:]) @ ex).astype(np.float32)
+                gain = np.exp2(e * self._face_weight(lab))
+                f = img[box].astype(np.float32) * gain[:, :, None]
+                img[box] = np.clip(f + 0.5, 0, 255).astype(np.uint8)
+        return img
+
+    def estimate_appearance(self, base: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """The appearance terms (:data:`~myoface.codec.params.N_APPEARANCE`,) that bring
+        ``base`` (the last render, with none) nearest to ``frame`` (H, W, 3) uint8, the
+        input (the encoder's fit, on the luma, BT.601): the face's shading by least squares
+        of the log ratio of the frame's to the render's on the skin (every
+        :data:`APPEARANCE_SHADING_STRIDE`-th pixel; a ridge towards 0), then the inside of the
+        mouth's gain and offset on the mouth's layer, against the frame over that shading
+        (a ridge towards gain 1, offset 0). Each within its bound
+        (:data:`~myoface.codec.params.APPEARANCE_LIMITS`)."""
+        lum = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+        a = np.zeros(N_APPEARANCE)
+        frame = np.asarray(frame)
+        box = self._face_box()
+        lab = self._label[box]
+        if lab.size == 0:
+            return a
+        ey, ex = self._shading_basis(box)
+        st = APPEARANCE_SHADING_STRIDE
+        sk = (lab == LABEL_SKIN)[::st, ::st]
+        if sk.sum() >= 4 * (N_SHADING_BUMPS + 1):
+            yb = base[box][::st, ::st][sk].astype(np.float32) @ lum
+            yr = frame[box][::st, ::st][sk].astype(np.float32) @ lum
+            rows, cols = np.nonzero(sk)
+            b = ey[::st][rows] * ex[:, ::st][:, cols].T  # (n, K)
+            # (as applied: the exponent times the face's weight)
+            w = self._face_weight(lab)[::st, ::st][sk].astype(np.float64)
+            basis = np.column_stack([np.ones(len(rows)), b]) * w[:, None]
+            t = np.clip(np.log2((yr + 1.0) / (yb + 1.0)), -APPEARANCE_LOG_CLIP, APPEARANCE_LOG_CLIP)
+            ridge = APPEARANCE_SHADING_RIDGE * len(rows) * np.r_[0.0, np.ones(N_SHADING_BUMPS)]
+            a[2:] = np.linalg.solve(basis.T @ basis + np.diag(ridge + 1e-9), basis.T @ t)
+        if "mouth" in self._openings:
+            mb = self._mouth_box()
+            lab_m = self._label[mb]
+            if int((lab_m == LABEL_MOUTH).sum()) >= APPEARANCE_MIN_MOUTH_PX:
+                # the terms as they are applied: y + s ((gain - 1) (y - c) + offset) ~ r, s
+                # the mouth's feathered layer, c its pivot (least squares in gain - 1, offset)
+                s = self._mouth_feather(lab_m)
+                c = float(self._mouth_pivot(base[mb].astype(np.float32), s))
+                on = s > 0.05
+                s = s[on].astype(np.float64)
+                y = base[mb][on].astype(np.float64) @ lum
+                r = frame[mb][on].astype(np.float64) @ lum
+                if a[2:].any():  # (the shading multiplies the mouth's terms: / it)
+                    ey_m, ex_m = self._shading_basis(mb)
+                    e = a[2] + (ey_m * a[3:]) @ ex_m
+                    r = r / np.exp2(e * self._face_weight(lab_m))[on]
+                u = np.column_stack([s * (y - c), s])
+                ata = u.T @ u
+                ridge = APPEARANCE_MOUTH_RIDGE * np.diag(ata)
+                g1, o = np.linalg.solve(ata + np.diag(ridge + 1e-9), u.T @ (r - y))
+                a[0] = np.log2(max(1.0 + float(g1), 1e-3))
+                a[1] = o
+        lim = np.asarray(APPEARANCE_LIMITS)
+        return np.clip(a, -lim, lim)
 
     def mouth_alpha(self, skin) -> float:
         """How much of the model's rendered mouth shows through the lips of ``skin`` (V, 3):
@@ -747,6 +917,24 @@ class PictureModel:
             shift = (cam.cx - 0.5 * w, cam.cy - 0.5 * h)
             self._mouth_renderer = (r, shift, k, keep)
         return self._mouth_renderer
+
+
+def _shading_nodes(skin: np.ndarray, rim: np.ndarray, k: int) -> np.ndarray:
+    """``k`` vertices of ``skin`` (V, 3) mm, head frame, off the ``rim``, picked farthest
+    apart in x, y from the one nearest the face's centre (deterministic: the encoder and the
+    decoder pick the same)."""
+    ok = np.ones(len(skin), bool)
+    ok[rim] = False
+    cand = np.flatnonzero(ok)
+    pts = skin[cand, :2]
+    first = int(np.argmin(((pts - pts.mean(axis=0)) ** 2).sum(axis=1)))
+    picked = [first]
+    d = ((pts - pts[first]) ** 2).sum(axis=1)
+    for _ in range(k - 1):
+        i = int(np.argmax(d))
+        picked.append(i)
+        d = np.minimum(d, ((pts - pts[i]) ** 2).sum(axis=1))
+    return cand[np.array(picked, dtype=np.int64)]
 
 
 def _mouth_face(face, uv: np.ndarray, texture: np.ndarray):

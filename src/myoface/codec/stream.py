@@ -34,11 +34,15 @@ import numpy as np
 
 from myoface.analysis.camera import PinholeCamera, rotmat, rotvec
 from myoface.codec.entropy import ParamCoder, RangeIO, Steps, code_identity, identity_order
-from myoface.codec.params import FrameParams
+from myoface.codec.params import N_APPEARANCE, FrameParams
 from myoface.errors import MyofaceFormatError
 
 MAGIC = b"MYOF"
-VERSION = 1
+#: the format version written (2: the packets carry the appearance terms,
+#: :data:`~myoface.codec.params.APPEARANCE_FIELDS`)
+VERSION = 2
+#: the versions read (1: packets without the appearance)
+VERSIONS_READ = (1, 2)
 TRAILER_MAGIC = b"MYOE"
 #: the header's bounds (a stream beyond them is refused before anything is allocated)
 MAX_WIDTH = MAX_HEIGHT = 4096
@@ -111,6 +115,7 @@ class Header:
     background : :data:`BACKGROUNDS`' key.
     image_codec : "webp", "avif" or "jpeg".
     image : the calibration picture, encoded.
+    version : the stream's format version (the writer's: :data:`VERSION`).
     """
 
     width: int
@@ -131,6 +136,12 @@ class Header:
     background: int
     image_codec: str
     image: bytes
+    version: int = VERSION
+
+    @property
+    def n_appearance(self) -> int:
+        """The appearance terms a packet carries (version 1: none)."""
+        return N_APPEARANCE if self.version >= 2 else 0
 
     # -------------------------------------------------------------- writing
 
@@ -165,7 +176,7 @@ class Header:
         w(self.image)
         payload = out.getvalue()
         return (
-            MAGIC + struct.pack("<BI", VERSION, len(payload)) + payload
+            MAGIC + struct.pack("<BI", self.version, len(payload)) + payload
             + struct.pack("<I", zlib.crc32(payload))
         )  # fmt: skip
 
@@ -374,7 +385,7 @@ class StreamWriter:
         self.header = parse_header_bytes(raw)
         self.header_bytes = len(raw)
         self.coder = ParamCoder(self.header.n_contractions, self.header.steps,
-                                self.header.calibration)  # fmt: skip
+                                self.header.calibration, self.header.n_appearance)  # fmt: skip
         self.n_frames = 0
         self.body_bytes = 0
         self._crc = 0
@@ -428,9 +439,11 @@ class StreamWriter:
         self._out(words[self._n_written :].tobytes())
         self._new_segment()
 
-    def write(self, params: FrameParams) -> FrameParams:
-        """Code one frame; returns the parameters the decoder will decode."""
-        out = self.coder.encode_frame(self.io, params)
+    def write(self, params: FrameParams, appearance_of=None) -> FrameParams:
+        """Code one frame; returns the parameters the decoder will decode. ``appearance_of``:
+        the encoder's fit of the frame's appearance terms
+        (:meth:`~myoface.codec.entropy.ParamCoder.encode_frame`); None: ``params``' own."""
+        out = self.coder.encode_frame(self.io, params, appearance_of)
         self._max_need = max(self._max_need, self.io.encoder.num_words() + 1)
         self.n_frames += 1
         self._seg_frames += 1
@@ -569,9 +582,10 @@ def read_header(b: _Buffer) -> Header:
     if head[:4] != MAGIC:
         raise MyofaceFormatError(f"{name}: not a myoface stream (no {MAGIC.decode()} magic)")
     version, n = struct.unpack("<BI", head[4:])
-    if version != VERSION:
+    if version not in VERSIONS_READ:
         raise MyofaceFormatError(
-            f"{name}: stream format version {version}; this myoface reads version {VERSION}"
+            f"{name}: stream format version {version}; this myoface reads versions "
+            + " and ".join(str(v) for v in VERSIONS_READ)
             + (" (upgrade myoface)" if version > VERSION else "")
         )
     if n > MAX_HEADER_BYTES:
@@ -583,7 +597,9 @@ def read_header(b: _Buffer) -> Header:
     if zlib.crc32(payload) != crc:
         raise MyofaceFormatError(f"{name}: corrupted header (its checksum fails)")
     try:
-        return Header.parse(payload)
+        h = Header.parse(payload)
+        h.version = int(version)
+        return h
     except MyofaceFormatError as exc:
         raise MyofaceFormatError(f"{name}: {exc}") from None
 
@@ -619,7 +635,7 @@ class StreamReader:
         self._b = _Buffer(source)
         self.header = read_header(self._b)
         h = self.header
-        self.coder = ParamCoder(h.n_contractions, h.steps, h.calibration)
+        self.coder = ParamCoder(h.n_contractions, h.steps, h.calibration, h.n_appearance)
         self.n_frames = 0
         self.ended = False
         self._crc = 0
