@@ -571,7 +571,7 @@ def _align_socket(img, x0, y0, points, rot, trans, f, cx, cy, tmpl, gx, gy, step
     col = np.empty(4)
     res = np.empty(n)
     samp = np.empty(n)
-    gain, offset, scale = 1.0, 0.0, np.inf
+    gain, offset, scale, sigma = 1.0, 0.0, np.inf, 0.0
     for it in range(iterations):
         # the image at the moved points, and each point's residual against the template
         m = 0
@@ -599,9 +599,10 @@ def _align_socket(img, x0, y0, points, rot, trans, f, cx, cy, tmpl, gx, gy, step
             m += 1
         if m < 30:
             return np.zeros(2), 0
-        sigma = 1.4826 * np.median(res[:m])  # (the residuals' robust scale)
-        if it > 0:
-            scale = sigma * robust
+        if it < 2:  # the residuals' robust scale (1.4826 median absolute), from the first two
+            sigma = 1.4826 * np.median(res[:m])
+            if it == 1:
+                scale = sigma * robust
         ata[:] = 0.0
         atb[:] = 0.0
         for k in range(n):
@@ -632,7 +633,7 @@ def _align_socket(img, x0, y0, points, rot, trans, f, cx, cy, tmpl, gx, gy, step
         d[0] = min(max(d[0] + s0, -limit_mm), limit_mm)
         d[1] = min(max(d[1] + s1, -limit_mm), limit_mm)
         used = m
-        if abs(s0) < 0.005 and abs(s1) < 0.005 and it > 0:
+        if abs(s0) < 0.01 and abs(s1) < 0.01 and it > 1:
             break
     return d, used
 
@@ -689,6 +690,7 @@ class EyeSocket:
         self._sum = np.zeros(self.shape)
         self._count = np.zeros(self.shape)
         self._template = None  # (the mean, its gradients), kept until the next frame learnt
+        self._frame, self._crop = None, None  # the last frame sampled, and its luma crop
 
     @property
     def ready(self) -> bool:
@@ -713,7 +715,8 @@ class EyeSocket:
         projection of the grid by ``pose``, and the grid's image points (H, W, 2) px."""
         uv = camera.project(pose.apply(self.points))
         patch = np.full(len(uv), np.nan)
-        got = self._luma(frame, uv)
+        got = self._crop = self._luma(frame, uv)
+        self._frame = frame  # (offset reads the same crop)
         if got is not None:
             img, x0, y0 = got
             patch = _bilinear_at(img, uv[:, 1] - 0.5 - y0, uv[:, 0] - 0.5 - x0)
@@ -747,8 +750,9 @@ class EyeSocket:
             tmpl = np.where(seen, self._sum / np.maximum(self._count, 1), np.nan)
             gy, gx = np.gradient(tmpl)
             self._template = tuple(np.ascontiguousarray(a.ravel()) for a in (tmpl, gx, gy))
-        uv = camera.project(pose.apply(self.points))
-        got = self._luma(frame, uv)
+        got = self._crop if frame is self._frame else None
+        if got is None:
+            got = self._luma(frame, camera.project(pose.apply(self.points)))
         if got is None:
             return None
         img, x0, y0 = got
