@@ -325,7 +325,7 @@ def flow_sequence(frames, points) -> tuple[list, np.ndarray]:
 
 def run_headmotion(
     model, points, truth, poses, skins, fps: float = 30.0, settings=None, synthesis=False,
-    frames=None,
+    frames=None, detector_offsets: bool | None = None,
 ):  # fmt: skip
     """Fit the model to the landmark ``points`` of each frame (the 3-D fit, calibration frame
     chosen automatically in the first :data:`~myoface.analysis.modelfit.CALIBRATION_WINDOW_S` s)
@@ -333,7 +333,13 @@ def run_headmotion(
     (:class:`~myoface.analysis.synthesis.LandmarkSynthesis`: the model's face, its own texture).
     With ``settings.photometric`` the fit also reads ``frames`` (the images the points were
     detected on), as :class:`~myoface.analysis.trackers.landmark_fit.FitTracker` does: the
-    appearance taken from the calibration frame, each frame's pixels read against it."""
+    appearance taken from the calibration frame, each frame's pixels read against it.
+    ``detector_offsets``: take MediaPipe's offsets on this face off the points
+    (:class:`~myoface.analysis.landmarks.TrackerOffsets`, as
+    :attr:`~myoface.analysis.weights.FitSettings.tracker_offsets` says, for a face with a
+    texture, without synthesis); by default when the points are MediaPipe's, i.e. carry its
+    relative depth (x, y, z): points given as (x, y) only (e.g. the model's own projected
+    vertices, a perfect detector) have no detector's offsets to take off."""
     import time
 
     from myoface.analysis.camera import PinholeCamera
@@ -346,7 +352,10 @@ def run_headmotion(
     cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
     fit = ModelFit(model, cam, settings, fps=fps)
     syn = LandmarkSynthesis(model.face, cam, SIZE) if synthesis else None
-    if fit.settings.tracker_offsets and syn is None and model.face.texture is not None:
+    if detector_offsets is None:
+        detector_offsets = all(p is None or np.shape(p)[1] == 3 for p in points)
+    use = detector_offsets and fit.settings.tracker_offsets and syn is None
+    if use and model.face.texture is not None:
         from myoface.analysis.landmarks import TrackerOffsets
 
         reader = LandmarkSynthesis(model.face, cam, SIZE, tracking=fit.settings.tracking)
