@@ -935,7 +935,8 @@ class GazeEstimator:
                         e, frame, camera, pose, shape, points, start
                     )
                 if any(self.offsets[e.side] is not None for e in eyes):
-                    start = self._coarse(eyes, camera, rot, start, st.socket_window_deg)
+                    again = self._coarse(eyes, camera, rot, start, st.socket_window_deg)
+                    start = start if again is None else again
             for e in eyes:
                 out[e.side] = self._closed_by_contrast(e.side, self._refine(e, camera, rot, start))
                 patch = patches.get(e.side)
