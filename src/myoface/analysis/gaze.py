@@ -142,9 +142,10 @@ class GazeSettings:
         frames, and the distance (deg) at which a past reading's weight falls to e^-1/2.
     socket : move each eye to where its socket is in the frame (:class:`EyeSocket`) before
         reading it (False: where the fit puts it). On the benchmark's recorded fit, replayed
-        (2026-12-02), the worse eye 8.73 -> 5.94 deg and on a second clip (another gaze
-        programme and camera noise) 7.72 -> 5.52; on the true geometry 3.18 / 2.82 -> 2.86
-        / 2.80 and 4.10 / 4.66 -> 3.90 / 4.43 (left / right).
+        (2026-12-02), the worse eye 7.24 -> 4.98 deg (8.73 -> 5.94 with the fit before
+        7308bb1) and on a second clip (another gaze programme and camera noise) 7.72 -> 5.51;
+        on the true geometry 3.18 / 2.82 -> 2.87 / 2.77 and 4.10 / 4.66 -> 3.90 / 4.43 (left
+        / right).
     socket_half_mm, socket_step_mm : the socket's region, +-(x, y) mm about the eyeball's
         centre (the opening is 29 mm wide, 12 tall on the sample person; the brows' lower
         edge and the cheek's upper are in), and its grid's step (0.66 px at 500 mm).

@@ -36,14 +36,15 @@ shut frames all said closed, 0-1 % of the open ones. The reader costs 9-11 ms a 
 machine, 2026-12-02).
 
 With each eye read against its socket (:class:`~myoface.analysis.gaze.EyeSocket`; measured
-2026-12-02 at 9ae58fb, ``myoface bench --only analysis.gaze_error_deg``, after the fit's
-detector offsets of 7308bb1): 5.02 deg (left 5.02: yaw 4.31, pitch 5.64; right 4.21), the
+2026-12-02 at c3721bd, ``myoface bench --only analysis.gaze_error_deg``, after the fit's
+detector offsets of 7308bb1): 4.98 deg (left 4.98: yaw 4.33, pitch 5.55; right 4.20), the
 same fit without the socket 7.24 (its recorded per-frame geometry replayed through the reader);
-analysis by synthesis 5.56 (6.45 before both), the photometric term 7.00 (8.71). The eyeballs'
-centres where the reader put them 1.14 / 0.74 px RMS against the fit's 1.45 / 1.11
+analysis by synthesis 5.79 (6.45 before both), the photometric term 6.77 (8.71). The eyeballs'
+centres where the reader put them 1.13 / 0.75 px RMS against the fit's 1.45 / 1.11
 (``eyeball_centre_read_px_rms``; a socket offset on 94 % of the frames read: not before its
 template has seen 3 open frames, nor while the lids are less than 0.8 open). The reader on the
-true geometry 2.86 / 2.80 (2.8-3.2 without the socket). Oracle swaps on the recorded fit before
+true geometry 2.87 / 2.77 (2.8-3.2 without the socket); it costs 8-12 ms a frame on the loaded
+machine (6.8 ms of CPU against 3.6 without the socket, replayed). Oracle swaps on the recorded fit before
 the socket (the reader's input replaced by the truth's, the worse eye): the fit's everything
 8.7; the eyeball's centre at its true place in the image 6.1; and the true lids 3.7; and the
 true head rotation 2.3: the lids' shape and the head's rotation hold what is left. A second
