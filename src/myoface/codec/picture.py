@@ -26,6 +26,14 @@ What the picture cannot supply is the model's:
   picture moves across the eye; the eyeball's part under the lids at calibration (never seen)
   is filled with the sclera's colour.
 
+What the warp cannot show of the frame's look, the stream's appearance terms carry
+(:data:`~myoface.codec.params.APPEARANCE_FIELDS`, format version 2), applied on the warped
+picture (:meth:`PictureModel.apply_appearance`): the inside of the mouth's luma gain and
+offset (the person's teeth are brighter than the model's cavity), and the face's shading, a
+gain over the face and smooth bumps of light on it (a webcam's exposure, a head turning under
+lights, an expression's shading). The encoder fits them on each frame against this picture
+(:meth:`PictureModel.estimate_appearance`).
+
 The physics per frame is the synthesis' (:mod:`myoface.synth`): the tissue relaxed at the
 frame's contractions, warm-started from the previous frame's (``physics="relax"``); or, for a
 fixed cost (the default: real time), the tissue's linear response to each muscle and its
