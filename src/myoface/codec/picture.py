@@ -180,6 +180,9 @@ SHADING_FEATHER_PX = 4.0
 #: bumps pulled towards 0 by this ridge (per pixel), each pixel's log ratio clipped to this
 #: (log2: misplaced edges are not light)
 APPEARANCE_MIN_MOUTH_PX = 12
+#: ... the inside of the mouth under its terms takes the face's colour at this share of its
+#: saturation (teeth and the mouth's shade are a warm white and grey, not skin)
+MOUTH_TINT_SATURATION = 0.6
 APPEARANCE_MOUTH_RIDGE = 0.01
 APPEARANCE_SHADING_STRIDE = 2
 APPEARANCE_SHADING_RIDGE = 0.02
@@ -531,6 +534,14 @@ class PictureModel:
         )
         self._gap_cal = self._lip_gap(self._skin_cal)
         self._shade_nodes = _shading_nodes(self._skin_cal, self._rim, N_SHADING_BUMPS)
+        #: the colour of the mouth's inside under its appearance terms: the calibration
+        #: picture's face (inside the rim), normalised to luma 1, desaturated
+        #: (:data:`MOUTH_TINT_SATURATION`)
+        face_px = frame[_polygon_mask((h, w), skin_cal_px[self._rim])].astype(np.float64)
+        tint = face_px.mean(axis=0) if len(face_px) else np.full(3, 128.0)
+        tint = tint / max(float(tint @ [0.299, 0.587, 0.114]), 1.0)
+        tint = 1.0 + MOUTH_TINT_SATURATION * (tint - 1.0)
+        self._tint = tint.astype(np.float32) if np.isfinite(tint).all() else np.ones(3, np.float32)
         self._face_width_mm = float(np.ptp(self._skin_cal[:, 0]))
         if "mouth" in self._openings and model.dentition is not None:
             self._renderer()  # built now: not a stall at the first frame that opens the lips
@@ -765,8 +776,10 @@ class PictureModel:
     def apply_appearance(self, img: np.ndarray, appearance) -> np.ndarray:
         """The appearance terms ``appearance`` (:data:`~myoface.codec.params.APPEARANCE_FIELDS`)
         applied in place to ``img`` (H, W, 3) uint8, the last render's picture: the inside of
-        the mouth (the mouth's layer, feathered) ``y + (2**gain - 1) (y - c) + offset`` (``c``:
-        :meth:`_mouth_pivot`, the layer's mean luma), then the face's
+        the mouth (the mouth's layer, feathered): its luma ``y`` becomes
+        ``y + (2**gain - 1) (y - c) + offset`` (``c``: :meth:`_mouth_pivot`, the layer's mean
+        luma), in the colour of the calibration picture's face (its mean, normalised to luma
+        1: the render's colours are the model's); then the face's
         shading, ``y * 2**(w (g + sum_k a_k bump_k))`` (``w``: :meth:`_face_weight`).
         Returns ``img``."""
 
@@ -779,7 +792,13 @@ class PictureModel:
                 f = img[box].astype(np.float32)
                 c = self._mouth_pivot(f, soft)
                 g1 = np.float32(2.0 ** a[0] - 1.0)
-                f += soft[:, :, None] * (g1 * (f - c) + np.float32(a[1]))
+                y = f @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+                # the new luma in the colour of the person's face (the model's render has the
+                # model's colours: its cavity brightened turned grey-blue); the luma is the
+                # render's moved by the terms, (1 - s) y + s y'
+                y_new = y + g1 * (y - c) + np.float32(a[1])
+                s3 = soft[:, :, None]
+                f = (1 - s3) * f + s3 * (y_new[:, :, None] * self._tint)
                 img[box] = np.clip(f + 0.5, 0, 255).astype(np.uint8)
         if a[2:].any():
             box = self._face_box()
