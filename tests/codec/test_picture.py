@@ -15,7 +15,9 @@ from myoface.codec.params import APPEARANCE_FIELDS, APPEARANCE_STEPS, N_APPEARAN
 from myoface.codec.picture import (
     LABEL_EYE,
     LABEL_MOUTH,
+    MOUTH_TINT_SATURATION,
     PictureModel,
+    _polygon_mask,
     fill_holes,
     fill_rows,
     photo_setup,
@@ -250,7 +252,8 @@ def test_appearance_brightens_the_mouth_and_shades_the_face_only(model, camera, 
     without them, then the terms applied (what the encoder fits on)."""
     import cv2
 
-    pm = PictureModel(model, camera, _pattern(3), calibration, segment=False)
+    warm = (_pattern(3) * np.array([1.0, 0.75, 0.55])).astype(np.uint8)  # (a skin's hue)
+    pm = PictureModel(model, camera, warm, calibration, segment=False)
     p = _params(calibration, _contractions(model, jaw=0.6))
     base = pm.render(p)
     mouth = pm.last_label == LABEL_MOUTH
@@ -262,6 +265,18 @@ def test_appearance_brightens_the_mouth_and_shades_the_face_only(model, camera, 
     assert changed[mouth].mean() > 0.95
     near = cv2.dilate(mouth.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
     assert not changed[~near].any()
+    # deep inside the layer the pixel is its new luma in the face's colour (the render's
+    # colours are the model's): its luma 40 levels up about the layer's mean, its hue the face's
+    lum = np.array([0.299, 0.587, 0.114])
+    deep = cv2.erode(mouth.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
+    assert deep.sum() >= 5
+    y_new = out[deep].astype(float) @ lum
+    assert np.allclose(y_new, base[deep].astype(float) @ lum + 40.0, atol=2.0)
+    inside = _polygon_mask((H, W), pm.face_outline())  # (the calibration picture's face)
+    face_rgb = warm[inside].astype(float).mean(axis=0)
+    hue = face_rgb / (face_rgb @ lum)
+    want = 1.0 + MOUTH_TINT_SATURATION * (hue - 1.0)
+    assert np.allclose(out[deep].astype(float) / y_new[:, None], want, atol=0.05)
     a[:] = 0.0
     a[APPEARANCE_FIELDS.index("face_gain_log2")] = 0.25  # 19 % brighter
     out = pm.apply_appearance(base.copy(), a)
