@@ -32,6 +32,23 @@ needs_mediapipe = pytest.mark.skipif(
 
 
 @pytest.fixture(scope="session")
+def quick_run(tmp_path_factory):
+    """Every benchmark in quick mode, once for the session (``myoface bench --quick --json``):
+    the records and their detail. Each benchmark's models and JIT compilation cost most of a
+    quick run; the tests that check a benchmark's output (tests/test_cli_bench.py, the
+    known-warp comparison in tests/analysis/test_motionreader.py) read this one run rather than
+    start their own."""
+    import json
+
+    from myoface.cli import main
+
+    out = tmp_path_factory.mktemp("bench") / "all.json"
+    assert main(["bench", "--quick", "--json", str(out)]) == 0
+    records = json.loads(out.read_text())
+    return records, json.loads(out.with_suffix(".detail.json").read_text())
+
+
+@pytest.fixture(scope="session")
 def default_face():
     from myoface.face import load_default_face
 

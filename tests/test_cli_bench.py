@@ -39,17 +39,6 @@ def test_bench_unknown_prefix(capsys):
     assert main(["bench", "--only", "nothing."]) == 1
 
 
-@pytest.fixture(scope="module")
-def quick_run(tmp_path_factory):
-    """Every benchmark in quick mode, once for the module (``myoface bench --quick --json``):
-    the records and their detail (each benchmark's JIT compilation and models cost most of a
-    quick run; the tests below read this one run rather than start their own)."""
-    out = tmp_path_factory.mktemp("bench") / "all.json"
-    assert main(["bench", "--quick", "--json", str(out)]) == 0
-    records = json.loads(out.read_text())
-    return records, json.loads(out.with_suffix(".detail.json").read_text())
-
-
 @pytest.mark.slow
 def test_bench_json_record_schema(quick_run):
     rec = [r for r in quick_run[0] if r["name"] == "tissue.rk2_steps_per_s"]

@@ -111,14 +111,15 @@ def test_the_reader_reads_known_warps_at_gain_one(method, head_moves):
 
 @pytest.mark.shared_data
 @needs_mediapipe
-def test_the_known_warp_bench_reads_the_models_motion_in_the_warps_axes():
+def test_the_known_warp_bench_reads_the_models_motion_in_the_warps_axes(quick_run):
     """``analysis.known_warp_*``'s comparison (the whole analysis on the known-warp clips, the
     model read from its vertices) in the warp's axes: every frame measured, every region's
     gain and explained fraction finite, and the brows moving the model the way the warp
-    moved them (a sign or axis error would make it negative)."""
-    from myoface.bench.knownwarp import EXPRESSIONS, NEUTRAL_FRAMES, run_known_warp
+    moved them (a sign or axis error would make it negative). Read from the session's quick
+    run of every benchmark (its head-still clips), not run again."""
+    from myoface.bench.knownwarp import EXPRESSIONS, NEUTRAL_FRAMES
 
-    res = run_known_warp(False, quick=True)
+    res = quick_run[1]["analysis.known_warp_gain"]["head still"]
     assert res["frames"] == len(EXPRESSIONS) * (NEUTRAL_FRAMES + 3 + 6 + 3)
     for r, v in res["regions"].items():
         assert np.isfinite(v["gain"]) and np.isfinite(v["explained"]), r
