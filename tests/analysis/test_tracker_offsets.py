@@ -1,7 +1,8 @@
 """The detector's own offsets on a face, by view (myoface.analysis.landmarks.TrackerOffsets),
 taken off the points before the 3-D fit: on a synthetic detector that reads the head pitched
 by a known, view-dependent angle (no MediaPipe, no renders: what is tested is the table, its
-interpolation and the fit's use of it)."""
+interpolation and the fit's use of it); the last test runs MediaPipe on one render (the table
+taken from the calibration frame, FitSettings.tracker_offsets_frame)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import pytest
 from myoface.analysis.camera import HeadPose, PinholeCamera, rotmat
 from myoface.analysis.landmarks import TrackerOffsets, view_angles, view_rotation
 from myoface.analysis.modelfit import ModelFit
+from tests.conftest import needs_mediapipe
 
 CAMERA = PinholeCamera.for_image(640, 480, 40.0)
 
@@ -107,3 +109,59 @@ def test_the_calibration_reads_corrected_points(fm):
         )
     assert out[True][0] < 0.3 < out[False][0], out
     assert out[True][1] < 0.1, out  # mm RMS
+
+
+def test_a_calibration_done_again_at_its_frame_uses_the_same_frames(fm):
+    """``calibrate(frames, index, scores=...)`` (the calibration done again with the points
+    corrected, FitTracker with FitSettings.tracker_offsets_frame) fits the person's neutral
+    on the frames the first calibration chose around its frame; without the scores, on that
+    frame alone."""
+    from myoface.analysis.modelfit import CALIBRATION_FRAMES
+
+    skin = fm.skin_vertices()
+    rng = np.random.default_rng(3)
+    frames = []
+    for k in range(6):
+        pose = HeadPose.from_euler(2.0 * k, -1.0, 0.5, (0.0, 0.0, -500.0))
+        frames.append(seen(skin, pose) + rng.normal(0.0, 0.3, (len(skin), 2)))
+    fit = ModelFit(fm, CAMERA)
+    cal = fit.calibrate(frames)
+    assert len(cal.extra["frames"]) == min(CALIBRATION_FRAMES, len(frames)) > 1, cal.scores
+    again = fit.calibrate(frames, cal.index, scores=cal.scores)
+    assert again.extra["frames"] == cal.extra["frames"]
+    np.testing.assert_array_equal(again.scores, cal.scores)
+    np.testing.assert_allclose(again.identity_mm, cal.identity_mm, atol=1e-9)
+    assert fit.calibrate(frames, cal.index).extra["frames"] == [cal.index]
+
+
+@needs_mediapipe
+def test_the_default_face_takes_the_table_from_the_calibration_frame(fm):
+    """With FitSettings.tracker_offsets_frame a model without a texture gets the table with
+    the calibration frame as its texture: rendered at the calibration's pose it gives back
+    the frame where it draws the face; by default (off) it gets none."""
+    from myoface.analysis.synthesis import LandmarkSynthesis
+    from myoface.analysis.trackers.landmark_fit import FitTracker
+    from myoface.analysis.weights import FitSettings
+    from myoface.render.degrade import coverage
+
+    assert fm.face.texture is None
+    pose = HeadPose.from_euler(8.0, -4.0, 0.0, (0.0, 0.0, -520.0))
+    painter = LandmarkSynthesis(fm.face, CAMERA, (640, 480), detector=SyntheticReader())
+    frame = painter.renderer.render(fm.skin_vertices(), pose=(pose.rotation, pose.translation_mm))
+    for on in (False, True):
+        tracker = FitTracker(fm, settings=FitSettings(tracker_offsets_frame=on), gaze=False,
+                             calibration_frame=0)  # fmt: skip
+        try:
+            tracker.calibrate([frame])
+            table = tracker.fit.offsets
+            assert (table is not None) == on
+            if on:
+                ren = table.synthesis.renderer
+                cal = tracker.calibration.pose
+                back = ren.render(table.shape, pose=(cal.rotation, cal.translation_mm))
+                inside = coverage(ren) > 0.99
+                diff = np.abs(back.astype(float) - frame.astype(float))[inside].mean()
+                # (the renderer's shading applied once more on the frame's: ~17 levels)
+                assert inside.sum() > 5000 and diff < 25, (inside.sum(), diff)
+        finally:
+            tracker.close()

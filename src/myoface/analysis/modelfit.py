@@ -369,8 +369,9 @@ class ModelFit:
         return res
 
     def calibrate(
-        self, frames, index: int | None = None, synthesis: LandmarkSynthesis | None = None
-    ) -> Calibration:
+        self, frames, index: int | None = None, synthesis: LandmarkSynthesis | None = None,
+        scores=None,
+    ) -> Calibration:  # fmt: skip
         """Measure the person's own neutral.
 
         ``frames``: a sequence of landmark arrays (468, 3), or None where no face was found
@@ -384,7 +385,10 @@ class ModelFit:
         (regularised to be smooth: :attr:`FitSettings.identity_edge_sigma_mm`; the residual
         in the image plane then added, so that the neutral reproduces them) are fitted with
         every contraction at zero, the offset's rigid part moved into the poses
-        (:meth:`_gauge`); later frames measure expression relative to it.
+        (:meth:`_gauge`); later frames measure expression relative to it. ``scores``: with
+        ``index``, the frames' scores of an earlier calibration on them (its
+        :attr:`Calibration.scores`), so that the same frames around it calibrate with it
+        (without: the frame ``index`` alone).
         """
         if index is None:
             # scored as they come (``frames`` may be an iterator whose points are being
@@ -424,7 +428,9 @@ class ModelFit:
             frames = list(frames)
             if not frames:
                 raise MyofaceValueError("calibrate() needs at least one frame")
-            scores = np.full(len(frames), np.nan)
+            if scores is None or len(scores) != len(frames):
+                scores = np.full(len(frames), np.nan)
+            scores = np.asarray(scores, dtype=np.float64)
         if not 0 <= index < len(frames) or frames[index] is None:
             raise MyofaceValueError(f"calibration frame {index} has no face")
         use = [index]

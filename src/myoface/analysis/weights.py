@@ -146,6 +146,12 @@ class FitSettings:
     #: MediaPipe; a model without a texture: not done). See that class for why and what was
     #: measured.
     tracker_offsets: bool = True
+    #: for a model without a texture (the default face): the same table with the
+    #: calibration frame as the texture (each vertex of the calibrated neutral where the
+    #: calibration put it; :meth:`~myoface.analysis.synthesis.LandmarkSynthesis.from_frame`),
+    #: then the calibration done again with the corrected points. Off: measured 2026-12-02
+    #: it does not help on the real video (see the README's 3-D fit section).
+    tracker_offsets_frame: bool = False
 
 
 # ------------------------------------------------------------------ the model's structure

@@ -214,13 +214,7 @@ class FitTracker(TrackerBase):
         (which measures them at each frame) and with MediaPipe as the detector (the offsets
         are its own)."""
         fit = self.fit
-        if (
-            fit.offsets is not None
-            or not self.settings.tracker_offsets
-            or self.use_synthesis
-            or not self._own_detector
-            or self.model.face.texture is None
-        ):
+        if not self._wants_offsets() or self.model.face.texture is None:
             return
         h, w = shape[:2]
         try:
@@ -229,6 +223,34 @@ class FitTracker(TrackerBase):
         except MyofaceValueError:  # (a camera whose principal point is off the centre)
             return
         fit.set_offsets(TrackerOffsets(syn, fit.neutral, fit.camera))
+
+    def _wants_offsets(self) -> bool:
+        return (
+            self.fit.offsets is None
+            and self.settings.tracker_offsets
+            and not self.use_synthesis
+            and self._own_detector
+        )
+
+    def _offsets_from_frame(self, frame, points) -> None:
+        """For a model without a texture (:attr:`FitSettings.tracker_offsets_frame`): the
+        offsets' table rendered with the calibration frame as the texture
+        (:meth:`LandmarkSynthesis.from_frame`: the person's calibrated neutral, each vertex
+        where the calibration put it on the frame), then the calibration done again on the
+        same frame with the points corrected by it (``points``: the calibration's)."""
+        fit, cal = self.fit, self.calibration
+        if frame is None:
+            return
+        shape = fit.neutral + fit.identity_mm
+        try:
+            syn = LandmarkSynthesis.from_frame(
+                self.model.face, fit.camera, frame, shape, cal.pose,
+                tracking=self.settings.tracking,
+            )  # fmt: skip
+        except MyofaceValueError:  # (a camera whose principal point is off the centre)
+            return
+        fit.set_offsets(TrackerOffsets(syn, shape, fit.camera))
+        self.calibration = fit.calibrate(points, cal.index, scores=cal.scores)
 
     def calibrate(self, frames, first_index: int = 0) -> int:
         """The protocol's calibration: on ``frames`` (the video's from ``first_index`` on),
@@ -372,6 +394,12 @@ class FitTracker(TrackerBase):
             if points[idx] is None:
                 raise MyofaceValueError(f"no face found on calibration frame {calibration_frame}")
             self.calibration = self.fit.calibrate(points, idx)
+        if (
+            self.settings.tracker_offsets_frame
+            and self._wants_offsets()
+            and self.model.face.texture is None
+        ):
+            self._offsets_from_frame(images[self.calibration.index], points)
         if self.use_synthesis:
             cal = self.calibration
             fit = self.fit
