@@ -13,6 +13,7 @@ import pytest
 from myoface.analysis.camera import HeadPose, PinholeCamera
 from myoface.codec.params import APPEARANCE_FIELDS, APPEARANCE_STEPS, N_APPEARANCE, FrameParams
 from myoface.codec.picture import (
+    APPEARANCE_MOUTH_GAIN_LOG2,
     LABEL_EYE,
     LABEL_MOUTH,
     MOUTH_TINT_SATURATION,
@@ -265,18 +266,19 @@ def test_appearance_brightens_the_mouth_and_shades_the_face_only(model, camera, 
     assert changed[mouth].mean() > 0.95
     near = cv2.dilate(mouth.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
     assert not changed[~near].any()
-    # deep inside the layer the pixel is its new luma in the face's colour (the render's
-    # colours are the model's): its luma 40 levels up about the layer's mean, its hue the face's
+    # deep inside the layer the luma is 40 levels up, the change added in the face's colour
+    # (desaturated) over the render's own colours (the model's white teeth stay white)
     lum = np.array([0.299, 0.587, 0.114])
     deep = cv2.erode(mouth.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
+    deep &= base.max(axis=2) < 200  # (not clipped at 255)
     assert deep.sum() >= 5
-    y_new = out[deep].astype(float) @ lum
-    assert np.allclose(y_new, base[deep].astype(float) @ lum + 40.0, atol=2.0)
+    d = out[deep].astype(float) - base[deep]
+    assert np.allclose(d @ lum, 40.0, atol=2.0)
     inside = _polygon_mask((H, W), pm.face_outline())  # (the calibration picture's face)
     face_rgb = warm[inside].astype(float).mean(axis=0)
     hue = face_rgb / (face_rgb @ lum)
     want = 1.0 + MOUTH_TINT_SATURATION * (hue - 1.0)
-    assert np.allclose(out[deep].astype(float) / y_new[:, None], want, atol=0.05)
+    assert np.allclose(d / 40.0, want, atol=0.05)
     a[:] = 0.0
     a[APPEARANCE_FIELDS.index("face_gain_log2")] = 0.25  # 19 % brighter
     out = pm.apply_appearance(base.copy(), a)
@@ -318,6 +320,33 @@ def test_the_encoders_fit_reads_back_the_appearance_it_is_shown(model, camera, c
 
     for where in (mouth, face & ~mouth):
         assert se(fitted, where) < 0.1 * se(base, where)
+
+
+def test_the_encoders_mouth_gain_keeps_the_mouths_contrast(model, camera, calibration):
+    """Shown a flat grey mouth (the teeth and the cavity one luma: what the fit on the luma
+    alone chose for a person's wide bright teeth, a gain of x0.25), the encoder's fit keeps
+    the gain at its bound (:data:`APPEARANCE_MOUTH_GAIN_LOG2`: the teeth stay brighter than
+    the cavity) and brings the mouth's mean to the grey's by the offset."""
+    pm = PictureModel(model, camera, _pattern(4), calibration, segment=False)
+    p = _params(calibration, _contractions(model, jaw=0.6))
+    base = pm.render(p)
+    a = np.zeros(N_APPEARANCE)
+    a[APPEARANCE_FIELDS.index("mouth_gain_log2")] = -2.0
+    a[APPEARANCE_FIELDS.index("mouth_offset")] = 48.0
+    shown = pm.apply_appearance(base.copy(), a)
+    est = pm.estimate_appearance(base, shown)
+    assert est[0] == pytest.approx(APPEARANCE_MOUTH_GAIN_LOG2[0])
+    lum = np.array([0.299, 0.587, 0.114])
+    soft = pm._mouth_feather(pm.last_label)
+    deep = soft > 0.95
+    fitted = pm.apply_appearance(base.copy(), est)
+    # (the fit's weights: the feathered layer)
+    diff = fitted.astype(float) @ lum - shown.astype(float) @ lum
+    assert abs(float((soft * diff).sum() / soft.sum())) < 3.0
+    y = fitted[deep] @ lum
+    assert np.percentile(y, 95) - np.percentile(y, 5) > 0.6 * (
+        np.percentile(base[deep] @ lum, 95) - np.percentile(base[deep] @ lum, 5)
+    )
 
 
 def test_a_blink_closes_the_eyes_and_gaze_moves_the_iris(model, camera, calibration):

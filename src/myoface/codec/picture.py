@@ -184,6 +184,12 @@ APPEARANCE_MIN_MOUTH_PX = 12
 #: saturation (teeth and the mouth's shade are a warm white and grey, not skin)
 MOUTH_TINT_SATURATION = 0.6
 APPEARANCE_MOUTH_RIDGE = 0.01
+#: ... the mouth's gain (log2) the encoder sends is within these bounds (the format allows
+#: +-2): below 1 the gain flattens the model's teeth against its cavity, and the fit, on the
+#: luma alone, takes it down to its bound (x0.25) with the offset lifting the mouth to a flat
+#: grey: nearer in luma to a person's wide bright teeth than narrow teeth in a dark cavity, but
+#: no longer a mouth to whoever watches (docs/codec-format.md, "the encoder's fit")
+APPEARANCE_MOUTH_GAIN_LOG2 = (-0.5, 2.0)
 APPEARANCE_SHADING_STRIDE = 2
 APPEARANCE_SHADING_RIDGE = 0.02
 APPEARANCE_LOG_CLIP = 0.5
@@ -778,8 +784,8 @@ class PictureModel:
         applied in place to ``img`` (H, W, 3) uint8, the last render's picture: the inside of
         the mouth (the mouth's layer, feathered): its luma ``y`` becomes
         ``y + (2**gain - 1) (y - c) + offset`` (``c``: :meth:`_mouth_pivot`, the layer's mean
-        luma), in the colour of the calibration picture's face (its mean, normalised to luma
-        1: the render's colours are the model's); then the face's
+        luma), the change added in the colour of the calibration picture's face (its mean,
+        normalised to luma 1, desaturated) over the render's own colours; then the face's
         shading, ``y * 2**(w (g + sum_k a_k bump_k))`` (``w``: :meth:`_face_weight`).
         Returns ``img``."""
 
@@ -793,12 +799,12 @@ class PictureModel:
                 c = self._mouth_pivot(f, soft)
                 g1 = np.float32(2.0 ** a[0] - 1.0)
                 y = f @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
-                # the new luma in the colour of the person's face (the model's render has the
-                # model's colours: its cavity brightened turned grey-blue); the luma is the
-                # render's moved by the terms, (1 - s) y + s y'
-                y_new = y + g1 * (y - c) + np.float32(a[1])
-                s3 = soft[:, :, None]
-                f = (1 - s3) * f + s3 * (y_new[:, :, None] * self._tint)
+                # the luma's change added in the colour of the person's face (the model's
+                # render has the model's colours: its cavity brightened alone turned
+                # grey-blue; the teeth replaced by the face's colour at their new luma turned
+                # peach): the luma moves by s (y' - y), the render's own colours kept under it
+                dy = g1 * (y - c) + np.float32(a[1])
+                f = f + (soft * dy)[:, :, None] * self._tint
                 img[box] = np.clip(f + 0.5, 0, 255).astype(np.uint8)
         if a[2:].any():
             box = self._face_box()
@@ -818,8 +824,9 @@ class PictureModel:
         of the log ratio of the frame's to the render's on the skin (every
         :data:`APPEARANCE_SHADING_STRIDE`-th pixel; a ridge towards 0), then the inside of the
         mouth's gain and offset on the mouth's layer, against the frame over that shading
-        (a ridge towards gain 1, offset 0). Each within its bound
-        (:data:`~myoface.codec.params.APPEARANCE_LIMITS`)."""
+        (a ridge towards gain 1, offset 0; the gain within :data:`APPEARANCE_MOUTH_GAIN_LOG2`,
+        the offset fitted again at its bound: the mouth's contrast kept). Each within its
+        bound (:data:`~myoface.codec.params.APPEARANCE_LIMITS`)."""
         lum = np.array([0.299, 0.587, 0.114], dtype=np.float32)
         a = np.zeros(N_APPEARANCE)
         frame = np.asarray(frame)
@@ -861,7 +868,12 @@ class PictureModel:
                 ata = u.T @ u
                 ridge = APPEARANCE_MOUTH_RIDGE * np.diag(ata)
                 g1, o = np.linalg.solve(ata + np.diag(ridge + 1e-9), u.T @ (r - y))
-                a[0] = np.log2(max(1.0 + float(g1), 1e-3))
+                lo, hi = APPEARANCE_MOUTH_GAIN_LOG2
+                g = float(np.clip(np.log2(max(1.0 + float(g1), 1e-3)), lo, hi))
+                if g != np.log2(max(1.0 + float(g1), 1e-3)):  # at a bound: the offset for it
+                    res = r - y - (2.0**g - 1.0) * u[:, 0]
+                    o = float(s @ res) / (float(s @ s) * (1.0 + APPEARANCE_MOUTH_RIDGE) + 1e-9)
+                a[0] = g
                 a[1] = o
         lim = np.asarray(APPEARANCE_LIMITS)
         return np.clip(a, -lim, lim)
