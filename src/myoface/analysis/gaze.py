@@ -67,6 +67,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from myoface.analysis.potentials import LUMA_601
 from myoface.errors import MyofaceValueError
 from myoface.face.eyes import EYE_RADIUS_MM, eye_loop, eyeball_center
 from myoface.render.dressing import IRIS_DEG
@@ -93,7 +94,7 @@ IRIS_DEPTH_MM = EYE_RADIUS_MM * float(np.cos(np.radians(IRIS_DEG)))
 #: (:data:`myoface.render.renderer.MAX_GAZE_RAD`)
 MAX_GAZE_DEG = 45.0
 #: BT.601 luma weights of (R, G, B): the brightness the reader models
-LUMA = np.array([0.299, 0.587, 0.114])
+LUMA = np.asarray(LUMA_601)
 
 
 @dataclass(frozen=True)

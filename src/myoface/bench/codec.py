@@ -47,6 +47,7 @@ import time
 
 import numpy as np
 
+from myoface.analysis.potentials import LUMA_601
 from myoface.bench import Measurement, benchmark
 
 SAMPLE_SECONDS = 20.0
@@ -56,7 +57,7 @@ SSIM_EVERY = 5
 X264_SCALES = (1.0, 0.5, 0.25)
 #: x264's bytes within this fraction of the target count as equal
 BYTES_TOLERANCE = 0.05
-LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)
+LUMA = np.asarray(LUMA_601, dtype=np.float32)  # (BT.601)
 
 _cache: dict = {}
 

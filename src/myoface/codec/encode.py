@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from myoface.analysis.camera import PinholeCamera
+from myoface.analysis.potentials import LUMA_601
 from myoface.codec.entropy import DEFAULT_QUALITY, QUALITIES
 from myoface.codec.params import FrameParams
 from myoface.codec.stream import (
@@ -87,7 +88,7 @@ class Setup:
 def psnr_y(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None) -> float:
     """PSNR (dB) of the luma (BT.601) of RGB images ``a`` against ``b``, over ``mask``
     (bool (H, W); None: the whole frame)."""
-    w = np.array([0.299, 0.587, 0.114])
+    w = np.asarray(LUMA_601)
     ya = np.asarray(a, dtype=np.float64) @ w
     yb = np.asarray(b, dtype=np.float64) @ w
     d = (ya - yb) ** 2

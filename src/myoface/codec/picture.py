@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from myoface.analysis.camera import PinholeCamera
+from myoface.analysis.potentials import LUMA_601
 from myoface.codec.params import (
     APPEARANCE_LIMITS,
     N_APPEARANCE,
@@ -69,6 +70,9 @@ from myoface.codec.params import (
 )
 from myoface.codec.warp import raster_warp
 from myoface.errors import MyofaceValueError
+
+#: the luma's weights (BT.601), float32 as the picture's arithmetic
+LUMA = np.asarray(LUMA_601, dtype=np.float32)
 
 __all__ = [
     "PHYSICS",
@@ -545,7 +549,7 @@ class PictureModel:
         #: (:data:`MOUTH_TINT_SATURATION`)
         face_px = frame[_polygon_mask((h, w), skin_cal_px[self._rim])].astype(np.float64)
         tint = face_px.mean(axis=0) if len(face_px) else np.full(3, 128.0)
-        tint = tint / max(float(tint @ [0.299, 0.587, 0.114]), 1.0)
+        tint = tint / max(float(tint @ LUMA), 1.0)
         tint = 1.0 + MOUTH_TINT_SATURATION * (tint - 1.0)
         self._tint = tint.astype(np.float32) if np.isfinite(tint).all() else np.ones(3, np.float32)
         self._face_width_mm = float(np.ptp(self._skin_cal[:, 0]))
@@ -756,9 +760,8 @@ class PictureModel:
         """The luma (BT.601) about which the mouth's gain acts: the mean of ``rgb`` (the
         render without the terms) over the mouth's feathered layer ``soft`` (so that the gain
         and the offset are apart: contrast and level)."""
-        lum = np.array([0.299, 0.587, 0.114], dtype=np.float32)
         w = float(soft.sum())
-        return np.float32(float((rgb @ lum * soft).sum()) / w if w > 0 else 0.0)
+        return np.float32(float((rgb @ LUMA * soft).sum()) / w if w > 0 else 0.0)
 
     def _part_box(self, nodes, pad: int):
         """The box (rows, cols) of the last render's ``nodes`` (their destinations), ``pad``
@@ -798,7 +801,7 @@ class PictureModel:
                 f = img[box].astype(np.float32)
                 c = self._mouth_pivot(f, soft)
                 g1 = np.float32(2.0 ** a[0] - 1.0)
-                y = f @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+                y = f @ LUMA
                 # the luma's change added in the colour of the person's face (the model's
                 # render has the model's colours: its cavity brightened alone turned
                 # grey-blue; the teeth replaced by the face's colour at their new luma turned
@@ -827,7 +830,6 @@ class PictureModel:
         (a ridge towards gain 1, offset 0; the gain within :data:`APPEARANCE_MOUTH_GAIN_LOG2`,
         the offset fitted again at its bound: the mouth's contrast kept). Each within its
         bound (:data:`~myoface.codec.params.APPEARANCE_LIMITS`)."""
-        lum = np.array([0.299, 0.587, 0.114], dtype=np.float32)
         a = np.zeros(N_APPEARANCE)
         frame = np.asarray(frame)
         box = self._face_box()
@@ -838,8 +840,8 @@ class PictureModel:
         st = APPEARANCE_SHADING_STRIDE
         sk = (lab == LABEL_SKIN)[::st, ::st]
         if sk.sum() >= 4 * (N_SHADING_BUMPS + 1):
-            yb = base[box][::st, ::st][sk].astype(np.float32) @ lum
-            yr = frame[box][::st, ::st][sk].astype(np.float32) @ lum
+            yb = base[box][::st, ::st][sk].astype(np.float32) @ LUMA
+            yr = frame[box][::st, ::st][sk].astype(np.float32) @ LUMA
             rows, cols = np.nonzero(sk)
             b = ey[::st][rows] * ex[:, ::st][:, cols].T  # (n, K)
             # (as applied: the exponent times the face's weight)
@@ -858,8 +860,8 @@ class PictureModel:
                 c = float(self._mouth_pivot(base[mb].astype(np.float32), s))
                 on = s > 0.05
                 s = s[on].astype(np.float64)
-                y = base[mb][on].astype(np.float64) @ lum
-                r = frame[mb][on].astype(np.float64) @ lum
+                y = base[mb][on].astype(np.float64) @ LUMA
+                r = frame[mb][on].astype(np.float64) @ LUMA
                 if a[2:].any():  # (the shading multiplies the mouth's terms: / it)
                     ey_m, ex_m = self._shading_basis(mb)
                     e = a[2] + (ey_m * a[3:]) @ ex_m
