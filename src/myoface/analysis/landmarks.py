@@ -203,6 +203,26 @@ class TrackerOffsets:
         #: cells the detector found no face in (their offsets taken as zero)
         self.missed = 0
 
+    @classmethod
+    def of_textured_face(cls, face, shape, camera, size, tracking) -> TrackerOffsets | None:
+        """The table for ``face`` (its own texture; None without one) seen through ``camera``
+        in images of ``size`` (w, h) px, read by MediaPipe in ``tracking`` mode
+        (:attr:`FitSettings.tracking`); ``shape``: the neutral (V, 3) mm, head frame. None
+        where the renderer cannot take the camera (a principal point off the centre)."""
+        from myoface.analysis.synthesis import LandmarkSynthesis
+
+        if face.texture is None:
+            return None
+        try:
+            syn = LandmarkSynthesis(face, camera, size, tracking=tracking)
+        except MyofaceValueError:
+            return None
+        return cls(syn, shape, camera)
+
+    def close(self) -> None:
+        """Let the detector that reads the renders go."""
+        self.synthesis.close()
+
     def _cell(self, i: int, j: int) -> np.ndarray:
         if (i, j) not in self.cells:
             from myoface.analysis.camera import HeadPose

@@ -354,12 +354,14 @@ def run_headmotion(
     syn = LandmarkSynthesis(model.face, cam, SIZE) if synthesis else None
     if detector_offsets is None:
         detector_offsets = all(p is None or np.shape(p)[1] == 3 for p in points)
-    use = detector_offsets and fit.settings.tracker_offsets and syn is None
-    if use and model.face.texture is not None:
+    if detector_offsets and fit.settings.tracker_offsets and syn is None:
         from myoface.analysis.landmarks import TrackerOffsets
 
-        reader = LandmarkSynthesis(model.face, cam, SIZE, tracking=fit.settings.tracking)
-        fit.set_offsets(TrackerOffsets(reader, fit.neutral, cam))
+        fit.set_offsets(
+            TrackerOffsets.of_textured_face(
+                model.face, fit.neutral, cam, SIZE, fit.settings.tracking
+            )
+        )
     window = max(1, int(round(CALIBRATION_WINDOW_S * fps)))
     cal = fit.calibrate(points[:window], synthesis=syn)
     if photometric:
@@ -378,7 +380,7 @@ def run_headmotion(
         t_fit[k] = time.perf_counter() - t0
         est[k], ang[k], resid[k] = r.contractions, r.pose.angles_deg, r.residual_mm
     if fit.offsets is not None:
-        fit.offsets.synthesis.close()
+        fit.offsets.close()
     # the skin the estimates produce, against the true skin (head frame, the model's own)
     skin_err = np.full(n, np.nan)
     state = model.rest_state()

@@ -214,15 +214,14 @@ class FitTracker(TrackerBase):
         (which measures them at each frame) and with MediaPipe as the detector (the offsets
         are its own)."""
         fit = self.fit
-        if not self._wants_offsets() or self.model.face.texture is None:
+        if not self._wants_offsets():
             return
         h, w = shape[:2]
-        try:
-            syn = LandmarkSynthesis(self.model.face, fit.camera, (w, h),
-                                    tracking=self.settings.tracking)  # fmt: skip
-        except MyofaceValueError:  # (a camera whose principal point is off the centre)
-            return
-        fit.set_offsets(TrackerOffsets(syn, fit.neutral, fit.camera))
+        offsets = TrackerOffsets.of_textured_face(
+            self.model.face, fit.neutral, fit.camera, (w, h), self.settings.tracking
+        )
+        if offsets is not None:
+            fit.set_offsets(offsets)
 
     def _wants_offsets(self) -> bool:
         return (
@@ -535,4 +534,4 @@ class FitTracker(TrackerBase):
         if self.synthesis is not None:
             self.synthesis.close()
         if self.fit is not None and self.fit.offsets is not None:
-            self.fit.offsets.synthesis.close()
+            self.fit.offsets.close()
