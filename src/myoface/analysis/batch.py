@@ -760,7 +760,15 @@ def start_local_cluster(workers: int):
     import logging
 
     distributed = _require("distributed", "the dask engine")
-    with _signals_blocked(_TERMINAL_SIGNALS):
+    import dask
+
+    # one video a worker at a time: Dask's default (worker-saturation 1.1) sends a worker of
+    # one thread its next task while it runs one, and a task sent is one a stop may not cancel
+    # in time; a video is seconds to minutes, so the scheduler's round trip costs nothing
+    with (
+        _signals_blocked(_TERMINAL_SIGNALS),
+        dask.config.set({"distributed.scheduler.worker-saturation": 1.0}),
+    ):
         cluster = distributed.LocalCluster(
             n_workers=workers,
             threads_per_worker=1,
