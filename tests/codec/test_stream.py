@@ -86,9 +86,38 @@ def test_a_version_1_stream_is_read_without_appearance():
     assert all(_same(a, b) for a, b in zip(written, out, strict=True))
     assert not any(p.appearance.any() for p in out)  # (version 1 carries none)
     # the same frames in version 2 carry their appearance, in more bytes
-    data2, decoded2, _ = stream(40, seed=2)
-    assert data2[4] == VERSION == 2 and len(data2) > len(data)
-    assert any(p.appearance.any() for p in decoded2)
+    h2 = header()
+    h2.version = 2
+    buf = io.BytesIO()
+    w = StreamWriter(buf, h2)
+    written2 = [w.write(p) for p in frames(40, seed=2)]
+    w.close()
+    data2 = buf.getvalue()
+    assert data2[4] == 2 and len(data2) > len(data)
+    assert any(p.appearance.any() for p in written2)
+    out2 = list(StreamReader(BytesSource(data2)))
+    assert all(_same(a, b) for a, b in zip(written2, out2, strict=True))
+
+
+def test_version_3_codes_the_same_values_as_version_2_in_fewer_bits():
+    """Version 3 changes the packets' models only: the frames decode to the same values as
+    version 2's, and its body is smaller (the frames: smooth random walks, as a face's)."""
+    bodies, decoded = {}, {}
+    for version in (2, 3):
+        h = header()
+        h.version = version
+        buf = io.BytesIO()
+        w = StreamWriter(buf, h)
+        for p in frames(200, seed=5):
+            w.write(p)
+        w.close()
+        data = buf.getvalue()
+        assert data[4] == version
+        bodies[version] = w.body_bytes
+        decoded[version] = list(StreamReader(BytesSource(data)))
+    assert VERSION == 3
+    assert all(_same(a, b) for a, b in zip(decoded[2], decoded[3], strict=True))
+    assert bodies[3] < bodies[2]
 
 
 def test_the_encoders_appearance_fit_sees_the_quantised_frame_without_appearance():
@@ -209,7 +238,9 @@ def test_a_corrupted_stream_is_refused_in_one_line():
 def test_another_version_or_not_a_stream():
     data, _, _ = stream(5)
     newer = data[:4] + bytes([VERSION + 1]) + data[5:]
-    with pytest.raises(MyofaceFormatError, match="version 3; this myoface reads versions 1 and 2"):
+    with pytest.raises(
+        MyofaceFormatError, match="version 4; this myoface reads versions 1, 2 and 3"
+    ):
         _read_all(newer)
     with pytest.raises(MyofaceFormatError, match="not a myoface stream"):
         _read_all(b"RIFF" + data[4:])

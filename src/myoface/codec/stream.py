@@ -39,10 +39,12 @@ from myoface.errors import MyofaceFormatError
 
 MAGIC = b"MYOF"
 #: the format version written (2: the packets carry the appearance terms,
-#: :data:`~myoface.codec.params.APPEARANCE_FIELDS`)
-VERSION = 2
-#: the versions read (1: packets without the appearance)
-VERSIONS_READ = (1, 2)
+#: :data:`~myoface.codec.params.APPEARANCE_FIELDS`; 3: the same packets' symbols under
+#: better adaptive models, :class:`~myoface.codec.entropy.ParamCoder`'s ``model=3``)
+VERSION = 3
+#: the versions read (1: packets without the appearance; 2: version 3's packets under the
+#: first models)
+VERSIONS_READ = (1, 2, 3)
 TRAILER_MAGIC = b"MYOE"
 #: the header's bounds (a stream beyond them is refused before anything is allocated)
 MAX_WIDTH = MAX_HEIGHT = 4096
@@ -76,6 +78,11 @@ def ids_checksum(ids) -> int:
     """The CRC-32 of the contraction ids (``","``-joined, UTF-8): the header names the
     receiver's model by it."""
     return zlib.crc32(",".join(ids).encode())
+
+
+def coder_of(h: Header) -> ParamCoder:
+    """The packets' coder of a stream with header ``h`` (both sides make it the same)."""
+    return ParamCoder(h.n_contractions, h.steps, h.calibration, h.n_appearance, h.packet_model)
 
 
 class StreamTruncated(MyofaceFormatError):
@@ -137,6 +144,12 @@ class Header:
     image_codec: str
     image: bytes
     version: int = VERSION
+
+    @property
+    def packet_model(self) -> int:
+        """The packets' adaptive models (:class:`~myoface.codec.entropy.ParamCoder`'s
+        ``model``): 2 for versions 1 and 2, 3 from version 3."""
+        return 3 if self.version >= 3 else 2
 
     @property
     def n_appearance(self) -> int:
@@ -384,8 +397,7 @@ class StreamWriter:
         # both sides start from the header as the stream carries it (its float32 fields)
         self.header = parse_header_bytes(raw)
         self.header_bytes = len(raw)
-        self.coder = ParamCoder(self.header.n_contractions, self.header.steps,
-                                self.header.calibration, self.header.n_appearance)  # fmt: skip
+        self.coder = coder_of(self.header)
         self.n_frames = 0
         self.body_bytes = 0
         self._crc = 0
@@ -585,7 +597,8 @@ def read_header(b: _Buffer) -> Header:
     if version not in VERSIONS_READ:
         raise MyofaceFormatError(
             f"{name}: stream format version {version}; this myoface reads versions "
-            + " and ".join(str(v) for v in VERSIONS_READ)
+            + ", ".join(str(v) for v in VERSIONS_READ[:-1])
+            + f" and {VERSIONS_READ[-1]}"
             + (" (upgrade myoface)" if version > VERSION else "")
         )
     if n > MAX_HEADER_BYTES:
@@ -635,7 +648,7 @@ class StreamReader:
         self._b = _Buffer(source)
         self.header = read_header(self._b)
         h = self.header
-        self.coder = ParamCoder(h.n_contractions, h.steps, h.calibration, h.n_appearance)
+        self.coder = coder_of(h)
         self.n_frames = 0
         self.ended = False
         self._crc = 0
