@@ -57,6 +57,13 @@ SSIM_EVERY = 5
 X264_SCALES = (1.0, 0.5, 0.25)
 #: x264's bytes within this fraction of the target count as equal
 BYTES_TOLERANCE = 0.05
+#: x264's constant rate factors for its rate-PSNR curve (then bisected where it crosses a
+#: target)
+X264_CRFS = (51, 45, 39, 33, 27, 21)
+#: the curve's bracketing points no more than this far apart in face PSNR-Y (dB) ...
+CURVE_GAP_DB = 0.25
+#: ... or this close in CRF
+CURVE_MIN_CRF_GAP = 0.5
 LUMA = np.asarray(LUMA_601, dtype=np.float32)  # (BT.601)
 
 _cache: dict = {}
@@ -268,9 +275,11 @@ def _ours(kind: str, quick: bool, quality: str) -> dict:
 # ------------------------------------------------------------------ x264
 
 
-def _x264(clip: _Frames, bit_rate: float, scale: float) -> tuple[int, list]:
-    """``clip`` through libx264 at ``bit_rate`` (bit/s, ABR) at ``scale`` of its size: the
-    H.264 packets' bytes and the decoded frames at the clip's size."""
+def _x264(clip: _Frames, bit_rate: float | None, scale: float,
+          crf: float | None = None) -> tuple[int, list]:  # fmt: skip
+    """``clip`` through libx264 at ``bit_rate`` (bit/s, ABR), or at the constant rate factor
+    ``crf`` (``bit_rate`` None), at ``scale`` of its size: the H.264 packets' bytes and the
+    decoded frames at the clip's size."""
     import av
     import cv2
 
@@ -280,8 +289,12 @@ def _x264(clip: _Frames, bit_rate: float, scale: float) -> tuple[int, list]:
     out = av.open(buf, "w", format="mp4")
     s = out.add_stream("libx264", rate=int(round(clip.fps)))
     s.width, s.height, s.pix_fmt = sw, sh, "yuv420p"
-    s.bit_rate = max(1000, int(bit_rate))  # (libx264 takes kbit/s: at least 1)
-    s.options = {"preset": "medium", "x264-params": "keyint=infinite:qpmax=69"}
+    opts = {"preset": "medium", "x264-params": "keyint=infinite:qpmax=69"}
+    if crf is None:
+        s.bit_rate = max(1000, int(bit_rate))  # (libx264 takes kbit/s: at least 1)
+    else:
+        opts["crf"] = f"{crf:.2f}"
+    s.options = opts
     n_bytes = 0
     for f in clip:
         img = f if (sw, sh) == (w, h) else cv2.resize(f, (sw, sh), interpolation=cv2.INTER_AREA)
@@ -313,22 +326,6 @@ def _x264_point(kind: str, quick: bool, bit_rate: float, scale: float, ssim: boo
             q.add(f)
         _cache[key] = {"bytes": n_bytes, "bit_rate": int(bit_rate), "scale": scale, **q.result()}
     return _cache[key]
-
-
-def _bisect_rate(kind, quick, scale, ok, lo=1000.0, hi=2e6, steps=8) -> dict | None:
-    """The lowest average bit rate (log bisection) whose point satisfies ``ok`` (None when even
-    ``hi`` does not)."""
-    best = None
-    if not ok(_x264_point(kind, quick, hi, scale, False)):
-        return None
-    for _ in range(steps):
-        mid = float(np.sqrt(lo * hi))
-        p = _x264_point(kind, quick, mid, scale, False)
-        if ok(p):
-            hi, best = mid, p
-        else:
-            lo = mid
-    return best or _x264_point(kind, quick, hi, scale, False)
 
 
 def _rate_for_bytes(kind, quick, scale, target: int, tries: int = 6) -> dict | None:
@@ -379,17 +376,84 @@ def _x264_at_bytes(kind: str, quick: bool, target: int) -> dict | None:
     return _cache[key]
 
 
+def _x264_crf_point(kind: str, quick: bool, crf: float, scale: float) -> dict:
+    """x264 at constant rate factor ``crf`` and ``scale`` of the clip's size: its bytes and
+    quality (no SSIM)."""
+    crf = round(float(crf), 2)
+    key = ("x264_crf", kind, bool(quick), crf, scale)
+    if key not in _cache:
+        a = _analysed(kind, quick)
+        n_bytes, frames = _x264(a["clip"], None, scale, crf=crf)
+        q = _Quality(a["clip"], a["hulls"], ssim=False)
+        for f in frames[: len(a["clip"])]:
+            q.add(f)
+        _cache[key] = {"bytes": n_bytes, "crf": crf, "scale": scale, **q.result()}
+    return _cache[key]
+
+
+def _interp_log_bytes(lo: dict, hi: dict, target_db: float) -> float:
+    """The bytes at face PSNR-Y ``target_db`` on the straight line through points ``lo`` and
+    ``hi`` in (PSNR, log bytes)."""
+    p0, p1 = lo["face_psnr_db"], hi["face_psnr_db"]
+    l0, l1 = np.log(lo["bytes"]), np.log(hi["bytes"])
+    t = 0.0 if p1 == p0 else (target_db - p0) / (p1 - p0)
+    return float(np.exp(l0 + t * (l1 - l0)))
+
+
+def _x264_bracket(kind: str, quick: bool, scale: float, target_db: float) -> dict | None:
+    """x264's rate-PSNR curve at ``scale`` (its points at the constant rate factors
+    :data:`X264_CRFS`, then bisected in CRF) around ``target_db``: the two points of
+    adjacent CRFs whose face PSNR-Y brackets it, no more than :data:`CURVE_GAP_DB` apart
+    (or CRFs :data:`CURVE_MIN_CRF_GAP` apart), and the bytes interpolated between them in
+    log-bytes. None when x264 does not reach ``target_db`` at that size; ``below_curve``
+    when it beats it at its fewest bytes (CRF 51: then those bytes, an upper bound)."""
+
+    def pt(c):
+        return _x264_crf_point(kind, quick, c, scale)
+
+    crfs = sorted(X264_CRFS, reverse=True)  # (fewest bytes first)
+    pts = [pt(c) for c in crfs]
+    if pts[0]["face_psnr_db"] >= target_db:
+        return {"bytes": pts[0]["bytes"], "scale": scale, "below_curve": True,
+                "lo": pts[0], "hi": pts[0]}  # fmt: skip
+    k = next((i for i, p in enumerate(pts) if p["face_psnr_db"] >= target_db), None)
+    if k is None:
+        return None
+    lo, hi = pts[k - 1], pts[k]  # (lo: the higher CRF, below the target; hi: at or above)
+    while (hi["face_psnr_db"] - lo["face_psnr_db"] > CURVE_GAP_DB
+           and lo["crf"] - hi["crf"] > CURVE_MIN_CRF_GAP):  # fmt: skip
+        mid = pt((lo["crf"] + hi["crf"]) / 2)
+        if mid["face_psnr_db"] >= target_db:
+            hi = mid
+        else:
+            lo = mid
+    return {"bytes": int(round(_interp_log_bytes(lo, hi, target_db))), "scale": scale,
+            "below_curve": False, "lo": lo, "hi": hi}  # fmt: skip
+
+
 def _x264_for_psnr(kind: str, quick: bool, target_db: float) -> dict | None:
-    """The fewest bytes at which x264 reaches face PSNR-Y ``target_db`` (over its sizes)."""
+    """The bytes x264 needs to reach face PSNR-Y ``target_db``: on its rate-PSNR curve at
+    each size (:func:`_x264_bracket`: constant rate factor points bracketing the target,
+    interpolated in log-bytes; no reading at a rate control's step), the fewest over the
+    sizes; with the bracketing points and every size's answer."""
     key = ("x264_psnr", kind, bool(quick), round(target_db, 3))
     if key not in _cache:
-        found = []
+        found = {}
         for scale in _scales(quick):
-            p = _bisect_rate(kind, quick, scale, lambda p: p["face_psnr_db"] >= target_db,
-                             hi=2e6, steps=4 if quick else 7)  # fmt: skip
-            if p is not None:
-                found.append(p)
-        _cache[key] = min(found, key=lambda p: p["bytes"]) if found else None
+            b = _x264_bracket(kind, quick, scale, target_db)
+            if b is not None:
+                found[scale] = b
+        if not found:
+            _cache[key] = None
+        else:
+            best = min(found.values(), key=lambda b: b["bytes"])
+            keep = ("crf", "bytes", "face_psnr_db")
+            _cache[key] = {
+                "bytes": best["bytes"], "scale": best["scale"], "target_db": round(target_db, 3),
+                "below_curve": best["below_curve"],
+                "bracket": [{k: best[e][k] for k in keep} for e in ("lo", "hi")],
+                "sizes": {str(s): b["bytes"] for s, b in found.items()},
+            }  # fmt: skip
     return _cache[key]
 
 
@@ -570,7 +634,8 @@ def _summary(quick: bool) -> dict:
         out[kind] = {
             "frames": c["frames"], "size": c["size"], "qualities": rows,
             "x264_for_our_face_psnr": None if need is None else {
-                k: need[k] for k in ("bytes", "scale", "bit_rate", "face_psnr_db")},
+                k: need[k] for k in ("bytes", "scale", "target_db", "below_curve", "bracket",
+                                     "sizes")},
         }  # fmt: skip
     out["plot"] = _all(quick)["plot"]
     return out
@@ -640,7 +705,10 @@ def bench_face_gain(quick: bool) -> Measurement:
 @benchmark("codec.x264_bytes_ratio", "x", higher_is_better=True)
 def bench_x264_ratio(quick: bool) -> Measurement:
     """The bytes x264 needs to reach our face PSNR-Y (sample looped to 20 s, default quality),
-    over ours (at its best frame size; NaN when it does not reach it at 4 Mbit/s)."""
+    over ours: on x264's rate-PSNR curve (constant rate factor points at each of its sizes,
+    bisected until two adjacent points bracket our PSNR within 0.25 dB, the bytes
+    interpolated between them in log-bytes; the fewest over the sizes); the bracketing points
+    in the detail. NaN when x264 does not reach our PSNR at CRF 21 at any size."""
     c = _all(quick)["sample"]
     ours = c["qualities"]["medium"]["ours"]
     need = c["x264_for_our_face_psnr"]
