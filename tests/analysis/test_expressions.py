@@ -101,8 +101,11 @@ def test_the_rule_by_hand():
     # scores the same: the rule compares the AUs with each other
     for x in (_aus(AU01=0.8, AU04=0.5, AU15=0.7), _aus(AU06=0.6, AU12=0.9, AU20=0.5)):
         np.testing.assert_allclose(expression_scores_from_aus(x / 3), expression_scores_from_aus(x))
-    # ... but nothing is an expression until the strongest AU reaches a trace
+    # ... but the strongest AU gates the whole frame, open from half a trace (0.1) to a trace:
+    # at 0.15 half open (happiness 1 x 0.5), below 0.1 shut (nothing is an expression)
     s = expression_scores_from_aus(_aus(AU06=0.1, AU12=0.15))
+    assert s[0] == pytest.approx(0.5) and expression_labels(s) == ["happiness"]
+    s = expression_scores_from_aus(_aus(AU06=0.06, AU12=0.09))
     assert s[: len(EXPRESSIONS)].max() == 0 and expression_labels(s) == [NEUTRAL]
     # the gate: AU4 at 0.15 of the strongest (AU1) is half open (0.1 -> 0.2)
     s = expression_scores_from_aus(_aus(AU01=0.8, AU04=0.12, AU15=0.6))

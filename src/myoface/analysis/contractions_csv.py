@@ -11,7 +11,12 @@ import numpy as np
 
 from myoface._io import atomic_output, check_output_path, read_text
 from myoface.analysis.camera import POSE_COLUMNS, HeadPose
-from myoface.analysis.expressions import EXPRESSION_COLUMNS, LABEL_COLUMN, expression_cells
+from myoface.analysis.expressions import (
+    EXPRESSION_COLUMNS,
+    LABEL_COLUMN,
+    ExpressionReader,
+    expression_cells,
+)
 from myoface.analysis.gaze import GAZE_COLUMNS, GAZE_STATE_COLUMNS, GAZE_STATES
 from myoface.analysis.trackers.base import FrameMeasurement
 from myoface.errors import (
@@ -48,10 +53,13 @@ def jaw_angle_function(jaw):
     return lambda c: c * k
 
 
-def contractions_csv_row(f, ids, jaw) -> str:
+def contractions_csv_row(f, ids, jaw, expressions: ExpressionReader | None = None) -> str:
     """One measurement ``f`` as a line of a contractions CSV (no newline); ``jaw``: the
     model's jaw, or a function of the jaw control giving its angle (see
-    :func:`jaw_angle_function`)."""
+    :func:`jaw_angle_function`); ``expressions``: the video's
+    :class:`~myoface.analysis.expressions.ExpressionReader`, given the rows in order (the
+    expressions read above the person's rest reference, at the row's head pose), or None:
+    the row's expressions read from its contractions alone."""
     angle = jaw if callable(jaw) else jaw_angle_function(jaw)
     vals = ["" if not np.isfinite(v) else f"{v:.5f}" for v in f.contractions]
     jaw_cell = ""
@@ -59,7 +67,9 @@ def contractions_csv_row(f, ids, jaw) -> str:
         jaw_cell = f"{angle(float(f.contractions[ids.index('jaw')])):.5f}"
     head = f.head_cells()
     ok = f.quality == "ok"
-    expr = expression_cells(f.contractions if ok else [np.nan], ids)
+    pose = getattr(f, "pose", None)  # (the 3-D fit's; the snakes' rows have none)
+    angles = None if pose is None else pose.angles_deg
+    expr = expression_cells(f.contractions if ok else [np.nan], ids, expressions, angles)
     return ",".join([str(f.index), f"{f.time_s:.4f}", f.quality, *vals, jaw_cell, *head, *expr])
 
 
@@ -76,7 +86,9 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw) -> No
     :mod:`myoface.analysis.gaze`). Last, with every tracker, the expressions read from the
     contractions (:mod:`myoface.analysis.expressions`): ``expr_happiness, expr_sadness,
     expr_surprise, expr_fear, expr_anger, expr_disgust, expr_neutral`` (strengths in [0, 1])
-    and ``expression`` (the label; empty where the frame was not measured). Written whole
+    and ``expression`` (the label; empty where the frame was not measured), each row's read
+    above the person's rest reference learnt from the rows before it
+    (:class:`~myoface.analysis.expressions.ExpressionReader`). Written whole
     (atomically); :class:`ContractionsCsvWriter`
     writes the same rows one by one."""
     ids = list(ids)
@@ -88,7 +100,8 @@ def write_contractions_csv(path, ids, frames: list[FrameMeasurement], jaw) -> No
     cols = contractions_csv_header(ids, frames[0] if frames else None)
     lines = [",".join(cols)]
     angle = jaw_angle_function(jaw)
-    lines += [contractions_csv_row(f, ids, angle) for f in frames]
+    reader = ExpressionReader(ids)  # (one per video: the person's rest reference)
+    lines += [contractions_csv_row(f, ids, angle, reader) for f in frames]
     with writing(path), atomic_output(path) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
 
@@ -117,6 +130,8 @@ class ContractionsCsvWriter:
     Attributes
     ----------
     n_rows : int -- rows written so far.
+    expressions : the :class:`~myoface.analysis.expressions.ExpressionReader` of the rows
+        (causal: each row's expression columns are final when it is written).
     """
 
     def __init__(self, path, ids, jaw):
@@ -124,6 +139,7 @@ class ContractionsCsvWriter:
         self.ids = list(ids)
         self.jaw_angle = jaw_angle_function(jaw)
         self.n_rows = 0
+        self.expressions = ExpressionReader(self.ids)  # (the rows' rest reference)
         self._fh = None
         self._kind = None
 
@@ -135,7 +151,7 @@ class ContractionsCsvWriter:
             raise MyofaceValueError(
                 f"{self.path}: a {type(m).__name__} after {self._kind.__name__} rows"
             )
-        row = contractions_csv_row(m, self.ids, self.jaw_angle)
+        row = contractions_csv_row(m, self.ids, self.jaw_angle, self.expressions)
         with writing(self.path):  # a full disk names the CSV
             if self._fh is None:
                 head = ",".join(contractions_csv_header(self.ids, m))

@@ -9,7 +9,13 @@ appearance. Per frame:
 1. **AU intensities.** The fitted contractions are read as FACS action units through the
    project's AU table (``data/facs_action_units.toml``), exactly as the OpenFace CSV's
    ``AUxx_r`` columns are (:func:`myoface.analysis.openface.au_intensities`), divided by 5:
-   ``x_a`` in [0, 1], FACS's letters A-E at 0.2-1.0.
+   ``x_a`` in [0, 1], FACS's letters A-E at 0.2-1.0. In a video (:class:`ExpressionReader`,
+   what contractions.csv is written with) each AU is read above the person's **rest
+   reference**: what the fit reads of it on this video's frames labelled neutral, as a linear
+   function of the head's pose (yaw, pitch, roll), ``x_a - b_a(pose)`` (0 below it). With
+   the head moving, the fit reads AUs that are not there, in step with the pose (AU17 up to
+   1.0 with the head turned 30 deg; docs/expressions.md); the reference takes them off. A
+   single frame (:func:`expression_scores`) has no reference.
 2. **Prototypes.** Each expression is a list of AU combinations, the EMFACS prototypes and
    major variants of P. Ekman, W. V. Friesen & J. C. Hager, *Facial Action Coding System:
    Investigator's Guide* (2002), table 10-1 ("EMFACS predictions"; EMFACS-7 is W. V. Friesen
@@ -24,8 +30,9 @@ appearance. Per frame:
    expressions; the pattern is the same at any gain. An AU7 that is not measured is read as
    AU6 (:data:`READ_AS`).
 4. **An expression's strength** (``expr_<name>``, in [0, 1]) is its best prototype's match
-   times its *coverage*, ``E / (E + U)``, and 0 on a frame whose strongest AU is below a
-   trace (:data:`LEVEL_MIN`: FACS scores nothing below A): ``E`` the frame's AU activity
+   times its *coverage*, ``E / (E + U)``, times a level gate on the frame's strongest AU
+   that opens, like each AU's, from half a trace to a trace (:data:`LEVEL_MIN`: FACS scores
+   nothing below A; the fit reads an A at a fraction of it): ``E`` the frame's AU activity
    (sum of ``x_a**2``) in the AUs of that expression's prototypes and variants
    (:data:`EXPRESSION_AUS`) or in the AUs that go with any expression
    (:data:`ANY_EXPRESSION_AUS`: lips part, jaw drop, blink), ``U`` the activity it leaves
@@ -127,6 +134,13 @@ LEFT_OUT = {
 #: from, so a lid tightened shows as AU6 (with a little AU45). Used only where the AU itself
 #: is not measured (NaN).
 READ_AS = {7: 6}
+#: the rest reference's pose terms are yaw, pitch and roll in units of this many degrees
+#: (the head's turn at which the fit's spurious readings were measured: docs/expressions.md)
+REST_POSE_SCALE_DEG = 30.0
+#: the rest reference's prior on its pose terms (ridge; in frames seen at
+#: :data:`REST_POSE_SCALE_DEG`): until about a frame's worth of neutral frames have been seen
+#: turned that far, the reference is mostly the same at every pose (its level alone)
+REST_RIDGE = 0.3
 #: AUs that go with any expression: the lips parting and the jaw dropping ("25 or 26 may
 #: occur with all prototypes or major variants", table 10-1), and a blink
 ANY_EXPRESSION_AUS = (25, 26, 45)
@@ -238,8 +252,8 @@ def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
     relative to the frame's strongest AU, times each AU's presence gate on that relative
     intensity) times its coverage (``E / (E + U)``: the activity, sum of ``x**2``, in its
     own AUs and :data:`ANY_EXPRESSION_AUS`, against the activity it leaves unexplained
-    weighted by :func:`specificity`), and 0 when the frame's strongest AU is below
-    :data:`LEVEL_MIN` (a trace); a prototype with an unmeasured AU is not
+    weighted by :func:`specificity`), times a gate on the frame's strongest AU that opens from
+    half a trace to :data:`LEVEL_MIN` (a trace); a prototype with an unmeasured AU is not
     scored, an expression with no prototype scored is NaN. Neutral is 1 minus the strongest
     (NaN when none was scored). A row with no AU measured is NaN throughout.
     """
@@ -255,7 +269,8 @@ def expression_scores_from_aus(intensities, aus=None) -> np.ndarray:
     # unmeasured AU7 read as AU6), and nothing is an expression until it reaches a trace
     top = np.max(np.where(np.isfinite(x), x, 0.0), axis=1)
     rel = np.minimum(_read_as(x, aus) / np.where(top > 0, top, 1.0)[:, None], 1.0)
-    present = (top >= LEVEL_MIN).astype(np.float64)
+    # the level gate opens like each AU's: from half a trace to a trace
+    present = np.clip((top - (LEVEL_MIN - TRACE / 2)) / (TRACE / 2), 0.0, 1.0)
     out = np.full((len(x), len(EXPRESSION_COLUMNS)), np.nan)
     for i, (own, other, sign, protos) in enumerate(_plan(aus)):
         explained = sq[:, own].sum(axis=1)
@@ -327,9 +342,122 @@ def expression_scores(contractions, muscle_ids) -> np.ndarray:
     return s[0] if one else s
 
 
-def expression_cells(contractions, muscle_ids) -> list[str]:
+class ExpressionReader:
+    """The expressions of one video's frames in order, each read above the person's **rest
+    reference** (causal: a frame's scores depend on it and the frames before it, so the
+    contractions CSV can be written row by row, with no delay).
+
+    The fit reads AUs where there are none, and with the head moving it reads them in step
+    with the pose (docs/expressions.md: at rest, AU17 correlates 0.74 with the turn of the
+    head, AU10 and AU12 -0.8 with its pitch, and a linear function of the pose explains 60-85 %
+    of their variance). The reference of AU ``a`` is ``b_a(pose) = w_a . (1, yaw, pitch,
+    roll) / 30 deg``, least squares over the frames read so far whose label is neutral
+    (:data:`REST_RIDGE` holding the pose terms near 0 until neutral frames at other poses
+    show them), kept within 0 and the largest reading of the AU on those frames (no
+    extrapolation above what was seen at rest). Each frame's AUs are read as ``x_a -
+    b_a(pose)`` (0 below), then the rule (:func:`expression_scores_from_aus`). Before the
+    first neutral frame the reference is 0 (the rule on the readings as they are). Without a
+    pose (the snakes, or a frame whose pose is not finite) the pose terms are 0: the
+    reference is the AU's level at rest.
+
+    >>> r = ExpressionReader(ids)  # doctest: +SKIP
+    >>> for c, pose in frames:
+    ...     scores, label = r.read(c, pose.angles_deg)
+
+    Attributes
+    ----------
+    n_neutral : int -- the neutral frames the reference was fitted on so far.
+    """
+
+    def __init__(self, muscle_ids, aus=None):
+        self.ids = tuple(muscle_ids)
+        self.aus = tuple(rule_aus() if aus is None else aus)
+        self._gram = np.diag([1e-9, REST_RIDGE, REST_RIDGE, REST_RIDGE])
+        self._rhs = np.zeros((4, len(self.aus)))
+        self._high = np.zeros(len(self.aus))
+        self.n_neutral = 0
+
+    @staticmethod
+    def _features(angles_deg) -> np.ndarray:
+        a = np.zeros(3) if angles_deg is None else np.asarray(angles_deg, dtype=np.float64)
+        if a.shape != (3,) or not np.isfinite(a).all():
+            a = np.zeros(3)
+        return np.concatenate([[1.0], a / REST_POSE_SCALE_DEG])
+
+    def reference(self, angles_deg=None) -> np.ndarray:
+        """The rest reference (len(aus),) in [0, 1] at the pose ``angles_deg`` (yaw, pitch,
+        roll deg; None: the level at rest)."""
+        if not self.n_neutral:
+            return np.zeros(len(self.aus))
+        w = np.linalg.solve(self._gram, self._rhs)
+        return np.clip(self._features(angles_deg) @ w, 0.0, self._high)
+
+    def read_aus(self, intensities, angles_deg=None) -> tuple[np.ndarray, str]:
+        """One frame's scores (7,) and label from its AU intensities (len(aus),) in [0, 1]
+        and the head's ``angles_deg``; the frame joins the reference when labelled neutral.
+        A frame with no AU measured: NaN scores, label ``""``, nothing learnt."""
+        x = np.asarray(intensities, dtype=np.float64)
+        if not np.isfinite(x).any():
+            return np.full(len(EXPRESSION_COLUMNS), np.nan), ""
+        above = np.where(np.isfinite(x), np.clip(x - self.reference(angles_deg), 0.0, 1.0), x)
+        s = expression_scores_from_aus(above, self.aus)
+        label = expression_labels(s)[0]
+        if label == NEUTRAL:
+            f = self._features(angles_deg)
+            seen = np.nan_to_num(np.clip(x, 0.0, 1.0))
+            self._gram = self._gram + np.outer(f, f)
+            self._rhs = self._rhs + np.outer(f, seen)
+            self._high = np.maximum(self._high, seen)
+            self.n_neutral += 1
+        return s, label
+
+    def read(self, contractions, angles_deg=None) -> tuple[np.ndarray, str]:
+        """One frame's scores (7,) in :data:`EXPRESSION_COLUMNS`' order and label from its
+        contractions (M,) over the reader's muscle ids (NaN / ``""`` when they are not all
+        finite: a frame not measured, which the reference does not learn from)."""
+        c = np.asarray(contractions, dtype=np.float64)
+        if c.shape != (len(self.ids),) or not np.isfinite(c).all():
+            return np.full(len(EXPRESSION_COLUMNS), np.nan), ""
+        return self.read_aus(au_fractions(c[None], self.ids)[0], angles_deg)
+
+    def cells(self, contractions, angles_deg=None) -> list[str]:
+        """One frame's expression cells for contractions.csv (:data:`EXPRESSION_COLUMNS`
+        with 3 decimals, then the label); all empty when the contractions are not all
+        finite."""
+        s, label = self.read(contractions, angles_deg)
+        if not label:
+            return [""] * (len(EXPRESSION_COLUMNS) + 1)
+        return [*("" if not np.isfinite(v) else f"{v:.3f}" for v in s), label]
+
+
+def expression_sequence(contractions, muscle_ids, angles_deg=None) -> tuple[np.ndarray, list]:
+    """A video's expressions as contractions.csv has them: ``(scores (T, 7), labels (T,))``
+    of contractions (T, M) over ``muscle_ids`` read in order by one :class:`ExpressionReader`
+    (the rest reference), with the head's ``angles_deg`` (T, 3) (yaw, pitch, roll) or None."""
+    c = np.atleast_2d(np.asarray(contractions, dtype=np.float64))
+    ang = None if angles_deg is None else np.asarray(angles_deg, dtype=np.float64)
+    reader = ExpressionReader(muscle_ids)
+    x = au_fractions(c, muscle_ids)
+    scores = np.full((len(c), len(EXPRESSION_COLUMNS)), np.nan)
+    labels = []
+    for k in range(len(c)):
+        if not np.isfinite(c[k]).all():
+            labels.append("")
+            continue
+        scores[k], lab = reader.read_aus(x[k], None if ang is None else ang[k])
+        labels.append(lab)
+    return scores, labels
+
+
+def expression_cells(
+    contractions, muscle_ids, reader: ExpressionReader | None = None, angles_deg=None
+) -> list[str]:
     """One frame's expression cells for contractions.csv (:data:`EXPRESSION_COLUMNS` with 3
-    decimals, then the label); all empty when the contractions are not all finite."""
+    decimals, then the label); all empty when the contractions are not all finite. With a
+    ``reader`` (:class:`ExpressionReader`, one per video) read above its rest reference at
+    the head's ``angles_deg``; without, the frame alone, with no rest reference."""
+    if reader is not None:
+        return reader.cells(contractions, angles_deg)
     c = np.asarray(contractions, dtype=np.float64)
     if not np.isfinite(c).all():
         return [""] * (len(EXPRESSION_COLUMNS) + 1)
@@ -381,8 +509,31 @@ def read_expressions(path, table=None, muscle_ids=None) -> tuple[np.ndarray, lis
         return scores, labels
     if table is None or muscle_ids is None:
         raise MyofaceFormatError(f"{p}: no expression columns ({', '.join(EXPRESSION_COLUMNS)})")
-    scores = expression_scores(table, muscle_ids)
-    return scores, expression_labels(scores)
+    return expression_sequence(table, muscle_ids, _angles(head, reader))
+
+
+#: the head's angles in a contractions CSV written by the 3-D fit (camera.POSE_COLUMNS' first)
+_ANGLE_COLUMNS = ("head_yaw_deg", "head_pitch_deg", "head_roll_deg")
+
+
+def _angles(head, rows) -> np.ndarray | None:
+    """The head's angles (T, 3) deg of a contractions CSV's remaining ``rows`` (NaN where a
+    cell is empty or not a number), or None when it has no angle columns (the snakes')."""
+    if not all(c in head for c in _ANGLE_COLUMNS):
+        return None
+    cols = [head.index(c) for c in _ANGLE_COLUMNS]
+    out = []
+    for r in rows:
+        if not any(c.strip() for c in r):
+            continue
+        vals = []
+        for i in cols:
+            try:
+                vals.append(float(r[i]) if i < len(r) and r[i].strip() else np.nan)
+            except ValueError:
+                vals.append(np.nan)
+        out.append(vals)
+    return np.array(out, dtype=np.float64).reshape(-1, 3)
 
 
 #: the plot's colour per expression (and grey for neutral)
