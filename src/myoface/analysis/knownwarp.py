@@ -335,3 +335,175 @@ def expression_warp(points, model, contractions, state=None, **head):
     shifts = s * (disp[:, :2] * flip) @ rot.T
     head.setdefault("pivot", pts.mean(0))
     return MeshWarp(points=pts, shifts=shifts, **head), res.state
+
+
+# ------------------------------------------------------------------ an expression's look
+#
+# A warp moves the frame's pixels; a real expression also changes what they show. In the
+# sample video's smile the lips part (the teeth and the dark of the mouth appear between
+# them), the nasolabial folds deepen and the cheeks bulge, and the brows' raise folds the
+# forehead: about 8 % of the face's textured patches stop looking as they did at calibration
+# (:meth:`~myoface.analysis.photometric.PhotometricTerm.occlusion`'s test, 2026-12-01). A
+# reader of pixels that assumes the neutral's look can read such a change as motion, or as
+# motion resisted; a warp alone cannot show that. :func:`expression_look` paints the change
+# on a warped frame where the warped face now is, so the motion stays the known answer and
+# the look is what a real face adds.
+
+#: MediaPipe's face mesh's inner lips, corner to corner (upper, lower), and points used below
+INNER_LIP_UPPER = (78, 191, 80, 81, 82, 13, 312, 311, 310, 415, 308)
+INNER_LIP_LOWER = (78, 95, 88, 178, 87, 14, 317, 402, 318, 324, 308)
+NOSE_WINGS = (129, 358)
+MOUTH_CORNERS = (61, 291)
+EYES_OUTER = (33, 263)
+BROWS = (70, 63, 105, 66, 107, 336, 296, 334, 293, 300)
+GLABELLA, FOREHEAD_TOP = 9, 10
+#: what shows between the lips where they have parted: the upper teeth (this share of the
+#: gap's height from the upper lip, across the middle of the mouth) and the dark of the
+#: mouth (RGB)
+TEETH_SHARE = 0.55
+TEETH_RGB = (205.0, 195.0, 180.0)
+MOUTH_DARK_RGB = (40.0, 22.0, 22.0)
+#: a fold: its line darkens the skin by this fraction, over a Gaussian profile of this width
+#: (1 sd, IOD), and the skin beside it (the cheek's bulge) brightens by this fraction
+FOLD_DARKEN = 0.3
+FOLD_WIDTH_IOD = 0.018
+FOLD_BULGE = 0.10
+#: the forehead's lines (surprise): this many, between the brows and the forehead's top
+FOREHEAD_LINES = (0.3, 0.5, 0.7)
+FOREHEAD_DARKEN = 0.15
+#: which look each expression adds (any other: the lips' gap only)
+EXPRESSION_LOOKS = {
+    "happiness": ("gap", "nasolabial"),
+    "surprise": ("gap", "forehead"),
+}
+
+
+def _quadratic(a, c, b, n: int = 24) -> np.ndarray:
+    """A quadratic Bezier from ``a`` to ``b`` with control point ``c`` (n, 2)."""
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    return (1 - t) ** 2 * a + 2 * (1 - t) * t * c + t**2 * b
+
+
+def _line_profile(shape_hw, lines, sigma_px: float) -> np.ndarray:
+    """A Gaussian ridge (H, W) float32 of peak ~1 along the polylines ``lines`` (each (n, 2)
+    pixels) of width ``sigma_px`` (1 sd)."""
+    cv2 = _cv2()
+    h, w = shape_hw
+    ss = 4  # drawn at 4x sub-pixel precision (cv2's shift)
+    m = np.zeros((h, w), np.float32)
+    for ln in lines:
+        q = np.round(np.asarray(ln) * (1 << ss)).astype(np.int32).reshape(-1, 1, 2)
+        cv2.polylines(m, [q], False, 1.0, 1, cv2.LINE_AA, ss)
+    s = max(float(sigma_px), 0.5)
+    out = cv2.GaussianBlur(m, (0, 0), s)
+    peak = 1.0 / (np.sqrt(2 * np.pi) * s)  # a 1-px line blurred
+    return np.minimum(out / peak, 1.0)
+
+
+#: a polygon's coverage of a pixel is sampled on this many points a side
+COVERAGE_SUBSAMPLES = 4
+
+
+def _coverage(polygon, shape_hw) -> np.ndarray:
+    """How much of each pixel (H, W) float32, 0-1, the ``polygon`` (n, 2) pixels covers
+    (:data:`COVERAGE_SUBSAMPLES` squared points a pixel: a polygon of no area covers none)."""
+    from matplotlib.path import Path
+
+    h, w = shape_hw
+    out = np.zeros((h, w), np.float32)
+    poly = np.asarray(polygon, dtype=np.float64)
+    x0, y0 = np.maximum(np.floor(poly.min(0)).astype(int) - 1, 0)
+    x1 = min(int(np.ceil(poly[:, 0].max())) + 2, w)
+    y1 = min(int(np.ceil(poly[:, 1].max())) + 2, h)
+    if x1 <= x0 or y1 <= y0:
+        return out
+    n = COVERAGE_SUBSAMPLES
+    off = (np.arange(n) + 0.5) / n - 0.5  # (pixel centres at integer coordinates)
+    ys = (np.arange(y0, y1)[:, None] + off[None, :]).ravel()
+    xs = (np.arange(x0, x1)[:, None] + off[None, :]).ravel()
+    gx, gy = np.meshgrid(xs, ys)
+    inside = Path(poly).contains_points(np.column_stack([gx.ravel(), gy.ravel()]))
+    cov = inside.reshape(y1 - y0, n, x1 - x0, n).mean((1, 3))
+    out[y0:y1, x0:x1] = cov
+    return out
+
+
+def mouth_gap(points) -> np.ndarray:
+    """The lips' gap of the landmarks ``points`` (468, 2+) pixels: the polygon (n, 2) between
+    the inner lips' contours, upper then lower (corner to corner and back)."""
+    p = np.asarray(points, dtype=np.float64)[:, :2]
+    return np.vstack([p[list(INNER_LIP_UPPER)], p[list(INNER_LIP_LOWER)][::-1]])
+
+
+def expression_look(image, points, expression: str, amount: float, iod: float | None = None):
+    """``image`` (H, W, 3) uint8, the frame of a face whose landmarks are at ``points`` (468,
+    2+) pixels (the warped frame's: :meth:`MeshWarp.moved`), with the look that
+    ``expression`` adds at ``amount`` (0-1, its strength over time) painted on
+    (:data:`EXPRESSION_LOOKS`): where the lips have parted (:func:`mouth_gap`: between the
+    inner lips' contours) the upper teeth and the dark of the mouth (whatever ``amount``:
+    the gap is the motion's); for a smile the nasolabial folds
+    (from the nose's wings to beyond the mouth's corners) darkened with the cheek's bulge
+    beside them brightened; for surprise lines across the forehead. ``iod``: the
+    inter-ocular distance (pixels; default the points' outer eye corners'). The motion is
+    unchanged: only what the pixels show."""
+    cv2 = _cv2()
+    img = np.asarray(image)
+    a = float(np.clip(amount, 0.0, 1.0))
+    if a <= 0.0:
+        return img.copy()
+    p = np.asarray(points, dtype=np.float64)[:, :2]
+    if iod is None:
+        iod = float(np.linalg.norm(p[EYES_OUTER[1]] - p[EYES_OUTER[0]]))
+    h, w = img.shape[:2]
+    out = img.astype(np.float32)
+    looks = EXPRESSION_LOOKS.get(expression, ("gap",))
+    across = (p[EYES_OUTER[1]] - p[EYES_OUTER[0]]) / iod  # the face's x axis in the image
+    sigma = FOLD_WIDTH_IOD * iod
+    shade = np.ones((h, w), np.float32)
+    if "nasolabial" in looks:
+        lines, bulges = [], []
+        for side, (wing, corner) in enumerate(zip(NOSE_WINGS, MOUTH_CORNERS, strict=True)):
+            out_dir = across if side else -across
+            down = np.array([-out_dir[1], out_dir[0]]) * (1 if side else -1)
+            if down[1] < 0:
+                down = -down
+            start = p[wing] + 0.03 * iod * out_dir
+            end = p[corner] + 0.07 * iod * out_dir + 0.08 * iod * down
+            ctrl = 0.5 * (start + end) + 0.06 * iod * out_dir
+            ln = _quadratic(start, ctrl, end)
+            lines.append(ln)
+            bulges.append(ln + 3.0 * sigma * out_dir)
+        shade *= 1.0 - FOLD_DARKEN * a * _line_profile((h, w), lines, sigma)
+        shade *= 1.0 + FOLD_BULGE * a * _line_profile((h, w), bulges, 2.0 * sigma)
+    if "forehead" in looks:
+        up = p[FOREHEAD_TOP] - p[GLABELLA]
+        brows = p[list(BROWS)]
+        order = np.argsort(brows @ across)
+        lines = [brows[order] + k * up for k in FOREHEAD_LINES]
+        shade *= 1.0 - FOREHEAD_DARKEN * a * _line_profile((h, w), lines, 0.7 * sigma)
+    out *= shade[..., None]
+    if "gap" in looks:
+        # where the warp has parted the lips (the skin between the inner lips' contours is
+        # the neutral's closed lips stretched): what shows there now is the upper teeth
+        # across the middle of the mouth (TEETH_SHARE of the way down from the upper lip)
+        # and the dark of the mouth below them and towards the corners
+        mask = _coverage(mouth_gap(p), (h, w))
+        ss = 4
+        lines = []
+        for contour in (INNER_LIP_UPPER, INNER_LIP_LOWER):
+            ln = np.zeros((h, w), np.uint8)
+            c = np.round(p[list(contour)] * (1 << ss)).astype(np.int32).reshape(-1, 1, 2)
+            cv2.polylines(ln, [c], False, 255, 1, cv2.LINE_8, ss)
+            lines.append(cv2.distanceTransform(255 - ln, cv2.DIST_L2, 3))
+        frac = lines[0] / np.maximum(lines[0] + lines[1], 1e-6)  # 0 upper lip, 1 lower
+        c0, c1 = p[INNER_LIP_UPPER[0]], p[INNER_LIP_UPPER[-1]]
+        u = (c1 - c0) / max(float(np.linalg.norm(c1 - c0)) ** 2, 1e-9)
+        yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+        along = (xx - c0[0]) * u[0] + (yy - c0[1]) * u[1]  # 0..1 corner to corner
+        middle = np.clip(1.0 - (np.abs(along - 0.5) / 0.32) ** 4, 0.0, 1.0)
+        teeth = (middle * np.clip((TEETH_SHARE - frac) / 0.15 + 0.5, 0.0, 1.0))[..., None]
+        colour = teeth * np.array(TEETH_RGB, np.float32) + (1 - teeth) * np.array(
+            MOUTH_DARK_RGB, np.float32
+        )
+        out = mask[..., None] * colour + (1 - mask[..., None]) * out
+    return np.clip(np.round(out), 0, 255).astype(img.dtype)
