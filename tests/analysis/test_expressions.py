@@ -444,3 +444,143 @@ def test_readings_by_class(ids):
     assert t12 > 0.5 and e12 == pytest.approx(t12 / 2, abs=0.05)
     assert set(r["happiness"]["read, not played"]) == {"AU4"}
     assert r["rest"]["AU4"].startswith("0.50") and r["rest"]["AU12"].startswith("0.00")
+
+
+# ---------------------------------------------------------------- the rest reference (video)
+
+
+def _turning_rest(n=40, yaw_max=30.0):
+    """AU readings of a face at rest whose head turns from frontal to ``yaw_max`` over ``n``
+    frames, read by a fit that gives it anger's AUs in proportion to the turn (AU4 0.4, AU5
+    0.3, AU23 0.5 at 30 deg: the kind of pose-driven reading the benchmark measures), and
+    the head's angles (n, 3)."""
+    yaw = np.linspace(0.0, yaw_max, n)
+    x = np.array([_aus(AU04=0.4 * t, AU05=0.3 * t, AU23=0.5 * t) for t in yaw / 30.0])
+    ang = np.column_stack([yaw, np.zeros(n), np.zeros(n)])
+    return x, ang
+
+
+def test_the_rest_reference_takes_off_readings_that_follow_the_pose():
+    """Known answer: readings that are a linear function of the pose at rest. Read alone, the
+    turned frames are anger; read in order by one ExpressionReader, every frame is neutral
+    (each step of the turn adds less than half a trace above the reference learnt from the
+    frames before); and a smile played on top at the turned pose (AU6 0.3, AU12 0.5) is
+    happiness, which the frames alone do not say (anger's AUs are stronger)."""
+    from myoface.analysis.expressions import ExpressionReader
+
+    x, ang = _turning_rest()
+    alone = expression_labels(expression_scores_from_aus(x))
+    assert alone[-1] == "anger" and alone[0] == NEUTRAL
+    r = ExpressionReader([], aus=rule_aus())
+    labels = [r.read_aus(row, a)[1] for row, a in zip(x, ang, strict=True)]
+    assert labels == [NEUTRAL] * len(x)
+    assert r.n_neutral == len(x)
+    ref = r.reference(ang[-1])
+    np.testing.assert_allclose(ref, x[-1], atol=0.02)  # it has learnt the rest at 30 deg
+    smile = x[-1] + _aus(AU06=0.3, AU12=0.5)
+    assert expression_labels(expression_scores_from_aus(smile)) == ["anger"]
+    s, lab = r.read_aus(smile, ang[-1])
+    assert lab == "happiness" and s[0] > 0.9, s
+
+
+def test_the_rest_reference_does_not_extrapolate_above_what_it_saw():
+    """A pose beyond any seen at rest: the reference stays within the largest reading of each
+    AU on the neutral frames (it does not guess the readings of a turn it never saw)."""
+    from myoface.analysis.expressions import ExpressionReader
+
+    x, ang = _turning_rest(yaw_max=10.0)
+    r = ExpressionReader([], aus=rule_aus())
+    for row, a in zip(x, ang, strict=True):
+        r.read_aus(row, a)
+    far = r.reference([60.0, 0.0, 0.0])
+    np.testing.assert_allclose(far, x.max(axis=0), atol=1e-9)
+    assert (far <= x.max(axis=0) + 1e-12).all() and (far >= 0).all()
+
+
+def test_a_held_expression_stays_its_label():
+    """The reference learns only from frames labelled neutral: a smile held for 20 s (600
+    frames) after 1 s at rest is happiness to its last frame (a baseline from a trailing
+    window of every frame would have taken it for the rest)."""
+    from myoface.analysis.expressions import ExpressionReader
+
+    rest = _aus(AU17=0.05)
+    smile = _aus(AU06=0.3, AU12=0.5, AU17=0.05)
+    r = ExpressionReader([], aus=rule_aus())
+    labels = [r.read_aus(rest if k < 30 else smile, [5.0, 0.0, 0.0])[1] for k in range(630)]
+    assert labels[:30] == [NEUTRAL] * 30 and labels[30:] == ["happiness"] * 600
+    assert r.n_neutral == 30
+
+
+def test_without_a_pose_the_reference_is_the_level_at_rest():
+    """The snakes' rows have no pose: the reference is each AU's level on the neutral frames
+    (a face whose fit reads AU10 at 0.08 at rest: a raised upper lip is disgust from half a
+    trace above it). Frames not measured (NaN) are skipped and learnt from not at all."""
+    from myoface.analysis.expressions import ExpressionReader
+
+    r = ExpressionReader([], aus=rule_aus())
+    for k in range(10):
+        _, lab = r.read_aus(_aus(AU10=0.08 + 0.005 * (k % 2)))
+        assert lab == NEUTRAL
+    s, lab = r.read_aus(np.full(len(rule_aus()), np.nan))
+    assert lab == "" and np.isnan(s).all() and r.n_neutral == 10
+    np.testing.assert_allclose(r.reference()[rule_aus().index(10)], 0.0825, atol=1e-6)
+    s, lab = r.read_aus(_aus(AU10=0.25))  # 0.1675 above its rest: the level gate 0.675 open
+    assert lab == "disgust" and s[EXPRESSIONS.index("disgust")] == pytest.approx(0.675), s
+    s, lab = r.read_aus(_aus(AU10=0.14))  # 0.06 above: below half a trace, neutral
+    assert lab == NEUTRAL, s
+
+
+def test_expression_sequence_is_the_csvs(tmp_path, ids):
+    """expression_sequence (what the benchmark scores) gives what the CSV writer writes, row
+    by row, with the rows' head poses; a CSV without the expression columns has them
+    computed the same way (with its pose columns) by read_expressions."""
+    from myoface.analysis.camera import HeadPose
+    from myoface.analysis.contractions_csv import ContractionsCsvWriter, read_contractions_csv
+    from myoface.analysis.expressions import expression_sequence
+    from myoface.analysis.trackers.landmark_fit import FitMeasurement
+
+    rng = np.random.default_rng(3)
+    table, frames, angles = [], [], []
+    for k in range(24):
+        c = np.clip(rng.normal(0.0, 0.04, len(ids)), 0, 1)
+        if 12 <= k < 18:
+            c = np.maximum(c, expression_contractions("surprise", 0.6, ids))
+        a = (20 * np.sin(k / 5), 5 * np.cos(k / 7), 3.0)
+        frames.append(
+            FitMeasurement(k, k / 30, "ok", c, HeadPose.from_euler(*a, (0, 0, -500)), 0.3)
+        )
+        table.append(c)
+        angles.append(HeadPose.from_euler(*a, (0, 0, -500)).angles_deg)
+    path = tmp_path / "contractions.csv"
+    with ContractionsCsvWriter(path, ids, 0.3) as w:
+        for f in frames:
+            w.write(f)
+    scores, labels = read_expressions(path)
+    s2, l2 = expression_sequence(np.array(table), ids, np.array(angles))
+    assert labels == l2 and "surprise" in labels and NEUTRAL in labels
+    np.testing.assert_allclose(scores, s2, atol=5e-4)
+    rows = list(csv.reader(path.read_text().splitlines()))
+    old = tmp_path / "old.csv"
+    old.write_text("\n".join(",".join(r[:-8]) for r in rows) + "\n")
+    _, tab, _ = read_contractions_csv(old, ids)
+    s3, l3 = read_expressions(old, tab, ids)
+    assert l3 == labels
+    np.testing.assert_allclose(s3, s2, atol=2e-3)
+
+
+def test_rest_readings_vs_pose_on_a_known_answer(ids):
+    """The benchmark's diagnosis on readings made to follow the pose: AU17 linear in the yaw
+    (correlation +1, R^2 1), AU23 in the turn |yaw| (correlation with |yaw| 1; a linear
+    function of the signed angles explains nearly none of it, with |yaw| all of it)."""
+    from myoface.bench.expression import rest_readings_vs_pose
+
+    yaw = np.linspace(-30, 30, 41)
+    c = np.array(
+        [au_contractions({17: 0.3 + 0.2 * y / 30, 23: 0.4 * abs(y) / 30}, ids) for y in yaw]
+    )
+    ang = np.column_stack([yaw, 5 * np.sin(yaw / 7), np.zeros_like(yaw)])
+    out = rest_readings_vs_pose(c, ids, ["rest"] * len(yaw), ang)
+    assert out["AU17"]["corr yaw/pitch/roll"].startswith("+1.00"), out
+    assert out["AU17"]["r2 linear in pose"] > 0.99 and abs(out["AU17"]["mean"] - 0.3) < 0.02
+    assert out["AU23"]["corr |yaw|"] > 0.99
+    assert out["AU23"]["r2 linear in pose"] < 0.2 < 0.99 < out["AU23"]["r2 with |yaw|"]

@@ -12,11 +12,15 @@ frames are rendered and degraded as a webcam would (:func:`~myoface.bench.headmo
 texture at half resolution, a room, moving light, noise, blur, H.264), read by MediaPipe's face
 mesh and fitted in 3-D (:func:`~myoface.bench.headmotion.run_headmotion`, the calibration
 frame chosen automatically), and the fitted contractions labelled by the rule
-(:mod:`myoface.analysis.expressions`). Scored: the share of the apex frames labelled with the
+(:mod:`myoface.analysis.expressions`) as contractions.csv labels them: the frames in order,
+each read above the person's rest reference at the fit's head pose
+(:func:`~myoface.analysis.expressions.expression_sequence`). Scored: the share of the apex frames labelled with the
 expression played, and of the rest frames (between episodes; not the onsets and offsets)
 labelled neutral; the value is the lower of the two (the issue asks >= 0.9 of each). The
 detail has both, per expression and intensity, the confusion (played -> labels counted), the
-rule on the true contractions (what the rule says when the fit is perfect), what the fit makes
+rule on the true contractions (what the rule says when the fit is perfect), the rule on each
+frame alone (no rest reference), whether the AUs the fit reads at rest follow the head's pose
+(:func:`rest_readings_vs_pose`), what the fit makes
 of each AU (:func:`au_readings`: its gain, and its reading where the AU is absent), per class
 of frame (:func:`readings_by_class`: each played expression's AUs, true against read, the AUs
 read that were not played, and the readings at rest), whether the fit keeps each
@@ -227,6 +231,51 @@ def pattern_agreement(estimate, truth, ids, played, phase, intensity) -> dict:
     }
 
 
+def rest_readings_vs_pose(estimate, ids, phase, angles_deg) -> dict:
+    """Whether the AUs the fit reads at rest follow the head's pose (the fit's angles): per AU
+    read at 0.05 or more on average on the rest frames, its mean reading, its correlation
+    with the yaw, pitch and roll and with the turn (|yaw|), and the share of its variance a
+    linear function of (yaw, pitch, roll) explains (R^2, the rest reference's model,
+    :class:`~myoface.analysis.expressions.ExpressionReader`) on those frames, and with the
+    turn |yaw| as a fourth term;
+    ``{"AU17": {"mean": .., "corr yaw/pitch/roll": "+0.30 -0.51 +0.09", "corr |yaw|": ..,
+    "r2 linear in pose": ..}}``."""
+    from myoface.analysis.expressions import au_fractions, rule_aus
+
+    x = au_fractions(estimate, ids)
+    a = np.asarray(angles_deg, dtype=np.float64)
+    rest = (np.asarray(phase) == "rest") & np.isfinite(a).all(axis=1)
+    rest &= np.isfinite(np.nan_to_num(x, nan=0.0)).all(axis=1)
+    out: dict = {}
+    if rest.sum() < 5:
+        return out
+    f = np.column_stack([np.ones(rest.sum()), a[rest]])
+    for j, au in enumerate(rule_aus()):
+        y = x[rest, j]
+        if not np.isfinite(y).all() or y.mean() < 0.05 or y.std() == 0:
+            continue
+        r2 = [_r2(g, y) for g in (f, np.column_stack([f, np.abs(a[rest, 0])]))]
+
+        out[f"AU{au}"] = {
+            "mean": round(float(y.mean()), 3),
+            "corr yaw/pitch/roll": " ".join(f"{_corr(y, a[rest, i]):+.2f}" for i in range(3)),
+            "corr |yaw|": round(_corr(y, np.abs(a[rest, 0])), 2),
+            "r2 linear in pose": round(r2[0], 2),
+            "r2 with |yaw|": round(r2[1], 2),
+        }
+    return out
+
+
+def _r2(f, y) -> float:
+    """The share of the variance of ``y`` a least-squares fit on the columns of ``f`` explains."""
+    w, *_ = np.linalg.lstsq(f, y, rcond=None)
+    return float(1.0 - ((y - f @ w) ** 2).sum() / ((y - y.mean()) ** 2).sum())
+
+
+def _corr(y, v) -> float:
+    return float(np.corrcoef(y, v)[0, 1]) if np.std(v) > 0 else 0.0
+
+
 def model_landmarks(poses, skins):
     """The landmarks a perfect detector would give: the model's own skin vertices (the 468 of
     MediaPipe's topology) posed and projected by the fit's camera, (x, y) pixels, no depth."""
@@ -248,7 +297,11 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
         return _cache[key]
     import time
 
-    from myoface.analysis.expressions import expression_labels, expression_scores
+    from myoface.analysis.expressions import (
+        expression_labels,
+        expression_scores,
+        expression_sequence,
+    )
     from myoface.bench.headmotion import _cache as hm_cache
     from myoface.bench.headmotion import (
         _model,
@@ -281,8 +334,11 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
         points, _ = detect_sequence(frames)
         del frames
     res = run_headmotion(fm, points, truth, poses, skins)
-    labels = expression_labels(expression_scores(res.estimate, fm.ids))
-    ceiling = expression_labels(expression_scores(truth, fm.ids))
+    # as contractions.csv has them: the frames in order, above the rest reference at the
+    # fit's head pose (ExpressionReader)
+    _, labels = expression_sequence(res.estimate, fm.ids, res.angles_est)
+    _, ceiling = expression_sequence(truth, fm.ids, res.angles_true)
+    alone = expression_labels(expression_scores(res.estimate, fm.ids))  # (no reference)
     out = {
         "face": hm_cache.get("face_kind", "default"),
         "frames": len(truth),
@@ -308,6 +364,12 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
             for k, v in score_labels(ceiling, played, phase).items()
             if k in ("apex_accuracy", "rest_accuracy")
         },
+        "each_frame_alone (no rest reference)": {
+            k: v
+            for k, v in score_labels(alone, played, phase).items()
+            if k in ("apex_accuracy", "rest_accuracy")
+        },
+        "rest_readings_vs_pose": rest_readings_vs_pose(res.estimate, fm.ids, phase, res.angles_est),
         "au_readings": au_readings(res.estimate, truth, fm.ids),
         "readings_by_class": readings_by_class(res.estimate, truth, fm.ids, played, phase),
         "pattern_agreement": pattern_agreement(
