@@ -15,7 +15,7 @@ import pytest
 
 from myoface.analysis.camera import rotvec
 from myoface.codec.encode import EncodeStats, Setup, encode_params
-from myoface.codec.entropy import HOLD, ParamCoder
+from myoface.codec.entropy import HOLD, QUALITIES, ParamCoder
 from myoface.codec.params import APPEARANCE_STEPS, N_APPEARANCE
 from myoface.codec.stream import (
     MAGIC,
@@ -144,8 +144,14 @@ def test_the_encoders_appearance_fit_sees_the_quantised_frame_without_appearance
 
 
 def test_quality_trades_bits_for_fidelity():
+    # (the synthetic streams' picture is the same at every quality: these are the packets)
     sizes = {q: len(stream(200, quality=q)[0]) for q in ("low", "medium", "high", "max")}
-    assert sizes["low"] < sizes["medium"] < sizes["high"] < sizes["max"]
+    assert sizes["low"] <= sizes["medium"] < sizes["high"] < sizes["max"]
+    # each setting finer than the one below it, in its steps or its picture
+    ladder = [QUALITIES[q] for q in ("low", "medium", "high", "max")]
+    for (lo, lo_db), (hi, hi_db) in zip(ladder[:-1], ladder[1:], strict=True):
+        assert all(b <= a for a, b in zip(lo.as_tuple(), hi.as_tuple(), strict=True))
+        assert hi_db > lo_db
 
 
 def test_the_quantiser_holds_a_value_within_its_hold():
@@ -301,8 +307,14 @@ class _Growing(ByteSource):
         return out
 
 
-def test_a_live_stream_is_decoded_about_one_frame_behind_the_writer():
-    data, decoded, ends = stream(300, segment_frames=128)
+@pytest.mark.parametrize("quality", ["medium", "high"])
+def test_a_live_stream_is_decoded_a_frame_or_two_behind_the_writer(quality):
+    """Frame k is decoded once the range coder's words holding it have arrived and one word
+    past them (the range decoder reads ahead): the delay in frames is about 64 bits over the
+    bits a frame. Measured on these synthetic streams: "high" (~92 bits a frame) 86 % of
+    frames one behind, nearly all the rest two; "medium" (~45 bits a frame) median two,
+    99 % within three (at 30 frames/s: 67-100 ms)."""
+    data, decoded, ends = stream(300, segment_frames=128, quality=quality)
     src = _Growing(data, ends)
     # (the header arrives with the first frame's packet)
     delays = []
@@ -311,13 +323,10 @@ def test_a_live_stream_is_decoded_about_one_frame_behind_the_writer():
         delays.append(src.revealed - (k + 1))
     assert len(delays) == 300
     d = np.array(delays)
-    # frame k is decoded once the packet of frame k+1 is there (measured on this stream: 3
-    # of 4 frames), else that of k+2 (nearly all the rest; the range decoder reads one word
-    # past the frame's, which frame k+1 did not always complete)
     assert d.min() >= 0
-    assert np.median(d) <= 1
-    assert np.mean(d <= 1) >= 0.7
-    assert np.mean(d <= 2) >= 0.95
+    typical = 1 if quality == "high" else 2
+    assert np.median(d) <= typical
+    assert np.mean(d <= typical + 1) >= 0.95
     assert d.max() <= 5
 
 

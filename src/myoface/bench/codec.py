@@ -49,6 +49,7 @@ import numpy as np
 
 from myoface.analysis.potentials import LUMA_601
 from myoface.bench import Measurement, benchmark
+from myoface.codec.entropy import DEFAULT_QUALITY
 
 SAMPLE_SECONDS = 20.0
 QUALITY_ORDER = ("low", "medium", "high", "max")
@@ -261,6 +262,13 @@ def _ours(kind: str, quick: bool, quality: str) -> dict:
             "bits_per_frame": round(stats.bits_per_frame, 2),
             "frames": n,
             "picture": stats.picture,
+            "header_parts": {
+                **stats.picture["parts"],
+                "other": stats.header_bytes - sum(stats.picture["parts"].values()),
+            },
+            "packet_bits_per_frame": {
+                k: round(v / max(n, 1), 2) for k, v in stats.channel_bits.items()
+            },
             "coding_seconds": round(code_s, 3),
             "decoder_setup_seconds": round(setup_s, 3),
             "decoder_frames_seconds": round(t_frames, 3),
@@ -466,7 +474,7 @@ def _scales(quick: bool) -> tuple[float, ...]:
 
 
 def _qualities(quick: bool) -> tuple[str, ...]:
-    return ("medium",) if quick else QUALITY_ORDER
+    return (DEFAULT_QUALITY,) if quick else QUALITY_ORDER
 
 
 def _compare(kind: str, quick: bool) -> dict:
@@ -479,7 +487,7 @@ def _compare(kind: str, quick: bool) -> dict:
             o = _ours(kind, quick, qn)
             x = _x264_at_bytes(kind, quick, o["total_bytes"])
             rows[qn] = {"ours": o, "x264_equal_bytes": x}
-        med = rows["medium"]["ours"]
+        med = rows[DEFAULT_QUALITY]["ours"]
         need = _x264_for_psnr(kind, quick, med["face_psnr_db"])
         a = _analysed(kind, quick)
         _cache[key] = {
@@ -523,12 +531,14 @@ def _plot(quick: bool) -> str | None:
         # x264's curve: its best size at each rate measured
         pts = {}
         for k, v in _cache.items():
-            if k[0] == "x264" and k[1] == kind and k[2] == quick and v is not None:
+            if k[0] in ("x264", "x264_crf") and k[1:3] == (kind, quick) and v is not None:
                 pts.setdefault(v["bytes"], v["face_psnr_db"])
         if pts:
             b = np.array(sorted(pts))
             best = np.maximum.accumulate([pts[x] for x in b])  # (the best size at <= bytes)
-            ax.plot(b / 1e3, best, "-", color="C3", label="x264 (best of 3 sizes)")
+            ax.plot(
+                b / 1e3, best, "-", color="C3", label="x264 (best of 3 sizes; ABR and CRF points)"
+            )
         zr = ours[0]["zero_rate"]["face_psnr_db"]
         ax.axhline(zr, color="0.5", ls="--", label="zero rate (calibration frame)")
         ax.set_xscale("log")
@@ -558,7 +568,7 @@ def _all(quick: bool) -> dict:
 
 
 def _medium(kind: str, quick: bool) -> dict:
-    return _all(quick)[kind]["qualities"]["medium"]
+    return _all(quick)[kind]["qualities"][DEFAULT_QUALITY]
 
 
 def _decoded_fidelity(quick: bool) -> dict:
@@ -582,7 +592,7 @@ def _decoded_fidelity(quick: bool) -> dict:
         clip = a["clip"]
         n = min(len(clip.unique), len(clip))
         buf = io.BytesIO()
-        encode_params(buf, a["params"], lambda: a["setup"], quality="medium", images=clip)
+        encode_params(buf, a["params"], lambda: a["setup"], quality=DEFAULT_QUALITY, images=clip)
         t0 = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "decoded.mp4"
@@ -622,8 +632,9 @@ def _summary(quick: bool) -> dict:
         for qn, r in c["qualities"].items():
             o, x = r["ours"], r["x264_equal_bytes"]
             rows[qn] = {
-                "ours": {k: o[k] for k in ("total_bytes", "header_bytes", "bits_per_frame",
-                         "face_psnr_db", "frame_psnr_db", "face_ssim", "frame_ssim")},
+                "ours": {k: o[k] for k in ("total_bytes", "header_bytes", "header_parts",
+                         "bits_per_frame", "packet_bits_per_frame", "face_psnr_db",
+                         "frame_psnr_db", "face_ssim", "frame_ssim")},
                 "x264": None if x is None else {k: x.get(k) for k in (
                     "bytes", "scale", "at_its_fewest_bytes", "face_psnr_db", "frame_psnr_db",
                     "face_ssim", "frame_ssim")},
@@ -710,7 +721,7 @@ def bench_x264_ratio(quick: bool) -> Measurement:
     interpolated between them in log-bytes; the fewest over the sizes); the bracketing points
     in the detail. NaN when x264 does not reach our PSNR at CRF 21 at any size."""
     c = _all(quick)["sample"]
-    ours = c["qualities"]["medium"]["ours"]
+    ours = c["qualities"][DEFAULT_QUALITY]["ours"]
     need = c["x264_for_our_face_psnr"]
     v = float("nan") if need is None else need["bytes"] / ours["total_bytes"]
     return Measurement(round(v, 3), 1, detail={"x264": need, "ours_bytes": ours["total_bytes"]})

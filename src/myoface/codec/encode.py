@@ -143,16 +143,26 @@ def make_header(setup: Setup, quality: str = DEFAULT_QUALITY, image_codec: str |
             f"--image-codec {image_codec}: this Pillow has only {', '.join(image_codecs())}"
         )
     codec, data, report = compress_picture(setup.picture, target_db, codecs)
+    ident_step = identity_step_mm(setup.camera, setup.calibration)
     h = Header(
         width=setup.width, height=setup.height, fps=float(setup.fps),
         n_frames_hint=int(setup.n_frames_hint), quality=quality, steps=steps,
         segment_frames=int(segment_frames), camera=setup.camera, face="default",
         ids_crc=ids_checksum(setup.ids), n_contractions=len(setup.ids),
         calibration_index=int(setup.calibration_index), calibration=setup.calibration,
-        identity_mm=setup.identity_mm, identity_step_mm=identity_step_mm(setup.camera, setup.calibration), background=0,
+        identity_mm=setup.identity_mm, identity_step_mm=ident_step, background=0,
         image_codec=codec, image=data,
     )  # fmt: skip
-    return h, {"codec": codec, "target_psnr_db": target_db, "tried": report}
+    parts = {"picture": len(data), "identity": identity_bytes(h)}
+    return h, {"codec": codec, "target_psnr_db": target_db, "tried": report, "parts": parts}
+
+
+def identity_bytes(h: Header) -> int:
+    """The bytes of ``h``'s identity field (its range-coded offsets)."""
+    from myoface.codec.stream import _pack_identity
+
+    q = np.clip(np.round(h.identity_mm / h.identity_step_mm), -32767, 32767).astype(np.int64)
+    return len(_pack_identity(q, h.face))
 
 
 @dataclass
@@ -167,6 +177,8 @@ class EncodeStats:
     decoded: list = field(default_factory=list)
     seconds: float = 0.0
     interrupted: bool = False
+    #: the packets' bits by group of channels (:meth:`~myoface.codec.entropy.ParamCoder.channel_bits`)
+    channel_bits: dict = field(default_factory=dict)
 
     @property
     def bits_per_frame(self) -> float:
@@ -265,6 +277,7 @@ def encode_params(fh, frames, setup_of, quality: str = DEFAULT_QUALITY,
             put(q, qi)
     writer.close()
     stats.body_bytes, stats.n_frames = writer.body_bytes, writer.n_frames
+    stats.channel_bits = writer.coder.channel_bits()
     stats.seconds = time.perf_counter() - t0
     return stats
 
