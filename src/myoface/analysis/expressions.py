@@ -596,7 +596,8 @@ def plot_expressions(path, times, scores, labels, quality) -> None:
     band.set_xlabel("time (s)", fontsize=8)
     band.tick_params(labelsize=7)
     ax.set_title(
-        "expressions read from the fitted contractions (EMFACS prototypes over the AU table)\n"
+        "expressions read from the fitted contractions (EMFACS prototypes over the AU table,\n"
+        "each AU above the person's rest reference); "
         f"label: the strongest expression from {LABEL_MIN:g} (dotted), else neutral",
         fontsize=8,
     )
