@@ -4,7 +4,8 @@
 makes of its ``myoface encode`` stream at the default quality, x264 (PyAV's libx264) at the same
 total bytes, at the frame size that does best there (where x264 cannot get down to our bytes at
 any size, at its fewest bytes, more than ours: at 4 kbit/s it sends little more than grey), and
-x264 at the fewest bytes at which it reaches our face PSNR-Y over the clip. Each panel says its
+x264 where it reaches our face PSNR-Y over the clip (its constant rate factor point just at or
+above it, on its rate-PSNR curve, :func:`myoface.bench.codec._x264_for_psnr`). Each panel says its
 bytes over the whole 20-s clip and the face's PSNR-Y on that frame; the sheet shows four moments
 (rest, the smile rising, its apex, and falling).
 
@@ -37,9 +38,10 @@ encode_params(buf, a["params"], lambda: a["setup"], quality=QUALITY, images=clip
 decoded = [f.copy() for f in Decoder(BytesSource(buf.getvalue())).frames()]
 x = C._x264_at_bytes("sample", False, ours["total_bytes"])
 x_bytes, x_frames = C._x264(clip, x["bit_rate"], x["scale"])
-# ... and at the fewest bytes at which it reaches our face PSNR-Y (over the clip)
+# ... and where it reaches our face PSNR-Y (over the clip) on its rate-PSNR curve: the
+# constant rate factor point just at or above it (the curve's bracket's upper point)
 need = C._x264_for_psnr("sample", False, ours["face_psnr_db"])
-n_bytes, n_frames = C._x264(clip, need["bit_rate"], need["scale"])
+n_bytes, n_frames = C._x264(clip, None, need["scale"], crf=need["bracket"][1]["crf"])
 inputs = list(clip)
 n = min(len(inputs), len(decoded), len(x_frames), len(n_frames))
 
