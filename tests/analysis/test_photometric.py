@@ -245,3 +245,32 @@ def test_distance_to_a_closed_polyline():
     square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
     pts = np.array([[0.5, 0.5], [2.0, 0.5], [0.5, -1.0], [0.0, 0.5], [2.0, 2.0]])
     assert np.allclose(distance_to_polyline(pts, square), [0.5, 1.0, 1.0, 0.0, np.sqrt(2)])
+
+
+def test_the_shading_field_follows_smooth_shading(scene, monkeypatch):
+    """A frame lit as the calibration frame but darker towards one side of the face (a
+    smooth multiplicative ramp, no motion): with the shading's smooth field
+    (SHADE_FIELD_ORDER 2) the frame's light explains it, far better than one light's shading
+    and the quarters' offsets alone."""
+    import myoface.analysis.photometric as photometric
+    from myoface.analysis.photometric import SHADE_FIELD_ORDER
+
+    model, cam, shape, pose, frame = scene
+    assert SHADE_FIELD_ORDER == 0  # (off by default: see its comment)
+    app = Appearance.from_frame(frame, model.face, cam, pose, shape)
+    uv = cam.project(pose.apply(shape))
+    x = (np.arange(frame.shape[1]) - uv[:, 0].mean()) / np.ptp(uv[:, 0])
+    ramp = np.clip(1.0 + 0.5 * x + 0.8 * x**2, 0.0, None)[None, :, None]
+    lit = np.clip(frame * ramp, 0, 255).astype(np.uint8)
+    m = len(model.ids)
+    est = Estimate(pose, np.zeros(m), shape, skin_response(model, model.ids), np.arange(m))
+    costs = {}
+    for order in (0, 2):
+        monkeypatch.setattr(photometric, "SHADE_FIELD_ORDER", order)
+        term = PhotometricTerm(lit, app, cam)
+        term.prepare(est)
+        while term.settling:
+            term.advance()
+            term.prepare(est)
+        costs[order] = term.cost(est)
+    assert costs[2] < 0.3 * costs[0], costs

@@ -77,6 +77,20 @@ CONTRAST_CHANGE = 2.0
 #: height (mm, head frame; about the nose's tip)
 LIGHT_SPLIT_Y_MM = -20.0
 LIGHT_REGIONS = 4
+#: the shading's smooth field over the face, opt-in: the appearance's scale multiplied also by
+#: the monomials of the samples' head-frame x, y up to this order (0: none), fitted with the
+#: light (:meth:`PhotometricTerm._fit_light`): the shading that a real expression changes
+#: over a broad patch (a cheek bulging in a smile turns its normals; the face model's skin
+#: does not bulge the same) which one light's shading of the model's normals and an offset
+#: per quarter do not follow. Measured 2026-12-02 (0 / 1 / 2): ``single_face.mp4``'s
+#: fidelity (``myoface analyze --photometric --report``) 0.495 / 0.508 / 0.526 (lower lip
+#: -0.14 / -0.06 / 0.14, mouth corners 0.74 / 0.73 / 0.72); the known-warp smile, head
+#: still, plain and with its look (:func:`~myoface.analysis.knownwarp.expression_look`),
+#: the same gains to 0.02 (a warp does not change the shading); the degraded head-motion
+#: renders, head moving (90 frames): skin 0.993 / - / 0.988 mm, head 0.84 / - / 0.99 deg,
+#: median RMSE 0.102 / - / 0.114 (the field takes some of the shading that tells the
+#: head's turn under the light). Not justified by the known answers: off
+SHADE_FIELD_ORDER = 0
 
 
 def _cv2():
@@ -319,6 +333,8 @@ class Appearance:
     albedo: list | None = None
     #: the face's outline (its mesh's outer boundary loop, vertex indices)
     outline: np.ndarray | None = None
+    #: the samples' head-frame x, y (S, 2) over the face's half-width, about its centre
+    head_xy: np.ndarray | None = None
 
     @classmethod
     def from_frame(cls, frame, face, camera, pose, shape, levels=BLUR_SCHEDULE_PX,
@@ -364,7 +380,10 @@ class Appearance:
             for k, s in enumerate(levels):
                 values[k][d < OUTLINE_BLURS * s + 1.0] = np.nan
                 albedo[k][d < OUTLINE_BLURS * s + 1.0] = np.nan
-        return cls(samples, tri, tuple(levels), values, region, spacing, prior, albedo, outline)
+        hxy = head[:, :2] - head[:, :2].mean(0)
+        hxy = hxy / max(float(np.abs(hxy[:, 0]).max()), 1e-9)
+        return cls(samples, tri, tuple(levels), values, region, spacing, prior, albedo, outline,
+                   hxy)  # fmt: skip
 
 
 #: the weight of the samples on triangles with a vertex on the mouth's opening (the inner lip
@@ -468,6 +487,8 @@ class PhotometricTerm:
         m = use & np.isfinite(alb)
         reg = self.app.region
         onehot = np.eye(LIGHT_REGIONS)[reg]
+        if SHADE_FIELD_ORDER > 0:
+            basis = np.column_stack([basis, self._field()])
         x = np.column_stack([alb[:, None] * basis, onehot])
         if m.sum() < 40:
             return np.ones(len(val)), np.zeros(len(val))
@@ -479,6 +500,17 @@ class PhotometricTerm:
         nb = basis.shape[1]
         scale = basis @ sol[:nb]
         return scale, sol[nb:][reg]
+
+    def _field(self):
+        """A smooth field over the face (S, k): the monomials of the samples' head-frame x,
+        y (over the face's half-width) up to :data:`SHADE_FIELD_ORDER`, the constant left
+        out."""
+        xy = self.app.head_xy
+        cols = []
+        for n in range(1, SHADE_FIELD_ORDER + 1):
+            for i in range(n + 1):
+                cols.append(xy[:, 0] ** (n - i) * xy[:, 1] ** i)
+        return np.column_stack(cols)
 
     def _lit(self, idx):
         """The samples ``idx``' brightness under the frame's light."""
