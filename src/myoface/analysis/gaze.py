@@ -116,7 +116,11 @@ class GazeSettings:
         last: on the renders the same readings to 0.01 deg, in 40 % less time; a first fine
         step of 1.5 deg over +-4.5 rather than 1 over +-5 read the benchmark's renders on the
         true geometry the same to 0.01 deg, 1.94 / 3.78 deg RMS yaw / pitch, in a fifth less
-        time, 2026-12-02).
+        time, 2026-12-02). The last step 0.5 deg over +-1 rather than 0.25 (the pupil's term
+        makes its candidates dearer): on the two recorded clips 4.62 / 5.18 -> 4.64 / 5.17 deg,
+        on the true geometry 2.48 / 3.97 -> 2.49 / 3.96, single_face.mp4's SDs the same; the
+        reader with the pupil then costs what it did without it (6.5-6.7 ms CPU a frame,
+        replayed, 2026-12-02).
     edge_px : the softness (px) of the iris' edge in the model: the renders' anti-aliasing and
         a webcam's blur are about a pixel wide (1.0 px read 2-6 deg worse on sharp renders).
     upper_margin, lower_margin : pixels this close to the upper / lower lid margin, in iris
@@ -194,7 +198,7 @@ class GazeSettings:
     """
 
     coarse_deg: float = 6.0
-    fine: tuple = ((1.5, 4.5), (0.25, 1.0))
+    fine: tuple = ((1.5, 4.5), (0.5, 1.0))
     edge_px: float = 0.6
     upper_margin: float = 0.1
     lower_margin: float = 0.05

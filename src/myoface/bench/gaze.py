@@ -67,6 +67,9 @@ BLINKS = ((0.3, 7), (0.72, 7))
 CLOSED_TRUTH = 0.5
 #: the gaze's range in the programme (deg): inside the reader's and the renderer's +-45
 GAZE_RANGE_DEG = (25.0, 15.0)
+#: open frames above this closure are partly closed (a blink's edges: the detail's
+#: ``partly_closed_frames``)
+PARTLY_CLOSED = 0.05
 #: the least jump of a saccade (deg)
 MIN_SACCADE_DEG = 8.0
 
@@ -179,6 +182,16 @@ def _errors(est: np.ndarray, truth: np.ndarray, use: np.ndarray) -> dict:
     }
 
 
+def _rotation_error_deg(fitted, true) -> np.ndarray:
+    """The fitted head rotation's error (3,) deg, about the head's own x (pitch), y (yaw) and z
+    (roll) axes: the small-angle vector of ``true^T fitted`` (the fit's camera is its own, 45
+    deg assumed against the renders' 40: a head off the image's centre is seen along a ray
+    a little off the truth's, which the fitted rotation takes in, up to about 0.6 deg)."""
+    d = np.asarray(true).T @ np.asarray(fitted)
+    w = np.array([d[2, 1] - d[1, 2], d[0, 2] - d[2, 0], d[1, 0] - d[0, 1]]) / 2
+    return np.degrees(np.arcsin(np.clip(w, -1.0, 1.0)))
+
+
 def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
              photometric: bool = False) -> dict:  # fmt: skip
     """Analyse ``frames`` end to end and compare each eye's gaze with the truth; also the
@@ -209,6 +222,8 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
     est = {s: np.full((n, 2), np.nan) for s in ("l", "r")}
     states = {s: [""] * n for s in ("l", "r")}
     centre_err, socket_err, found = [], [], []
+    socket_side = {"l": [], "r": []}
+    rotation_err = []
     true_cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
     from myoface.face.eyes import eye_loop, eyeball_center
 
@@ -219,6 +234,7 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
     for m, off in zip(measured, offsets, strict=True):
         if m.gaze is None:
             continue
+        rotation_err.append(_rotation_error_deg(m.pose.rotation, poses[m.index].rotation))
         for s in ("l", "r"):
             e = m.gaze.eye(s)
             states[s][m.index] = e.state
@@ -231,6 +247,7 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
                 d = np.zeros(3) if off[s] is None else np.array([*off[s], 0.0])
                 moved = cam.project(m.pose.apply((centres[s] + d)[None]))[0]
                 socket_err.append(moved - want)
+                socket_side[s].append(moved - want)
                 found.append(off[s] is not None)
     # the reader alone, on the true pose, skin and camera
     alone = GazeEstimator(model.face)
@@ -241,6 +258,7 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
             if g.eye(s).ok:
                 alone_est[s][k] = (g.eye(s).yaw_deg, g.eye(s).pitch_deg)
     open_ = closure < CLOSED_TRUTH
+    partly = open_ & (closure > PARTLY_CLOSED)
     shut = closure >= 0.9
     jumps = np.flatnonzero(np.linalg.norm(np.diff(gaze, axis=0), axis=1) >= MIN_SACCADE_DEG) + 1
     out = {"per_eye": {}, "reader_on_true_geometry": {}}
@@ -255,6 +273,10 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
                 if shut.any() else None,
                 "open_frames_said_closed": round(float((st[open_] == "closed").mean()), 3),
                 "saccade_frames": _errors(est[s][jumps], gaze[jumps], open_[jumps]),
+                "partly_closed_frames": _errors(est[s], gaze, partly),
+                "eyeball_centre_read_px_mean": [
+                    round(float(v), 3) for v in np.mean(socket_side[s], axis=0)
+                ] if socket_side[s] else None,
             }
         )  # fmt: skip
     ce = np.array(centre_err) if centre_err else np.full((1, 2), np.nan)
@@ -264,6 +286,11 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
         round(float(v), 3) for v in np.sqrt(np.mean(se**2, axis=0))
     ]
     out["socket_found"] = round(float(np.mean(found)), 3) if found else None
+    re = np.array(rotation_err) if rotation_err else np.full((1, 3), np.nan)
+    out["head_rotation_error_deg"] = {
+        "rms": [round(float(v), 3) for v in np.sqrt(np.mean(re**2, axis=0))],
+        "mean": [round(float(v), 3) for v in re.mean(axis=0)],
+    }
     out["gaze_ms_per_frame"] = reader.describe()["ms_per_frame"]
     out["analysis_seconds"] = round(seconds, 2)
     out["estimator"] = estimator + (" + photometric" if photometric else "")
