@@ -56,9 +56,22 @@ The socket takes the first step and part of the second (it moves the lids with t
 own shape stays the fit's): 5.9 deg, 5.5 on a second clip. What is left is the lids' shape
 (the fit's opening too open or too closed by 1-2.5 px, most at a blink's start, where the
 truth counts the eye open to half closed) and the head's rotation error, which no local
-offset removes. On the true geometry the reader alone is off by 2.7-2.9 deg RMS. On single_face.mp4, where the person looks at the
-phone's screen throughout, the reading holds within 0.8-1.6 deg (SD) and the blink's frames
-say closed; its absolute direction (16 and 9.5 deg to the person's right, 6-8 up) cannot be
+offset removes. On the true geometry the reader alone is off by 2.7-2.9 deg RMS.
+
+Measured again with the pupil in the model (2026-12-02, the benchmark's two clips, each
+fit recorded once and replayed through the reader; the worse eye's RMS, clip 1 / clip 2):
+the fit without the socket 6.90 / 7.41 deg; with it (the default) 4.64 / 5.17; the
+eyeball's centre put each frame where the truth's is in the image (the fit's lids moved
+with it, no socket) 3.78 / 3.21, its yaw 2.0-2.4; the reader on the true geometry 2.49 /
+3.96. The yaw's error is mostly a bias: the socket's template sits at the fit's mean
+misplacement, and that mean is not zero (the centres where the reader puts them 0.6 and 1.1
+px to the image's right of the truth's, both clips alike: the yaw reads 2.8-4.3 deg to the
+person's right; removing each eye's mean misplacement takes the yaw to 1.8-4.0 but not the
+pitch, which the lids' shape and the head's pitch error, 2.0 deg RMS, hold). The pitch on
+the true geometry is what the pupil helped (per eye 3.1-5.9 deg -> 2.7-5.2). On
+single_face.mp4, where the person looks at the phone's screen throughout,
+the reading holds within 0.7-1.0 deg yaw and 1.8 pitch (SD) and the blink's frames say
+closed; its absolute direction (16 and 9.5 deg to the person's right, 5-8 up) cannot be
 checked there (the screen's place beside the camera is not known).
 """
 

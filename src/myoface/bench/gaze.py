@@ -49,6 +49,20 @@ the socket (the reader's input replaced by the truth's, the worse eye): the fit'
 8.7; the eyeball's centre at its true place in the image 6.1; and the true lids 3.7; and the
 true head rotation 2.3: the lids' shape and the head's rotation hold what is left. A second
 clip (gaze programme seed 7, camera seed 3, replayed): 7.72 -> 5.52 with the socket.
+
+With the pupil in the reader's model (:attr:`~myoface.analysis.gaze.GazeSettings.pupil`,
+in its last fine step; measured 2026-12-02 at adf0700, ``myoface bench --only
+analysis.gaze_error_deg``): 4.64 deg (left 4.64: yaw 4.06, pitch 5.16; right 3.99: yaw 4.66,
+pitch 3.18), analysis by synthesis 5.48, the photometric term 6.60; the reader on the true
+geometry 2.49 / 2.48 (yaw 1.59 / 2.25, pitch 3.15 / 2.69). Where the rest sits (the new
+parts of the detail): the yaw is mostly a bias, -2.8 and -4.3 deg, and it is the eyeballs'
+centres where the reader put them, 0.60 and 1.10 px to the image's right of the truth's on
+average (``eyeball_centre_read_px_mean``; 4-5 deg a pixel): the socket's template sits at
+the fit's mean misplacement; the photometric term's pitch, +5.4 and +5.7 deg, is the same
+thing downwards (0.84 and 1.30 px). The fitted head's rotation is off by 2.0 / 1.8 / 0.9
+deg RMS (pitch / yaw / roll; ``head_rotation_error_deg``), and the open frames a blink
+partly closes (5 an eye) are read 5-7 deg RMS off (``partly_closed_frames``: the fit's lids
+lag the blink).
 """
 
 from __future__ import annotations
