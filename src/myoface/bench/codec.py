@@ -12,7 +12,8 @@ Two clips:
 
 Each clip is analysed once (the 3-D fit, :class:`~myoface.codec.encode.VideoParams`: its wall
 time gives ``codec.encode_fps``); its parameters are then coded at every quality
-(:data:`~myoface.codec.entropy.QUALITIES`) and decoded by the whole decoder
+(:data:`~myoface.codec.entropy.QUALITIES`, their measured ladder and the default's rule
+there) and decoded by the whole decoder
 (:class:`~myoface.codec.decode.Decoder`: header, person's model, picture, every frame).
 
 Quality is measured against the clip's own frames: PSNR of the luma (BT.601) over the pooled
@@ -31,9 +32,12 @@ The peers, measured in the same run on the same frames:
   does best at the bytes is taken: x264 at its best, not at a size it cannot reach (where it
   cannot get down to our bytes at any size, as at the default quality on the sample, it is
   compared at its fewest bytes, more than ours: ``at_its_fewest_bytes`` in the detail). The
-  bytes x264 needs for our face PSNR-Y are bisected over its average rate (7 steps): the
-  rate found is an upper bound within about 6 % of rate, more in bytes where x264's quality
-  jumps;
+  bytes x264 needs for our face PSNR-Y are read off its rate-PSNR curve: at each size, its
+  points at constant rate factors 51, 45, ..., 21, bisected in CRF until two adjacent points
+  bracket our PSNR within :data:`CURVE_GAP_DB`, the bytes interpolated between them in
+  log-bytes; the fewest over the sizes, with the bracketing points in the detail (an
+  average-rate search read its rate control's steps instead: 22.1 kB where the curve says
+  14.7 kB, 2026-12-02; x264's constant rate factor is its better mode at these rates);
 - the zero-rate baseline: the stream's own header picture (the calibration frame as the
   receiver has it) repeated, no packets at all.
 
@@ -528,17 +532,25 @@ def _plot(quick: bool) -> str | None:
         for k, o in enumerate(ours):
             ax.annotate(o["quality"], (o["total_bytes"] / 1e3, o["face_psnr_db"]), fontsize=7,
                         xytext=(-6, -11 if k % 2 else 6), textcoords="offset points")  # fmt: skip
-        # x264's curve: its best size at each rate measured
-        pts = {}
-        for k, v in _cache.items():
-            if k[0] in ("x264", "x264_crf") and k[1:3] == (kind, quick) and v is not None:
-                pts.setdefault(v["bytes"], v["face_psnr_db"])
-        if pts:
-            b = np.array(sorted(pts))
-            best = np.maximum.accumulate([pts[x] for x in b])  # (the best size at <= bytes)
-            ax.plot(
-                b / 1e3, best, "-", color="C3", label="x264 (best of 3 sizes; ABR and CRF points)"
-            )
+        # x264's rate-PSNR curves: its constant rate factor points at each size, and the
+        # average-rate points the equal-bytes comparison tried
+        for scale, ls in zip(_scales(quick), ("-", "--", ":"), strict=False):
+            pts = sorted((v["bytes"], v["face_psnr_db"]) for k, v in _cache.items()
+                         if k[0] == "x264_crf" and k[1:3] == (kind, quick) and k[4] == scale)  # fmt: skip
+            if pts:
+                b, db = np.array(pts).T
+                ax.plot(b / 1e3, db, ls, color="C3", lw=1.2, label=f"x264 CRF, {scale:g} size")
+        abr = [(v["bytes"], v["face_psnr_db"]) for k, v in _cache.items()
+               if k[0] == "x264" and k[1:3] == (kind, quick)]  # fmt: skip
+        if abr:
+            b, db = np.array(abr).T
+            ax.plot(b / 1e3, db, ".", color="C3", ms=3, label="x264 average rate (equal bytes)")
+        need = c["x264_for_our_face_psnr"]
+        if need is not None:
+            med = c["qualities"][DEFAULT_QUALITY]["ours"]["total_bytes"]
+            ax.plot(need["bytes"] / 1e3, need["target_db"], "kx", ms=8,
+                    label=f"x264 at our {DEFAULT_QUALITY}'s PSNR: {need['bytes'] / 1e3:.1f} kB "
+                    f"({need['bytes'] / med:.1f}x)")  # fmt: skip
         zr = ours[0]["zero_rate"]["face_psnr_db"]
         ax.axhline(zr, color="0.5", ls="--", label="zero rate (calibration frame)")
         ax.set_xscale("log")
