@@ -507,6 +507,227 @@ def _candidates_rss(px, bright, fixed, proj, centres, tilt, major, minor, edge_p
     return _rss_numba(px, bright, fixed, proj, centres, tilt, major, minor, edge_px, *pupil)
 
 
+@numba.njit(cache=True)
+def _ellipse_of(ex, ey, ez, gx, gy, gz, depth, radius, f, cx, cy):  # pragma: no cover
+    """:func:`iris_ellipses` for one gaze ``(gx, gy, gz)`` (camera frame) of the eyeball
+    centred at ``(ex, ey, ez)``: centre (x, y), tilt (x, y), major, minor, cos."""
+    dx, dy, dz = ex + depth * gx, ey + depth * gy, ez + depth * gz
+    den = max(-dz, 1e-6)
+    x, y = cx + f * dx / den, cy - f * dy / den
+    tz = dz + 0.5 * gz
+    tden = max(-tz, 1e-6)
+    tx = cx + f * (dx + 0.5 * gx) / tden - x
+    ty = cy - f * (dy + 0.5 * gy) / tden - y
+    n = np.sqrt(tx * tx + ty * ty)
+    if n > 1e-9:
+        tx, ty = tx / max(n, 1e-12), ty / max(n, 1e-12)
+    else:
+        tx, ty = 1.0, 0.0
+    dn = np.sqrt(dx * dx + dy * dy + dz * dz)
+    cos = (gx * -dx + gy * -dy + gz * -dz) / dn
+    major = radius * (f / den)
+    minor = major * max(abs(cos), 0.05)
+    return x, y, tx, ty, major, minor, cos
+
+
+#: the compiled sums' floating-point licence: reassociation (the sums over the pixels run as
+#: vectors) and fused multiply-adds; no assumption about NaN or infinity
+_FAST = {"reassoc", "contract", "nsz", "arcp"}
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy", inline="always")
+def _logistic(z):  # pragma: no cover
+    """The cover ``1 / (1 + exp(-z))`` of :func:`iris_cover` (1 above ``z`` = 30, 0 below -12),
+    with ``exp`` as a polynomial the compiler can run on vectors: ``exp(t / 64) ** 64``, the
+    Taylor series of degree 14 (its error below 1e-17 for ``|t / 64|`` <= 0.47), squared six
+    times (relative error ~1e-14 against numpy's)."""
+    t = min(max(-z, -30.0), 12.0) * (1.0 / 64.0)
+    e = 1.0 / 87178291200.0
+    e = e * t + 1.0 / 6227020800.0
+    e = e * t + 1.0 / 479001600.0
+    e = e * t + 1.0 / 39916800.0
+    e = e * t + 1.0 / 3628800.0
+    e = e * t + 1.0 / 362880.0
+    e = e * t + 1.0 / 40320.0
+    e = e * t + 1.0 / 5040.0
+    e = e * t + 1.0 / 720.0
+    e = e * t + 1.0 / 120.0
+    e = e * t + 1.0 / 24.0
+    e = e * t + 1.0 / 6.0
+    e = e * t + 0.5
+    e = e * t + 1.0
+    e = e * t + 1.0
+    e = e * e
+    e = e * e
+    e = e * e
+    e = e * e
+    e = e * e
+    e = e * e
+    c = 1.0 / (1.0 + e)
+    c = 1.0 if z > 30.0 else c
+    return 0.0 if z < -12.0 else c
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy", inline="always")
+def _cover_z(x, y, cx, cy, tx, ty, ia, ib, major, edge_px):  # pragma: no cover
+    """The logistic's argument of :func:`iris_cover` at the pixel ``(x, y)`` for the ellipse
+    centred at ``(cx, cy)``, tilted ``(tx, ty)``, of inverse radii ``ia`` (major), ``ib``."""
+    dx = x - cx
+    dy = y - cy
+    ut = dx * tx + dy * ty
+    un = -dx * ty + dy * tx
+    rho = np.sqrt((ut * ib) * (ut * ib) + (un * ia) * (un * ia))
+    z = np.sqrt(ut * ut + un * un) * (1.0 - rho) / (max(rho, 1e-9) * edge_px)
+    return z if rho > 1e-9 else major / edge_px
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+def _iris_sums(xs, ys, bright, f0, f1, f2, f3, f4, i0, i1, cx, cy, tx, ty, ia, ib, major,
+               edge_px, out):  # pragma: no cover  # fmt: skip
+    """Over the pixels ``i0..i1``: the iris cover's sums of :func:`_rss_numba` (its square,
+    its product with the brightness and with each fixed column ``f0..f4``) into ``out[:7]``."""
+    ii = cb = u0 = u1 = u2 = u3 = u4 = 0.0
+    for i in range(i0, i1):
+        c = _logistic(_cover_z(xs[i], ys[i], cx, cy, tx, ty, ia, ib, major, edge_px))
+        ii += c * c
+        cb += c * bright[i]
+        u0 += c * f0[i]
+        u1 += c * f1[i]
+        u2 += c * f2[i]
+        u3 += c * f3[i]
+        u4 += c * f4[i]
+    out[0], out[1], out[2], out[3], out[4], out[5], out[6] = ii, cb, u0, u1, u2, u3, u4
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+def _pupil_sums(xs, ys, bright, f0, f1, f2, f3, f4, i0, i1, cx, cy, tx, ty, ia, ib, major,
+                qx, qy, pa, pb, pmajor, edge_px, out):  # pragma: no cover  # fmt: skip
+    """:func:`_iris_sums` and the pupil's (centred at ``(qx, qy)``, the iris' tilt, inverse
+    radii ``pa``, ``pb``; none where the iris has none) into ``out[7:]``: its square, its
+    product with the iris' cover, the brightness and each fixed column."""
+    ii = cb = u0 = u1 = u2 = u3 = u4 = 0.0
+    pp = ip = pbr = v0 = v1 = v2 = v3 = v4 = 0.0
+    for i in range(i0, i1):
+        x, y, b = xs[i], ys[i], bright[i]
+        c = _logistic(_cover_z(x, y, cx, cy, tx, ty, ia, ib, major, edge_px))
+        ii += c * c
+        cb += c * b
+        u0 += c * f0[i]
+        u1 += c * f1[i]
+        u2 += c * f2[i]
+        u3 += c * f3[i]
+        u4 += c * f4[i]
+        c2 = _logistic(_cover_z(x, y, qx, qy, tx, ty, pa, pb, pmajor, edge_px))
+        c2 = c2 if c > 0.0 else 0.0
+        pp += c2 * c2
+        ip += c * c2
+        pbr += c2 * b
+        v0 += c2 * f0[i]
+        v1 += c2 * f1[i]
+        v2 += c2 * f2[i]
+        v3 += c2 * f3[i]
+        v4 += c2 * f4[i]
+    out[0], out[1], out[2], out[3], out[4], out[5], out[6] = ii, cb, u0, u1, u2, u3, u4
+    out[7], out[8], out[9] = pp, ip, pbr
+    out[10], out[11], out[12], out[13], out[14] = v0, v1, v2, v3, v4
+
+
+@numba.njit(cache=True)
+def _gaze_rss(xs, ys, bright, fx, proj, centre, rot, f, cx, cy, yaw, pitch, edge_px,
+              pupil):  # pragma: no cover  # fmt: skip
+    """:meth:`_Eye.rss` in one pass: for each candidate gaze ``(yaw, pitch)`` (K,) degrees,
+    head frame, turned into the camera frame by ``rot``, its iris' (and with ``pupil`` its
+    pupil's) ellipse (:func:`iris_ellipses`) about the eyeball's centre ``centre`` (3,) mm
+    through the camera (``f``, ``cx``, ``cy``), whether it is used (facing the camera, its
+    centre within its major radius of the pixels' box) and, where it is, the residual and the
+    iris' coefficient of :func:`_rss_numba` on the pixels at ``xs``, ``ys`` (N,) (sorted by
+    ``xs``; brightness ``bright``, the plane and bands ``fx`` (5, N), ``proj`` the inverse of
+    their normal matrix). Only the pixels within the major radius plus 12 edge widths (plus a
+    pixel) of the ellipse's centre in x are summed: beyond, a pixel is outside the ellipse by
+    more than the 12 widths beyond which :func:`_rss_numba` counts no cover (the sums are the
+    same, but for the order of the additions and the logistic's polynomial, ~1e-12).
+    Returns ``(rss (K,) inf where not used or the iris is not darker, coef (K,), base)``."""
+    n = xs.shape[0]
+    k_all = yaw.shape[0]
+    gti = np.zeros(5)
+    for i in range(n):
+        for j in range(5):
+            gti[j] += fx[j, i] * bright[i]
+    pg = np.zeros(5)
+    for j in range(5):
+        for q in range(5):
+            pg[j] += proj[j, q] * gti[q]
+    base = bright @ bright
+    for j in range(5):
+        base -= gti[j] * pg[j]
+    lox, loy, hix, hiy = np.inf, np.inf, -np.inf, -np.inf
+    for i in range(n):
+        lox, hix = min(lox, xs[i]), max(hix, xs[i])
+        loy, hiy = min(loy, ys[i]), max(hiy, ys[i])
+    rss = np.full(k_all, np.inf)
+    coef = np.zeros(k_all)
+    out = np.zeros(15)
+    ex, ey, ez = centre[0], centre[1], centre[2]
+    for k in range(k_all):
+        y = np.radians(yaw[k])
+        p = np.radians(pitch[k])
+        hx, hy, hz = np.sin(y) * np.cos(p), np.sin(p), np.cos(y) * np.cos(p)
+        gx = hx * rot[0, 0] + hy * rot[0, 1] + hz * rot[0, 2]
+        gy = hx * rot[1, 0] + hy * rot[1, 1] + hz * rot[1, 2]
+        gz = hx * rot[2, 0] + hy * rot[2, 1] + hz * rot[2, 2]
+        cx_, cy_, tx, ty, major, minor, cos = _ellipse_of(
+            ex, ey, ez, gx, gy, gz, IRIS_DEPTH_MM, IRIS_RADIUS_MM, f, cx, cy
+        )
+        if not (cos > 0.05 and lox - major < cx_ < hix + major
+                and loy - major < cy_ < hiy + major):  # fmt: skip
+            continue
+        reach = major + 12.0 * edge_px + 1.0
+        i0 = np.searchsorted(xs, cx_ - reach)
+        i1 = np.searchsorted(xs, cx_ + reach)
+        if pupil:
+            qx, qy, _, _, pmaj, pmin, _ = _ellipse_of(
+                ex, ey, ez, gx, gy, gz, PUPIL_DEPTH_MM, PUPIL_RADIUS_MM, f, cx, cy
+            )
+            _pupil_sums(xs, ys, bright, fx[0], fx[1], fx[2], fx[3], fx[4], i0, i1, cx_, cy_,
+                        tx, ty, 1.0 / major, 1.0 / minor, major, qx, qy, 1.0 / pmaj,
+                        1.0 / pmin, pmaj, edge_px, out)  # fmt: skip
+        else:
+            _iris_sums(xs, ys, bright, fx[0], fx[1], fx[2], fx[3], fx[4], i0, i1, cx_, cy_,
+                       tx, ty, 1.0 / major, 1.0 / minor, major, edge_px, out)  # fmt: skip
+        upu = 0.0
+        upg = 0.0
+        for j in range(5):
+            upg += out[2 + j] * pg[j]
+            for q in range(5):
+                upu += out[2 + j] * proj[j, q] * out[2 + q]
+        s = max(out[0] - upu, 1e-12)
+        r = out[1] - upg
+        rss[k] = base - r * r / s
+        coef[k] = r / s
+        if pupil:
+            vpv = 0.0
+            upv = 0.0
+            vpg = 0.0
+            for j in range(5):
+                vpg += out[10 + j] * pg[j]
+                for q in range(5):
+                    vpv += out[10 + j] * proj[j, q] * out[10 + q]
+                    upv += out[2 + j] * proj[j, q] * out[10 + q]
+            s22 = out[7] - vpv
+            s12 = out[8] - upv
+            r2 = out[9] - vpg
+            det = s * s22 - s12 * s12
+            if det > 1e-12 * s * max(s22, 1e-12):
+                a1 = (s22 * r - s12 * r2) / det
+                a2 = (s * r2 - s12 * r) / det
+                if a2 < 0.0 and a1 < 0.0:  # (as :func:`_rss_numba`)
+                    rss[k] = base - (a1 * r + a2 * r2)
+                    coef[k] = a1
+        if not coef[k] < 0.0:
+            rss[k] = np.inf
+    return rss, coef, base
+
+
 # ------------------------------------------------------------------ the opening's pixels
 
 
@@ -591,6 +812,16 @@ class EyeSamples:
     bright: np.ndarray
     fixed: np.ndarray
     proj: np.ndarray
+    #: the pixels sorted by x for :func:`_gaze_rss`: (xs, ys, bright, fixed.T), made once
+    _by_x: tuple | None = field(default=None, repr=False, compare=False)
+
+    def by_x(self) -> tuple:
+        """The pixels' x (N,), y (N,), brightness (N,) and fixed columns (m, N), sorted by x."""
+        if self._by_x is None:
+            o = np.argsort(self.px[:, 0], kind="stable")
+            self._by_x = tuple(np.ascontiguousarray(a) for a in
+                               (self.px[o, 0], self.px[o, 1], self.bright[o], self.fixed[o].T))  # fmt: skip
+        return self._by_x
 
     @property
     def n(self) -> int:
@@ -911,30 +1142,16 @@ class _Eye:
         sclera, does not face the camera or misses the opening, the explained share (K,) and
         the iris' coefficient (K,); ``coarse``: on every other pixel; ``pupil``: with the
         pupil in the model."""
-        dirs = gaze_directions(yaw, pitch) @ np.asarray(rotation).T
-        c2, t, a, b, facing = iris_ellipses(camera, self.centre, dirs)
-        if pupil:
-            pc, _, pa, pb, _ = iris_ellipses(camera, self.centre, dirs, PUPIL_DEPTH_MM,
-                                             PUPIL_RADIUS_MM)  # fmt: skip
-            pupil = (pc, pa, pb)
-        else:
-            pupil = None
         if coarse and self.coarse is None:
             self.coarse = self.samples.checkerboard()
         s = self.coarse if coarse else self.samples
-        # only the candidates whose iris reaches the opening's pixels (the others explain
-        # nothing)
-        lo, hi = s.px.min(axis=0), s.px.max(axis=0)
-        use = facing & np.all((c2 > lo - a[:, None]) & (c2 < hi + a[:, None]), axis=1)
-        rss, coef = np.full(len(c2), np.inf), np.zeros(len(c2))
-        if use.any():
-            pick = None if pupil is None else tuple(x[use] for x in pupil)
-            rss[use], coef[use] = _candidates_rss(
-                s.px, s.bright, s.fixed, s.proj, c2[use], t[use], a[use], b[use],
-                settings.edge_px, pick,
-            )  # fmt: skip
-        base = max(s.base_rss(), 1e-12)
-        rss = np.where((coef < 0) & use, rss, np.inf)
+        rss, coef, base = _gaze_rss(
+            *s.by_x(), s.proj, np.asarray(self.centre, dtype=np.float64),
+            np.ascontiguousarray(rotation, dtype=np.float64), float(camera.focal_px),
+            float(camera.cx), float(camera.cy), np.ascontiguousarray(yaw, dtype=np.float64),
+            np.ascontiguousarray(pitch, dtype=np.float64), float(settings.edge_px), bool(pupil),
+        )  # fmt: skip
+        base = max(base, 1e-12)
         return rss, 1.0 - rss / base, coef
 
 
