@@ -84,12 +84,12 @@ LIGHT_REGIONS = 4
 #: does not bulge the same) which one light's shading of the model's normals and an offset
 #: per quarter do not follow. Measured 2026-12-02 (0 / 1 / 2): ``single_face.mp4``'s
 #: fidelity (``myoface analyze --photometric --report``) 0.495 / 0.508 / 0.526 (lower lip
-#: -0.14 / -0.06 / 0.14, mouth corners 0.74 / 0.73 / 0.72); the known-warp smile, head
-#: still, plain and with its look (:func:`~myoface.analysis.knownwarp.expression_look`),
-#: the same gains to 0.02 (a warp does not change the shading); the degraded head-motion
-#: renders, head moving (90 frames): skin 0.993 / - / 0.988 mm, head 0.84 / - / 0.99 deg,
-#: median RMSE 0.102 / - / 0.114 (the field takes some of the shading that tells the
-#: head's turn under the light). Not justified by the known answers: off
+#: -0.14 / -0.06 / 0.14, mouth corners 0.74 / 0.73 / 0.72); the known-warp smile, head still,
+#: plain and with its look (:func:`~myoface.analysis.knownwarp.expression_look`, the cheeks'
+#: shading changed too), the same gains to 0.03 (brows 0.65 / 0.62 with the look); the
+#: degraded head-motion renders, head moving (90 frames): skin 0.993 / - / 0.988 mm, head
+#: 0.84 / - / 0.99 deg, median RMSE 0.102 / - / 0.114 (the field takes some of the shading
+#: that tells the head's turn under the light). Not justified by the known answers: off
 SHADE_FIELD_ORDER = 0
 
 
