@@ -897,6 +897,46 @@ def _bilinear_at(img, rows, cols):  # pragma: no cover
 
 
 @numba.njit(cache=True)
+def _project_head(points, rot, trans, f, cx, cy):  # pragma: no cover
+    """Head-frame points (N, 3) mm through the pose (``rot``, ``trans``) and the pinhole
+    camera (``f``, ``cx``, ``cy``) into the image (N, 2) px: ``camera.project(pose.apply(.))``."""
+    n = points.shape[0]
+    uv = np.empty((n, 2))
+    for k in range(n):
+        x, y, z = points[k, 0], points[k, 1], points[k, 2]
+        qx = x * rot[0, 0] + y * rot[0, 1] + z * rot[0, 2] + trans[0]
+        qy = x * rot[1, 0] + y * rot[1, 1] + z * rot[1, 2] + trans[1]
+        qz = x * rot[2, 0] + y * rot[2, 1] + z * rot[2, 2] + trans[2]
+        depth = max(-qz, 1e-6)
+        uv[k, 0] = cx + f * qx / depth
+        uv[k, 1] = cy - f * qy / depth
+    return uv
+
+
+@numba.njit(cache=True)
+def _luma_crop(img, x0, y0, x1, y1, luma, scale):  # pragma: no cover
+    """The luma (rows ``y0..y1``, columns ``x0..x1``) of the image ``img`` (H, W, >= 3),
+    divided by ``scale``."""
+    out = np.empty((y1 - y0 + 1, x1 - x0 + 1))
+    for r in range(y0, y1 + 1):
+        for c in range(x0, x1 + 1):
+            v = float(img[r, c, 0]) * luma[0] + float(img[r, c, 1]) * luma[1]
+            out[r - y0, c - x0] = (v + float(img[r, c, 2]) * luma[2]) / scale
+    return out
+
+
+@numba.njit(cache=True)
+def _sample_patch(img, x0, y0, uv, valid):  # pragma: no cover
+    """:func:`_bilinear` of the crop ``img`` (its pixel (0, 0) the frame's (``x0``, ``y0``))
+    at the image points ``uv`` (N, 2) (pixel centres at + 0.5), NaN where not ``valid``."""
+    n = uv.shape[0]
+    out = np.empty(n)
+    for k in range(n):
+        out[k] = _bilinear(img, uv[k, 1] - 0.5 - y0, uv[k, 0] - 0.5 - x0) if valid[k] else np.nan
+    return out
+
+
+@numba.njit(cache=True)
 def _align_socket(img, x0, y0, points, rot, trans, f, cx, cy, tmpl, gx, gy, step_mm,
                   iris_c, iris_r, iterations, limit_mm, robust, prior_mm):  # pragma: no cover  # fmt: skip
     """The shift ``d`` (2,) mm (head frame x, y) by which the socket's grid ``points`` (N, 3),
@@ -908,39 +948,48 @@ def _align_socket(img, x0, y0, points, rot, trans, f, cx, cy, tmpl, gx, gy, step
     undone exactly, the skin's relief and all); points that fall within ``iris_r`` px of
     ``iris_c`` (the iris) or on NaN are not compared. Also the number of points compared
     (0: too few, or none converged)."""
-    n = points.shape[0]
+    # the points compared at all (a template value and its gradient), in the camera frame
+    # where the shift is nought, and the shift's directions there (head x and y)
+    n = 0
+    keep = np.empty(points.shape[0], dtype=np.int64)
+    for k in range(points.shape[0]):
+        if not (np.isnan(tmpl[k]) or np.isnan(gx[k]) or np.isnan(gy[k])):
+            keep[n] = k
+            n += 1
+    q0 = np.empty((n, 3))
+    tk = np.empty(n)
+    gxk = np.empty(n)
+    gyk = np.empty(n)
+    for e in range(n):
+        k = keep[e]
+        x, y, z = points[k, 0], points[k, 1], points[k, 2]
+        for a in range(3):
+            q0[e, a] = rot[a, 0] * x + rot[a, 1] * y + rot[a, 2] * z + trans[a]
+        tk[e], gxk[e], gyk[e] = tmpl[k], gx[k], gy[k]
     d = np.zeros(2)
     used = 0
-    ata = np.empty((4, 4))
-    atb = np.empty(4)
-    col = np.empty(4)
     res = np.empty(n)
     samp = np.empty(n)
     gain, offset, scale, sigma = 1.0, 0.0, np.inf, 0.0
+    ir2 = iris_r * iris_r
     for it in range(iterations):
         # the image at the moved points, and each point's residual against the template
         m = 0
-        for k in range(n):
-            samp[k] = np.nan
-            t = tmpl[k]
-            if np.isnan(t) or np.isnan(gx[k]) or np.isnan(gy[k]):
-                continue
-            px = points[k, 0] + d[0]
-            py = points[k, 1] + d[1]
-            pz = points[k, 2]
-            qx = rot[0, 0] * px + rot[0, 1] * py + rot[0, 2] * pz + trans[0]
-            qy = rot[1, 0] * px + rot[1, 1] * py + rot[1, 2] * pz + trans[1]
-            qz = rot[2, 0] * px + rot[2, 1] * py + rot[2, 2] * pz + trans[2]
-            depth = max(-qz, 1e-6)
-            u = cx + f * qx / depth
-            v = cy - f * qy / depth
-            if (u - iris_c[0]) ** 2 + (v - iris_c[1]) ** 2 < iris_r * iris_r:
+        sx = rot[0, 0] * d[0] + rot[0, 1] * d[1]
+        sy = rot[1, 0] * d[0] + rot[1, 1] * d[1]
+        sz = rot[2, 0] * d[0] + rot[2, 1] * d[1]
+        for e in range(n):
+            samp[e] = np.nan
+            depth = max(-(q0[e, 2] + sz), 1e-6)
+            u = cx + f * (q0[e, 0] + sx) / depth
+            v = cy - f * (q0[e, 1] + sy) / depth
+            if (u - iris_c[0]) ** 2 + (v - iris_c[1]) ** 2 < ir2:
                 continue
             p = _bilinear(img, v - 0.5 - y0, u - 0.5 - x0)
             if np.isnan(p):
                 continue
-            samp[k] = p
-            res[m] = abs(p - gain * t - offset)
+            samp[e] = p
+            res[m] = abs(p - gain * tk[e] - offset)
             m += 1
         if m < 30:
             return np.zeros(2), 0
@@ -948,27 +997,38 @@ def _align_socket(img, x0, y0, points, rot, trans, f, cx, cy, tmpl, gx, gy, step
             sigma = 1.4826 * np.median(res[:m])
             if it == 1:
                 scale = sigma * robust
-        ata[:] = 0.0
-        atb[:] = 0.0
-        for k in range(n):
-            p = samp[k]
+        # the normal equations (symmetric: the upper triangle summed)
+        a00 = a01 = a02 = a03 = a11 = a12 = a13 = a22 = a23 = a33 = 0.0
+        b0 = b1 = b2 = b3 = 0.0
+        cg = gain / step_mm
+        for e in range(n):
+            p = samp[e]
             if np.isnan(p):
                 continue
-            t = tmpl[k]
+            t = tk[e]
             r = p - gain * t - offset
             wt = 1.0 if abs(r) <= scale else scale / abs(r)  # (Huber's)
-            col[0], col[1], col[2], col[3] = gain * gx[k] / step_mm, gain * gy[k] / step_mm, t, 1.0
-            for a in range(4):
-                atb[a] += wt * col[a] * r
-                for b in range(4):
-                    ata[a, b] += wt * col[a] * col[b]
-        for a in range(4):
-            ata[a, a] += 1e-9
+            c0, c1 = cg * gxk[e], cg * gyk[e]
+            w0, w1, w2 = wt * c0, wt * c1, wt * t
+            a00 += w0 * c0
+            a01 += w0 * c1
+            a02 += w0 * t
+            a03 += w0
+            a11 += w1 * c1
+            a12 += w1 * t
+            a13 += w1
+            a22 += w2 * t
+            a23 += w2
+            a33 += wt
+            b0 += w0 * r
+            b1 += w1 * r
+            b2 += w2 * r
+            b3 += wt * r
         # the prior on the shift (the unknowns are minus its step): lam |d - x|^2
         lam = m * sigma * sigma / (prior_mm * prior_mm * 4.0)
-        for a in range(2):
-            ata[a, a] += lam
-            atb[a] += lam * d[a]
+        ata = np.array([[a00 + 1e-9 + lam, a01, a02, a03], [a01, a11 + 1e-9 + lam, a12, a13],
+                        [a02, a12, a22 + 1e-9, a23], [a03, a13, a23, a33 + 1e-9]])  # fmt: skip
+        atb = np.array([b0 + lam * d[0], b1 + lam * d[1], b2, b3])
         step = np.linalg.solve(ata, atb)
         # (p ~ gain t + offset - gain grad . delta: the step moves the points by -delta)
         s0 = min(max(-step[0], -1.0), 1.0)
@@ -1030,6 +1090,7 @@ class EyeSocket:
         #: the grid's points (N, 3) mm, head frame, and those on the face (H, W) bool
         self.points = np.column_stack([pts, np.nan_to_num(z.ravel(), nan=c[2])])
         self.valid = np.isfinite(z)
+        self._valid_flat = np.ascontiguousarray(self.valid.ravel())
         self.shape = x.shape
         self.settings = st
         self._sum = np.zeros(self.shape)
@@ -1045,28 +1106,35 @@ class EyeSocket:
     def _luma(self, frame, uv):
         """The frame's luma about the image points ``uv`` (N, 2) (a margin of 2 px plus the
         largest offset), and its top-left pixel; None off the frame."""
-        img = np.asarray(frame)[..., :3]
+        img = np.asarray(frame)
         m = 2 + int(np.ceil(self.settings.socket_max_mm * 2))  # (px per mm < 2 here)
-        x0, y0 = np.maximum(np.floor(uv.min(axis=0)).astype(int) - m, 0)
-        x1, y1 = np.minimum(np.ceil(uv.max(axis=0)).astype(int) + m,
-                            [img.shape[1] - 1, img.shape[0] - 1])  # fmt: skip
+        x0 = max(int(np.floor(uv[:, 0].min())) - m, 0)
+        y0 = max(int(np.floor(uv[:, 1].min())) - m, 0)
+        x1 = min(int(np.ceil(uv[:, 0].max())) + m, img.shape[1] - 1)
+        y1 = min(int(np.ceil(uv[:, 1].max())) + m, img.shape[0] - 1)
         if x1 <= x0 + 1 or y1 <= y0 + 1:
             return None
         scale = 255.0 if img.dtype == np.uint8 else 1.0
-        return img[y0 : y1 + 1, x0 : x1 + 1].astype(np.float64) @ LUMA / scale, int(x0), int(y0)
+        return _luma_crop(img, x0, y0, x1, y1, LUMA, scale), x0, y0
 
     def sample(self, frame, camera, pose) -> tuple[np.ndarray, np.ndarray]:
         """The frame's patch (H, W) (luma, bilinear; NaN off the face or the frame) at the
         projection of the grid by ``pose``, and the grid's image points (H, W, 2) px."""
-        uv = camera.project(pose.apply(self.points))
-        patch = np.full(len(uv), np.nan)
+        uv = self._project(camera, pose)
         got = self._crop = self._luma(frame, uv)
         self._frame = frame  # (offset reads the same crop)
-        if got is not None:
+        if got is None:
+            patch = np.full(len(uv), np.nan)
+        else:
             img, x0, y0 = got
-            patch = _bilinear_at(img, uv[:, 1] - 0.5 - y0, uv[:, 0] - 0.5 - x0)
-            patch[~self.valid.ravel()] = np.nan
+            patch = _sample_patch(img, x0, y0, uv, self._valid_flat)
         return patch.reshape(self.shape), uv.reshape(*self.shape, 2)
+
+    def _project(self, camera, pose) -> np.ndarray:
+        """The grid's points in the image (N, 2) px through ``pose`` and ``camera``."""
+        return _project_head(self.points, np.asarray(pose.rotation, dtype=np.float64),
+                             np.asarray(pose.translation_mm, dtype=np.float64),
+                             float(camera.focal_px), float(camera.cx), float(camera.cy))  # fmt: skip
 
     def usable(self, uv, iris_centre, iris_radius_px) -> np.ndarray:
         """The patch's pixels (H, W) bool to learn from: on the face and off the iris read
@@ -1097,7 +1165,7 @@ class EyeSocket:
             self._template = tuple(np.ascontiguousarray(a.ravel()) for a in (tmpl, gx, gy))
         got = self._crop if frame is self._frame else None
         if got is None:
-            got = self._luma(frame, camera.project(pose.apply(self.points)))
+            got = self._luma(frame, self._project(camera, pose))
         if got is None:
             return None
         img, x0, y0 = got
