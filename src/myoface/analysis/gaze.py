@@ -834,9 +834,62 @@ class EyeSamples:
 
     def checkerboard(self) -> EyeSamples:
         """Every other pixel (those whose column + row is even): the coarse grid's samples."""
-        keep = (np.floor(self.px).astype(np.int64).sum(axis=1) % 2) == 0
-        fixed = self.fixed[keep]
-        return EyeSamples(self.px[keep], self.bright[keep], fixed, np.linalg.pinv(fixed.T @ fixed))
+        return EyeSamples(*_checkerboard(self.px, self.bright, self.fixed))
+
+
+@numba.njit(cache=True)
+def _sample_columns(img, px, du, dl, iris_px, upper_margin, lower_margin, band, luma,
+                    scale):  # pragma: no cover  # fmt: skip
+    """What :func:`_eye_samples_numpy` makes of the opening's pixels ``px`` (N, 2) and their
+    distances to the margins ``du``, ``dl``: those far enough from the margins, their
+    brightness, the fixed columns (the plane and the bands) and the inverse of their normal
+    matrix (none kept: empty arrays)."""
+    lim_u, lim_l = upper_margin * iris_px, lower_margin * iris_px
+    n = 0
+    for i in range(px.shape[0]):
+        if du[i] > lim_u and dl[i] > lim_l:
+            n += 1
+    out = np.empty((n, 2))
+    bright = np.empty(n)
+    fixed = np.empty((n, 5))
+    if n < 6:
+        return out, bright, fixed, np.eye(5)
+    j = 0
+    mx = 0.0
+    my = 0.0
+    width = band * iris_px
+    for i in range(px.shape[0]):
+        if not (du[i] > lim_u and dl[i] > lim_l):
+            continue
+        x, y = px[i, 0], px[i, 1]
+        out[j, 0], out[j, 1] = x, y
+        r, c = int(y), int(x)
+        v = float(img[r, c, 0]) * luma[0] + float(img[r, c, 1]) * luma[1]
+        bright[j] = (v + float(img[r, c, 2]) * luma[2]) / scale
+        fixed[j, 0] = 1.0
+        fixed[j, 3] = np.exp(-du[i] / width)
+        fixed[j, 4] = np.exp(-dl[i] / width)
+        mx += x
+        my += y
+        j += 1
+    mx /= n
+    my /= n
+    size = max(iris_px, 1.0)
+    for j in range(n):
+        fixed[j, 1] = (out[j, 0] - mx) / size
+        fixed[j, 2] = (out[j, 1] - my) / size
+    return out, bright, fixed, np.linalg.pinv(fixed.T @ fixed)
+
+
+@numba.njit(cache=True)
+def _checkerboard(px, bright, fixed):  # pragma: no cover
+    """:meth:`EyeSamples.checkerboard`'s arrays: the pixels whose column + row is even, and
+    the inverse of their fixed columns' normal matrix."""
+    keep = np.empty(px.shape[0], dtype=np.bool_)
+    for i in range(px.shape[0]):
+        keep[i] = (int(np.floor(px[i, 0])) + int(np.floor(px[i, 1]))) % 2 == 0
+    f = np.ascontiguousarray(fixed[keep])
+    return px[keep], bright[keep], f, np.linalg.pinv(f.T @ f)
 
 
 def eye_samples(frame, upper, lower, iris_px: float, settings: GazeSettings) -> EyeSamples:
@@ -844,6 +897,34 @@ def eye_samples(frame, upper, lower, iris_px: float, settings: GazeSettings) -> 
     ``upper`` and ``lower`` (each (M, 2) px, from corner to corner, the same corners), away from
     the margins by :attr:`GazeSettings.upper_margin` / ``lower_margin`` iris radii
     (``iris_px``); pixel (row, col) is read at (col + 0.5, row + 0.5)."""
+    poly = np.concatenate([upper, lower[::-1][1:-1]])
+    h, w = frame.shape[:2]
+    x0, y0 = np.maximum(np.floor(poly.min(axis=0)).astype(int) - 1, 0)
+    x1, y1 = np.minimum(np.ceil(poly.max(axis=0)).astype(int) + 1, [w - 1, h - 1])
+    empty = EyeSamples(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 5)), np.eye(5))
+    if x1 < x0 or y1 < y0:
+        return empty
+    px, du, dl = _opening_pixels(
+        int(x0), int(y0), int(x1), int(y1), *(np.ascontiguousarray(a, dtype=np.float64)
+                                              for a in (poly, upper, lower))
+    )  # fmt: skip
+    img = np.asarray(frame)
+    px, bright, fixed, proj = _sample_columns(
+        img, px, du, dl, float(iris_px), float(settings.upper_margin),
+        float(settings.lower_margin), float(settings.band), LUMA,
+        255.0 if img.dtype == np.uint8 else 1.0,
+    )  # fmt: skip
+    if len(px) < 6:
+        return empty
+    return EyeSamples(px, bright, fixed, proj)
+
+
+def _eye_samples_numpy(frame, upper, lower, iris_px: float, settings: GazeSettings) -> EyeSamples:
+    """The pixels of ``frame`` (H, W, 3) inside the opening bounded by the lid margins
+    ``upper`` and ``lower`` (each (M, 2) px, from corner to corner, the same corners), away from
+    the margins by :attr:`GazeSettings.upper_margin` / ``lower_margin`` iris radii
+    (``iris_px``); pixel (row, col) is read at (col + 0.5, row + 0.5). (In numpy: the
+    reference of :func:`eye_samples`.)"""
     poly = np.concatenate([upper, lower[::-1][1:-1]])
     h, w = frame.shape[:2]
     x0, y0 = np.maximum(np.floor(poly.min(axis=0)).astype(int) - 1, 0)
@@ -1185,11 +1266,77 @@ class EyeSocket:
 def _grid(centre, step, half) -> tuple[np.ndarray, np.ndarray]:
     """(yaw, pitch) degrees of a square grid of ``step`` within ``half`` of ``centre``, inside
     +-:data:`MAX_GAZE_DEG`."""
-    a = np.arange(-half, half + 1e-9, step)
-    yaw, pitch = np.meshgrid(centre[0] + a, centre[1] + a, indexing="ij")
-    yaw, pitch = yaw.ravel(), pitch.ravel()
+    key = (float(step), float(half))
+    offsets = _GRIDS.get(key)
+    if offsets is None:
+        a = np.arange(-half, half + 1e-9, step)
+        offsets = _GRIDS[key] = tuple(x.ravel() for x in np.meshgrid(a, a, indexing="ij"))
+    yaw, pitch = centre[0] + offsets[0], centre[1] + offsets[1]
     ok = (np.abs(yaw) <= MAX_GAZE_DEG) & (np.abs(pitch) <= MAX_GAZE_DEG)
     return yaw[ok], pitch[ok]
+
+
+#: :func:`_grid`'s offsets by (step, half)
+_GRIDS: dict = {}
+
+
+@numba.njit(cache=True)
+def _iris_at(centre, rot, yaw, pitch, f, cx, cy):  # pragma: no cover
+    """The iris' centre (x, y) px and radius (px) for the gaze ``(yaw, pitch)`` degrees, head
+    frame (as :func:`iris_ellipses`)."""
+    y = np.radians(yaw)
+    p = np.radians(pitch)
+    hx, hy, hz = np.sin(y) * np.cos(p), np.sin(p), np.cos(y) * np.cos(p)
+    gx = hx * rot[0, 0] + hy * rot[0, 1] + hz * rot[0, 2]
+    gy = hx * rot[1, 0] + hy * rot[1, 1] + hz * rot[1, 2]
+    gz = hx * rot[2, 0] + hy * rot[2, 1] + hz * rot[2, 2]
+    x, y, _, _, major, _, _ = _ellipse_of(centre[0], centre[1], centre[2], gx, gy, gz,
+                                          IRIS_DEPTH_MM, IRIS_RADIUS_MM, f, cx, cy)  # fmt: skip
+    return x, y, major
+
+
+@numba.njit(cache=True)
+def _along_chain(v, chain, at):  # pragma: no cover
+    """The points (len(at), 3) at the shares ``at`` of the polyline ``v[chain]``'s length."""
+    m = chain.shape[0]
+    s = np.zeros(m)
+    for i in range(1, m):
+        a, b = chain[i - 1], chain[i]
+        d0, d1, d2 = v[b, 0] - v[a, 0], v[b, 1] - v[a, 1], v[b, 2] - v[a, 2]
+        s[i] = s[i - 1] + np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    s /= max(s[m - 1], 1e-9)
+    out = np.empty((at.shape[0], 3))
+    for k in range(3):
+        out[:, k] = np.interp(at, s, v[chain, k])
+    return out
+
+
+@numba.njit(cache=True)
+def _aperture_mm(v, upper, lower):  # pragma: no cover
+    """The mean gap (mm) between the upper and the lower lid's margins (vertex chains) of the
+    skin ``v`` (V, 3): their distance at 7 shares of their lengths, 0.2 to 0.8."""
+    at = np.linspace(0.2, 0.8, 7)
+    a, b = _along_chain(v, upper, at), _along_chain(v, lower, at)
+    total = 0.0
+    for i in range(at.shape[0]):
+        d0, d1, d2 = a[i, 0] - b[i, 0], a[i, 1] - b[i, 1], a[i, 2] - b[i, 2]
+        total += np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    return total / at.shape[0]
+
+
+def _percentile90(values) -> float:
+    """``np.percentile(values, 90)`` (its linear interpolation), without numpy's overhead
+    on the few values it is asked of here."""
+    v = sorted(float(x) for x in values)
+    n = len(v)
+    q = 0.9
+    virtual = (n * q + (1 + q * (1 - 1 - 1))) - 1
+    i = min(max(int(np.floor(virtual)), 0), n - 1)
+    j = min(i + 1, n - 1)
+    t = virtual - np.floor(virtual)
+    a, b = v[i], v[j]
+    diff = b - a
+    return float(b - diff * (1 - t) if t >= 0.5 else a + diff * t)
 
 
 @dataclass
@@ -1289,16 +1436,9 @@ class GazeEstimator:
 
     @staticmethod
     def _aperture(v, upper, lower) -> float:
-        """The mean gap (mm) between the upper and the lower lid's margins of skin ``v``."""
-        xs = np.linspace(0.2, 0.8, 7)
-
-        def along(chain):
-            p = v[chain]
-            s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]
-            s /= max(s[-1], 1e-9)
-            return np.column_stack([np.interp(xs, s, p[:, k]) for k in range(3)])
-
-        return float(np.linalg.norm(along(upper) - along(lower), axis=1).mean())
+        """The mean gap (mm) between the upper and the lower lid's margins of skin ``v``
+        (:func:`_aperture_mm`)."""
+        return float(_aperture_mm(np.ascontiguousarray(v, dtype=np.float64), upper, lower))
 
     def reset(self) -> None:
         """Forget the past readings (after a frame without a face)."""
@@ -1403,9 +1543,11 @@ class GazeEstimator:
 
     def _iris_image(self, eye: _Eye, camera, rot, yaw, pitch) -> tuple[np.ndarray, float]:
         """The iris' centre (2,) px and radius (px) in the image for the gaze ``(yaw, pitch)``."""
-        g = gaze_directions(yaw, pitch) @ np.asarray(rot).T
-        c2, _, major, _, _ = iris_ellipses(camera, eye.centre, g[None])
-        return c2[0], float(major[0])
+        c = np.asarray(eye.centre, dtype=np.float64)
+        x, y, major = _iris_at(c, np.ascontiguousarray(rot, dtype=np.float64), float(yaw),
+                               float(pitch), float(camera.focal_px), float(camera.cx),
+                               float(camera.cy))  # fmt: skip
+        return np.array([x, y]), float(major)
 
     def _socket(self, eye: _Eye, frame, camera, pose, shape, points, start) -> tuple:
         """``eye`` moved by its socket's offset in ``frame`` (:class:`EyeSocket`: the eyeball's
@@ -1443,7 +1585,7 @@ class GazeEstimator:
         if not read.ok or opening < st.socket_open:
             return False
         past = self._contrasts[side]
-        usual = float(np.percentile(past, 90)) if past else 0.0
+        usual = _percentile90(past) if past else 0.0
         return abs(read.contrast) >= st.socket_open * usual
 
     def _learn(self, eye: _Eye, camera, rot, read: EyeGaze, patch, uv) -> None:
@@ -1483,7 +1625,7 @@ class GazeEstimator:
             return eye
         past = self._contrasts[side]
         c = abs(eye.contrast)
-        usual = float(np.percentile([*past, c], 90))
+        usual = _percentile90([*past, c])
         if c < self.settings.closed_contrast * usual:
             return EyeGaze(state="closed", explained=eye.explained, contrast=eye.contrast)
         if eye.ok:
