@@ -106,6 +106,133 @@ def test_the_compiled_kernel_is_the_numpy_one():
     assert np.all(with_pupil[0] <= alone + 1e-9) and np.any(with_pupil[0] < alone - 1e-6)
 
 
+def _plain_rss(samples, camera, rot, centre, yaw, pitch, edge_px, pupil):
+    """The candidates' residuals the plain way (numpy): the reference of the one-pass kernel
+    :func:`_gaze_rss` (what ``_Eye.rss`` computed before it)."""
+    from myoface.analysis.gaze import PUPIL_DEPTH_MM, PUPIL_RADIUS_MM
+
+    dirs = gaze_directions(yaw, pitch) @ rot.T
+    c2, t, a, b, facing = iris_ellipses(camera, centre, dirs)
+    lo, hi = samples.px.min(axis=0), samples.px.max(axis=0)
+    use = facing & np.all((c2 > lo - a[:, None]) & (c2 < hi + a[:, None]), axis=1)
+    pick = None
+    if pupil:
+        pc, _, pa, pb, _ = iris_ellipses(camera, centre, dirs, PUPIL_DEPTH_MM, PUPIL_RADIUS_MM)
+        pick = (pc[use], pa[use], pb[use])
+    rss, coef = np.full(len(c2), np.inf), np.zeros(len(c2))
+    rss[use], coef[use] = _rss_numpy(samples.px, samples.bright, samples.fixed, samples.proj,
+                                     c2[use], t[use], a[use], b[use], edge_px, pick)  # fmt: skip
+    return np.where((coef < 0) & use, rss, np.inf), coef, use
+
+
+def test_the_one_pass_kernel_is_the_plain_reference(camera):
+    """An eye drawn by the model itself (a shaded sclera, the iris and a darker pupil of a
+    known gaze, noise) seen through a turned head: the compiled one-pass kernel (ellipses, the
+    box test, the sums over the pixels within the iris' reach, the polynomial logistic) gives
+    the plain numpy path's residuals and coefficients, with and without the pupil, on the
+    candidates of a coarse grid (some facing away or off the opening) and of a fine one; and
+    its best candidate with the pupil is the truth (without it, within a step)."""
+    from myoface.analysis.gaze import (
+        PUPIL_DEPTH_MM,
+        PUPIL_RADIUS_MM,
+        _gaze_rss,
+        _grid,
+        eye_samples,
+        iris_cover,
+    )
+
+    rng = np.random.default_rng(5)
+    rot = HeadPose.from_euler(25.0, -10.0, 5.0).rotation
+    centre = np.array([8.0, -5.0, -420.0])
+    truth = (12.0, -6.0)
+    g = gaze_directions(*truth) @ rot.T
+    c, t, a, b, _ = iris_ellipses(camera, centre, g[None])
+    pc, _, pa, pb, _ = iris_ellipses(camera, centre, g[None], PUPIL_DEPTH_MM, PUPIL_RADIUS_MM)
+    mid = camera.project(centre[None])[0]
+    s = np.linspace(-1.0, 1.0, 11)
+    upper = np.column_stack([mid[0] + 26 * s, mid[1] - 11 * (1 - s**2) + 1])
+    lower = np.column_stack([mid[0] + 26 * s, mid[1] + 8 * (1 - s**2) + 1])
+    h, w = 480, 640
+    y, x = np.mgrid[0:h, 0:w] + 0.5
+    every = np.column_stack([x.ravel(), y.ravel()])
+    near = np.abs(every - mid).max(axis=1) < 40
+    luma = np.full(h * w, 0.8)
+    iris = iris_cover(every[near], c, t, a, b, 0.6)[0]
+    pupil = iris_cover(every[near], pc, t, pa, pb, 0.6)[0]
+    luma[near] += 0.002 * (every[near, 0] - mid[0]) - 0.5 * iris - 0.2 * pupil
+    frame = np.clip(luma.reshape(h, w, 1) + rng.normal(0, 0.01, (h, w, 1)), 0, 1).repeat(3, 2)
+    samples = eye_samples(frame, upper, lower, float(a[0]), GazeSettings())
+    assert samples.n > 300
+    cam = (camera.focal_px, camera.cx, camera.cy)
+    for yaw, pitch in (_grid((0.0, 0.0), 6.0, 45.0), _grid(truth, 0.5, 1.0)):
+        for with_pupil in (False, True):
+            want, wcoef, use = _plain_rss(samples, camera, rot, centre, yaw, pitch, 0.6,
+                                          with_pupil)  # fmt: skip
+            got, gcoef, base = _gaze_rss(*samples.by_x(), samples.proj, centre, rot, *cam,
+                                         yaw, pitch, 0.6, with_pupil)  # fmt: skip
+            assert base == pytest.approx(samples.base_rss(), rel=1e-12)
+            np.testing.assert_array_equal(np.isfinite(got), np.isfinite(want))
+            ok = np.isfinite(want)
+            assert 0 < ok.sum() < len(yaw) or len(yaw) < 30
+            np.testing.assert_allclose(got[ok], want[ok], rtol=0, atol=1e-10 * base)
+            np.testing.assert_allclose(gcoef[use], wcoef[use], rtol=1e-9, atol=1e-12)
+            assert np.argmin(got) == np.argmin(want)
+            if len(yaw) < 30:  # (the truth with the pupil's term, the image's model)
+                k = int(np.argmin(got))
+                tol = 0.0 if with_pupil else 0.5
+                assert abs(yaw[k] - truth[0]) <= tol and abs(pitch[k] - truth[1]) <= tol
+                # (the iris' darkening; without the pupil's term it takes some of the pupil's)
+                assert gcoef[k] == pytest.approx(-0.5, abs=0.02) if with_pupil else gcoef[k] < -0.5
+
+
+def test_the_compiled_samples_are_the_numpy_ones():
+    """The opening's samples compiled (pixels kept, brightness, the fixed columns, the
+    inverse normal matrix; and their checkerboard), the lids' aperture and the contrasts'
+    90th percentile against their plain-numpy references."""
+    from myoface.analysis.gaze import (
+        EyeSamples,
+        _aperture_mm,
+        _eye_samples_numpy,
+        _percentile90,
+        eye_samples,
+    )
+
+    rng = np.random.default_rng(7)
+    t = np.linspace(0.0, np.pi, 9)
+    upper = np.column_stack([40 + 22 * np.cos(t[::-1]), 30 - 9 * np.sin(t[::-1])])
+    lower = np.column_stack([40 + 22 * np.cos(t[::-1]), 30 + 6 * np.sin(t[::-1])])
+    for frame in (
+        rng.integers(0, 256, (60, 90, 3), dtype=np.uint8),
+        rng.uniform(0, 1, (60, 90, 4)),
+    ):
+        got = eye_samples(frame, upper, lower, 8.0, GazeSettings())
+        want = _eye_samples_numpy(frame, upper, lower, 8.0, GazeSettings())
+        assert got.n == want.n > 200
+        np.testing.assert_array_equal(got.px, want.px)
+        for a, b in ((got.bright, want.bright), (got.fixed, want.fixed), (got.proj, want.proj)):
+            np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
+        keep = (np.floor(want.px).astype(np.int64).sum(axis=1) % 2) == 0
+        ref = EyeSamples(want.px[keep], want.bright[keep], want.fixed[keep],
+                         np.linalg.pinv(want.fixed[keep].T @ want.fixed[keep]))  # fmt: skip
+        board = got.checkerboard()
+        np.testing.assert_array_equal(board.px, ref.px)
+        np.testing.assert_allclose(board.proj, ref.proj, rtol=1e-9, atol=1e-12)
+    v = rng.normal(size=(30, 3))
+    up, lo = np.arange(0, 8), np.arange(8, 15)
+    xs = np.linspace(0.2, 0.8, 7)
+
+    def along(chain):
+        p = v[chain]
+        s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))]
+        return np.column_stack([np.interp(xs, s / s[-1], p[:, k]) for k in range(3)])
+
+    want = np.linalg.norm(along(up) - along(lo), axis=1).mean()
+    assert _aperture_mm(v, up, lo) == pytest.approx(want, rel=1e-12)
+    for n in (1, 2, 3, 7, 10, 59, 60):
+        vals = list(rng.uniform(0, 1, n))
+        assert _percentile90(vals) == pytest.approx(np.percentile(vals, 90), rel=1e-14)
+
+
 def test_the_pupil_is_read_where_the_iris_is_dark_in_its_middle():
     """Brightness made by the model itself (a sclera, an iris, and a pupil darker still): the
     candidate at the truth explains it with the pupil's term; where the pupil is as bright as
