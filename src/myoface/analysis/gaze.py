@@ -739,7 +739,7 @@ def _gaze_rss(xs, ys, bright, fx, proj, centre, rot, f, cx, cy, yaw, pitch, edge
 # ------------------------------------------------------------------ the opening's pixels
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _opening_pixels(x0, y0, x1, y1, poly, upper, lower):  # pragma: no cover
     """The pixels (col, row) of the box ``x0..x1, y0..y1`` whose centres (col + 0.5, row +
     0.5) lie inside the closed polygon ``poly`` (M, 2) (even-odd rule), as (N, 2) centres,
@@ -772,7 +772,7 @@ def _opening_pixels(x0, y0, x1, y1, poly, upper, lower):  # pragma: no cover
     return px[:n], du[:n], dl[:n]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _polyline_distance(x, y, chain):  # pragma: no cover
     best = np.inf
     for i in range(chain.shape[0] - 1):
@@ -810,6 +810,20 @@ def _chain_distance(px, chain) -> np.ndarray:
     return np.sqrt(((p - q) ** 2).sum(-1)).min(axis=1)
 
 
+@numba.njit(cache=True)
+def _sorted_by_x(px, bright, fixed):  # pragma: no cover
+    """The pixels' x, y, brightness and fixed columns (m, N), in the (stable) order of x."""
+    o = np.argsort(px[:, 0], kind="mergesort")
+    n, m = fixed.shape
+    xs, ys, b, f = np.empty(n), np.empty(n), np.empty(n), np.empty((m, n))
+    for i in range(n):
+        k = o[i]
+        xs[i], ys[i], b[i] = px[k, 0], px[k, 1], bright[k]
+        for j in range(m):
+            f[j, i] = fixed[k, j]
+    return xs, ys, b, f
+
+
 @dataclass
 class EyeSamples:
     """The pixels read of one eye's opening: centres ``px`` (N, 2) (x, y) px, brightness (N,)
@@ -826,9 +840,7 @@ class EyeSamples:
     def by_x(self) -> tuple:
         """The pixels' x (N,), y (N,), brightness (N,) and fixed columns (m, N), sorted by x."""
         if self._by_x is None:
-            o = np.argsort(self.px[:, 0], kind="stable")
-            self._by_x = tuple(np.ascontiguousarray(a) for a in
-                               (self.px[o, 0], self.px[o, 1], self.bright[o], self.fixed[o].T))  # fmt: skip
+            self._by_x = _sorted_by_x(self.px, self.bright, self.fixed)
         return self._by_x
 
     @property
@@ -963,7 +975,7 @@ def _eye_samples_numpy(frame, upper, lower, iris_px: float, settings: GazeSettin
 # ------------------------------------------------------------------ the eye's socket, learned
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _bilinear(img, r, c):  # pragma: no cover
     """``img`` (H, W) at (row ``r``, column ``c``), NaN outside or where a corner is NaN."""
     h, w = img.shape
@@ -985,7 +997,7 @@ def _bilinear_at(img, rows, cols):  # pragma: no cover
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _project_head(points, rot, trans, f, cx, cy):  # pragma: no cover
     """Head-frame points (N, 3) mm through the pose (``rot``, ``trans``) and the pinhole
     camera (``f``, ``cx``, ``cy``) into the image (N, 2) px: ``camera.project(pose.apply(.))``."""
@@ -1014,7 +1026,7 @@ def _luma_crop(img, x0, y0, x1, y1, luma, scale):  # pragma: no cover
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _sample_patch(img, x0, y0, uv, valid):  # pragma: no cover
     """:func:`_bilinear` of the crop ``img`` (its pixel (0, 0) the frame's (``x0``, ``y0``))
     at the image points ``uv`` (N, 2) (pixel centres at + 0.5), NaN where not ``valid``."""
@@ -1025,7 +1037,7 @@ def _sample_patch(img, x0, y0, uv, valid):  # pragma: no cover
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _align_socket(img, x0, y0, points, rot, trans, f, cx, cy, tmpl, gx, gy, step_mm,
                   iris_c, iris_r, iterations, limit_mm, robust, prior_mm):  # pragma: no cover  # fmt: skip
     """The shift ``d`` (2,) mm (head frame x, y) by which the socket's grid ``points`` (N, 3),
@@ -1234,8 +1246,8 @@ class EyeSocket:
     def learn(self, patch, usable) -> None:
         """Add a frame's patch (its usable pixels) to the template."""
         ok = usable & np.isfinite(patch)
-        self._sum[ok] += patch[ok]
-        self._count[ok] += 1
+        np.add(self._sum, patch, out=self._sum, where=ok)
+        self._count += ok
         self._template = None
 
     def offset(self, frame, camera, pose, iris_centre, iris_radius_px) -> np.ndarray | None:
