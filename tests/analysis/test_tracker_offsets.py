@@ -165,3 +165,49 @@ def test_the_default_face_takes_the_table_from_the_calibration_frame(fm):
                 assert inside.sum() > 5000 and diff < 25, (inside.sum(), diff)
         finally:
             tracker.close()
+
+
+class ChinSlider(TrackerOffsets):
+    """A detector's table whose offsets are known exactly: the chin's points (the lowest
+    tenth of the face) read lower by 0.25 mm per degree of the view's azimuth, as MediaPipe's
+    chin slides along the outline of a turned head (no renders: :meth:`offsets` is the
+    detector's offset itself)."""
+
+    def __init__(self, fm):
+        skin = fm.skin_vertices()
+        super().__init__(None, skin, CAMERA)
+        self.chin = skin[:, 1] < np.percentile(skin[:, 1], 10)
+
+    def offsets(self, pose):
+        out = np.zeros_like(self.shape)
+        out[self.chin, 1] = -0.25 * abs(view_angles(pose)[0])
+        return out
+
+
+def test_the_neutral_frame_is_chosen_on_corrected_points(fm):
+    """The calibration scores each frame's expression on the points it will fit (the
+    detector's offsets at that frame's view taken off): a neutral face turned 24 deg, whose
+    detector lowers the chin 6 mm, is as neutral as the frontal frames after it, so the
+    earliest frame calibrates (scored on the raw points, its chin read as an expression and
+    a later frame chosen; issue 30: on the head-motion renders the neutral was then taken at
+    the wrong view, and the chin raiser read 0.44 at rest)."""
+    import myoface.analysis.modelfit as modelfit
+
+    skin = fm.skin_vertices()
+    table = ChinSlider(fm)
+    poses = [HeadPose.from_euler(24.0, 0.0, 0.0, (0.0, 0.0, -500.0))]
+    poses += [HeadPose.from_euler(0.0, 0.0, 0.0, (0.0, 0.0, -500.0))] * 4
+    frames = [CAMERA.project(q.apply(skin + table.offsets(q))) for q in poses]
+    chosen = {}
+    for corrected in (False, True):
+        old = modelfit.SCORE_CORRECTED
+        modelfit.SCORE_CORRECTED = corrected
+        try:
+            fit = ModelFit(fm, CAMERA)
+            fit.set_offsets(table)
+            cal = fit.calibrate(frames)
+        finally:
+            modelfit.SCORE_CORRECTED = old
+        chosen[corrected] = (cal.index, np.round(cal.scores, 2).tolist())
+    assert chosen[True][0] == 0, chosen
+    assert chosen[False][0] != 0, chosen
