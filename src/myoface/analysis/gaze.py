@@ -78,9 +78,11 @@ What it costs: the candidates' residuals are one compiled pass (:func:`_gaze_rss
 candidate's ellipses, whether it reaches the opening, and the sums over the pixels within its
 iris' reach, run as vectors), and the opening's samples, the socket's patch and its alignment
 are compiled too. Replayed on the benchmark's two recorded clips (2026-12-02, CPU time, the
-median of 3 runs against the previous code in the same process): 6.1 -> 2.6 ms a frame, the
+median of 3 runs against the previous code in the same process): 6.0 -> 2.5 ms a frame, the
 readings and states identical; ``myoface bench --only analysis.gaze_error_deg`` the same
-4.643 deg, every reading of its detail the same.
+4.643 deg, every reading of its detail the same. In the analysis benchmark's pass over
+single_face.mp4 (the tracker's thread CPU in the reader, two runs each) 3.7-3.9 -> 1.4-1.5 ms
+a frame, the pass 17.9-18.4 -> 15.3-16.2 ms; its gaze columns identical.
 """
 
 from __future__ import annotations
