@@ -12,6 +12,7 @@ import pytest
 from myoface.analysis.camera import HeadPose, PinholeCamera, rotmat
 from myoface.analysis.landmarks import TrackerOffsets, view_angles, view_rotation
 from myoface.analysis.modelfit import ModelFit
+from myoface.analysis.weights import FitSettings, offset_spread_weights
 from tests.conftest import needs_mediapipe
 
 CAMERA = PinholeCamera.for_image(640, 480, 40.0)
@@ -76,7 +77,9 @@ def test_the_fit_recovers_the_pose_a_biased_detector_misreads(fm):
     for pose in poses:
         errs = {}
         for with_table in (False, True):
-            fit = ModelFit(fm, CAMERA)
+            # (without the spread's weights, which render the views of a turning head:
+            # test_the_spread_weighs_the_points_whose_offsets_move_with_the_view)
+            fit = ModelFit(fm, CAMERA, FitSettings(offset_spread=0.0))
             reader = SyntheticReader()
             if with_table:
                 fit.set_offsets(TrackerOffsets(reader, fit.neutral, CAMERA))
@@ -203,7 +206,8 @@ def test_the_neutral_frame_is_chosen_on_corrected_points(fm):
         old = modelfit.SCORE_CORRECTED
         modelfit.SCORE_CORRECTED = corrected
         try:
-            fit = ModelFit(fm, CAMERA)
+            # (the spread's weights off: they weigh the sliding chin less, which hides it)
+            fit = ModelFit(fm, CAMERA, FitSettings(offset_spread=0.0))
             fit.set_offsets(table)
             cal = fit.calibrate(frames)
         finally:
@@ -211,3 +215,36 @@ def test_the_neutral_frame_is_chosen_on_corrected_points(fm):
         chosen[corrected] = (cal.index, np.round(cal.scores, 2).tolist())
     assert chosen[True][0] == 0, chosen
     assert chosen[False][0] != 0, chosen
+
+
+def test_the_spread_weighs_the_points_whose_offsets_move_with_the_view(fm):
+    """TrackerOffsets.spread: zero where the detector's offset does not change with the view,
+    the offset's RMS about its mean over the views where it does (the chin of
+    :class:`ChinSlider`: 0.25 mm a degree of azimuth, over -30..30 deg by 10: 0.25 * 20 =
+    5 mm RMS); the fit's weights (FitSettings.offset_spread) fall there as
+    offset_spread_weights says and nowhere else."""
+    from myoface.analysis.landmarks import OFFSET_AZIMUTHS_DEG
+
+    table = ChinSlider(fm)
+    pose = HeadPose.from_euler(0.0, 0.0, 0.0, (0.0, 0.0, -500.0))
+    spread = table.spread(pose)
+    az = OFFSET_AZIMUTHS_DEG[np.abs(OFFSET_AZIMUTHS_DEG) <= 30.0]
+    expect = 0.25 * np.std(np.abs(az))
+    # (to 15 %: the views are placed about the face's centre, and their azimuth, seen from
+    # the head frame's origin, is a little off the grid's)
+    np.testing.assert_allclose(spread[table.chin], expect, rtol=0.15)
+    np.testing.assert_allclose(spread[table.chin], spread[table.chin][0])
+    np.testing.assert_array_equal(spread[~table.chin], 0.0)
+    assert expect > 1.0  # (the test means something: the chin's weight well below 1)
+    skin = fm.skin_vertices()
+    w = {}
+    for scale in (0.0, 1.0):
+        fit = ModelFit(fm, CAMERA, FitSettings(offset_spread=scale))
+        fit.set_offsets(table)
+        w[scale] = fit._weights(pose, skin)
+    ratio = w[1.0] / w[0.0]
+    np.testing.assert_allclose(ratio[~table.chin], 1.0)
+    np.testing.assert_allclose(
+        ratio[table.chin], offset_spread_weights(spread[table.chin], 1.0, 1.0)
+    )
+    assert (ratio[table.chin] < 0.2).all()

@@ -137,6 +137,11 @@ def _apply_similarity(s, ms, md, pts):
 #: right) and elevation (up and down), degrees, of the camera seen from the head
 OFFSET_AZIMUTHS_DEG = np.arange(-60.0, 60.1, 10.0)
 OFFSET_ELEVATIONS_DEG = np.arange(-40.0, 40.1, 10.0)
+#: the views over which :meth:`TrackerOffsets.spread` measures how far each point's offset
+#: moves: a head turned as far as a person at a webcam turns it (the head-motion benchmark's
+#: yaw +-30 and pitch +-15 deg)
+SPREAD_AZIMUTH_DEG = 30.0
+SPREAD_ELEVATION_DEG = 20.0
 
 
 def view_angles(pose) -> tuple[float, float]:
@@ -258,6 +263,30 @@ class TrackerOffsets:
             if w > 1e-9:
                 out += w * self._cell(i0 + di, j0 + dj)
         return out
+
+    def spread(self, pose, azimuth_deg: float = SPREAD_AZIMUTH_DEG,
+               elevation_deg: float = SPREAD_ELEVATION_DEG) -> np.ndarray:  # fmt: skip
+        """(V,) mm: how far the detector's offset at each point moves as the view changes,
+        the RMS about their mean of :meth:`offsets` over the table's views within
+        ``azimuth_deg`` and ``elevation_deg`` of frontal (rendered now where not yet; 35
+        views by default, ~0.6 s at 640x480), at ``pose``'s distance. A point whose offset
+        moves far with the view (the jaw line and the chin, which MediaPipe slides along the
+        face's outline as the head turns) is one whose correction is only as good as the
+        table at the frame's view (its grid, its interpolation, the one read per cell, and
+        the camera the table does not see): :func:`~myoface.analysis.weights.offset_spread_weights`."""
+        if self.depth_mm is None:
+            self.depth_mm = float(np.linalg.norm(pose.translation_mm))
+        from myoface.analysis.camera import HeadPose
+
+        centre = self.shape.mean(axis=0)
+        offs = []
+        for az in self.azimuths[np.abs(self.azimuths) <= azimuth_deg + 1e-9]:
+            for el in self.elevations[np.abs(self.elevations) <= elevation_deg + 1e-9]:
+                rot = view_rotation(az, el)
+                view = HeadPose(rot, np.array([0.0, 0.0, -self.depth_mm]) - rot @ centre)
+                offs.append(self.offsets(view))
+        offs = np.asarray(offs)
+        return np.sqrt(((offs - offs.mean(axis=0)) ** 2).sum(axis=2).mean(axis=0))
 
     def correct(self, points, pose, shape) -> np.ndarray:
         """``points`` (V, 3; x, y px) with the detector's offsets at ``pose`` taken off x, y:

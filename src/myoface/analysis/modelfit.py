@@ -83,6 +83,7 @@ from myoface.analysis.weights import (
     laplacian,
     lid_gains,
     model_error_weights,
+    offset_spread_weights,
 )
 from myoface.errors import MyofaceValueError
 from myoface.face.personal import fit_similarity_3d
@@ -232,6 +233,7 @@ class ModelFit:
         #: the detector's offsets on this face by view (:meth:`set_offsets`), taken off the
         #: points of every frame (None: the points as given)
         self.offsets = None
+        self._spread_w = None  # (:meth:`_offset_weights`)
         #: tissue relaxes that did not converge (see :meth:`_relax`)
         self.unconverged_relaxes = 0
         #: where the time goes (for the benchmark's breakdown): the fits' thread CPU (s) and
@@ -505,6 +507,7 @@ class ModelFit:
         before :meth:`calibrate`, so that the calibration reads corrected points too. Not
         with analysis by synthesis (which measures the offsets at each frame's estimate)."""
         self.offsets = offsets
+        self._spread_w = None
 
     def _corrected(self, p, pose: HeadPose | None = None) -> np.ndarray:
         """``p`` with :attr:`offsets` taken off at ``pose`` (the previous frame's; without
@@ -555,7 +558,20 @@ class ModelFit:
         p = pose.apply(shape)
         view = -p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-9)
         cos = (n * view).sum(1)
-        return self.base_weights * np.clip(cos / 0.3, 0.05, 1.0)
+        return self.base_weights * np.clip(cos / 0.3, 0.05, 1.0) * self._offset_weights(pose)
+
+    def _offset_weights(self, pose: HeadPose):
+        """The weights (V,) of the detector's offsets' own error
+        (:attr:`FitSettings.offset_spread`, :func:`offset_spread_weights`), measured once,
+        at the distance of the first pose they are asked at; 1 without offsets."""
+        s = self.settings
+        if self.offsets is None or not s.offset_spread > 0:
+            return 1.0
+        if self._spread_w is None:
+            self._spread_w = offset_spread_weights(
+                self.offsets.spread(pose), s.offset_spread, s.landmark_sigma_mm
+            )
+        return self._spread_w
 
     def landmark_term(self, points, weights) -> LandmarkTerm:
         """The landmark term of ``points`` (V, 3) with per-vertex ``weights`` (V,)."""

@@ -152,6 +152,39 @@ class FitSettings:
     #: then the calibration done again with the corrected points. Off: measured 2026-12-02
     #: it does not help on the real video (see the README's 3-D fit section).
     tracker_offsets_frame: bool = False
+    #: with the detector's offsets taken off (:attr:`tracker_offsets`): a point's landmark
+    #: variance grows by ``(offset_spread * spread)^2``, ``spread`` (mm) how far the detector's
+    #: offset at that point moves across the views of a turning head
+    #: (:meth:`~myoface.analysis.landmarks.TrackerOffsets.spread`;
+    #: :func:`offset_spread_weights`): the correction at a frame's view is only as good as
+    #: the table there, and where the offset moves far with the view (on the head-motion
+    #: benchmark's face, RMS over +-30 deg of yaw and +-20 of pitch: the jaw line 3.5-5 mm,
+    #: the forehead's top 3.2-3.5, the nose's tip 2.8, the chin 1.9, the mouth's corners 1.6,
+    #: the eyes' inner corners 1.3; median 1.7, mean weight 0.26) what it misses is large.
+    #: Measured (issue 30, 2026-12-02) on the expression benchmark's
+    #: 356-frame synthetic clip (head moving, degraded renders, MediaPipe): after correction,
+    #: the points' residual to the true vertices at rest scatters 1.2 mm (median) to 3.3 mm
+    #: (the jaw line, the chin) and follows the pitch by up to 0.2 mm a degree; its spread
+    #: about its mean correlates 0.53 with the table's spread. The AUs read at rest (means
+    #: over the rest frames; 0 / 0.3 / 0.6 / 1 / 1.5 / 2.5): AU17 0.17 / 0.18 / 0.15 / 0.10 /
+    #: 0.05 / <0.05, AU23 0.25 / 0.22 / 0.18 / 0.11 / 0.08 / <0.05, AU4 0.13 / 0.12 / 0.09 /
+    #: 0.07 / <0.05; median contraction RMSE 0.178 / 0.159 / 0.154 / 0.140 / 0.138 / 0.138,
+    #: worst (12 muscles + jaw) 0.283 / 0.281 / 0.277 / 0.279 / 0.296 / 0.311, skin 1.30 /
+    #: 1.26 / 1.22 / 1.19 / 1.19 / 1.21 mm. 1: the spread counted one for one as the
+    #: correction's own error (not tuned past it: beyond, the expressions' worst muscle
+    #: loses). Weighing each point by its visibility instead (its normal's cosine to the
+    #: view, n.v) is not the lever: the residual after correction is nearly flat in n.v
+    #: (1.7 mm RMS at n.v > 0.9, 1.9 at 0.2-0.3, 2.2 behind the outline), and giving the fit
+    #: the true positions of every point with n.v < 0.3 left AU17 at 0.13 and AU23 at 0.23.
+    #: Most of the gain is the landmarks weighing less as a whole (their residual after
+    #: the correction is ~1.8 mm RMS, against landmark_sigma_mm's 1): every point weighed
+    #: 0.26 (the spread weights' mean) instead gave AU17 0.11, AU23 0.16, AU4 0.09, median
+    #: 0.148, skin 1.24 mm, against the spread weights' (as implemented) 0.13, 0.14, 0.11,
+    #: 0.142 and 1.19 mm; the spread weighs only where the offsets are taken off (a
+    #: textured model), so the default face on a real video is unchanged.
+    #: A finer table (5 or 2.5 deg) did not help either (AU17 0.21, 0.30: more cells, each
+    #: one read of MediaPipe, more of its scatter).
+    offset_spread: float = 1.0
 
 
 # ------------------------------------------------------------------ the model's structure
@@ -165,6 +198,17 @@ def landmark_weights(face, oval_weight: float = FitSettings.oval_weight) -> np.n
     if loops:
         w[loops[0]] = oval_weight
     return w
+
+
+def offset_spread_weights(spread_mm, scale: float = FitSettings.offset_spread,
+                          sigma_mm: float = FitSettings.landmark_sigma_mm) -> np.ndarray:  # fmt: skip
+    """Per-vertex weights (V,) for the detector's offsets' own error
+    (:attr:`FitSettings.offset_spread`): ``1 / (1 + (scale * spread_mm / sigma_mm)^2)``, the
+    landmark's variance ``sigma_mm^2`` grown by ``(scale * spread_mm)^2`` (``spread_mm``
+    (V,): :meth:`~myoface.analysis.landmarks.TrackerOffsets.spread`)."""
+    if not scale >= 0:
+        raise MyofaceValueError(f"offset_spread must be >= 0; got {scale}")
+    return 1.0 / (1.0 + (scale * np.asarray(spread_mm, dtype=np.float64) / sigma_mm) ** 2)
 
 
 def model_error_weights(response, model_error: float = FitSettings.model_error,
