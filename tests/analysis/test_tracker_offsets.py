@@ -218,11 +218,12 @@ def test_the_neutral_frame_is_chosen_on_corrected_points(fm):
 
 
 def test_the_spread_weighs_the_points_whose_offsets_move_with_the_view(fm):
-    """TrackerOffsets.spread: zero where the detector's offset does not change with the view,
-    the offset's RMS about its mean over the views where it does (the chin of
-    :class:`ChinSlider`: 0.25 mm a degree of azimuth, over -30..30 deg by 10: 0.25 * 20 =
-    5 mm RMS); the fit's weights (FitSettings.offset_spread) fall there as
-    offset_spread_weights says and nowhere else."""
+    """TrackerOffsets.spread: the RMS over the views of a turning head of each point's
+    offset less its rigid part. :class:`ChinSlider`'s chin (0.25 mm a degree of azimuth, over
+    -30..30 deg by 10: 0.25 * std(|azimuth|) = 2.4 mm RMS, of which the face's best rigid
+    motion takes a little) spreads nearly that far, the rest of the face, which the detector
+    reads where it is, hardly (only what the rigid fit spreads over it); the fit's weights
+    (FitSettings.offset_spread) are offset_spread_weights of the spread."""
     from myoface.analysis.landmarks import OFFSET_AZIMUTHS_DEG
 
     table = ChinSlider(fm)
@@ -230,12 +231,10 @@ def test_the_spread_weighs_the_points_whose_offsets_move_with_the_view(fm):
     spread = table.spread(pose)
     az = OFFSET_AZIMUTHS_DEG[np.abs(OFFSET_AZIMUTHS_DEG) <= 30.0]
     expect = 0.25 * np.std(np.abs(az))
-    # (to 15 %: the views are placed about the face's centre, and their azimuth, seen from
-    # the head frame's origin, is a little off the grid's)
-    np.testing.assert_allclose(spread[table.chin], expect, rtol=0.15)
-    np.testing.assert_allclose(spread[table.chin], spread[table.chin][0])
-    np.testing.assert_array_equal(spread[~table.chin], 0.0)
-    assert expect > 1.0  # (the test means something: the chin's weight well below 1)
+    assert expect > 2.0  # (the test means something: the chin's weight well below 1)
+    assert (spread[table.chin] > 0.8 * expect).all(), spread[table.chin]
+    assert (spread[table.chin] < 1.05 * expect).all(), spread[table.chin]
+    assert spread[~table.chin].max() < 0.15 * expect, spread[~table.chin].max()
     skin = fm.skin_vertices()
     w = {}
     for scale in (0.0, 1.0):
@@ -243,8 +242,5 @@ def test_the_spread_weighs_the_points_whose_offsets_move_with_the_view(fm):
         fit.set_offsets(table)
         w[scale] = fit._weights(pose, skin)
     ratio = w[1.0] / w[0.0]
-    np.testing.assert_allclose(ratio[~table.chin], 1.0)
-    np.testing.assert_allclose(
-        ratio[table.chin], offset_spread_weights(spread[table.chin], 1.0, 1.0)
-    )
-    assert (ratio[table.chin] < 0.2).all()
+    np.testing.assert_allclose(ratio, offset_spread_weights(spread, 1.0, 1.0))
+    assert (ratio[table.chin] < 0.25).all() and (ratio[~table.chin] > 0.9).all()

@@ -267,7 +267,8 @@ class TrackerOffsets:
     def spread(self, pose, azimuth_deg: float = SPREAD_AZIMUTH_DEG,
                elevation_deg: float = SPREAD_ELEVATION_DEG) -> np.ndarray:  # fmt: skip
         """(V,) mm: how far the detector's offset at each point moves as the view changes,
-        the RMS about their mean of :meth:`offsets` over the table's views within
+        the RMS about their mean of :meth:`offsets`, each less its rigid part (the small
+        rotation and translation of the face that fits it best), over the table's views within
         ``azimuth_deg`` and ``elevation_deg`` of frontal (rendered now where not yet; 35
         views by default, ~0.6 s at 640x480), at ``pose``'s distance. A point whose offset
         moves far with the view (the jaw line and the chin, which MediaPipe slides along the
@@ -279,12 +280,24 @@ class TrackerOffsets:
         from myoface.analysis.camera import HeadPose
 
         centre = self.shape.mean(axis=0)
+        # a small rigid motion of the face (rotation w, translation t): w x X + t = A (w, t)
+        x = self.shape - centre
+        a = np.zeros((len(x), 3, 6))
+        a[:, :, 3:] = np.eye(3)
+        a[:, 0, 1], a[:, 0, 2] = x[:, 2], -x[:, 1]
+        a[:, 1, 0], a[:, 1, 2] = -x[:, 2], x[:, 0]
+        a[:, 2, 0], a[:, 2, 1] = x[:, 1], -x[:, 0]
+        a = a.reshape(-1, 6)
         offs = []
         for az in self.azimuths[np.abs(self.azimuths) <= azimuth_deg + 1e-9]:
             for el in self.elevations[np.abs(self.elevations) <= elevation_deg + 1e-9]:
                 rot = view_rotation(az, el)
                 view = HeadPose(rot, np.array([0.0, 0.0, -self.depth_mm]) - rot @ centre)
-                offs.append(self.offsets(view))
+                off = self.offsets(view)
+                # less its rigid part (the face read turned or shifted as a whole: the pose
+                # takes it, it is no point's own)
+                rigid = a @ np.linalg.lstsq(a, off.ravel(), rcond=None)[0]
+                offs.append(off - rigid.reshape(-1, 3))
         offs = np.asarray(offs)
         return np.sqrt(((offs - offs.mean(axis=0)) ** 2).sum(axis=2).mean(axis=0))
 

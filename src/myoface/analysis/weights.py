@@ -154,36 +154,37 @@ class FitSettings:
     tracker_offsets_frame: bool = False
     #: with the detector's offsets taken off (:attr:`tracker_offsets`): a point's landmark
     #: variance grows by ``(offset_spread * spread)^2``, ``spread`` (mm) how far the detector's
-    #: offset at that point moves across the views of a turning head
-    #: (:meth:`~myoface.analysis.landmarks.TrackerOffsets.spread`;
+    #: offset at that point, less the face's rigid part, moves across the views of a turning
+    #: head (:meth:`~myoface.analysis.landmarks.TrackerOffsets.spread`;
     #: :func:`offset_spread_weights`): the correction at a frame's view is only as good as
-    #: the table there, and where the offset moves far with the view (on the head-motion
-    #: benchmark's face, RMS over +-30 deg of yaw and +-20 of pitch: the jaw line 3.5-5 mm,
-    #: the forehead's top 3.2-3.5, the nose's tip 2.8, the chin 1.9, the mouth's corners 1.6,
-    #: the eyes' inner corners 1.3; median 1.7, mean weight 0.26) what it misses is large.
-    #: Measured (issue 30, 2026-12-02) on the expression benchmark's
-    #: 356-frame synthetic clip (head moving, degraded renders, MediaPipe): after correction,
-    #: the points' residual to the true vertices at rest scatters 1.2 mm (median) to 3.3 mm
-    #: (the jaw line, the chin) and follows the pitch by up to 0.2 mm a degree; its spread
-    #: about its mean correlates 0.53 with the table's spread. The AUs read at rest (means
-    #: over the rest frames; 0 / 0.3 / 0.6 / 1 / 1.5 / 2.5): AU17 0.17 / 0.18 / 0.15 / 0.10 /
-    #: 0.05 / <0.05, AU23 0.25 / 0.22 / 0.18 / 0.11 / 0.08 / <0.05, AU4 0.13 / 0.12 / 0.09 /
-    #: 0.07 / <0.05; median contraction RMSE 0.178 / 0.159 / 0.154 / 0.140 / 0.138 / 0.138,
-    #: worst (12 muscles + jaw) 0.283 / 0.281 / 0.277 / 0.279 / 0.296 / 0.311, skin 1.30 /
-    #: 1.26 / 1.22 / 1.19 / 1.19 / 1.21 mm. 1: the spread counted one for one as the
-    #: correction's own error (not tuned past it: beyond, the expressions' worst muscle
-    #: loses). Weighing each point by its visibility instead (its normal's cosine to the
-    #: view, n.v) is not the lever: the residual after correction is nearly flat in n.v
-    #: (1.7 mm RMS at n.v > 0.9, 1.9 at 0.2-0.3, 2.2 behind the outline), and giving the fit
-    #: the true positions of every point with n.v < 0.3 left AU17 at 0.13 and AU23 at 0.23.
-    #: Most of the gain is the landmarks weighing less as a whole (their residual after
+    #: the table there (its grid, its interpolation, one read of MediaPipe a cell, and the
+    #: camera it does not see), and where the offset moves far with the view (the jaw line,
+    #: the chin, the forehead's top row) what it misses is large. 1: the spread counted one for
+    #: one as the correction's own error (not tuned past it).
+    #:
+    #: Measured (issue 30, 2026-12-02, at the commit's muscles; degraded renders, MediaPipe).
+    #: After the correction, the points' residual to the true vertices at rest scatters 1.2 mm
+    #: (median over points) to 3.3 mm (the jaw line, the chin) and follows the pitch by up to
+    #: 0.2 mm a degree; its spread correlates 0.53 with the table's. The expression
+    #: benchmark's synthetic clip (356 frames, head moving), 0 / 1: AUs read at rest (means
+    #: over the rest frames) AU17 0.17 / 0.085, AU23 0.25 / 0.17, AU4 0.13 / 0.12, AU10 0.08 /
+    #: <0.05, AU12 0.10 / 0.06, AU5 0.17 / <0.05; contraction RMSE median 0.178 / 0.149, worst
+    #: (12 muscles + jaw) 0.283 / 0.277; skin 1.30 / 1.20 mm. analysis.headmotion (90
+    #: frames): head moving, worst RMSE 0.390 / 0.289, median 0.168 / 0.152, worst
+    #: correlation -0.22 / -0.21, skin 1.34 / 1.32 mm, head 1.80 / 1.92 deg; head still,
+    #: worst 0.212 / 0.226, median 0.105 / 0.107, worst correlation 0.73 / 0.57 (the inner
+    #: brows': the forehead's top row weighs less), head 1.40 / 1.54 deg. The spread with the
+    #: rigid part left in weighed the forehead less still (head still, worst correlation
+    #: 0.41). Much of the gain is the landmarks weighing less as a whole (their residual after
     #: the correction is ~1.8 mm RMS, against landmark_sigma_mm's 1): every point weighed
-    #: 0.26 (the spread weights' mean) instead gave AU17 0.11, AU23 0.16, AU4 0.09, median
-    #: 0.148, skin 1.24 mm, against the spread weights' (as implemented) 0.13, 0.14, 0.11,
-    #: 0.142 and 1.19 mm; the spread weighs only where the offsets are taken off (a
-    #: textured model), so the default face on a real video is unchanged.
-    #: A finer table (5 or 2.5 deg) did not help either (AU17 0.21, 0.30: more cells, each
-    #: one read of MediaPipe, more of its scatter).
+    #: 0.26 (the spread weights' mean) gave on the clip AU17 0.11, AU23 0.16, median 0.148,
+    #: skin 1.24 mm. The spread weighs only where the offsets are taken off (a textured
+    #: model), so the default face on a real video is unchanged. Weighing each point by its
+    #: visibility (its normal's cosine to the view, n.v) is not the lever: the residual after
+    #: the correction is nearly flat in n.v (1.7 mm RMS at n.v > 0.9, 1.9 at 0.2-0.3, 2.2
+    #: behind the outline), and giving the fit the true positions of every point with n.v <
+    #: 0.3 left AU17 at 0.13 and AU23 at 0.23. A finer table (5 or 2.5 deg) did not help
+    #: either (AU17 0.21, 0.30: more cells, each one read of MediaPipe, more of its scatter).
     offset_spread: float = 1.0
 
 
