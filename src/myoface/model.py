@@ -60,6 +60,8 @@ from myoface.tissue import (
     step_rk2,
 )
 from myoface.tissue import relax as relax_tissue
+from myoface.tissue.assemble import bind_layer
+from myoface.tissue.model import LayerMaterial
 
 #: fascia nodes whose largest unit-contraction displacement is below this (mm) stay free
 DRIVEN_MIN_MM = 1e-3
@@ -134,6 +136,10 @@ class FaceModel:
         s("muscles", muscles)
         s("ids", muscles.ids)
         base = assemble_tissue(face.vertices, face.triangles, params)
+        if muscles.bound_skin is not None:  # skin bound to its muscle (MuscleSet.bound_skin)
+            base = bind_layer(
+                base, muscles.bound_skin.vertices, "fat", LayerMaterial(*muscles.bound_skin.fat)
+            )
         nv = base.n_vertices
         fascia = base.layer_nodes("fascia")
         jaw_w = muscles.jaw.weights if muscles.jaw is not None else np.zeros(nv)

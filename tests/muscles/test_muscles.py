@@ -96,6 +96,54 @@ def test_region_keeps_lower_lip_muscles_off_the_upper_lip():
     assert f[0, 1] < 0 and np.all(f[1] == 0)
 
 
+def test_lower_share_weights_the_lower_lip_and_corner():
+    """A linear muscle's lower_share: the lower lip (jaw weight 1) takes that share of the field,
+    the corner on the slit (1/2) the mean of it and 1, the upper lip all of it; mirrored too."""
+    m = LinearMuscle("m", [0, 20, 0], [0, 0, 0], 10, 5, lower_share=0.3)
+    pts = np.zeros((3, 3))
+    f = m.field(pts, np.array([0.0, 0.5, 1.0]))
+    np.testing.assert_allclose(f[:, 1], 5 * np.array([1.0, 0.65, 0.3]))
+    assert m.mirrored("n").lower_share == 0.3
+    with pytest.raises(MyofaceValueError, match="lower_share"):
+        LinearMuscle("m", [0, 20, 0], [0, 0, 0], 10, 5, lower_share=1.5)
+
+
+def test_bound_skin_stiffens_the_fat_under_its_vertices(tmp_path, default_face):
+    """[bound_skin]: the fat layer's springs under the listed vertices (both ends under them)
+    take the given stiffness, and no other spring changes."""
+    from myoface.model import FaceModel
+    from myoface.tissue.model import LAYERS
+
+    f = tmp_path / "m.toml"
+    body = (
+        '[[muscle]]\nid = "pull"\nsides = "lr"\ntype = "linear"\n'
+        "origin = { vertex = 345, depth_mm = 12 }\ninsertion = { vertex = 291, depth_mm = 6 }\n"
+        "radius_mm = 10\nmax_shortening_mm = 3\nlower_share = 0.5\n"
+    )
+    f.write_text(body + "[bound_skin]\nvertices = [17, 18, 200]\nfat = [3000.0, 30000.0, 0.3]\n")
+    ms = load_muscles(f, default_face)
+    assert ms["pull_r"].lower_share == 0.5
+    np.testing.assert_array_equal(ms.bound_skin.vertices, [17, 18, 200])
+    bound = FaceModel(default_face, ms).tissue
+    free = FaceModel(default_face, load_muscles(_write(tmp_path / "n.toml", body), default_face))
+    free = free.tissue
+    changed = bound.spring_material != free.spring_material
+    nv = default_face.n_vertices
+    assert changed.any() and np.all(free.spring_material[changed] == LAYERS.index("fat"))
+    ends = np.stack([bound.spring_i[changed] % nv, bound.spring_j[changed] % nv])
+    assert set(np.unique(ends)) <= {17, 18, 200}
+    np.testing.assert_array_equal(bound.materials[bound.spring_material[changed]][:, 0], 3000.0)
+    for bad, msg in (("vertices = [99999]", "outside"), ("vertices = []", "list of vertex")):
+        f.write_text(body + f"[bound_skin]\n{bad}\nfat = [1.0, 2.0, 0.1]\n")
+        with pytest.raises(MyofaceFormatError, match=msg):
+            load_muscles(f, default_face)
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
+
+
 def test_default_set_has_the_required_muscles(muscles):
     required = PAPER_TWELVE + [
         f"{m}_{s}"

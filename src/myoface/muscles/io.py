@@ -42,6 +42,11 @@ An optional ``[jaw]`` table: ``hinge`` (a point), ``axis`` (default [1, 0, 0]),
 ``translation_from`` (where the translation starts, default 0), and the harmonic weight constraints ``lower`` / ``upper`` (lists of landmark
 group names or vertex indices held at 1 / 0), ``lower_below`` / ``upper_above`` (points: every
 vertex below / above that point's height is held at 1 / 0). Vertices listed as both are left free.
+
+A linear muscle may take ``lower_share`` (in [0, 1], default 1): the share of its field the lower
+lip and chin take (:class:`~myoface.muscles.types.LinearMuscle`). An optional ``[bound_skin]``
+table: ``vertices`` (skin vertex indices) and ``fat = [alpha, beta, strain_c]``: the tissue's fat
+layer under those vertices takes that stiffness (:class:`~myoface.muscles.muscleset.BoundSkin`).
 """
 
 from __future__ import annotations
@@ -61,7 +66,7 @@ from myoface.face.io import WATERS_UNIT_MM
 from myoface.face.mesh import FaceMesh
 from myoface.muscles.jaw import Jaw, harmonic_weights
 from myoface.muscles.lids import LidMuscle
-from myoface.muscles.muscleset import MuscleSet
+from myoface.muscles.muscleset import BoundSkin, MuscleSet
 from myoface.muscles.types import LinearMuscle, SheetMuscle, SphincterMuscle, WatersMuscle
 
 DEFAULT_MUSCLES_FILE = "default_muscles.toml"
@@ -69,7 +74,7 @@ TYPES = ("linear", "sheet", "sphincter", "waters", "lid")
 SIDES = ("lr", "mid")
 _COMMON_KEYS = {"id", "sides", "type", "region", "note"}
 _KEYS = {
-    "linear": {"origin", "insertion", "radius_mm", "max_shortening_mm"},
+    "linear": {"origin", "insertion", "radius_mm", "max_shortening_mm", "lower_share"},
     "sheet": {"origin", "insertion", "width_mm", "below_mm", "max_shortening_mm"},
     "sphincter": {
         "center",
@@ -83,7 +88,11 @@ _KEYS = {
     "waters": {"skin", "bone", "fall_start_mm", "fall_end_mm", "zone_deg", "clamp"},
     "lid": {"eye", "action", "origin", "insertion", "angle_deg"},
 }
-_OPTIONAL = {"sphincter": {"axis_u", "normal", "protrusion_mm"}, "lid": {"angle_deg"}}
+_OPTIONAL = {
+    "linear": {"lower_share"},
+    "sphincter": {"axis_u", "normal", "protrusion_mm"},
+    "lid": {"angle_deg"},
+}
 
 
 class _Placer:
@@ -189,6 +198,7 @@ def _build(entry: dict, placer: _Placer, ctx: str):
             _number(entry, "radius_mm", ctx),
             _number(entry, "max_shortening_mm", ctx),
             region,
+            _number(entry, "lower_share", ctx) if "lower_share" in entry else 1.0,
         )
     if kind == "sheet":
         return SheetMuscle(
@@ -335,7 +345,25 @@ def muscles_from_dict(
             raise MyofaceFormatError(f"{ctx}: {exc}") from None
     jaw = _build_jaw(doc["jaw"], placer, where) if "jaw" in doc else None
     name = str(doc.get("meta", {}).get("name", where))
-    return MuscleSet(muscles, jaw, name=name)
+    bound = _build_bound_skin(doc["bound_skin"], face, where) if "bound_skin" in doc else None
+    return MuscleSet(muscles, jaw, name=name, bound_skin=bound)
+
+
+def _build_bound_skin(spec, face: FaceMesh, where: str) -> BoundSkin:
+    ctx = f"{where}: [bound_skin]"
+    if not isinstance(spec, dict) or set(spec) - {"vertices", "fat", "note"}:
+        raise MyofaceFormatError(f"{ctx}: needs vertices and fat (and an optional note)")
+    v = spec.get("vertices")
+    if not isinstance(v, list) or not v or not all(isinstance(i, int) for i in v):
+        raise MyofaceFormatError(f"{ctx}: vertices must be a list of vertex indices")
+    if max(v) >= face.n_vertices or min(v) < 0:
+        raise MyofaceFormatError(f"{ctx}: vertex index outside [0, {face.n_vertices - 1}]")
+    try:
+        return BoundSkin(
+            v, tuple(_floats(spec.get("fat"), 3, f"{ctx}.fat")), str(spec.get("note", ""))
+        )
+    except MyofaceValueError as exc:
+        raise MyofaceFormatError(f"{ctx}: {exc}") from None
 
 
 def load_muscles(path: str | os.PathLike, face: FaceMesh) -> MuscleSet:

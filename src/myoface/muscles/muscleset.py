@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -13,6 +14,30 @@ from myoface.muscles.types import Muscle
 
 #: the id of the jaw-opening control in every MuscleSet that has a jaw
 JAW_ID = "jaw"
+
+
+@dataclass(frozen=True)
+class BoundSkin:
+    """Skin bound to the muscle under it: where mimetic muscles insert into the dermis with no
+    mobile fat between (the lower lip, the chin), the lattice's fat layer under ``vertices``
+    takes the stiffness ``fat`` = (alpha, beta, strain_c) (eq. 2) instead of the fat's own
+    (:func:`myoface.tissue.assemble.bind_layer`)."""
+
+    vertices: np.ndarray
+    fat: tuple[float, float, float]
+    note: str = ""
+
+    def __post_init__(self):
+        v = np.unique(np.asarray(self.vertices, dtype=np.int64))
+        if v.ndim != 1 or len(v) == 0 or v.min() < 0:
+            raise MyofaceValueError("bound skin needs a non-empty list of vertex indices")
+        object.__setattr__(self, "vertices", v)
+        a, b, c = (float(x) for x in self.fat)
+        if not (0 < a <= b and c >= 0):
+            raise MyofaceValueError(
+                f"bound skin's fat needs 0 < alpha <= beta, strain_c >= 0; got {self.fat}"
+            )
+        object.__setattr__(self, "fat", (a, b, c))
 
 
 class MuscleSet:
@@ -29,10 +54,17 @@ class MuscleSet:
     name : str
     """
 
-    def __init__(self, muscles: Sequence[Muscle], jaw: Jaw | None = None, name: str = ""):
+    def __init__(
+        self,
+        muscles: Sequence[Muscle],
+        jaw: Jaw | None = None,
+        name: str = "",
+        bound_skin: BoundSkin | None = None,
+    ):
         self.muscles: tuple[Muscle, ...] = tuple(muscles)
         self.jaw = jaw
         self.name = name
+        self.bound_skin = bound_skin
         ids = [m.id for m in self.muscles]
         if JAW_ID in ids:
             raise MyofaceValueError(f"muscle id {JAW_ID!r} is reserved for the jaw")

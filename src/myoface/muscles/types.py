@@ -80,6 +80,12 @@ class LinearMuscle:
         muscle vector m_i = m^e - m^a at c = 1 (to the bone); we scale m_i to this length so that
         c in [0, 1] spans a physiological range (a muscle shortens by about a third of its length).
     region : {"all", "upper", "lower"}
+    lower_share : float in [0, 1]
+        The share of the field the lower lip and chin (jaw weight 1) take: the field is weighted
+        by ``1 - (1 - lower_share) * lower``, so the mouth corner (jaw weight 1/2 on the slit)
+        keeps more of it than the lower lip beyond. Default 1 (eq. (6) unweighted). For a
+        muscle inserting into the modiolus, which moves the lower lip only through the lip's
+        own fibres: the zygomatic major.
     """
 
     id: str
@@ -88,6 +94,7 @@ class LinearMuscle:
     radius_mm: float
     max_shortening_mm: float
     region: str = "all"
+    lower_share: float = 1.0
     kind = "linear"
 
     def __post_init__(self):
@@ -96,6 +103,10 @@ class LinearMuscle:
         _positive(f"radius_mm of {self.id}", self.radius_mm)
         _positive(f"max_shortening_mm of {self.id}", self.max_shortening_mm, allow_zero=True)
         _check_region(self.id, self.region)
+        share = float(self.lower_share)
+        if not 0.0 <= share <= 1.0:
+            raise MyofaceValueError(f"lower_share of {self.id} must be in [0, 1]; got {share!r}")
+        object.__setattr__(self, "lower_share", share)
         if np.linalg.norm(self.origin - self.insertion) < 1e-6:
             raise MyofaceValueError(f"muscle {self.id!r}: origin and insertion coincide")
 
@@ -109,6 +120,8 @@ class LinearMuscle:
         """Displacement (N, 3) mm of ``points`` (N, 3) per unit contraction."""
         d = np.linalg.norm(self.insertion - points, axis=1)
         b = cosine_falloff(d, self.radius_mm) * region_weight(self.region, lower)
+        if self.lower_share < 1.0:
+            b = b * (1.0 - (1.0 - self.lower_share) * lower)
         return b[:, None] * (self.max_shortening_mm * self.direction)[None, :]
 
     def mirrored(self, new_id: str) -> LinearMuscle:
@@ -120,6 +133,7 @@ class LinearMuscle:
             self.radius_mm,
             self.max_shortening_mm,
             self.region,
+            self.lower_share,
         )
 
 

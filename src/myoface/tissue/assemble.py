@@ -18,7 +18,7 @@ from myoface.errors import MyofaceValueError
 from myoface.face.mesh import triangle_normals, unique_edges, vertex_normals
 from myoface.tissue.forces import LAW_CONTINUOUS, LAW_PAPER, element_volumes_numpy
 from myoface.tissue.hessian import stiffness_matrix
-from myoface.tissue.model import TissueModel, TissueParams
+from myoface.tissue.model import LAYERS, LayerMaterial, TissueModel, TissueParams
 
 #: lightest node mass as a fraction of the median (keeps the explicit time step reasonable)
 MASS_FLOOR = 0.25
@@ -189,6 +189,25 @@ def assemble_tissue(
     )
     # mass-proportional damping from the slowest mode of the undamped lattice (TissueParams)
     return replace(model, damping=2.0 * params.damping_ratio * lowest_frequency(model) * mass)
+
+
+def bind_layer(model: TissueModel, vertices, layer: str, material: LayerMaterial) -> TissueModel:
+    """A copy of ``model`` in which the springs of element layer ``layer`` ("dermis", "fat" or
+    "muscle") under ``vertices`` (skin vertex indices; both ends of a spring under one of them)
+    take ``material`` instead of the layer's own: e.g. where the mimetic muscles insert into
+    the dermis and there is no mobile fat between (the lips, the chin). The material is
+    appended as a row of :attr:`TissueModel.materials`; the damping is left as it was."""
+    k = LAYERS.index(layer)
+    if k == 0:
+        raise MyofaceValueError("bind_layer binds an element layer, not the epidermis")
+    nv = model.n_vertices
+    under = np.zeros(nv, bool)
+    under[np.asarray(vertices, dtype=np.int64)] = True
+    sel = (model.spring_material == k) & under[model.spring_i % nv] & under[model.spring_j % nv]
+    mats = np.vstack([model.materials, [material.alpha, material.beta, material.strain_c]])
+    smat = model.spring_material.copy()
+    smat[sel] = len(mats) - 1
+    return replace(model, materials=mats, spring_material=smat)
 
 
 def lowest_frequency(model: TissueModel) -> float:
