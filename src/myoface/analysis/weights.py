@@ -162,7 +162,17 @@ class FitSettings:
     #: the chin, the forehead's top row) what it misses is large. 1: the spread counted one for
     #: one as the correction's own error (not tuned past it).
     #:
-    #: Measured (issue 30, 2026-12-02, at the commit's muscles; degraded renders, MediaPipe).
+    #: At da930c9's muscles (the smile's field on the lower lip changed; both this and
+    #: :data:`~myoface.analysis.modelfit.SCORE_CORRECTED` off / on, the full benchmarks):
+    #: analysis.expression_accuracy's synthetic clip, apex 0.49 / 0.43, rest 0.78 / 0.86
+    #: (the headline, the lower, 0.49 / 0.43), AUs at rest AU17 0.43 / 0.21, AU23 0.23 / 0.47
+    #: (the lower face's false reading moves from the chin raiser to the lip tightener),
+    #: AU12 0.13 / <0.05, AU20 0.16 / 0.10, contraction RMSE median 0.185 / 0.156 (this
+    #: alone: apex 0.36, rest 0.93; the scoring alone: 0.43, 0.70); analysis.headmotion,
+    #: moving, worst RMSE 0.316 / 0.295, median 0.166 / 0.149, skin 1.28 / 1.27 mm, head
+    #: 1.79 / 1.89 deg; still, median 0.114 / 0.118, skin 1.00 / 1.03 mm. Set 0 to go back.
+    #:
+    #: Measured (issue 30, 2026-12-02, at e2115bd's muscles; degraded renders, MediaPipe).
     #: After the correction, the points' residual to the true vertices at rest scatters 1.2 mm
     #: (median over points) to 3.3 mm (the jaw line, the chin) and follows the pitch by up to
     #: 0.2 mm a degree; its spread correlates 0.53 with the table's. The expression
