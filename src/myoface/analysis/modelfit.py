@@ -113,6 +113,8 @@ CALIBRATION_FRAMES = 5
 #: 0.25; worst RMSE (12 muscles + jaw) 0.316 -> 0.283, skin 1.39 -> 1.30 mm, head 1.54 ->
 #: 1.60 deg. The neutral fitted to the true-pose-corrected points picks the same frame
 #: (AU17 0.18 at rest): what is left is the table's and MediaPipe's error, not the choice.
+#: (Those at e2115bd's muscles; at da930c9's it chose frame 18 and, alone, took the clip's
+#: apex accuracy 0.49 -> 0.43 and rest 0.78 -> 0.70: see FitSettings.offset_spread.)
 SCORE_CORRECTED = True
 
 
