@@ -914,22 +914,35 @@ def _checkerboard(px, bright, fixed):  # pragma: no cover
     return px[keep], bright[keep], f, np.linalg.pinv(f.T @ f)
 
 
+def _no_samples() -> EyeSamples:
+    return EyeSamples(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 5)), np.eye(5))
+
+
+def _opening(frame, upper, lower):
+    """The pixels of ``frame`` inside the opening bounded by ``upper`` and ``lower`` (see
+    :func:`eye_samples`) and their distances to each margin (``_opening_pixels``), or None
+    where the opening's box is off the frame."""
+    poly = np.concatenate([upper, lower[::-1][1:-1]])
+    h, w = frame.shape[:2]
+    x0, y0 = np.maximum(np.floor(poly.min(axis=0)).astype(int) - 1, 0)
+    x1, y1 = np.minimum(np.ceil(poly.max(axis=0)).astype(int) + 1, [w - 1, h - 1])
+    if x1 < x0 or y1 < y0:
+        return None
+    return _opening_pixels(
+        int(x0), int(y0), int(x1), int(y1), *(np.ascontiguousarray(a, dtype=np.float64)
+                                              for a in (poly, upper, lower))
+    )  # fmt: skip
+
+
 def eye_samples(frame, upper, lower, iris_px: float, settings: GazeSettings) -> EyeSamples:
     """The pixels of ``frame`` (H, W, 3) inside the opening bounded by the lid margins
     ``upper`` and ``lower`` (each (M, 2) px, from corner to corner, the same corners), away from
     the margins by :attr:`GazeSettings.upper_margin` / ``lower_margin`` iris radii
     (``iris_px``); pixel (row, col) is read at (col + 0.5, row + 0.5)."""
-    poly = np.concatenate([upper, lower[::-1][1:-1]])
-    h, w = frame.shape[:2]
-    x0, y0 = np.maximum(np.floor(poly.min(axis=0)).astype(int) - 1, 0)
-    x1, y1 = np.minimum(np.ceil(poly.max(axis=0)).astype(int) + 1, [w - 1, h - 1])
-    empty = EyeSamples(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 5)), np.eye(5))
-    if x1 < x0 or y1 < y0:
-        return empty
-    px, du, dl = _opening_pixels(
-        int(x0), int(y0), int(x1), int(y1), *(np.ascontiguousarray(a, dtype=np.float64)
-                                              for a in (poly, upper, lower))
-    )  # fmt: skip
+    opening = _opening(frame, upper, lower)
+    if opening is None:
+        return _no_samples()
+    px, du, dl = opening
     img = np.asarray(frame)
     px, bright, fixed, proj = _sample_columns(
         img, px, du, dl, float(iris_px), float(settings.upper_margin),
@@ -937,7 +950,7 @@ def eye_samples(frame, upper, lower, iris_px: float, settings: GazeSettings) -> 
         255.0 if img.dtype == np.uint8 else 1.0,
     )  # fmt: skip
     if len(px) < 6:
-        return empty
+        return _no_samples()
     return EyeSamples(px, bright, fixed, proj)
 
 
@@ -947,21 +960,14 @@ def _eye_samples_numpy(frame, upper, lower, iris_px: float, settings: GazeSettin
     the margins by :attr:`GazeSettings.upper_margin` / ``lower_margin`` iris radii
     (``iris_px``); pixel (row, col) is read at (col + 0.5, row + 0.5). (In numpy: the
     reference of :func:`eye_samples`.)"""
-    poly = np.concatenate([upper, lower[::-1][1:-1]])
-    h, w = frame.shape[:2]
-    x0, y0 = np.maximum(np.floor(poly.min(axis=0)).astype(int) - 1, 0)
-    x1, y1 = np.minimum(np.ceil(poly.max(axis=0)).astype(int) + 1, [w - 1, h - 1])
-    empty = EyeSamples(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 5)), np.eye(5))
-    if x1 < x0 or y1 < y0:
-        return empty
-    px, du, dl = _opening_pixels(
-        int(x0), int(y0), int(x1), int(y1), *(np.ascontiguousarray(a, dtype=np.float64)
-                                              for a in (poly, upper, lower))
-    )  # fmt: skip
+    opening = _opening(frame, upper, lower)
+    if opening is None:
+        return _no_samples()
+    px, du, dl = opening
     keep = (du > settings.upper_margin * iris_px) & (dl > settings.lower_margin * iris_px)
     px, du, dl = px[keep], du[keep], dl[keep]
     if len(px) < 6:
-        return empty
+        return _no_samples()
     rgb = np.asarray(frame)[px[:, 1].astype(int), px[:, 0].astype(int), :3]
     bright = rgb.astype(np.float64) @ LUMA / (255.0 if rgb.dtype == np.uint8 else 1.0)
     xy = (px - px.mean(axis=0)) / max(iris_px, 1.0)
