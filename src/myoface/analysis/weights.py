@@ -195,7 +195,15 @@ class FitSettings:
     #: behind the outline), and giving the fit the true positions of every point with n.v <
     #: 0.3 left AU17 at 0.13 and AU23 at 0.23. A finer table (5 or 2.5 deg) did not help
     #: either (AU17 0.21, 0.30: more cells, each one read of MediaPipe, more of its scatter).
-    offset_spread: float = 1.0
+    #:
+    #: **Off** (0) by default: at the released muscles (b5a2c3f), with
+    #: :data:`~myoface.analysis.modelfit.SCORE_CORRECTED` on, ``myoface bench --only
+    #: analysis.expression_accuracy`` gave apex 0.40 / 0.34 / 0.34 and rest 0.81 / 0.91 / 0.92
+    #: at offset_spread 0 / 0.5 / 1 (both off: 0.56 / 0.79): what it takes off the rest frames
+    #: it takes off the expressions too (the landmarks weigh less as a whole: the prior
+    #: damps), and a damped fit is what the analysis must not be rewarded for. Opt in with
+    #: ``FitSettings(offset_spread=1.0)``.
+    offset_spread: float = 0.0
 
 
 # ------------------------------------------------------------------ the model's structure
@@ -211,7 +219,7 @@ def landmark_weights(face, oval_weight: float = FitSettings.oval_weight) -> np.n
     return w
 
 
-def offset_spread_weights(spread_mm, scale: float = FitSettings.offset_spread,
+def offset_spread_weights(spread_mm, scale: float = 1.0,
                           sigma_mm: float = FitSettings.landmark_sigma_mm) -> np.ndarray:  # fmt: skip
     """Per-vertex weights (V,) for the detector's offsets' own error
     (:attr:`FitSettings.offset_spread`): ``1 / (1 + (scale * spread_mm / sigma_mm)^2)``, the
