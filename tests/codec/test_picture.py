@@ -505,3 +505,26 @@ def test_fill_rows_continues_the_background_beside_a_hole():
     hole = out[20:60, 30:70].astype(int)
     away = np.r_[0:26, 36:40]  # the hole's columns 4 px or more from the trim
     assert hole[:, away].min() >= 215
+
+
+def test_two_picture_models_of_one_frame_segment_it_alike(model, camera, calibration):
+    """GrabCut (the person told from the background) starts its colour models from OpenCV's
+    random generator: two picture models of the same frame in one process (two decoders of
+    one stream, the encoder's and a decoder's) must tell the person from the background
+    alike, whatever OpenCV drew in between (the generator seeded for each segmentation)."""
+    import cv2
+
+    from myoface.render import Camera, Renderer
+
+    fov = float(np.degrees(2 * np.arctan(0.5 * H / camera.focal_px)))
+    rc = Camera(np.zeros(3), np.array([0.0, 0.0, -1.0]), (0.0, 1.0, 0.0), W, H, fov)
+    r = Renderer(model.face, rc, ssaa=1)
+    img = r.render(model.skin_vertices(), pose=(calibration.rotation, calibration.translation))
+    face = r.triangle_ids() >= 0
+    frame = np.where(face[:, :, None], img, _pattern(0))  # a busy, many-coloured background
+    masks = []
+    for _ in range(3):
+        cv2.randu(np.zeros((7, 7)), 0, 1)  # something else drew from OpenCV's generator
+        masks.append(PictureModel(model, camera, frame, calibration).person)
+    assert masks[0] is not None
+    assert np.array_equal(masks[0], masks[1]) and np.array_equal(masks[0], masks[2])

@@ -90,6 +90,10 @@ PHYSICS = ("linear", "relax")
 #: labels of the warp's layers in :attr:`PictureModel.last_label`
 LABEL_STILL, LABEL_AROUND, LABEL_EYE, LABEL_MOUTH, LABEL_SKIN = 0, 1, 2, 3, 4
 
+#: the seed of OpenCV's random generator for each GrabCut (:func:`person_mask`); 0 gives
+#: ``cv::RNG``'s default state (0xFFFFFFFF), a fresh process', so every segmentation is that one
+GRABCUT_SEED = 0
+
 #: the rings of nodes around the face's rim (:class:`PictureModel`): each ring is the rim
 #: scaled by ``scale`` about its centre in the head frame (x, y), ``back_mm`` behind it (the
 #: head's sides curve away from the camera), and moves with ``weight`` of the head's motion
@@ -1103,6 +1107,12 @@ def person_mask(frame: np.ndarray, rim_px, ring2_px, ring3_px):
     if not (init == cv2.GC_BGD).any() and not (init == cv2.GC_PR_BGD).any():
         return None, None
     bgd, fgd = np.zeros((1, 65)), np.zeros((1, 65))
+    # GrabCut seeds its colour models by k-means from OpenCV's per-thread random generator:
+    # without a fixed seed a second picture model in one process (a second decoder, the
+    # encoder's own) segments the same frame differently from the first, and the outline's
+    # pixels decode up to ~160 grey levels apart. The seed is OpenCV's own initial state, so
+    # a fresh process segments exactly as before.
+    cv2.setRNGSeed(GRABCUT_SEED)
     try:
         cv2.grabCut(
             cv2.cvtColor(small, cv2.COLOR_RGB2BGR), init, None, bgd, fgd, SEGMENT_ITERATIONS,
