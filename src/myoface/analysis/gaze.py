@@ -404,6 +404,65 @@ def _rss_numpy(px, bright, fixed, proj, centres, tilt, major, minor, edge_px, pu
     return (np.where(both, base - (a1 * r + a2 * r2), rss), np.where(both, a1, coef))
 
 
+#: the compiled sums' floating-point licence: reassociation (the sums over the pixels run as
+#: vectors) and fused multiply-adds; no assumption about NaN or infinity
+_FAST = {"reassoc", "contract", "nsz", "arcp"}
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy", inline="always")
+def _logistic(z):  # pragma: no cover
+    """The cover ``1 / (1 + exp(-z))`` of :func:`iris_cover` (1 above ``z`` = 30, 0 below -12),
+    with ``exp`` as a polynomial the compiler can run on vectors: ``exp(t / 64) ** 64``, the
+    Taylor series of degree 14 (its error below 1e-17 for ``|t / 64|`` <= 0.47), squared six
+    times (relative error ~1e-14 against numpy's)."""
+    t = min(max(-z, -30.0), 12.0) * (1.0 / 64.0)
+    e = 1.0 / 87178291200.0
+    e = e * t + 1.0 / 6227020800.0
+    e = e * t + 1.0 / 479001600.0
+    e = e * t + 1.0 / 39916800.0
+    e = e * t + 1.0 / 3628800.0
+    e = e * t + 1.0 / 362880.0
+    e = e * t + 1.0 / 40320.0
+    e = e * t + 1.0 / 5040.0
+    e = e * t + 1.0 / 720.0
+    e = e * t + 1.0 / 120.0
+    e = e * t + 1.0 / 24.0
+    e = e * t + 1.0 / 6.0
+    e = e * t + 0.5
+    e = e * t + 1.0
+    e = e * t + 1.0
+    e = e * e
+    e = e * e
+    e = e * e
+    e = e * e
+    e = e * e
+    e = e * e
+    c = 1.0 / (1.0 + e)
+    c = 1.0 if z > 30.0 else c
+    return 0.0 if z < -12.0 else c
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy", inline="always")
+def _cover_z(x, y, cx, cy, tx, ty, ia, ib, major, edge_px):  # pragma: no cover
+    """The logistic's argument of :func:`iris_cover` at the pixel ``(x, y)`` for the ellipse
+    centred at ``(cx, cy)``, tilted ``(tx, ty)``, of inverse radii ``ia`` (major), ``ib``."""
+    dx = x - cx
+    dy = y - cy
+    ut = dx * tx + dy * ty
+    un = -dx * ty + dy * tx
+    rho = np.sqrt((ut * ib) * (ut * ib) + (un * ia) * (un * ia))
+    z = np.sqrt(ut * ut + un * un) * (1.0 - rho) / (max(rho, 1e-9) * edge_px)
+    return z if rho > 1e-9 else major / edge_px
+
+
+@numba.njit(cache=True, fastmath=_FAST, error_model="numpy", inline="always")
+def _cover(x, y, cx, cy, tx, ty, ia, ib, major, edge_px):  # pragma: no cover
+    """How much of the pixel ``(x, y)`` the ellipse covers (:func:`iris_cover`, one pixel):
+    :func:`_logistic` of :func:`_cover_z`; 0 beyond 12 edge widths outside. Every compiled
+    kernel's cover, the iris' and the pupil's."""
+    return _logistic(_cover_z(x, y, cx, cy, tx, ty, ia, ib, major, edge_px))
+
+
 @numba.njit(cache=True)
 def _rss_numba(px, bright, fixed, proj, centres, tilt, major, minor, edge_px,
                pupil_centres, pupil_major, pupil_minor):  # pragma: no cover  # fmt: skip
@@ -442,35 +501,17 @@ def _rss_numba(px, bright, fixed, proj, centres, tilt, major, minor, edge_px,
         ip = 0.0
         pbr = 0.0
         for i in range(n):
-            dx = px[i, 0] - cx
-            dy = px[i, 1] - cy
-            ut = dx * tx + dy * ty
-            un = -dx * ty + dy * tx
-            rho = np.sqrt((ut * ib_) ** 2 + (un * ia) ** 2)
-            if rho > 1e-9:
-                z = np.sqrt(ut * ut + un * un) * (1.0 - rho) / (rho * edge_px)
-            else:
-                z = major[k] / edge_px
-            if z < -12.0:  # (outside: covers < 1e-5, taken as nothing; the pupil is inside)
+            c = _cover(px[i, 0], px[i, 1], cx, cy, tx, ty, ia, ib_, major[k], edge_px)
+            if c == 0.0:  # (outside: covers < 1e-5, taken as nothing; the pupil is inside)
                 continue
-            c = 1.0 if z > 30.0 else 1.0 / (1.0 + np.exp(-z))
             ii += c * c
             ib += c * bright[i]
             for j in range(m):
                 u[j] += c * fixed[i, j]
             if with_pupil:
-                dx = px[i, 0] - qx
-                dy = px[i, 1] - qy
-                ut = dx * tx + dy * ty
-                un = -dx * ty + dy * tx
-                rho = np.sqrt((ut * pb_) ** 2 + (un * pa) ** 2)
-                if rho > 1e-9:
-                    z = np.sqrt(ut * ut + un * un) * (1.0 - rho) / (rho * edge_px)
-                else:
-                    z = pupil_major[k] / edge_px
-                if z < -12.0:
+                c2 = _cover(px[i, 0], px[i, 1], qx, qy, tx, ty, pa, pb_, pupil_major[k], edge_px)
+                if c2 == 0.0:
                     continue
-                c2 = 1.0 if z > 30.0 else 1.0 / (1.0 + np.exp(-z))
                 pp += c2 * c2
                 ip += c * c2
                 pbr += c2 * bright[i]
@@ -540,57 +581,6 @@ def _ellipse_of(ex, ey, ez, gx, gy, gz, depth, radius, f, cx, cy):  # pragma: no
     return x, y, tx, ty, major, minor, cos
 
 
-#: the compiled sums' floating-point licence: reassociation (the sums over the pixels run as
-#: vectors) and fused multiply-adds; no assumption about NaN or infinity
-_FAST = {"reassoc", "contract", "nsz", "arcp"}
-
-
-@numba.njit(cache=True, fastmath=_FAST, error_model="numpy", inline="always")
-def _logistic(z):  # pragma: no cover
-    """The cover ``1 / (1 + exp(-z))`` of :func:`iris_cover` (1 above ``z`` = 30, 0 below -12),
-    with ``exp`` as a polynomial the compiler can run on vectors: ``exp(t / 64) ** 64``, the
-    Taylor series of degree 14 (its error below 1e-17 for ``|t / 64|`` <= 0.47), squared six
-    times (relative error ~1e-14 against numpy's)."""
-    t = min(max(-z, -30.0), 12.0) * (1.0 / 64.0)
-    e = 1.0 / 87178291200.0
-    e = e * t + 1.0 / 6227020800.0
-    e = e * t + 1.0 / 479001600.0
-    e = e * t + 1.0 / 39916800.0
-    e = e * t + 1.0 / 3628800.0
-    e = e * t + 1.0 / 362880.0
-    e = e * t + 1.0 / 40320.0
-    e = e * t + 1.0 / 5040.0
-    e = e * t + 1.0 / 720.0
-    e = e * t + 1.0 / 120.0
-    e = e * t + 1.0 / 24.0
-    e = e * t + 1.0 / 6.0
-    e = e * t + 0.5
-    e = e * t + 1.0
-    e = e * t + 1.0
-    e = e * e
-    e = e * e
-    e = e * e
-    e = e * e
-    e = e * e
-    e = e * e
-    c = 1.0 / (1.0 + e)
-    c = 1.0 if z > 30.0 else c
-    return 0.0 if z < -12.0 else c
-
-
-@numba.njit(cache=True, fastmath=_FAST, error_model="numpy", inline="always")
-def _cover_z(x, y, cx, cy, tx, ty, ia, ib, major, edge_px):  # pragma: no cover
-    """The logistic's argument of :func:`iris_cover` at the pixel ``(x, y)`` for the ellipse
-    centred at ``(cx, cy)``, tilted ``(tx, ty)``, of inverse radii ``ia`` (major), ``ib``."""
-    dx = x - cx
-    dy = y - cy
-    ut = dx * tx + dy * ty
-    un = -dx * ty + dy * tx
-    rho = np.sqrt((ut * ib) * (ut * ib) + (un * ia) * (un * ia))
-    z = np.sqrt(ut * ut + un * un) * (1.0 - rho) / (max(rho, 1e-9) * edge_px)
-    return z if rho > 1e-9 else major / edge_px
-
-
 @numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
 def _iris_sums(xs, ys, bright, f0, f1, f2, f3, f4, i0, i1, cx, cy, tx, ty, ia, ib, major,
                edge_px, out):  # pragma: no cover  # fmt: skip
@@ -598,7 +588,7 @@ def _iris_sums(xs, ys, bright, f0, f1, f2, f3, f4, i0, i1, cx, cy, tx, ty, ia, i
     its product with the brightness and with each fixed column ``f0..f4``) into ``out[:7]``."""
     ii = cb = u0 = u1 = u2 = u3 = u4 = 0.0
     for i in range(i0, i1):
-        c = _logistic(_cover_z(xs[i], ys[i], cx, cy, tx, ty, ia, ib, major, edge_px))
+        c = _cover(xs[i], ys[i], cx, cy, tx, ty, ia, ib, major, edge_px)
         ii += c * c
         cb += c * bright[i]
         u0 += c * f0[i]
@@ -619,7 +609,7 @@ def _pupil_sums(xs, ys, bright, f0, f1, f2, f3, f4, i0, i1, cx, cy, tx, ty, ia, 
     pp = ip = pbr = v0 = v1 = v2 = v3 = v4 = 0.0
     for i in range(i0, i1):
         x, y, b = xs[i], ys[i], bright[i]
-        c = _logistic(_cover_z(x, y, cx, cy, tx, ty, ia, ib, major, edge_px))
+        c = _cover(x, y, cx, cy, tx, ty, ia, ib, major, edge_px)
         ii += c * c
         cb += c * b
         u0 += c * f0[i]
@@ -627,7 +617,7 @@ def _pupil_sums(xs, ys, bright, f0, f1, f2, f3, f4, i0, i1, cx, cy, tx, ty, ia, 
         u2 += c * f2[i]
         u3 += c * f3[i]
         u4 += c * f4[i]
-        c2 = _logistic(_cover_z(x, y, qx, qy, tx, ty, pa, pb, pmajor, edge_px))
+        c2 = _cover(x, y, qx, qy, tx, ty, pa, pb, pmajor, edge_px)
         c2 = c2 if c > 0.0 else 0.0
         pp += c2 * c2
         ip += c * c2
