@@ -584,3 +584,62 @@ def test_rest_readings_vs_pose_on_a_known_answer(ids):
     assert out["AU17"]["r2 linear in pose"] > 0.99 and abs(out["AU17"]["mean"] - 0.3) < 0.02
     assert out["AU23"]["corr |yaw|"] > 0.99
     assert out["AU23"]["r2 linear in pose"] < 0.2 < 0.99 < out["AU23"]["r2 with |yaw|"]
+
+
+def _ceiling_clip(ids, read=None):
+    """A clip for readings_ceiling: rest frames between apex episodes of the six expressions
+    (two each, at 0.5 and 1.0), the head turning; the estimate is the truth at 0.4 of its
+    strength (or each episode's contractions as ``read`` maps them) plus chin raiser and lip
+    tightener readings that follow the turn |yaw| and the pitch squared (as the fit's do), and
+    a little noise."""
+    rng = np.random.default_rng(3)
+    truth, est, played, phase = [], [], [], []
+    spurious = []
+    for lv in (0.5, 1.0):
+        for name in EXPRESSIONS:
+            for ph, n in (("rest", 12), ("apex", 6)):
+                c = expression_contractions(name, lv, ids) if ph == "apex" else np.zeros(len(ids))
+                for _ in range(n):
+                    truth.append(c)
+                    est.append(0.4 * (read(name, lv) if read and ph == "apex" else c))
+                    played.append(name if ph == "apex" else "neutral")
+                    phase.append(ph)
+    k = np.arange(len(truth))
+    ang = np.column_stack([30 * np.sin(k / 9.0), 15 * np.sin(k / 13.0 + 1), 5 * np.sin(k / 7.0)])
+    for y, p in ang[:, :2]:
+        spurious.append(au_contractions({17: 0.5 * abs(y) / 30, 23: 0.3 * (p / 15) ** 2}, ids))
+    est = np.array(est) + np.array(spurious) + rng.normal(0, 0.003, (len(k), len(ids)))
+    return est, np.array(truth), played, phase, ang
+
+
+def test_readings_ceiling_on_a_known_answer(ids):
+    """The benchmark's ceiling (what any rule on the fit's contractions could do): readings at
+    a gain of 0.4 with pose-driven chin raiser and lip tightener taken off by its oracle rest
+    reference tell every apex frame from rest and are each nearest their own pattern;
+    readings that swap happiness's and sadness's patterns consistently fail the true patterns
+    for those two and keep the fit's own consistency; readings that swap them in one episode
+    only fail that too."""
+    from myoface.bench.expression import readings_ceiling
+
+    r = readings_ceiling(*_ceiling_clip(ids))
+    assert r["presence"] == 1.0 and r["identity_true_patterns"] == 1.0, r
+    assert r["identity_own_readings"] == 1.0
+
+    swap = {"happiness": "sadness", "sadness": "happiness"}
+
+    def consistently(name, lv):
+        return expression_contractions(swap.get(name, name), lv, ids)
+
+    r = readings_ceiling(*_ceiling_clip(ids, consistently))
+    per = r["identity_true_patterns_per_expression"]
+    assert per["happiness"] == per["sadness"] == 0.0 and per["anger"] == 1.0, r
+    assert r["identity_own_readings"] == 1.0
+
+    def once(name, lv):
+        return expression_contractions(swap.get(name, name) if lv == 1.0 else name, lv, ids)
+
+    r = readings_ceiling(*_ceiling_clip(ids, once))
+    assert r["identity_true_patterns_per_expression"]["happiness"] == 0.5
+    # each of the four episodes of the two is compared with the other episode of its
+    # expression, read as the other's pattern: all four fail, the other eight are right
+    assert r["identity_own_readings"] == pytest.approx(8 / 12, abs=1e-3), r
