@@ -257,6 +257,29 @@ def test_the_pupil_is_read_where_the_iris_is_dark_in_its_middle():
         assert (off > 1e-4) == used and off <= alone + 1e-12
 
 
+def test_the_compiled_cover_is_the_logistic_of_the_ellipse():
+    """The one compiled cover every kernel uses (``_cover``) against :func:`iris_cover` on
+    pixels inside, on the edge and far outside ellipses of any tilt and eccentricity (and
+    at the centre): the same to 1e-12, nought beyond 12 edge widths outside."""
+    from myoface.analysis.gaze import _cover, iris_cover
+
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        c = rng.uniform(-5, 5, (1, 2))
+        t = rng.normal(size=(1, 2))
+        t /= np.linalg.norm(t)
+        a = rng.uniform(2, 9, 1)
+        b = a * rng.uniform(0.2, 1.0, 1)
+        px = np.vstack([c + rng.normal(0, 1.5 * a[0], (200, 2)), c])
+        edge = rng.uniform(0.3, 1.2)
+        want = iris_cover(px, c, t, a, b, edge)[0]
+        got = np.array([_cover(x, y, c[0, 0], c[0, 1], t[0, 0], t[0, 1], 1 / a[0], 1 / b[0],
+                               a[0], edge) for x, y in px])  # fmt: skip
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+        assert np.all(got[want == 0.0] == 0.0)
+        assert (want == 0.0).any() and ((want > 0.01) & (want < 0.99)).any()
+
+
 def test_the_openings_pixels_are_the_numpy_ones():
     """The compiled opening (pixels inside the lids' polygon and their distances to the two
     margins) against the plain-numpy references, on an eye-shaped polygon and a random one."""
