@@ -24,7 +24,9 @@ frame alone (no rest reference), whether the AUs the fit reads at rest follow th
 of each AU (:func:`au_readings`: its gain, and its reading where the AU is absent), per class
 of frame (:func:`readings_by_class`: each played expression's AUs, true against read, the AUs
 read that were not played, and the readings at rest), whether the fit keeps each
-expression's pattern of AUs whatever its gain (:func:`pattern_agreement`), and, in a
+expression's pattern of AUs whatever its gain (:func:`pattern_agreement`), how far any rule
+on the fit's contractions could go, given an oracle rest reference and the true patterns
+(:func:`readings_ceiling`: presence, identity; docs/expressions.md), and, in a
 full run, all of it again with the head still (what the head's motion costs), with the
 head still on the clean renders (what the camera costs), and with the fit given the model's
 own projected vertices instead of MediaPipe's points, head moving and still (what the
