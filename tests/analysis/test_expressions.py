@@ -588,7 +588,7 @@ def test_rest_readings_vs_pose_on_a_known_answer(ids):
 
 def _ceiling_clip(ids, read=None):
     """A clip for readings_ceiling: rest frames between apex episodes of the six expressions
-    (two each, at 0.5 and 1.0), the head turning; the estimate is the truth at 0.4 of its
+    (two each, at 0.5 and 1.0), the head turning; the estimate is the truth at 0.25 of its
     strength (or each episode's contractions as ``read`` maps them) plus chin raiser and lip
     tightener readings that follow the turn |yaw| and the pitch squared (as the fit's do), and
     a little noise."""
@@ -601,21 +601,23 @@ def _ceiling_clip(ids, read=None):
                 c = expression_contractions(name, lv, ids) if ph == "apex" else np.zeros(len(ids))
                 for _ in range(n):
                     truth.append(c)
-                    est.append(0.4 * (read(name, lv) if read and ph == "apex" else c))
+                    est.append(0.25 * (read(name, lv) if read and ph == "apex" else c))
                     played.append(name if ph == "apex" else "neutral")
                     phase.append(ph)
     k = np.arange(len(truth))
     ang = np.column_stack([30 * np.sin(k / 9.0), 15 * np.sin(k / 13.0 + 1), 5 * np.sin(k / 7.0)])
     for y, p in ang[:, :2]:
-        spurious.append(au_contractions({17: 0.5 * abs(y) / 30, 23: 0.3 * (p / 15) ** 2}, ids))
+        spurious.append(au_contractions({17: abs(y) / 30, 23: 0.8 * (p / 15) ** 2}, ids))
     est = np.array(est) + np.array(spurious) + rng.normal(0, 0.003, (len(k), len(ids)))
     return est, np.array(truth), played, phase, ang
 
 
 def test_readings_ceiling_on_a_known_answer(ids):
     """The benchmark's ceiling (what any rule on the fit's contractions could do): readings at
-    a gain of 0.4 with pose-driven chin raiser and lip tightener taken off by its oracle rest
-    reference tell every apex frame from rest and are each nearest their own pattern;
+    a gain of 0.25 with pose-driven chin raiser and lip tightener taken off by its oracle rest
+    reference tell every apex frame from rest and are each nearest their own pattern (with a
+    reference linear in the angles, as the reader's, the episodes' residuals keep the turn's
+    chin raiser and are alike at 0.47 only);
     readings that swap happiness's and sadness's patterns consistently fail the true patterns
     for those two and keep the fit's own consistency; readings that swap them in one episode
     only fail that too."""
