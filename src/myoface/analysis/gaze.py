@@ -83,6 +83,36 @@ readings and states identical; ``myoface bench --only analysis.gaze_error_deg`` 
 4.643 deg, every reading of its detail the same. In the analysis benchmark's pass over
 single_face.mp4 (the tracker's thread CPU in the reader, two runs each) 3.7-3.9 -> 1.4-1.5 ms
 a frame, the pass 17.9-18.4 -> 15.3-16.2 ms; its gaze columns identical.
+
+Where the eyeball's centre's bias comes from, and what did not remove it (2026-12-02,
+``tools/gaze_replay.py`` on the benchmark's clip / a second clip, gaze seed 7 and camera
+seed 3; the worse eye 4.64 / 5.17 deg as committed). The bias is the fit's lids: over the
+frames open in the truth the fitted eye opening (its vertices' mean) sits 0.4-0.7 px to the
+image's right of the truth's on every eye of both clips (and 0.4-0.5 px up on three of the
+four), and the eyeball's centre, placed from the opening (10.4-10.5 mm behind its centroid in
+the fit, 10.5-10.6 in the truth), goes with it; the socket follows the fit's misplacement
+from frame to frame (its shift correlates 0.77-0.91 with the one needed) but its template
+sits at the fit's mean, so the mean stays (0.6 / 1.0 px). An oracle of what a per-video
+constant could give at best (each eye's centre moved by the shift the truth asks for,
+head frame: left (-0.45, -0.3), right (-0.85, 0.3) mm on clip 1): 4.64 -> 4.16 deg (right
+3.99 -> 2.50), and on clip 2 5.17 -> 5.11 (its left eye's pitch worse): the rest is frame to
+frame. Tried and not kept: (1) the centre estimated per video from the iris, the reader's
+residual summed over the frames as a function of a constant shift of the centre, the gaze
+fitted again at each (the limbus' foreshortening is what tells the centre from the gaze):
+the sum is sharp but its minimum is not the truth's (x right on the left eyes, -0.5 mm, but
++0.5 and -2.0 mm on the right ones where the truth asks about -0.85 and -0.3; y at the grid's edge,
++2 mm, where it asks -0.4 to +0.3): the model's iris against the image's is not unbiased to
+a tenth of a millimetre. (2) The template's opening registered to the fitted neutral's lids
+(the correlation of the template with the opening's soft mask): x 0.5-4 times the shift asked
+for, y 0.5-1.1 mm low (the lashes and the lid's shadow darken the opening's top). (3) Refining the
+coarse grid's two or three best basins and keeping the least residual: 4.63 / 5.24, and on
+single_face.mp4 the left eye's pitch SD 1.6 -> 3.2 deg (the wrong basin fits better on those
+frames). (4) The socket aligned a second time with the iris masked where it was read:
+4.60 / 5.37. (5) The socket's prior (:attr:`GazeSettings.socket_prior_mm`) 2.5 mm: 4.26 /
+5.78; none: 5.06 / 8.06. The left eye's pitch on clip 1 is held by frames after the second
+blink (66-77), head turned 26 deg: the fit puts that eye 2.3 px too high, the socket takes
+0.9 px of it, and the reading falls between two pitches 5.5 deg apart (0.5 and -5 deg
+where the truth is 6.9; the reader on the true geometry -3.4 to +1.6 deg off there).
 """
 
 from __future__ import annotations
