@@ -182,6 +182,9 @@ class HeadMotionResult:
     residual_mm: np.ndarray  # (T,)
     calibration_index: int
     fit_seconds: np.ndarray  # (T,) wall time of the fit per frame
+    #: with the anchored flow: its tracker's counts (:attr:`~myoface.analysis.modelflow.
+    #: ModelFlow.stats`)
+    flow_stats: dict | None = None
 
     def rmse(self) -> np.ndarray:
         return np.sqrt(np.nanmean((self.estimate - self.truth) ** 2, axis=0))
@@ -325,7 +328,7 @@ def flow_sequence(frames, points) -> tuple[list, np.ndarray]:
 
 def run_headmotion(
     model, points, truth, poses, skins, fps: float = 30.0, settings=None, synthesis=False,
-    frames=None, detector_offsets: bool | None = None,
+    frames=None, detector_offsets: bool | None = None, anchored_flow: bool = False,
 ):  # fmt: skip
     """Fit the model to the landmark ``points`` of each frame (the 3-D fit, calibration frame
     chosen automatically in the first :data:`~myoface.analysis.modelfit.CALIBRATION_WINDOW_S` s)
@@ -339,16 +342,22 @@ def run_headmotion(
     :attr:`~myoface.analysis.weights.FitSettings.tracker_offsets` says, for a face with a
     texture, without synthesis); by default when the points are MediaPipe's, i.e. carry its
     relative depth (x, y, z): points given as (x, y) only (e.g. the model's own projected
-    vertices, a perfect detector) have no detector's offsets to take off."""
+    vertices, a perfect detector) have no detector's offsets to take off.
+    ``anchored_flow``: the points also read on ``frames`` by the model-anchored tracker
+    (:class:`~myoface.analysis.modelflow.ModelFlow`, ``myoface analyze --flow``), each frame
+    predicted by the fit's previous one, as
+    :class:`~myoface.analysis.trackers.landmark_fit.FitTracker` does; the fit reads them in
+    place of MediaPipe's x, y where the tracker is sure."""
     import time
 
     from myoface.analysis.camera import PinholeCamera
     from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, ModelFit
+    from myoface.analysis.modelflow import ModelFlow, predicted
     from myoface.analysis.synthesis import LandmarkSynthesis
 
     photometric = settings is not None and settings.photometric
-    if photometric and (frames is None or len(frames) != len(points)):
-        raise ValueError("the photometric fit needs the frames, one per set of points")
+    if (photometric or anchored_flow) and (frames is None or len(frames) != len(points)):
+        raise ValueError("the photometric fit and the flow need the frames, one per set of points")
     cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
     fit = ModelFit(model, cam, settings, fps=fps)
     syn = LandmarkSynthesis(model.face, cam, SIZE) if synthesis else None
@@ -366,6 +375,7 @@ def run_headmotion(
     cal = fit.calibrate(points[:window], synthesis=syn)
     if photometric:
         fit.set_appearance(frames[cal.index])
+    tracker = ModelFlow.of_fit(frames[cal.index], fit) if anchored_flow else None
     n, m = len(points), model.n_muscles
     est = np.full((n, m), np.nan)
     ang = np.full((n, 3), np.nan)
@@ -374,9 +384,12 @@ def run_headmotion(
     for k, p in enumerate(points):
         if p is None:
             fit.lose_track()
+            if tracker is not None:
+                tracker.reset()
             continue
         t0 = time.perf_counter()
-        r = fit.fit(p, syn, image=frames[k] if photometric else None)
+        flow = None if tracker is None else tracker.track(frames[k], p, predicted(fit))
+        r = fit.fit(p, syn, image=frames[k] if photometric else None, flow=flow)
         t_fit[k] = time.perf_counter() - t0
         est[k], ang[k], resid[k] = r.contractions, r.pose.angles_deg, r.residual_mm
     if fit.offsets is not None:
@@ -392,6 +405,7 @@ def run_headmotion(
     true_ang = np.array([p.angles_deg for p in poses])
     return HeadMotionResult(
         tuple(model.ids), truth, est, true_ang, ang, skin_err, resid, cal.index, t_fit,
+        None if tracker is None else dict(tracker.stats),
     )  # fmt: skip
 
 
@@ -522,7 +536,7 @@ def _head(still: bool) -> str:
 
 
 def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = None,
-         degraded: bool = True, photometric: bool | None = None,
+         degraded: bool = True, photometric: bool | None = None, anchored: bool = False,
          ) -> tuple[HeadMotionResult, dict]:  # fmt: skip
     """The loop (cached per run): 90 frames (16 with ``quick``) at 30 fps; the default
     estimator (the 3-D fit), or with ``synthesis`` the fit with analysis by synthesis;
@@ -530,12 +544,17 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
     :attr:`~myoface.analysis.weights.FitSettings.flow`); the fit's photometric term on or off
     (``photometric``, ``myoface analyze --photometric``; default: as the analysis,
     :attr:`~myoface.analysis.weights.FitSettings.photometric`); on the camera's frames
-    (``degraded``, the benchmarks' numbers) or the clean renders."""
+    (``degraded``, the benchmarks' numbers) or the clean renders. ``anchored``: MediaPipe's
+    points with the model-anchored tracker's in the fit (``flow`` is then the chained
+    refinement of MediaPipe's points, which it replaces: False)."""
     from myoface.analysis.weights import FitSettings
 
     flow = FitSettings().flow if flow is None else bool(flow)
     photometric = FitSettings().photometric if photometric is None else bool(photometric)
-    key = (bool(quick), bool(still), bool(synthesis), flow, bool(degraded), photometric)
+    if anchored:
+        flow = False
+    key = (bool(quick), bool(still), bool(synthesis), flow, bool(degraded), photometric,
+           bool(anchored))  # fmt: skip
     if key not in _cache:
         import time
 
@@ -547,7 +566,8 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
         t0 = time.perf_counter()
         res = run_headmotion(
             fm, points, truth, poses, skins, settings=settings, synthesis=synthesis,
-            frames=_frames(quick, still, degraded) if photometric else None,
+            frames=_frames(quick, still, degraded) if photometric or anchored else None,
+            anchored_flow=anchored,
         )  # fmt: skip
         detail = {
             "face": _cache["face_kind"],
@@ -555,7 +575,7 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
             "head": _head(still),
             "renders": _renders(degraded),
             "estimator": "fit-synthesis" if synthesis else "fit",
-            "optical_flow": flow,
+            "optical_flow": "anchored" if anchored else ("chained" if flow else False),
             "photometric": photometric,
             "summary_12_jaw": res.summary(),
             "per_muscle": {
@@ -574,6 +594,10 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
             "tracker_ms_per_frame_median": float(np.median(t_det) * 1e3),
             "analysis_seconds": time.perf_counter() - t0,
         }
+        if res.flow_stats is not None:
+            # the anchored tracker's points: tracked, left at MediaPipe's, its thread CPU
+            detail["optical_flow_points"] = res.flow_stats
+            detail["flow_ms_per_frame"] = 1e3 * res.flow_stats["cpu_s"] / max(len(truth), 1)
         _cache[key] = (res, detail)
     return _cache[key]
 
@@ -606,8 +630,12 @@ def _both(quick: bool) -> dict:
         out[f"{head}, fit"] = _run(quick, still)[1]
         out[f"{head}, fit, clean renders"] = _run(quick, still, degraded=False)[1]
         out[f"{head}, photometric"] = _run(quick, still, photometric=True)[1]
+        # the fit with the model-anchored point tracker (myoface analyze --flow)
+        out[f"{head}, fit with anchored flow"] = _run(quick, still, anchored=True)[1]
         if not quick:
             out[f"{head}, fit-synthesis"] = _run(quick, still, True)[1]
+            # MediaPipe's points refined by the chained flow (FlowRefiner; before 2026-12-02
+            # what --flow did)
             out[f"{head}, fit with optical flow"] = _run(quick, still, False, True)[1]
             out[f"{head}, snakes"] = _snakes(quick, still)
             out[f"{head}, snakes, clean renders"] = _snakes(quick, still, False)

@@ -81,8 +81,15 @@ LOOK_KEYS = ("head still, with the look", "head moving, with the look")
 PLAIN_KEYS = ("head still", "head moving")
 GAIN_TARGET = (0.9, 1.1)
 EXPLAINED_TARGET = 0.9
-#: the analyses compared: the default, and the photometric fit
-VARIANTS = {"default": {}, "photometric": {"photometric": True}}
+#: the analyses compared: the default, the photometric fit, and the fit with optical flow
+#: (``--flow``) by each of its point trackers (:data:`~myoface.analysis.modelflow.
+#: FLOW_METHODS`): FitSettings' changes, and the flow's tracker (key ``"flow_method"``)
+VARIANTS = {
+    "default": {},
+    "photometric": {"photometric": True},
+    "flow, anchored": {"flow": True, "flow_method": "anchored"},
+    "flow, chained": {"flow": True, "flow_method": "chained"},
+}
 
 
 def _envelope(n_neutral, rise, hold, fall) -> np.ndarray:
@@ -142,10 +149,11 @@ def make_clip(frame, points, model, expression: str, head_moves: bool, quick: bo
 
 
 def run_known_warp(head_moves: bool, quick: bool = False, settings=None, look: bool = False,
-                   expressions=EXPRESSIONS) -> dict:  # fmt: skip
+                   expressions=EXPRESSIONS, flow_method: str | None = None) -> dict:  # fmt: skip
     """The known-warp clips of ``expressions`` (``look``: with the look each adds,
     :func:`make_clip`) analysed (see the module's docstring) with the fit's
-    ``settings`` (default: the default analysis'): per region the gain and explained
+    ``settings`` (default: the default analysis'; ``flow_method``: the point tracker of
+    ``settings.flow``, :class:`~myoface.analysis.trackers.landmark_fit.FitTracker`'s): per region the gain and explained
     fraction of the model's motion against the warp's, over every clip's frames; the leak
     (the model's motion error at the points no muscle moves, over the moving regions' true
     motion, RMS); and the contractions' RMSE against the truth."""
@@ -169,7 +177,7 @@ def run_known_warp(head_moves: bool, quick: bool = False, settings=None, look: b
             frame, pts, model, expression, head_moves, quick, look=look
         )
         video = _Clip(frames, 30.0)
-        tracker = FitTracker(model, fps=video.fps, settings=settings)
+        tracker = FitTracker(model, fps=video.fps, settings=settings, flow_method=flow_method)
         try:
             first = tracker.calibrate(iter(video), 0)
             measured = [m for _, m in Tracking(video, tracker, first)]
@@ -190,6 +198,9 @@ def run_known_warp(head_moves: bool, quick: bool = False, settings=None, look: b
             c_err.append(measured[k].contractions - true_c[k])
     d_model, d_true = np.array(d_model), np.array(d_true)
     out: dict = {"frames": len(d_model), "expressions": list(expressions), "regions": {}}
+    stats = tracker.describe().get("optical_flow_points")
+    if stats is not None:  # (the last clip's)
+        out["optical_flow_points"] = stats
     for r, ii in REGIONS.items():
         j = list(ii)
         out["regions"][r] = {
@@ -224,15 +235,19 @@ def _both(quick: bool) -> dict:
     for name, kw in VARIANTS.items():
         if quick and name != "default":
             break  # (a quick run shows the benchmark runs: the default's clips, ~20 s less)
+        kw = dict(kw)
+        method = kw.pop("flow_method", None)
         settings = replace(FitSettings(), **kw)
         out[name] = {
-            "head still": run_known_warp(False, quick, settings),
-            "head moving": run_known_warp(True, quick, settings),
+            "head still": run_known_warp(False, quick, settings, flow_method=method),
+            "head moving": run_known_warp(True, quick, settings, flow_method=method),
         }
         if not quick:
             # the same expressions with the look they add (LOOKS; not in the headline)
             for key, moves in ((LOOK_KEYS[0], False), (LOOK_KEYS[1], True)):
-                out[name][key] = run_known_warp(moves, quick, settings, look=True)
+                out[name][key] = run_known_warp(
+                    moves, quick, settings, look=True, flow_method=method
+                )
     return out
 
 

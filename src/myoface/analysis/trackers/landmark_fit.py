@@ -17,6 +17,7 @@ from myoface.analysis.flow import FlowDetector, FlowRefiner
 from myoface.analysis.gaze import GAZE_COLUMNS, GAZE_STATE_COLUMNS, Gaze, GazeEstimator
 from myoface.analysis.landmarks import TrackerOffsets
 from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, Calibration, ModelFit
+from myoface.analysis.modelflow import FLOW_METHODS, ModelFlow, predicted
 from myoface.analysis.sections import SECTIONS, section_vertices
 from myoface.analysis.synthesis import LandmarkSynthesis
 from myoface.analysis.trackers.base import NOT_OBSERVED, Measurement, TrackerBase
@@ -39,6 +40,15 @@ OCCLUDED_FRACTION = 0.12
 # (measured 2026-12-01: on single_face.mp4's real smile the share is at most 0.086, 90 % of
 # frames under 0.064; a skin-toned blob over the mouth and chin of the known-warp smile makes
 # it 0.17-0.18, the frames around it 0.0)
+
+
+def _flow_method(method: str | None) -> str:
+    from myoface.analysis import modelflow
+
+    method = modelflow.FLOW_METHOD if method is None else method
+    if method not in FLOW_METHODS:
+        raise MyofaceValueError(f"flow_method must be one of {FLOW_METHODS}; got {method!r}")
+    return method
 
 
 class LandmarkObservation(NamedTuple):
@@ -127,7 +137,8 @@ class FitTracker(TrackerBase):
     def __init__(self, model, fps: float = 30.0, camera: PinholeCamera | None = None,
                  settings: FitSettings | None = None, detector=None,
                  synthesis: bool = False, deferred_relax: bool = False,
-                 calibration_frame: int | None = None, gaze: bool = True):  # fmt: skip
+                 calibration_frame: int | None = None, gaze: bool = True,
+                 flow_method: str | None = None):  # fmt: skip
         if model.face.n_vertices != 468:
             raise MyofaceValueError(
                 "the landmark tracker needs a face model with MediaPipe's 468-point topology "
@@ -146,9 +157,15 @@ class FitTracker(TrackerBase):
             import_mediapipe()  # (fails now, with the pip command, if it is not installed)
         #: the detector; made when first needed (the calibration hands its own over)
         self._detector = detector
-        #: the optical flow's refiner (FitSettings.flow, or a flow detector given)
-        #: the optical flow (FitSettings.flow), read by the fit as a term of its own
-        self._flow = FlowRefiner() if self.settings.flow else None
+        #: with FitSettings.flow, which tracker reads the points
+        #: (:data:`~myoface.analysis.modelflow.FLOW_METHODS`; None: the module's default)
+        self.flow_method = _flow_method(flow_method)
+        #: the optical flow (FitSettings.flow), read by the fit as a term of its own: the
+        #: chained flow on the detector's thread (FlowRefiner), or the model-anchored
+        #: tracker (ModelFlow, made at calibration; it runs with the fit, which predicts)
+        chained = self.settings.flow and self.flow_method == "chained"
+        self._flow = FlowRefiner() if chained else None
+        self._anchored: ModelFlow | None = None
         #: whichever refiner counts the flow's points (describe()): ours, or a flow
         #: detector's given to the tracker (which refines its points itself)
         self._refiner = self._flow
@@ -291,7 +308,7 @@ class FitTracker(TrackerBase):
         after them: an iterator can go on from there); an error when no frame has a face.
         Returns the calibration frame's index in the video."""
         t_start = time.perf_counter()
-        if self.settings.flow and self._refiner is self._flow:
+        if self._flow is not None and self._refiner is self._flow:
             # the flow's tracks and counts start with the calibration's first frame
             self._flow = self._refiner = FlowRefiner()
         # the frames up to the first there is (its size makes the fit's camera); the rest are
@@ -421,6 +438,12 @@ class FitTracker(TrackerBase):
             if frame is None:
                 raise MyofaceValueError("the calibration frame was not kept")
             self.fit.set_appearance(frame)
+        if self.settings.flow and self.flow_method == "anchored":
+            # the points read against the calibration frame, through the model (ModelFlow)
+            frame = images[self.calibration.index]
+            if frame is None:
+                raise MyofaceValueError("the calibration frame was not kept")
+            self._anchored = self._refiner = ModelFlow.of_fit(frame, self.fit)
         self.calibration_frame = first_index + self.calibration.index
         if self.gaze is not None:  # the person's eyeballs and open lids
             self.gaze.calibrate(self.fit.neutral + self.fit.identity_mm)
@@ -452,9 +475,12 @@ class FitTracker(TrackerBase):
             self._lose_track()
             return FitMeasurement(index, time_s, "no_face", nan, None, float("nan"))
         prev = fit._prev
+        flow = obs.flow
+        if self._anchored is not None:
+            flow = self._anchored.track(frame, obs.points, predicted(fit))
         try:
             r = fit.fit(
-                obs.points, self.synthesis, deferred=self.deferred_relax, flow=obs.flow,
+                obs.points, self.synthesis, deferred=self.deferred_relax, flow=flow,
                 image=frame if self.settings.photometric else None,
             )  # fmt: skip
         except (np.linalg.LinAlgError, MyofaceValueError):
@@ -487,6 +513,8 @@ class FitTracker(TrackerBase):
     def _lose_track(self) -> None:
         """After a frame not measured: the fit and the gaze's filter start again."""
         self.fit.lose_track()
+        if self._anchored is not None:
+            self._anchored.reset()
         if self.gaze is not None:
             self.gaze.reset()
 

@@ -1,0 +1,261 @@
+"""Compiled inner loops of the model-anchored point tracker (:mod:`myoface.analysis.modelflow`):
+each point's template taken from the calibration frame through a 2x2 warp, then aligned to the
+current frame by translation-only Lucas-Kanade (inverse compositional, the brightness'
+gain and offset in the patch taken out, Huber-weighted), coarse to fine; and each vertex's
+local affine map between two projections of the face's mesh.
+
+Images are image pyramids packed into one flat float32 array (level ``l`` at ``offsets[l]``,
+``shapes[l]`` rows and columns; level ``l`` is the image reduced ``2**l`` times by
+``cv2.pyrDown``, so a point ``p`` of level 0 is at ``p / 2**l`` there). ``nogil``: MediaPipe
+runs on another thread meanwhile.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+#: a track's status (:func:`track_points`)
+OK, OUTSIDE, FLAT, SKIPPED = 0, 1, 2, 3
+
+
+@njit(cache=True, nogil=True)
+def _sample(flat, off, rows, cols, x, y):
+    """Bilinear sample of a packed level at (x, y) (column, row); NaN outside."""
+    if not (x >= 0.0 and y >= 0.0 and x <= cols - 1.001 and y <= rows - 1.001):
+        return np.nan
+    ix = int(x)
+    iy = int(y)
+    fx = x - ix
+    fy = y - iy
+    i = off + iy * cols + ix
+    a = flat[i] + fx * (flat[i + 1] - flat[i])
+    b = flat[i + cols] + fx * (flat[i + cols + 1] - flat[i + cols])
+    return a + fy * (b - a)
+
+
+@njit(cache=True, nogil=True)
+def track_points(ref, ref_off, ref_shape, cur, cur_off, cur_shape, ref_xy, guess, ainv,
+                 active, half, iterations, huber, eps):  # fmt: skip
+    """Track points from a reference image's pyramid into the current image's.
+
+    Point ``i`` (``active[i]``) is the reference image's patch around ``ref_xy[i]`` seen
+    through the 2x2 map ``ainv[i]`` (a pixel offset ``x`` in the current image is
+    ``ainv[i] @ x`` in the reference's), a square of ``2 half + 1`` pixels a side at every
+    level; it is looked for in the current image from ``guess[i]``, coarse to fine, by
+    translation-only Lucas-Kanade: the template's gradient fixed (inverse compositional), the
+    current patch's mean and contrast matched to the template's at each iteration, Huber's
+    weights beyond ``huber`` times the residuals' mean absolute value, at most ``iterations``
+    steps a level, stopping when a step is under ``eps`` px (of that level).
+
+    Returns ``xy`` (N, 2) where each point was found (the guess where it was not), ``ncc``
+    (N,) the normalised cross-correlation of the template and the patch found (level 0),
+    ``texture`` (N,) the smaller eigenvalue of the template's gradient structure tensor over
+    its pixels (grey levels squared per pixel squared, level 0), ``step`` (N,) the last step's
+    length (px, level 0), and ``status`` (N,): :data:`OK`, :data:`OUTSIDE` (the patch left an
+    image), :data:`FLAT` (no gradient to align) or :data:`SKIPPED` (not active)."""
+    n = ref_xy.shape[0]
+    levels = ref_off.shape[0]
+    w = 2 * half + 1
+    xy = guess.copy()
+    ncc = np.zeros(n)
+    texture = np.zeros(n)
+    step = np.full(n, np.inf)
+    status = np.full(n, SKIPPED, dtype=np.int64)
+    tpl = np.empty((w + 2, w + 2))
+    gx = np.empty((w, w))
+    gy = np.empty((w, w))
+    patch = np.empty((w, w))
+    for i in range(n):
+        if not active[i]:
+            continue
+        status[i] = OK
+        qx = guess[i, 0]
+        qy = guess[i, 1]
+        a00, a01 = ainv[i, 0, 0], ainv[i, 0, 1]
+        a10, a11 = ainv[i, 1, 0], ainv[i, 1, 1]
+        for lev in range(levels - 1, -1, -1):
+            s = 1.0 / (1 << lev)
+            roff, rr, rc = ref_off[lev], ref_shape[lev, 0], ref_shape[lev, 1]
+            coff, cr, cc = cur_off[lev], cur_shape[lev, 0], cur_shape[lev, 1]
+            # the template, one pixel wider for its central differences
+            cxr = ref_xy[i, 0] * s
+            cyr = ref_xy[i, 1] * s
+            bad = False
+            for v in range(w + 2):
+                dy = v - half - 1.0
+                for u in range(w + 2):
+                    dx = u - half - 1.0
+                    val = _sample(ref, roff, rr, rc, cxr + a00 * dx + a01 * dy,
+                                  cyr + a10 * dx + a11 * dy)  # fmt: skip
+                    if np.isnan(val):
+                        bad = True
+                        break
+                    tpl[v, u] = val
+                if bad:
+                    break
+            if bad:
+                status[i] = OUTSIDE
+                break
+            tmean = 0.0
+            for v in range(w):
+                for u in range(w):
+                    tmean += tpl[v + 1, u + 1]
+            tmean /= w * w
+            tvar = 0.0
+            sxx, sxy, syy = 0.0, 0.0, 0.0
+            for v in range(w):
+                for u in range(w):
+                    gx[v, u] = 0.5 * (tpl[v + 1, u + 2] - tpl[v + 1, u])
+                    gy[v, u] = 0.5 * (tpl[v + 2, u + 1] - tpl[v, u + 1])
+                    d = tpl[v + 1, u + 1] - tmean
+                    tvar += d * d
+                    sxx += gx[v, u] * gx[v, u]
+                    sxy += gx[v, u] * gy[v, u]
+                    syy += gy[v, u] * gy[v, u]
+            tstd = np.sqrt(tvar / (w * w))
+            tr = 0.5 * (sxx + syy)
+            mineig = tr - np.sqrt(max(tr * tr - (sxx * syy - sxy * sxy), 0.0))
+            if lev == 0:
+                texture[i] = mineig / (w * w)
+            if mineig <= 1e-9 or tstd <= 1e-9:
+                status[i] = FLAT
+                break
+            lx = qx * s
+            ly = qy * s
+            scale = -1.0  # the residuals' mean absolute value (Huber's scale)
+            last = np.inf
+            for _ in range(iterations):
+                pmean = 0.0
+                for v in range(w):
+                    for u in range(w):
+                        val = _sample(cur, coff, cr, cc, lx + u - half, ly + v - half)
+                        if np.isnan(val):
+                            bad = True
+                            break
+                        patch[v, u] = val
+                        pmean += val
+                    if bad:
+                        break
+                if bad:
+                    break
+                pmean /= w * w
+                pvar = 0.0
+                for v in range(w):
+                    for u in range(w):
+                        d = patch[v, u] - pmean
+                        pvar += d * d
+                pstd = np.sqrt(pvar / (w * w))
+                gain = tstd / max(pstd, 1e-6)
+                h00, h01, h11, b0, b1, mabs = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+                for v in range(w):
+                    for u in range(w):
+                        e = (patch[v, u] - pmean) * gain - (tpl[v + 1, u + 1] - tmean)
+                        ae = abs(e)
+                        mabs += ae
+                        wt = 1.0
+                        if scale > 0.0 and ae > huber * scale:
+                            wt = huber * scale / ae
+                        h00 += wt * gx[v, u] * gx[v, u]
+                        h01 += wt * gx[v, u] * gy[v, u]
+                        h11 += wt * gy[v, u] * gy[v, u]
+                        b0 += wt * gx[v, u] * e
+                        b1 += wt * gy[v, u] * e
+                scale = mabs / (w * w)
+                det = h00 * h11 - h01 * h01
+                if det <= 1e-12:
+                    bad = True
+                    break
+                ddx = (h11 * b0 - h01 * b1) / det
+                ddy = (h00 * b1 - h01 * b0) / det
+                lx -= ddx
+                ly -= ddy
+                last = np.sqrt(ddx * ddx + ddy * ddy)
+                if last < eps:
+                    break
+            if bad:
+                status[i] = OUTSIDE
+                break
+            qx = lx / s
+            qy = ly / s
+            if lev == 0:
+                step[i] = last
+        if status[i] != OK:
+            continue
+        xy[i, 0] = qx
+        xy[i, 1] = qy
+        # the normalised cross-correlation of the template and the patch found
+        pm, tm = 0.0, 0.0
+        bad = False
+        for v in range(w):
+            for u in range(w):
+                val = _sample(cur, cur_off[0], cur_shape[0, 0], cur_shape[0, 1],
+                              qx + u - half, qy + v - half)  # fmt: skip
+                if np.isnan(val):
+                    bad = True
+                    break
+                patch[v, u] = val
+                pm += val
+                tm += tpl[v + 1, u + 1]
+            if bad:
+                break
+        if bad:
+            status[i] = OUTSIDE
+            xy[i, 0] = guess[i, 0]
+            xy[i, 1] = guess[i, 1]
+            continue
+        pm /= w * w
+        tm /= w * w
+        spt, spp, stt = 0.0, 0.0, 0.0
+        for v in range(w):
+            for u in range(w):
+                a = patch[v, u] - pm
+                b = tpl[v + 1, u + 1] - tm
+                spt += a * b
+                spp += a * a
+                stt += b * b
+        ncc[i] = spt / max(np.sqrt(spp * stt), 1e-12)
+    return xy, ncc, texture, step, status
+
+
+@njit(cache=True, nogil=True)
+def local_affines(src, dst, nbr_start, nbr):
+    """Each vertex's 2x2 linear map (V, 2, 2) taking its neighbours' offsets in ``src`` (V, 2)
+    to theirs in ``dst`` (V, 2), least squares (``nbr[nbr_start[v]:nbr_start[v + 1]]`` are
+    vertex ``v``'s neighbours), and its condition (V,): the smaller singular value of the
+    neighbours' offsets in ``src`` over the larger (0: degenerate, the map the identity)."""
+    nv = src.shape[0]
+    out = np.zeros((nv, 2, 2))
+    cond = np.zeros(nv)
+    for v in range(nv):
+        cxx, cxy, cyy = 0.0, 0.0, 0.0
+        pxx, pxy, pyx, pyy = 0.0, 0.0, 0.0, 0.0
+        for k in range(nbr_start[v], nbr_start[v + 1]):
+            j = nbr[k]
+            ax = src[j, 0] - src[v, 0]
+            ay = src[j, 1] - src[v, 1]
+            bx = dst[j, 0] - dst[v, 0]
+            by = dst[j, 1] - dst[v, 1]
+            cxx += ax * ax
+            cxy += ax * ay
+            cyy += ay * ay
+            pxx += bx * ax
+            pxy += bx * ay
+            pyx += by * ax
+            pyy += by * ay
+        tr = 0.5 * (cxx + cyy)
+        disc = np.sqrt(max(tr * tr - (cxx * cyy - cxy * cxy), 0.0))
+        lo, hi = tr - disc, tr + disc
+        det = cxx * cyy - cxy * cxy
+        if hi <= 1e-12 or det <= 1e-12 * hi * hi:
+            out[v, 0, 0] = 1.0
+            out[v, 1, 1] = 1.0
+            continue
+        cond[v] = np.sqrt(max(lo, 0.0) / hi)
+        # A = P C^-1
+        i00, i01, i11 = cyy / det, -cxy / det, cxx / det
+        out[v, 0, 0] = pxx * i00 + pxy * i01
+        out[v, 0, 1] = pxx * i01 + pxy * i11
+        out[v, 1, 0] = pyx * i00 + pyy * i01
+        out[v, 1, 1] = pyx * i01 + pyy * i11
+    return out, cond

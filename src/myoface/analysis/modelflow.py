@@ -1,0 +1,298 @@
+"""Points read against the calibration frame, through the model: a drift-free point tracker
+for the 3-D fit.
+
+MediaPipe reads about half of a face's motion (a real frame warped by a known field: 0.49-0.66);
+optical flow reads nearly all of it, but a flow chained from frame to frame drifts, and a flow
+from the calibration frame fails once the head has turned, because the patch around a point no
+longer looks as it did (:mod:`myoface.analysis.flow`). Here every point is read against the
+calibration frame's appearance, never the previous frame's, with its template warped by what
+the model says has happened to the skin around it since:
+
+- at calibration (:meth:`ModelFlow.calibrate`), the reference: where the person's calibrated
+  neutral (the fit's ``neutral + identity``) puts each vertex on the calibration frame (its
+  pose), and that frame's image. A tracked point is then exactly what the fit's vertex is:
+  the skin point that was there at calibration (MediaPipe's own offsets from the vertex play
+  no part);
+- on each frame (:meth:`ModelFlow.track`), the prediction: the previous frame's fit (its pose
+  and skin; :func:`predicted`). Each vertex's local linear map between the calibration
+  frame's projection of the mesh and the prediction's (least squares over the vertex's
+  neighbours on the mesh: the head's rotation, foreshortening, scale, and the skin's
+  stretch as far as the model already follows the expression) warps the template; the
+  translation is then found by Lucas-Kanade (:func:`~myoface.analysis._lkkernels.
+  track_points`: inverse compositional, the patch's brightness gain and offset matched,
+  Huber-weighted, coarse to fine), from the prediction's point moved as MediaPipe's point
+  moved since the previous frame;
+- a point counts (``ok``) where its surface faces the camera in both views
+  (:attr:`ModelFlow.min_cos`), the warp is well posed, the alignment converged, the patch
+  found correlates with the template (:attr:`ModelFlow.min_ncc`) and it is within
+  :attr:`ModelFlow.tolerance` inter-ocular distances of where it was looked for; elsewhere
+  MediaPipe's point stands (the fit's landmark term).
+
+The brightness is high-pass filtered first (a Gaussian of :attr:`ModelFlow.highpass_sigma_px`
+taken out): shading that does not move with the skin (a light that moves, the head turning
+under a light) pulls the alignment less; the patch's gain and offset take out the rest.
+Only crops around the face are processed.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from myoface.analysis._fitkernels import vertex_normals
+from myoface.analysis._lkkernels import OK, local_affines, track_points
+from myoface.errors import MyofaceValueError
+from myoface.facemesh import import_opencv
+
+#: MediaPipe's outer eye corners (the inter-ocular distance that scales the tolerance)
+EYE_CORNERS = (33, 263)
+#: the point trackers of the fit's optical flow (:attr:`~myoface.analysis.weights.FitSettings.
+#: flow`): ``"anchored"`` this module's, ``"chained"`` :class:`~myoface.analysis.flow.
+#: FlowRefiner` (from the first frame, else from the previous one)
+FLOW_METHODS = ("anchored", "chained")
+#: the one ``myoface analyze --flow`` uses
+FLOW_METHOD = "anchored"
+
+
+def _cv2():
+    return import_opencv("the model-anchored point tracker")
+
+
+def mesh_neighbours(triangles, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each vertex's neighbours on the mesh (its one-ring) as CSR: ``(start (V + 1,),
+    neighbours)``."""
+    tri = np.asarray(triangles, dtype=np.int64)
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    e = np.concatenate([e, e[:, ::-1]])
+    e = np.unique(e, axis=0)  # (sorted by the first vertex)
+    start = np.searchsorted(e[:, 0], np.arange(n_vertices + 1))
+    return start.astype(np.int64), np.ascontiguousarray(e[:, 1])
+
+
+def gap_vertices(face) -> np.ndarray:
+    """The vertices whose patch takes in the mouth's gap once the lips part: the lips' inner
+    margins (:func:`~myoface.face.lips.inner_lip_margins`; none for a face without them).
+    On the known-warp clips the lower lip's inner margin, tracked, moved 0.06 of the warp
+    (the patch's edge is the upper lip's, which stays)."""
+    from myoface.face.lips import inner_lip_margins
+
+    m = inner_lip_margins(face)
+    if m is None:
+        return np.zeros(0, dtype=np.int64)
+    return np.unique(np.concatenate([m[0], m[1]]))
+
+
+def predicted(fit):
+    """The model's prediction for the next frame of ``fit`` (a
+    :class:`~myoface.analysis.modelfit.ModelFit`): its previous frame's pose and skin (V, 3),
+    or None when it has no previous frame (the calibration frame's pose and the person's
+    neutral are then the closest guess: :meth:`ModelFlow.track` takes them)."""
+    prev = fit._prev
+    if prev is None:
+        return None
+    return prev.pose, fit.shape(prev.contractions)
+
+
+class ModelFlow:
+    """The model-anchored point tracker (see the module's docstring).
+
+    Parameters
+    ----------
+    window : the template's side, px (odd), at every pyramid level.
+    levels : pyramid levels above the image.
+    iterations : Lucas-Kanade steps per level at most.
+    min_ncc : a point counts when its patch correlates with the template at least this much.
+    tolerance : ... and it is within this many inter-ocular distances of where it was
+        looked for.
+    min_cos : ... and its surface's normal is within arccos(min_cos) of the view, in the
+        calibration frame and in the prediction.
+    highpass_sigma_px : the Gaussian blur taken out of the brightness first (0: none).
+    huber : Huber's threshold, in mean absolute residuals of the patch.
+    """
+
+    def __init__(self, window: int = 15, levels: int = 1, iterations: int = 12,
+                 min_ncc: float = 0.6, tolerance: float = 0.15, min_cos: float = 0.25,
+                 highpass_sigma_px: float = 4.0, huber: float = 1.5,
+                 smooth_sigma_px: float = 0.0):  # fmt: skip
+        if int(window) < 5 or int(window) % 2 == 0 or int(levels) < 0 or int(iterations) < 1:
+            raise MyofaceValueError(
+                "ModelFlow needs an odd window >= 5, levels >= 0, iterations >= 1"
+            )
+        if not (-1 <= min_ncc < 1 and tolerance > 0 and -1 <= min_cos < 1 and huber > 0):
+            raise MyofaceValueError(
+                "ModelFlow needs min_ncc and min_cos in [-1, 1), tolerance > 0 and huber > 0"
+            )
+        self.window = int(window)
+        self.levels = int(levels)
+        self.iterations = int(iterations)
+        self.min_ncc = float(min_ncc)
+        self.tolerance = float(tolerance)
+        self.min_cos = float(min_cos)
+        self.highpass_sigma_px = float(highpass_sigma_px)
+        self.huber = float(huber)
+        self.smooth_sigma_px = float(smooth_sigma_px)
+        #: counts over the frames tracked: points read against the calibration frame, points
+        #: left at the detector's; and the tracker's own seconds (thread CPU)
+        self.stats = {"frames": 0, "tracked": 0, "detector": 0, "cpu_s": 0.0}
+        self._ref = None
+        self._nbr = None
+        self._last = None  # (detector's points, predicted points) of the previous frame
+
+    # ------------------------------------------------------------------ set-up
+    @property
+    def calibrated(self) -> bool:
+        return self._ref is not None
+
+    def reset(self) -> None:
+        """After a frame without a face: the next guess starts from the detector's point
+        (the reference stays: it is the calibration frame's)."""
+        self._last = None
+
+    def _margin(self) -> int:
+        return (self.window // 2 + 3) * (1 << self.levels) + 8
+
+    def _pyramid(self, frame, lo, hi):
+        """The crop [lo, hi) of ``frame`` (clipped to it), grey, high-passed, as a packed
+        pyramid: (flat, offsets, shapes, origin)."""
+        cv2 = _cv2()
+        frame = np.asarray(frame)
+        h, w = frame.shape[:2]
+        x0, y0 = int(max(np.floor(lo[0]), 0)), int(max(np.floor(lo[1]), 0))
+        x1, y1 = int(min(np.ceil(hi[0]), w)), int(min(np.ceil(hi[1]), h))
+        if x1 - x0 < 8 or y1 - y0 < 8:
+            return None
+        crop = frame[y0:y1, x0:x1]
+        if crop.ndim == 3:
+            grey = cv2.cvtColor(np.ascontiguousarray(crop[..., :3]), cv2.COLOR_RGB2GRAY)
+        else:
+            grey = crop
+        grey = grey.astype(np.float32)
+        low = None
+        if self.highpass_sigma_px > 0:
+            low = cv2.GaussianBlur(grey, (0, 0), self.highpass_sigma_px)
+        if self.smooth_sigma_px > 0:
+            grey = cv2.GaussianBlur(grey, (0, 0), self.smooth_sigma_px)
+        if low is not None:
+            grey = grey - low
+        levels = [grey]
+        for _ in range(self.levels):
+            if min(levels[-1].shape) < 16:
+                break
+            levels.append(cv2.pyrDown(levels[-1]))
+        while len(levels) < self.levels + 1:  # (a tiny crop: coarse levels repeat the last)
+            levels.append(levels[-1])
+        shapes = np.array([lv.shape for lv in levels], dtype=np.int64)
+        sizes = shapes[:, 0] * shapes[:, 1]
+        offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        flat = np.concatenate([lv.ravel() for lv in levels]).astype(np.float64)
+        return flat, offsets, shapes, np.array([x0, y0], dtype=np.float64)
+
+    def _view(self, camera, pose, shape, triangles):
+        """The vertices' pixels (V, 2) and how squarely each faces the camera (V,)."""
+        pc = pose.apply(shape)
+        n = vertex_normals(np.ascontiguousarray(shape, dtype=np.float64), triangles)
+        n = n @ pose.rotation.T
+        view = -pc / np.maximum(np.linalg.norm(pc, axis=1, keepdims=True), 1e-9)
+        return camera.project(pc), (n * view).sum(1)
+
+    def calibrate(self, image, camera, pose, shape, triangles, exclude=()) -> None:
+        """Take the reference: ``image`` (the calibration frame, RGB or grey) and where the
+        calibrated neutral ``shape`` (V, 3) mm, head frame, at ``pose`` puts each vertex on it
+        through ``camera``; ``triangles`` the mesh's (the neighbours of each vertex);
+        ``exclude``: vertices never tracked (their patch is not the skin's: the lips' inner
+        margins, whose patch takes in the mouth's gap)."""
+        tri = np.ascontiguousarray(np.asarray(triangles, dtype=np.int64))
+        shape = np.asarray(shape, dtype=np.float64)
+        uv, cos = self._view(camera, pose, shape, tri)
+        m = self._margin()
+        pyr = self._pyramid(image, uv.min(0) - m, uv.max(0) + m)
+        if pyr is None:
+            raise MyofaceValueError("the calibration frame has no face to take templates from")
+        self._nbr = mesh_neighbours(tri, len(shape))
+        usable = np.ones(len(shape), dtype=bool)
+        usable[np.asarray(exclude, dtype=np.int64)] = False
+        self._ref = {"uv": uv, "cos": cos, "pyr": pyr, "camera": camera, "tri": tri,
+                     "pose": pose, "shape": shape, "usable": usable}  # fmt: skip
+        self._last = None
+
+    @classmethod
+    def of_fit(cls, image, fit, **kw) -> ModelFlow:
+        """A tracker calibrated on ``fit``'s calibration (a calibrated
+        :class:`~myoface.analysis.modelfit.ModelFit`) and its frame ``image``."""
+        out = cls(**kw)
+        face = fit.model.face
+        out.calibrate(
+            image, fit.camera, fit.calibration.pose, fit.neutral + fit.identity_mm,
+            face.triangles, exclude=gap_vertices(face),
+        )  # fmt: skip
+        return out
+
+    # ------------------------------------------------------------------ tracking
+    def track(self, image, points, prediction=None):
+        """Where each vertex's skin point is on ``image``: ``(xy (V, 2), ok (V,) bool)``,
+        ``xy`` the tracked position where ``ok``, the detector's ``points`` (V, 2+) elsewhere;
+        None (and the guesses start again) without points. ``prediction``: ``(pose, shape)``
+        of the model on this frame (:func:`predicted`: the fit's previous frame); None: the
+        calibration's pose and neutral."""
+        if self._ref is None:
+            raise MyofaceValueError("ModelFlow.track() needs calibrate() first")
+        if points is None or image is None:
+            self.reset()
+            return None
+        pts = np.asarray(points, dtype=np.float64)[:, :2]
+        if not np.isfinite(pts).all():
+            self.reset()
+            return None
+        t0 = time.thread_time()
+        ref = self._ref
+        if prediction is None:
+            pose, shape = ref["pose"], ref["shape"]
+        else:
+            pose, shape = prediction
+        uv, cos = self._view(ref["camera"], pose, np.asarray(shape, dtype=np.float64), ref["tri"])
+        # the guess: the prediction's point moved as the detector's moved since the frame
+        # predicted from (the detector's point itself without a prediction)
+        if prediction is None:
+            guess = pts.copy()
+        elif self._last is not None:
+            guess = uv + (pts - self._last[0])
+        else:
+            guess = uv
+        amap, cond = local_affines(ref["uv"], uv, *self._nbr)
+        det = amap[:, 0, 0] * amap[:, 1, 1] - amap[:, 0, 1] * amap[:, 1, 0]
+        active = ref["usable"] & (cos > self.min_cos) & (ref["cos"] > self.min_cos) & (cond > 0.05)
+        active &= (det > 0.2) & (det < 5.0)
+        safe = np.where(np.abs(det) > 1e-9, det, 1.0)
+        ainv = np.empty_like(amap)
+        ainv[:, 0, 0] = amap[:, 1, 1] / safe
+        ainv[:, 0, 1] = -amap[:, 0, 1] / safe
+        ainv[:, 1, 0] = -amap[:, 1, 0] / safe
+        ainv[:, 1, 1] = amap[:, 0, 0] / safe
+        m = self._margin()
+        pyr = self._pyramid(image, guess.min(0) - m, guess.max(0) + m)
+        ok = np.zeros(len(pts), dtype=bool)
+        xy = pts.copy()
+        if pyr is not None:
+            rflat, roff, rshape, rorg = ref["pyr"]
+            cflat, coff, cshape, corg = pyr
+            q, ncc, _, step, status = track_points(
+                rflat, roff, rshape, cflat, coff, cshape,
+                np.ascontiguousarray(ref["uv"] - rorg), np.ascontiguousarray(guess - corg),
+                np.ascontiguousarray(ainv), active, self.window // 2, self.iterations,
+                self.huber, 0.01,
+            )  # fmt: skip
+            q = q + corg
+            if len(pts) > max(EYE_CORNERS):
+                scale = float(np.linalg.norm(uv[EYE_CORNERS[0]] - uv[EYE_CORNERS[1]]))
+            else:
+                scale = 0.4 * float(np.ptp(uv[:, 0]))
+            ok = (status == OK) & (ncc >= self.min_ncc) & (step < 0.5)
+            ok &= np.linalg.norm(q - guess, axis=1) < self.tolerance * scale
+            xy[ok] = q[ok]
+        self._last = (pts.copy(), uv)
+        self.stats["frames"] += 1
+        self.stats["tracked"] += int(ok.sum())
+        self.stats["detector"] += int((~ok).sum())
+        self.stats["cpu_s"] += time.thread_time() - t0
+        return xy, ok
