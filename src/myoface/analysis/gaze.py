@@ -1447,6 +1447,10 @@ class GazeEstimator:
         self.sockets: dict[str, EyeSocket] = {}
         #: each eye's last offset of its socket (mm, head frame x and y; None: none found)
         self.offsets: dict[str, np.ndarray | None] = {"l": None, "r": None}
+        #: each eye's opening as the fit put it in the last frame read, before its socket's
+        #: offset: the mean of its lid margins' image points (px; the benchmark's detail
+        #: compares it with the truth's)
+        self.openings: dict[str, np.ndarray | None] = {"l": None, "r": None}
         self.aperture_mm: dict[str, float] = {}
         self.calibrate(face.vertices)
         self.smoother = GazeSmoother(self.settings)
@@ -1508,11 +1512,13 @@ class GazeEstimator:
         if st.lids == "landmarks" and points is None:
             raise MyofaceValueError("lids='landmarks' needs MediaPipe's points")
         self.offsets = {"l": None, "r": None}
+        self.openings = {"l": None, "r": None}
         out: dict[str, EyeGaze] = {}
         opening: dict[str, float] = {}  # each eye's aperture, of the open one's
         eyes: list[_Eye] = []
         for side, (_, upper, lower) in self._eyes.items():
             centre, up2, lo2 = self._placement(side, camera, pose, shape, points)
+            self.openings[side] = np.concatenate([up2, lo2]).mean(axis=0)
             opening[side] = self._aperture(shape, upper, lower) / self.aperture_mm[side]
             if opening[side] < st.closed_ratio:
                 out[side] = EyeGaze(state="closed")

@@ -19,7 +19,11 @@ has, per eye and angle, the same on the analysis and on the reader alone given t
 pose, skin and camera (the instrument checked on a known answer: what the geometry from the
 fit costs is the difference), how often an open eye was read, how the blinks were said
 (``closed`` on the truth's closed frames, and on its open ones), the error on the saccades'
-frames, the image error of the eyeballs' centres the fit placed (px), and the reader's time.
+frames, the image error of the eyeballs' centres the fit placed (px) and of the eye openings
+it fitted (the mean of the lid margins' image points, on the frames whose lids rest in the
+truth: ``eye_opening_px_mean``), each eye's error with the fitted head's rotation error taken
+off (the reading re-expressed in the true head frame: ``in_true_head_frame``), and the
+reader's time.
 
 Measured 2026-12-02 (90 frames, degraded; ``myoface bench --only analysis.gaze``, 29 s on a
 loaded 2-core machine, ``--quick`` 8 s), at 1dde7d8 (the default face's new lips): the default
@@ -211,7 +215,7 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
     """Analyse ``frames`` end to end and compare each eye's gaze with the truth; also the
     reader alone on the true geometry. The detail's numbers (see the module)."""
     from myoface.analysis.camera import PinholeCamera
-    from myoface.analysis.gaze import GazeEstimator
+    from myoface.analysis.gaze import GazeEstimator, gaze_angles, gaze_directions
     from myoface.analysis.pipeline import Tracking, make_analyzer
     from myoface.bench.headmotion import FOV_DEG, SIZE, _Clip
 
@@ -223,11 +227,13 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
         photometric=photometric,
     )  # fmt: skip
     try:
-        measured, offsets = [], []
+        measured, offsets, openings = [], [], []
         for _, m in Tracking(clip, an, first):
             measured.append(m)
             offsets.append({s: an.gaze.offsets.get(s) for s in ("l", "r")})
+            openings.append({s: an.gaze.openings.get(s) for s in ("l", "r")})
         reader = an.gaze
+        margins = {s: np.concatenate(reader._eyes[s][1:]) for s in ("l", "r")}
         centres = {s: reader.centres_mm[s] for s in ("l", "r")}
         cam = an.fit.camera
     finally:
@@ -245,7 +251,11 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
         s: eyeball_center(model.face.vertices, eye_loop(model.face, g))
         for s, g in (("l", "eye_l"), ("r", "eye_r"))
     }
-    for m, off in zip(measured, offsets, strict=True):
+    # each reading re-expressed in the true head frame (the fitted head's rotation error
+    # taken off), and the fitted eye openings' image error (the lids at rest in the truth)
+    est_true_frame = {s: np.full((n, 2), np.nan) for s in ("l", "r")}
+    opening_err = {"l": [], "r": []}
+    for m, off, op in zip(measured, offsets, openings, strict=True):
         if m.gaze is None:
             continue
         rotation_err.append(_rotation_error_deg(m.pose.rotation, poses[m.index].rotation))
@@ -254,6 +264,12 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
             states[s][m.index] = e.state
             if e.ok:
                 est[s][m.index] = (e.yaw_deg, e.pitch_deg)
+                d = poses[m.index].rotation.T @ m.pose.rotation @ gaze_directions(*est[s][m.index])
+                est_true_frame[s][m.index] = gaze_angles(d)
+                if op[s] is not None and closure[m.index] <= PARTLY_CLOSED:
+                    lids = skins[m.index][margins[s]]
+                    want = true_cam.project(poses[m.index].apply(lids)).mean(axis=0)
+                    opening_err[s].append(op[s] - want)
             got = cam.project(m.pose.apply(centres[s][None]))[0]
             want = true_cam.project(poses[m.index].apply(true_c[s][None]))[0]
             centre_err.append(got - want)
@@ -291,6 +307,10 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
                 "eyeball_centre_read_px_mean": [
                     round(float(v), 3) for v in np.mean(socket_side[s], axis=0)
                 ] if socket_side[s] else None,
+                "eye_opening_px_mean": [
+                    round(float(v), 3) for v in np.mean(opening_err[s], axis=0)
+                ] if opening_err[s] else None,
+                "in_true_head_frame": _errors(est_true_frame[s], gaze, open_),
             }
         )  # fmt: skip
     ce = np.array(centre_err) if centre_err else np.full((1, 2), np.nan)
