@@ -18,13 +18,19 @@ benchmark ``analysis.fidelity``) reads the two sides with instruments that are n
   is MediaPipe's point i. No renderer and no detector.
 
 On each side, the displacements of the judged points (:data:`JUDGED_REGIONS`: mouth
-corners, the lower lip's outer edge, brows, eyelids, chin) from the reference (the calibration frame; the model's
-neutral, contractions 0) are taken with the head's motion in the image plane removed by a
-2-D similarity fitted to the *rigid* points, which no muscle moves (:data:`RIGID_POINTS`: eye
-corners, nose bridge), and divided by that side's own inter-ocular distance (outer eye
-corners, :data:`EYE_OUTER`); the input's are turned into the face's frontal axes (the
-reference frame's rigid points onto the model's), and both given as x across, y up. Then,
-per region and overall, over the frames and points::
+corners, the lower lip's outer edge, brows, eyelids, chin) from the reference (the
+calibration frame; the model's neutral, contractions 0) are taken with the head's motion
+removed, and divided by that side's own inter-ocular distance (outer eye corners,
+:data:`EYE_OUTER`), both given as x across, y up of the face front on. The model's head does
+not move (a 2-D similarity of its *rigid* points, which no muscle moves, :data:`RIGID_POINTS`:
+eye corners, nose bridge, takes out the little they do). The input's head does, in 3-D
+(:data:`ALIGNMENT`): each frame's head pose is fitted to the reader's rigid points, whose
+depths are the person's face model's
+(:class:`~myoface.analysis.motionreader.HeadPose3D`), and what the pose does not predict is
+the displacement; a 2-D similarity of the rigid points (``alignment="2d"``, the measure until
+2026-12-02) reads a nod of 5 degrees as 0.019 IOD RMS of chin motion on renders
+(:data:`READER_VALIDATION`'s ``head_motion_3d``). Then, per region and overall, over the
+frames and points::
 
     explained = 1 - sum |d_in - d_out|^2 / sum |d_in|^2
 
@@ -83,7 +89,13 @@ import numpy as np
 
 from myoface._io import atomic_output, read_text
 from myoface.analysis.contractions_csv import read_contractions_csv
-from myoface.analysis.motionreader import aligned_displacements, grey, make_reader, similarity_2d
+from myoface.analysis.motionreader import (
+    HeadPose3D,
+    aligned_displacements,
+    grey,
+    make_reader,
+    similarity_2d,
+)
 from myoface.analysis.resynthesis import resynthesis_frames
 from myoface.analysis.video import open_video
 from myoface.errors import MyofaceValueError
@@ -411,6 +423,15 @@ READER_VALIDATION = {
             "not judged: inner lips": [0.27, 0.81],
         },
     },
+    # the same renders with the head turning in 3-D (5 degrees of yaw, of pitch, and 4, 4, 3
+    # of all three), no expression: what each alignment reads as motion (IOD RMS, the worst
+    # region), and with surprise on top of all three the 3-D alignment's gain (2026-12-02)
+    "head_motion_3d": {
+        "test": "tests/analysis/test_fidelity.py::test_the_reader_under_3d_head_motion",
+        "still_face_read_as_motion": {"2d": [0.006, 0.019], "3d": [0.004, 0.010]},
+        "gain_3d_surprise_with_head_motion": [1.01, 1.06],
+        "known_warps_3d": {"gain": [0.95, 1.04], "explained": [0.987, 0.999]},
+    },
 }
 #: the reader's names in reports
 READER_NAMES = {
@@ -424,21 +445,61 @@ _RIGID = [_POS[i] for i in RIGID_POINTS]
 _EYES = (_POS[EYE_OUTER[0]], _POS[EYE_OUTER[1]])
 
 
-def _region_displacements(ref, seq, regions=None, rotation=None) -> dict:
+def _region_displacements(ref, seq, regions=None, rotation=None, face3d=None) -> dict:
     """{region: (T, P, 2)} displacements of ``seq`` (T, len(POINTS), 2; image axes, x right,
-    y down; NaN rows: not measured) from ``ref`` (len(POINTS), 2), each frame mapped onto
-    ``ref`` by the 2-D similarity of the rigid points (the head's motion in the image plane
-    taken out), over ``ref``'s inter-ocular distance; turned by ``rotation`` (2, 2; into the
-    face's frontal axes) and given in the head frame's axes (x to the subject's left, y up)."""
+    y down; NaN rows: not measured) from ``ref`` (len(POINTS), 2), given in the head frame's
+    axes (x to the subject's left, y up), over the inter-ocular distance.
+
+    With ``face3d`` ((len(POINTS), 3) mm, the person's face at the points, head frame), the
+    head's motion is taken out in 3-D (:class:`~myoface.analysis.motionreader.HeadPose3D`:
+    each frame's pose fitted to the rigid points, the reference frame's points given the
+    face's depths), which also turns them into the face's frontal axes. Without it, each frame
+    is mapped onto ``ref`` by the 2-D similarity of the rigid points (the head's motion in the
+    image plane taken out), over ``ref``'s inter-ocular distance, and turned by ``rotation``
+    (2, 2; into the face's frontal axes)."""
     regions = REGIONS if regions is None else regions
     d = np.full(np.shape(seq), np.nan)
+    head = None if face3d is None else HeadPose3D(ref, face3d, _RIGID, _EYES)
     for k, cur in enumerate(seq):
         if np.isfinite(cur).all():
-            d[k] = aligned_displacements(ref, cur, _RIGID, _EYES)
-    if rotation is not None:
-        d = d @ np.asarray(rotation).T
-    d = d * np.array([1.0, -1.0])
+            if head is not None:
+                d[k] = head.displacements(cur)
+            else:
+                d[k] = aligned_displacements(ref, cur, _RIGID, _EYES)
+    if head is None:
+        if rotation is not None:
+            d = d @ np.asarray(rotation).T
+        d = d * np.array([1.0, -1.0])
     return {name: d[:, [_POS[i] for i in idx]] for name, idx in regions.items()}
+
+
+#: how the input's side takes the head's motion out (:func:`input_displacements`): "3d", a
+#: head pose fitted to the rigid points' readings with the person's face model as their
+#: depths (:class:`~myoface.analysis.motionreader.HeadPose3D`), or "2d", a similarity in the
+#: image. On renders of the person's face with known head motion of 5 degrees and no
+#: expression (``tests/analysis/test_fidelity.py::test_the_reader_under_3d_head_motion``,
+#: 2026-12-02), the 2-D alignment read a nod as 0.012-0.019 inter-ocular distances RMS of
+#: mouth-corner and chin motion, a turn as 0.010 of the brows'; the 3-D one 0.002-0.007 and
+#: 0.006 (see :data:`READER_VALIDATION`'s ``head_motion_3d``)
+ALIGNMENT = "3d"
+ALIGNMENTS = ("3d", "2d")
+
+
+def input_displacements(ref, pts, side: dict, regions=None, alignment: str = ALIGNMENT) -> dict:
+    """The input's side of the measure: {region: (T, P, 2)} displacements of the reader's
+    points ``pts`` (T, len(POINTS), 2; pixels) from the reference's ``ref``, the head's motion
+    taken out by ``alignment`` (:data:`ALIGNMENTS`), in the face's frontal axes (x across, y
+    up), over the inter-ocular distance. ``side``: :func:`model_displacements`' dict of the
+    model's neutral (its 2-D points turn the 2-D alignment's frame into the face's frontal
+    axes; its 3-D points are the 3-D alignment's depths)."""
+    if alignment == "3d":
+        return _region_displacements(ref, pts, regions, face3d=side["neutral_3d"])
+    if alignment == "2d":
+        # the reference frame's rigid points turned onto the model's neutral ones (the head's
+        # roll in the reference frame)
+        _, rot, _ = similarity_2d(ref[_RIGID], side["neutral_points"][_RIGID])
+        return _region_displacements(ref, pts, regions, rotation=rot)
+    raise MyofaceValueError(f"alignment must be one of {ALIGNMENTS}; got {alignment!r}")
 
 
 def model_points(model, table, ok=None) -> tuple[np.ndarray, np.ndarray, int]:
@@ -470,18 +531,32 @@ def model_points(model, table, ok=None) -> tuple[np.ndarray, np.ndarray, int]:
     return out, neutral, unconverged
 
 
-def model_displacements(model, table, ok=None, regions=None) -> tuple[dict, dict]:
+def model_displacements(
+    model, table, ok=None, regions=None, alignment: str = ALIGNMENT
+) -> tuple[dict, dict]:
     """The model's side of the measure, exact: :func:`model_points` of ``table``, their
-    displacements from the neutral (contractions 0) with the rigid points' similarity taken out
-    as on the input's side (on the sample video's analysis the person's model's rigid points
-    move by 0.0034 of its inter-ocular distance at most, and this changes the regions'
-    displacements by 0.0010-0.0017 IOD RMS against 0.011-0.105 of motion; 2026-12-01), over the model's own inter-ocular distance,
-    in the head frame's axes (x to the subject's left, y up). Returns ({region: (T, P, 2)}, a
-    dict of the neutral's points (image axes, mm, for the input's axes) and the relaxations
-    that did not converge)."""
+    displacements from the neutral (contractions 0) with the head's motion that the rigid
+    points show taken out by ``alignment``, as on the input's side (:func:`input_displacements`:
+    the rigid points are not quite rigid in the model either, e.g. surprise at 0.9 raises the
+    outer eye corners by 0.04 IOD, and the two sides must define the head by them alike; on
+    the sample video's analysis the person's model's rigid points move by 0.0034 of its
+    inter-ocular distance at most, and the 2-D similarity changed the regions' displacements
+    by 0.0010-0.0017 IOD RMS against 0.011-0.105 of motion; 2026-12-01), over the model's own
+    inter-ocular distance, in the head frame's axes (x to the subject's left, y up). Returns
+    ({region: (T, P, 2)}, a dict of the neutral's points (image axes, mm, for the input's
+    axes; and 3-D, head frame, for the input's depths) and the relaxations that did not
+    converge)."""
     pts, neutral, unconverged = model_points(model, table, ok)
-    d = _region_displacements(neutral, pts, regions)
-    return d, {"neutral_points": neutral, "unconverged": unconverged}
+    face3d = model.skin_vertices(model.rest_state())[list(POINTS)].astype(np.float64)
+    d = _region_displacements(neutral, pts, regions, face3d=_face3d_for(alignment, face3d))
+    return d, {"neutral_points": neutral, "neutral_3d": face3d, "unconverged": unconverged}
+
+
+def _face3d_for(alignment: str, face3d):
+    """The depths :func:`_region_displacements` takes for ``alignment`` (None: 2-D)."""
+    if alignment not in ALIGNMENTS:
+        raise MyofaceValueError(f"alignment must be one of {ALIGNMENTS}; got {alignment!r}")
+    return face3d if alignment == "3d" else None
 
 
 #: :func:`model_reach`: Gauss-Newton rounds per frame (each relaxes the tissue once) and the
@@ -492,7 +567,7 @@ REACH_RIDGE = 0.02
 
 
 def model_reach(
-    model, d_in: dict, show_progress: bool = False
+    model, d_in: dict, show_progress: bool = False, alignment: str = ALIGNMENT
 ) -> tuple[FidelityResult, np.ndarray]:
     """How much of the input's motion ``d_in`` ({region: (T, P, 2)}, as
     :func:`fidelity_of_analysis` reads it) the model could reproduce at best: for each frame
@@ -515,7 +590,9 @@ def model_reach(
     target = np.concatenate([d_in[k] for k in names], axis=1)  # (T, P, 2)
     flip = np.array([1.0, -1.0])
     idx = list(POINTS)
-    neutral = model.skin_vertices(model.rest_state())[idx, :2] * flip
+    rest = model.skin_vertices(model.rest_state())[idx].astype(np.float64)
+    neutral = rest[:, :2] * flip
+    face3d = _face3d_for(alignment, rest)
     iod = float(np.linalg.norm(neutral[_EYES[0]] - neutral[_EYES[1]]))
     pos = [_POS[i] for k in names for i in _ALL_REGIONS[k]]
     ids = list(model.ids)
@@ -534,12 +611,12 @@ def model_reach(
                 warnings.simplefilter("ignore", RelaxWarning)
                 res = model.relax(c, state, tol_mm=SYNTH_TOL_MM)
             now = model.skin_vertices(res.state)[idx, :2] * flip
-            d = _region_displacements(neutral, now[None], regions)
+            d = _region_displacements(neutral, now[None], regions, face3d=face3d)
             have = np.concatenate([d[k] for k in names], axis=1)[0].reshape(-1)
             c = lsq_linear(a, np.concatenate([want - have + jac @ c, zeros]), bounds=(0, 1)).x
         state = res.state
         table[t] = c
-    d_out, _ = model_displacements(model, table, np.isfinite(table).all(1), regions)
+    d_out, _ = model_displacements(model, table, np.isfinite(table).all(1), regions, alignment)
     cat_in = np.concatenate([d_in[k] for k in names], axis=1)
     cat_out = np.concatenate([d_out[k] for k in names], axis=1)
     result = FidelityResult(
@@ -675,6 +752,7 @@ def fidelity_of_analysis(
     mediapipe_on_both: bool = True,
     size: int | None = None,
     show_progress: bool = False,
+    alignment: str = ALIGNMENT,
 ) -> tuple[FidelityResult, dict]:
     """The fidelity measure of an analysis, the frames of ``video_path`` that
     ``contractions_csv`` measured (its ``frame`` column; "ok" rows) against ``model`` driven
@@ -727,11 +805,8 @@ def fidelity_of_analysis(
         detect_landmarks_too=mediapipe_on_both,
     )
     t_in = time.perf_counter() - t0
-    d_out, side = model_displacements(model, table, ok, JUDGED_REGIONS)
-    # the input's displacements in the face's frontal axes: the reference frame's rigid points
-    # turned onto the model's neutral ones (the head's roll in the reference frame)
-    _, rot, _ = similarity_2d(ref[_RIGID], side["neutral_points"][_RIGID])
-    d_in = _region_displacements(ref, pts_in, JUDGED_REGIONS, rotation=rot)
+    d_out, side = model_displacements(model, table, ok, JUDGED_REGIONS, alignment)
+    d_in = input_displacements(ref, pts_in, side, JUDGED_REGIONS, alignment)
     per = {k: scores(d_in[k], d_out[k]) for k in d_in}
     cat_in = np.concatenate(list(d_in.values()), axis=1)
     cat_out = np.concatenate(list(d_out.values()), axis=1)
@@ -777,6 +852,7 @@ def fidelity_of_analysis(
                     "renders": READER_VALIDATION["renders"] if reader == "dis" else None,
                 },
             },
+            "head_motion_taken_out": ALIGNMENT_TEXT[alignment],
             "model_side": (
                 "the model's skin vertices at each row's contractions (tissue relaxed, "
                 "warm-started), x and y of the head frame, from the neutral (contractions 0), "
@@ -818,10 +894,20 @@ MEASURE_TEXT = (
     "explained = 1 - sum|d_in - d_out|^2 / sum|d_in|^2 over frames and points; "
     "gain = sum d_in.d_out / sum|d_in|^2; corr = sum d_in.d_out / sqrt(sum|d_in|^2 "
     "sum|d_out|^2); d_in = the input's points read by the motion reader from the calibration "
-    "frame, d_out = the model's skin vertices at the same points from its neutral, each with "
-    "the rigid points' 2-D similarity taken out, over its own inter-ocular distance, x and y "
-    "of the face front on"
+    "frame, the head's motion taken out (head_motion_taken_out), d_out = the model's skin "
+    "vertices at the same points from its neutral, the rigid points' 2-D similarity taken "
+    "out; each over its own inter-ocular distance, x and y of the face front on"
 )
+#: and for the input's alignment
+ALIGNMENT_TEXT = {
+    "3d": (
+        "in 3-D: each frame's head pose (scaled orthographic) fitted to the reader's rigid "
+        "points, the calibration frame's points given the depths of the person's face model; "
+        "what the pose does not predict is each point's displacement, taken back into the "
+        "head frame"
+    ),
+    "2d": "in the image plane: a 2-D similarity of the rigid points",
+}
 #: and for the measure of earlier reports
 MEDIAPIPE_ON_BOTH_TEXT = (
     "MediaPipe's face mesh on the input and on the resynthesis rendered front on, each frame "
@@ -841,6 +927,7 @@ def write_fidelity_report(
     reader: str = READER,
     mediapipe_on_both: bool = True,
     show_progress: bool = False,
+    alignment: str = ALIGNMENT,
 ) -> FidelityResult:
     """``fidelity.json`` and ``fidelity.png`` in an analysis' output ``folder`` (its
     ``contractions.csv``; the calibration frame from its ``analysis.json`` unless given):
@@ -861,6 +948,7 @@ def write_fidelity_report(
         reader=reader,
         mediapipe_on_both=mediapipe_on_both,
         show_progress=show_progress,
+        alignment=alignment,
     )
     times = how.pop("times_s")
     old = None
