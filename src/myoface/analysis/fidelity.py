@@ -853,6 +853,7 @@ def fidelity_of_analysis(
                 },
             },
             "head_motion_taken_out": ALIGNMENT_TEXT[alignment],
+            "head_turn_deg": _head_turn(ref, pts_in, side) if alignment == "3d" else None,
             "model_side": (
                 "the model's skin vertices at each row's contractions (tissue relaxed, "
                 "warm-started), x and y of the head frame, from the neutral (contractions 0), "
@@ -887,6 +888,22 @@ def fidelity_of_analysis(
     how["seconds"] = round(time.perf_counter() - t0, 2)
     how["times_s"] = [float(x) for x in times]
     return res, how
+
+
+def _head_turn(ref, pts, side: dict) -> dict:
+    """The range (min, max degrees) of the head's yaw, pitch and roll from the reference frame
+    that the 3-D alignment took out of the readings ``pts`` (T, len(POINTS), 2)."""
+    from scipy.spatial.transform import Rotation
+
+    head = HeadPose3D(ref, side["neutral_3d"], _RIGID, _EYES)
+    rots = [head.rotation(p) for p in pts if np.isfinite(p).all()]
+    if not rots:
+        return {}
+    ypr = Rotation.from_matrix(np.array(rots)).as_euler("yxz", degrees=True)
+    return {
+        k: [round(float(ypr[:, j].min()), 2), round(float(ypr[:, j].max()), 2)]
+        for j, k in enumerate(("yaw", "pitch", "roll"))
+    }
 
 
 #: fidelity.json's words for the measure

@@ -367,10 +367,12 @@ class HeadPose3D:
         self.reference_pose = (s0, r0, t0)
         self.iod = float(np.linalg.norm(x[eye_outer[0], :2] - x[eye_outer[1], :2]))
 
-    def pose(self, cur) -> tuple[float, np.ndarray, np.ndarray]:
-        """The pose ``(s, R, t)`` of the frame whose points are ``cur`` (N, 2, pixels)."""
+    def pose(self, cur, rigid=None) -> tuple[float, np.ndarray, np.ndarray]:
+        """The pose ``(s, R, t)`` of the frame whose points are ``cur`` (N, 2, pixels), fitted
+        to ``rigid`` (default: the rigid points given at construction)."""
         q = np.asarray(cur, dtype=np.float64) * _UP
-        rigid, keep = self.rigid, self.rigid
+        rigid = self.rigid if rigid is None else np.asarray(list(rigid))
+        keep = rigid
         s0, r0, _ = self.reference_pose
         prior = (r0, self.prior * s0 * self.iod) if self.prior > 0 else None
         pose = fit_pose_3d(self.face[keep], q[keep], self.reference_pose, prior)
@@ -386,11 +388,11 @@ class HeadPose3D:
             pose = fit_pose_3d(self.face[keep], q[keep], pose, prior)
         return pose
 
-    def displacements(self, cur) -> np.ndarray:
+    def displacements(self, cur, rigid=None) -> np.ndarray:
         """The displacements (N, 2) of the points ``cur`` (N, 2, pixels) from the reference's,
-        the head's motion taken out, in the head frame's x and y (y up), over the inter-ocular
-        distance."""
-        s, r, t = self.pose(cur)
+        the head's motion taken out (the pose fitted to ``rigid``, default the rigid points),
+        in the head frame's x and y (y up), over the inter-ocular distance."""
+        s, r, t = self.pose(cur, rigid)
         q = np.asarray(cur, dtype=np.float64) * _UP
         left = q - (s * (self.face @ r.T)[:, :2] + t)
         return np.linalg.solve(s * r[:2, :2], left.T).T / self.iod
