@@ -35,8 +35,44 @@ def _sample(flat, off, rows, cols, x, y):
 
 
 @njit(cache=True, nogil=True)
-def track_points(ref, ref_off, ref_shape, cur, cur_off, cur_shape, ref_xy, guess, ainv,
-                 active, half, iterations, huber, eps):  # fmt: skip
+def _patch(flat, mask, off, rows, cols, x0, y0, w, masked, tw, patch, pw):
+    """The w x w patch of a packed level whose first pixel is at (x0, y0) (a translation: one
+    set of bilinear weights for every pixel) into ``patch``, and each pixel's weight into
+    ``pw``: ``tw``'s, 0 where ``mask`` is above 0.5 (looked up only when ``masked``). False
+    when the patch leaves the level."""
+    if not (x0 >= 0.0 and y0 >= 0.0 and x0 + w - 1 <= cols - 1.001 and y0 + w - 1 <= rows - 1.001):
+        return False
+    ix = int(x0)
+    iy = int(y0)
+    fx = x0 - ix
+    fy = y0 - iy
+    w00 = (1 - fx) * (1 - fy)
+    w01 = fx * (1 - fy)
+    w10 = (1 - fx) * fy
+    w11 = fx * fy
+    for v in range(w):
+        i = off + (iy + v) * cols + ix
+        for u in range(w):
+            j = i + u
+            patch[v, u] = (
+                w00 * flat[j] + w01 * flat[j + 1] + w10 * flat[j + cols] + w11 * flat[j + cols + 1]
+            )
+            pw[v, u] = tw[v, u]
+            if masked:
+                mk = (
+                    w00 * mask[j]
+                    + w01 * mask[j + 1]
+                    + w10 * mask[j + cols]
+                    + w11 * mask[j + cols + 1]
+                )
+                if mk > 0.5:
+                    pw[v, u] = 0.0
+    return True
+
+
+@njit(cache=True, nogil=True)
+def track_points(ref, ref_mask, ref_off, ref_shape, cur, cur_mask, cur_off, cur_shape, ref_xy,
+                 guess, ainv, active, masked, half, iterations, huber, eps):  # fmt: skip
     """Track points from a reference image's pyramid into the current image's.
 
     Point ``i`` (``active[i]``) is the reference image's patch around ``ref_xy[i]`` seen
@@ -46,23 +82,29 @@ def track_points(ref, ref_off, ref_shape, cur, cur_off, cur_shape, ref_xy, guess
     translation-only Lucas-Kanade: the template's gradient fixed (inverse compositional), the
     current patch's mean and contrast matched to the template's at each iteration, Huber's
     weights beyond ``huber`` times the residuals' mean absolute value, at most ``iterations``
-    steps a level, stopping when a step is under ``eps`` px (of that level).
+    steps a level, stopping when a step is under ``eps`` px (of that level). ``ref_mask`` and
+    ``cur_mask`` (packed as the images): a pixel where either is above 0.5 (e.g. the mouth's
+    gap) weighs nothing, for the points ``masked`` (N,) bool (the others' patches are not
+    near the mask: not looked up).
 
     Returns ``xy`` (N, 2) where each point was found (the guess where it was not), ``ncc``
-    (N,) the normalised cross-correlation of the template and the patch found (level 0),
-    ``texture`` (N,) the smaller eigenvalue of the template's gradient structure tensor over
-    its pixels (grey levels squared per pixel squared, level 0), ``step`` (N,) the last step's
-    length (px, level 0), and ``status`` (N,): :data:`OK`, :data:`OUTSIDE` (the patch left an
-    image), :data:`FLAT` (no gradient to align) or :data:`SKIPPED` (not active)."""
+    (N,) the normalised cross-correlation of the template and the patch found (level 0, the
+    unmasked pixels), ``contrast`` (N,) the template's variance over those pixels (grey
+    levels squared, level 0),
+    ``step`` (N,) the last step's length (px, level 0), and ``status`` (N,): :data:`OK`,
+    :data:`OUTSIDE` (the patch left an image), :data:`FLAT` (no gradient to align, or too
+    few pixels unmasked) or :data:`SKIPPED` (not active)."""
     n = ref_xy.shape[0]
     levels = ref_off.shape[0]
     w = 2 * half + 1
     xy = guess.copy()
     ncc = np.zeros(n)
-    texture = np.zeros(n)
+    contrast = np.zeros(n)
     step = np.full(n, np.inf)
     status = np.full(n, SKIPPED, dtype=np.int64)
     tpl = np.empty((w + 2, w + 2))
+    tw = np.empty((w, w))  # the template's pixels' weights (its mask)
+    pw = np.empty((w, w))  # ... times the current patch's
     gx = np.empty((w, w))
     gy = np.empty((w, w))
     patch = np.empty((w, w))
@@ -86,39 +128,41 @@ def track_points(ref, ref_off, ref_shape, cur, cur_off, cur_shape, ref_xy, guess
                 dy = v - half - 1.0
                 for u in range(w + 2):
                     dx = u - half - 1.0
-                    val = _sample(ref, roff, rr, rc, cxr + a00 * dx + a01 * dy,
-                                  cyr + a10 * dx + a11 * dy)  # fmt: skip
+                    x = cxr + a00 * dx + a01 * dy
+                    y = cyr + a10 * dx + a11 * dy
+                    val = _sample(ref, roff, rr, rc, x, y)
                     if np.isnan(val):
                         bad = True
                         break
                     tpl[v, u] = val
+                    if 0 < v <= w and 0 < u <= w:
+                        mk = _sample(ref_mask, roff, rr, rc, x, y) if masked[i] else 0.0
+                        tw[v - 1, u - 1] = 1.0 if mk <= 0.5 else 0.0
                 if bad:
                     break
             if bad:
                 status[i] = OUTSIDE
                 break
-            tmean = 0.0
+            tn, tmean = 0.0, 0.0
             for v in range(w):
                 for u in range(w):
-                    tmean += tpl[v + 1, u + 1]
-            tmean /= w * w
-            tvar = 0.0
+                    tn += tw[v, u]
+                    tmean += tw[v, u] * tpl[v + 1, u + 1]
+            if tn < 0.5 * w * w:
+                status[i] = FLAT
+                break
+            tmean /= tn
             sxx, sxy, syy = 0.0, 0.0, 0.0
             for v in range(w):
                 for u in range(w):
                     gx[v, u] = 0.5 * (tpl[v + 1, u + 2] - tpl[v + 1, u])
                     gy[v, u] = 0.5 * (tpl[v + 2, u + 1] - tpl[v, u + 1])
-                    d = tpl[v + 1, u + 1] - tmean
-                    tvar += d * d
-                    sxx += gx[v, u] * gx[v, u]
-                    sxy += gx[v, u] * gy[v, u]
-                    syy += gy[v, u] * gy[v, u]
-            tstd = np.sqrt(tvar / (w * w))
+                    sxx += tw[v, u] * gx[v, u] * gx[v, u]
+                    sxy += tw[v, u] * gx[v, u] * gy[v, u]
+                    syy += tw[v, u] * gy[v, u] * gy[v, u]
             tr = 0.5 * (sxx + syy)
             mineig = tr - np.sqrt(max(tr * tr - (sxx * syy - sxy * sxy), 0.0))
-            if lev == 0:
-                texture[i] = mineig / (w * w)
-            if mineig <= 1e-9 or tstd <= 1e-9:
+            if mineig <= 1e-9:
                 status[i] = FLAT
                 break
             lx = qx * s
@@ -126,31 +170,38 @@ def track_points(ref, ref_off, ref_shape, cur, cur_off, cur_shape, ref_xy, guess
             scale = -1.0  # the residuals' mean absolute value (Huber's scale)
             last = np.inf
             for _ in range(iterations):
-                pmean = 0.0
+                if not _patch(cur, cur_mask, coff, cr, cc, lx - half, ly - half, w,
+                              masked[i], tw, patch, pw):  # fmt: skip
+                    bad = True
+                    break
+                pn, pmean = 0.0, 0.0
                 for v in range(w):
                     for u in range(w):
-                        val = _sample(cur, coff, cr, cc, lx + u - half, ly + v - half)
-                        if np.isnan(val):
-                            bad = True
-                            break
-                        patch[v, u] = val
-                        pmean += val
-                    if bad:
-                        break
-                if bad:
+                        pn += pw[v, u]
+                        pmean += pw[v, u] * patch[v, u]
+                if pn < 0.5 * w * w:
+                    bad = True
                     break
-                pmean /= w * w
-                pvar = 0.0
+                pmean /= pn
+                tm2 = 0.0
+                for v in range(w):
+                    for u in range(w):
+                        tm2 += pw[v, u] * tpl[v + 1, u + 1]
+                tm2 /= pn
+                pvar, tvar = 0.0, 0.0
                 for v in range(w):
                     for u in range(w):
                         d = patch[v, u] - pmean
-                        pvar += d * d
-                pstd = np.sqrt(pvar / (w * w))
-                gain = tstd / max(pstd, 1e-6)
+                        pvar += pw[v, u] * d * d
+                        d = tpl[v + 1, u + 1] - tm2
+                        tvar += pw[v, u] * d * d
+                gain = np.sqrt(tvar / max(pvar, 1e-9))
                 h00, h01, h11, b0, b1, mabs = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
                 for v in range(w):
                     for u in range(w):
-                        e = (patch[v, u] - pmean) * gain - (tpl[v + 1, u + 1] - tmean)
+                        if pw[v, u] == 0.0:
+                            continue
+                        e = (patch[v, u] - pmean) * gain - (tpl[v + 1, u + 1] - tm2)
                         ae = abs(e)
                         mabs += ae
                         wt = 1.0
@@ -161,7 +212,7 @@ def track_points(ref, ref_off, ref_shape, cur, cur_off, cur_shape, ref_xy, guess
                         h11 += wt * gy[v, u] * gy[v, u]
                         b0 += wt * gx[v, u] * e
                         b1 += wt * gy[v, u] * e
-                scale = mabs / (w * w)
+                scale = mabs / pn
                 det = h00 * h11 - h01 * h01
                 if det <= 1e-12:
                     bad = True
@@ -185,37 +236,33 @@ def track_points(ref, ref_off, ref_shape, cur, cur_off, cur_shape, ref_xy, guess
         xy[i, 0] = qx
         xy[i, 1] = qy
         # the normalised cross-correlation of the template and the patch found
-        pm, tm = 0.0, 0.0
-        bad = False
-        for v in range(w):
-            for u in range(w):
-                val = _sample(cur, cur_off[0], cur_shape[0, 0], cur_shape[0, 1],
-                              qx + u - half, qy + v - half)  # fmt: skip
-                if np.isnan(val):
-                    bad = True
-                    break
-                patch[v, u] = val
-                pm += val
-                tm += tpl[v + 1, u + 1]
-            if bad:
-                break
-        if bad:
-            status[i] = OUTSIDE
+        pn, pm, tm = 0.0, 0.0, 0.0
+        bad = not _patch(cur, cur_mask, cur_off[0], cur_shape[0, 0], cur_shape[0, 1],
+                         qx - half, qy - half, w, masked[i], tw, patch, pw)  # fmt: skip
+        if not bad:
+            for v in range(w):
+                for u in range(w):
+                    pn += pw[v, u]
+                    pm += pw[v, u] * patch[v, u]
+                    tm += pw[v, u] * tpl[v + 1, u + 1]
+        if bad or pn < 0.5 * w * w:
+            status[i] = OUTSIDE if bad else FLAT
             xy[i, 0] = guess[i, 0]
             xy[i, 1] = guess[i, 1]
             continue
-        pm /= w * w
-        tm /= w * w
+        pm /= pn
+        tm /= pn
         spt, spp, stt = 0.0, 0.0, 0.0
         for v in range(w):
             for u in range(w):
                 a = patch[v, u] - pm
                 b = tpl[v + 1, u + 1] - tm
-                spt += a * b
-                spp += a * a
-                stt += b * b
+                spt += pw[v, u] * a * b
+                spp += pw[v, u] * a * a
+                stt += pw[v, u] * b * b
         ncc[i] = spt / max(np.sqrt(spp * stt), 1e-12)
-    return xy, ncc, texture, step, status
+        contrast[i] = stt / pn
+    return xy, ncc, contrast, step, status
 
 
 @njit(cache=True, nogil=True)

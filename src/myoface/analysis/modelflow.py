@@ -23,15 +23,40 @@ the model says has happened to the skin around it since:
   Huber-weighted, coarse to fine), from the prediction's point moved as MediaPipe's point
   moved since the previous frame;
 - a point counts (``ok``) where its surface faces the camera in both views
-  (:attr:`ModelFlow.min_cos`), the warp is well posed, the alignment converged, the patch
-  found correlates with the template (:attr:`ModelFlow.min_ncc`) and it is within
-  :attr:`ModelFlow.tolerance` inter-ocular distances of where it was looked for; elsewhere
-  MediaPipe's point stands (the fit's landmark term).
+  (:attr:`ModelFlow.min_cos`), the warp is well posed, the alignment converged, it is within
+  :attr:`ModelFlow.tolerance` inter-ocular distances of where it was looked for, and the patch
+  found correlates with the template: at least :attr:`ModelFlow.min_ncc`, or at least
+  :attr:`ModelFlow.min_ncc_rel` of what a perfect match reaches through both frames' sensor
+  noise (estimated on each frame; a smooth cheek's patch correlates at 0.5 when it is found
+  exactly); elsewhere MediaPipe's point stands (the fit's landmark term). The lips' inner
+  margins are never tracked (their patch takes in the mouth's gap), and the pixels inside
+  the gap (the polygon of the inner margins, in the calibration frame and where the
+  prediction puts it) weigh nothing in any patch.
 
 The brightness is high-pass filtered first (a Gaussian of :attr:`ModelFlow.highpass_sigma_px`
 taken out): shading that does not move with the skin (a light that moves, the head turning
 under a light) pulls the alignment less; the patch's gain and offset take out the rest.
 Only crops around the face are processed.
+
+Measured 2026-12-02 (issue 30; the numbers of each setting in the report of the commit that
+set it): on a textured plane turned 30 degrees the points are found within 0.05 px (median)
+from a prediction 3 degrees off (tests/analysis/test_modelflow.py). On the known-warp clips'
+smile and surprise (head still), read alone, the tracker finds 0.89 of the mouth corners'
+motion, 0.97 of the brows', 1.04 of the lids', 0.96 of the chin's (MediaPipe 0.70, 0.89,
+0.64, 0.54). On the head-motion renders, against the exact answer (the true surface point
+under each reference pixel), the points it keeps are 0.8 px off (median) with the head
+still (the chained flow's 0.8 px, of 98 % of the points) and 2.2 px with it turning (the
+chained flow's 4.1 px: its drift), where it keeps 70 % and 47 % of the points (the rest turned
+away, the lips' margins, or not matching): the error grows with the head's turn
+from the calibration pose, in both directions alike (a forward-backward check, ``fb_max_px``,
+keeps a sixth of the points and leaves their error at 1.2 px), because the renders' shading
+does not turn with the skin and their skin texture is faint (half resolution). On the
+sample video's smile the mouth's and chin's patches stop matching at the apex (teeth, the
+lips stretched, the folds), and MediaPipe's points stand there. Window 11 (was 15): the
+mouth corners' gain in the fit 0.77 -> 0.81 on the known warps, 6 -> 4.5 ms a frame; one
+pyramid level (two let the mouth's 60-px patches lock wrongly: corners 0.73). It costs
+~5.5 ms of CPU a frame (thread CPU on a loaded 2-core machine, 468 points), on the fit's
+thread (it needs the previous frame's fit).
 """
 
 from __future__ import annotations
@@ -47,6 +72,8 @@ from myoface.facemesh import import_opencv
 
 #: MediaPipe's outer eye corners (the inter-ocular distance that scales the tolerance)
 EYE_CORNERS = (33, 263)
+#: Lucas-Kanade stops at a step under this (px, at each level)
+EPS_PX = 0.03
 #: the point trackers of the fit's optical flow (:attr:`~myoface.analysis.weights.FitSettings.
 #: flow`): ``"anchored"`` this module's, ``"chained"`` :class:`~myoface.analysis.flow.
 #: FlowRefiner` (from the first frame, else from the previous one)
@@ -70,14 +97,28 @@ def mesh_neighbours(triangles, n_vertices: int) -> tuple[np.ndarray, np.ndarray]
     return start.astype(np.int64), np.ascontiguousarray(e[:, 1])
 
 
+def _noise(flat, offsets, shapes) -> float:
+    """The sensor's noise (grey levels, 1 sd) in a packed pyramid's level 0, robustly: the
+    median absolute second difference along rows (6 sigma^2 for white noise), which the
+    face's smooth skin dominates."""
+    h, w = int(shapes[0, 0]), int(shapes[0, 1])
+    img = flat[offsets[0] : offsets[0] + h * w].reshape(h, w)
+    d = img[:, :-2] - 2 * img[:, 1:-1] + img[:, 2:]
+    return float(1.4826 * np.median(np.abs(d)) / np.sqrt(6.0))
+
+
+def _margins(face):
+    from myoface.face.lips import inner_lip_margins
+
+    return inner_lip_margins(face)
+
+
 def gap_vertices(face) -> np.ndarray:
     """The vertices whose patch takes in the mouth's gap once the lips part: the lips' inner
     margins (:func:`~myoface.face.lips.inner_lip_margins`; none for a face without them).
     On the known-warp clips the lower lip's inner margin, tracked, moved 0.06 of the warp
     (the patch's edge is the upper lip's, which stays)."""
-    from myoface.face.lips import inner_lip_margins
-
-    m = inner_lip_margins(face)
+    m = _margins(face)
     if m is None:
         return np.zeros(0, dtype=np.int64)
     return np.unique(np.concatenate([m[0], m[1]]))
@@ -109,12 +150,21 @@ class ModelFlow:
         calibration frame and in the prediction.
     highpass_sigma_px : the Gaussian blur taken out of the brightness first (0: none).
     huber : Huber's threshold, in mean absolute residuals of the patch.
+    smooth_sigma_px : a Gaussian blur of the brightness first (0: none; 1 px made no
+        difference on the degraded renders).
+    fb_max_px : > 0: a point counts only where tracked back into the calibration frame it
+        lands within this of its reference (0: not checked; off, see the module's docstring).
+    min_ncc_rel, min_expected_ncc : ... or its correlation is at least ``min_ncc_rel`` times
+        what a perfect match reaches through both frames' noise, where that is at least
+        ``min_expected_ncc`` (0: ``min_ncc`` alone). Head-motion renders, head still / moving
+        (skin mm): ``min_ncc`` 0.6 alone 0.81 / 1.23; with 0.7, 0.2: 0.76 / 1.22.
     """
 
-    def __init__(self, window: int = 15, levels: int = 1, iterations: int = 12,
+    def __init__(self, window: int = 11, levels: int = 1, iterations: int = 12,
                  min_ncc: float = 0.6, tolerance: float = 0.15, min_cos: float = 0.25,
                  highpass_sigma_px: float = 4.0, huber: float = 1.5,
-                 smooth_sigma_px: float = 0.0):  # fmt: skip
+                 smooth_sigma_px: float = 0.0, fb_max_px: float = 0.0,
+                 min_ncc_rel: float = 0.7, min_expected_ncc: float = 0.2):  # fmt: skip
         if int(window) < 5 or int(window) % 2 == 0 or int(levels) < 0 or int(iterations) < 1:
             raise MyofaceValueError(
                 "ModelFlow needs an odd window >= 5, levels >= 0, iterations >= 1"
@@ -132,6 +182,9 @@ class ModelFlow:
         self.highpass_sigma_px = float(highpass_sigma_px)
         self.huber = float(huber)
         self.smooth_sigma_px = float(smooth_sigma_px)
+        self.fb_max_px = float(fb_max_px)
+        self.min_ncc_rel = float(min_ncc_rel)
+        self.min_expected_ncc = float(min_expected_ncc)
         #: counts over the frames tracked: points read against the calibration frame, points
         #: left at the detector's; and the tracker's own seconds (thread CPU)
         self.stats = {"frames": 0, "tracked": 0, "detector": 0, "cpu_s": 0.0}
@@ -149,12 +202,20 @@ class ModelFlow:
         (the reference stays: it is the calibration frame's)."""
         self._last = None
 
+    def _near(self, xy, box) -> np.ndarray:
+        """Which points' patches (at any level) may reach the box ``(lo, hi)`` (None: none)."""
+        if box is None:
+            return np.zeros(len(xy), dtype=bool)
+        r = (self.window // 2 + 2) * (1 << self.levels)
+        return ((xy > box[0] - r) & (xy < box[1] + r)).all(axis=1)
+
     def _margin(self) -> int:
         return (self.window // 2 + 3) * (1 << self.levels) + 8
 
-    def _pyramid(self, frame, lo, hi):
+    def _pyramid(self, frame, lo, hi, polygon=None):
         """The crop [lo, hi) of ``frame`` (clipped to it), grey, high-passed, as a packed
-        pyramid: (flat, offsets, shapes, origin)."""
+        pyramid, and the mask of ``polygon`` (K, 2) px packed alike (1 inside: the mouth's
+        gap; none: zeros): (flat, mask, offsets, shapes, origin)."""
         cv2 = _cv2()
         frame = np.asarray(frame)
         h, w = frame.shape[:2]
@@ -186,7 +247,18 @@ class ModelFlow:
         sizes = shapes[:, 0] * shapes[:, 1]
         offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
         flat = np.concatenate([lv.ravel() for lv in levels]).astype(np.float64)
-        return flat, offsets, shapes, np.array([x0, y0], dtype=np.float64)
+        mask = np.zeros_like(flat)
+        if polygon is not None and len(polygon) >= 3:
+            m0 = np.zeros(grey.shape, dtype=np.uint8)
+            poly = np.round((np.asarray(polygon) - [x0, y0]) * 4).astype(np.int32)
+            cv2.fillPoly(m0, [poly], 1, lineType=cv2.LINE_8, shift=2)
+            if m0.any():
+                ml = [m0.astype(np.float32)]
+                for k in range(1, len(levels)):
+                    ml.append(cv2.resize(ml[-1], (int(shapes[k, 1]), int(shapes[k, 0])),
+                                         interpolation=cv2.INTER_AREA))  # fmt: skip
+                mask = np.concatenate([m.ravel() for m in ml]).astype(np.float64)
+        return flat, mask, offsets, shapes, np.array([x0, y0], dtype=np.float64)
 
     def _view(self, camera, pose, shape, triangles):
         """The vertices' pixels (V, 2) and how squarely each faces the camera (V,)."""
@@ -196,24 +268,30 @@ class ModelFlow:
         view = -pc / np.maximum(np.linalg.norm(pc, axis=1, keepdims=True), 1e-9)
         return camera.project(pc), (n * view).sum(1)
 
-    def calibrate(self, image, camera, pose, shape, triangles, exclude=()) -> None:
+    def calibrate(self, image, camera, pose, shape, triangles, exclude=(), gap=None) -> None:
         """Take the reference: ``image`` (the calibration frame, RGB or grey) and where the
         calibrated neutral ``shape`` (V, 3) mm, head frame, at ``pose`` puts each vertex on it
         through ``camera``; ``triangles`` the mesh's (the neighbours of each vertex);
         ``exclude``: vertices never tracked (their patch is not the skin's: the lips' inner
-        margins, whose patch takes in the mouth's gap)."""
+        margins, whose patch takes in the mouth's gap); ``gap``: the vertices around the
+        mouth's gap in order (upper inner margin, then the lower one back), whose polygon's
+        pixels weigh nothing in any patch (in the calibration frame, and in each frame where
+        the prediction puts it: the teeth and the dark of the mouth are not skin)."""
         tri = np.ascontiguousarray(np.asarray(triangles, dtype=np.int64))
         shape = np.asarray(shape, dtype=np.float64)
         uv, cos = self._view(camera, pose, shape, tri)
         m = self._margin()
-        pyr = self._pyramid(image, uv.min(0) - m, uv.max(0) + m)
+        gap = None if gap is None else np.asarray(gap, dtype=np.int64)
+        pyr = self._pyramid(image, uv.min(0) - m, uv.max(0) + m, None if gap is None else uv[gap])
         if pyr is None:
             raise MyofaceValueError("the calibration frame has no face to take templates from")
         self._nbr = mesh_neighbours(tri, len(shape))
         usable = np.ones(len(shape), dtype=bool)
         usable[np.asarray(exclude, dtype=np.int64)] = False
         self._ref = {"uv": uv, "cos": cos, "pyr": pyr, "camera": camera, "tri": tri,
-                     "pose": pose, "shape": shape, "usable": usable}  # fmt: skip
+                     "pose": pose, "shape": shape, "usable": usable, "gap": gap,
+                     "noise": _noise(pyr[0], pyr[2], pyr[3]),
+                     "gap_box": None if gap is None else (uv[gap].min(0), uv[gap].max(0))}  # fmt: skip
         self._last = None
 
     @classmethod
@@ -222,9 +300,11 @@ class ModelFlow:
         :class:`~myoface.analysis.modelfit.ModelFit`) and its frame ``image``."""
         out = cls(**kw)
         face = fit.model.face
+        margins = _margins(face)
+        gap = None if margins is None else np.concatenate([margins[0], margins[1][::-1]])
         out.calibrate(
             image, fit.camera, fit.calibration.pose, fit.neutral + fit.identity_mm,
-            face.triangles, exclude=gap_vertices(face),
+            face.triangles, exclude=gap_vertices(face), gap=gap,
         )  # fmt: skip
         return out
 
@@ -270,25 +350,52 @@ class ModelFlow:
         ainv[:, 1, 0] = -amap[:, 1, 0] / safe
         ainv[:, 1, 1] = amap[:, 0, 0] / safe
         m = self._margin()
-        pyr = self._pyramid(image, guess.min(0) - m, guess.max(0) + m)
+        gap = ref["gap"]
+        gap_box = None if gap is None else (uv[gap].min(0), uv[gap].max(0))
+        pyr = self._pyramid(
+            image, guess.min(0) - m, guess.max(0) + m, None if gap is None else uv[gap]
+        )
         ok = np.zeros(len(pts), dtype=bool)
         xy = pts.copy()
         if pyr is not None:
-            rflat, roff, rshape, rorg = ref["pyr"]
-            cflat, coff, cshape, corg = pyr
-            q, ncc, _, step, status = track_points(
-                rflat, roff, rshape, cflat, coff, cshape,
+            rflat, rmask, roff, rshape, rorg = ref["pyr"]
+            cflat, cmask, coff, cshape, corg = pyr
+            # (the mask is looked up only in the patches that may reach it)
+            masked = self._near(ref["uv"], ref["gap_box"]) | self._near(guess, gap_box)
+            q, ncc, contrast, step, status = track_points(
+                rflat, rmask, roff, rshape, cflat, cmask, coff, cshape,
                 np.ascontiguousarray(ref["uv"] - rorg), np.ascontiguousarray(guess - corg),
-                np.ascontiguousarray(ainv), active, self.window // 2, self.iterations,
-                self.huber, 0.01,
+                np.ascontiguousarray(ainv), active, masked, self.window // 2,
+                self.iterations, self.huber, EPS_PX,
             )  # fmt: skip
             q = q + corg
             if len(pts) > max(EYE_CORNERS):
                 scale = float(np.linalg.norm(uv[EYE_CORNERS[0]] - uv[EYE_CORNERS[1]]))
             else:
                 scale = 0.4 * float(np.ptp(uv[:, 0]))
-            ok = (status == OK) & (ncc >= self.min_ncc) & (step < 0.5)
+            if self.min_ncc_rel > 0:
+                # the correlation a perfect match reaches through both frames' noise
+                nr, nc = ref["noise"] ** 2, _noise(cflat, coff, cshape) ** 2
+                c2 = np.maximum(contrast - nr, 0.0)
+                expected = c2 / np.sqrt(np.maximum((c2 + nr) * (c2 + nc), 1e-12))
+                good = (ncc >= self.min_ncc_rel * expected) & (expected >= self.min_expected_ncc)
+                good |= ncc >= self.min_ncc
+            else:
+                good = ncc >= self.min_ncc
+            ok = (status == OK) & good & (step < 0.5)
             ok &= np.linalg.norm(q - guess, axis=1) < self.tolerance * scale
+            if self.fb_max_px > 0 and ok.any():
+                # back: the patch found, seen through the inverse map, looked for in the
+                # calibration frame from where the forward correction puts it
+                back_guess = ref["uv"] + np.einsum("vij,vj->vi", ainv, q - guess)
+                back, _, _, _, st2 = track_points(
+                    cflat, cmask, coff, cshape, rflat, rmask, roff, rshape,
+                    np.ascontiguousarray(q - corg), np.ascontiguousarray(back_guess - rorg),
+                    np.ascontiguousarray(amap), ok, masked, self.window // 2,
+                    self.iterations, self.huber, EPS_PX,
+                )  # fmt: skip
+                ok &= st2 == OK
+                ok &= np.linalg.norm(back + rorg - ref["uv"], axis=1) < self.fb_max_px
             xy[ok] = q[ok]
         self._last = (pts.copy(), uv)
         self.stats["frames"] += 1
