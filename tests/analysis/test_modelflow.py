@@ -184,3 +184,35 @@ def test_the_fit_reads_the_tracked_points():
         tr.close()
     assert abs(moved[False] - 1.5) < 0.3
     assert abs(moved[True] - 3.0) < 0.3
+
+
+def test_the_mouths_gap_weighs_nothing():
+    """A dark gap opens inside a polygon of vertices (as the mouth's does between the lips):
+    with the polygon given as the gap, the points around it are found where they are; without
+    it, their patches take in the dark and many of them are lost or misplaced."""
+    shape, tri = _plane()
+    img0 = _texture()
+    uv0 = CAM.project(POSE0.apply(shape))
+    pose = HeadPose.from_euler(0, 0, 0, (1.5, 0.5, -400))
+    img, uv = _seen(img0, uv0, pose, shape)
+    n = 15
+    loop = [6 * n + 5, 6 * n + 6, 6 * n + 7, 6 * n + 8, 6 * n + 9, 8 * n + 9, 8 * n + 8,
+            8 * n + 7, 8 * n + 6, 8 * n + 5]  # fmt: skip
+    gap = np.round(uv[loop] * 4).astype(np.int32)
+    cv2.fillPoly(img, [gap], (10, 10, 10), shift=2)
+    inside = [7 * n + 6, 7 * n + 7, 7 * n + 8]
+    det = np.column_stack([uv0 + 0.5 * (uv - uv0), np.zeros(len(uv))])
+    near = np.linalg.norm(uv[:, None] - uv[loop][None], axis=2).min(1) < 8
+    near[loop + inside] = False
+    assert near.sum() >= 6
+    errs = {}
+    for given in (True, False):
+        mf = ModelFlow()
+        mf.calibrate(img0, CAM, POSE0, shape, tri, exclude=loop + inside,
+                     gap=loop if given else None)  # fmt: skip
+        xy, ok = mf.track(img, det, (pose, shape))
+        assert not ok[loop + inside].any()
+        err = np.linalg.norm(xy - uv, axis=1)[near]
+        errs[given] = (ok[near].mean(), np.median(np.where(ok[near], err, np.inf)))
+    assert errs[True][0] > 0.8 and errs[True][1] < 0.1
+    assert errs[False][1] > 3 * errs[True][1]

@@ -229,13 +229,29 @@ class ModelFlow:
         else:
             grey = crop
         grey = grey.astype(np.float32)
+        m0 = None
+        if polygon is not None and len(polygon) >= 3:
+            m0 = np.zeros(grey.shape, dtype=np.uint8)
+            poly = np.round((np.asarray(polygon) - [x0, y0]) * 4).astype(np.int32)
+            cv2.fillPoly(m0, [poly], 1, lineType=cv2.LINE_8, shift=2)
+            if not m0.any():
+                m0 = None
+        keep = None if m0 is None else (1.0 - m0).astype(np.float32)
         low = None
         if self.highpass_sigma_px > 0:
-            low = cv2.GaussianBlur(grey, (0, 0), self.highpass_sigma_px)
+            sig = self.highpass_sigma_px
+            if keep is None:
+                low = cv2.GaussianBlur(grey, (0, 0), sig)
+            else:  # (the gap's pixels out of the neighbourhood's mean: no halo around it)
+                low = cv2.GaussianBlur(grey * keep, (0, 0), sig) / np.maximum(
+                    cv2.GaussianBlur(keep, (0, 0), sig), 1e-3
+                )
         if self.smooth_sigma_px > 0:
             grey = cv2.GaussianBlur(grey, (0, 0), self.smooth_sigma_px)
         if low is not None:
             grey = grey - low
+        if keep is not None:
+            grey = grey * keep  # (the gap at the mean: what pyrDown mixes in is neutral)
         levels = [grey]
         for _ in range(self.levels):
             if min(levels[-1].shape) < 16:
@@ -248,16 +264,12 @@ class ModelFlow:
         offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
         flat = np.concatenate([lv.ravel() for lv in levels]).astype(np.float64)
         mask = np.zeros_like(flat)
-        if polygon is not None and len(polygon) >= 3:
-            m0 = np.zeros(grey.shape, dtype=np.uint8)
-            poly = np.round((np.asarray(polygon) - [x0, y0]) * 4).astype(np.int32)
-            cv2.fillPoly(m0, [poly], 1, lineType=cv2.LINE_8, shift=2)
-            if m0.any():
-                ml = [m0.astype(np.float32)]
-                for k in range(1, len(levels)):
-                    ml.append(cv2.resize(ml[-1], (int(shapes[k, 1]), int(shapes[k, 0])),
-                                         interpolation=cv2.INTER_AREA))  # fmt: skip
-                mask = np.concatenate([m.ravel() for m in ml]).astype(np.float64)
+        if m0 is not None:
+            ml = [m0.astype(np.float32)]
+            for k in range(1, len(levels)):
+                ml.append(cv2.resize(ml[-1], (int(shapes[k, 1]), int(shapes[k, 0])),
+                                     interpolation=cv2.INTER_AREA))  # fmt: skip
+            mask = np.concatenate([m.ravel() for m in ml]).astype(np.float64)
         return flat, mask, offsets, shapes, np.array([x0, y0], dtype=np.float64)
 
     def _view(self, camera, pose, shape, triangles):
