@@ -445,7 +445,39 @@ _RIGID = [_POS[i] for i in RIGID_POINTS]
 _EYES = (_POS[EYE_OUTER[0]], _POS[EYE_OUTER[1]])
 
 
-def _region_displacements(ref, seq, regions=None, rotation=None, face3d=None) -> dict:
+#: the rigid points that stay when the eyes close (:func:`_region_displacements`): the nose
+#: ridge, from between the eyes down
+RIDGE_POINTS = (168, 6, 197, 195)
+#: the eye corners among the rigid points
+EYE_CORNERS = (33, 133, 362, 263)
+#: the upper and lower lid centres, right and left eye
+LIDS = ((159, 145), (386, 374))
+#: the eyes count as closing when either lid opening (upper to lower lid centre) is read at
+#: less than this fraction of the reference frame's. DIS follows a closing lid only partway:
+#: a render of the person's face whose lids close to 0.13 of their opening is read at
+#: 0.52-0.69, the sample video's blink at 0.52-0.70, and its smile's squint at 0.74-0.84
+#: (2026-12-02). A narrower squint read below it is aligned on the nose ridge too, which holds
+#: the turn out of the image plane only by the pose's prior
+CLOSING_OPENING = 0.7
+_RIDGE = [_POS[i] for i in RIDGE_POINTS]
+_CORNERS = [_POS[i] for i in EYE_CORNERS]
+_LIDS = [(_POS[a], _POS[b]) for a, b in LIDS]
+
+
+def _eyes_closing(ref, cur, unsure_row=None) -> bool:
+    """Whether the frame whose points are ``cur`` shows the eyes closing: a lid opening read
+    below :data:`CLOSING_OPENING` of the reference's, or an eye corner's reading failing the
+    reader's forward-backward check (``unsure_row``)."""
+    if unsure_row is not None and np.asarray(unsure_row)[_CORNERS].any():
+        return True
+    for a, b in _LIDS:
+        o0 = float(np.linalg.norm(ref[a] - ref[b]))
+        if o0 > 0 and np.linalg.norm(cur[a] - cur[b]) < CLOSING_OPENING * o0:
+            return True
+    return False
+
+
+def _region_displacements(ref, seq, regions=None, rotation=None, face3d=None, unsure=None):
     """{region: (T, P, 2)} displacements of ``seq`` (T, len(POINTS), 2; image axes, x right,
     y down; NaN rows: not measured) from ``ref`` (len(POINTS), 2), given in the head frame's
     axes (x to the subject's left, y up), over the inter-ocular distance.
@@ -453,17 +485,26 @@ def _region_displacements(ref, seq, regions=None, rotation=None, face3d=None) ->
     With ``face3d`` ((len(POINTS), 3) mm, the person's face at the points, head frame), the
     head's motion is taken out in 3-D (:class:`~myoface.analysis.motionreader.HeadPose3D`:
     each frame's pose fitted to the rigid points, the reference frame's points given the
-    face's depths), which also turns them into the face's frontal axes. Without it, each frame
-    is mapped onto ``ref`` by the 2-D similarity of the rigid points (the head's motion in the
-    image plane taken out), over ``ref``'s inter-ocular distance, and turned by ``rotation``
-    (2, 2; into the face's frontal axes)."""
+    face's depths), which also turns them into the face's frontal axes. In a frame where the
+    eyes close (:func:`_eyes_closing`; ``unsure``: (T, len(POINTS)) the readings that failed
+    the reader's forward-backward check, or None) the pose is fitted to the nose ridge alone
+    (:data:`RIDGE_POINTS`, the turn out of the image plane held by the pose's prior): a lid
+    closing drags the flow at the eye corners with it. On a render of the person's face
+    blinking, its eye corners still, the rigid points' alignment read 0.004-0.013 IOD RMS of
+    motion into the mouth corners, lower lip, brows and chin while the eyes were closed, the
+    ridge's 0.0001-0.0002 (``test_a_blink_does_not_move_the_other_regions``, 2026-12-02).
+
+    Without ``face3d``, each frame is mapped onto ``ref`` by the 2-D similarity of the rigid
+    points (the head's motion in the image plane taken out), over ``ref``'s inter-ocular
+    distance, and turned by ``rotation`` (2, 2; into the face's frontal axes)."""
     regions = REGIONS if regions is None else regions
     d = np.full(np.shape(seq), np.nan)
     head = None if face3d is None else HeadPose3D(ref, face3d, _RIGID, _EYES)
     for k, cur in enumerate(seq):
         if np.isfinite(cur).all():
             if head is not None:
-                d[k] = head.displacements(cur)
+                closing = _eyes_closing(ref, cur, None if unsure is None else unsure[k])
+                d[k] = head.displacements(cur, _RIDGE if closing else None)
             else:
                 d[k] = aligned_displacements(ref, cur, _RIGID, _EYES)
     if head is None:
@@ -485,15 +526,20 @@ ALIGNMENT = "3d"
 ALIGNMENTS = ("3d", "2d")
 
 
-def input_displacements(ref, pts, side: dict, regions=None, alignment: str = ALIGNMENT) -> dict:
+def input_displacements(
+    ref, pts, side: dict, regions=None, alignment: str = ALIGNMENT, unsure=None
+) -> dict:
     """The input's side of the measure: {region: (T, P, 2)} displacements of the reader's
     points ``pts`` (T, len(POINTS), 2; pixels) from the reference's ``ref``, the head's motion
     taken out by ``alignment`` (:data:`ALIGNMENTS`), in the face's frontal axes (x across, y
     up), over the inter-ocular distance. ``side``: :func:`model_displacements`' dict of the
     model's neutral (its 2-D points turn the 2-D alignment's frame into the face's frontal
-    axes; its 3-D points are the 3-D alignment's depths)."""
+    axes; its 3-D points are the 3-D alignment's depths). ``unsure``: the readings that failed
+    the reader's forward-backward check (:func:`read_video_points`), which tell the 3-D
+    alignment where the eyes close."""
     if alignment == "3d":
-        return _region_displacements(ref, pts, regions, face3d=side["neutral_3d"])
+        face3d = side["neutral_3d"]
+        return _region_displacements(ref, pts, regions, face3d=face3d, unsure=unsure)
     if alignment == "2d":
         # the reference frame's rigid points turned onto the model's neutral ones (the head's
         # roll in the reference frame)
@@ -806,7 +852,7 @@ def fidelity_of_analysis(
     )
     t_in = time.perf_counter() - t0
     d_out, side = model_displacements(model, table, ok, JUDGED_REGIONS, alignment)
-    d_in = input_displacements(ref, pts_in, side, JUDGED_REGIONS, alignment)
+    d_in = input_displacements(ref, pts_in, side, JUDGED_REGIONS, alignment, unsure)
     per = {k: scores(d_in[k], d_out[k]) for k in d_in}
     cat_in = np.concatenate(list(d_in.values()), axis=1)
     cat_out = np.concatenate(list(d_out.values()), axis=1)
@@ -853,7 +899,7 @@ def fidelity_of_analysis(
                 },
             },
             "head_motion_taken_out": ALIGNMENT_TEXT[alignment],
-            "head_turn_deg": _head_turn(ref, pts_in, side) if alignment == "3d" else None,
+            "head_turn_deg": _head_turn(ref, pts_in, side, unsure) if alignment == "3d" else None,
             "model_side": (
                 "the model's skin vertices at each row's contractions (tissue relaxed, "
                 "warm-started), x and y of the head frame, from the neutral (contractions 0), "
@@ -890,13 +936,17 @@ def fidelity_of_analysis(
     return res, how
 
 
-def _head_turn(ref, pts, side: dict) -> dict:
+def _head_turn(ref, pts, side: dict, unsure) -> dict:
     """The range (min, max degrees) of the head's yaw, pitch and roll from the reference frame
     that the 3-D alignment took out of the readings ``pts`` (T, len(POINTS), 2)."""
     from scipy.spatial.transform import Rotation
 
     head = HeadPose3D(ref, side["neutral_3d"], _RIGID, _EYES)
-    rots = [head.rotation(p) for p in pts if np.isfinite(p).all()]
+    rots = [
+        head.rotation(p, _RIDGE if _eyes_closing(ref, p, u) else None)
+        for p, u in zip(pts, unsure, strict=True)
+        if np.isfinite(p).all()
+    ]
     if not rots:
         return {}
     ypr = Rotation.from_matrix(np.array(rots)).as_euler("yxz", degrees=True)

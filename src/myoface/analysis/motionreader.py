@@ -397,9 +397,10 @@ class HeadPose3D:
         left = q - (s * (self.face @ r.T)[:, :2] + t)
         return np.linalg.solve(s * r[:2, :2], left.T).T / self.iod
 
-    def rotation(self, cur) -> np.ndarray:
-        """The head's rotation (3, 3) from the reference frame to the frame of ``cur``."""
-        return self.pose(cur)[1] @ self.reference_pose[1].T
+    def rotation(self, cur, rigid=None) -> np.ndarray:
+        """The head's rotation (3, 3) from the reference frame to the frame of ``cur`` (the
+        pose fitted to ``rigid``, default the rigid points)."""
+        return self.pose(cur, rigid)[1] @ self.reference_pose[1].T
 
 
 _UP = np.array([1.0, -1.0])

@@ -296,10 +296,12 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
     (0.82 / 0.74), eyelids 0.50 / 0.51 (0.79 / 0.87), chin -3.46 / -0.63 (0.41 / 0.34): the
     model's chin moves down where the person's rises, its lips move more and its brows less;
     quick (36 frames): -0.03 (0.86). Measured 2026-12-02 with the head's motion taken out in
-    3-D: 0.582 (with the 2-D similarity 0.577), the model's reach 0.701 (0.708); per region
-    explained, 3-D / 2-D: mouth corners 0.81 / 0.81, lower lip 0.02 / 0.02, brows 0.14 / 0.05,
-    eyelids 0.48 / 0.50, chin -0.36 / -0.03 (the input's chin stays where the analysis' jaw
-    drops it); the head turned by yaw -1.6..1.1, pitch -4.6..0.2, roll -1.7..1.0 degrees."""
+    3-D (the nose ridge alone while the eyes close): 0.577 (with the 2-D similarity 0.577),
+    the model's reach 0.709 (0.708); per region explained, 3-D / 2-D: mouth corners 0.80 /
+    0.81, lower lip 0.05 / 0.02, brows 0.17 / 0.05, eyelids 0.38 / 0.50 (the blink's lid
+    motion no longer cancelled by the eye corners' drag), chin -0.09 / -0.03 (the input's
+    chin stays where the analysis' jaw drops it); the head turned by yaw 0..1.0, pitch
+    -3.1..0.2, roll -1.0..1.0 degrees."""
     import json
     import tempfile
     from pathlib import Path
