@@ -68,10 +68,17 @@ class FitSettings:
         lip down while the chin rises. Detected on every frame, the points scatter a little
         more; the fit's temporal prior takes that out.
     flow : read the points optical flow tracks as a term of the fit's own
-        (:class:`~myoface.analysis.terms.OpticalFlowTerm`; :mod:`myoface.analysis.flow`: each
-        point tracked by Lucas-Kanade from the first frame with a face, used where the track
-        is sure, in place of MediaPipe's x, y), because MediaPipe reads an expression's motion
-        short. Off by default: it
+        (:class:`~myoface.analysis.terms.OpticalFlowTerm`), because MediaPipe reads an
+        expression's motion short. Since 2026-12-02 the points come from
+        :mod:`myoface.analysis.modelflow` (each read against the calibration frame, its
+        template warped by the model's predicted pose and skin; that module and
+        :mod:`myoface.bench.headmotion` / :mod:`myoface.bench.knownwarp` have its numbers;
+        it costs ~5.5-8 ms of CPU a frame on the fit's thread: analysis.fps' ratio to
+        MediaPipe 0.19 against the default's 0.30 in the same run). What follows is the
+        earlier tracker's (:mod:`myoface.analysis.flow`, ``FitTracker(flow_method=
+        "chained")``: each point tracked by Lucas-Kanade from the first frame with a face,
+        else from the previous frame, used where the track is sure, in place of MediaPipe's
+        x, y). Off by default: it
         helps where the skin's texture moves with the skin and the face keeps its look, and
         hurt on the real video we have. Measured 2026-12-01 (BENCHMARKS.md; the flow on /
         off): on the head-motion closed loop, head still, skin error 0.34 / 1.03 mm, median
@@ -121,6 +128,11 @@ class FitSettings:
     photo_sigma: float = 8.0
     photo_huber: float = 2.0
     photo_landmark_weight: float = 0.1
+    #: the lid margins' image edges as a term (:mod:`myoface.analysis.lidedges`,
+    #: :class:`~myoface.analysis.lidedges.LidEdgeTerm`; its weights and why in
+    #: :class:`~myoface.analysis.lidedges.LidEdgeSettings`): opt-in, see that module for what
+    #: was measured
+    lid_edges: bool = False
     #: the photometric samples' weight for the model's own error, as :attr:`model_error` is
     #: the landmarks' (:func:`model_error_weights` at each sample: 1 where no muscle moves the
     #: skin, 0.5 where one moves it 2 mm at full contraction). The calibration frame's

@@ -38,6 +38,18 @@ in every region with the look (the default's lowest 0.57). The look does not dam
 photometric fit as the sample video's real smile does (its mouth corners' gain there 0.54,
 the default's 0.65): the mouth's dark and teeth open its lips and jaw by a fifth more than
 the warp, and its corners move more with them.
+
+The fit with optical flow (``myoface analyze --flow``) by each point tracker
+(``flow, anchored``: :mod:`myoface.analysis.modelflow`, every point against the calibration
+frame through the model; ``flow, chained``: :class:`~myoface.analysis.flow.FlowRefiner`).
+Measured 2026-12-02 at 4c5dcdb (``myoface bench --only analysis.known_warp_gain``; head
+still / moving, gain and explained): anchored mouth corners 0.81 / 0.80 (explained 0.95),
+lips 0.97 / 0.98, brows 0.87, eyelids 0.91, chin 0.95 / 0.96 (explained >= 0.95 in every
+region), leak 0.060 / 0.058; chained 0.80, 0.90 / 0.89, 0.83 / 0.84, 0.86 / 0.87, 0.88 /
+0.87, leak 0.073 / 0.069; the default's 0.48-0.57 and leak 0.22 in the same run. With the
+look, anchored corners 0.75 / 0.79 (chained 0.90 / 0.89: the corners' patches stop matching
+the calibration frame as the look changes them, and MediaPipe's points stand there), lips
+1.06 / 1.08, brows 0.81, eyelids 0.86, chin 1.04 / 1.06.
 """
 
 from __future__ import annotations
