@@ -364,6 +364,23 @@ class ModelFit:
         frame's appearance, once :meth:`set_appearance` has taken it (else not used)."""
         t0 = time.thread_time()
         photo = self.photometric_term(image)
+        # the lid margins' edges (FitSettings.lid_edges) read on this frame's fits only
+        self._lid_image = image if self.settings.lid_edges else None
+        try:
+            return self._fit_frame(points, synthesis, deferred, flow, photo, t0)
+        finally:
+            self._lid_image = None
+
+    def lid_edge_term(self, image):
+        """The lid margins' edge term of ``image`` (:mod:`myoface.analysis.lidedges`)."""
+        from myoface.analysis.lidedges import LidEdgeTerm, MarginSamples
+
+        if getattr(self, "_lid_samples", None) is None:
+            self._lid_samples = MarginSamples(self.model.face)
+        return LidEdgeTerm(image, self._lid_samples, self.camera)
+
+    def _fit_frame(self, points, synthesis, deferred, flow, photo, t0) -> FrameFit:
+        """(:meth:`fit`'s body.)"""
         p = check_points(points, len(self.neutral))
         if flow is not None:
             flow = (np.asarray(flow[0], dtype=np.float64), np.asarray(flow[1], dtype=bool))
@@ -604,6 +621,8 @@ class ModelFit:
                 )  # fmt: skip
             )
         out += [MagnitudePrior(s.magnitude_sigma), SparsityPrior(s.sparsity)]
+        if getattr(self, "_lid_image", None) is not None:  # (FitSettings.lid_edges)
+            out.append(self.lid_edge_term(self._lid_image))
         # (the observations last: the priors' normal equations are summed first, then theirs)
         if photo is not None:
             # the pixels read the motion; MediaPipe's points stay as a weak term (they find

@@ -481,7 +481,7 @@ class FitTracker(TrackerBase):
         try:
             r = fit.fit(
                 obs.points, self.synthesis, deferred=self.deferred_relax, flow=flow,
-                image=frame if self.settings.photometric else None,
+                image=frame if self.settings.photometric or self.settings.lid_edges else None,
             )  # fmt: skip
         except (np.linalg.LinAlgError, MyofaceValueError):
             self._lose_track()
