@@ -42,20 +42,18 @@ def main() -> None:
         degraded_sequence,
         detect_sequence,
         head_trajectory,
+        relaxed_skins,
         run_headmotion,
     )
 
     fm = _model()
     truth, played, phase = episode_programme(fm.ids, EPISODES)
     poses = head_trajectory(len(truth), False)
-    state, skins = fm.rest_state(), []
-    for c in truth:
-        state = fm.relax(c, state).state
-        skins.append(fm.skin_vertices(state))
-    frames, _ = degraded_sequence(fm.face, poses, np.array(skins))
+    skins = relaxed_skins(fm, truth)
+    frames, _ = degraded_sequence(fm.face, poses, skins)
     points, _ = detect_sequence(frames)
     del frames
-    res = run_headmotion(fm, points, truth, poses, np.array(skins))
+    res = run_headmotion(fm, points, truth, poses, skins)
 
     alone = expression_labels(expression_scores(res.estimate, fm.ids))
     reader = ExpressionReader(fm.ids)

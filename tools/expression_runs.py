@@ -94,11 +94,7 @@ def run(name: str, out: Path) -> None:
     truth, played, ph = episode_programme(fm.ids, episodes, phases)
     inten = _intensities(episodes, phases)
     poses = hm.head_trajectory(len(truth), True) if still else trajectory(len(truth), phase, amp)
-    state = fm.rest_state()
-    skins = np.empty((len(truth), fm.face.n_vertices, 3))
-    for k, c in enumerate(truth):
-        state = fm.relax(c, state).state
-        skins[k] = fm.skin_vertices(state)
+    skins = hm.relaxed_skins(fm, truth)
     if exact:
         from myoface.bench.expression import model_landmarks
 

@@ -387,6 +387,7 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
         degraded_sequence,
         detect_sequence,
         head_trajectory,
+        relaxed_skins,
         render_sequence,
         run_headmotion,
     )
@@ -398,11 +399,7 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
     truth, played, phase = episode_programme(fm.ids, episodes, phases)
     intensity = _intensities(episodes, phases)
     poses = head_trajectory(len(truth), still)
-    state = fm.rest_state()
-    skins = np.empty((len(truth), fm.face.n_vertices, 3))
-    for k, c in enumerate(truth):
-        state = fm.relax(c, state).state
-        skins[k] = fm.skin_vertices(state)
+    skins = relaxed_skins(fm, truth)
     if exact:
         points, camera = model_landmarks(poses, skins), None
     else:

@@ -240,13 +240,18 @@ class HeadMotionResult:
 def make_sequence(model, n_frames: int = 90, still: bool = False):
     """Truth of the loop: contractions (T, M), head poses and the skin (T, V, 3) head frame."""
     truth = expression_programme(model.ids, n_frames)
-    poses = head_trajectory(n_frames, still)
+    return truth, head_trajectory(n_frames, still), relaxed_skins(model, truth)
+
+
+def relaxed_skins(model, contractions) -> np.ndarray:
+    """The skin (T, V, 3) head frame at each row of ``contractions`` (T, M), the tissue
+    relaxed from the previous frame's (from rest for the first)."""
     state = model.rest_state()
-    skins = np.empty((n_frames, model.face.n_vertices, 3))
-    for k, c in enumerate(truth):
+    skins = np.empty((len(contractions), model.face.n_vertices, 3))
+    for k, c in enumerate(contractions):
         state = model.relax(c, state).state
         skins[k] = model.skin_vertices(state)
-    return truth, poses, skins
+    return skins
 
 
 def render_sequence(face, poses, skins) -> list[np.ndarray]:
