@@ -33,14 +33,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from myoface.analysis.camera import PinholeCamera
 from myoface.analysis.terms import Estimate, pixel_mm
 
 #: the eyes' landmark groups (the face's opening margins)
 EYE_GROUPS = ("eye_l", "eye_r")
-#: luma weights (ITU-R BT.601)
-_LUMA = np.array([0.299, 0.587, 0.114])
 
 
 @dataclass(frozen=True)
@@ -66,11 +65,12 @@ class LidEdgeSettings:
     step_px: float = 0.5
     min_contrast: float = 4.0
     min_opening_px: float = 3.0
-    sigma_mm: float = 1.0
+    sigma_mm: float = 0.5
     huber: float = 1.5
     polarity: str = "nearest"
-    lids: str = "both"
+    lids: str = "upper"
     redetect_px: float = 0.5
+    upper_sign: int = 0
 
 
 def lid_chains(face) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -100,119 +100,139 @@ class MarginSamples:
         self.chains = lid_chains(face)
         for e, chains in enumerate(self.chains):
             for li, ch in enumerate(chains):
-                for k in range(1, len(ch) - 1):  # interior vertices
+                # along the lid: interior vertex, midpoint to the next, ..., last interior
+                for k in range(1, len(ch) - 1):
                     a.append(ch[k]), b.append(ch[k]), al.append(0.0)
                     eye.append(e), lid.append(li)
-                for k in range(1, len(ch) - 2):  # midpoints between interior vertices
-                    a.append(ch[k]), b.append(ch[k + 1]), al.append(0.5)
-                    eye.append(e), lid.append(li)
+                    if k < len(ch) - 2:
+                        a.append(ch[k]), b.append(ch[k + 1]), al.append(0.5)
+                        eye.append(e), lid.append(li)
         self.a = np.array(a)
         self.b = np.array(b)
         self.alpha = np.array(al)
         self.eye = np.array(eye)
         self.lid = np.array(lid)
+        # each sample's neighbours along its lid (itself at the lid's ends)
+        n = len(self.a)
+        same = np.r_[False, (self.eye[1:] == self.eye[:-1]) & (self.lid[1:] == self.lid[:-1])]
+        idx = np.arange(n)
+        self._prev = np.where(same, idx - 1, idx)
+        self._next = np.where(np.r_[same[1:], False], idx + 1, idx)
 
     def points(self, v: np.ndarray) -> np.ndarray:
         """The samples' places (N, 3) on vertices ``v`` (V, 3)."""
         w = self.alpha[:, None]
         return (1 - w) * v[self.a] + w * v[self.b]
 
-    def normals(self, uv: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    def normals(self, uv: np.ndarray) -> np.ndarray:
         """The unit image directions (N, 2) across the margin at the projected samples ``uv``
-        (N, 2), pointing into the opening (towards ``centres`` (2, 2), each eye's)."""
-        n = len(uv)
-        tang = np.zeros((n, 2))
-        # the tangent from the neighbouring samples of the same lid (the samples of a lid are
-        # vertices then midpoints: order them along the lid by their vertex positions)
-        for e in (0, 1):
-            for li in (0, 1):
-                idx = np.flatnonzero((self.eye == e) & (self.lid == li))
-                p = uv[idx]
-                order = np.argsort(p @ (p[-1] - p[0]) if len(p) > 1 else np.zeros(len(p)))
-                q = p[order]
-                t = np.gradient(q, axis=0) if len(q) > 1 else np.tile([1.0, 0.0], (len(q), 1))
-                tang[idx[order]] = t
+        (N, 2), pointing into the opening (towards the centroid of its eye's samples)."""
+        tang = uv[self._next] - uv[self._prev]
         tang /= np.maximum(np.linalg.norm(tang, axis=1, keepdims=True), 1e-9)
         nrm = np.column_stack([-tang[:, 1], tang[:, 0]])
+        centres = np.array([uv[self.eye == e].mean(0) for e in (0, 1)])
         toward = centres[self.eye] - uv
         flip = (nrm * toward).sum(1) < 0
         nrm[flip] *= -1
         return nrm
 
 
-def _bilinear_luma(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """The luma of RGB ``img`` (H, W, 3) at pixel positions ``x``, ``y`` (any shape; pixel
-    centres at integers), bilinear, clamped to the image."""
-    h, w = img.shape[:2]
-    x = np.clip(x, 0, w - 1.001)
-    y = np.clip(y, 0, h - 1.001)
-    x0 = np.floor(x).astype(np.int64)
-    y0 = np.floor(y).astype(np.int64)
+@njit(cache=True, nogil=True)
+def _luma_at(img, x, y):
+    """The BT.601 luma of RGB ``img`` (H, W, 3) at ``(x, y)`` (pixel centres at integers),
+    bilinear, clamped to the image."""
+    h, w = img.shape[0], img.shape[1]
+    x = min(max(x, 0.0), w - 1.001)
+    y = min(max(y, 0.0), h - 1.001)
+    x0, y0 = int(np.floor(x)), int(np.floor(y))
     fx, fy = x - x0, y - y0
-    if img.ndim == 3:
-        img = img @ _LUMA
-    flat = img.reshape(-1)
-    i = y0 * w + x0
-
-    def g(k):
-        return flat[k]
-
-    return (
-        g(i) * (1 - fx) * (1 - fy)
-        + g(i + 1) * fx * (1 - fy)
-        + g(i + w) * (1 - fx) * fy
-        + g(i + w + 1) * fx * fy
-    )
+    out = 0.0
+    for c in range(3):
+        wc = 0.299 if c == 0 else (0.587 if c == 1 else 0.114)
+        v = (
+            img[y0, x0, c] * (1 - fx) * (1 - fy)
+            + img[y0, x0 + 1, c] * fx * (1 - fy)
+            + img[y0 + 1, x0, c] * (1 - fx) * fy
+            + img[y0 + 1, x0 + 1, c] * fx * fy
+        )
+        out += wc * v
+    return out
 
 
-def find_edges(img, uv, normals, settings: LidEdgeSettings | None = None):
-    """The edge across each sample's profile: ``uv`` (N, 2) the model's margin points (px),
-    ``normals`` (N, 2) unit directions across the margin. Returns the edges' offsets (N,) px
-    along the normals from ``uv``, their strength (N,) luma per px, and whether each is
-    clear (N,) bool (see the module's docstring)."""
-    s = settings or LidEdgeSettings()
-    ts = np.arange(-s.window_px - s.step_px, s.window_px + 1.5 * s.step_px, s.step_px)
-    tang = np.column_stack([-normals[:, 1], normals[:, 0]])
-    side = np.array([-1.0, 0.0, 1.0])
-    # (N, 3 lines, T) positions
-    px = (
-        uv[:, None, None, :]
-        + ts[None, None, :, None] * normals[:, None, None, :]
-        + side[None, :, None, None] * tang[:, None, None, :]
-    )
-    # the luma of the samples' neighbourhood only (a crop: a whole frame's costs more)
-    lo = np.floor(px.reshape(-1, 2).min(0)).astype(np.int64) - 1
-    hi = np.ceil(px.reshape(-1, 2).max(0)).astype(np.int64) + 2
-    h, w = img.shape[:2]
-    lo = np.clip(lo, 0, [w - 2, h - 2])
-    hi = np.clip(hi, lo + 2, [w, h])
-    crop = img[lo[1] : hi[1], lo[0] : hi[0]]
-    luma = crop @ _LUMA if crop.ndim == 3 else crop.astype(np.float64)
-    prof = _bilinear_luma(luma, px[..., 0] - lo[0], px[..., 1] - lo[1]).mean(axis=1)  # (N, T)
-    prof = np.concatenate([prof[:, :1], prof, prof[:, -1:]], axis=1)
-    prof = 0.25 * prof[:, :-2] + 0.5 * prof[:, 1:-1] + 0.25 * prof[:, 2:]
-    der = (prof[:, 2:] - prof[:, :-2]) / (2 * s.step_px)  # at ts[1:-1]
-    tc = ts[1:-1]
-    mag = np.abs(der)
-    n = len(uv)
-    if s.polarity == "nearest":
-        peak = np.zeros_like(mag, dtype=bool)
-        peak[:, 1:-1] = (mag[:, 1:-1] >= mag[:, :-2]) & (mag[:, 1:-1] >= mag[:, 2:])
-        peak &= mag >= np.maximum(s.min_contrast, 0.5 * mag.max(axis=1, keepdims=True))
-        dist = np.where(peak, np.abs(tc)[None], np.inf)
-        k = np.argmin(dist, axis=1)
-    else:
-        k = np.argmax(mag, axis=1)
-    rows = np.arange(n)
-    strength = mag[rows, k]
-    inside = (k > 0) & (k < len(tc) - 1)
-    kk = np.clip(k, 1, len(tc) - 2)
-    m0, m1, m2 = mag[rows, kk - 1], mag[rows, kk], mag[rows, kk + 1]
-    den = m0 - 2 * m1 + m2
-    frac = np.where(den < -1e-9, 0.5 * (m0 - m2) / np.where(den < -1e-9, den, -1.0), 0.0)
-    off = tc[kk] + np.clip(frac, -0.5, 0.5) * s.step_px
-    ok = inside & (strength >= s.min_contrast) & (np.abs(off) <= s.window_px)
+@njit(cache=True, nogil=True)
+def _edges(img, uv, nrm, sign, window, step, min_contrast, nearest):
+    """:func:`find_edges`' loop (compiled): per sample the profile, its derivative, the
+    edge's offset, signed strength and whether it is clear."""
+    n = uv.shape[0]
+    nt = int(np.floor((2 * window + 2 * step) / step + 1e-9)) + 1  # ts from -window - step
+    off = np.zeros(n)
+    strength = np.zeros(n)
+    ok = np.zeros(n, dtype=np.bool_)
+    prof = np.zeros(nt)
+    smooth = np.zeros(nt)
+    nd = nt - 2
+    der = np.zeros(nd)
+    mag = np.zeros(nd)
+    for i in range(n):
+        nx, ny = nrm[i, 0], nrm[i, 1]
+        tx, ty = -ny, nx
+        for k in range(nt):
+            t = -window - step + k * step
+            acc = 0.0
+            for sd in (-1.0, 0.0, 1.0):
+                acc += _luma_at(img, uv[i, 0] + t * nx + sd * tx, uv[i, 1] + t * ny + sd * ty)
+            prof[k] = acc / 3.0
+        for k in range(nt):
+            a = prof[max(k - 1, 0)]
+            b = prof[min(k + 1, nt - 1)]
+            smooth[k] = 0.25 * a + 0.5 * prof[k] + 0.25 * b
+        best, bmax = -1, 0.0
+        for k in range(nd):
+            der[k] = (smooth[k + 2] - smooth[k]) / (2 * step)
+            m = abs(der[k])
+            if sign[i] > 0:
+                m = max(der[k], 0.0)
+            elif sign[i] < 0:
+                m = max(-der[k], 0.0)
+            mag[k] = m
+            if m > bmax:
+                bmax, best = m, k
+        if nearest:
+            thr = max(min_contrast, 0.5 * bmax)
+            best, dbest = -1, 1e30
+            for k in range(1, nd - 1):
+                if mag[k] >= mag[k - 1] and mag[k] >= mag[k + 1] and mag[k] >= thr:
+                    d = abs(-window + k * step)
+                    if d < dbest:
+                        dbest, best = d, k
+        if best <= 0 or best >= nd - 1:
+            continue
+        m0, m1, m2 = mag[best - 1], mag[best], mag[best + 1]
+        den = m0 - 2 * m1 + m2
+        frac = 0.5 * (m0 - m2) / den if den < -1e-9 else 0.0
+        frac = min(max(frac, -0.5), 0.5)
+        o = -window + best * step + frac * step
+        off[i] = o
+        strength[i] = m1 if der[best] >= 0 else -m1
+        ok[i] = m1 >= min_contrast and abs(o) <= window
     return off, strength, ok
+
+
+def find_edges(img, uv, normals, settings: LidEdgeSettings | None = None, sign=None):
+    """The edge across each sample's profile: ``uv`` (N, 2) the model's margin points (px),
+    ``normals`` (N, 2) unit directions across the margin, on ``img`` (H, W, 3) RGB. Returns
+    the edges' offsets (N,) px along the normals from ``uv``, their strength (N,) luma per
+    px (signed: + where the luma rises along the normal), and whether each is clear (N,)
+    bool (see the module's docstring). ``sign`` (N,): +1 where only an edge that brightens
+    along the normal counts, -1 where only one that darkens, 0 either (default)."""
+    s = settings or LidEdgeSettings()
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    normals = np.ascontiguousarray(normals, dtype=np.float64)
+    sg = np.zeros(len(uv)) if sign is None else np.asarray(sign, dtype=np.float64)
+    return _edges(
+        np.asarray(img), uv, normals, np.ascontiguousarray(sg), float(s.window_px),
+        float(s.step_px), float(s.min_contrast), s.polarity == "nearest",
+    )  # fmt: skip
 
 
 class LidEdgeTerm:
@@ -267,12 +287,19 @@ class LidEdgeTerm:
         normals, offsets, strengths and which count."""
         _, _, uv = self._project(est)
         sm = self.samples
-        centres = np.array([uv[sm.eye == e].mean(0) for e in (0, 1)])
-        nrm = sm.normals(uv, centres)
-        off, strength, ok = find_edges(self.image, uv, nrm, self.settings)
-        ok &= self._readable(est, uv)
+        nrm = sm.normals(uv)
+        want = self._readable(est, uv)
         if self.settings.lids == "upper":
-            ok &= sm.lid == 0
+            want &= sm.lid == 0
+        sel = np.flatnonzero(want)
+        sign = np.where(sm.lid[sel] == 0, self.settings.upper_sign, 0)
+        off = np.zeros(len(uv))
+        strength = np.zeros(len(uv))
+        ok = np.zeros(len(uv), dtype=bool)
+        if len(sel):
+            off[sel], strength[sel], ok[sel] = find_edges(
+                self.image, uv[sel], nrm[sel], self.settings, sign
+            )
         self.used = np.flatnonzero(ok)
         self.nrm = nrm[self.used]
         self.target = ((uv[self.used] + off[self.used, None] * self.nrm) * self.nrm).sum(1)
