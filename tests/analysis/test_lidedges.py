@@ -82,3 +82,29 @@ def test_the_terms_jacobian_matches_its_residuals():
     ])  # fmt: skip
     # cost = sum r^2, b = -J^T r: the gradient is -2 b
     assert np.allclose(num, -2 * b, rtol=1e-4, atol=1e-4 * np.abs(num).max())
+
+
+def test_closed_and_turned_away_eyes_are_not_read():
+    from myoface.face.io import load_default_face
+
+    face = load_default_face()
+    sm = MarginSamples(face)
+    cam = PinholeCamera.for_image(640, 480, 40.0)
+    term = LidEdgeTerm(np.zeros((480, 640, 3)), sm, cam)
+    m = 1
+    jac = np.zeros((face.n_vertices, 3, m))
+
+    def readable(shape, yaw):
+        pose = HeadPose.from_euler(yaw, 0.0, 0.0, translation_mm=(0, 0, -500))
+        est = Estimate(pose, np.zeros(m), shape, jac, np.arange(m))
+        return term._readable(est, term._project(est)[2])
+
+    v = face.vertices.copy()
+    assert readable(v, 0.0).all()
+    # the first eye closed: its upper margin's vertices onto its lower margin's mean
+    upper, lower = sm.chains[0]
+    v[upper[1:-1]] = v[lower].mean(0)
+    ok = readable(v, 0.0)
+    assert not ok[sm.eye == 0].any() and ok[sm.eye == 1].all()
+    # the head turned 80 degrees: neither eye faces the camera within FACING_DEG
+    assert not readable(face.vertices, 80.0).any()

@@ -40,6 +40,9 @@ from myoface.analysis.terms import Estimate, pixel_mm
 
 #: the eyes' landmark groups (the face's opening margins)
 EYE_GROUPS = ("eye_l", "eye_r")
+#: an eye turned further than this from the line of sight is not read (its margins are seen
+#: edge-on: the lid's own skin, not the opening, makes the edge)
+FACING_DEG = 60.0
 
 
 @dataclass(frozen=True)
@@ -70,7 +73,7 @@ class LidEdgeSettings:
     polarity: str = "nearest"
     lids: str = "upper"
     redetect_px: float = 0.5
-    upper_sign: int = 0
+    upper_sign: int = 1
 
 
 def lid_chains(face) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -118,6 +121,15 @@ class MarginSamples:
         idx = np.arange(n)
         self._prev = np.where(same, idx - 1, idx)
         self._next = np.where(np.r_[same[1:], False], idx + 1, idx)
+        #: per eye: its upper lid's samples, its lower lid's, and all of its samples
+        self.groups = [
+            (
+                np.flatnonzero((self.eye == e) & (self.lid == 0)),
+                np.flatnonzero((self.eye == e) & (self.lid == 1)),
+                np.flatnonzero(self.eye == e),
+            )
+            for e in (0, 1)
+        ]
 
     def points(self, v: np.ndarray) -> np.ndarray:
         """The samples' places (N, 3) on vertices ``v`` (V, 3)."""
@@ -218,6 +230,59 @@ def _edges(img, uv, nrm, sign, window, step, min_contrast, nearest):
     return off, strength, ok
 
 
+@njit(cache=True, nogil=True)
+def _rows(rot, trans, shape, jac, free, ia, ib, alpha, nrm, target, scale, f, cx, cy, hw,
+          huber, want_normal):  # fmt: skip
+    """The term's residuals at a pose and skin: its cost (Huber's) and, with
+    ``want_normal``, its normal equations (H, b) in (omega, dt, dc[free])."""
+    n = ia.shape[0]
+    nf = free.shape[0]
+    nu = 6 + nf
+    hmat = np.zeros((nu, nu))
+    bvec = np.zeros(nu)
+    row = np.zeros(nu)
+    cost = 0.0
+    for i in range(n):
+        al = alpha[i]
+        x = (1 - al) * shape[ia[i]] + al * shape[ib[i]]
+        rx = rot @ x
+        pc = rx + trans
+        d = max(-pc[2], 1e-6)
+        u = cx + f * pc[0] / d
+        v = cy - f * pc[1] / d
+        r = (nrm[i, 0] * u + nrm[i, 1] * v - target[i]) * scale
+        ar = abs(r)
+        cost += r * r if ar <= huber else 2 * huber * ar - huber * huber
+        if not want_normal:
+            continue
+        # g = n^T d(u, v)/dP, scaled
+        g0 = nrm[i, 0] * f / d * scale
+        g1 = -nrm[i, 1] * f / d * scale
+        g2 = (nrm[i, 0] * f * pc[0] / d**2 - nrm[i, 1] * f * pc[1] / d**2) * scale
+        row[0] = rx[1] * g2 - rx[2] * g1
+        row[1] = rx[2] * g0 - rx[0] * g2
+        row[2] = rx[0] * g1 - rx[1] * g0
+        row[3], row[4], row[5] = g0, g1, g2
+        # head-frame direction R^T g
+        h0 = rot[0, 0] * g0 + rot[1, 0] * g1 + rot[2, 0] * g2
+        h1 = rot[0, 1] * g0 + rot[1, 1] * g1 + rot[2, 1] * g2
+        h2 = rot[0, 2] * g0 + rot[1, 2] * g1 + rot[2, 2] * g2
+        for j in range(nf):
+            m = free[j]
+            row[6 + j] = (1 - al) * (
+                h0 * jac[ia[i], 0, m] + h1 * jac[ia[i], 1, m] + h2 * jac[ia[i], 2, m]
+            ) + al * (h0 * jac[ib[i], 0, m] + h1 * jac[ib[i], 1, m] + h2 * jac[ib[i], 2, m])
+        w = hw[i]
+        for p in range(nu):
+            bvec[p] -= w * row[p] * r
+            for q in range(p, nu):
+                hmat[p, q] += w * row[p] * row[q]
+    for p in range(nu):
+        for q in range(p):
+            hmat[p, q] = hmat[q, p]
+    return cost, hmat, bvec
+
+
 def find_edges(img, uv, normals, settings: LidEdgeSettings | None = None, sign=None):
     """The edge across each sample's profile: ``uv`` (N, 2) the model's margin points (px),
     ``normals`` (N, 2) unit directions across the margin, on ``img`` (H, W, 3) RGB. Returns
@@ -268,18 +333,22 @@ class LidEdgeTerm:
         return x, pc, self.camera.project(pc)
 
     def _readable(self, est: Estimate, uv) -> np.ndarray:
-        """(N,) the samples of eyes open and facing the camera."""
+        """(N,) the samples of the eyes that are open (the mean gap between the projected
+        margins at least :attr:`LidEdgeSettings.min_opening_px`, the upper above the lower in
+        the head's own up direction) and face the camera (the head's forward axis within
+        :data:`FACING_DEG` of the line of sight to the eye)."""
         s, sm = self.settings, self.samples
         ok = np.ones(len(uv), dtype=bool)
-        for e in (0, 1):
-            up = (sm.eye == e) & (sm.lid == 0)
-            lo = (sm.eye == e) & (sm.lid == 1)
-            gap = float(np.linalg.norm(uv[up].mean(0) - uv[lo].mean(0)))
-            # facing: the opening's image area against its extent (a turned-away eye's
-            # projected margins cross or collapse)
-            cu, cl = uv[up].mean(0), uv[lo].mean(0)
-            if gap < s.min_opening_px or cu[1] >= cl[1] - 0.5 * s.min_opening_px:
-                ok[sm.eye == e] = False
+        rot = est.pose.rotation
+        up_img = np.array([rot[0, 1], -rot[1, 1]])  # the head's +y in the image (y down)
+        fwd = rot[:, 2]
+        for iu, il, ie in sm.groups:
+            d = uv[iu].mean(0) - uv[il].mean(0)
+            gap = float(np.hypot(*d))
+            pc = est.pose.apply(est.shape[sm.a[ie[:1]]])[0]
+            facing = float(-pc @ fwd / max(np.linalg.norm(pc), 1e-9))
+            if gap < s.min_opening_px or d @ up_img <= 0 or facing < np.cos(np.radians(FACING_DEG)):
+                ok[ie] = False
         return ok
 
     def detect(self, est: Estimate) -> dict:
@@ -315,6 +384,17 @@ class LidEdgeTerm:
         h = self.settings.huber
         self.hw = np.where(np.abs(r) > h, h / np.maximum(np.abs(r), 1e-12), 1.0)
 
+    def _call(self, est: Estimate, want_normal: bool):
+        sm, u = self.samples, self.used
+        cam = self.camera
+        return _rows(
+            np.ascontiguousarray(est.pose.rotation), np.asarray(est.pose.translation_mm, float),
+            np.ascontiguousarray(est.shape, dtype=np.float64), est.jac,
+            np.asarray(est.free, dtype=np.int64), sm.a[u], sm.b[u], sm.alpha[u], self.nrm,
+            self.target, self.mm_per_px / self.settings.sigma_mm, float(cam.focal_px),
+            float(cam.cx), float(cam.cy), self.hw, self.settings.huber, want_normal,
+        )  # fmt: skip
+
     def _residuals(self, est: Estimate) -> np.ndarray:
         if not len(self.used):
             return np.zeros(0)
@@ -323,33 +403,13 @@ class LidEdgeTerm:
         return d * (self.mm_per_px / self.settings.sigma_mm)
 
     def normal_equations(self, est: Estimate):
-        n = est.n_unknowns
-        hmat, b = np.zeros((n, n)), np.zeros(n)
         if not len(self.used):
-            return hmat, b
-        sm = self.samples
-        u = self.used
-        x = sm.points(est.shape)[u]
-        pc = est.pose.apply(x)
-        dproj = self.camera.projection_jacobian(pc)  # (n, 2, 3)
-        g = np.einsum("ni,nij->nj", self.nrm, dproj) * (self.mm_per_px / self.settings.sigma_mm)
-        rx = pc - est.pose.translation_mm  # R X
-        jrow = np.zeros((len(u), n))
-        # d P / d omega = omega x (R X) -> g . (omega x rx) = omega . (rx x g)
-        jrow[:, :3] = np.cross(rx, g)
-        jrow[:, 3:6] = g
-        if len(est.free):
-            al = sm.alpha[u][:, None, None]
-            jx = (1 - al) * est.jac[sm.a[u]][:, :, est.free] + al * est.jac[sm.b[u]][:, :, est.free]
-            gr = g @ est.pose.rotation  # (n, 3) in the head frame
-            jrow[:, 6:] = np.einsum("ni,nif->nf", gr, jx)
-        r = self._residuals(est)
-        w = self.hw
-        hmat = jrow.T @ (jrow * w[:, None])
-        b = -jrow.T @ (w * r)
+            n = est.n_unknowns
+            return np.zeros((n, n)), np.zeros(n)
+        _, hmat, b = self._call(est, True)
         return hmat, b
 
     def cost(self, est: Estimate) -> float:
-        r = np.abs(self._residuals(est))
-        h = self.settings.huber
-        return float(np.where(r <= h, r**2, 2 * h * r - h**2).sum())
+        if not len(self.used):
+            return 0.0
+        return float(self._call(est, False)[0])
