@@ -216,3 +216,61 @@ def test_the_mouths_gap_weighs_nothing():
         errs[given] = (ok[near].mean(), np.median(np.where(ok[near], err, np.inf)))
     assert errs[True][0] > 0.8 and errs[True][1] < 0.1
     assert errs[False][1] > 3 * errs[True][1]
+
+
+def test_the_fast_kernel_is_the_reference_one():
+    """track_points (one pass to sample a patch, one for the normal equations) finds what
+    track_points_reference (the plain loops) finds, on patches with and without the mouth's
+    gap, with the affine map of a turned head."""
+    from myoface.analysis._lkkernels import track_points, track_points_reference
+
+    img0 = _texture(seed=1)
+    img1 = cv2.warpAffine(img0, np.float32([[1.02, 0.05, 2.3], [-0.04, 0.99, -1.6]]), (640, 360),
+                          flags=cv2.INTER_CUBIC)  # fmt: skip
+    poly = np.array([[300.0, 170.0], [340.0, 165.0], [345.0, 190.0], [305.0, 195.0]])
+    mf = ModelFlow()
+    r = mf._pyramid(img0, (100, 60), (540, 300), poly)
+    c = mf._pyramid(img1, (100, 60), (540, 300), poly + [2.0, -1.0])
+    rng = np.random.default_rng(5)
+    ref_xy = rng.uniform([140, 100], [500, 260], (300, 2))
+    truth = ref_xy @ np.array([[1.02, 0.05], [-0.04, 0.99]]).T + [2.3, -1.6]
+    guess = truth + rng.normal(0, 1.0, truth.shape)
+    amap = np.array([[1.02, 0.05], [-0.04, 0.99]])
+    ainv = np.repeat(np.linalg.inv(amap)[None], len(ref_xy), axis=0)
+    active = np.ones(len(ref_xy), dtype=bool)
+    masked = np.linalg.norm(ref_xy - poly.mean(0), axis=1) < 60
+    assert masked.sum() > 10
+    args = (r[0], r[1], r[2], r[3], c[0], c[1], c[2], c[3], ref_xy - r[4], guess - c[4], ainv,
+            active, masked, 5, 12, 1.5, 0.03)  # fmt: skip
+    want = track_points_reference(*args)
+    got = track_points(*args, 0.03)
+    assert np.array_equal(want[4], got[4]) and (got[4] == 0).mean() > 0.9
+    ok = got[4] == 0
+    assert np.abs(want[0][ok] - got[0][ok]).max() < 1e-6
+    assert np.abs(want[1][ok] - got[1][ok]).max() < 1e-6
+    assert np.median(np.linalg.norm(got[0][ok] + c[4] - truth[ok], axis=1)) < 0.1
+
+
+def test_a_prepared_frame_tracks_as_the_frame():
+    """The crop prepared on the detector's thread (ModelFlow.prepare, around the detector's
+    points) gives the points found from the frame itself."""
+    shape, tri = _plane()
+    img0 = _texture()
+    uv0 = CAM.project(POSE0.apply(shape))
+    pose = HeadPose.from_euler(10, 3, 2, (2, 1, -405))
+    img, uv = _seen(img0, uv0, pose, shape)
+    det = np.column_stack([uv0 + 0.5 * (uv - uv0), np.zeros(len(uv))])
+    gap = [100, 101, 102, 117, 116, 115]
+    xys = []
+    for prepared in (False, True):
+        mf = ModelFlow()
+        mf.calibrate(img0, CAM, POSE0, shape, tri, exclude=gap, gap=gap)
+        xy, ok = mf.track(
+            img, det, (pose, shape), prepared=mf.prepare(img, det) if prepared else None
+        )
+        xys.append((xy, ok))
+    (a, oka), (b, okb) = xys
+    assert (oka == okb).mean() > 0.98 and oka.mean() > 0.8
+    both = oka & okb
+    assert np.median(np.linalg.norm(a[both] - b[both], axis=1)) < 0.01
+    assert np.median(np.linalg.norm(b[okb] - uv[okb], axis=1)) < 0.1

@@ -74,6 +74,12 @@ from myoface.facemesh import import_opencv
 EYE_CORNERS = (33, 263)
 #: Lucas-Kanade stops at a step under this (px, at each level)
 EPS_PX = 0.03
+#: a frame's noise (:func:`_noise`) is read on every this many rows of its crop
+NOISE_STRIDE = 4
+#: :meth:`ModelFlow.prepare`'s crop reaches this much further than a patch needs around the
+#: detector's points (px): the guess is the prediction moved as the detector moved, a few
+#: px from the detector's point (else the crop is made again on the fit's thread)
+PREPARED_SLACK_PX = 24
 #: the point trackers of the fit's optical flow (:attr:`~myoface.analysis.weights.FitSettings.
 #: flow`): ``"anchored"`` this module's, ``"chained"`` :class:`~myoface.analysis.flow.
 #: FlowRefiner` (from the first frame, else from the previous one)
@@ -97,14 +103,27 @@ def mesh_neighbours(triangles, n_vertices: int) -> tuple[np.ndarray, np.ndarray]
     return start.astype(np.int64), np.ascontiguousarray(e[:, 1])
 
 
-def _noise(flat, offsets, shapes) -> float:
-    """The sensor's noise (grey levels, 1 sd) in a packed pyramid's level 0, robustly: the
-    median absolute second difference along rows (6 sigma^2 for white noise), which the
-    face's smooth skin dominates."""
+def _noise(flat, offsets, shapes, stride: int = 1) -> float:
+    """The sensor's noise (grey levels, 1 sd) in a packed pyramid's level 0
+    (:func:`_noise_image`)."""
     h, w = int(shapes[0, 0]), int(shapes[0, 1])
-    img = flat[offsets[0] : offsets[0] + h * w].reshape(h, w)
-    d = img[:, :-2] - 2 * img[:, 1:-1] + img[:, 2:]
-    return float(1.4826 * np.median(np.abs(d)) / np.sqrt(6.0))
+    return _noise_image(flat[offsets[0] : offsets[0] + h * w].reshape(h, w), stride)
+
+
+def _noise_image(img, stride: int = 1) -> float:
+    """The sensor's noise (grey levels, 1 sd) in an image, robustly: the median absolute
+    second difference along rows (6 sigma^2 for white noise), which the face's smooth skin
+    dominates; over every ``stride``-th row (a frame's crop: every 4th, ~10^4 differences,
+    0.1 ms where every row took 0.7)."""
+    img = np.asarray(img, dtype=np.float64)[:: max(int(stride), 1)]
+    d = np.abs(img[:, :-2] - 2 * img[:, 1:-1] + img[:, 2:]).ravel()
+    k = len(d) // 2
+    if len(d) % 2:
+        med = np.partition(d, k)[k]
+    else:
+        part = np.partition(d, (k - 1, k))
+        med = 0.5 * (part[k - 1] + part[k])
+    return float(1.4826 * med / np.sqrt(6.0))
 
 
 def _margins(face):
@@ -164,7 +183,8 @@ class ModelFlow:
                  min_ncc: float = 0.6, tolerance: float = 0.15, min_cos: float = 0.25,
                  highpass_sigma_px: float = 4.0, huber: float = 1.5,
                  smooth_sigma_px: float = 0.0, fb_max_px: float = 0.0,
-                 min_ncc_rel: float = 0.7, min_expected_ncc: float = 0.2):  # fmt: skip
+                 min_ncc_rel: float = 0.7, min_expected_ncc: float = 0.2,
+                 coarse_eps_px: float = EPS_PX):  # fmt: skip
         if int(window) < 5 or int(window) % 2 == 0 or int(levels) < 0 or int(iterations) < 1:
             raise MyofaceValueError(
                 "ModelFlow needs an odd window >= 5, levels >= 0, iterations >= 1"
@@ -185,6 +205,7 @@ class ModelFlow:
         self.fb_max_px = float(fb_max_px)
         self.min_ncc_rel = float(min_ncc_rel)
         self.min_expected_ncc = float(min_expected_ncc)
+        self.coarse_eps_px = float(coarse_eps_px)
         #: counts over the frames tracked: points read against the calibration frame, points
         #: left at the detector's; and the tracker's own seconds (thread CPU)
         self.stats = {"frames": 0, "tracked": 0, "detector": 0, "cpu_s": 0.0}
@@ -212,10 +233,26 @@ class ModelFlow:
     def _margin(self) -> int:
         return (self.window // 2 + 3) * (1 << self.levels) + 8
 
-    def _pyramid(self, frame, lo, hi, polygon=None):
-        """The crop [lo, hi) of ``frame`` (clipped to it), grey, high-passed, as a packed
-        pyramid, and the mask of ``polygon`` (K, 2) px packed alike (1 inside: the mouth's
-        gap; none: zeros): (flat, mask, offsets, shapes, origin)."""
+    def prepare(self, frame, points):
+        """What of ``frame`` does not depend on the model's prediction, for :meth:`track`
+        (its ``prepared``): the crop around the detector's ``points`` (V, 2+) px, grey, its
+        blur (the high-pass's) and its noise. Thread-safe (reads only the settings): the fit's
+        tracker makes it on the detector's thread, ahead of the fit. None without points."""
+        if points is None or frame is None:
+            return None
+        pts = np.asarray(points, dtype=np.float64)[:, :2]
+        if not np.isfinite(pts).all():
+            return None
+        m = self._margin() + PREPARED_SLACK_PX
+        return self._crop(frame, pts.min(0) - m, pts.max(0) + m, noise=True)
+
+    def _crop(self, frame, lo, hi, noise: bool = False):
+        """The crop [lo, hi) of ``frame`` (clipped to it): ``(grey, low, origin, (lo, hi),
+        noise, high)``: the grey levels (float32), their Gaussian blur of
+        :attr:`highpass_sigma_px` (None without), the crop's first pixel, its box, (``noise``)
+        the high-passed crop's noise (:func:`_noise`, every :data:`NOISE_STRIDE`-th row; the
+        mouth's gap not taken out), and the crop high-passed (smoothed first with
+        :attr:`smooth_sigma_px`). None for a crop under 8 px."""
         cv2 = _cv2()
         frame = np.asarray(frame)
         h, w = frame.shape[:2]
@@ -229,6 +266,39 @@ class ModelFlow:
         else:
             grey = crop
         grey = grey.astype(np.float32)
+        low = None
+        if self.highpass_sigma_px > 0:
+            low = cv2.GaussianBlur(grey, (0, 0), self.highpass_sigma_px)
+        hp = grey
+        if self.smooth_sigma_px > 0:
+            hp = cv2.GaussianBlur(grey, (0, 0), self.smooth_sigma_px)
+        if low is not None:
+            hp = hp - low
+        nz = _noise_image(hp, NOISE_STRIDE) if noise else None
+        box = (np.array([x0, y0], dtype=np.float64), np.array([x1, y1], dtype=np.float64))
+        return grey, low, box[0], box, nz, hp
+
+    def _pyramid(self, frame, lo, hi, polygon=None, prepared=None):
+        """The crop [lo, hi) of ``frame`` (clipped to it), grey, high-passed, as a packed
+        pyramid, and the mask of ``polygon`` (K, 2) px packed alike (1 inside: the mouth's
+        gap; none: zeros): (flat, mask, offsets, shapes, origin). ``prepared``
+        (:meth:`prepare`): its crop where it holds [lo, hi) (then larger), else made here."""
+        cv2 = _cv2()
+        crop = None
+        if prepared is not None:
+            blo, bhi = prepared[3]
+            fh, fw = np.shape(frame)[:2]
+            inside = (np.floor(np.maximum(lo, 0)) >= blo).all() and (
+                np.ceil(np.minimum(hi, [fw, fh])) <= bhi
+            ).all()
+            if inside:
+                crop = prepared
+        if crop is None:
+            crop = self._crop(frame, lo, hi)
+            if crop is None:
+                return None
+        grey, low, origin, hp = crop[0], crop[1], crop[2], crop[5]
+        x0, y0 = origin
         m0 = None
         if polygon is not None and len(polygon) >= 3:
             m0 = np.zeros(grey.shape, dtype=np.uint8)
@@ -236,22 +306,33 @@ class ModelFlow:
             cv2.fillPoly(m0, [poly], 1, lineType=cv2.LINE_8, shift=2)
             if not m0.any():
                 m0 = None
-        keep = None if m0 is None else (1.0 - m0).astype(np.float32)
-        low = None
-        if self.highpass_sigma_px > 0:
-            sig = self.highpass_sigma_px
-            if keep is None:
-                low = cv2.GaussianBlur(grey, (0, 0), sig)
-            else:  # (the gap's pixels out of the neighbourhood's mean: no halo around it)
-                low = cv2.GaussianBlur(grey * keep, (0, 0), sig) / np.maximum(
-                    cv2.GaussianBlur(keep, (0, 0), sig), 1e-3
+        if m0 is not None:
+            hp = hp.copy()
+            gh, gw = grey.shape
+            bx0, by0 = np.maximum(np.floor(poly.min(0) / 4).astype(int) - 1, 0)
+            bx1, by1 = np.minimum(np.ceil(poly.max(0) / 4).astype(int) + 2, [gw, gh])
+            keep = (1.0 - m0).astype(np.float32)
+            if low is not None:
+                # the gap's pixels out of the neighbourhood's mean (no halo around it): a
+                # blur normalised by the kept pixels', which differs from the plain one
+                # only within the kernel's reach (OpenCV's float kernel: 4 sigma) of the
+                # gap, so it is computed on a crop twice that reach around the gap's box
+                sig = self.highpass_sigma_px
+                r = (int(round(sig * 8 + 1)) | 1) // 2
+                ix0, iy0 = max(bx0 - r, 0), max(by0 - r, 0)
+                ix1, iy1 = min(bx1 + r, gw), min(by1 + r, gh)
+                sx0, sy0 = max(bx0 - 2 * r, 0), max(by0 - 2 * r, 0)
+                sx1, sy1 = min(bx1 + 2 * r, gw), min(by1 + 2 * r, gh)
+                gs, ks = grey[sy0:sy1, sx0:sx1], keep[sy0:sy1, sx0:sx1]
+                norm = cv2.GaussianBlur(gs * ks, (0, 0), sig) / np.maximum(
+                    cv2.GaussianBlur(ks, (0, 0), sig), 1e-3
                 )
-        if self.smooth_sigma_px > 0:
-            grey = cv2.GaussianBlur(grey, (0, 0), self.smooth_sigma_px)
-        if low is not None:
-            grey = grey - low
-        if keep is not None:
-            grey = grey * keep  # (the gap at the mean: what pyrDown mixes in is neutral)
+                hp[iy0:iy1, ix0:ix1] += (
+                    low[iy0:iy1, ix0:ix1] - norm[iy0 - sy0 : iy1 - sy0, ix0 - sx0 : ix1 - sx0]
+                )
+            # (the gap at the mean: what pyrDown mixes in is neutral)
+            hp[by0:by1, bx0:bx1] *= keep[by0:by1, bx0:bx1]
+        grey = hp
         levels = [grey]
         for _ in range(self.levels):
             if min(levels[-1].shape) < 16:
@@ -270,7 +351,7 @@ class ModelFlow:
                 ml.append(cv2.resize(ml[-1], (int(shapes[k, 1]), int(shapes[k, 0])),
                                      interpolation=cv2.INTER_AREA))  # fmt: skip
             mask = np.concatenate([m.ravel() for m in ml]).astype(np.float64)
-        return flat, mask, offsets, shapes, np.array([x0, y0], dtype=np.float64)
+        return flat, mask, offsets, shapes, np.array([x0, y0], dtype=np.float64), crop[4]
 
     def _view(self, camera, pose, shape, triangles):
         """The vertices' pixels (V, 2) and how squarely each faces the camera (V,)."""
@@ -295,6 +376,7 @@ class ModelFlow:
         m = self._margin()
         gap = None if gap is None else np.asarray(gap, dtype=np.int64)
         pyr = self._pyramid(image, uv.min(0) - m, uv.max(0) + m, None if gap is None else uv[gap])
+        pyr = None if pyr is None else pyr[:5]
         if pyr is None:
             raise MyofaceValueError("the calibration frame has no face to take templates from")
         self._nbr = mesh_neighbours(tri, len(shape))
@@ -321,12 +403,13 @@ class ModelFlow:
         return out
 
     # ------------------------------------------------------------------ tracking
-    def track(self, image, points, prediction=None):
+    def track(self, image, points, prediction=None, prepared=None):
         """Where each vertex's skin point is on ``image``: ``(xy (V, 2), ok (V,) bool)``,
         ``xy`` the tracked position where ``ok``, the detector's ``points`` (V, 2+) elsewhere;
         None (and the guesses start again) without points. ``prediction``: ``(pose, shape)``
         of the model on this frame (:func:`predicted`: the fit's previous frame); None: the
-        calibration's pose and neutral."""
+        calibration's pose and neutral. ``prepared``: :meth:`prepare` of ``image`` and
+        ``points`` (made on another thread; None: made here)."""
         if self._ref is None:
             raise MyofaceValueError("ModelFlow.track() needs calibrate() first")
         if points is None or image is None:
@@ -365,20 +448,21 @@ class ModelFlow:
         gap = ref["gap"]
         gap_box = None if gap is None else (uv[gap].min(0), uv[gap].max(0))
         pyr = self._pyramid(
-            image, guess.min(0) - m, guess.max(0) + m, None if gap is None else uv[gap]
-        )
+            image, guess.min(0) - m, guess.max(0) + m, None if gap is None else uv[gap],
+            prepared,
+        )  # fmt: skip
         ok = np.zeros(len(pts), dtype=bool)
         xy = pts.copy()
         if pyr is not None:
             rflat, rmask, roff, rshape, rorg = ref["pyr"]
-            cflat, cmask, coff, cshape, corg = pyr
+            cflat, cmask, coff, cshape, corg, cnoise = pyr
             # (the mask is looked up only in the patches that may reach it)
             masked = self._near(ref["uv"], ref["gap_box"]) | self._near(guess, gap_box)
-            q, ncc, contrast, step, status = track_points(
+            q, ncc, contrast, step, status, _ = track_points(
                 rflat, rmask, roff, rshape, cflat, cmask, coff, cshape,
                 np.ascontiguousarray(ref["uv"] - rorg), np.ascontiguousarray(guess - corg),
                 np.ascontiguousarray(ainv), active, masked, self.window // 2,
-                self.iterations, self.huber, EPS_PX,
+                self.iterations, self.huber, EPS_PX, self.coarse_eps_px,
             )  # fmt: skip
             q = q + corg
             if len(pts) > max(EYE_CORNERS):
@@ -387,7 +471,10 @@ class ModelFlow:
                 scale = 0.4 * float(np.ptp(uv[:, 0]))
             if self.min_ncc_rel > 0:
                 # the correlation a perfect match reaches through both frames' noise
-                nr, nc = ref["noise"] ** 2, _noise(cflat, coff, cshape) ** 2
+                nr, nc = (
+                    ref["noise"] ** 2,
+                    (_noise(cflat, coff, cshape, NOISE_STRIDE) if cnoise is None else cnoise) ** 2,
+                )
                 c2 = np.maximum(contrast - nr, 0.0)
                 expected = c2 / np.sqrt(np.maximum((c2 + nr) * (c2 + nc), 1e-12))
                 good = (ncc >= self.min_ncc_rel * expected) & (expected >= self.min_expected_ncc)
@@ -400,11 +487,11 @@ class ModelFlow:
                 # back: the patch found, seen through the inverse map, looked for in the
                 # calibration frame from where the forward correction puts it
                 back_guess = ref["uv"] + np.einsum("vij,vj->vi", ainv, q - guess)
-                back, _, _, _, st2 = track_points(
+                back, _, _, _, st2, _ = track_points(
                     cflat, cmask, coff, cshape, rflat, rmask, roff, rshape,
                     np.ascontiguousarray(q - corg), np.ascontiguousarray(back_guess - rorg),
                     np.ascontiguousarray(amap), ok, masked, self.window // 2,
-                    self.iterations, self.huber, EPS_PX,
+                    self.iterations, self.huber, EPS_PX, self.coarse_eps_px,
                 )  # fmt: skip
                 ok &= st2 == OK
                 ok &= np.linalg.norm(back + rorg - ref["uv"], axis=1) < self.fb_max_px

@@ -54,10 +54,13 @@ def _flow_method(method: str | None) -> str:
 class LandmarkObservation(NamedTuple):
     """What :meth:`FitTracker.observe` sees on a frame with a face: MediaPipe's ``points``
     (468, 3), and ``flow``, ``(xy (468, 2), tracked (468,) bool)`` where optical flow tracked
-    them (:attr:`~myoface.analysis.weights.FitSettings.flow`; else None)."""
+    them (:attr:`~myoface.analysis.weights.FitSettings.flow`; else None); ``prepared``, with
+    the model-anchored tracker, what it reads of the frame before the fit's prediction
+    (:meth:`~myoface.analysis.modelflow.ModelFlow.prepare`, made on the detector's thread)."""
 
     points: np.ndarray
     flow: tuple | None = None
+    prepared: tuple | None = None
 
     @property
     def seen(self) -> np.ndarray:
@@ -208,7 +211,11 @@ class FitTracker(TrackerBase):
         no face; the flow's tracks then start again)."""
         pts = detector.detect(frame)
         flow = None if self._flow is None else self._flow.track(frame, pts)
-        return None if pts is None else LandmarkObservation(pts, flow)
+        if pts is None:
+            return None
+        anchored = self._anchored  # (the crop and blur here, off the fit's thread)
+        prepared = None if anchored is None else anchored.prepare(frame, pts)
+        return LandmarkObservation(pts, flow, prepared)
 
     @property
     def mm_per_px(self) -> float | None:
@@ -456,7 +463,10 @@ class FitTracker(TrackerBase):
         may run on another thread than :meth:`measure` (the driver runs it ahead), which
         takes its result as ``observation``."""
         if index in self._detected:
-            return self._detected.pop(index)
+            obs = self._detected.pop(index)
+            if obs is not None and self._anchored is not None and obs.prepared is None:
+                obs = obs._replace(prepared=self._anchored.prepare(frame, obs.points))
+            return obs
         self._detected.clear()  # (past the calibration frames: the detector tracks from here)
         t0 = time.perf_counter()
         obs = self._observed(self.detector, frame)
@@ -477,7 +487,9 @@ class FitTracker(TrackerBase):
         prev = fit._prev
         flow = obs.flow
         if self._anchored is not None:
-            flow = self._anchored.track(frame, obs.points, predicted(fit))
+            flow = self._anchored.track(
+                frame, obs.points, predicted(fit), prepared=getattr(obs, "prepared", None)
+            )
         try:
             r = fit.fit(
                 obs.points, self.synthesis, deferred=self.deferred_relax, flow=flow,
