@@ -7,25 +7,77 @@ pixel off the image's margins in a way that depends on the face and the view (on
 benchmark's renders the fitted openings' mean point sits 0.5-0.7 px off the truth's), and the
 eyeball's centre and the gaze read from it follow.
 
-What is measured (:func:`find_edges`): along each lid margin of the fitted model (the margin's
-vertex chain from :func:`lid_chains`, projected into the frame) sample points are taken (the
-chain's interior vertices and the midpoints between them; the corners are left out: their
-normal is not defined and the margins meet there), and at each the frame's luma is read on a
-short profile across the margin (along the projected normal, +-:attr:`LidEdgeSettings.
-window_px`, every half pixel, averaged over three parallel lines a pixel apart and smoothed).
-The margin is the profile's edge: the strongest extremum of its derivative within the window,
-placed to a fraction of a pixel by a parabola through the extremum and its two neighbours.
-A sample counts only where that edge is clear (its contrast at least
-:attr:`LidEdgeSettings.min_contrast` grey levels per pixel, and the edge not at the window's
-end). An eye is not read while its lids are closed (the projected opening narrower than
-:attr:`LidEdgeSettings.min_opening_px`), nor when it turns away from the camera.
+What is measured (:func:`find_edges`, compiled): along each lid margin of the fitted model
+(the margin's vertex chain from :func:`lid_chains`, projected into the frame) sample points are
+taken (the chain's interior vertices and the midpoints between them: 13 a lid; the corners are
+left out, their normal is not defined and the margins meet there), and at each the frame's
+luma is read on a short profile across the margin (along the projected normal,
++-:attr:`LidEdgeSettings.window_px`, every half pixel, averaged over three parallel lines a
+pixel apart and smoothed). The margin is an extremum of the profile's derivative, the clear one
+nearest the model's margin (at least half the strongest in the window and
+:attr:`LidEdgeSettings.min_contrast` grey levels a pixel, not at the window's end), placed to a
+fraction of a pixel by a parabola through it and its two neighbours. On the upper lid only an
+edge that brightens into the opening counts (:attr:`LidEdgeSettings.upper_sign`): the lashes
+make a dark band whose upper edge (skin to lashes, darkening) lies 1-2 px above the margin and
+is often the stronger; the margin is the band's lower edge, lashes to eyeball. By default only
+the upper lids are read (:attr:`LidEdgeSettings.lids`): the lower lid's edge is a broad ramp
+(no lashes; sclera or iris inside) that the finder puts 0.8-0.9 px inside the true margin on
+the renders. An eye is not read while its lids are closed (the projected opening narrower
+than :attr:`LidEdgeSettings.min_opening_px`), upside down, or turned more than
+:data:`FACING_DEG` from the line of sight.
 
 The term (:class:`LidEdgeTerm`): each found edge ``e`` with the profile's direction ``n`` adds
 the row ``n . (proj(R X + t) - e) k / sigma`` for the model's point ``X`` on the margin there
 (``k`` mm per pixel at the head's depth, so it is in mm on the face): a point-to-line distance,
-since an edge says where the margin is across it, not along it. Huber-weighted (beyond
-:attr:`LidEdgeSettings.huber` sigmas), the edges read again at the start of each Gauss-Newton
-step (at the step's estimate).
+since an edge says where the margin is across it, not along it (which is also why it cannot
+move an opening sideways: the upper lid's normals are near vertical). Huber-weighted (beyond
+:attr:`LidEdgeSettings.huber` sigmas); the edges are read at a frame's first Gauss-Newton step
+and again when the margins have moved :attr:`LidEdgeSettings.redetect_px` since.
+
+Measured 2026-12-02 (``tools/lidedge_check.py``, ``tools/lidedge_headmotion.py``; the gaze
+benchmark's two 90-frame clips, degraded renders of the personal face, head +-30 deg):
+
+- the finder on the known answer (started from the true margins moved -1.5..+1.5 px across
+  them): without the polarity rule the upper lids' edges 0.16-0.28 px inside the true margin,
+  RMS 1.0-1.4 px, lower lids 0.8-0.9 inside, RMS 1.2-1.4; with it (the default) the upper
+  lids 0.7-0.86 px inside, RMS 1.25-1.33. On the renders the eyeball shows a dark ring
+  inside the skin's margin (the renderer's socket between lid and eyeball), so the
+  appearance's edge is not the mesh's margin there: the finder's offset is the renderer's as
+  much as the finder's.
+- the fitted upper margins against the truth (signed distance along the normal, + into the
+  opening, over the frames at rest / the blinks' edges), off -> on: clip 1 left -0.55 / -2.25
+  px bias (RMS 1.26 / 2.64) -> +0.28 / -0.97 (1.09 / 2.34), right -0.06 / -1.09 (0.89 / 1.69)
+  -> +0.40 / +0.50 (0.75 / 0.78); clip 2 left RMS 1.43 / 2.80 -> 1.17 / 2.12, right 1.13 /
+  2.07 -> 0.73 / 1.26. The lids sit closer to the margins, most at a blink's start, where the
+  fit lagged.
+- the gaze does not follow: ``analysis.gaze_error_deg`` 4.64 -> 4.58 on clip 1, 5.18 -> 6.17
+  on clip 2 (the partly closed frames, 4-5 an eye, read 3 -> 8 deg off: the reader's),
+  analysis by synthesis 5.31 -> 6.21, the photometric fit 6.60 -> 7.89 (with both lids and no
+  polarity rule, sigma 1 mm: 4.64 -> 4.75, 6.60 -> 4.24).
+- the head-motion loop (90 frames): worst RMSE 0.288 -> 0.287, median 0.163 -> 0.165, head
+  1.89 -> 1.86 deg; the levator palpebrae 0.26 / 0.26 -> 0.23 / 0.17, the palpebral
+  orbicularis 0.05 / 0.05 -> 0.15 / 0.09: with the render's edge inside the margin the lids
+  are read as closing a little.
+- single_face.mp4: the polarity-free finder put the left upper lid on the lashes' top edge
+  (the skin-to-lashes edge); with the rule the fitted upper margins sit on the lash line's
+  lower edge where the eye begins (by eye, on frames 5, 20, 40, 60), 1-1.5 px lower than
+  without the term, and the palpebral orbicularis reads 0.28 / 0.35 on average instead of
+  0.14 / 0.12 (the person's neutral lids, placed by MediaPipe's points at calibration, are
+  higher than the edges say: the rest reads as a partial closure). The gaze's spread over
+  the clip, left 1.6 / 3.1 -> 1.0 / 1.1 deg (yaw / pitch SD), right 1.7 / 2.8 -> 2.2 / 1.6.
+- tried and not kept: the edges taken relative to the calibration frame's (each lid's
+  median offset there, taken off later frames, so that the appearance's own offset from the
+  margin cancels): 5.30 / 5.40 deg on the clips, one frame's reading of a lid is too noisy.
+- cost: the finder 0.12 ms for the 52 samples, a step's rows 0.03 ms and its cost 0.008 ms;
+  in the fit 1.2 ms a frame of CPU (about 4.7 steps), and the fit takes about one more
+  Gauss-Newton step a frame with it (4.2 -> 6.2 ms a frame of the fit's CPU on clip 1).
+
+So it is opt-in (:attr:`~myoface.analysis.weights.FitSettings.lid_edges`): it puts the upper
+lids nearer the image's margins on the renders and on the sample, but the gaze benchmark is
+better on one clip and worse on the other, and the lid muscles read at rest move with where
+the neutral's lids were put at calibration. What it needs to be the default: the person's
+neutral lids placed by the same edges at calibration (so that rest is rest), and the gaze
+reader checked on the lids it then gets.
 """
 
 from __future__ import annotations
@@ -54,7 +106,12 @@ class LidEdgeSettings:
     min_contrast : the least edge strength (luma levels per px) that counts.
     min_opening_px : an eye whose projected opening (mean gap between its margins) is
         narrower than this is not read (closed or closing).
-    sigma_mm : the edge's scatter about the true margin, mm on the face (the term's unit).
+    sigma_mm : the term's unit, mm on the face. 0.5 mm: of 0.3, 0.5 and 1 mm tried on the
+        gaze benchmark's clip (upper lids, no polarity rule) it put the upper lids nearest
+        the truth at the blinks' edges (left RMS 1.75 / 1.26 / 2.01 px) without moving them
+        off at rest; it is stronger than the finder's own scatter per sample (1.0-1.4 px,
+        0.8-1.1 mm) would say, because what the term is to overrule is MediaPipe's lid
+        points' bias, which no number of frames averages away.
     huber : Huber's threshold (sigmas).
     polarity : which edge is the margin: ``"strongest"`` (the strongest either way),
         ``"nearest"`` (the clear extremum nearest the model's margin).
