@@ -50,10 +50,12 @@ benchmark's two 90-frame clips, degraded renders of the personal face, head +-30
   -> +0.40 / +0.50 (0.75 / 0.78); clip 2 left RMS 1.43 / 2.80 -> 1.17 / 2.12, right 1.13 /
   2.07 -> 0.73 / 1.26. The lids sit closer to the margins, most at a blink's start, where the
   fit lagged.
-- the gaze does not follow: ``analysis.gaze_error_deg`` 4.64 -> 4.58 on clip 1, 5.18 -> 6.17
-  on clip 2 (the partly closed frames, 4-5 an eye, read 3 -> 8 deg off: the reader's),
-  analysis by synthesis 5.31 -> 6.21, the photometric fit 6.60 -> 7.89 (with both lids and no
-  polarity rule, sigma 1 mm: 4.64 -> 4.75, 6.60 -> 4.24).
+- the gaze does not follow: ``analysis.gaze_error_deg`` 4.60 -> 4.58 on clip 1 (the fitted
+  openings' mean, ``eye_opening_px_mean``, left (0.50, -0.54) -> (0.46, -0.21) px, right
+  (0.67, 0.09) -> (0.66, 0.27)), 5.18 -> 6.17 on clip 2 (the partly closed frames, 4-5 an
+  eye, read 3 -> 8 deg off: the reader's), analysis by synthesis 5.34 -> 6.18, the
+  photometric fit 6.66 -> 7.89 (with both lids and no polarity rule, sigma 1 mm: 4.64 ->
+  4.75, photometric 6.60 -> 4.24).
 - the head-motion loop (90 frames): worst RMSE 0.288 -> 0.287, median 0.163 -> 0.165, head
   1.89 -> 1.86 deg; the levator palpebrae 0.26 / 0.26 -> 0.23 / 0.17, the palpebral
   orbicularis 0.05 / 0.05 -> 0.15 / 0.09: with the render's edge inside the margin the lids
@@ -71,6 +73,8 @@ benchmark's two 90-frame clips, degraded renders of the personal face, head +-30
 - cost: the finder 0.12 ms for the 52 samples, a step's rows 0.03 ms and its cost 0.008 ms;
   in the fit 1.2 ms a frame of CPU (about 4.7 steps), and the fit takes about one more
   Gauss-Newton step a frame with it (4.2 -> 6.2 ms a frame of the fit's CPU on clip 1).
+  ``analysis.fps`` with the term on 62.1 fps (0.244x MediaPipe), off 52.3 (0.178x), the same
+  loaded machine one after the other: within its noise.
 
 So it is opt-in (:attr:`~myoface.analysis.weights.FitSettings.lid_edges`): it puts the upper
 lids nearer the image's margins on the renders and on the sample, but the gaze benchmark is
