@@ -108,3 +108,38 @@ def test_closed_and_turned_away_eyes_are_not_read():
     assert not ok[sm.eye == 0].any() and ok[sm.eye == 1].all()
     # the head turned 80 degrees: neither eye faces the camera within FACING_DEG
     assert not readable(face.vertices, 80.0).any()
+
+
+@pytest.mark.slow
+def test_the_fit_with_lid_edges_puts_biased_lids_back_on_the_rendered_margins():
+    """A render of the default face with a detector that puts the upper lids' points 2 px too
+    high: the fit follows the points; with the lid edges (FitSettings.lid_edges) its upper
+    margins end nearer the rendered ones."""
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.weights import FitSettings
+    from myoface.bench.headmotion import camera_renderer
+    from myoface.model import build_face_model
+
+    fm = build_face_model()
+    cam = PinholeCamera.for_image(640, 480, 40.0)
+    pose = HeadPose.from_euler(12.0, 6.0, 3.0, translation_mm=(10, 5, -450))
+    skin = fm.skin_vertices()
+    img = camera_renderer(fm.face).render(skin, pose=(pose.rotation, pose.translation_mm))
+    sm = MarginSamples(fm.face)
+    pc = pose.apply(skin)
+    pts = cam.project(pc)
+    for upper, _ in sm.chains:
+        pts[upper[1:-1], 1] -= 2.0  # (up in the image)
+
+    def upper_error(settings, image):
+        fit = ModelFit(fm, cam, settings)
+        r = fit.fit(pts, image=image)
+        got = cam.project(r.pose.apply(sm.points(fit.shape(r.contractions))))
+        want = cam.project(pose.apply(sm.points(skin)))
+        d = ((got - want) * sm.normals(want)).sum(1)
+        return float(np.abs(d[sm.lid == 0]).mean())
+
+    without = upper_error(FitSettings(), None)
+    with_edges = upper_error(FitSettings(lid_edges=True), img)
+    assert without > 0.8  # (the points' bias shows)
+    assert with_edges < 0.6 * without
