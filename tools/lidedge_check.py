@@ -11,7 +11,8 @@ analysis.gaze_error_deg`` runs it (``on``: FitSettings.lid_edges; ``key=value``:
 :class:`~myoface.analysis.lidedges.LidEdgeSettings`), and per eye and lid the fitted
 margin's signed distance from the true margin (px, along the true margin's normal, + into the
 opening) over the frames at rest, and over the frames of the blinks' edges (closure 0.05-0.5),
-and the gaze's error. ``--clip2``: the benchmark's second clip (gaze seed 7, camera seed 3).
+and the gaze's error. ``--clip2``: the benchmark's second clip (gaze seed 7, camera seed 3); ``--headmotion``
+(``finder`` only): the head-motion benchmark's 90 degraded renders (expressions, head moving).
 """
 
 from __future__ import annotations
@@ -65,10 +66,25 @@ def _table(rows, sm, label):
             )
 
 
+def _headmotion():
+    """The head-motion benchmark's degraded renders (90 frames, head moving) and their truth;
+    the lids' closure from the truth's palpebral orbicularis."""
+    import myoface.bench.headmotion as H
+
+    fm, truth, poses, skins, _, _ = H._sequence(False, False, False, True)
+    frames = H._frames(False, False, True)
+    ids = list(fm.ids)
+    cols = [ids.index(m) for m in ids if m.startswith("orbicularis_oculi_palpebralis")]
+    return fm, frames, poses, None, np.asarray(truth)[:, cols].max(axis=1), skins
+
+
 def finder(settings) -> None:
     from myoface.analysis.lidedges import MarginSamples, find_edges
 
-    model, frames, poses, _, closure, skins = _clip("--clip2" in sys.argv)
+    if "--headmotion" in sys.argv:
+        model, frames, poses, _, closure, skins = _headmotion()
+    else:
+        model, frames, poses, _, closure, skins = _clip("--clip2" in sys.argv)
     sm = MarginSamples(model.face)
     rows = []
     for k in range(len(frames)):

@@ -40,7 +40,9 @@ benchmark's two 90-frame clips, degraded renders of the personal face, head +-30
 - the finder on the known answer (started from the true margins moved -1.5..+1.5 px across
   them): without the polarity rule the upper lids' edges 0.16-0.28 px inside the true margin,
   RMS 1.0-1.4 px, lower lids 0.8-0.9 inside, RMS 1.2-1.4; with it (the default) the upper
-  lids 0.7-0.86 px inside, RMS 1.25-1.33. On the renders the eyeball shows a dark ring
+  lids 0.7-0.86 px inside, RMS 1.25-1.33; on the head-motion benchmark's 90 renders
+  (expressions, lids at rest) the upper lids 0.79-1.05 px inside, RMS 1.37-1.41 (without the
+  rule 0.05-0.48, RMS 1.03-1.51), the lower 0.62-0.70, RMS 1.03-1.32. On the renders the eyeball shows a dark ring
   inside the skin's margin (the renderer's socket between lid and eyeball), so the
   appearance's edge is not the mesh's margin there: the finder's offset is the renderer's as
   much as the finder's.
