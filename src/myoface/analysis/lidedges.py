@@ -50,8 +50,10 @@ benchmark's two 90-frame clips, degraded renders of the personal face, head +-30
   opening, over the frames at rest / the blinks' edges), off -> on: clip 1 left -0.55 / -2.25
   px bias (RMS 1.26 / 2.64) -> +0.28 / -0.97 (1.09 / 2.34), right -0.06 / -1.09 (0.89 / 1.69)
   -> +0.40 / +0.50 (0.75 / 0.78); clip 2 left RMS 1.43 / 2.80 -> 1.17 / 2.12, right 1.13 /
-  2.07 -> 0.73 / 1.26. The lids sit closer to the margins, most at a blink's start, where the
-  fit lagged.
+  2.07 -> 0.73 / 1.26. The upper lids sit closer to the margins, most at a blink's start,
+  where the fit lagged. The lower lids follow them a little (clip 2 RMS 1.27 / 0.80 -> 1.41 /
+  0.91 px, bias +0.33 -> +0.45): below the neutral's upper lid the fit has only the palpebral
+  orbicularis to lower it (the levator is already at 0), and it raises the lower lid too.
 - the gaze does not follow: ``analysis.gaze_error_deg`` 4.60 -> 4.58 on clip 1 (the fitted
   openings' mean, ``eye_opening_px_mean``, left (0.50, -0.54) -> (0.46, -0.21) px, right
   (0.67, 0.09) -> (0.66, 0.27)), 5.18 -> 6.17 on clip 2 (the partly closed frames, 4-5 an
