@@ -14,7 +14,8 @@ analysis (MediaPipe's points), ``--flow`` with the model-anchored tracker
     python tools/flow_compare.py fps --repeats 5
 
 ``--set`` overrides :class:`~myoface.analysis.modelflow.ModelFlow`'s parameters (JSON), e.g.
-``--set '{"levels": 0}'``. The numbers of issue 30's report on the anchored tracker
+``--set '{"levels": 0}'``; ``--variant NAME=JSON`` adds a kind NAME, the anchored tracker
+with those parameters, to compare settings in one run (``--kinds default,anchored,NAME``). The numbers of issue 30's report on the anchored tracker
 (2026-12-02) were taken this way.
 """
 
@@ -31,17 +32,28 @@ import numpy as np
 KINDS = ("default", "anchored", "chained")
 
 
+#: ModelFlow's parameters over its defaults: ``--set`` (every anchored kind) and each
+#: ``--variant NAME=JSON``'s (the kind NAME, the anchored tracker with those)
+_PARAMS: dict = {"": {}}
+
+
 def _overrides(params: dict) -> None:
     from myoface.analysis import modelflow
 
-    if not params:
-        return
+    _PARAMS[""] = dict(params)
+    _PARAMS["active"] = dict(params)
     init = modelflow.ModelFlow.__init__
 
     def patched(self, **kw):
-        init(self, **{**kw, **params})
+        init(self, **{**kw, **_PARAMS["active"]})
 
     modelflow.ModelFlow.__init__ = patched
+
+
+def _method(kind: str) -> str:
+    """The point tracker of ``kind`` (a variant's: the anchored), and its parameters set."""
+    _PARAMS["active"] = {**_PARAMS[""], **_PARAMS.get(kind, {})}
+    return "anchored" if kind in _PARAMS else kind
 
 
 def _analyzer(model, video, kind: str):
@@ -49,7 +61,7 @@ def _analyzer(model, video, kind: str):
     from myoface.analysis.pipeline import make_analyzer
 
     if kind != "default":
-        modelflow.FLOW_METHOD = kind
+        modelflow.FLOW_METHOD = _method(kind)
     return make_analyzer(model, video, "landmarks", calibration_frame=None, flow=kind != "default")
 
 
@@ -62,7 +74,7 @@ def fidelity(path, kinds) -> None:
     model = build_face_model()
     for kind in kinds:
         if kind != "default":
-            modelflow.FLOW_METHOD = kind
+            modelflow.FLOW_METHOD = _method(kind)
         with tempfile.TemporaryDirectory() as tmp:
             res = analyze_to_folder(
                 path, Path(tmp) / "a", model=model, tracker="landmarks", flow=kind != "default"
@@ -123,8 +135,14 @@ def main(argv=None) -> None:
     ap.add_argument("--kinds", default=",".join(KINDS), help=f"some of {','.join(KINDS)}")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--set", default="{}", help="ModelFlow's parameters, JSON")
+    ap.add_argument("--variant", action="append", default=[], metavar="NAME=JSON",
+                    help="a kind NAME: the anchored tracker with these parameters (repeatable; "
+                    "list NAME in --kinds)")  # fmt: skip
     args = ap.parse_args(argv)
     _overrides(json.loads(args.set))
+    for v in args.variant:
+        name, _, params = v.partition("=")
+        _PARAMS[name] = json.loads(params or "{}")
     path = args.video
     if path is None:
         from myoface.analysis.sample import fetch_sample_video

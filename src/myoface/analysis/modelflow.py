@@ -53,10 +53,28 @@ keeps a sixth of the points and leaves their error at 1.2 px), because the rende
 does not turn with the skin and their skin texture is faint (half resolution). On the
 sample video's smile the mouth's and chin's patches stop matching at the apex (teeth, the
 lips stretched, the folds), and MediaPipe's points stand there. Window 11 (was 15): the
-mouth corners' gain in the fit 0.77 -> 0.81 on the known warps, 6 -> 4.5 ms a frame; one
-pyramid level (two let the mouth's 60-px patches lock wrongly: corners 0.73). It costs
-~5.5 ms of CPU a frame (thread CPU on a loaded 2-core machine, 468 points), on the fit's
-thread (it needs the previous frame's fit).
+mouth corners' gain in the fit 0.77 -> 0.81 on the known warps; one pyramid level (two let
+the mouth's 60-px patches lock wrongly: corners 0.73).
+
+Cost (2026-12-02, thread CPU on the shared 2-core machine, the sample video, 468 points;
+``tools/flow_compare.py`` and the profile in the commit's report): 6.6 ms a frame on the
+fit's thread at 12 steps a level (Lucas-Kanade 4.7, the crop and its pyramid 0.9, the frame's
+noise 0.6). Now 3.3 ms on the fit's thread (Lucas-Kanade 2.2, the gap's mask and the pyramid
+0.7) and 0.8 ms on the detector's (:meth:`ModelFlow.prepare`: the crop, its blur and noise),
+by: a kernel with two passes a step where there were five (the same points to 1e-10 px:
+4.4 -> 3.1 ms); the noise on every 4th row; the gap's normalised blur only near the gap; at
+most 6 steps a level, the coarse level stopping at 0.2 px. Settings against the full
+benchmarks' anchored rows (head-motion renders still / moving: skin mm, head deg, worst
+muscle RMSE; known warps: the corners' gain, the lowest explained): 12 steps 0.78 / 1.27 /
+0.169, 1.21 / 1.55 / 0.278, 0.80, 0.95; 6 steps (these) 0.76 / 1.33 / 0.161, 1.23 / 1.57 /
+0.355, 0.80, 0.95. Cheaper and not kept: window 9 (Lucas-Kanade 1.5 ms; 0.80 / 1.35 / 0.157,
+1.20 / 1.57 / 0.310, 0.81, 0.94) accepts a point whose patch is the flat side of an edge
+(tests: test_flat_excluded_and_turned_away_points_are_the_detectors; 81 pixels correlate
+by chance where 121 do not); no coarse level (window 9: 1.0 ms; 0.85 / 1.38 / 0.163, 1.24 /
+1.74 / 0.285) reads the head's angle under motion worse, as does window 11 without it
+(1.72 deg). The default analysis (no flow) on the same renders: 1.09 / 1.40 / 0.212, 1.36 /
+1.88 / 0.390. The fit itself costs ~1 ms more a frame with the flow's term, and relaxes the
+tissue more often (the skin it reads moves more).
 """
 
 from __future__ import annotations
@@ -74,6 +92,9 @@ from myoface.facemesh import import_opencv
 EYE_CORNERS = (33, 263)
 #: Lucas-Kanade stops at a step under this (px, at each level)
 EPS_PX = 0.03
+#: ... and at the levels above the image at a step under this (px of that level: the image's
+#: level refines what they find)
+COARSE_EPS_PX = 0.2
 #: a frame's noise (:func:`_noise`) is read on every this many rows of its crop
 NOISE_STRIDE = 4
 #: :meth:`ModelFlow.prepare`'s crop reaches this much further than a patch needs around the
@@ -162,6 +183,8 @@ class ModelFlow:
     window : the template's side, px (odd), at every pyramid level.
     levels : pyramid levels above the image.
     iterations : Lucas-Kanade steps per level at most.
+    coarse_eps_px : the levels above the image stop at a step under this (px of the level;
+        the image's at :data:`EPS_PX`).
     min_ncc : a point counts when its patch correlates with the template at least this much.
     tolerance : ... and it is within this many inter-ocular distances of where it was
         looked for.
@@ -179,12 +202,12 @@ class ModelFlow:
         (skin mm): ``min_ncc`` 0.6 alone 0.81 / 1.23; with 0.7, 0.2: 0.76 / 1.22.
     """
 
-    def __init__(self, window: int = 11, levels: int = 1, iterations: int = 12,
+    def __init__(self, window: int = 11, levels: int = 1, iterations: int = 6,
                  min_ncc: float = 0.6, tolerance: float = 0.15, min_cos: float = 0.25,
                  highpass_sigma_px: float = 4.0, huber: float = 1.5,
                  smooth_sigma_px: float = 0.0, fb_max_px: float = 0.0,
                  min_ncc_rel: float = 0.7, min_expected_ncc: float = 0.2,
-                 coarse_eps_px: float = EPS_PX):  # fmt: skip
+                 coarse_eps_px: float = COARSE_EPS_PX):  # fmt: skip
         if int(window) < 5 or int(window) % 2 == 0 or int(levels) < 0 or int(iterations) < 1:
             raise MyofaceValueError(
                 "ModelFlow needs an odd window >= 5, levels >= 0, iterations >= 1"
@@ -274,6 +297,7 @@ class ModelFlow:
             hp = cv2.GaussianBlur(grey, (0, 0), self.smooth_sigma_px)
         if low is not None:
             hp = hp - low
+        hp = hp.astype(np.float64)  # (the kernels' type; :meth:`_pyramid` changes it in place)
         nz = _noise_image(hp, NOISE_STRIDE) if noise else None
         box = (np.array([x0, y0], dtype=np.float64), np.array([x1, y1], dtype=np.float64))
         return grey, low, box[0], box, nz, hp
@@ -282,7 +306,8 @@ class ModelFlow:
         """The crop [lo, hi) of ``frame`` (clipped to it), grey, high-passed, as a packed
         pyramid, and the mask of ``polygon`` (K, 2) px packed alike (1 inside: the mouth's
         gap; none: zeros): (flat, mask, offsets, shapes, origin). ``prepared``
-        (:meth:`prepare`): its crop where it holds [lo, hi) (then larger), else made here."""
+        (:meth:`prepare`): its crop where it holds [lo, hi) (then larger; it is used up: its
+        high-passed crop is changed in place), else made here."""
         cv2 = _cv2()
         crop = None
         if prepared is not None:
@@ -307,11 +332,11 @@ class ModelFlow:
             if not m0.any():
                 m0 = None
         if m0 is not None:
-            hp = hp.copy()
             gh, gw = grey.shape
             bx0, by0 = np.maximum(np.floor(poly.min(0) / 4).astype(int) - 1, 0)
             bx1, by1 = np.minimum(np.ceil(poly.max(0) / 4).astype(int) + 2, [gw, gh])
-            keep = (1.0 - m0).astype(np.float32)
+            keep = np.ones(grey.shape, dtype=np.float32)
+            keep[by0:by1, bx0:bx1] -= m0[by0:by1, bx0:bx1]
             if low is not None:
                 # the gap's pixels out of the neighbourhood's mean (no halo around it): a
                 # blur normalised by the kept pixels', which differs from the plain one
@@ -343,9 +368,14 @@ class ModelFlow:
         shapes = np.array([lv.shape for lv in levels], dtype=np.int64)
         sizes = shapes[:, 0] * shapes[:, 1]
         offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-        flat = np.concatenate([lv.ravel() for lv in levels]).astype(np.float64)
+        if len(levels) == 1:
+            flat = grey.ravel()
+        else:
+            flat = np.concatenate([lv.ravel() for lv in levels]).astype(np.float64)
         mask = np.zeros_like(flat)
-        if m0 is not None:
+        if m0 is not None and len(levels) == 1:
+            mask.reshape(grey.shape)[by0:by1, bx0:bx1] = m0[by0:by1, bx0:bx1]
+        elif m0 is not None:
             ml = [m0.astype(np.float32)]
             for k in range(1, len(levels)):
                 ml.append(cv2.resize(ml[-1], (int(shapes[k, 1]), int(shapes[k, 0])),
