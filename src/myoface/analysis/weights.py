@@ -73,8 +73,10 @@ class FitSettings:
         :mod:`myoface.analysis.modelflow` (each read against the calibration frame, its
         template warped by the model's predicted pose and skin; that module and
         :mod:`myoface.bench.headmotion` / :mod:`myoface.bench.knownwarp` have its numbers;
-        it costs ~5.5-8 ms of CPU a frame on the fit's thread: analysis.fps' ratio to
-        MediaPipe 0.19 against the default's 0.30 in the same run). What follows is the
+        it costs ~3.3 ms of CPU a frame on the fit's thread and ~0.8 on the detector's, and
+        the fit ~1 ms more with its term: ``tools/flow_compare.py fps`` 2026-12-02, process
+        CPU 19.1 ms a frame against the default's 14.0, frames a second 0.188x MediaPipe's
+        against 0.256x, in the same run; off by default for that). What follows is the
         earlier tracker's (:mod:`myoface.analysis.flow`, ``FitTracker(flow_method=
         "chained")``: each point tracked by Lucas-Kanade from the first frame with a face,
         else from the previous frame, used where the track is sure, in place of MediaPipe's
