@@ -65,15 +65,18 @@ by: a kernel with two passes a step where there were five (the same points to 1e
 4.4 -> 3.1 ms); the noise on every 4th row; the gap's normalised blur only near the gap; at
 most 6 steps a level, the coarse level stopping at 0.2 px. Settings against the full
 benchmarks' anchored rows (head-motion renders still / moving: skin mm, head deg, worst
-muscle RMSE; known warps: the corners' gain, the lowest explained): 12 steps 0.78 / 1.27 /
-0.169, 1.21 / 1.55 / 0.278, 0.80, 0.95; 6 steps (these) 0.76 / 1.33 / 0.161, 1.23 / 1.57 /
-0.355, 0.80, 0.95. Cheaper and not kept: window 9 (Lucas-Kanade 1.5 ms; 0.80 / 1.35 / 0.157,
+muscle RMSE; known warps: the corners' gain, the lowest explained): before (c232522, 12
+steps) 0.78 / 1.27 / 0.169, 1.21 / 1.55 / 0.278, 0.80, 0.95; 12 steps and 0.03 px at every
+level with this code (the crop, the noise's rows and the gap's blur computed as above: the
+same to rounding) 0.76 / 1.33 / 0.158, 1.22 / 1.57 / 0.333: the worst muscle under head
+motion moves that much with rounding; 6 steps (these) 0.76 / 1.33 / 0.161, 1.23 / 1.57 /
+0.355, 0.80, 0.95 (the default analysis on this code: 1.09 / 1.35 / 0.220, 1.35 / 1.89 /
+0.288). Cheaper and not kept: window 9 (Lucas-Kanade 1.5 ms; 0.80 / 1.35 / 0.157,
 1.20 / 1.57 / 0.310, 0.81, 0.94) accepts a point whose patch is the flat side of an edge
 (tests: test_flat_excluded_and_turned_away_points_are_the_detectors; 81 pixels correlate
 by chance where 121 do not); no coarse level (window 9: 1.0 ms; 0.85 / 1.38 / 0.163, 1.24 /
 1.74 / 0.285) reads the head's angle under motion worse, as does window 11 without it
-(1.72 deg). The default analysis (no flow) on the same renders: 1.09 / 1.40 / 0.212, 1.36 /
-1.88 / 0.390. The fit itself costs ~1 ms more a frame with the flow's term, and relaxes the
+(1.72 deg). The fit itself costs ~1 ms more a frame with the flow's term, and relaxes the
 tissue more often (the skin it reads moves more).
 """
 
