@@ -223,9 +223,10 @@ def add_analysis_arguments(p) -> None:
     p.add_argument(
         "--flow",
         action="store_true",
-        help="landmarks' 3-D fit: refine MediaPipe's points by optical flow (Lucas-Kanade "
-        "from the first frame), which reads skin motion MediaPipe reads short; best where "
-        "the skin has texture and the face keeps its look (see README)",
+        help="landmarks' 3-D fit: also read its points in the pixels, each against the "
+        "calibration frame through the model (Lucas-Kanade on the template the fitted mesh "
+        "warps; no drift), which reads skin motion MediaPipe reads short; best where the "
+        "skin has texture and the face keeps its look; ~4 ms a frame more (see README)",
     )
     p.add_argument(
         "--photometric",
