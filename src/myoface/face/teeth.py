@@ -70,6 +70,22 @@ CONTACT_MARGIN_MM = 0.3
 #: skin beside the chin's judged points far enough that DIS read the chin on a render of known
 #: contractions at a correlation of 0.89 against 0.93 (tests/analysis/test_fidelity.py)
 CHIN_CLEARANCE_MM = 1.5
+#: a lower-lip vertex within the lower arch's width, from this far above its incisal edge (mm)
+#: down over its band, is held in front of the arch whatever its depth
+#: (:meth:`Arch.hold_in_front`): a lip cannot pass through the teeth, so one drawn down and
+#: back (the depressor labii inferioris with the jaw open) lies on their front. The band's own
+#: test (:meth:`Arch.inside`) reaches only ``thickness_mm`` behind the front and not above the
+#: edge: on the sample video's analysed smile with the depressor as a sheet (d585611) the lower
+#: lip's inner margin beside the midline lay 0.5 mm above the lower incisal edge and 3.4 mm
+#: behind its front, its centre 7.5 mm behind (out of the band), and the lip's triangles passed
+#: in front of the teeth by 1.0-6.4 mm (tests/render/test_mouth.py); 2 mm covers the mesh's
+#: triangles there, as :data:`CHIN_ABOVE_EDGE_MM` below the lip
+LIP_ABOVE_EDGE_MM = 2.0
+#: ... and ends this far in front of it (mm): the lip's flat triangles between vertices held on
+#: the curved front pass behind it by the arc's sagitta, 0.4-0.6 mm over the 7-8 mm between
+#: the lower lip's vertices beside the midline (with the 0.3 mm of :data:`CONTACT_MARGIN_MM` the
+#: teeth showed through them by 0.15-0.2 mm on the sample's smile)
+LIP_HOLD_MARGIN_MM = 1.0
 #: projection rounds (teeth and lips alternate; the lower arch's push has a vertical part)
 CONTACT_ROUNDS = 4
 
@@ -129,6 +145,26 @@ class Arch:
         if m.any():
             q = out[m]
             out[m] = q + (margin - self.signed_depth(q))[:, None] * self.normal(q)
+        return out
+
+    def hold_in_front(
+        self, p: np.ndarray, above_mm: float, margin: float = CONTACT_MARGIN_MM
+    ) -> np.ndarray:
+        """Points (N, 3) within the arch's width, from ``above_mm`` beyond its edge (above the
+        lower one's) over its band's height, and less than ``margin`` in front of its front (or
+        behind it at any depth), moved forward to ``margin`` in front of it (copy)."""
+        out = np.array(p, dtype=np.float64)
+        d = self.signed_depth(out)
+        h = self.direction * (out[:, 1] - self.edge(out[:, 0]))
+        m = (
+            (np.abs(out[:, 0] - self.xc) <= self.half_width)
+            & (d < margin)
+            & (h > -above_mm)
+            & (h < self.height_mm)
+        )
+        if m.any():
+            q = out[m]
+            out[m] = q + (margin - d[m])[:, None] * self.normal(q)
         return out
 
 
@@ -279,9 +315,10 @@ def lip_contact(skin: np.ndarray, dentition: Dentition, jaw_pose=None) -> np.nda
     -------
     (V, 3) float ndarray
         Lip vertices in the upper band pushed out of its front, those in the lower band (tested
-        in the jaw's rest frame) out of its front; upper-lip margin not below the lower's; the
-        skin below the lower lip (:attr:`Dentition.chin`) at least its clearance in front of
-        the lower band.
+        in the jaw's rest frame) out of its front, and the lower lip's behind the lower band's
+        front at any depth (:data:`LIP_ABOVE_EDGE_MM`) in front of it; upper-lip margin not
+        below the lower's; the skin below the lower lip (:attr:`Dentition.chin`) at least its
+        clearance in front of the lower band.
     """
     out = np.array(skin, dtype=np.float64)
     d = dentition
@@ -295,6 +332,14 @@ def lip_contact(skin: np.ndarray, dentition: Dentition, jaw_pose=None) -> np.nda
             p = _rigid_apply(jaw_pose, d.lower.push_out(_rigid_inverse(jaw_pose, p)))
         moved = np.abs(p - out[lips]).max() if len(lips) else 0.0
         out[lips] = p
+        # the lower lip on the lower teeth's front, however deep it was drawn
+        q = out[d.lower_lip]
+        local = q if jaw_pose is None else _rigid_inverse(jaw_pose, q)
+        held = d.lower.hold_in_front(local, LIP_ABOVE_EDGE_MM, LIP_HOLD_MARGIN_MM)
+        m = np.any(held != local, axis=1)
+        if m.any():
+            out[d.lower_lip[m]] = held[m] if jaw_pose is None else _rigid_apply(jaw_pose, held[m])
+            moved = max(moved, float(np.abs(out[d.lower_lip[m]] - q[m]).max()))
         if moved == 0.0:
             break
     if len(d.chin):
