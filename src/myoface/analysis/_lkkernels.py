@@ -71,6 +71,35 @@ def _patch(flat, mask, off, rows, cols, x0, y0, w, masked, tw, patch, pw):
 
 
 @njit(cache=True, nogil=True)
+def _correlate(cur, cur_mask, cur_off, cur_shape, qx, qy, half, w, masked, tw, tpl, patch, pw):
+    """The patch of the finest level at (qx, qy) against the template ``tpl`` (its inner w x
+    w): (status, normalised cross-correlation, the template's weighted variance); status
+    OUTSIDE where the patch leaves the level, FLAT where under half its pixels carry weight."""
+    pn, pm, tm = 0.0, 0.0, 0.0
+    bad = not _patch(cur, cur_mask, cur_off[0], cur_shape[0, 0], cur_shape[0, 1],
+                     qx - half, qy - half, w, masked, tw, patch, pw)  # fmt: skip
+    if not bad:
+        for v in range(w):
+            for u in range(w):
+                pn += pw[v, u]
+                pm += pw[v, u] * patch[v, u]
+                tm += pw[v, u] * tpl[v + 1, u + 1]
+    if bad or pn < 0.5 * w * w:
+        return (OUTSIDE if bad else FLAT), 0.0, 0.0
+    pm /= pn
+    tm /= pn
+    spt, spp, stt = 0.0, 0.0, 0.0
+    for v in range(w):
+        for u in range(w):
+            a = patch[v, u] - pm
+            b = tpl[v + 1, u + 1] - tm
+            spt += pw[v, u] * a * b
+            spp += pw[v, u] * a * a
+            stt += pw[v, u] * b * b
+    return OK, spt / max(np.sqrt(spp * stt), 1e-12), stt / pn
+
+
+@njit(cache=True, nogil=True)
 def track_points_reference(ref, ref_mask, ref_off, ref_shape, cur, cur_mask, cur_off, cur_shape, ref_xy,
                  guess, ainv, active, masked, half, iterations, huber, eps):  # fmt: skip
     """Track points from a reference image's pyramid into the current image's.
@@ -233,35 +262,18 @@ def track_points_reference(ref, ref_mask, ref_off, ref_shape, cur, cur_mask, cur
                 step[i] = last
         if status[i] != OK:
             continue
-        xy[i, 0] = qx
-        xy[i, 1] = qy
         # the normalised cross-correlation of the template and the patch found
-        pn, pm, tm = 0.0, 0.0, 0.0
-        bad = not _patch(cur, cur_mask, cur_off[0], cur_shape[0, 0], cur_shape[0, 1],
-                         qx - half, qy - half, w, masked[i], tw, patch, pw)  # fmt: skip
-        if not bad:
-            for v in range(w):
-                for u in range(w):
-                    pn += pw[v, u]
-                    pm += pw[v, u] * patch[v, u]
-                    tm += pw[v, u] * tpl[v + 1, u + 1]
-        if bad or pn < 0.5 * w * w:
-            status[i] = OUTSIDE if bad else FLAT
+        found = _correlate(cur, cur_mask, cur_off, cur_shape, qx, qy, half, w, masked[i], tw,
+                           tpl, patch, pw)  # fmt: skip
+        if found[0] != OK:
+            status[i] = found[0]
             xy[i, 0] = guess[i, 0]
             xy[i, 1] = guess[i, 1]
             continue
-        pm /= pn
-        tm /= pn
-        spt, spp, stt = 0.0, 0.0, 0.0
-        for v in range(w):
-            for u in range(w):
-                a = patch[v, u] - pm
-                b = tpl[v + 1, u + 1] - tm
-                spt += pw[v, u] * a * b
-                spp += pw[v, u] * a * a
-                stt += pw[v, u] * b * b
-        ncc[i] = spt / max(np.sqrt(spp * stt), 1e-12)
-        contrast[i] = stt / pn
+        xy[i, 0] = qx
+        xy[i, 1] = qy
+        ncc[i] = found[1]
+        contrast[i] = found[2]
     return xy, ncc, contrast, step, status
 
 
@@ -516,34 +528,18 @@ def track_points(ref, ref_mask, ref_off, ref_shape, cur, cur_mask, cur_off, cur_
                 step[i] = last
         if status[i] != OK:
             continue
-        xy[i, 0] = qx
-        xy[i, 1] = qy
-        pn, pm, tm = 0.0, 0.0, 0.0
-        bad = not _patch(cur, cur_mask, cur_off[0], cur_shape[0, 0], cur_shape[0, 1],
-                         qx - half, qy - half, w, mi, tw, patch, pw)  # fmt: skip
-        if not bad:
-            for v in range(w):
-                for u in range(w):
-                    pn += pw[v, u]
-                    pm += pw[v, u] * patch[v, u]
-                    tm += pw[v, u] * tpl[v + 1, u + 1]
-        if bad or pn < 0.5 * w * w:
-            status[i] = OUTSIDE if bad else FLAT
+        # the normalised cross-correlation of the template and the patch found
+        found = _correlate(cur, cur_mask, cur_off, cur_shape, qx, qy, half, w, mi, tw,
+                           tpl, patch, pw)  # fmt: skip
+        if found[0] != OK:
+            status[i] = found[0]
             xy[i, 0] = guess[i, 0]
             xy[i, 1] = guess[i, 1]
             continue
-        pm /= pn
-        tm /= pn
-        spt, spp, stt = 0.0, 0.0, 0.0
-        for v in range(w):
-            for u in range(w):
-                a = patch[v, u] - pm
-                b = tpl[v + 1, u + 1] - tm
-                spt += pw[v, u] * a * b
-                spp += pw[v, u] * a * a
-                stt += pw[v, u] * b * b
-        ncc[i] = spt / max(np.sqrt(spp * stt), 1e-12)
-        contrast[i] = stt / pn
+        xy[i, 0] = qx
+        xy[i, 1] = qy
+        ncc[i] = found[1]
+        contrast[i] = found[2]
     return xy, ncc, contrast, step, status, steps
 
 
