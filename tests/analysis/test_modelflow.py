@@ -43,6 +43,18 @@ def _seen(img0, uv0, pose, shape):
     return img, uv
 
 
+def _calibration():
+    """The plane, its triangles, the calibration image and the vertices' pixels in it."""
+    shape, tri = _plane()
+    img0 = _texture()
+    return shape, tri, img0, CAM.project(POSE0.apply(shape))
+
+
+def _half_read(uv0, uv):
+    """A detector that reads half the motion (x, y, depth 0)."""
+    return np.column_stack([uv0 + 0.5 * (uv - uv0), np.zeros(len(uv))])
+
+
 def _tracker(img0, shape, tri, **kw):
     mf = ModelFlow(**kw)
     mf.calibrate(img0, CAM, POSE0, shape, tri)
@@ -53,12 +65,10 @@ def test_a_turned_head_is_read_against_the_calibration_frame():
     """The plane turned 30 deg: with the template warped by a prediction 3 deg off, every
     point is found within a few hundredths of a pixel although the detector read half the
     motion; without the warp (the calibration's pose as the prediction) they are not."""
-    shape, tri = _plane()
-    img0 = _texture()
-    uv0 = CAM.project(POSE0.apply(shape))
+    shape, tri, img0, uv0 = _calibration()
     pose = HeadPose.from_euler(30, 9, 5, (5, 3, -410))
     img, uv = _seen(img0, uv0, pose, shape)
-    det = np.column_stack([uv0 + 0.5 * (uv - uv0), np.zeros(len(uv))])
+    det = _half_read(uv0, uv)
     pred = HeadPose.from_euler(27, 10, 4, (5, 3, -410))
     xy, ok = _tracker(img0, shape, tri).track(img, det, (pred, shape))
     assert ok.mean() > 0.95
@@ -75,9 +85,7 @@ def test_no_drift_over_a_long_back_and_forth():
     """Turning back and forth 12 times (with sensor noise on every frame): the points found
     on the same pose are the same on every pass (a tracker chained frame to frame would
     accumulate its error)."""
-    shape, tri = _plane()
-    img0 = _texture()
-    uv0 = CAM.project(POSE0.apply(shape))
+    shape, tri, img0, uv0 = _calibration()
     mf = _tracker(img0, shape, tri)
     rng = np.random.default_rng(3)
     yaws = [0, 6, 12, 18, 12, 6]
@@ -88,7 +96,7 @@ def test_no_drift_over_a_long_back_and_forth():
             pose = HeadPose.from_euler(yaw, 0, 0, (0, 0, -400))
             img, uv = _seen(img0, uv0, pose, shape)
             img = np.clip(img + rng.normal(0, 3, img.shape), 0, 255).astype(np.uint8)
-            det = np.column_stack([uv0 + 0.5 * (uv - uv0), np.zeros(len(uv))])
+            det = _half_read(uv0, uv)
             xy, ok = mf.track(img, det, (pred, shape))
             pred = pose  # (the next frame's prediction: this frame's pose)
             if yaw == 18:
@@ -101,16 +109,14 @@ def test_no_drift_over_a_long_back_and_forth():
 
 
 def test_flat_excluded_and_turned_away_points_are_the_detectors():
-    shape, tri = _plane()
-    img0 = _texture()
-    uv0 = CAM.project(POSE0.apply(shape))
+    shape, tri, img0, uv0 = _calibration()
     img, uv = _seen(img0, uv0, HeadPose.from_euler(0, 0, 0, (2, 0, -400)), shape)
     flat = uv[:, 0] < 280
     img[:, :290] = 128  # nothing to align there
     mf = ModelFlow()
     excluded = np.array([100, 112])
     mf.calibrate(img0, CAM, POSE0, shape, tri, exclude=excluded)
-    det = np.column_stack([uv0 + 0.5 * (uv - uv0), np.zeros(len(uv))])
+    det = _half_read(uv0, uv)
     xy, ok = mf.track(img, det, (POSE0, shape))
     assert not ok[flat].any() and not ok[excluded].any()
     assert ok[~flat].mean() > 0.9
@@ -190,9 +196,7 @@ def test_the_mouths_gap_weighs_nothing():
     """A dark gap opens inside a polygon of vertices (as the mouth's does between the lips):
     with the polygon given as the gap, the points around it are found where they are; without
     it, their patches take in the dark and many of them are lost or misplaced."""
-    shape, tri = _plane()
-    img0 = _texture()
-    uv0 = CAM.project(POSE0.apply(shape))
+    shape, tri, img0, uv0 = _calibration()
     pose = HeadPose.from_euler(0, 0, 0, (1.5, 0.5, -400))
     img, uv = _seen(img0, uv0, pose, shape)
     n = 15
@@ -201,7 +205,7 @@ def test_the_mouths_gap_weighs_nothing():
     gap = np.round(uv[loop] * 4).astype(np.int32)
     cv2.fillPoly(img, [gap], (10, 10, 10), shift=2)
     inside = [7 * n + 6, 7 * n + 7, 7 * n + 8]
-    det = np.column_stack([uv0 + 0.5 * (uv - uv0), np.zeros(len(uv))])
+    det = _half_read(uv0, uv)
     near = np.linalg.norm(uv[:, None] - uv[loop][None], axis=2).min(1) < 8
     near[loop + inside] = False
     assert near.sum() >= 6
@@ -254,12 +258,10 @@ def test_the_fast_kernel_is_the_reference_one():
 def test_a_prepared_frame_tracks_as_the_frame():
     """The crop prepared on the detector's thread (ModelFlow.prepare, around the detector's
     points) gives the points found from the frame itself."""
-    shape, tri = _plane()
-    img0 = _texture()
-    uv0 = CAM.project(POSE0.apply(shape))
+    shape, tri, img0, uv0 = _calibration()
     pose = HeadPose.from_euler(10, 3, 2, (2, 1, -405))
     img, uv = _seen(img0, uv0, pose, shape)
-    det = np.column_stack([uv0 + 0.5 * (uv - uv0), np.zeros(len(uv))])
+    det = _half_read(uv0, uv)
     gap = [100, 101, 102, 117, 116, 115]
     xys = []
     for prepared in (False, True):
