@@ -568,7 +568,8 @@ def test_real_video_holds_its_gaze_and_says_the_blink(tmp_path):
     yaw, 1.7 deg pitch with the sockets; 0.9-1.1 and 1.1-1.3 without; the means within 0.6
     deg of each other; with the pupil in the last fine step 0.7-1.0 and 1.8, the pitch 0.9-1.3
     deg lower; with the pupil in every fine step the pitch flips between two readings, SD
-    2.6-4.1: this test fails it). openface.csv has the gaze where the eyes were read."""
+    2.6-4.1, and at 2da1fc6 3.7: this test fails it). openface.csv has the gaze where the eyes
+    were read."""
     from myoface.cli import main
     from myoface.facemesh import mediapipe_available
     from tests.conftest import shared_path

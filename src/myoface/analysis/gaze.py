@@ -255,11 +255,28 @@ class GazeSettings:
         opening, pins it. Measured 2026-12-02 on the benchmark's two clips (replayed
         recorded fits; the worse eye, then the reader on the true geometry): none 4.98 / 5.51
         deg (true 2.87 / 4.42), last 4.66 / 5.20 (2.51 / 3.86), all 4.38 / 4.93 (2.26 /
-        2.98). But on single_face.mp4 (a dark brown iris, the upper lid's shadow across it,
-        a reflection beside the pupil; the person holds their gaze) ``"all"`` flips between
-        two readings 5-9 deg apart in pitch (SD 4.1 and 2.6 deg, against 1.7 without the
-        pupil): the pupil's term takes either dark patch. ``"last"`` keeps it to the basin
-        the iris found: SD 1.9 deg (yaw 0.7-1.0, as before), its pitch 1.2 deg lower.
+        2.98). On single_face.mp4 (a dark brown iris, the upper lid's shadow across it, a
+        reflection beside the pupil; the person holds their gaze) ``"all"`` then flipped
+        between two readings 5-9 deg apart in pitch (SD 4.1 and 2.6 deg, against 1.7 without
+        the pupil): the pupil's term takes either dark patch. ``"last"`` keeps it to the
+        basin the iris found: SD 1.9 deg (yaw 0.7-1.0, as before), its pitch 1.2 deg lower.
+        Measured again on 2da1fc6's tree (2026-12-02 14:40 UTC, with the tracker's edits then
+        in progress; the fits recorded afresh by ``tools/gaze_replay.py``): the iris alone has two minima in pitch wherever it reaches
+        under both lids (its top or its bottom edge set against a lid: on the true geometry
+        of the second clip a look at -1 deg read -7, the residual at the truth 8 % above the
+        minimum), the pupil's term one, at the truth. Last -> all: the reader on the true
+        geometry 2.49 / 2.48 -> 1.79 / 2.29 deg (clip 1, left / right; pitch 3.1 / 2.7 ->
+        2.0 / 2.2) and 3.41 / 3.96 -> 2.11 / 2.81 (clip 2; pitch 4.6 / 5.2 -> 2.5 / 3.3); on
+        the recorded fits, the worse eye, 4.64 -> 4.54 and 5.17 -> 4.94 (the fit's eyeball
+        centres' yaw bias, 2.6-4.3 deg on every eye, untouched). On single_face.mp4 replayed
+        through ``gaze_replay``'s recording it held (pitch SD 1.67 / 1.95 -> 1.96 / 2.16 deg,
+        single frames 4-5 deg low), but ``myoface analyze`` of the same video
+        (tests/analysis/test_gaze.py's real-video test) flipped again: the right eye's pitch
+        between about 8 and -1 deg, SD 3.7. It stays ``"last"``: the pupil's term needs a
+        test of whether the image shows a pupil at all before it may move the basin. Tried
+        with ``"all"`` and not kept either (the same replays): the band 0.6 (clip 2 4.94 ->
+        5.25), the last step over +-1.5 deg (the same), the prior 0.1 (clip 1 4.38, clip 2's
+        true geometry worse), the edge 0.8 px (worse everywhere).
     """
 
     coarse_deg: float = 6.0
