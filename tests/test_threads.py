@@ -64,3 +64,33 @@ def test_run_ahead_runs_in_order_and_stops_its_thread():
 
 def test_run_ahead_without_work_yields_the_items():
     assert list(run_ahead(iter(range(7)), depth=1)) == list(range(7))
+
+
+def test_ordered_worker_runs_in_order_and_stops():
+    """OrderedWorker: jobs run one after another in the order submitted, on a daemon thread;
+    an exception is the job's future's; closing cancels what has not started and stops the
+    thread."""
+    import threading
+
+    from myoface._threads import OrderedWorker
+
+    order, gate = [], threading.Event()
+    w = OrderedWorker("myoface-test-worker")
+    futs = [w.submit(lambda k=k: (order.append(k), k * k)[1]) for k in range(5)]
+    assert [f.result(timeout=10) for f in futs] == [0, 1, 4, 9, 16] and order == list(range(5))
+    bad = w.submit(lambda: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        bad.result(timeout=10)
+    blocked = w.submit(gate.wait)
+    later = w.submit(order.append, 99)
+    gate.set()
+    blocked.result(timeout=10)
+    w.close(timeout=10)
+    assert later.done() and (later.cancelled() or order[-1] == 99)
+    assert not [t for t in threading.enumerate() if t.name == "myoface-test-worker"]
+    w2 = OrderedWorker("myoface-test-worker")
+    w2.submit(gate.clear)
+    w2.submit(gate.wait, 0.5)
+    pending = w2.submit(order.append, 100)
+    w2.close(timeout=10)
+    assert pending.cancelled() or pending.done()

@@ -35,6 +35,7 @@ KINDS = ("default", "anchored", "chained")
 #: ModelFlow's parameters over its defaults: ``--set`` (every anchored kind) and each
 #: ``--variant NAME=JSON``'s (the kind NAME, the anchored tracker with those)
 _PARAMS: dict = {"": {}}
+_LAG: dict = {}
 
 
 def _overrides(params: dict) -> None:
@@ -51,8 +52,15 @@ def _overrides(params: dict) -> None:
 
 
 def _method(kind: str) -> str:
-    """The point tracker of ``kind`` (a variant's: the anchored), and its parameters set."""
-    _PARAMS["active"] = {**_PARAMS[""], **_PARAMS.get(kind, {})}
+    """The point tracker of ``kind`` (a variant's: the anchored), and its parameters set
+    (``"lag"``: :data:`~myoface.analysis.modelflow.PREDICTION_LAG`, the fit's frame the
+    tracking predicts from, k - lag)."""
+    from myoface.analysis import modelflow
+
+    params = {**_PARAMS[""], **_PARAMS.get(kind, {})}
+    _LAG.setdefault("default", modelflow.PREDICTION_LAG)
+    modelflow.PREDICTION_LAG = int(params.pop("lag", _LAG["default"]))
+    _PARAMS["active"] = params
     return "anchored" if kind in _PARAMS else kind
 
 

@@ -1,10 +1,12 @@
-"""Work run ahead of its consumer on a thread of its own (decoding, detection)."""
+"""Work run ahead of its consumer on a thread of its own (decoding, detection, the anchored
+flow's tracking)."""
 
 from __future__ import annotations
 
 import queue
 import threading
 from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Future
 
 from myoface.errors import MyofaceValueError
 
@@ -63,3 +65,48 @@ def run_ahead(
     finally:
         stop.set()
         worker.join()
+
+
+class OrderedWorker:
+    """Calls run in the order submitted on one daemon thread of their own, each result a
+    :class:`concurrent.futures.Future` (its exception raised by ``result()``). A daemon, so
+    that work still waiting at the interpreter's exit (a job blocked on something that will
+    not come) does not hold it; :meth:`close` stops it (the jobs not started are cancelled)."""
+
+    def __init__(self, name: str = "myoface-worker"):
+        self._q: queue.Queue = queue.Queue()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            job = self._q.get()
+            if job is None:
+                return
+            fut, fn, args = job
+            if not fut.set_running_or_notify_cancel():
+                continue
+            try:
+                fut.set_result(fn(*args))
+            except BaseException as exc:  # handed to whoever takes the result
+                fut.set_exception(exc)
+
+    def submit(self, fn: Callable, *args) -> Future:
+        """``fn(*args)`` after the jobs submitted before it."""
+        fut: Future = Future()
+        self._q.put((fut, fn, args))
+        return fut
+
+    def close(self, timeout: float | None = None) -> None:
+        """Cancel the jobs not started, let the running one end (``timeout`` s at most) and
+        stop the thread."""
+        while True:
+            try:
+                job = self._q.get_nowait()
+            except queue.Empty:
+                break
+            if job is not None:
+                job[0].cancel()
+        self._q.put(None)
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout)

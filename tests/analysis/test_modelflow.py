@@ -276,3 +276,115 @@ def test_a_prepared_frame_tracks_as_the_frame():
     both = oka & okb
     assert np.median(np.linalg.norm(a[both] - b[both], axis=1)) < 0.01
     assert np.median(np.linalg.norm(b[okb] - uv[okb], axis=1)) < 0.1
+
+
+class _Clip:
+    """Frames in memory, as the analysis' driver reads a video."""
+
+    def __init__(self, frames, fps=30.0):
+        self.frames, self.fps, self.n_frames = frames, fps, len(frames)
+
+    def __iter__(self):
+        return iter(self.frames)
+
+
+def _moving_face_clip(n=9, lost=4):
+    """The default face's points on a textured frame that moves 0.8 px a frame to the right
+    (and 0.3 px down), a detector that reads half of it, and no face on frame ``lost``."""
+    from myoface.model import build_face_model
+
+    fm = build_face_model()
+    cam = PinholeCamera.for_image(640, 480, 40.0)
+    pose = HeadPose.from_euler(5.0, 0.0, 0.0, (0.0, 0.0, -500.0))
+    pts0 = np.column_stack([cam.project(pose.apply(fm.face.vertices)), np.zeros(468)])
+    img0 = _texture(480, 640, seed=5)
+    frames, points = [], []
+    for k in range(n):
+        m = np.float32([[1, 0, 0.8 * k], [0, 1, 0.3 * k]])
+        frames.append(cv2.warpAffine(img0, m, (640, 480), flags=cv2.INTER_CUBIC,
+                                     borderMode=cv2.BORDER_REFLECT))  # fmt: skip
+        points.append(None if k == lost else pts0 + [0.4 * k, 0.15 * k, 0.0])
+
+    class Detector:
+        def detect(self, frame):
+            return points[next(i for i, f in enumerate(frames) if f is frame)]
+
+        def close(self):
+            pass
+
+    return fm, cam, frames, Detector
+
+
+@pytest.mark.parametrize("lag", [1, 2])
+def test_tracking_ahead_is_tracking_frame_by_frame(lag):
+    """The fit's anchored flow tracked on a thread of its own ahead of the fit (frame k from
+    the fit of frame k - lag, FitTracker.flow_lag) gives what measuring frame by frame on one
+    thread gives, to the bit, run after run, a frame without a face included; the flow is
+    used (most points tracked), and with lag 1 it is the plain loop: ModelFlow.track from
+    the fit's previous frame (predicted; the frame's crop prepared as the tracker does it,
+    ModelFlow.prepare), then the fit."""
+    from myoface.analysis.modelflow import predicted
+    from myoface.analysis.pipeline import Tracking
+    from myoface.analysis.trackers.landmark_fit import FitTracker
+    from myoface.analysis.weights import FitSettings
+
+    fm, cam, frames, Detector = _moving_face_clip()
+
+    def tracker():
+        return FitTracker(fm, camera=cam, detector=Detector(), calibration_frame=0,
+                          settings=FitSettings(flow=True), flow_method="anchored",
+                          gaze=False, flow_lag=lag)  # fmt: skip
+
+    runs = []
+    for ahead in (True, False, True):
+        tr = tracker()
+        try:
+            if ahead:
+                got = [m for _, m in Tracking(_Clip(frames), tr, 0)]
+            else:
+                tr.calibrate(iter(frames), 0)
+                got = [tr.measure(f, k, k / 30) for k, f in enumerate(frames)]
+            stats = tr.describe()["optical_flow_points"]
+        finally:
+            tr.close()
+        assert [m.quality for m in got] == ["ok"] * 4 + ["no_face"] + ["ok"] * 4
+        assert stats["frames"] == 8 and stats["tracked"] > 0.5 * 8 * 468
+        runs.append(np.array([m.contractions for m in got]))
+    assert np.array_equal(runs[0], runs[1], equal_nan=True)
+    assert np.array_equal(runs[0], runs[2], equal_nan=True)
+    if lag == 1:
+        # the plain loop
+        tr = tracker()
+        tr.calibrate(iter(frames), 0)
+        mf, fit, det = tr._anchored, tr.fit, Detector()
+        plain = []
+        for f in frames:
+            p = det.detect(f)
+            if p is None:
+                fit.lose_track()
+                mf.reset()
+                plain.append(np.full(len(tr.ids), np.nan))
+                continue
+            flow = mf.track(f, p, predicted(fit), prepared=mf.prepare(f, p))
+            plain.append(fit.fit(p, deferred=tr.deferred_relax, flow=flow).contractions)
+        tr.close()
+        assert np.array_equal(np.array(plain), runs[0], equal_nan=True)
+
+
+def test_tracking_ahead_stops_when_the_analysis_does():
+    """Stopping the analysis early (the driver's iteration closed, then the tracker) leaves
+    no thread waiting on a fit that will not come."""
+    import threading
+
+    from myoface.analysis.pipeline import Tracking
+    from myoface.analysis.trackers.landmark_fit import FitTracker
+    from myoface.analysis.weights import FitSettings
+
+    fm, cam, frames, Detector = _moving_face_clip(lost=-1)
+    tr = FitTracker(fm, camera=cam, detector=Detector(), calibration_frame=0,
+                    settings=FitSettings(flow=True), flow_method="anchored", gaze=False)  # fmt: skip
+    it = iter(Tracking(_Clip(frames), tr, 0))
+    next(it)
+    it.close()
+    tr.close()
+    assert not [t for t in threading.enumerate() if t.name == "myoface-flow"]

@@ -110,6 +110,12 @@ PREPARED_SLACK_PX = 24
 FLOW_METHODS = ("anchored", "chained")
 #: the one ``myoface analyze --flow`` uses
 FLOW_METHOD = "anchored"
+#: the fit's tracker (:class:`~myoface.analysis.trackers.landmark_fit.FitTracker`) tracks frame
+#: k from the fit of frame k - this (its pose and skin, and the detector's points on it): with
+#: 2, frame k is tracked on a thread of its own while frame k - 1 is fitted (1: after it; the
+#: same result, run to run, either way)
+PREDICTION_LAG = 2
+_LAST = object()  # (track()'s ``since`` by default: the frame tracked last)
 
 
 def _cv2():
@@ -436,13 +442,19 @@ class ModelFlow:
         return out
 
     # ------------------------------------------------------------------ tracking
-    def track(self, image, points, prediction=None, prepared=None):
+    def track(self, image, points, prediction=None, prepared=None, since=_LAST):
         """Where each vertex's skin point is on ``image``: ``(xy (V, 2), ok (V,) bool)``,
         ``xy`` the tracked position where ``ok``, the detector's ``points`` (V, 2+) elsewhere;
         None (and the guesses start again) without points. ``prediction``: ``(pose, shape)``
-        of the model on this frame (:func:`predicted`: the fit's previous frame); None: the
-        calibration's pose and neutral. ``prepared``: :meth:`prepare` of ``image`` and
-        ``points`` (made on another thread; None: made here)."""
+        of the model on this frame (:func:`predicted`: the fit's previous frame, or an earlier
+        one's); None: the calibration's pose and neutral. ``prepared``: :meth:`prepare` of
+        ``image`` and ``points`` (made on another thread; None: made here). ``since``: the
+        detector's points (V, 2+) on the frame the prediction is of (the guess is the
+        prediction moved as they moved since; None: the prediction itself); by default the
+        points of the frame this tracker tracked last (None after :meth:`reset`): the
+        previous frame's. With ``since`` given the call reads nor changes any state of the
+        tracker's but its counts: the fit's tracker calls it on a thread of its own
+        (:data:`PREDICTION_LAG`)."""
         if self._ref is None:
             raise MyofaceValueError("ModelFlow.track() needs calibrate() first")
         if points is None or image is None:
@@ -461,10 +473,13 @@ class ModelFlow:
         uv, cos = self._view(ref["camera"], pose, np.asarray(shape, dtype=np.float64), ref["tri"])
         # the guess: the prediction's point moved as the detector's moved since the frame
         # predicted from (the detector's point itself without a prediction)
+        explicit = since is not _LAST
+        if not explicit:
+            since = None if self._last is None else self._last[0]
         if prediction is None:
             guess = pts.copy()
-        elif self._last is not None:
-            guess = uv + (pts - self._last[0])
+        elif since is not None:
+            guess = uv + (pts - np.asarray(since, dtype=np.float64)[:, :2])
         else:
             guess = uv
         amap, cond = local_affines(ref["uv"], uv, *self._nbr)
@@ -529,7 +544,8 @@ class ModelFlow:
                 ok &= st2 == OK
                 ok &= np.linalg.norm(back + rorg - ref["uv"], axis=1) < self.fb_max_px
             xy[ok] = q[ok]
-        self._last = (pts.copy(), uv)
+        if not explicit:
+            self._last = (pts.copy(), uv)
         self.stats["frames"] += 1
         self.stats["tracked"] += int(ok.sum())
         self.stats["detector"] += int((~ok).sum())

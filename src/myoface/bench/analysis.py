@@ -85,10 +85,11 @@ def _sample_video():
 
 
 def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None,
-                   photometric: bool = False) -> int:  # fmt: skip
+                   photometric: bool = False, flow: bool = False) -> int:  # fmt: skip
     """Decode ``path`` and analyse every frame (no output files) as ``myoface analyze``
     does (for the landmarks' 3-D fit: calibrated on the most neutral frame of the first 2 s,
-    the analysis from frame 0; ``photometric``: with ``--photometric``); returns the frame
+    the analysis from frame 0; ``photometric``: with ``--photometric``; ``flow``: with
+    ``--flow``, the model-anchored point tracker); returns the frame
     count. The run's process CPU time and the analyzer's own timings
     (:attr:`FitTracker.timings`, :attr:`ModelFit.timings`) are kept for the benchmark's
     breakdown."""
@@ -104,8 +105,9 @@ def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None,
     t0, c0 = time.perf_counter(), time.process_time()
     video = open_video(path)
     an, first = make_analyzer(
-        fm, video, tracker, calibration_frame=None, refine=refine, photometric=photometric
-    )
+        fm, video, tracker, calibration_frame=None, refine=refine, photometric=photometric,
+        flow=flow,
+    )  # fmt: skip
     try:
         n = sum(1 for _ in measure_frames(video, an, first, max_frames))
     finally:
@@ -115,7 +117,8 @@ def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None,
     fit = getattr(an, "fit", None)
     if fit is not None:
         timings.update(fit.timings)
-    _cache[("timings", tracker, refine, photometric)] = {"frames": n, **timings}
+    key = ("timings", tracker, refine, photometric) + (("flow",) if flow else ())
+    _cache[key] = {"frames": n, **timings}
     return n
 
 
@@ -164,6 +167,22 @@ def _fps(fn, quick: bool) -> tuple[float, int]:
     return n / time_median(fn, reps, warmup=0), reps
 
 
+def _fps_interleaved(fns, quick: bool) -> tuple[list, int]:
+    """:func:`_fps` of each of ``fns``, their repeats interleaved (one of each in turn), so
+    that a shared machine's load falls on all alike."""
+    import time
+
+    reps = 1 if quick else 5
+    ns = [fn() for fn in fns]  # the warm-ups
+    times: list = [[] for _ in fns]
+    for _ in range(reps):
+        for fn, t in zip(fns, times, strict=True):
+            t0 = time.perf_counter()
+            fn()
+            t.append(time.perf_counter() - t0)
+    return [n / float(np.median(t)) for n, t in zip(ns, times, strict=True)], reps
+
+
 @benchmark("analysis.fps", "1/s", higher_is_better=True, peer="mediapipe face_mesh 0.10.14")
 def bench_analysis_fps(quick: bool) -> Measurement:
     """Frames per second of the analysis loop on the sample video ``single_face.mp4`` (72
@@ -195,8 +214,17 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     of 3-4 48.5 / 20.1 / 176.8 fps. The whole benchmark (with analysis.fps_snakes) 43 s."""
     path = _sample_video()
     m = None if not quick else 24
-    ours, n = _fps(lambda: _analysis_pass(path, "landmarks", m), quick)
-    peer, _ = _fps(lambda: _mediapipe_pass(path, m), quick)
+    # the default, MediaPipe alone and --flow (the points read against the calibration frame
+    # through the model, on a thread of their own: modelflow.PREDICTION_LAG), interleaved
+    (ours, peer, flow), n = _fps_interleaved(
+        [
+            lambda: _analysis_pass(path, "landmarks", m),
+            lambda: _mediapipe_pass(path, m),
+            lambda: _analysis_pass(path, "landmarks", m, flow=True),
+        ],
+        quick,
+    )
+    flow_t = _breakdown(("timings", "landmarks", None, False, "flow"))
     ours_t = _breakdown(("timings", "landmarks", None, False))
     peer_t = _breakdown(("timings", "mediapipe"))
     lin, _ = _fps(lambda: _analysis_pass(path, "landmarks", m, refine=0), quick)
@@ -210,13 +238,26 @@ def bench_analysis_fps(quick: bool) -> Measurement:
         # the same video, frames and repeats, the same breakdown (below), with --photometric
         "fps_photometric": photo,
         "fit_share_of_frame_photometric": 1.0 - photo / peer,
-        "fps_side_by_side": {"default": ours, "photometric": photo, "mediapipe": peer},
+        "fps_side_by_side": {
+            "default": ours,
+            "photometric": photo,
+            "flow": flow,
+            "mediapipe": peer,
+        },
+        # the same with --flow: frames a second, its ratio to MediaPipe's
+        "fps_flow": flow,
+        "flow_ratio": flow / peer,
+        "cpu_ratio_flow": (
+            peer_t["cpu_ms_per_frame"] / flow_t["cpu_ms_per_frame"]
+            if flow_t.get("cpu_ms_per_frame") and peer_t.get("cpu_ms_per_frame")
+            else None
+        ),
         # the last timed pass of each, per frame (ms): wall and process CPU (all threads:
         # on a busy machine the CPU time is the steadier measure of the work), and ours by
         # stage: the calibration's wall time, MediaPipe's wall time on the frames after it
         # (on the thread that runs ahead of the fit), the fit's and the relaxes' thread CPU
         # and the time a fit waited for a deferred relax
-        "breakdown": {"ours": ours_t, "photometric": photo_t, "mediapipe": peer_t},
+        "breakdown": {"ours": ours_t, "photometric": photo_t, "flow": flow_t, "mediapipe": peer_t},
         "cpu_ratio": (
             peer_t["cpu_ms_per_frame"] / ours_t["cpu_ms_per_frame"]
             if ours_t.get("cpu_ms_per_frame") and peer_t.get("cpu_ms_per_frame")

@@ -367,6 +367,7 @@ def run_headmotion(
     place of MediaPipe's x, y where the tracker is sure."""
     import time
 
+    from myoface.analysis import modelflow
     from myoface.analysis.camera import PinholeCamera
     from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, ModelFit
     from myoface.analysis.modelflow import ModelFlow, predicted
@@ -398,15 +399,21 @@ def run_headmotion(
     ang = np.full((n, 3), np.nan)
     resid = np.full(n, np.nan)
     t_fit = np.zeros(n)
+    lag = modelflow.PREDICTION_LAG
+    lagged = []  # (the prediction each frame's fit leaves, its points), as FitTracker keeps
     for k, p in enumerate(points):
         if p is None:
             fit.lose_track()
-            if tracker is not None:
-                tracker.reset()
+            lagged.append((None, None))
             continue
         t0 = time.perf_counter()
-        flow = None if tracker is None else tracker.track(frames[k], p, predicted(fit))
+        flow = None
+        if tracker is not None:  # (frame k tracked from the fit of frame k - lag)
+            pred, since = lagged[k - lag] if k >= lag else (None, None)
+            prep = tracker.prepare(frames[k], p)
+            flow = tracker.track(frames[k], p, pred, prepared=prep, since=since)
         r = fit.fit(p, syn, image=frames[k] if photometric else None, flow=flow)
+        lagged.append((predicted(fit), p))
         t_fit[k] = time.perf_counter() - t0
         est[k], ang[k], resid[k] = r.contractions, r.pose.angles_deg, r.residual_mm
     if fit.offsets is not None:

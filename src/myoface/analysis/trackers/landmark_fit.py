@@ -5,19 +5,21 @@ model (head pose and every muscle) fitted to its points
 from __future__ import annotations
 
 import itertools
+import threading
 import time
+from concurrent.futures import Future
 from dataclasses import asdict, dataclass, field
 from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from myoface._threads import run_ahead
+from myoface._threads import OrderedWorker, run_ahead
 from myoface.analysis.camera import POSE_COLUMNS, HeadPose, PinholeCamera
 from myoface.analysis.flow import FlowDetector, FlowRefiner
 from myoface.analysis.gaze import GAZE_COLUMNS, GAZE_STATE_COLUMNS, Gaze, GazeEstimator
 from myoface.analysis.landmarks import TrackerOffsets
 from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, Calibration, ModelFit
-from myoface.analysis.modelflow import FLOW_METHODS, ModelFlow, predicted
+from myoface.analysis.modelflow import FLOW_METHODS, ModelFlow
 from myoface.analysis.sections import SECTIONS, section_vertices
 from myoface.analysis.synthesis import LandmarkSynthesis
 from myoface.analysis.trackers.base import NOT_OBSERVED, Measurement, TrackerBase
@@ -54,9 +56,10 @@ def _flow_method(method: str | None) -> str:
 class LandmarkObservation(NamedTuple):
     """What :meth:`FitTracker.observe` sees on a frame with a face: MediaPipe's ``points``
     (468, 3), and ``flow``, ``(xy (468, 2), tracked (468,) bool)`` where optical flow tracked
-    them (:attr:`~myoface.analysis.weights.FitSettings.flow`; else None); ``prepared``, with
-    the model-anchored tracker, what it reads of the frame before the fit's prediction
-    (:meth:`~myoface.analysis.modelflow.ModelFlow.prepare`, made on the detector's thread)."""
+    them (:attr:`~myoface.analysis.weights.FitSettings.flow`; else None; with the
+    model-anchored tracker run ahead, a :class:`~concurrent.futures.Future` of it, which
+    :meth:`FitTracker.measure` waits for); ``prepared``: not used (kept for callers that
+    build observations)."""
 
     points: np.ndarray
     flow: tuple | None = None
@@ -141,7 +144,7 @@ class FitTracker(TrackerBase):
                  settings: FitSettings | None = None, detector=None,
                  synthesis: bool = False, deferred_relax: bool = False,
                  calibration_frame: int | None = None, gaze: bool = True,
-                 flow_method: str | None = None):  # fmt: skip
+                 flow_method: str | None = None, flow_lag: int | None = None):  # fmt: skip
         if model.face.n_vertices != 468:
             raise MyofaceValueError(
                 "the landmark tracker needs a face model with MediaPipe's 468-point topology "
@@ -169,6 +172,23 @@ class FitTracker(TrackerBase):
         chained = self.settings.flow and self.flow_method == "chained"
         self._flow = FlowRefiner() if chained else None
         self._anchored: ModelFlow | None = None
+        #: the anchored tracker tracks frame k from the fit of frame k - this
+        #: (:data:`~myoface.analysis.modelflow.PREDICTION_LAG`), on a thread of its own when
+        #: the driver observes ahead (:meth:`observe`)
+        from myoface.analysis import modelflow
+
+        self.flow_lag = modelflow.PREDICTION_LAG if flow_lag is None else int(flow_lag)
+        if self.flow_lag < 1:
+            raise MyofaceValueError(f"flow_lag must be >= 1; got {flow_lag}")
+        self._flow_worker: OrderedWorker | None = None
+        self._flow_cond = threading.Condition()
+        self._flow_closing = False
+        #: observations and measurements since the anchored tracker was made (in step: one
+        #: of each a frame), and the predictions the measurements left, by that count
+        self._n_observed = 0
+        self._n_measured = 0
+        self._predictions: dict = {}
+        self._ok_prediction: tuple = (None, None)  # (the last measured frame's)
         #: whichever refiner counts the flow's points (describe()): ours, or a flow
         #: detector's given to the tracker (which refines its points itself)
         self._refiner = self._flow
@@ -191,7 +211,11 @@ class FitTracker(TrackerBase):
         #: where the time goes (for the benchmark's breakdown): the calibration's wall time
         #: (s; its MediaPipe, scores and identity fit), and the detector's wall time (s) and
         #: count on the frames after it (on the thread that runs :meth:`observe`)
+        #: and with the anchored flow, its frames tracked, its thread CPU (the crop and the
+        #: tracking, on whichever thread ran them) and the fit's wait for it (wall)
         self.timings = {"calibration_s": 0.0, "detections": 0, "detect_s": 0.0}
+        if self.settings.flow and self.flow_method == "anchored":
+            self.timings.update({"flows": 0, "flow_cpu_s": 0.0, "flow_wait_s": 0.0})
         #: each eye's gaze on the measured frames (None: not read)
         self.gaze = GazeEstimator(model.face) if gaze else None
 
@@ -213,9 +237,7 @@ class FitTracker(TrackerBase):
         flow = None if self._flow is None else self._flow.track(frame, pts)
         if pts is None:
             return None
-        anchored = self._anchored  # (the crop and blur here, off the fit's thread)
-        prepared = None if anchored is None else anchored.prepare(frame, pts)
-        return LandmarkObservation(pts, flow, prepared)
+        return LandmarkObservation(pts, flow)
 
     @property
     def mm_per_px(self) -> float | None:
@@ -451,6 +473,9 @@ class FitTracker(TrackerBase):
             if frame is None:
                 raise MyofaceValueError("the calibration frame was not kept")
             self._anchored = self._refiner = ModelFlow.of_fit(frame, self.fit)
+            self._n_observed = self._n_measured = 0
+            self._predictions.clear()
+            self._ok_prediction = (None, None)
         self.calibration_frame = first_index + self.calibration.index
         if self.gaze is not None:  # the person's eyeballs and open lids
             self.gaze.calibrate(self.fit.neutral + self.fit.identity_mm)
@@ -461,12 +486,70 @@ class FitTracker(TrackerBase):
         """The frame's :class:`LandmarkObservation`, or None without a face: the
         calibration's (frames it detected), else detected. Called once per frame, in order;
         may run on another thread than :meth:`measure` (the driver runs it ahead), which
-        takes its result as ``observation``."""
-        if index in self._detected:
-            obs = self._detected.pop(index)
-            if obs is not None and self._anchored is not None and obs.prepared is None:
-                obs = obs._replace(prepared=self._anchored.prepare(frame, obs.points))
+        takes its result as ``observation``. With the model-anchored flow, its tracking of
+        the frame is handed to a thread of its own (the observation's ``flow`` a future):
+        it waits there for the fit of frame k - :attr:`flow_lag` (:meth:`_track_anchored`)."""
+        return self._anchor(frame, self._observe(frame, index), ahead=True)
+
+    def _anchor(self, frame, obs, ahead: bool):
+        """``obs`` with the anchored tracker's points as its ``flow`` (none without it):
+        tracked on the flow's thread (``ahead``: a future) or here."""
+        if self._anchored is None:
             return obs
+        seq = self._n_observed
+        self._n_observed += 1
+        if obs is None:
+            return None
+        if not ahead:
+            return obs._replace(flow=self._track_anchored(seq, frame, obs.points))
+        if self._flow_worker is None:
+            self._flow_worker = OrderedWorker("myoface-flow")
+        return obs._replace(
+            flow=self._flow_worker.submit(self._track_anchored, seq, frame, obs.points)
+        )
+
+    def _track_anchored(self, seq: int, frame, points):
+        """The anchored tracker on observation ``seq`` (counted from the calibration):
+        the frame's crop (:meth:`~myoface.analysis.modelflow.ModelFlow.prepare`), then,
+        once measurement ``seq - flow_lag`` is done, tracked from the prediction it left
+        (:meth:`_publish`). The same points whichever thread runs it and whenever."""
+        anchored = self._anchored
+        c0 = time.thread_time()
+        prepared = anchored.prepare(frame, points)
+        cpu = time.thread_time() - c0
+        need = seq - self.flow_lag
+        with self._flow_cond:
+            while need >= 0 and self._n_measured <= need and not self._flow_closing:
+                self._flow_cond.wait()
+            if need >= 0 and self._n_measured <= need:
+                return None  # (closed meanwhile: not used)
+            prediction, since = self._predictions.get(need, (None, None))
+        c0 = time.thread_time()
+        out = anchored.track(frame, points, prediction, prepared=prepared, since=since)
+        with self._flow_cond:  # (the timings are the driver's thread's too)
+            self.timings["flows"] += 1
+            self.timings["flow_cpu_s"] += cpu + time.thread_time() - c0
+        return out
+
+    def _publish(self, prediction=None, since=None) -> None:
+        """A measurement done: the prediction it leaves for the frames after it (the
+        fit's pose and skin, and the detector's points on that frame; None: none, the
+        calibration's pose and neutral and the detector's points)."""
+        if self._anchored is None:
+            return
+        with self._flow_cond:
+            seq = self._n_measured
+            self._predictions[seq] = (prediction, since)
+            # (the observations up to this one are tracked: the next read seq + 1 - lag on)
+            for old in [k for k in self._predictions if k <= seq - self.flow_lag]:
+                del self._predictions[old]
+            self._n_measured += 1
+            self._flow_cond.notify_all()
+
+    def _observe(self, frame, index: int = 0) -> LandmarkObservation | None:
+        """(:meth:`observe` without the anchored flow.)"""
+        if index in self._detected:
+            return self._detected.pop(index)
         self._detected.clear()  # (past the calibration frames: the detector tracks from here)
         t0 = time.perf_counter()
         obs = self._observed(self.detector, frame)
@@ -479,17 +562,20 @@ class FitTracker(TrackerBase):
         """The frame's measurement; ``observation``: its :meth:`observe` (None without a
         face; by default observed here)."""
         fit = self._ensure_fit(np.shape(frame))
-        obs = self.observe(frame, index) if observation is NOT_OBSERVED else observation
+        if observation is NOT_OBSERVED:
+            obs = self._anchor(frame, self._observe(frame, index), ahead=False)
+        else:
+            obs = observation
         nan = np.full(len(self.ids), np.nan)
         if obs is None:
             self._lose_track()
             return FitMeasurement(index, time_s, "no_face", nan, None, float("nan"))
         prev = fit._prev
         flow = obs.flow
-        if self._anchored is not None:
-            flow = self._anchored.track(
-                frame, obs.points, predicted(fit), prepared=getattr(obs, "prepared", None)
-            )
+        if isinstance(flow, Future):  # (the anchored flow, tracked on its thread)
+            t0 = time.perf_counter()
+            flow = flow.result()
+            self.timings["flow_wait_s"] += time.perf_counter() - t0
         try:
             r = fit.fit(
                 obs.points, self.synthesis, deferred=self.deferred_relax, flow=flow,
@@ -499,9 +585,18 @@ class FitTracker(TrackerBase):
             self._lose_track()
             return FitMeasurement(index, time_s, "fit_failed", nan, None, float("nan"))
         shape = fit.shape(r.contractions)
+        # the prediction this frame leaves for the anchored flow (ModelFlow.track; as soon
+        # as it is known, so that the next frame's tracking runs while this one's gaze is
+        # read): the fit's pose and skin here, unless the frame is not measured
+        occluded = r.occlusion > OCCLUDED_FRACTION
+        if occluded:
+            self._publish(*self._ok_prediction)  # (the last measured frame's)
+        elif r.residual_mm <= MISFIT_RMS_MM:
+            self._ok_prediction = ((r.pose, shape), obs.points)
+            self._publish(*self._ok_prediction)
         uv = fit.camera.project(r.pose.apply(shape))
         contours = {s: uv[v] for s, v in self._sections.items()}
-        if r.occlusion > OCCLUDED_FRACTION:
+        if occluded:
             if self.gaze is not None:
                 self.gaze.reset()  # (its filter averages measured frames only)
             fit._prev = prev  # (the next frame starts from the last measured one)
@@ -523,10 +618,13 @@ class FitTracker(TrackerBase):
         )  # fmt: skip
 
     def _lose_track(self) -> None:
-        """After a frame not measured: the fit and the gaze's filter start again."""
+        """After a frame not measured: the fit and the gaze's filter start again (and the
+        anchored flow from the detector's points)."""
         self.fit.lose_track()
         if self._anchored is not None:
             self._anchored.reset()
+            self._ok_prediction = (None, None)
+            self._publish()
         if self.gaze is not None:
             self.gaze.reset()
 
@@ -567,6 +665,12 @@ class FitTracker(TrackerBase):
         return out
 
     def close(self) -> None:
+        if self._flow_worker is not None:
+            with self._flow_cond:
+                self._flow_closing = True
+                self._flow_cond.notify_all()
+            self._flow_worker.close()
+            self._flow_worker = None
         if self.fit is not None:
             self.fit.close()
         if self._detector is not None:
