@@ -1,9 +1,9 @@
 """Where the paper's snakes put the lips' outline on a video, against MediaPipe's.
 
-    python tools/snake_lips.py [--video MP4] [--draw 20,45,60] [--out DIR] [--mouth]
+    python tools/snake_lips.py [--video MP4] [--draw 20,45,60] [--out DIR] [--mouth] [--colour]
 
 Runs :class:`~myoface.analysis.trackers.snakes.Analyzer` (the default options, or with the
-mouth layer, ``--mouth``) on the video and, on every frame, MediaPipe's face mesh as an
+mouth layer, ``--mouth``, or its colour layer, ``--colour``) on the video and, on every frame, MediaPipe's face mesh as an
 independent reference for the lips' outer outline (its points 0-17 and 61-291 lie on the
 vermilion border; on the sample video's smile it follows the upper lip above the teeth and the
 lower lip's lower edge, which we checked by eye on the drawn frames). Prints per frame the
@@ -37,6 +37,7 @@ def main() -> None:
     ap.add_argument("--draw", default="")
     ap.add_argument("--out", default=".")
     ap.add_argument("--mouth", action="store_true", help="the mouth layer for the lips")
+    ap.add_argument("--colour", action="store_true", help="the mouth layer from the lips' colour")
     args = ap.parse_args()
 
     import cv2
@@ -51,7 +52,10 @@ def main() -> None:
     draw = {int(k) for k in args.draw.split(",") if k}
     fm = build_face_model()
     k0, _, init, _ = auto_init(iter(video), fm.face)
-    an = Analyzer(fm, init, mouth_sections=MOUTH_SECTIONS if args.mouth else ())
+    mouth = args.mouth or args.colour
+    an = Analyzer(
+        fm, init, mouth_sections=MOUTH_SECTIONS if mouth else (), mouth_colour=args.colour
+    )
     ids = list(an.ids)
     cols = [
         ids.index(m)

@@ -173,6 +173,71 @@ def image_potential(image, sigma: float = 2.0, method: str = "gaussian") -> np.n
     return out
 
 
+#: the mouth layer's step between the skin and the lips (grey levels; :func:`mouth_image`):
+#: about the lips' luminance step at rest on the sample video (skin 135, lips 86-90)
+MOUTH_CONTRAST = 50.0
+#: gaps in the mouth's outline closed before its holes are filled (px)
+MOUTH_GAP_PX = 4
+
+
+@dataclass(frozen=True)
+class MouthTones:
+    """A face's colours around its mouth, measured on a calibration frame (see
+    :func:`mouth_image`): the pseudo-hue R / (R + G) of the skin around the lips and of the
+    lips, the grey level below which a pixel is the mouth's dark inside, and the HSV
+    saturation below which it is a tooth."""
+
+    skin_hue: float
+    lip_hue: float
+    floor: float
+    teeth_saturation: float
+
+
+def pseudo_hue(image) -> np.ndarray:
+    """(H, W) R / (R + G) of an RGB image (0.5 where both are 0): high on the lips, lower on
+    the skin around them, lowest on the teeth (the pseudo-hue with which Eveno, Caplier &
+    Coulon 2004 find the lips' outline)."""
+    rgb = np.asarray(image)[..., :3].astype(np.float64)
+    s = rgb[..., 0] + rgb[..., 1]
+    return np.where(s > 0, rgb[..., 0] / np.maximum(s, 1e-9), 0.5)
+
+
+def saturation(image) -> np.ndarray:
+    """(H, W) HSV saturation (max - min) / max of an RGB image's channels (0 where black)."""
+    rgb = np.asarray(image)[..., :3].astype(np.float64)
+    hi, lo = rgb.max(axis=-1), rgb.min(axis=-1)
+    return (hi - lo) / np.maximum(hi, 1e-9)
+
+
+def mouth_image(image, tones: MouthTones, contrast: float = MOUTH_CONTRAST) -> np.ndarray:
+    """(H, W) grey levels in which the whole mouth, lips, teeth and its dark inside, is one
+    dark region on the skin, for the lips' outer outline. The mouth's inside (darker than
+    ``tones.floor``) and the teeth (less saturated than ``tones.teeth_saturation``) are given
+    the lips' pseudo-hue; each pixel's pseudo-hue (then blurred by a pixel: video keeps
+    colour at half resolution) is placed between the skin's (0) and the lips' (1) and clipped
+    there; the holes the mouth encloses are mouth (1) too, gaps of up to
+    :data:`MOUTH_GAP_PX` in its outline closed (where a stretched lip is thinnest, the teeth
+    that neither test caught touch the skin); the mouth at ``contrast`` grey levels below
+    the skin. A grey image has no hue: its grey
+    levels raised to the floor instead."""
+    a = np.asarray(image)
+    if a.ndim != 3 or a.shape[2] < 3:
+        return np.maximum(to_intensity(a), float(tones.floor))
+    from scipy.ndimage import binary_closing, binary_fill_holes, gaussian_filter
+
+    span = tones.lip_hue - tones.skin_hue
+    span = span if abs(span) > 1e-3 else 1e-3
+    hue = pseudo_hue(a)
+    hue[(to_intensity(a) < tones.floor) | (saturation(a) < tones.teeth_saturation)] = (
+        tones.skin_hue + span
+    )
+    g = np.clip((gaussian_filter(hue, 1.0, mode="nearest") - tones.skin_hue) / span, 0.0, 1.0)
+    mouth = g > 0.5
+    closed = binary_closing(mouth, np.ones((3, 3), bool), MOUTH_GAP_PX // 2, border_value=0)
+    g[binary_fill_holes(closed) & ~mouth] = 1.0
+    return np.ascontiguousarray(200.0 - contrast * g)
+
+
 def _kernel_reach(sigma: float, methods) -> int:
     """How far (px) the potentials ``methods`` at ``sigma`` look from a pixel (their widest
     Gaussian's radius, plus the two central differences of the edge potential and of its
@@ -266,20 +331,26 @@ def _clip_box(box, w: int, h: int):
     return None if x1 - x0 < 2 or y1 - y0 < 2 else (x0, y0, x1, y1)
 
 
-def _box_potentials(a: np.ndarray, sigma: float, methods, box, floor: float | None = None):
+def _box_potentials(a: np.ndarray, sigma: float, methods, box, floor=None, outward=None):
     """The potentials ``methods`` of image ``a`` and their gradients on ``box`` (x0, y0, x1,
     y1), each (L, y1 - y0 + 1, x1 - x0 + 1): filtered on the box grown by the blur's reach,
     so that they equal the whole image's inside it. ``floor``: grey levels below it are
-    raised to it first (see :func:`potential_field`)."""
+    raised to it first, or a :class:`MouthTones`: the image is then :func:`mouth_image`'s of
+    the grown box (whose holes are those the box shows); ``outward``: an ellipse for
+    :func:`_outward_edges` (see :func:`potential_field`)."""
     h, w = a.shape[:2]
     x0, y0, x1, y1 = box
     smooth = [m for m in methods if m != "paper"]
     reach = max(_kernel_reach(float(sigma), methods) if smooth else 0, 4)  # "paper": 2 + 2
     cx0, cy0 = max(x0 - reach, 0), max(y0 - reach, 0)
     cx1, cy1 = min(x1 + reach, w - 1), min(y1 + reach, h - 1)
-    img = np.ascontiguousarray(to_intensity(a[cy0 : cy1 + 1, cx0 : cx1 + 1]))
-    if floor is not None:
-        np.maximum(img, float(floor), out=img)
+    crop = a[cy0 : cy1 + 1, cx0 : cx1 + 1]
+    if isinstance(floor, MouthTones):
+        img = mouth_image(crop, floor)
+    else:
+        img = np.ascontiguousarray(to_intensity(crop))
+        if floor is not None:
+            np.maximum(img, float(floor), out=img)
     tmp = np.empty_like(img)
     threads = img.size > SERIAL_PIXELS
     blur = _blur_separable if threads else _blur_separable_1
@@ -299,6 +370,8 @@ def _box_potentials(a: np.ndarray, sigma: float, methods, box, floor: float | No
                 wide = np.empty_like(img)
                 blur(img, gaussian_kernel(4.0 * float(sigma)), wide, tmp)
                 np.subtract(blurred, wide, out=out)
+            elif outward is not None:
+                _outward_edges(blurred, outward, (cx0, cy0), out)
             else:
                 grad_mag(blurred, out)
                 if m == "line+edge":
@@ -313,6 +386,21 @@ def _box_potentials(a: np.ndarray, sigma: float, methods, box, floor: float | No
     return pot[sl], gx[sl], gy[sl]
 
 
+def _outward_edges(blurred: np.ndarray, outward, origin, out: np.ndarray) -> None:
+    """``out`` = -max(0, grad(blurred) . d): the edges whose grey levels rise outwards from
+    an ellipse's centre, d the unit normal of the concentric ellipse through each pixel;
+    ``outward`` = (cx, cy, ax, ay) image px, ``origin`` the image pixel of ``blurred[0, 0]``."""
+    cx, cy, ax, ay = (float(v) for v in outward)
+    gy, gx = np.gradient(blurred)
+    h, w = blurred.shape
+    x = np.arange(w, dtype=np.float64) + origin[0] - cx
+    y = np.arange(h, dtype=np.float64) + origin[1] - cy
+    dx = np.broadcast_to(x[None, :] / ax**2, (h, w))
+    dy = np.broadcast_to(y[:, None] / ay**2, (h, w))
+    norm = np.maximum(np.hypot(dx, dy), 1e-12)
+    np.minimum(-(gx * dx + gy * dy) / norm, 0.0, out=out)
+
+
 def potential_field(
     image,
     sigma: float = 2.0,
@@ -320,6 +408,8 @@ def potential_field(
     window=None,
     layer_windows=None,
     layer_floors=None,
+    layer_sigmas=None,
+    layer_outward=None,
 ) -> PotentialField:
     """The potentials ``methods`` (one layer each, see :func:`image_potential`) of ``image``
     (H, W[, 3]) over ``window`` = (x0, y0, x1, y1) pixels (inclusive; clipped to the image;
@@ -338,7 +428,19 @@ def potential_field(
     layer's image is raised to it before filtering: what is darker than the feature itself
     makes no edge. For the lips' outline (:class:`~myoface.analysis.trackers.snakes.Analyzer`,
     ``mouth_sections``): the mouth's dark inside, seen as the lips part, is then no darker
-    than the lips, and the only edge left near it is the lips' with the skin.
+    than the lips, and the only edge left near it is the lips' with the skin. An entry may
+    be :class:`MouthTones` instead: that layer is then made from :func:`mouth_image` of its
+    window (grown by the blur's reach), the lips, the teeth and the mouth's inside one region.
+
+    ``layer_sigmas``: one entry per method, None or that layer's own Gaussian width (px), e.g.
+    a coarse copy of a layer, whose wider ravines draw a contour from farther (its potential
+    multiplied by the ratio of the widths, so that its ravines are as deep).
+
+    ``layer_outward``: one entry per method, None or an ellipse (cx, cy, ax, ay), image px,
+    around a closed feature: that edge layer keeps only the edges whose grey levels rise
+    outwards from the ellipse's centre (``P = -max(0, grad(G * I) . d)``, d the outward
+    normal of the concentric ellipse through the pixel): of a dark feature's outline, the
+    outer side only.
     """
     for m in methods:
         if m not in METHODS:
@@ -359,10 +461,28 @@ def potential_field(
     if len(floors) != len(methods):
         raise MyofaceValueError("layer_floors must have one entry (or None) per method")
     for fl in floors:
-        if fl is not None and not (np.isfinite(fl) and 0 <= fl <= 255):
+        if fl is None or isinstance(fl, MouthTones):
+            continue
+        if not (np.isfinite(fl) and 0 <= fl <= 255):
             raise MyofaceValueError(f"a layer's floor must be a grey level in [0, 255]; got {fl}")
+    sigmas = [None] * len(methods) if layer_sigmas is None else list(layer_sigmas)
+    if len(sigmas) != len(methods):
+        raise MyofaceValueError("layer_sigmas must have one entry (or None) per method")
+    for sg in sigmas:
+        if sg is not None and not (np.isfinite(sg) and sg > 0):
+            raise MyofaceValueError(f"a layer's sigma must be > 0 pixels; got {sg}")
+    outs = [None] * len(methods) if layer_outward is None else list(layer_outward)
+    if len(outs) != len(methods):
+        raise MyofaceValueError("layer_outward must have one entry (or None) per method")
+    for j, o in enumerate(outs):
+        if o is not None and (methods[j] in ("paper", "line") or not min(o[2:]) > 0):
+            raise MyofaceValueError("layer_outward: an edge layer and an ellipse with axes > 0")
     x0, y0, x1, y1 = box
-    whole = [j for j, lw in enumerate(sub) if lw is None and floors[j] is None]
+
+    def own(j):  # a layer computed on its own (not with the others on the whole window)
+        return any(v[j] is not None for v in (sub, floors, sigmas, outs))
+
+    whole = [j for j in range(len(methods)) if not own(j)]
     shape = (len(methods), y1 - y0 + 1, x1 - x0 + 1)
     pot, gx, gy = np.zeros(shape), np.zeros(shape), np.zeros(shape)
     if whole:
@@ -370,16 +490,22 @@ def potential_field(
         pot[whole], gx[whole], gy[whole] = p, u, v
     boxes = [None] * len(methods)
     for j, lw in enumerate(sub):
-        if lw is None and floors[j] is None:
+        if not own(j):
             continue
-        if lw is None:  # a floored layer over the whole window
+        if lw is None:  # a floored (or own sigma's) layer over the whole window
             b = box
         else:
             b = _clip_box((max(lw[0], x0), max(lw[1], y0), min(lw[2], x1), min(lw[3], y1)), w, h)
             boxes[j] = b if b is not None else (x0, y0, x0, y0)
         if b is None:
             continue
-        p, u, v = _box_potentials(a, sigma, [methods[j]], b, floors[j])
+        sg = sigma if sigmas[j] is None else sigmas[j]
+        p, u, v = _box_potentials(a, sg, [methods[j]], b, floors[j], outs[j])
+        if sigmas[j] is not None:
+            # a wider blur lowers an edge's slope by the blurs' ratio: the coarse layer's
+            # ravines are deepened by it (scale-normalised derivatives, Lindeberg 1998)
+            k = sg / sigma
+            p, u, v = p * k, u * k, v * k
         sl = (slice(b[1] - y0, b[3] - y0 + 1), slice(b[0] - x0, b[2] - x0 + 1))
         pot[j][sl], gx[j][sl], gy[j][sl] = p[0], u[0], v[0]
     return PotentialField(pot, gx, gy, (x0, y0), (w, h), tuple(boxes))

@@ -17,10 +17,13 @@ from myoface.analysis.estimate import ContractionEstimator
 from myoface.analysis.headframe import HeadTracker, Similarity, head_box
 from myoface.analysis.landmarks import auto_init, rigid_vertices, similarity_affine
 from myoface.analysis.potentials import (
+    MouthTones,
     PotentialField,
     bilinear,
     potential_field,
     potential_image,
+    pseudo_hue,
+    saturation,
     to_intensity,
 )
 from myoface.analysis.sections import (
@@ -95,6 +98,15 @@ MOUTH_SECTIONS = ("lips",)
 #: percentile, 0.049-0.052 with the 10th (the floor 72 and 53 grey levels; the cavity ~15, the
 #: lower lip near the corners 95-115, the skin beside it 155-170)
 MOUTH_BAND_MM = (0.5, 2.5)
+#: with ``mouth_colour``, the mouth sections relax first in a copy of their layer blurred this
+#: many times more (its ravines deepened as much), which reaches farther: as the sample
+#: video's smile opens the upper lip's border rises 22 px above the lips' outline at rest
+MOUTH_COARSE = 3.0
+#: the teeth in the mouth sections' layer (:func:`~myoface.analysis.potentials.mouth_image`):
+#: pixels less saturated than this fraction of the skin's around the lips (measured on the
+#: calibration frame, MOUTH_BAND_MM outside the outline). On the sample video the skin there
+#: is at 0.40, the lips at 0.47, the teeth of the smile at 0.23-0.30
+TEETH_SATURATION = 0.75
 MOUTH_FLOOR_PERCENTILE = 25.0
 
 
@@ -124,6 +136,21 @@ def lips_tone(
     pts = (q[:, None, :] + depths[None, :, None] * nrm[:, None, :]).reshape(-1, 2)
     vals = np.array([bilinear(img, x, y) for x, y in pts])
     return float(np.percentile(vals, percentile))
+
+
+def _band(img: np.ndarray, contour: np.ndarray, band_px, sign: int) -> np.ndarray:
+    """``img`` (H, W) sampled in the band ``band_px`` (px) inside (``sign`` 1) or outside
+    (-1) the closed ``contour`` ((K, 2) image (x, y) px), along each node's normal."""
+    q = np.asarray(contour, dtype=np.float64)
+    tan = np.roll(q, -1, axis=0) - np.roll(q, 1, axis=0)
+    nrm = np.stack([-tan[:, 1], tan[:, 0]], axis=1)
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-12)[:, None]
+    area = 0.5 * np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1])
+    if area < 0:
+        nrm = -nrm
+    depths = sign * np.linspace(band_px[0], band_px[1], 5)
+    pts = (q[:, None, :] + depths[None, :, None] * nrm[:, None, :]).reshape(-1, 2)
+    return np.array([bilinear(img, x, y) for x, y in pts])
 
 
 def _init_mm_per_px(model, init: dict) -> float:
@@ -171,6 +198,25 @@ class Analyzer:
         right zygomatic major's estimate from 0.95-1.0 down to 0.3-0.55 and lost a nasolabial
         contour (misfit), while on the closed loop's renders it kept the lips' snake on the
         outline.
+    mouth_colour : with ``mouth_sections``, their layer made from the lips' colour instead
+        (:func:`~myoface.analysis.potentials.mouth_image`: the pseudo-hue R / (R + G) between
+        the skin's and the lips', measured on the calibration frame, with the teeth, the
+        mouth's dark inside and what the lips enclose taken as lips), keeping only the edges
+        whose grey levels rise outwards from the lips' middle (the teeth's edges with the
+        lips, inside the outline, make none), and a coarse copy (:data:`MOUTH_COARSE`) the
+        sections relax in first. Off by default. Measured 2026-12-02 on the sample video's
+        open smile (frames 25-64, means; ``python tools/snake_lips.py --colour``, against
+        MediaPipe's outline): the snakes' top went from 5.7 px below the upper lip's border
+        (on the upper teeth) to 0.5 px, their bottom from 12.6 px above the lower lip's (on
+        the lower teeth's edge) to 4.2 px, but the subject's left corner stays inside (9.1 ->
+        11.6 px) and the right one goes out (1.9 -> 4.9 px); with the bundled muscles the fit
+        then reads the right zygomatic major at 0.39 over the smile (1.00 without; with the
+        depressor labii inferioris as a sheet, d585611's muscle file: 1.00 and the left one
+        0.94, with the outline's top 0.5, bottom 4.2, corners 1.0 and 15.0 px). On the closed
+        loop (24 frames at 256 px, ``run_closed_loop``, the mouth drawn shut) the worst RMSE
+        went 0.255 -> 0.129 (the depressors 0.21-0.26 -> 0.10-0.13, frontalis_outer_r 0.056 ->
+        0.025), with the teeth rendered 0.296 -> 0.138 (the plain mouth layer: 0.281), and
+        with the sheet 0.099 -> 0.052.
     reseed : with ``estimator="curves"``, a second pass per frame: the contours are moved to
         where the model, at the first estimate, puts their skin, relaxed again and the
         contractions re-estimated (analysis by synthesis; twice the tracking cost).
@@ -205,6 +251,7 @@ class Analyzer:
         estimator: str = "curves",
         line_sections=LINE_SECTIONS,
         mouth_sections=(),
+        mouth_colour: bool = False,
         reseed: bool = True,
         synthesis=None,
         synthesis_rounds: int = 3,
@@ -250,6 +297,8 @@ class Analyzer:
         for kind, secs in (("line", line_sections), ("mouth", mouth_sections)):
             if any(s in secs for s in self.sections):
                 kinds.append(kind)
+        if "mouth" in kinds and mouth_colour:
+            kinds.append("mouth_coarse")
         self._layer_kinds = tuple(kinds)
         self.layers = [
             kinds.index("line")
@@ -263,6 +312,10 @@ class Analyzer:
         #: frame (:func:`lips_tone`, measured on the calibration frame; None before)
         self.mouth_floor = None
         self.mouth_sections = tuple(mouth_sections)
+        #: whether the mouth sections' layer is made from the lips' colour
+        #: (:func:`~myoface.analysis.potentials.mouth_image`), keeps only the edges rising
+        #: outwards from the lips' middle, and has a coarse copy they relax in first
+        self.mouth_colour = bool(mouth_colour)
         self.snakes = Snakes(self.contours, self.params, layers=self.layers)
         all_fids = {f.name: f for f in model_fiducials(model.face)}
         self.fiducials = [all_fids[f"{s}:{n}"] for s in self.sections for n in FEATURES[s]]
@@ -304,6 +357,22 @@ class Analyzer:
         self._synth = None  # FrameSynthesizer, made on the calibration frame
 
     # ------------------------------------------------------------ potentials
+    def _mouth_tones(self, frame, conts, band) -> MouthTones:
+        """The colours around the mouth sections' outlines ``conts`` on ``frame`` (the
+        calibration frame): the skin's in ``band`` (px) outside them, the lips' inside."""
+        hue, sat = pseudo_hue(frame), saturation(frame)
+        qs = [q for s, q in zip(self.sections, conts, strict=True) if s in self.mouth_sections]
+
+        def median(img, sign):
+            return float(np.median(np.concatenate([_band(img, q, band, sign) for q in qs])))
+
+        return MouthTones(
+            skin_hue=median(hue, -1),
+            lip_hue=median(hue, 1),
+            floor=float(self.mouth_floor),
+            teeth_saturation=TEETH_SATURATION * median(sat, -1),
+        )
+
     def _methods(self) -> tuple:
         return tuple("line" if k == "line" else self.potential for k in self._layer_kinds)
 
@@ -317,11 +386,20 @@ class Analyzer:
         q = np.asarray(nodes, dtype=np.float64)
         box, _ = self._box(frame, q, None)
         layer = self.snakes.node_layer
+        kinds = self._layer_kinds
+        own = [kinds.index("mouth") if k == "mouth_coarse" else j for j, k in enumerate(kinds)]
         layer_windows = [None] + [
-            self._box(frame, q[layer == j], None)[0] for j in range(1, len(self._layer_kinds))
+            self._box(frame, q[layer == own[j]], None)[0] for j in range(1, len(kinds))
         ]
-        floors = [self.mouth_floor if k == "mouth" else None for k in self._layer_kinds]
-        return potential_field(frame, self.sigma, self._methods(), box, layer_windows, floors)
+        floors = [self.mouth_floor if k.startswith("mouth") else None for k in kinds]
+        sigmas = [self.sigma * MOUTH_COARSE if k == "mouth_coarse" else None for k in kinds]
+        outward = [None] * len(kinds)
+        if "mouth" in kinds and self.mouth_colour:
+            ell = _ellipse(q[layer == kinds.index("mouth")])
+            outward = [ell if k.startswith("mouth") else None for k in kinds]
+        return potential_field(
+            frame, self.sigma, self._methods(), box, layer_windows, floors, sigmas, outward
+        )
 
     @staticmethod
     def _box(frame, q: np.ndarray, pad: float | None):
@@ -352,6 +430,16 @@ class Analyzer:
         if fld is None or not self._covers(fld, nodes):
             fld = self._field_for(frame, nodes)
         self._field = fld
+        if "mouth_coarse" in self._layer_kinds and self.mouth_floor is not None:
+            # the mouth's sections first in the coarse copy of their layer, from wherever the
+            # frame before or the model put them, then in their own
+            lay = self.snakes.node_layer
+            mouth = lay == self._layer_kinds.index("mouth")
+            lay[mouth] = self._layer_kinds.index("mouth_coarse")
+            try:
+                self.snakes.relax(fld)
+            finally:
+                lay[mouth] = self._layer_kinds.index("mouth")
         return self.snakes.relax(fld), fld
 
     @property
@@ -532,6 +620,8 @@ class Analyzer:
                 if s in self.mouth_sections
             ]
             self.mouth_floor = float(min(tones))
+            if np.ndim(frame) == 3 and self.mouth_colour:
+                self.mouth_floor = self._mouth_tones(frame, res.split(), band)
             res, fld = self._relax(frame, None)
         self._contrast0 = _contrast(fld)
         conts = res.split()
@@ -702,6 +792,13 @@ class Analyzer:
         if self._detector:
             self._detector.close()
         self._detector = None
+
+
+def _ellipse(q: np.ndarray) -> tuple:
+    """(cx, cy, ax, ay): the centre and half extents (px, at least 1) of the points ``q``."""
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    c, half = 0.5 * (lo + hi), np.maximum(0.5 * (hi - lo), 1.0)
+    return (float(c[0]), float(c[1]), float(half[0]), float(half[1]))
 
 
 def _contrast(fld: PotentialField) -> float:
