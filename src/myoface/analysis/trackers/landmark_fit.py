@@ -514,9 +514,8 @@ class FitTracker(TrackerBase):
         once measurement ``seq - flow_lag`` is done, tracked from the prediction it left
         (:meth:`_publish`). The same points whichever thread runs it and whenever."""
         anchored = self._anchored
-        c0 = time.thread_time()
+        c0 = time.thread_time()  # (waiting takes no CPU)
         prepared = anchored.prepare(frame, points)
-        cpu = time.thread_time() - c0
         need = seq - self.flow_lag
         with self._flow_cond:
             while need >= 0 and self._n_measured <= need and not self._flow_closing:
@@ -524,11 +523,10 @@ class FitTracker(TrackerBase):
             if need >= 0 and self._n_measured <= need:
                 return None  # (closed meanwhile: not used)
             prediction, since = self._predictions.get(need, (None, None))
-        c0 = time.thread_time()
         out = anchored.track(frame, points, prediction, prepared=prepared, since=since)
         with self._flow_cond:  # (the timings are the driver's thread's too)
             self.timings["flows"] += 1
-            self.timings["flow_cpu_s"] += cpu + time.thread_time() - c0
+            self.timings["flow_cpu_s"] += time.thread_time() - c0
         return out
 
     def _publish(self, prediction=None, since=None) -> None:
@@ -643,6 +641,9 @@ class FitTracker(TrackerBase):
             # the optical flow's points (FitSettings.flow): tracked from the first frame,
             # from the previous frame, or left at MediaPipe's
             out["optical_flow_points"] = dict(self._refiner.stats)
+        if self._anchored is not None:
+            # the fit's frame each frame's anchored tracking predicts from (k - this)
+            out["optical_flow_lag"] = self.flow_lag
         if self.fit is not None:
             cam = self.fit.camera
             out["camera"] = {"focal_px": cam.focal_px, "cx": cam.cx, "cy": cam.cy}
