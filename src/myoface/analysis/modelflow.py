@@ -78,6 +78,41 @@ by chance where 121 do not); no coarse level (window 9: 1.0 ms; 0.85 / 1.38 / 0.
 1.74 / 0.285) reads the head's angle under motion worse, as does window 11 without it
 (1.72 deg). The fit itself costs ~1 ms more a frame with the flow's term, and relaxes the
 tissue more often (the skin it reads moves more).
+
+Off the fit's thread (issue 30, 2026-12-02): the fit's tracker
+(:class:`~myoface.analysis.trackers.landmark_fit.FitTracker`) tracks frame k on a thread of
+its own from the fit of frame k - :data:`PREDICTION_LAG` (2): while frame k - 1 is fitted,
+frame k is prepared and tracked, and the fit waits for it 0.2 ms a frame where it waited
+4.6 (``flow_wait`` in ``analysis.fps``' breakdown; 1 is the plain loop, to the bit). The
+prediction one frame older changes little (full benchmarks at the same tree, lag 2 / 1:
+head-motion renders still 0.80 / 0.80 mm, 1.27 / 1.27 deg, worst RMSE 0.177 / 0.176; moving
+1.22 / 1.21 mm, 1.56 / 1.57 deg, 0.269 / 0.264; known warps, head still: corners 0.80 /
+0.80, brows 0.87 / 0.87, lips 0.96 / 0.97, chin 0.94 / 0.95, explained >= 0.95, leak 0.059
+/ 0.059). The work is the same (5.2 ms CPU a frame on that thread, the fit 1.1 more, at a
+load of 6-11 on the 2 cores); it is hidden where a core is free, not where the machine is
+saturated: ``analysis.fps`` there gave the default 24.7 frames/s (0.177x MediaPipe), the flow
+18.4 (0.132x; process CPU 24.4 against 17.1 ms a frame). Measured and not kept: tracking
+3 vertices in 4 and the rest (117, none two neighbours) from their tracked neighbours'
+offsets to the prediction (the interpolated points 0.43 px from the tracked ones, median; 1.6 px at the 90th percentile,
+where the tracking is within 0.05 px); 4 or 5 steps a level (18 / 8 % fewer steps, 8 / 4
+points a frame accepted or rejected otherwise, 0.4 / 0.2 px at the 95th percentile); the
+coarse level stopping at 0.5 px (12 %, 6 points, 0.2 px), the image's at 0.1 px (15 %, 0.16
+px).
+
+Where the known warps' mouth corners (0.80) and brows (0.87) are held (head still,
+``analysis.known_warp_gain``'s clips, the fit with this tracker): the fit given the warp's
+exact positions of every tracked vertex reaches 0.92 / 0.97, of the vertices this tracker
+keeps (the rest MediaPipe's) 0.89 / 0.98; this tracker with the templates deformed by the
+warp's own local maps (not the model's prediction) 0.79 / 0.87, the same: the template's
+deformation does not hold them. The tracker alone reads 0.90 of the corners' motion and 0.97
+of the brows' at the regions' points (explained 0.98 / 0.99), the same when it starts from
+the true position (0.90 / 0.97: the alignment's optimum, not its start or its steps) and
+when the mouth's gap is masked where the warp puts it (0.89 / 0.97); a 7-px patch reads
+0.91 / 0.97 (the fit 0.81 / 0.89): where the smile's field peaks, the patch's best
+translation averages it over its pixels. The fit, which fits the muscles to every point
+around, loses another tenth at both (given exact points it loses 0.03-0.08): the shortfall
+is the tracker's reading at the corners and the fit's (its priors, the muscles' reach)
+on top; the brows' is the fit's.
 """
 
 from __future__ import annotations

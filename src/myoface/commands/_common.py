@@ -226,7 +226,8 @@ def add_analysis_arguments(p) -> None:
         help="landmarks' 3-D fit: also read its points in the pixels, each against the "
         "calibration frame through the model (Lucas-Kanade on the template the fitted mesh "
         "warps; no drift), which reads skin motion MediaPipe reads short; best where the "
-        "skin has texture and the face keeps its look; ~4 ms a frame more (see README)",
+        "skin has texture and the face keeps its look; ~5 ms CPU a frame more, on a thread "
+        "of its own beside the fit (see README)",
     )
     p.add_argument(
         "--photometric",
