@@ -4,18 +4,24 @@ alone on it with other settings: the reader's variants compared in seconds on th
 
     python tools/gaze_replay.py record bench  /tmp/bench.pkl     # the benchmark's clip
     python tools/gaze_replay.py record bench2 /tmp/bench2.pkl    # gaze seed 7, camera seed 3
+    python tools/gaze_replay.py record bench-clean /tmp/clean.pkl # the clip undegraded
     python tools/gaze_replay.py record ~/.cache/myoface/single_face.mp4 /tmp/sample.pkl
+    python tools/gaze_replay.py record ~/.cache/myoface/single_face.mp4 /tmp/s_cli.pkl default
     python tools/gaze_replay.py replay /tmp/bench.pkl /tmp/sample.pkl socket_prior_mm=1.0
 
-``record`` runs the analysis as ``myoface bench --only analysis.gaze_error_deg`` (or
-``myoface analyze --tracker landmarks`` on a video) does and keeps, per measured frame, the
+``record`` runs the analysis as ``myoface bench --only analysis.gaze_error_deg`` does (on a
+video: with the benchmark's face model, the sample person's from the photo; with ``default``
+after the output path, the bundled default face, as ``myoface analyze --tracker landmarks``
+without ``--face`` does) and keeps, per measured frame, the
 frame, the fit's camera, head pose, fitted skin and MediaPipe's points, the neutral the reader
-was calibrated on, and the reading; on the benchmark's clips also the truth. ``replay`` runs a
+was calibrated on, and the reading; on the benchmark's clips also the truth (gaze, closure,
+head poses, skin). ``replay`` runs a
 fresh :class:`~myoface.analysis.gaze.GazeEstimator` (``key=value``: fields of
 :class:`~myoface.analysis.gaze.GazeSettings`, as Python literals) over each recording and
 prints, with the truth, each eye's RMS error over the frames open in the truth (the
-benchmark's ``per_eye``; its headline is the worse eye), else each eye's mean and SD and the
-frames said closed; and whether the readings are those recorded (the same settings and code
+benchmark's ``per_eye``; its headline is the worse eye) and the same for the reader on the
+true geometry (the true pose, skin and camera: ``true_geometry``), else each eye's mean and SD
+and the frames said closed; and whether the readings are those recorded (the same settings and code
 give the same readings, bit for bit)."""
 
 from __future__ import annotations
@@ -29,14 +35,15 @@ import time
 import numpy as np
 
 
-def record(source: str, out: str) -> None:
+def record(source: str, out: str, face: str = "bench") -> None:
     import myoface.bench.gaze as B
     from myoface.analysis.pipeline import Tracking, make_analyzer
     from myoface.bench.headmotion import _Clip, _model
+    from myoface.model import load_face_model
 
-    model = _model()
+    model = _model() if face == "bench" else load_face_model(None)
     truth = None
-    if source in ("bench", "bench2"):
+    if source in ("bench", "bench2", "bench-clean"):
         n = 90
         poses, gaze, closure, skins = B.make_gaze_sequence(model, n)
         deg = None
@@ -47,9 +54,17 @@ def record(source: str, out: str) -> None:
 
             gaze = B.gaze_programme(n, seed=7)
             deg = replace(CameraDegradation(), seed=3)
+        if source == "bench-clean":
+            from dataclasses import replace
+
+            from myoface.render.degrade import CameraDegradation
+
+            deg = replace(CameraDegradation(), light_amplitude=0.0, exposure_drift=0.0,
+                          background=False, blur_sigma_px=0.0, full_scale_electrons=1e9,
+                          read_noise_electrons=0.0, crf=None)  # fmt: skip
         frames, _ = B.render_gaze_sequence(model.face, poses, gaze, skins, deg)
         video = _Clip(frames)
-        truth = {"gaze": gaze, "closure": closure}
+        truth = {"gaze": gaze, "closure": closure, "poses": poses, "skins": skins}
     else:
         from myoface.analysis.video import open_video
 
@@ -76,7 +91,7 @@ def record(source: str, out: str) -> None:
         an.close()
     with open(out, "wb") as f:
         pickle.dump({"frames": frames, "index": index, "neutral": neutral[-1],
-                     "truth": truth}, f)  # fmt: skip
+                     "truth": truth, "face": face}, f)  # fmt: skip
     print(f"recorded {len(frames)} frames of {source} into {out}")
 
 
@@ -85,10 +100,12 @@ def replay(path: str, settings) -> dict:
     (with the truth) or spread, and the CPU time a frame."""
     from myoface.analysis.gaze import GazeEstimator
     from myoface.bench.headmotion import _model
+    from myoface.model import load_face_model
 
     with open(path, "rb") as f:
         rec = pickle.load(f)
-    reader = GazeEstimator(_model().face, settings)
+    bench = rec.get("face", "bench") == "bench"
+    reader = GazeEstimator((_model() if bench else load_face_model(None)).face, settings)
     reader.calibrate(rec["neutral"])
     out, prev = [], None
     t0 = time.process_time()
@@ -127,7 +144,36 @@ def replay(path: str, settings) -> dict:
         }
     if truth is not None:
         res["worse_eye_rms_deg"] = max(res["l"]["rms_deg"], res["r"]["rms_deg"])
+        if "poses" in truth:
+            res["true_geometry"] = _on_true_geometry(reader.__class__, rec, settings)
     return res
+
+
+def _on_true_geometry(cls, rec, settings) -> dict:
+    """The reader with ``settings`` on the recording's frames given the true head pose, skin
+    and camera (the benchmark's ``reader_on_true_geometry``): each eye's RMS error (deg)."""
+    from myoface.analysis.camera import PinholeCamera
+    from myoface.bench.headmotion import FOV_DEG, SIZE, _model
+
+    truth = rec["truth"]
+    cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
+    reader = cls(_model().face, settings)
+    got = {s: np.full((len(truth["gaze"]), 2), np.nan) for s in "lr"}
+    for k, (frame, *_) in zip(rec["index"], rec["frames"], strict=True):
+        g = reader.measure(frame, cam, truth["poses"][k], truth["skins"][k])
+        for s in "lr":
+            if g.eye(s).ok:
+                got[s][k] = (g.eye(s).yaw_deg, g.eye(s).pitch_deg)
+    out = {}
+    open_ = np.asarray(truth["closure"]) < 0.5
+    for s in "lr":
+        ok = open_ & np.isfinite(got[s]).all(axis=1)
+        e = got[s][ok] - np.asarray(truth["gaze"])[ok]
+        out[s] = {"rms_deg": round(float(np.sqrt(np.mean(e**2))), 3),
+                  "yaw_rms_deg": round(float(np.sqrt(np.mean(e[:, 0] ** 2))), 3),
+                  "pitch_rms_deg": round(float(np.sqrt(np.mean(e[:, 1] ** 2))), 3),
+                  "frames": int(ok.sum())}  # fmt: skip
+    return out
 
 
 def _same(a, b) -> bool:
@@ -142,8 +188,8 @@ def _same(a, b) -> bool:
 def main(argv) -> None:
     from myoface.analysis.gaze import GazeSettings
 
-    if len(argv) == 3 and argv[0] == "record":
-        record(argv[1], argv[2])
+    if len(argv) in (3, 4) and argv[0] == "record":
+        record(*argv[1:])
         return
     if len(argv) < 2 or argv[0] != "replay":
         sys.exit(__doc__)

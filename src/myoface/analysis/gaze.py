@@ -125,6 +125,42 @@ the right eye of clip 1 its per-frame shift does not follow the truth's (x: r = 
 median at the grid's edge, -2 px, where the truth asks -0.66: the bands and the lashes take
 a shift of the margin as well as the margin does. What the fit's lids cost is in the
 benchmark's detail (``eye_opening_px_mean``); the fix belongs to where the lids are fitted.
+
+Where the 4.64 deg sits, broken down (2026-12-02, ``tools/gaze_replay.py``'s recordings of
+the benchmark's clip, the second clip and the first undegraded, ``record bench-clean``; the
+benchmark's detail has the new fields). Not the calibration: the fitted neutral's eyeball
+centres are 0.01-0.08 mm (x) and 0.01-0.16 mm (y) from the truth's in the head frame
+(``eyeball_centre_neutral_mm``). Each frame's pose puts them 0.5-1.0 px to the image's right
+of the truth's on average (clip 1 left / right 0.44 / 1.09 px, ``eyeball_centre_px_mean``;
+clip 2 0.74 / 0.71 on the frames whose lids rest), and every eye of both clips reads 2.6-4.3 deg to the person's
+right. Undegraded, the worse eye 3.38 deg (left 2.81, its yaw bias -0.2; right 3.38, -3.4;
+the reader on the true geometry 1.64 / 1.62): the camera's degradation costs 3.4 -> 4.6,
+the rest is there without it. The pose's eye region follows the detector: MediaPipe's own
+eye openings sit 0.1-0.9 px to the image's left of the truth on the degraded clips, the
+fit's (after :class:`~myoface.analysis.landmarks.TrackerOffsets`) 0.4-0.7 px to its right;
+on the person's model rendered sharp, full texture, frontal, MediaPipe reads both openings
+1.2 px left, about what the offsets take off, more than its error on the benchmark's frames.
+Its eye points move with what it is shown: the same frontal render with the texture at half
+resolution (the benchmark's) reads the right opening at -0.18 px instead of -1.24, and a
+gaze of +-15 deg moves either opening by up to 1 px. At 4-5 deg a pixel, 3 deg needs the
+eye region within about 0.3 px: the fit's pose, not the reader.
+
+The reader's own pitch, on the true geometry: its error is per fixation and pushed away from
+level (clip 2: a look at -1 deg read -7, one at 5 read 11; fitted on the truth's angles, a
+gain of 1.24-1.28 in pitch on both clips, 1.03-1.09 in yaw; on clean frontal renders 1.07-1.09
+and a look at 0 read 2-5.5 deg low). Where both lids cover the iris, the iris alone does not
+place it: on a clean frontal render looking straight ahead its residual has one minimum, at
+-6 deg; without the upper band the iris runs to the grid's edge (the person's lash line
+along the upper margin is darker than the iris); with the band 1 px wide instead of 0.4 iris
+radii, -6; with the iris' own brightness plane (the sclera's shading multiplies, the plane
+adds), -6; with the iris faded towards the margins (a logistic of the distance, 1 px), -4;
+with the pupil's term, 0. The pupil in every fine step (:attr:`GazeSettings.pupil`) fixes it
+on the renders and flips on single_face.mp4 (above). Not kept either: taking the pupil's
+reading only where its residual is lower, from the same start (single_face.mp4's left eye
+pitch SD 3.95 deg); the pupil's contrast against the iris as a share of the iris' against
+the sclera does not tell where the pupil can be trusted (median 0.27-0.34 on the renders,
+0.17-0.22 on single_face.mp4, the quartiles overlapping); the temporal filter over 5-6
+frames (4.64 -> 4.59-4.64).
 """
 
 from __future__ import annotations

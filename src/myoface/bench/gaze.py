@@ -21,9 +21,11 @@ fit costs is the difference), how often an open eye was read, how the blinks wer
 (``closed`` on the truth's closed frames, and on its open ones), the error on the saccades'
 frames, the image error of the eyeballs' centres the fit placed (px) and of the eye openings
 it fitted (the mean of the lid margins' image points, on the frames whose lids rest in the
-truth: ``eye_opening_px_mean``), each eye's error with the fitted head's rotation error taken
-off (the reading re-expressed in the true head frame: ``in_true_head_frame``), and the
-reader's time.
+truth: ``eye_opening_px_mean``), where the fit's pose puts each eyeball's centre
+(``eyeball_centre_px_mean``, the image, before the socket's move) and where the calibrated
+neutral has it against the truth's (``eyeball_centre_neutral_mm``, head frame, mm), each
+eye's error with the fitted head's rotation error taken off (the reading re-expressed in
+the true head frame: ``in_true_head_frame``), and the reader's time.
 
 Measured 2026-12-02 (90 frames, degraded; ``myoface bench --only analysis.gaze``, 29 s on a
 loaded 2-core machine, ``--quick`` 8 s), at 1dde7d8 (the default face's new lips): the default
@@ -67,6 +69,14 @@ thing downwards (0.84 and 1.30 px). The fitted head's rotation is off by 2.0 / 1
 deg RMS (pitch / yaw / roll; ``head_rotation_error_deg``), and the open frames a blink
 partly closes (5 an eye) are read 5-7 deg RMS off (``partly_closed_frames``: the fit's lids
 lag the blink).
+
+The same run's new fields (2026-12-02, ``myoface bench --only analysis.gaze_error_deg``, 4.643
+deg, every reading as before): the calibrated neutral's eyeball centres are 0.08 / 0.01 mm
+(x) and 0.01 / 0.16 mm (y) from the truth's in the head frame (``eyeball_centre_neutral_mm``;
+analysis by synthesis 0.40 / 0.55 mm in x), and the fit's poses put them 0.44 / 1.09 px to
+the image's right of the truth's on average (``eyeball_centre_px_mean``, before the socket;
+0.60 / 1.10 after it): the yaw's bias is the pose's, not the calibration's (the breakdown is
+in :mod:`myoface.analysis.gaze`).
 """
 
 from __future__ import annotations
@@ -243,6 +253,7 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
     states = {s: [""] * n for s in ("l", "r")}
     centre_err, socket_err, found = [], [], []
     socket_side = {"l": [], "r": []}
+    centre_side = {"l": [], "r": []}
     rotation_err = []
     true_cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
     from myoface.face.eyes import eye_loop, eyeball_center
@@ -273,6 +284,7 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
             got = cam.project(m.pose.apply(centres[s][None]))[0]
             want = true_cam.project(poses[m.index].apply(true_c[s][None]))[0]
             centre_err.append(got - want)
+            centre_side[s].append(got - want)
             if e.ok:  # where the reader put the eyeball (its socket's offset, if found)
                 d = np.zeros(3) if off[s] is None else np.array([*off[s], 0.0])
                 moved = cam.project(m.pose.apply((centres[s] + d)[None]))[0]
@@ -304,6 +316,12 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
                 "open_frames_said_closed": round(float((st[open_] == "closed").mean()), 3),
                 "saccade_frames": _errors(est[s][jumps], gaze[jumps], open_[jumps]),
                 "partly_closed_frames": _errors(est[s], gaze, partly),
+                "eyeball_centre_px_mean": [
+                    round(float(v), 3) for v in np.mean(centre_side[s], axis=0)
+                ] if centre_side[s] else None,
+                "eyeball_centre_neutral_mm": [
+                    round(float(v), 3) for v in centres[s] - true_c[s]
+                ],
                 "eyeball_centre_read_px_mean": [
                     round(float(v), 3) for v in np.mean(socket_side[s], axis=0)
                 ] if socket_side[s] else None,
