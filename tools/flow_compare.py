@@ -15,7 +15,9 @@ analysis (MediaPipe's points), ``--flow`` with the model-anchored tracker
 
 ``--set`` overrides :class:`~myoface.analysis.modelflow.ModelFlow`'s parameters (JSON), e.g.
 ``--set '{"levels": 0}'``; ``--variant NAME=JSON`` adds a kind NAME, the anchored tracker
-with those parameters, to compare settings in one run (``--kinds default,anchored,NAME``). The numbers of issue 30's report on the anchored tracker
+with those parameters (and ``"lag"``: :data:`~myoface.analysis.modelflow.PREDICTION_LAG`),
+to compare settings in one run (``--kinds default,anchored,NAME``), e.g. ``--variant
+'lag1={"lag": 1}'``. The numbers of issue 30's report on the anchored tracker
 (2026-12-02) were taken this way.
 """
 

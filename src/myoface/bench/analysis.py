@@ -211,7 +211,16 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     2-core machine at a load of 2-3): default 73.9 fps, photometric 22.9, MediaPipe alone
     198.7; per frame wall 13.1 / 43.7 / 5.2 ms, process CPU 17.4 / 43.9 / 6.4 ms, of which
     the fit's own CPU 3.3 / 29.6 ms, the relaxes' 2.4 / 3.3 ms (22 / 33 relaxes); at a load
-    of 3-4 48.5 / 20.1 / 176.8 fps. The whole benchmark (with analysis.fps_snakes) 43 s."""
+    of 3-4 48.5 / 20.1 / 176.8 fps. The whole benchmark (with analysis.fps_snakes) 43 s.
+
+    And with ``--flow`` (the points read against the calibration frame through the model,
+    :mod:`~myoface.analysis.modelflow`, tracked on a thread of their own beside the fit):
+    ``fps_flow``, ``flow_ratio`` (to MediaPipe's), ``breakdown.flow`` (with the flow's thread
+    CPU and the fit's wait for it), its repeats interleaved with the default's and
+    MediaPipe's. Measured 2026-12-02 at a load of 6-11 on the 2 cores: default 24.7 fps
+    (0.177x), --flow 18.4 (0.132x), MediaPipe 140.1; process CPU 17.1 / 24.4 / 4.4 ms a
+    frame, the flow's thread 5.2, the fit waiting for it 3.4 ms a frame (the machine had no
+    core free)."""
     path = _sample_video()
     m = None if not quick else 24
     # the default, MediaPipe alone and --flow (the points read against the calibration frame

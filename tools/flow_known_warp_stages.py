@@ -1,0 +1,146 @@
+"""Which stage holds the known warps' regions with the anchored flow (issue 30): the fit with
+``--flow`` (:mod:`myoface.analysis.modelflow`) on ``analysis.known_warp_gain``'s clips, head
+still, with one stage of the tracker replaced by the warp's own answer (the warp moves every
+pixel, so the true position of each tracked vertex on each frame is known):
+
+- ``real``: nothing replaced (the fit as ``myoface analyze --flow`` runs it);
+- ``exact_all``: every usable vertex given at its true position (the fit's reach with a
+  perfect reader);
+- ``exact_kept``: the vertices the tracker keeps given at their true positions, the others
+  MediaPipe's (what the points it drops cost);
+- ``true_map``: the templates deformed by the warp's local maps, not the model's prediction;
+- ``true_gap``: the mouth's gap masked where the warp puts it, not the prediction;
+- ``true_start``: Lucas-Kanade started from the true positions.
+
+Each prints the fit's gain and explained fraction per region (as the benchmark), and the
+tracker's own reading at the regions' points (its gain against the warp, over the points it
+keeps). ``--set JSON`` overrides ModelFlow's parameters, e.g. ``--set '{"window": 7}'``.
+Runs with :data:`~myoface.analysis.modelflow.PREDICTION_LAG` 1 (``--lag``).
+
+    python tools/flow_known_warp_stages.py real exact_all exact_kept true_map
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+MODES = ("real", "exact_all", "exact_kept", "true_map", "true_gap", "true_start")
+
+
+def run(mode: str, params: dict, lag: int) -> None:
+    import myoface.analysis.knownwarp as kwa
+    import myoface.analysis.modelflow as mfm
+    import myoface.bench.knownwarp as kwb
+    from myoface.analysis.fidelity import REGIONS
+    from myoface.analysis.weights import FitSettings
+
+    warps: dict = {}  # id(frame) -> its warp
+    made: list = []
+    state = {"warp": None, "in_track": False, "origin": None, "true": None}
+    saved = {
+        (kwa, "expression_warp"): kwa.expression_warp,
+        (kwb, "make_clip"): kwb.make_clip,
+        (mfm, "local_affines"): mfm.local_affines,
+        (mfm, "track_points"): mfm.track_points,
+        (mfm, "PREDICTION_LAG"): mfm.PREDICTION_LAG,
+        (mfm.ModelFlow, "__init__"): mfm.ModelFlow.__init__,
+        (mfm.ModelFlow, "_pyramid"): mfm.ModelFlow._pyramid,
+        (mfm.ModelFlow, "track"): mfm.ModelFlow.track,
+    }
+    orig = {k[1]: v for k, v in saved.items()}
+
+    def expression_warp(*a, **k):
+        w, s = orig["expression_warp"](*a, **k)
+        made.append(w)
+        return w, s
+
+    def make_clip(*a, **k):
+        made.clear()
+        frames, truth, c = orig["make_clip"](*a, **k)
+        warps.update({id(f): w for f, w in zip(frames, made, strict=True)})
+        return frames, truth, c
+
+    def init(self, **kw):
+        orig["__init__"](self, **{**kw, **params})
+
+    def local_affines(src, dst, start, nbr):
+        if mode == "true_map" and state["in_track"] and state["warp"] is not None:
+            dst = state["warp"].moved(src)
+        return orig["local_affines"](src, dst, start, nbr)
+
+    def pyramid(self, frame, lo, hi, polygon=None, prepared=None):
+        w = state["warp"] if state["in_track"] else None
+        if mode == "true_gap" and w is not None and polygon is not None:
+            polygon = w.moved(self._ref["uv"][self._ref["gap"]])
+        out = orig["_pyramid"](self, frame, lo, hi, polygon, prepared)
+        if w is not None and out is not None:
+            state["origin"], state["true"] = out[4], w.moved(self._ref["uv"])
+        return out
+
+    def track_points(*a):
+        a = list(a)
+        if mode == "true_start" and state["in_track"] and state["true"] is not None:
+            a[9] = np.ascontiguousarray(state["true"] - state["origin"])  # (the guess)
+        return orig["track_points"](*a)
+
+    records = []
+
+    def track(self, image, points, prediction=None, prepared=None, since=mfm._LAST):
+        state["warp"], state["in_track"], state["true"] = warps.get(id(image)), True, None
+        try:
+            r = orig["track"](self, image, points, prediction, prepared=prepared, since=since)
+        finally:
+            state["in_track"] = False
+        w = state["warp"]
+        if r is None or w is None:
+            return r
+        true = w.moved(self._ref["uv"])
+        records.append((self._ref["uv"].copy(), true, r[0].copy(), r[1].copy()))
+        if mode not in ("exact_all", "exact_kept"):
+            return r
+        xy, ok = r
+        if mode == "exact_all":
+            ok = self._ref["usable"].copy()
+        return np.where(ok[:, None], true, xy), ok
+
+    kwa.expression_warp, kwb.make_clip = expression_warp, make_clip
+    mfm.local_affines, mfm.track_points, mfm.PREDICTION_LAG = local_affines, track_points, lag
+    mfm.ModelFlow.__init__, mfm.ModelFlow._pyramid, mfm.ModelFlow.track = init, pyramid, track
+    try:
+        out = kwb.run_known_warp(False, False, FitSettings(flow=True), flow_method="anchored")
+    finally:
+        for (obj, name), v in saved.items():
+            setattr(obj, name, v)
+    fit = {r: (round(v["gain"], 3), round(v["explained"], 3)) for r, v in out["regions"].items()}
+    print(f"{mode}: the fit's (gain, explained) {json.dumps(fit)}, leak {out['leak']:.3f}")
+    for name, ids in REGIONS.items():
+        ids = np.asarray(ids)
+        num = den = res = 0.0
+        kept = tot = 0
+        for ref, true, xy, ok in records:
+            o = ok[ids]
+            kept, tot = kept + int(o.sum()), tot + len(ids)
+            dt, dr = (true - ref)[ids][o], (xy - ref)[ids][o]
+            num += float((dt * dr).sum())
+            den += float((dt * dt).sum())
+            res += float(((dr - dt) ** 2).sum())
+        print(f"  the tracker at {name}: kept {kept / max(tot, 1):.2f}, gain "
+              f"{num / max(den, 1e-9):.3f}, explained {1 - res / max(den, 1e-9):.3f}",
+              flush=True)  # fmt: skip
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("modes", nargs="+", choices=MODES)
+    ap.add_argument("--set", default="{}", help="ModelFlow's parameters, JSON")
+    ap.add_argument("--lag", type=int, default=1, help="modelflow.PREDICTION_LAG")
+    args = ap.parse_args(argv)
+    for mode in args.modes:
+        run(mode, json.loads(args.set), args.lag)
+
+
+if __name__ == "__main__":
+    main()
