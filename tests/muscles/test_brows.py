@@ -30,13 +30,14 @@ def moved():
 
 
 def test_the_upper_orbital_part_brings_the_brow_straight_down(moved):
-    """Every point of the brow goes down by at least 1 mm, more down than sideways, and the
-    brow as a whole by at least 2 mm; the sphincter instead draws the brow's tail towards the
-    eye's centre, more towards the midline than down (why the upper part is its own muscle)."""
+    """Every point of the brow goes down by at least 0.75 mm, more down than sideways, and
+    the brow as a whole by at least 1.5 mm; the sphincter instead draws the brow's tail
+    towards the eye's centre, more towards the midline than down (why the upper part is its
+    own muscle)."""
     d = moved["orbicularis_oculi_superior_l"][list(BROW_L)]
-    assert np.all(d[:, 1] < -1.0), d
+    assert np.all(d[:, 1] < -0.75), d
     assert np.all(np.abs(d[:, 0]) < np.abs(d[:, 1])), d
-    assert d[:, 1].mean() < -2.0, d
+    assert d[:, 1].mean() < -1.5, d
     tail = moved["orbicularis_oculi_l"][BROW_OUTER_L]
     assert tail[0] < 0 and abs(tail[0]) > abs(tail[1]), tail
 
