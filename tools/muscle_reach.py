@@ -52,6 +52,8 @@ MUSCLES = (
     "mentalis_l",
     "orbicularis_oculi_l",
     "corrugator_supercilii_l",
+    "depressor_supercilii_l",
+    "orbicularis_oculi_superior_l",
     "frontalis_outer_l",
     "jaw",
 )

@@ -1,7 +1,10 @@
 """Render the person's face (the fidelity measure's ``person_model``) and the default face at a
 few contractions with a given muscle file, side by side in one PNG, to look at.
 
-    python tools/muscle_renders.py OUT.png [--muscles FILE]
+    python tools/muscle_renders.py OUT.png [--muscles FILE] [--brows]
+
+``--brows``: the brow lowerers instead (each at full contraction on both sides, AU4 and AU6),
+the upper two thirds of the face.
 """
 
 from __future__ import annotations
@@ -33,30 +36,46 @@ SHOWN = {
     },  # fmt: skip
 }
 
+BOTH = {"_l": 1.0, "_r": 1.0}
+SHOWN_BROWS = {
+    "rest": {},
+    "corrugator 1.0 both": {f"corrugator_supercilii{k}": v for k, v in BOTH.items()},
+    "dep. supercilii 1.0 both": {f"depressor_supercilii{k}": v for k, v in BOTH.items()},
+    "orb. oculi sup. 1.0 both": {f"orbicularis_oculi_superior{k}": v for k, v in BOTH.items()},
+    "orb. oculi 1.0 both": {f"orbicularis_oculi{k}": v for k, v in BOTH.items()},
+    "AU4 1.0": "au:4",
+    "AU6 1.0": "au:6",
+}
+
 
 def main(argv=None):
     import cv2
 
     from myoface.analysis.resynthesis import resynthesis_frames
-    from myoface.control import expression_contractions
+    from myoface.control import au_contractions, expression_contractions
 
     ap = argparse.ArgumentParser()
     ap.add_argument("out")
     ap.add_argument("--muscles", default=None)
     ap.add_argument("--size", type=int, default=320)
+    ap.add_argument("--brows", action="store_true")
     a = ap.parse_args(argv)
+    shown = SHOWN_BROWS if a.brows else SHOWN
     rows = []
     for name, fm in mr.models(a.muscles).items():
         table = []
-        for c in SHOWN.values():
-            if isinstance(c, str):
+        for c in shown.values():
+            if isinstance(c, str) and c.startswith("au:"):
+                table.append(fm.validate(au_contractions({int(c[3:]): 1.0}, fm.ids)))
+            elif isinstance(c, str):
                 table.append(expression_contractions(c, 0.9, fm.ids))
             else:
                 table.append(fm.validate(c))
         frames = list(resynthesis_frames(fm, np.array(table), a.size))
         row = []
-        for label, f in zip(SHOWN, frames, strict=True):
-            f = np.ascontiguousarray(f[a.size // 3 :, :, ::-1])  # the lower two thirds, BGR
+        for label, f in zip(shown, frames, strict=True):
+            rows_px = slice(0, 2 * a.size // 3) if a.brows else slice(a.size // 3, None)
+            f = np.ascontiguousarray(f[rows_px, :, ::-1])  # two thirds of the face, BGR
             cv2.putText(f, f"{name}: {label}", (4, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
                         (255, 255, 255), 1)  # fmt: skip
             row.append(f)

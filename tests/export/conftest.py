@@ -1,7 +1,8 @@
 """Fixtures of the glTF export's tests: the default model, and the exports of the demo's
 contractions.csv (``data/single_face_contractions.csv``: ``myoface analyze single_face.mp4
---tracker landmarks``, 72 frames at 30 fps with head pose and gaze) and of each expression,
-made once per session."""
+--tracker landmarks``, 72 frames at 30 fps with head pose and gaze; the columns of the
+depressor supercilii and the orbicularis oculi's upper part, added to the muscle set after it
+was made, at 0) and of each expression, made once per session."""
 
 from __future__ import annotations
 

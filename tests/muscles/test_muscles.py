@@ -171,7 +171,7 @@ def test_default_set_origins_in_bone_insertions_under_skin(muscles, default_face
 def test_default_set_is_mirror_symmetric(muscles):
     flip = np.array([-1.0, 1.0, 1.0])
     pairs = muscles.mirror_pairs()
-    assert len(pairs) == 16  # 14 tissue muscles and 2 lid muscles per side
+    assert len(pairs) == 18  # 16 tissue muscles and 2 lid muscles per side
     for left, right in pairs:
         ml, mr = muscles[left], muscles[right]
         assert ml.insertion[0] > 0 > mr.insertion[0]  # _l is the subject's left, +x

@@ -397,8 +397,13 @@ def with_default_lids(doc: dict) -> dict:
 
 
 #: default muscles added after personal faces were first saved, and not recognisable by their
-#: type as the lids are: a face file without them gets the default set's (AU24 needs the first)
-LATER_DEFAULT_MUSCLES = ("orbicularis_oris_marginalis",)
+#: type as the lids are: a face file without them gets the default set's (AU24 needs the first,
+#: AU4 the depressor supercilii, AU6 the orbicularis oculi's upper part)
+LATER_DEFAULT_MUSCLES = (
+    "orbicularis_oris_marginalis",
+    "depressor_supercilii",
+    "orbicularis_oculi_superior",
+)
 
 
 def with_later_defaults(doc: dict) -> dict:

@@ -30,7 +30,13 @@ from myoface.errors import MyofaceError, MyofaceValueError
 from myoface.synth import SYNTH_TOL_MM
 
 REGIONS = {
-    "brows and eyes": ("frontalis", "corrugator", "orbicularis_oculi", "levator_palpebrae"),
+    "brows and eyes": (
+        "frontalis",
+        "corrugator",
+        "depressor_supercilii",
+        "orbicularis_oculi",
+        "levator_palpebrae",
+    ),
     "nose and upper lip": ("levator", "zygomaticus_minor"),
     "mouth corners": ("zygomaticus_major", "risorius", "buccinator", "depressor_anguli"),
     "lower lip and chin": ("depressor_labii", "mentalis", "orbicularis_oris"),
