@@ -8,6 +8,7 @@ alone on it with other settings: the reader's variants compared in seconds on th
     python tools/gaze_replay.py record ~/.cache/myoface/single_face.mp4 /tmp/sample.pkl
     python tools/gaze_replay.py record ~/.cache/myoface/single_face.mp4 /tmp/s_cli.pkl default
     python tools/gaze_replay.py replay /tmp/bench.pkl /tmp/sample.pkl socket_prior_mm=1.0
+    python tools/gaze_replay.py replay /tmp/bench.pkl oracle=skin     # the socket's ceiling
 
 ``record`` runs the analysis as ``myoface bench --only analysis.gaze_error_deg`` does (on a
 video: with the benchmark's face model, the sample person's from the photo; with ``default``
@@ -22,7 +23,15 @@ prints, with the truth, each eye's RMS error over the frames open in the truth (
 benchmark's ``per_eye``; its headline is the worse eye) and the same for the reader on the
 true geometry (the true pose, skin and camera: ``true_geometry``), else each eye's mean and SD
 and the frames said closed; and whether the readings are those recorded (the same settings and code
-give the same readings, bit for bit)."""
+give the same readings, bit for bit). With the truth, also where the reader put each eye
+(``placed``: over the frames whose lids rest in the truth, the eyeball's centre and the eye's
+skin ring, the neutral's vertices within 15 x 10 mm of the eyeball's centre and 5 mm or more
+in front of it, moved by the socket's offset, against the truth's in the image, px: mean and
+RMS; ``centre_minus_skin`` is what no 2-D move of the skin can take off, the head's rotation
+error times the eyeball's depth behind the skin). ``oracle=skin`` replaces each socket offset by
+the move that puts the skin ring where the truth's is (a perfect registration of the eye's
+surroundings: the ceiling of a socket), ``oracle=centre`` by the one that puts the eyeball's
+centre where the truth's is."""
 
 from __future__ import annotations
 
@@ -95,9 +104,105 @@ def record(source: str, out: str, face: str = "bench") -> None:
     print(f"recorded {len(frames)} frames of {source} into {out}")
 
 
-def replay(path: str, settings) -> dict:
+def _skin_ring(neutral, centre) -> np.ndarray:
+    """The eye's skin ring about the eyeball's ``centre`` (3,) mm: the vertices of ``neutral``
+    within 15 x 10 mm of it in (x, y) and 5 mm or more in front of it (the canthi, the lids'
+    outer skin, the brow's lower edge and the cheek's upper; the opening's margins are
+    nearer the eyeball), as a bool mask."""
+    v = np.asarray(neutral)
+    return (
+        (np.abs(v[:, 0] - centre[0]) < 15)
+        & (np.abs(v[:, 1] - centre[1]) < 10)
+        & (v[:, 2] > centre[2] + 5)
+    )
+
+
+class _Oracle:
+    """Each frame's socket offsets replaced by the truth's answer (``kind``: ``"skin"``, the
+    move that puts the eye's skin ring where the truth's is in the image; ``"centre"``, the
+    one that puts the eyeball's centre there): least squares on the move's Jacobian."""
+
+    def __init__(self, kind, rec, reader):
+        from myoface.analysis.camera import PinholeCamera
+        from myoface.bench.headmotion import FOV_DEG, SIZE, _model
+        from myoface.face.eyes import eye_loop, eyeball_center
+
+        self.kind, self.rec, self.reader = kind, rec, reader
+        self.cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
+        face = _model().face
+        self.true_c = {s: eyeball_center(face.vertices, eye_loop(face, g))
+                       for s, g in (("l", "eye_l"), ("r", "eye_r"))}  # fmt: skip
+        self.k = 0
+        for side, sock in reader.sockets.items():
+            sock.offset = self._offset(side)
+
+    def _offset(self, side):
+        def offset(frame, camera, pose, iris_centre, iris_radius_px):
+            truth, k = self.rec["truth"], self.k
+            c = self.reader.centres_mm[side]
+            if self.kind == "centre":
+                pts = c[None]
+                want = self.cam.project(truth["poses"][k].apply(self.true_c[side][None]))[0]
+            else:
+                ring = _skin_ring(self.rec["neutral"], c)
+                pts = self.rec["neutral"][ring]
+                want = self.cam.project(truth["poses"][k].apply(truth["skins"][k][ring])).mean(0)
+
+            def at(d):
+                return camera.project(pose.apply(pts + np.array([d[0], d[1], 0.0]))).mean(0)
+
+            h = 1e-3
+            jac = np.column_stack([(at((h, 0)) - at((0, 0))) / h, (at((0, h)) - at((0, 0))) / h])
+            return np.linalg.solve(jac, want - at((0, 0)))
+
+        return offset
+
+
+def _placed(rec, reader, frame_pose, k, acc) -> None:
+    """Add frame ``k``'s misplacements (px) of each eye (its centre and its skin ring, moved by
+    the socket's offset) against the truth's to ``acc``."""
+    from myoface.analysis.camera import PinholeCamera
+    from myoface.bench.headmotion import FOV_DEG, SIZE, _model
+    from myoface.face.eyes import eye_loop, eyeball_center
+
+    truth = rec["truth"]
+    if truth["closure"][k] > 0.05:
+        return
+    if "true_c" not in acc:
+        face = _model().face
+        acc["cam"] = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
+        acc["true_c"] = {s: eyeball_center(face.vertices, eye_loop(face, g))
+                         for s, g in (("l", "eye_l"), ("r", "eye_r"))}  # fmt: skip
+    camera, pose = frame_pose
+    cam, tp = acc["cam"], truth["poses"][k]
+    for s in "lr":
+        d = reader.offsets[s]
+        move = np.zeros(3) if d is None else np.array([d[0], d[1], 0.0])
+        c = reader.centres_mm[s]
+        ring = _skin_ring(rec["neutral"], c)
+        centre = camera.project(pose.apply((c + move)[None]))[0]
+        centre = centre - cam.project(tp.apply(acc["true_c"][s][None]))[0]
+        skin = camera.project(pose.apply(rec["neutral"][ring] + move)).mean(0)
+        skin = skin - cam.project(tp.apply(truth["skins"][k][ring])).mean(0)
+        acc.setdefault(s, []).append(np.concatenate([centre, skin]))
+
+
+def _placed_summary(rows) -> dict:
+    a = np.asarray(rows)
+
+    def part(x):
+        return {"mean": x.mean(0).round(2).tolist(),
+                "rms": round(float(np.sqrt((x**2).sum(1).mean())), 2)}  # fmt: skip
+
+    return {"centre_px": part(a[:, :2]), "skin_px": part(a[:, 2:]),
+            "centre_minus_skin_px": part(a[:, :2] - a[:, 2:])}  # fmt: skip
+
+
+def replay(path: str, settings, oracle: str | None = None) -> dict:
     """The reader with ``settings`` over the recording at ``path``: its readings, their errors
-    (with the truth) or spread, and the CPU time a frame."""
+    (with the truth) or spread, where it placed the eyes (with the truth), and the CPU time a
+    frame; ``oracle`` (``"skin"``, ``"centre"``): the sockets' offsets the truth's (see the
+    module)."""
     from myoface.analysis.gaze import GazeEstimator
     from myoface.bench.headmotion import _model
     from myoface.model import load_face_model
@@ -107,14 +212,21 @@ def replay(path: str, settings) -> dict:
     bench = rec.get("face", "bench") == "bench"
     reader = GazeEstimator((_model() if bench else load_face_model(None)).face, settings)
     reader.calibrate(rec["neutral"])
-    out, prev = [], None
+    if oracle is not None and rec["truth"] is None:
+        sys.exit("an oracle needs a recording with the truth")
+    orc = None if oracle is None else _Oracle(oracle, rec, reader)
+    out, prev, placed = [], None, {}
     t0 = time.process_time()
     for (frame, camera, pose, shape, points, _), k in zip(rec["frames"], rec["index"],
                                                           strict=True):  # fmt: skip
         if prev is not None and k != prev + 1:
             reader.reset()  # (as the tracker after a frame it did not measure)
         prev = k
+        if orc is not None:
+            orc.k = k
         out.append(reader.measure(frame, camera, pose, shape, points))
+        if rec["truth"] is not None and "poses" in rec["truth"]:
+            _placed(rec, reader, (camera, pose), k, placed)
     ms = 1e3 * (time.process_time() - t0) / max(len(out), 1)
     same = all(a.eye(s) == b[-1].eye(s) or _same(a.eye(s), b[-1].eye(s))
                for a, b in zip(out, rec["frames"], strict=True) for s in "lr")  # fmt: skip
@@ -144,6 +256,8 @@ def replay(path: str, settings) -> dict:
         }
     if truth is not None:
         res["worse_eye_rms_deg"] = max(res["l"]["rms_deg"], res["r"]["rms_deg"])
+        if placed:
+            res["placed"] = {s: _placed_summary(placed[s]) for s in "lr" if s in placed}
         if "poses" in truth:
             res["true_geometry"] = _on_true_geometry(reader.__class__, rec, settings)
     return res
@@ -194,10 +308,14 @@ def main(argv) -> None:
     if len(argv) < 2 or argv[0] != "replay":
         sys.exit(__doc__)
     paths = [a for a in argv[1:] if "=" not in a]
-    kw = {k: ast.literal_eval(v) for k, v in (a.split("=", 1) for a in argv[1:] if "=" in a)}
+    kw = {k: ast.literal_eval(v) for k, v in (a.split("=", 1) for a in argv[1:] if "=" in a)
+          if k != "oracle"}  # fmt: skip
+    oracle = next((a.split("=", 1)[1] for a in argv[1:] if a.startswith("oracle=")), None)
+    if oracle not in (None, "skin", "centre"):
+        sys.exit(f"oracle must be skin or centre; got {oracle!r}")
     settings = GazeSettings(**kw)
     for p in paths:
-        print(p, replay(p, settings))
+        print(p, replay(p, settings, oracle))
 
 
 if __name__ == "__main__":
