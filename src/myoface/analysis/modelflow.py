@@ -91,7 +91,9 @@ head-motion renders still 0.80 / 0.80 mm, 1.27 / 1.27 deg, worst RMSE 0.177 / 0.
 / 0.059). The work is the same (5.2 ms CPU a frame on that thread, the fit 1.1 more, at a
 load of 6-11 on the 2 cores); it is hidden where a core is free, not where the machine is
 saturated: ``analysis.fps`` there gave the default 24.7 frames/s (0.177x MediaPipe), the flow
-18.4 (0.132x; process CPU 24.4 against 17.1 ms a frame). Measured and not kept: tracking
+18.4 (0.132x; process CPU 24.4 against 17.1 ms a frame); at a load of 2.6-5.5, 41.8 (0.184x)
+and 34.0 (0.149x), the fit waiting 0.19 ms a frame for the flow (``tools/flow_compare.py fps``
+at a load of 1-2.6: 0.239x and 0.195x). Measured and not kept: tracking
 3 vertices in 4 and the rest (117, none two neighbours) from their tracked neighbours'
 offsets to the prediction (the interpolated points 0.43 px from the tracked ones, median; 1.6 px at the 90th percentile,
 where the tracking is within 0.05 px); 4 or 5 steps a level (18 / 8 % fewer steps, 8 / 4

@@ -220,7 +220,9 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     MediaPipe's. Measured 2026-12-02 at a load of 6-11 on the 2 cores: default 24.7 fps
     (0.177x), --flow 18.4 (0.132x), MediaPipe 140.1; process CPU 17.1 / 24.4 / 4.4 ms a
     frame, the flow's thread 5.2, the fit waiting for it 3.4 ms a frame (the machine had no
-    core free)."""
+    core free); at a load of 2.6-5.5 (c5ab423, with the brow muscles): default 41.8 fps
+    (0.184x), --flow 34.0 (0.149x), MediaPipe 227.7; process CPU 17.7 / 25.0 / 4.2 ms, the
+    flow's thread 5.0, the fit 4.5 ms against 3.1, its wait for the flow 0.19 ms a frame."""
     path = _sample_video()
     m = None if not quick else 24
     # the default, MediaPipe alone and --flow (the points read against the calibration frame
