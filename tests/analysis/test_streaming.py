@@ -110,7 +110,10 @@ def test_the_landmark_fit_streams_its_rows_too(tmp_path):
     first = next(k for k, r in enumerate(seen) if r > 0)
     assert first < n // 2  # the rows start coming before the video's end
     lag = [k - r for k, r in enumerate(seen) if k >= first]
-    assert min(lag) >= 1 and max(lag) <= DETECT_AHEAD_FRAMES + 2, lag
+    # MediaPipe's thread runs ahead of the fit (the median frame is read with rows still to
+    # come), never more than its queue allows; on a loaded machine it may fall behind on a frame
+    # (CI, 2026-12-02: one frame read with every row before it written), so 0 is allowed
+    assert min(lag) >= 0 and np.median(lag) >= 1 and max(lag) <= DETECT_AHEAD_FRAMES + 2, lag
     assert seen[-1] >= m - DETECT_AHEAD_FRAMES - 2
     with open(out / "contractions.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
