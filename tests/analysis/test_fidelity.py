@@ -307,7 +307,12 @@ def test_the_true_contractions_read_from_their_own_render(smile_clip_384, tmp_pa
     [0.8, 1.1], its bounds on renders, :func:`test_the_reader_on_renders_at_known_contractions`:
     the face rests with its lips together, and as the smile opens them the mouth's dark
     inside comes out at the corners: gain 0.86 since 2026-12-02, 1.03 with the lips apart;
-    correlation above 0.9: the chin's 0.93, above 0.95 with the lips apart),
+    correlation above 0.9: the chin's 0.93, above 0.95 with the lips apart; read at their pixel
+    the corners sat on the lips' slit, where DIS's flow is the upper lip's or the lower lip's by
+    a few pixels of the render: the depressor labii inferioris made a sheet, moving the corners
+    by 0.03 mm, moved that 0.86 to 0.79; read over their support
+    (:data:`~myoface.analysis.fidelity.CORNER_SUPPORT_IOD`) 0.91 and 0.90, explained 0.95 and
+    0.93),
     and no motion where the model moved none (brows, lids). The lips are left out: the mouth
     opens, and at its inner edge (points 13, 14) the render's inside of the mouth comes out
     of the edge the flow follows (measured 2026-12-01: corners gain 1.03, explained 0.97, chin
@@ -376,7 +381,9 @@ def test_the_reader_on_renders_at_known_contractions(tmp_path):
     lip, chin and brows at 0.85-1.15, the head's motion taken out by either alignment (2-D, and
     3-D on both sides) (measured 2026-12-01, 2-D: corners 0.84-1.02, the others 0.91-1.09;
     2026-12-02, 3-D: corners 0.81-1.01, the others 0.90-1.08; sadness' and anger's corners,
-    moving down and in, 0.67-0.68, not tested here);
+    moving down and in, 0.67-0.68, not tested here; the corners read over their support
+    (:data:`~myoface.analysis.fidelity.CORNER_SUPPORT_IOD`, 2026-12-02): 0.82-0.94 with the
+    bundled muscles, 0.84-0.93 with the depressor labii inferioris a sheet, either alignment);
     the lips' centres, which the measure does not judge, are misread where the teeth come
     out (inner lips 0.27-0.81 of their motion, explained below 0.75)."""
     from myoface.analysis import fidelity

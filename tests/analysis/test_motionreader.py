@@ -54,6 +54,43 @@ def _programme(iod, k, n):
     return {r: np.asarray(v) * a * iod for r, v in APEX_IOD.items()}
 
 
+def test_a_point_read_over_its_support():
+    """DIS with a point's support (the mouth corners' in the fidelity measure): a smooth
+    random texture shifted by a known sub-pixel amount is read there as that shift, as at a
+    point without support (within 0.1 px); the support's flow is its mean, which a point whose
+    support straddles two motions reads between them; a negative or ill-shaped support is
+    refused."""
+    from myoface.analysis.motionreader import DenseFlowMotionReader
+    from myoface.errors import MyofaceValueError
+
+    rng = np.random.default_rng(0)
+    img = cv2.GaussianBlur(rng.uniform(0, 255, (240, 240)).astype(np.float32), (0, 0), 2.0)
+    img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+
+    def shifted(dx, dy):
+        m = np.float32([[1, 0, dx], [0, 1, dy]])
+        return cv2.warpAffine(
+            img, m, (240, 240), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT
+        )
+
+    pts = np.array([[120.0, 100.0], [120.0, 100.0], [70.0, 160.0]])
+    reader = DenseFlowMotionReader(img, pts, support=[0.0, 2.5, 4.0])
+    q, ok = reader.read(shifted(1.3, -0.7))
+    np.testing.assert_allclose(q - pts, [[1.3, -0.7]] * 3, atol=0.1)
+    assert ok.all()
+    # above row 120 a shift of (2, -2), below it none: the supported boundary point is read
+    # between the two, strictly inside
+    two = img.copy()
+    two[:120] = shifted(2.0, -2.0)[:120]
+    at = np.array([[120.0, 120.0], [60.0, 60.0]])
+    q, _ = DenseFlowMotionReader(img, at, support=[2.5, 0.0]).read(two)
+    np.testing.assert_allclose(q[1] - at[1], [2.0, -2.0], atol=0.1)
+    assert 0.2 < (q[0] - at[0])[0] < 1.8 and -1.8 < (q[0] - at[0])[1] < -0.2
+    for bad in ([-1.0, 0.0, 0.0], [1.0, 1.0]):
+        with pytest.raises(MyofaceValueError, match="support"):
+            DenseFlowMotionReader(img, pts, support=bad)
+
+
 @pytest.mark.shared_data
 @needs_mediapipe
 @pytest.mark.parametrize("method,alignment", [("lk", "2d"), ("dis", "2d"), ("dis", "3d")])
@@ -70,7 +107,11 @@ def test_the_reader_reads_known_warps_at_gain_one(method, alignment, head_moves)
     all). Measured
     2026-12-01, head still / moving: LK gain 0.96-1.06 / 0.96-1.08, explained 0.94-0.998 /
     0.92-0.998; DIS gain 0.97-1.03 / 0.96-1.04, explained 0.99-1.0 / 0.99-1.0; DIS with the 3-D
-    alignment (2026-12-02) gain 0.95-1.04, explained 0.987-0.999."""
+    alignment (2026-12-02) gain 0.95-1.04, explained 0.987-0.999. DIS reads the mouth corners
+    over the fidelity measure's support (:data:`~myoface.analysis.fidelity.CORNER_SUPPORT_IOD`)
+    as the measure does (2026-12-02: corners 0.96-1.00, explained 0.991-0.995, head still and
+    moving, either alignment; every region 0.95-1.04)."""
+    from myoface.analysis.fidelity import CORNER_SUPPORT_IOD
     from myoface.analysis.video import open_video
     from myoface.facemesh import FaceMeshDetector
 
@@ -90,7 +131,9 @@ def test_the_reader_reads_known_warps_at_gain_one(method, alignment, head_moves)
     rigid = [pos[i] for i in RIGID_POINTS]
     eyes = (pos[EYE_OUTER[0]], pos[EYE_OUTER[1]])
     ref = pts[idx, :2]
-    reader = make_reader(method, frame, ref, iod)
+    support = np.zeros(len(idx))
+    support[[pos[i] for i in REGIONS["mouth_corners"]]] = CORNER_SUPPORT_IOD
+    reader = make_reader(method, frame, ref, iod, support)
     head3d = None
     if alignment == "3d":
         from myoface.face.personal import face_from_photo

@@ -46,6 +46,9 @@ LEVELS = 3
 DIS_FINEST_SCALE = 0
 #: DIS's flow is computed on the points' box grown by this fraction of its larger side (+ 8 px)
 DIS_MARGIN = 0.3
+#: a point given a support (:class:`DenseFlowMotionReader`'s ``support``) is read as the flow's
+#: mean over a Gaussian of that width, cut at this many widths
+SUPPORT_CUT = 2.5
 
 
 def window_for(iod_px: float) -> int:
@@ -113,16 +116,29 @@ class DenseFlowMotionReader:
     variational refinement) down to the full resolution (``finest_scale=0``; the preset stops
     at half of it). :meth:`read` gives each frame's points (N, 2) and which are sure: the flow
     back from the frame to the reference, computed the same way, brings the point within
-    ``fb_max_px`` of where it started."""
+    ``fb_max_px`` of where it started.
+
+    ``support`` (N,) pixels (0: none, the default): a point with a support is read as the mean
+    of the forward flow over the pixels around it, weighted by a Gaussian of that width (cut at
+    :data:`SUPPORT_CUT` widths) and left out where the flow back does not return within
+    ``fb_max_px``; it is sure when at least half that weight returns. For a point on a motion
+    boundary: a mouth corner, where the lips' slit ends, sits between the upper lip's flow and
+    the lower lip's (on a smile's render they differ by 10 px at 6 px from it), and the flow at
+    its pixel is whichever side DIS's smoothing leans to, which a few pixels of the render
+    change (see :mod:`myoface.analysis.fidelity`'s ``CORNER_SUPPORT_IOD``)."""
 
     def __init__(self, reference, points, finest_scale: int = DIS_FINEST_SCALE,
-                 fb_max_px: float = 1.0, margin: float = DIS_MARGIN):  # fmt: skip
+                 fb_max_px: float = 1.0, margin: float = DIS_MARGIN,
+                 support=None):  # fmt: skip
         cv2 = import_opencv("the motion reader")
         pts = np.asarray(points, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] < 2 or not np.isfinite(pts[:, :2]).all():
             raise MyofaceValueError(f"points must be finite (N, 2) pixels; got {pts.shape}")
         img = grey(reference)
         # the flow is computed on the points' box with a margin (the face, not the frame)
+        sup = np.zeros(len(pts)) if support is None else np.asarray(support, dtype=np.float64)
+        if sup.shape != (len(pts),) or not (np.isfinite(sup).all() and (sup >= 0).all()):
+            raise MyofaceValueError(f"support must be (N,) widths >= 0; got {sup.shape}")
         lo, hi = pts[:, :2].min(0), pts[:, :2].max(0)
         m = margin * float((hi - lo).max()) + 8.0
         h, w = img.shape
@@ -134,6 +150,7 @@ class DenseFlowMotionReader:
         self.ref = np.ascontiguousarray(img[self._box])
         self.ref_points = pts[:, :2].copy()
         self.fb_max_px = float(fb_max_px)
+        self.support = sup
         self._dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
         self._dis.setFinestScale(int(finest_scale))
         self._dis.setUseSpatialPropagation(True)
@@ -152,7 +169,30 @@ class DenseFlowMotionReader:
         q = p + bilinear(self._fwd, p)
         back = q + bilinear(self._bwd, q)
         ok = np.isfinite(q).all(1) & (np.linalg.norm(back - p, axis=1) < self.fb_max_px)
+        for i in np.flatnonzero(self.support > 0):
+            q[i], ok[i] = self._supported(p[i], self.support[i])
         return q + self._origin, ok
+
+    def _supported(self, p: np.ndarray, width: float) -> tuple[np.ndarray, bool]:
+        """The reading of the point ``p`` (the box's pixels) over its support of ``width``."""
+        h, w = self._fwd.shape[:2]
+        r = SUPPORT_CUT * width
+        x0, x1 = max(0, int(np.floor(p[0] - r))), min(w - 1, int(np.ceil(p[0] + r)))
+        y0, y1 = max(0, int(np.floor(p[1] - r))), min(h - 1, int(np.ceil(p[1] + r)))
+        ys, xs = np.mgrid[y0 : y1 + 1, x0 : x1 + 1]
+        xy = np.column_stack([xs.ravel(), ys.ravel()]).astype(np.float64)
+        d2 = ((xy - p) ** 2).sum(1)
+        inside = d2 <= r * r
+        xy, d2 = xy[inside], d2[inside]
+        u = self._fwd[ys.ravel()[inside], xs.ravel()[inside]].astype(np.float64)
+        back = xy + u + bilinear(self._bwd, xy + u)
+        wgt = np.exp(-0.5 * d2 / width**2)
+        good = np.isfinite(u).all(1) & (np.linalg.norm(back - xy, axis=1) < self.fb_max_px)
+        total = float(wgt.sum())
+        kept = float(wgt[good].sum())
+        if not kept > 0:
+            return p + bilinear(self._fwd, p[None])[0], False
+        return p + (wgt[good, None] * u[good]).sum(0) / kept, kept >= 0.5 * total
 
 
 def bilinear(field: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -174,13 +214,16 @@ def bilinear(field: np.ndarray, points: np.ndarray) -> np.ndarray:
 METHODS = ("lk", "dis")
 
 
-def make_reader(method: str, reference, points, iod_px: float):
+def make_reader(method: str, reference, points, iod_px: float, support_iod=None):
     """The reader ``method`` ("lk": :class:`FlowMotionReader` with :func:`window_for`
-    ``iod_px``; "dis": :class:`DenseFlowMotionReader`) of ``points`` in ``reference``."""
+    ``iod_px``; "dis": :class:`DenseFlowMotionReader`, ``support_iod`` (N,) its points'
+    supports in inter-ocular distances, default none) of ``points`` in ``reference``. (Lucas-
+    Kanade reads every point over its window: ``support_iod`` does not apply.)"""
     if method == "lk":
         return FlowMotionReader(reference, points, window=window_for(iod_px))
     if method == "dis":
-        return DenseFlowMotionReader(reference, points)
+        sup = None if support_iod is None else np.asarray(support_iod, float) * float(iod_px)
+        return DenseFlowMotionReader(reference, points, support=sup)
     raise MyofaceValueError(f"the motion reader's method must be one of {METHODS}; got {method!r}")
 
 
