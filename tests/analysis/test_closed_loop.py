@@ -56,15 +56,6 @@ def plain():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "known regression of the closed-lipped default face (12834a7, issue 34): the paper's "
-        "snakes on the synthetic closed loop read frontalis_outer_r at RMSE 0.059 against the "
-        "0.04 bound (every other muscle within its bound; analysis.closed_loop_rmse 0.018, "
-        "met); not investigated yet"
-    ),
-)
 def test_closed_loop_recovers_every_muscle(plain):
     res = plain
     assert all(q == "ok" for q in res.quality)
@@ -77,7 +68,7 @@ def test_closed_loop_recovers_every_muscle(plain):
     assert rmse["jaw"] < 0.02 and corr["jaw"] > 0.99, table
     for m in res.ids:
         if m.startswith("depressor"):
-            continue  # test_closed_loop_recovers_the_depressors (a known regression)
+            continue  # test_closed_loop_recovers_the_depressors
         # the issue's target 0.05 for the frontalis and the zygomatics (at most 0.04: their
         # outlines move by pixels); the levators' by up to 1.6x (their nasolabial contours
         # are short), and 91% of the variance explained
@@ -89,14 +80,6 @@ def test_closed_loop_recovers_every_muscle(plain):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "known regression of the closed-lipped default face (12834a7, issue 34): with the lips "
-        "together at rest the paper's snakes read the depressor labii inferioris at RMSE 0.21 "
-        "against the 0.15 bound (0.105-0.118 with the lips apart); not investigated yet"
-    ),
-)
 def test_closed_loop_recovers_the_depressors(plain):
     """The depressors' signature beyond the jaw's is a sub-pixel change of the lower lip's
     outline at 256 x 256, where the tracker's bias (which analysis by synthesis removes, see

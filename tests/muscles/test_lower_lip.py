@@ -12,23 +12,7 @@ LOWER_LIP = (17, 84, 314)  # the lower lip's outer edge: centre, right, left (Me
 UPPER_LIP = (0, 13)  # the upper lip's outer and inner edge at the midline
 CHIN_BOSS = 200
 
-pytestmark = [
-    pytest.mark.slow,  # relaxes from rest at full contraction
-    pytest.mark.xfail(
-        strict=True,
-        reason=(
-            "the default set's depressor labii inferioris pulls into the face (the lip's centre "
-            "down 0.5 mm at full contraction); the sheet of d585611 passed these and raised "
-            "analysis.fidelity 0.577 -> 0.661, but with the analysis' own contractions of the "
-            "real smile it drew the lower lip behind the lower teeth (5.7-6.4 mm, "
-            "tests/render/test_mouth.py; the lips' contact now holds such a lip in front of "
-            "them: with it and the sheet 0.658) and the paper's snakes read the smile's "
-            "zygomatici at 0.28-0.33 (test_real_video_smile_with_the_snakes: their nasolabial "
-            "contours sit 3.5 mm from the model's fold at zygomaticus 1): reverted until that "
-            "is found"
-        ),
-    ),
-]
+pytestmark = pytest.mark.slow  # relaxes from rest at full contraction
 
 
 @pytest.fixture(scope="module")

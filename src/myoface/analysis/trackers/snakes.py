@@ -193,8 +193,9 @@ class Analyzer:
     line_sections : sections tracked in the ``"line"`` potential (thin dark lines) instead of
         ``potential``.
     mouth_sections : sections around the mouth, tracked in ``potential`` with the mouth's
-        inside no darker than the lips (e.g. :data:`MOUTH_SECTIONS`; the lips' tone measured
-        on the calibration frame). Off by default: on the sample video's smile it drew the
+        inside no darker than the lips (default :data:`MOUTH_SECTIONS`, with ``mouth_colour``;
+        ``()`` for none; the lips' tone measured on the calibration frame). Without
+        ``mouth_colour`` (the plain mouth layer): on the sample video's smile it drew the
         right zygomatic major's estimate from 0.95-1.0 down to 0.3-0.55 and lost a nasolabial
         contour (misfit), while on the closed loop's renders it kept the lips' snake on the
         outline.
@@ -204,7 +205,9 @@ class Analyzer:
         mouth's dark inside and what the lips enclose taken as lips), keeping only the edges
         whose grey levels rise outwards from the lips' middle (the teeth's edges with the
         lips, inside the outline, make none), and a coarse copy (:data:`MOUTH_COARSE`) the
-        sections relax in first. Off by default. Measured 2026-12-02 on the sample video's
+        sections relax in first. On by default since 2026-12-02, with the depressor labii
+        inferioris as a sheet (with which, without this layer, the snakes read the sample's
+        smile's zygomatic majors at 0.28-0.33). Measured 2026-12-02 on the sample video's
         open smile (frames 25-64, means; ``python tools/snake_lips.py --colour``, against
         MediaPipe's outline): the snakes' top went from 5.7 px below the upper lip's border
         (on the upper teeth) to 0.5 px, their bottom from 12.6 px above the lower lip's (on
@@ -250,8 +253,8 @@ class Analyzer:
         head_reference=("nose",),
         estimator: str = "curves",
         line_sections=LINE_SECTIONS,
-        mouth_sections=(),
-        mouth_colour: bool = False,
+        mouth_sections=MOUTH_SECTIONS,
+        mouth_colour: bool = True,
         reseed: bool = True,
         synthesis=None,
         synthesis_rounds: int = 3,
