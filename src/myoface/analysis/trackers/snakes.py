@@ -122,19 +122,7 @@ def lips_tone(
     """The lips' dark tone on ``frame``: the ``percentile`` of the grey levels (0-255) in the
     band ``band_px`` (px) inside the closed ``contour`` ((K, 2) image (x, y) px, the lips'
     outer outline), sampled along each node's inward normal."""
-    q = np.asarray(contour, dtype=np.float64)
-    img = np.ascontiguousarray(to_intensity(frame))
-    tan = np.roll(q, -1, axis=0) - np.roll(q, 1, axis=0)
-    nrm = np.stack([-tan[:, 1], tan[:, 0]], axis=1)
-    nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-12)[:, None]
-    # the normal (-ty, tx) points inwards on a contour running clockwise on the screen (y
-    # down: positive shoelace area)
-    area = 0.5 * np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1])
-    if area < 0:
-        nrm = -nrm
-    depths = np.linspace(band_px[0], band_px[1], 5)
-    pts = (q[:, None, :] + depths[None, :, None] * nrm[:, None, :]).reshape(-1, 2)
-    vals = np.array([bilinear(img, x, y) for x, y in pts])
+    vals = _band(np.ascontiguousarray(to_intensity(frame)), contour, band_px, 1)
     return float(np.percentile(vals, percentile))
 
 
@@ -145,6 +133,8 @@ def _band(img: np.ndarray, contour: np.ndarray, band_px, sign: int) -> np.ndarra
     tan = np.roll(q, -1, axis=0) - np.roll(q, 1, axis=0)
     nrm = np.stack([-tan[:, 1], tan[:, 0]], axis=1)
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1), 1e-12)[:, None]
+    # the normal (-ty, tx) points inwards on a contour running clockwise on the screen (y
+    # down: positive shoelace area)
     area = 0.5 * np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1])
     if area < 0:
         nrm = -nrm
