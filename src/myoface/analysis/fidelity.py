@@ -496,6 +496,15 @@ def _eyes_closing(ref, cur, unsure_row=None) -> bool:
     return False
 
 
+def _closing_frames(ref, seq, unsure=None) -> list:
+    """:func:`_eyes_closing` of each frame of ``seq`` (False where not measured)."""
+    return [
+        bool(np.isfinite(cur).all())
+        and _eyes_closing(ref, cur, None if unsure is None else unsure[k])
+        for k, cur in enumerate(seq)
+    ]
+
+
 def _region_displacements(ref, seq, regions=None, rotation=None, face3d=None, unsure=None):
     """{region: (T, P, 2)} displacements of ``seq`` (T, len(POINTS), 2; image axes, x right,
     y down; NaN rows: not measured) from ``ref`` (len(POINTS), 2), given in the head frame's
@@ -518,13 +527,16 @@ def _region_displacements(ref, seq, regions=None, rotation=None, face3d=None, un
     distance, and turned by ``rotation`` (2, 2; into the face's frontal axes)."""
     regions = REGIONS if regions is None else regions
     d = np.full(np.shape(seq), np.nan)
-    head = None if face3d is None else HeadPose3D(ref, face3d, _RIGID, _EYES)
-    for k, cur in enumerate(seq):
-        if np.isfinite(cur).all():
-            if head is not None:
-                closing = _eyes_closing(ref, cur, None if unsure is None else unsure[k])
-                d[k] = head.displacements(cur, _RIDGE if closing else None)
-            else:
+    if face3d is not None:
+        head = HeadPose3D(ref, face3d, _RIGID, _EYES)
+        poses = head.sequence_poses(seq, _closing_frames(ref, seq, unsure), _RIDGE)
+        for k, (cur, pose) in enumerate(zip(seq, poses, strict=True)):
+            if pose is not None:
+                d[k] = head.displacements_at(cur, pose)
+    else:
+        head = None
+        for k, cur in enumerate(seq):
+            if np.isfinite(cur).all():
                 d[k] = aligned_displacements(ref, cur, _RIGID, _EYES)
     if head is None:
         if rotation is not None:
@@ -966,11 +978,9 @@ def _head_turn(ref, pts, side: dict, unsure) -> dict:
     from scipy.spatial.transform import Rotation
 
     head = HeadPose3D(ref, side["neutral_3d"], _RIGID, _EYES)
-    rots = [
-        head.rotation(p, _RIDGE if _eyes_closing(ref, p, u) else None)
-        for p, u in zip(pts, unsure, strict=True)
-        if np.isfinite(p).all()
-    ]
+    poses = head.sequence_poses(pts, _closing_frames(ref, pts, unsure), _RIDGE)
+    r0 = head.reference_pose[1]
+    rots = [p[1] @ r0.T for p in poses if p is not None]
     if not rots:
         return {}
     ypr = Rotation.from_matrix(np.array(rots)).as_euler("yxz", degrees=True)

@@ -410,14 +410,17 @@ class HeadPose3D:
         self.reference_pose = (s0, r0, t0)
         self.iod = float(np.linalg.norm(x[eye_outer[0], :2] - x[eye_outer[1], :2]))
 
-    def pose(self, cur, rigid=None) -> tuple[float, np.ndarray, np.ndarray]:
+    def pose(self, cur, rigid=None, towards=None) -> tuple[float, np.ndarray, np.ndarray]:
         """The pose ``(s, R, t)`` of the frame whose points are ``cur`` (N, 2, pixels), fitted
-        to ``rigid`` (default: the rigid points given at construction)."""
+        to ``rigid`` (default: the rigid points given at construction), the turn out of the
+        image plane held towards the rotation ``towards`` (3, 3; default the reference
+        frame's) by the prior."""
         q = np.asarray(cur, dtype=np.float64) * _UP
         rigid = self.rigid if rigid is None else np.asarray(list(rigid))
         keep = rigid
         s0, r0, _ = self.reference_pose
-        prior = (r0, self.prior * s0 * self.iod) if self.prior > 0 else None
+        centre = r0 if towards is None else np.asarray(towards, dtype=np.float64)
+        prior = (centre, self.prior * s0 * self.iod) if self.prior > 0 else None
         pose = fit_pose_3d(self.face[keep], q[keep], self.reference_pose, prior)
         for _ in range(OUTLIER_ROUNDS):
             s, r, t = pose
@@ -431,19 +434,54 @@ class HeadPose3D:
             pose = fit_pose_3d(self.face[keep], q[keep], pose, prior)
         return pose
 
-    def displacements(self, cur, rigid=None) -> np.ndarray:
+    def displacements(self, cur, rigid=None, towards=None) -> np.ndarray:
         """The displacements (N, 2) of the points ``cur`` (N, 2, pixels) from the reference's,
-        the head's motion taken out (the pose fitted to ``rigid``, default the rigid points),
-        in the head frame's x and y (y up), over the inter-ocular distance."""
-        s, r, t = self.pose(cur, rigid)
+        the head's motion taken out (the pose fitted to ``rigid``, default the rigid points,
+        held towards ``towards`` as :meth:`pose`), in the head frame's x and y (y up), over the
+        inter-ocular distance."""
+        return self.displacements_at(cur, self.pose(cur, rigid, towards))
+
+    def rotation(self, cur, rigid=None, towards=None) -> np.ndarray:
+        """The head's rotation (3, 3) from the reference frame to the frame of ``cur`` (the
+        pose fitted to ``rigid``, default the rigid points, held towards ``towards``)."""
+        return self.pose(cur, rigid, towards)[1] @ self.reference_pose[1].T
+
+    def sequence_poses(self, seq, fallback, narrow) -> list:
+        """The pose of each frame of ``seq`` (T, N, 2, pixels; rows with a NaN: None). A frame
+        whose ``fallback`` (T,) is true (e.g. the eyes closing, which drags the flow at the eye
+        corners) is fitted to the points ``narrow`` (e.g. the nose ridge, which tells the turn
+        out of the image plane poorly), with that turn held towards the rotation between the
+        nearest other frames' (interpolated in time; the one on one side at the sequence's
+        ends; the reference frame's if there is none): a head turned and held, then blinking,
+        is not read as turning back to the reference in the blink."""
+        seq = np.asarray(seq, dtype=np.float64)
+        ok = [bool(np.isfinite(cur).all()) for cur in seq]
+        poses = [self.pose(cur) if o and not f else None
+                 for cur, o, f in zip(seq, ok, fallback, strict=True)]  # fmt: skip
+        full = [k for k, p in enumerate(poses) if p is not None]
+        for k in range(len(seq)):
+            if not ok[k] or poses[k] is not None:
+                continue
+            before = [j for j in full if j < k]
+            after = [j for j in full if j > k]
+            if before and after:
+                a, b = before[-1], after[0]
+                ra, rb = poses[a][1], poses[b][1]
+                w = _rotvec(rb @ ra.T) * (k - a) / (b - a)
+                towards = _rotvec_matrix(w) @ ra
+            elif before or after:
+                towards = poses[(before or after)[-1 if before else 0]][1]
+            else:
+                towards = None
+            poses[k] = self.pose(seq[k], narrow, towards)
+        return poses
+
+    def displacements_at(self, cur, pose) -> np.ndarray:
+        """:meth:`displacements` of ``cur`` (N, 2, pixels) at a given ``pose`` ``(s, R, t)``."""
+        s, r, t = pose
         q = np.asarray(cur, dtype=np.float64) * _UP
         left = q - (s * (self.face @ r.T)[:, :2] + t)
         return np.linalg.solve(s * r[:2, :2], left.T).T / self.iod
-
-    def rotation(self, cur, rigid=None) -> np.ndarray:
-        """The head's rotation (3, 3) from the reference frame to the frame of ``cur`` (the
-        pose fitted to ``rigid``, default the rigid points)."""
-        return self.pose(cur, rigid)[1] @ self.reference_pose[1].T
 
 
 _UP = np.array([1.0, -1.0])
