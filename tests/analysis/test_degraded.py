@@ -47,18 +47,7 @@ def degraded_smile():
 @pytest.mark.shared_data
 @pytest.mark.parametrize(
     "photometric",
-    [
-        pytest.param(
-            False,
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="with the detector's offsets taken off (FitSettings.tracker_offsets) "
-                "the head is 1.1 deg from the truth (was 1.9) but the left zygomaticus reads "
-                "0.446 (was 0.485), 0.004 outside the 0.25 this test allows",
-            ),
-        ),
-        True,
-    ],
+    [False, True],
 )
 def test_pose_and_contractions_are_recovered_on_a_degraded_render(degraded_smile, photometric):
     """Over the held smile: the head's angles within 3 degrees RMS of the truth, the two

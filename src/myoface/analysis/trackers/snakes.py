@@ -183,9 +183,8 @@ class Analyzer:
     line_sections : sections tracked in the ``"line"`` potential (thin dark lines) instead of
         ``potential``.
     mouth_sections : sections around the mouth, tracked in ``potential`` with the mouth's
-        inside no darker than the lips (default :data:`MOUTH_SECTIONS`, with ``mouth_colour``;
-        ``()`` for none; the lips' tone measured on the calibration frame). Without
-        ``mouth_colour`` (the plain mouth layer): on the sample video's smile it drew the
+        inside no darker than the lips (e.g. :data:`MOUTH_SECTIONS`; the lips' tone measured
+        on the calibration frame). Off by default: on the sample video's smile it drew the
         right zygomatic major's estimate from 0.95-1.0 down to 0.3-0.55 and lost a nasolabial
         contour (misfit), while on the closed loop's renders it kept the lips' snake on the
         outline.
@@ -195,9 +194,12 @@ class Analyzer:
         mouth's dark inside and what the lips enclose taken as lips), keeping only the edges
         whose grey levels rise outwards from the lips' middle (the teeth's edges with the
         lips, inside the outline, make none), and a coarse copy (:data:`MOUTH_COARSE`) the
-        sections relax in first. On by default since 2026-12-02, with the depressor labii
-        inferioris as a sheet (with which, without this layer, the snakes read the sample's
-        smile's zygomatic majors at 0.28-0.33). Measured 2026-12-02 on the sample video's
+        sections relax in first. Off by default: it weakens the fiducial estimator on a
+        synthetic smile (``tests/test_cli_analyze.py``, correlation 0.67 < 0.7) and leaves a
+        frame of a batch's synthetic smile unmeasured, not yet understood; with the depressor
+        labii inferioris as a sheet (the default set since 2026-12-02) the snakes without it
+        read the sample's smile's zygomatic majors at 0.27-0.33, with it at 0.92 (the left one
+        0.62 on the last frame). Measured 2026-12-02 on the sample video's
         open smile (frames 25-64, means; ``python tools/snake_lips.py --colour``, against
         MediaPipe's outline): the snakes' top went from 5.7 px below the upper lip's border
         (on the upper teeth) to 0.5 px, their bottom from 12.6 px above the lower lip's (on
@@ -243,8 +245,8 @@ class Analyzer:
         head_reference=("nose",),
         estimator: str = "curves",
         line_sections=LINE_SECTIONS,
-        mouth_sections=MOUTH_SECTIONS,
-        mouth_colour: bool = True,
+        mouth_sections=(),
+        mouth_colour: bool = False,
         reseed: bool = True,
         synthesis=None,
         synthesis_rounds: int = 3,
