@@ -343,7 +343,10 @@ def muscle_files(draw) -> bytes:
         return draw(st.binary(max_size=300))
     from importlib import resources
 
-    lines = (resources.files("myoface") / "data" / "default_muscles.toml").read_text().splitlines()
+    text = (resources.files("myoface") / "data" / "default_muscles.toml").read_text()
+    # its comment lines left out: they say nothing to the parser, and with them the file (16 kB
+    # since 2026-12-02) made an example's repr pass hypothesis' 30 kB warning
+    lines = [ln for ln in text.splitlines() if not ln.lstrip().startswith("#")]
     for _ in range(draw(st.integers(0, 3))):  # a few mutations, anywhere
         k = draw(st.integers(0, len(lines) - 1))
         what = draw(st.sampled_from(["drop", "repeat", "number"]))
