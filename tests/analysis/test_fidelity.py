@@ -587,6 +587,30 @@ def test_the_reader_under_3d_head_motion(tmp_path):
     assert leak2d_nod_chin > 0.015
 
 
+def _blinking(video, n, first, poses=None):
+    """The person's own face (made from the sample video's first frame) rendered over ``n``
+    frames to ``video``, its lids closing over four from ``first`` (the palpebral orbicularis
+    oculi at 0.5, 1, 1, 0.5), nothing else moving but the head's ``poses``, and read by the
+    judge's reader: (model, contractions table, (reference points, points, unsure))."""
+    from myoface.analysis import fidelity
+    from myoface.analysis.resynthesis import resynthesis_frames
+    from myoface.render import VideoWriter
+
+    path = shared_path("video", "single_face.mp4")
+    if not path.exists():
+        pytest.skip("../shared/data/video/single_face.mp4 is not here")
+    fm, _ = fidelity.person_model(path, 0)
+    ids = list(fm.ids)
+    table = np.zeros((n, len(ids)))
+    for m in ("orbicularis_oculi_palpebralis_l", "orbicularis_oculi_palpebralis_r"):
+        table[first : first + 4, ids.index(m)] = (0.5, 1.0, 1.0, 0.5)
+    with VideoWriter(video, fps=10) as vw:
+        for f in resynthesis_frames(fm, table, 384, poses=poses):
+            vw.write(f)
+    ref, pts, unsure, _ = fidelity.read_video_points(video, list(range(n)), 0)
+    return fm, table, (ref, pts, unsure)
+
+
 @needs_mediapipe
 @pytest.mark.slow
 @pytest.mark.shared_data
@@ -602,23 +626,8 @@ def test_a_blink_does_not_move_the_other_regions(tmp_path):
     stays, read at a gain of 0.75 (DIS follows a closing lid only partway; held above 0.5)."""
     from myoface.analysis import fidelity
     from myoface.analysis.motionreader import gain
-    from myoface.analysis.resynthesis import resynthesis_frames
-    from myoface.render import VideoWriter
 
-    path = shared_path("video", "single_face.mp4")
-    if not path.exists():
-        pytest.skip("../shared/data/video/single_face.mp4 is not here")
-    fm, _ = fidelity.person_model(path, 0)
-    n = 12
-    ids = list(fm.ids)
-    table = np.zeros((n, len(ids)))
-    for m in ("orbicularis_oculi_palpebralis_l", "orbicularis_oculi_palpebralis_r"):
-        table[5:9, ids.index(m)] = (0.5, 1.0, 1.0, 0.5)
-    video = tmp_path / "blink.mp4"
-    with VideoWriter(video, fps=10) as vw:
-        for f in resynthesis_frames(fm, table, 384):
-            vw.write(f)
-    ref, pts, unsure, _ = fidelity.read_video_points(video, list(range(n)), 0)
+    fm, table, (ref, pts, unsure) = _blinking(tmp_path / "blink.mp4", 12, 5)
     d_out, side = fidelity.model_displacements(fm, table, None, JUDGED_REGIONS, "3d")
     d_in = fidelity.input_displacements(ref, pts, side, JUDGED_REGIONS, "3d", unsure)
     always = fidelity._region_displacements(ref, pts, JUDGED_REGIONS)  # (2-D, for the axes)
@@ -655,28 +664,14 @@ def test_a_blink_with_the_head_turned_is_not_read_as_a_turn_back(tmp_path):
     from scipy.spatial.transform import Rotation
 
     from myoface.analysis import fidelity
-    from myoface.analysis.resynthesis import resynthesis_frames
-    from myoface.render import VideoWriter
 
-    path = shared_path("video", "single_face.mp4")
-    if not path.exists():
-        pytest.skip("../shared/data/video/single_face.mp4 is not here")
-    fm, _ = fidelity.person_model(path, 0)
     n = 14
-    ids = list(fm.ids)
-    table = np.zeros((n, len(ids)))
-    for m in ("orbicularis_oculi_palpebralis_l", "orbicularis_oculi_palpebralis_r"):
-        table[7:11, ids.index(m)] = (0.5, 1.0, 1.0, 0.5)
     pivot = np.array([0.0, -60.0, -10.0])  # the neck, as _head_poses
     poses = []
     for j in range(n):
         r = Rotation.from_euler("x", 4.0 * min(j / 4, 1.0), degrees=True).as_matrix()
         poses.append((r, pivot - r @ pivot))
-    video = tmp_path / "nod_blink.mp4"
-    with VideoWriter(video, fps=10) as vw:
-        for f in resynthesis_frames(fm, table, 384, poses=poses):
-            vw.write(f)
-    ref, pts, unsure, _ = fidelity.read_video_points(video, list(range(n)), 0)
+    fm, table, (ref, pts, unsure) = _blinking(tmp_path / "nod_blink.mp4", n, 7, poses)
     d_out, side = fidelity.model_displacements(fm, table, None, JUDGED_REGIONS, "3d")
     d_in = fidelity.input_displacements(ref, pts, side, JUDGED_REGIONS, "3d", unsure)
     closed, held = [7, 8, 9, 10], [4, 5, 6, 11, 12, 13]
