@@ -441,11 +441,6 @@ class HeadPose3D:
         inter-ocular distance."""
         return self.displacements_at(cur, self.pose(cur, rigid, towards))
 
-    def rotation(self, cur, rigid=None, towards=None) -> np.ndarray:
-        """The head's rotation (3, 3) from the reference frame to the frame of ``cur`` (the
-        pose fitted to ``rigid``, default the rigid points, held towards ``towards``)."""
-        return self.pose(cur, rigid, towards)[1] @ self.reference_pose[1].T
-
     def sequence_poses(self, seq, fallback, narrow) -> list:
         """The pose of each frame of ``seq`` (T, N, 2, pixels; rows with a NaN: None). A frame
         whose ``fallback`` (T,) is true (e.g. the eyes closing, which drags the flow at the eye
