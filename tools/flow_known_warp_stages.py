@@ -8,6 +8,8 @@ pixel, so the true position of each tracked vertex on each frame is known):
   perfect reader);
 - ``exact_kept``: the vertices the tracker keeps given at their true positions, the others
   MediaPipe's (what the points it drops cost);
+- ``exact_patch``: the vertices the tracker keeps given where the warp moves their patch on
+  average (a perfect patch tracker: what a patch reads where the motion peaks);
 - ``true_map``: the templates deformed by the warp's local maps, not the model's prediction;
 - ``true_gap``: the mouth's gap masked where the warp puts it, not the prediction;
 - ``true_start``: Lucas-Kanade started from the true positions.
@@ -27,10 +29,11 @@ import json
 
 import numpy as np
 
-MODES = ("real", "exact_all", "exact_kept", "true_map", "true_gap", "true_start")
+MODES = ("real", "exact_all", "exact_kept", "exact_patch", "true_map", "true_gap", "true_start")
 
 
-def run(mode: str, params: dict, lag: int) -> None:
+def run(mode: str, params: dict, lag: int, fit: dict | None = None, dump: str | None = None,
+        moving: bool = False) -> None:  # fmt: skip
     import myoface.analysis.knownwarp as kwa
     import myoface.analysis.modelflow as mfm
     import myoface.bench.knownwarp as kwb
@@ -87,6 +90,7 @@ def run(mode: str, params: dict, lag: int) -> None:
         return orig["track_points"](*a)
 
     records = []
+    avgs = []  # the warp's motion averaged over each point's patch: (uniform, gradient-weighted)
 
     def track(self, image, points, prediction=None, prepared=None, since=mfm._LAST):
         state["warp"], state["in_track"], state["true"] = warps.get(id(image)), True, None
@@ -99,6 +103,9 @@ def run(mode: str, params: dict, lag: int) -> None:
             return r
         true = w.moved(self._ref["uv"])
         records.append((self._ref["uv"].copy(), true, r[0].copy(), r[1].copy()))
+        avgs.append(_patch_truth(self, w))
+        if mode == "exact_patch":
+            return np.where(r[1][:, None], avgs[-1][0], r[0]), r[1]
         if mode not in ("exact_all", "exact_kept"):
             return r
         xy, ok = r
@@ -110,12 +117,38 @@ def run(mode: str, params: dict, lag: int) -> None:
     mfm.local_affines, mfm.track_points, mfm.PREDICTION_LAG = local_affines, track_points, lag
     mfm.ModelFlow.__init__, mfm.ModelFlow._pyramid, mfm.ModelFlow.track = init, pyramid, track
     try:
-        out = kwb.run_known_warp(False, False, FitSettings(flow=True), flow_method="anchored")
+        settings = FitSettings(**{"flow": True, **(fit or {})})
+        out = kwb.run_known_warp(moving, False, settings, flow_method="anchored")
     finally:
         for (obj, name), v in saved.items():
             setattr(obj, name, v)
-    fit = {r: (round(v["gain"], 3), round(v["explained"], 3)) for r, v in out["regions"].items()}
-    print(f"{mode}: the fit's (gain, explained) {json.dumps(fit)}, leak {out['leak']:.3f}")
+    if dump:
+        ref, true, xy, ok = (np.array(a) for a in zip(*records, strict=True))
+        np.savez_compressed(f"{dump}_{mode}.npz", ref=ref, true=true, xy=xy, ok=ok)
+    got = {r: (round(v["gain"], 3), round(v["explained"], 3)) for r, v in out["regions"].items()}
+    print(f"{mode}: the fit's (gain, explained) {json.dumps(got)}, leak {out['leak']:.3f}")
+    if avgs:
+        for k, what in enumerate(("uniform", "gradient-weighted")):
+            num = den = 0.0
+            per = {}
+            for name, ids in REGIONS.items():
+                ids = np.asarray(ids)
+                n2 = d2 = 0.0
+                for (ref, _true, xy, ok), a in zip(records, avgs, strict=True):
+                    o = ok[ids]
+                    dt, dr = (a[k] - ref)[ids][o], (xy - ref)[ids][o]
+                    n2 += float((dt * dr).sum())
+                    d2 += float((dt * dt).sum())
+                per[name] = round(n2 / max(d2, 1e-9), 3)
+            for (ref, _true, xy, ok), a in zip(records, avgs, strict=True):
+                dt, dr = (a[k] - ref)[ok], (xy - ref)[ok]
+                num += float((dt * dr).sum())
+                den += float((dt * dt).sum())
+            print(
+                f"  the tracker against the warp's motion averaged over its patch ({what}): "
+                f"every kept point {num / max(den, 1e-9):.3f}, {json.dumps(per)}",
+                flush=True,
+            )
     for name, ids in REGIONS.items():
         ids = np.asarray(ids)
         num = den = res = 0.0
@@ -132,14 +165,43 @@ def run(mode: str, params: dict, lag: int) -> None:
               flush=True)  # fmt: skip
 
 
+def _patch_truth(flow, warp):
+    """Where each reference point's patch (the tracker's window, level 0, in the calibration
+    frame) goes on average under ``warp``: uniformly, and weighted by the calibration frame's
+    high-passed structure tensor (what translation-only Lucas-Kanade's least squares weighs
+    each pixel's motion by). (2 of (V, 2) px.)"""
+    ref = flow._ref
+    uv = ref["uv"]
+    h = flow.window // 2
+    o = np.stack(np.meshgrid(np.arange(-h, h + 1), np.arange(-h, h + 1)), -1).reshape(-1, 2)
+    pix = uv[:, None, :] + o[None].astype(np.float64)  # (V, P, 2)
+    moved = warp.moved(pix.reshape(-1, 2)).reshape(pix.shape) - o[None]
+    uni = moved.mean(1)
+    flat, _, offs, shapes, org = ref["pyr"]
+    img = flat[offs[0] : offs[0] + shapes[0, 0] * shapes[0, 1]].reshape(shapes[0, 0], shapes[0, 1])
+    gy, gx = np.gradient(img)
+    ij = np.round(pix - org).astype(int)
+    ij[..., 0] = np.clip(ij[..., 0], 0, img.shape[1] - 1)
+    ij[..., 1] = np.clip(ij[..., 1], 0, img.shape[0] - 1)
+    ax, ay = gx[ij[..., 1], ij[..., 0]], gy[ij[..., 1], ij[..., 0]]
+    g = np.stack([np.stack([ax * ax, ax * ay], -1), np.stack([ax * ay, ay * ay], -1)], -2)
+    gs = g.sum(1) + 1e-9 * np.eye(2)
+    rhs = np.einsum("vpij,vpj->vi", g, moved)
+    grad = np.linalg.solve(gs, rhs[..., None])[..., 0]
+    return uni, grad
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("modes", nargs="+", choices=MODES)
     ap.add_argument("--set", default="{}", help="ModelFlow's parameters, JSON")
     ap.add_argument("--lag", type=int, default=1, help="modelflow.PREDICTION_LAG")
+    ap.add_argument("--fit", default="{}", help="FitSettings' fields, JSON")
+    ap.add_argument("--moving", action="store_true", help="the clips with fake head motion")
+    ap.add_argument("--dump", default=None, help="save the tracker's readings to DUMP_MODE.npz")
     args = ap.parse_args(argv)
     for mode in args.modes:
-        run(mode, json.loads(args.set), args.lag)
+        run(mode, json.loads(args.set), args.lag, json.loads(args.fit), args.dump, args.moving)
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ from myoface.analysis.terms import (
     OpticalFlowTerm,
     SparsityPrior,
     TemporalPrior,
+    patch_footprint,
 )
 from tests.analysis.test_fit import CAMERA, landmarks
 
@@ -57,6 +58,13 @@ def _moved(fit, est, x):
     return Estimate(pose, c, fit.shape(c), est.jac, est.free)
 
 
+def _footprint(fit, pose, half=5):
+    """(F, base) of 11-px patches where ``pose`` puts ``fit``'s neutral (no gap)."""
+    base = fit.neutral + fit.identity_mm
+    pc = pose.apply(base)
+    return patch_footprint(CAMERA.project(pc), -pc[:, 2], fit.model.face.triangles, half), base
+
+
 def _terms(fit, p, prev, huber):
     s = fit.settings
     w0 = fit.base_weights
@@ -70,6 +78,16 @@ def _terms(fit, p, prev, huber):
             p, CAMERA, w0, s.landmark_sigma_mm, s.depth_sigma_mm, huber, xy_weights=~tracked
         ),
         "flow": OpticalFlowTerm(moved, tracked, CAMERA, w0, s.landmark_sigma_mm, huber),
+        # each point against the model's motion averaged over its patch
+        "flow_footprint": OpticalFlowTerm(
+            moved,
+            tracked,
+            CAMERA,
+            w0,
+            s.landmark_sigma_mm,
+            huber,
+            footprint=_footprint(fit, prev.pose),
+        ),  # fmt: skip
         "temporal": TemporalPrior(
             prev, 1 / 30, s.rotation_rate_deg_per_s, s.translation_rate_mm_per_s, s.rate_per_s
         ),
@@ -80,7 +98,15 @@ def _terms(fit, p, prev, huber):
 
 @pytest.mark.parametrize(
     "name",
-    ["landmarks", "landmarks_beside_flow", "flow", "temporal", "magnitude", "sparsity"],
+    [
+        "landmarks",
+        "landmarks_beside_flow",
+        "flow",
+        "flow_footprint",
+        "temporal",
+        "magnitude",
+        "sparsity",
+    ],  # fmt: skip
 )
 @pytest.mark.parametrize("use_depth", [True, False])
 @pytest.mark.parametrize("n_free", [0, 7, None])
@@ -158,6 +184,83 @@ def test_the_flow_term_takes_the_landmarks_place_where_it_tracked(frame):
     none = OpticalFlowTerm(xy, np.zeros(len(p), bool), *args[:3], np.inf)
     none.prepare(est)
     assert none.cost(est) == 0.0
+
+
+def test_a_patch_footprint_averages_a_field_over_the_patch():
+    """:func:`patch_footprint` on a regular grid of triangles: rows sum to 1; a field linear
+    in the image (a patch's mean is its centre's) is left as it is; a field that peaks at a
+    vertex (a tent) is averaged to the tent's mean over the patch (computed here in closed
+    form); a patch reaching off the mesh keeps its vertex; pixels inside the gap's polygon
+    do not count."""
+    n, step, half = 9, 10.0, 3
+    g = np.stack(np.meshgrid(np.arange(n), np.arange(n)), -1).reshape(-1, 2) * step
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = (
+        idx[:-1, :-1].ravel(),
+        idx[:-1, 1:].ravel(),
+        idx[1:, :-1].ravel(),
+        idx[1:, 1:].ravel(),
+    )
+    tri = np.concatenate([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
+    f = patch_footprint(g, np.ones(len(g)), tri, half)
+    np.testing.assert_allclose(np.asarray(f.sum(1)).ravel(), 1.0, atol=1e-12)
+    inner = (g.min(1) >= step) & (g.max(1) <= (n - 2) * step)
+    lin = g @ np.array([0.3, -0.7]) + 2.0
+    np.testing.assert_allclose((f @ lin)[inner], lin[inner], atol=1e-9)
+    # a tent at the centre vertex: on this mesh (diagonals a-d) the field is linear per
+    # triangle, its mean over the square patch the mean of max(0, 1 - ...) at the pixels
+    centre = int(idx[n // 2, n // 2])
+    tent = np.zeros(len(g))
+    tent[centre] = 1.0
+    o = np.arange(-half, half + 1) / step
+    x, y = np.meshgrid(o, o)
+    # the barycentric hat of a vertex on this triangulation
+    hat = np.where(x * y >= 0, 1 - np.maximum(np.abs(x), np.abs(y)), 1 - np.abs(x) - np.abs(y))
+    assert (f @ tent)[centre] == pytest.approx(np.clip(hat, 0, None).mean(), rel=1e-9)
+    assert (f @ tent)[centre] < 0.9  # (short of the peak)
+    # off the mesh: the corner vertex keeps itself
+    assert f[0, 0] == 1.0 and f[0].nnz == 1
+    # a gap around the centre's right neighbour: its pixels left out, the patch still used
+    right = int(idx[n // 2, n // 2 + 1])
+    box = g[right] + np.array([[-2.5, -2.5], [2.5, -2.5], [2.5, 2.5], [-2.5, 2.5]])
+    fg = patch_footprint(g, np.ones(len(g)), tri, half, gap=box)
+    np.testing.assert_allclose((fg @ lin)[centre], lin[centre], atol=1e-9)  # (untouched)
+    assert fg[right].nnz > 1 and fg[right, right] != f[right, right]
+    np.testing.assert_allclose(fg.sum(1), 1.0, atol=1e-12)
+
+
+def test_the_flow_term_with_footprints_reads_a_patchs_motion_at_gain_one(frame):
+    """A patch tracker reads the mean motion of its patch (short of the motion at its
+    vertex where the motion peaks). Given points that moved exactly so (the model's motion
+    at known contractions averaged over each point's patch), the fit whose flow term knows
+    the patches finds the contractions; read at the vertices, the same points give a fit
+    whose skin moves less (the shortfall :class:`OpticalFlowTerm` describes)."""
+    fit, p, pose, c, prev = frame
+    s = fit.settings
+    m = fit.n_muscles
+    truth = prev.pose
+    c_true = np.zeros(m)
+    for mid, v in (("zygomaticus_major_l", 0.6), ("zygomaticus_major_r", 0.6),
+                   ("frontalis_inner_l", 0.5), ("frontalis_inner_r", 0.5)):  # fmt: skip
+        c_true[fit.ids.index(mid)] = v
+    fmat, base = _footprint(fit, truth, half=5)
+    seen = base + fmat @ (fit.shape(c_true) - base)
+    xy = CAMERA.project(truth.apply(seen))
+    tracked = np.ones(len(xy), dtype=bool)
+    free = np.arange(m)
+    jac = np.ascontiguousarray(fit.response)
+    out = {}
+    for name, fp in (("patch", (fmat, base)), ("vertex", None)):
+        flow = OpticalFlowTerm(xy, tracked, CAMERA, fit.base_weights, s.landmark_sigma_mm,
+                               s.huber, footprint=fp)  # fmt: skip
+        pose_f, c_f, _, _ = bounded_gauss_newton([flow], fit.shape, jac, truth, np.zeros(m),
+                                                 free, 40)  # fmt: skip
+        d_true = fit.shape(c_true) - base
+        d_fit = fit.shape(c_f) - base
+        moving = np.linalg.norm(d_true, axis=1) > 1.0
+        out[name] = float((d_fit[moving] * d_true[moving]).sum() / (d_true[moving] ** 2).sum())
+    assert out["patch"] == pytest.approx(1.0, abs=0.03)
+    assert out["vertex"] < out["patch"] - 0.05
 
 
 def test_the_solver_sums_any_terms_it_is_given(frame):

@@ -74,6 +74,7 @@ from myoface.analysis.terms import (
     OpticalFlowTerm,
     SparsityPrior,
     TemporalPrior,
+    patch_footprint,
     pixel_mm,
 )
 from myoface.analysis.weights import (
@@ -240,6 +241,10 @@ class ModelFit:
         #: points of every frame (None: the points as given)
         self.offsets = None
         self._spread_w = None  # (:meth:`_offset_weights`)
+        #: the optical flow's patches (:meth:`set_flow_footprint`): their half side (px;
+        #: None: not set) and the weights made from the calibration
+        self._footprint_half: int | None = None
+        self._footprint_cache = None
         #: tissue relaxes that did not converge (see :meth:`_relax`)
         self.unconverged_relaxes = 0
         #: where the time goes (for the benchmark's breakdown): the fits' thread CPU (s) and
@@ -645,8 +650,48 @@ class ModelFit:
                 xy_weights=1.0 - tracked,
             )  # fmt: skip
         )
-        out.append(OpticalFlowTerm(xy, tracked, self.camera, weights, s.landmark_sigma_mm, s.huber))
+        out.append(
+            OpticalFlowTerm(
+                xy,
+                tracked,
+                self.camera,
+                weights,
+                s.landmark_sigma_mm,
+                s.huber,
+                footprint=self._footprint(),
+            )  # fmt: skip
+        )
         return out
+
+    def set_flow_footprint(self, half: int | None) -> None:
+        """The optical flow's points are read by patches ``2 half + 1`` px a side, centred
+        where the calibrated neutral puts each vertex on the calibration frame (the
+        model-anchored tracker's templates, :class:`~myoface.analysis.modelflow.ModelFlow`,
+        which calls this): the flow's term then compares each point with the model's motion
+        averaged over its patch (:class:`~myoface.analysis.terms.OpticalFlowTerm`,
+        :attr:`FitSettings.flow_footprint`). None: with its vertex."""
+        self._footprint_half = None if half is None else int(half)
+        self._footprint_cache = None
+
+    def _footprint(self):
+        """(:class:`~myoface.analysis.terms.OpticalFlowTerm`'s ``footprint``: made once a
+        calibration, :func:`~myoface.analysis.terms.patch_footprint`; None when not set.)"""
+        half = self._footprint_half
+        cal = self.calibration
+        if half is None or cal is None or not self.settings.flow_footprint:
+            return None
+        cache = self._footprint_cache
+        if cache is None or cache[0] is not cal:
+            base = self.neutral + self.identity_mm
+            pc = cal.pose.apply(base)
+            uv = self.camera.project(pc)
+            gap = _mouth_gap(self.model.face)
+            fmat = patch_footprint(
+                uv, -pc[:, 2], self.model.face.triangles, half, None if gap is None else uv[gap]
+            )
+            cache = (cal, (fmat, base))
+            self._footprint_cache = cache
+        return cache[1]
 
     def _fit(self, p, prev: FrameFit | None, refine: int, start: FrameFit | None = None,
              rest: bool = False, flow=None, photo=None):  # fmt: skip
@@ -810,6 +855,15 @@ class ModelFit:
             h += w[:, None, None] * np.outer(jz, jz)[None]
             g -= (w * rz)[:, None] * jz[None]
         return h, g.ravel()
+
+
+def _mouth_gap(face):
+    """The mouth's gap's polygon's vertices (upper inner margin, then the lower one back), as
+    the anchored tracker masks it (None for a face without the lips' margins)."""
+    from myoface.face.lips import inner_lip_margins
+
+    m = inner_lip_margins(face)
+    return None if m is None else np.concatenate([m[0], m[1][::-1]])
 
 
 def _linear(jac: np.ndarray, dc: np.ndarray) -> np.ndarray:

@@ -477,6 +477,8 @@ class ModelFlow:
             image, fit.camera, fit.calibration.pose, fit.neutral + fit.identity_mm,
             face.triangles, exclude=gap_vertices(face), gap=gap,
         )  # fmt: skip
+        # the fit compares each point with the model's motion over this tracker's window
+        fit.set_flow_footprint(out.window // 2)
         return out
 
     # ------------------------------------------------------------------ tracking

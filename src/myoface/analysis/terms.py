@@ -179,19 +179,154 @@ class OpticalFlowTerm(LandmarkTerm):
     (whose term then weighs those vertices' x, y at 0 and keeps their depth), with the same
     scatter (``sigma_mm``) and Huber threshold.
 
+    What a patch tracker reads is not the motion at its point but the motion of its patch:
+    translation-only Lucas-Kanade finds the one shift that best moves the whole window, about
+    the mean of the skin's motion over the window's pixels. Where the motion peaks (a smile's
+    mouth corner, the middle of a raised brow) that mean is short of the peak. With
+    ``footprint`` (:func:`patch_footprint`: each tracked point's window, in the calibration
+    frame, as weights over the model's vertices) the term compares the point with the
+    model's own motion averaged over the same window (``base + F (shape - base)``, ``base``
+    the person's neutral, head frame), not with its vertex: the model predicts what the
+    tracker reads. Measured 2026-12-02 (``tools/flow_known_warp_stages.py``, the known-warp
+    clips, head still): against the warp's motion at the points the anchored tracker reads
+    0.90 of the mouth corners' motion and 0.97 of the brows', against the warp's motion
+    averaged over its window 0.98 and 1.00 (0.98 over every point it keeps); the smile's and
+    surprise's fields of the face model, interpolated smoothly (C1) between the vertices
+    rather than linearly, average over an 11-px window to 0.90 of the corners' peak and
+    0.92-0.98 of the brows' (linearly: 0.90, 0.89-0.96): the shortfall is the field's
+    shape at the patch's scale, not the known warp's interpolation. Read at the vertex, the
+    fit explained the shortfall with smaller contractions everywhere the muscles move the
+    skin (the corners 0.80, the brows 0.87).
+
     Parameters
     ----------
     xy : (V, 2) the tracked points, pixels (column, row); ``tracked`` (V,) bool: where the
         track is sure. ``camera``, ``weights``, ``sigma_mm``, ``huber``: as for
         :class:`LandmarkTerm`.
+    footprint : None, or (sparse (V, V) rows summing to 1, ``base`` (V, 3) mm, head frame):
+        each point's patch as weights over the vertices, and the shape the motion is
+        measured from (the person's neutral).
     """
 
     def __init__(self, xy, tracked, camera: PinholeCamera, weights, sigma_mm: float,
-                 huber: float):  # fmt: skip
+                 huber: float, footprint=None):  # fmt: skip
         xy = np.asarray(xy, dtype=np.float64)
         pts = np.column_stack([xy[:, :2], np.full(len(xy), np.nan)])
-        w = np.asarray(weights, dtype=np.float64) * np.asarray(tracked, dtype=np.float64)
+        tracked = np.asarray(tracked, dtype=bool)
+        w = np.asarray(weights, dtype=np.float64) * tracked
         super().__init__(pts, camera, w, sigma_mm, 1.0, huber)
+        self.footprint = None
+        self._rows = np.flatnonzero(tracked)
+        if footprint is not None and len(self._rows):
+            fmat, base = footprint
+            self.footprint = (fmat[self._rows], np.asarray(base, dtype=np.float64))
+        self._jac_of = None  # (the Jacobian last averaged, and its average: one per frame)
+        self._jac_avg = None
+
+    def _averaged(self, est: Estimate) -> Estimate:
+        """``est`` with each tracked vertex's skin and response averaged over its patch."""
+        if self.footprint is None:
+            return est
+        fmat, base = self.footprint
+        rows = self._rows
+        shape = est.shape.copy()
+        shape[rows] = base[rows] + fmat @ (est.shape - base)
+        if self._jac_of is not est.jac:
+            m = est.jac.shape[2]
+            jac = est.jac.copy()
+            jac[rows] = (fmat @ est.jac.reshape(len(est.jac), -1)).reshape(-1, 3, m)
+            self._jac_of, self._jac_avg = est.jac, np.ascontiguousarray(jac)
+        return Estimate(est.pose, est.contractions, shape, self._jac_avg, est.free)
+
+    def normal_equations(self, est: Estimate):
+        return super().normal_equations(self._averaged(est))
+
+    def cost(self, est: Estimate) -> float:
+        return super().cost(self._averaged(est))
+
+
+def patch_footprint(uv, depth, triangles, half: int, gap=None):
+    """Each point's patch as weights over the mesh's vertices: sparse (V, V), row ``v`` the
+    mean, over the ``(2 half + 1)^2`` pixels of the square window centred on ``uv[v]`` (V, 2)
+    px (a tracker's template in the calibration frame), of the barycentric weights of the
+    mesh's triangle (``triangles`` (T, 3), projected at ``uv``) under each pixel: the nearest
+    (``depth`` (V,), distance from the camera) where triangles overlap. Pixels inside the
+    polygon ``gap`` (K, 2) px (the mouth's gap, which the tracker masks) do not count. A
+    point whose patch reaches off the mesh elsewhere (over an eye's opening, beyond the
+    face's outline) keeps its own vertex (row ``v`` = e_v): there the patch's strongest
+    texture is the opening's or the outline's edge, which moves with the margin, not as the
+    skin's mean. Multiplying a field given at the vertices (the model's skin motion) by it
+    averages the field, linearly interpolated over the triangles, over each patch."""
+    from scipy import sparse
+
+    uv = np.asarray(uv, dtype=np.float64)
+    depth = np.asarray(depth, dtype=np.float64)
+    tri = np.asarray(triangles, dtype=np.int64)
+    n = len(uv)
+    o = np.arange(-int(half), int(half) + 1, dtype=np.float64)
+    off = np.stack(np.meshgrid(o, o), -1).reshape(-1, 2)
+    pix = (uv[:, None, :] + off[None]).reshape(-1, 2)
+    owner = np.full(len(pix), -1, dtype=np.int64)
+    best = np.full(len(pix), np.inf)
+    bary = np.zeros((len(pix), 3))
+    order = np.argsort(pix[:, 0])
+    xs = pix[order, 0]
+    a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
+    lo, hi = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    i0 = np.searchsorted(xs, lo[:, 0], side="left")
+    i1 = np.searchsorted(xs, hi[:, 0], side="right")
+    for t in range(len(tri)):
+        if i1[t] <= i0[t]:
+            continue
+        idx = order[i0[t] : i1[t]]
+        y = pix[idx, 1]
+        idx = idx[(y >= lo[t, 1]) & (y <= hi[t, 1])]
+        if not len(idx):
+            continue
+        e1, e2 = b[t] - a[t], c[t] - a[t]
+        den = e1[0] * e2[1] - e1[1] * e2[0]
+        if abs(den) < 1e-9:
+            continue
+        q = pix[idx] - a[t]
+        l1 = (q[:, 0] * e2[1] - q[:, 1] * e2[0]) / den
+        l2 = (e1[0] * q[:, 1] - e1[1] * q[:, 0]) / den
+        l0 = 1.0 - l1 - l2
+        inside = (l0 >= -1e-9) & (l1 >= -1e-9) & (l2 >= -1e-9)
+        if not inside.any():
+            continue
+        idx, lam = idx[inside], np.column_stack([l0, l1, l2])[inside]
+        z = lam @ depth[tri[t]]
+        nearer = z < best[idx]
+        idx, lam, z = idx[nearer], lam[nearer], z[nearer]
+        owner[idx], best[idx], bary[idx] = t, z, lam
+    row = np.repeat(np.arange(n), len(off))
+    on = owner >= 0
+    masked = np.zeros(len(pix), dtype=bool) if gap is None else _inside(pix, gap)
+    off_mesh = np.bincount(row[~on & ~masked], minlength=n)
+    on &= (off_mesh == 0)[row] & ~masked
+    count = np.bincount(row[on], minlength=n).astype(np.float64)
+    r = np.repeat(row[on], 3)
+    col = tri[owner[on]].ravel()
+    val = (bary[on] / count[row[on]][:, None]).ravel()
+    none = np.flatnonzero(count == 0)
+    r = np.concatenate([r, none])
+    col = np.concatenate([col, none])
+    val = np.concatenate([val, np.ones(len(none))])
+    return sparse.csr_matrix((val, (r, col)), shape=(n, n))
+
+
+def _inside(pts, polygon) -> np.ndarray:
+    """Which points (N, 2) are inside ``polygon`` (K, 2) (even-odd rule)."""
+    poly = np.asarray(polygon, dtype=np.float64)
+    x, y = pts[:, 0], pts[:, 1]
+    out = np.zeros(len(pts), dtype=bool)
+    for k in range(len(poly)):
+        (x1, y1), (x2, y2) = poly[k - 1], poly[k]
+        cross = (y1 > y) != (y2 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xc = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+        out ^= cross & (x < xc)
+    return out
 
 
 def pixel_mm(camera: PinholeCamera, pose: HeadPose) -> float:

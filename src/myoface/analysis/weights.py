@@ -118,6 +118,11 @@ class FitSettings:
     huber: float = 1.5
     tracking: bool = False
     flow: bool = False
+    #: with :attr:`flow` (the model-anchored tracker): each tracked point compared with the
+    #: model's motion averaged over the tracker's patch, not with its vertex (a patch
+    #: tracker reads its window's mean motion, short of a peak's;
+    #: :class:`~myoface.analysis.terms.OpticalFlowTerm` has why and what was measured)
+    flow_footprint: bool = True
     iterations: int = 8
     refine: int = 1
     relax_step_mm: float = 2.0
