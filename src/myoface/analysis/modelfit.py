@@ -223,6 +223,12 @@ class ModelFit:
         ) * model_error_weights(
             self.response[:, :, soft], self.settings.model_error, self.settings.landmark_sigma_mm
         )
+        #: with the optical flow: MediaPipe's x, y where the flow did not track weigh this
+        #: much more (:attr:`FitSettings.flow_landmark_error`)
+        self._detector_weights = model_error_weights(
+            self.response[:, :, soft], self.settings.flow_landmark_error,
+            self.settings.landmark_sigma_mm,
+        )  # fmt: skip
         self.identity_mm = np.zeros_like(self.neutral)
         #: the fit's own state of the model's tissue (each relax starts from the last)
         self.state = model.rest_state()
@@ -647,7 +653,7 @@ class ModelFit:
                 s.landmark_sigma_mm,
                 s.depth_sigma_mm,
                 s.huber,
-                xy_weights=1.0 - tracked,
+                xy_weights=(1.0 - tracked) * self._detector_weights,
             )  # fmt: skip
         )
         out.append(
