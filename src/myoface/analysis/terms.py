@@ -219,24 +219,33 @@ class OpticalFlowTerm(LandmarkTerm):
         self._rows = np.flatnonzero(tracked)
         if footprint is not None and len(self._rows):
             fmat, base = footprint
-            self.footprint = (fmat[self._rows], np.asarray(base, dtype=np.float64))
+            sub = fmat[self._rows]  # (every row has an entry: its own vertex at least)
+            self.footprint = (sub, np.asarray(base, dtype=np.float64))
+            self._csr = (sub.indptr[:-1], sub.indices, sub.data[:, None])
         self._jac_of = None  # (the Jacobian last averaged, and its average: one per frame)
         self._jac_avg = None
+        self._last = None  # (the estimate last averaged, and its average)
 
     def _averaged(self, est: Estimate) -> Estimate:
         """``est`` with each tracked vertex's skin and response averaged over its patch."""
         if self.footprint is None:
             return est
+        last = self._last
+        if last is not None and last[0] is est:
+            return last[1]  # (a step asks for its normal equations and its cost alike)
         fmat, base = self.footprint
         rows = self._rows
         shape = est.shape.copy()
-        shape[rows] = base[rows] + fmat @ (est.shape - base)
+        start, cols, vals = self._csr  # (the rows' products, without scipy's overhead)
+        shape[rows] = base[rows] + np.add.reduceat(vals * (est.shape - base)[cols], start)
         if self._jac_of is not est.jac:
             m = est.jac.shape[2]
             jac = est.jac.copy()
             jac[rows] = (fmat @ est.jac.reshape(len(est.jac), -1)).reshape(-1, 3, m)
             self._jac_of, self._jac_avg = est.jac, np.ascontiguousarray(jac)
-        return Estimate(est.pose, est.contractions, shape, self._jac_avg, est.free)
+        out = Estimate(est.pose, est.contractions, shape, self._jac_avg, est.free)
+        self._last = (est, out)
+        return out
 
     def normal_equations(self, est: Estimate):
         return super().normal_equations(self._averaged(est))
