@@ -4,10 +4,13 @@ front of a camera, makes a smile; the flow reads, at the points it tracks, the m
 averaged over each point's patch (what a patch tracker reads,
 :class:`~myoface.analysis.terms.OpticalFlowTerm`), and MediaPipe reads half of the motion
 (measured on real frames warped by known fields: 0.49-0.66) at every point, which the fit
-reads where the flow did not track (here: the lips, as the anchored tracker leaves the lips'
-margins). The default settings recover the smile's skin motion at gain 1; reading the
-patches at their vertices, or MediaPipe's points at full weight beside the flow, they do
-not."""
+reads where the flow did not track (the lips, as the anchored tracker leaves the lips'
+margins and drops about half of the lips' points). With every point tracked, the default
+settings recover the smile's skin motion at gain 1, and reading the patches at their
+vertices they do not; with the lips left to MediaPipe, MediaPipe's short reading pulls the
+fit back unless it weighs less where the muscles move the skin far
+(:attr:`~myoface.analysis.weights.FitSettings.flow_landmark_error`, off by default: see
+why there)."""
 
 from __future__ import annotations
 
@@ -34,7 +37,7 @@ def fm():
     return build_face_model()
 
 
-def _gain(fm, settings) -> float:
+def _gain(fm, settings, lips_to_mediapipe: bool) -> float:
     """The fitted skin's motion over the true one (least squares, the points the smile moves
     more than 1 mm) on the last of 8 frames, the smile rising over 5 and held."""
     pose = HeadPose.from_euler(4.0, -3.0, 2.0, (0.0, 0.0, -450.0))
@@ -51,14 +54,13 @@ def _gain(fm, settings) -> float:
     gap = np.concatenate([upper, lower[::-1]])
     uv = CAMERA.project(pc)
     fmat = patch_footprint(uv, -pc[:, 2], fm.face.triangles, HALF, uv[gap])
-    # the lips (what the smile moves most, and what the anchored tracker leaves to MediaPipe
-    # at their margins) untracked, every other point tracked
     lips = np.zeros(len(base), dtype=bool)
-    lips[np.concatenate([upper, lower])] = True
-    edges = fm.face.edges
-    lips[edges[lips[edges[:, 0]], 1]] = True  # (and their neighbours: ~half of the lips)
-    lips[edges[lips[edges[:, 1]], 0]] = True
-    assert lips.sum() >= 30
+    if lips_to_mediapipe:
+        lips[np.concatenate([upper, lower])] = True
+        edges = fm.face.edges
+        lips[edges[lips[edges[:, 0]], 1]] = True  # (and their neighbours: ~half of the lips)
+        lips[edges[lips[edges[:, 1]], 0]] = True
+        assert lips.sum() >= 30
     true_d = None
     for a in [*np.linspace(0.2, 1.0, 5), 1.0, 1.0, 1.0]:  # (rising, then held)
         skin = fit.shape(a * c)  # (the model's linear response: the fit's own forward model)
@@ -71,10 +73,17 @@ def _gain(fm, settings) -> float:
     return float((d[moving] * true_d[moving]).sum() / (true_d[moving] ** 2).sum())
 
 
-def test_the_fit_with_flow_moves_the_skin_as_far_as_the_face_moved(fm):
-    default = _gain(fm, FitSettings(flow=True))
-    at_vertices = _gain(fm, FitSettings(flow=True, flow_footprint=False))
-    mediapipe_full = _gain(fm, FitSettings(flow=True, flow_landmark_error=0.0))
-    assert 0.93 < default < 1.07, default
-    assert at_vertices < default - 0.02, (at_vertices, default)
-    assert mediapipe_full < default - 0.03, (mediapipe_full, default)
+def test_the_fit_reads_a_patch_trackers_points_at_gain_one(fm):
+    default = _gain(fm, FitSettings(flow=True), False)
+    at_vertices = _gain(fm, FitSettings(flow=True, flow_footprint=False), False)
+    assert 0.95 < default < 1.05, default
+    assert at_vertices < default - 0.03, (at_vertices, default)
+
+
+def test_mediapipe_weaker_where_the_skin_moves_keeps_its_shortfall_out(fm):
+    plain = _gain(fm, FitSettings(flow=True), True)
+    weaker = _gain(fm, FitSettings(flow=True, flow_landmark_error=0.2), True)
+    at_vertices = _gain(fm, FitSettings(flow=True, flow_footprint=False), True)
+    assert 0.93 < weaker < 1.07, weaker
+    assert plain < weaker - 0.05, (plain, weaker)
+    assert at_vertices < plain, (at_vertices, plain)
