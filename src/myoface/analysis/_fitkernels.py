@@ -16,16 +16,6 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
-def _point(rot, trans, x, f, cx, cy):
-    """Camera point (3,), its pixel (2,) and the depth in front of the camera."""
-    pc = np.empty(3)
-    for i in range(3):
-        pc[i] = rot[i, 0] * x[0] + rot[i, 1] * x[1] + rot[i, 2] * x[2] + trans[i]
-    d = max(-pc[2], 1e-6)
-    return pc, cx + f * pc[0] / d, cy - f * pc[1] / d, d
-
-
-@njit(cache=True, nogil=True)
 def landmark_terms(rot, trans, shape, f, cx, cy, p, use_z, w0, kxy, inv_ds, k, huber):
     """Per vertex: the weighted residuals' pieces (V, 4): ru, rv (in sigmas), rz (in sigmas,
     its ``w0``-weighted mean removed), and the 2-D distance in sigmas."""
@@ -33,13 +23,19 @@ def landmark_terms(rot, trans, shape, f, cx, cy, p, use_z, w0, kxy, inv_ds, k, h
     out = np.zeros((nv, 4))
     zsum, wsum = 0.0, 0.0
     for v in range(nv):
-        pc, u, vv, _ = _point(rot, trans, shape[v], f, cx, cy)
-        ru = (u - p[v, 0]) * kxy
-        rv = (vv - p[v, 1]) * kxy
+        # the camera point, its pixel and its depth in front of the camera (in scalars: a
+        # small array a vertex cost more than the rest of the loop)
+        x0, x1, x2 = shape[v, 0], shape[v, 1], shape[v, 2]
+        pc0 = rot[0, 0] * x0 + rot[0, 1] * x1 + rot[0, 2] * x2 + trans[0]
+        pc1 = rot[1, 0] * x0 + rot[1, 1] * x1 + rot[1, 2] * x2 + trans[1]
+        pc2 = rot[2, 0] * x0 + rot[2, 1] * x1 + rot[2, 2] * x2 + trans[2]
+        d = max(-pc2, 1e-6)
+        ru = (cx + f * pc0 / d - p[v, 0]) * kxy
+        rv = (cy - f * pc1 / d - p[v, 1]) * kxy
         out[v, 0], out[v, 1] = ru, rv
         out[v, 3] = np.sqrt(ru * ru + rv * rv)
         if use_z:
-            dz = -pc[2] - k * p[v, 2]
+            dz = -pc2 - k * p[v, 2]
             out[v, 2] = dz
             zsum += w0[v] * dz
             wsum += w0[v]
@@ -78,23 +74,38 @@ def normal_equations(
     The weighted rows are made vertex by vertex into ``J^T`` (unknowns x rows, so that each
     product of two unknowns' columns is one contiguous dot product, :func:`_gram`): the
     depth rows' weighted mean is removed from them first (``sum_v w_v (z_v - zbar)(z_v -
-    zbar)^T`` is the Gram matrix of ``sqrt(w_v) (z_v - zbar)``)."""
+    zbar)^T`` is the Gram matrix of ``sqrt(w_v) (z_v - zbar)``). Rows that weigh nothing
+    are left out of ``J^T`` (they add nothing to either sum): with the optical flow's term
+    (:class:`~myoface.analysis.terms.OpticalFlowTerm`) the landmarks' x, y rows of the
+    tracked vertices and the flow's of the others, a third of the rows the two terms make."""
     nv = shape.shape[0]
     nf = free.shape[0]
     n = 6 + nf
     t = landmark_terms(rot, trans, shape, f, cx, cy, p, use_z, w0, kxy, inv_ds, k, huber)
     w = np.empty(nv)
     wsum = 0.0
+    nxy, nz = 0, 0
     for v in range(nv):
         r = t[v, 3]
         w[v] = w0[v] * (huber / max(r, 1e-12) if r > huber else 1.0)
         wsum += w[v]
-    nrow = 3 * nv if use_z else 2 * nv
-    jt = np.zeros((n, nrow))  # the weighted rows, transposed: u (nv), v (nv), z (nv)
+        if w[v] * mxy[v] > 0.0:
+            nxy += 1
+        if use_z and w[v] > 0.0:
+            nz += 1
+    nrow = 2 * nxy + nz
+    jt = np.zeros((n, nrow))  # the weighted rows, transposed: u (nxy), v (nxy), z (nz)
     rw = np.empty(nrow)  # ... and their weighted residuals
+    zsw = np.empty(nz)  # the square root of each depth row's weight
     zmean = np.zeros(n)
     g = np.empty((3, 3))  # per vertex, d(u, v, z-row)/dP
+    cols = np.empty(3, dtype=np.int64)
+    ixy, iz = 0, 0
     for v in range(nv):
+        use_xy = w[v] * mxy[v] > 0.0
+        use_zv = use_z and w[v] > 0.0
+        if not (use_xy or use_zv):
+            continue
         y0 = rot[0, 0] * shape[v, 0] + rot[0, 1] * shape[v, 1] + rot[0, 2] * shape[v, 2]
         y1 = rot[1, 0] * shape[v, 0] + rot[1, 1] * shape[v, 1] + rot[1, 2] * shape[v, 2]
         y2 = rot[2, 0] * shape[v, 0] + rot[2, 1] * shape[v, 1] + rot[2, 2] * shape[v, 2]
@@ -108,9 +119,23 @@ def normal_equations(
         g[0, 0], g[0, 1], g[0, 2] = f / d * s, 0.0, f * pc0 / (d * d) * s
         g[1, 0], g[1, 1], g[1, 2] = 0.0, -f / d * s, -f * pc1 / (d * d) * s
         g[2, 0], g[2, 1], g[2, 2] = 0.0, 0.0, -inv_ds
-        nr = 3 if use_z else 2
-        for q in range(nr):
-            col = q * nv + v
+        nq = 0
+        q0 = 0 if use_xy else 2
+        if use_xy:
+            cols[0], cols[1] = ixy, nxy + ixy
+            rw[ixy] = t[v, 0] * sxy
+            rw[nxy + ixy] = t[v, 1] * sxy
+            ixy += 1
+            nq = 2
+        if use_zv:
+            cols[nq] = 2 * nxy + iz
+            zsw[iz] = sw
+            rw[2 * nxy + iz] = t[v, 2] * sw
+            iz += 1
+            nq += 1
+        for qi in range(nq):
+            q = q0 + qi
+            col = cols[qi]
             # dP/d(omega) = -[y]x, dP/d(dt) = I, dP/d(dc) = R dshape/dc
             jt[0, col] = -g[q, 1] * y2 + g[q, 2] * y1
             jt[1, col] = g[q, 0] * y2 - g[q, 2] * y0
@@ -125,26 +150,24 @@ def normal_equations(
             for j in range(nf):
                 m = free[j]
                 jt[6 + j, col] = e0 * dsdc[v, 0, m] + e1 * dsdc[v, 1, m] + e2 * dsdc[v, 2, m]
-        rw[v] = t[v, 0] * sxy
-        rw[nv + v] = t[v, 1] * sxy
-        if use_z:
-            col = 2 * nv + v
-            for j in range(n):
-                zmean[j] += w[v] * jt[j, col]
-            rw[col] = t[v, 2] * sw
-    if use_z:
+            if q == 2:
+                for j in range(n):
+                    zmean[j] += w[v] * jt[j, col]
+    if nz > 0:
         for j in range(n):
             zm = zmean[j] / wsum
-            for v in range(nv):
-                col = 2 * nv + v
-                jt[j, col] = (jt[j, col] - zm) * np.sqrt(w[v])
+            for i in range(nz):
+                col = 2 * nxy + i
+                jt[j, col] = (jt[j, col] - zm) * zsw[i]
     return _gram(jt, rw)
 
 
 @njit(cache=True, nogil=True, fastmath=True)
 def _gram(jt, r):
     """``(jt jt^T, -jt r)`` for ``jt`` (n, R): dot products of contiguous rows (vectorised:
-    the order of the sums is the compiler's)."""
+    the order of the sums is the compiler's), four rows by four at a time (each pair of
+    loads feeds 16 products, where a dot product at a time loads two numbers for each: 3-4x
+    faster on 45 x 1404)."""
     n, nr = jt.shape
     h = np.empty((n, n))
     b = np.empty(n)
@@ -153,12 +176,49 @@ def _gram(jt, r):
         for q in range(nr):
             acc += jt[i, q] * r[q]
         b[i] = -acc
-        for j in range(i, n):
-            acc = 0.0
-            for q in range(nr):
-                acc += jt[i, q] * jt[j, q]
-            h[i, j] = acc
-            h[j, i] = acc
+    blk = np.empty((4, 4))
+    for i in range(0, n, 4):
+        for j in range(i, n, 4):
+            if i + 4 <= n and j + 4 <= n:
+                a00, a01, a02, a03 = 0.0, 0.0, 0.0, 0.0
+                a10, a11, a12, a13 = 0.0, 0.0, 0.0, 0.0
+                a20, a21, a22, a23 = 0.0, 0.0, 0.0, 0.0
+                a30, a31, a32, a33 = 0.0, 0.0, 0.0, 0.0
+                for q in range(nr):
+                    x0, x1, x2, x3 = jt[i, q], jt[i + 1, q], jt[i + 2, q], jt[i + 3, q]
+                    y0, y1, y2, y3 = jt[j, q], jt[j + 1, q], jt[j + 2, q], jt[j + 3, q]
+                    a00 += x0 * y0
+                    a01 += x0 * y1
+                    a02 += x0 * y2
+                    a03 += x0 * y3
+                    a10 += x1 * y0
+                    a11 += x1 * y1
+                    a12 += x1 * y2
+                    a13 += x1 * y3
+                    a20 += x2 * y0
+                    a21 += x2 * y1
+                    a22 += x2 * y2
+                    a23 += x2 * y3
+                    a30 += x3 * y0
+                    a31 += x3 * y1
+                    a32 += x3 * y2
+                    a33 += x3 * y3
+                blk[0, 0], blk[0, 1], blk[0, 2], blk[0, 3] = a00, a01, a02, a03
+                blk[1, 0], blk[1, 1], blk[1, 2], blk[1, 3] = a10, a11, a12, a13
+                blk[2, 0], blk[2, 1], blk[2, 2], blk[2, 3] = a20, a21, a22, a23
+                blk[3, 0], blk[3, 1], blk[3, 2], blk[3, 3] = a30, a31, a32, a33
+                for di in range(4):
+                    for dj in range(4):
+                        h[i + di, j + dj] = blk[di, dj]
+                        h[j + dj, i + di] = blk[di, dj]
+            else:  # (the last rows, fewer than four)
+                for ii in range(i, min(i + 4, n)):
+                    for jj in range(j, min(j + 4, n)):
+                        acc = 0.0
+                        for q in range(nr):
+                            acc += jt[ii, q] * jt[jj, q]
+                        h[ii, jj] = acc
+                        h[jj, ii] = acc
     return h, b
 
 

@@ -376,34 +376,40 @@ class ModelFlow:
             m0 = np.zeros(grey.shape, dtype=np.uint8)
             poly = np.round((np.asarray(polygon) - [x0, y0]) * 4).astype(np.int32)
             cv2.fillPoly(m0, [poly], 1, lineType=cv2.LINE_8, shift=2)
-            if not m0.any():
-                m0 = None
-        if m0 is not None:
+            # (the polygon's pixels are within its box: the mask is looked at only there)
             gh, gw = grey.shape
             bx0, by0 = np.maximum(np.floor(poly.min(0) / 4).astype(int) - 1, 0)
             bx1, by1 = np.minimum(np.ceil(poly.max(0) / 4).astype(int) + 2, [gw, gh])
-            keep = np.ones(grey.shape, dtype=np.float32)
-            keep[by0:by1, bx0:bx1] -= m0[by0:by1, bx0:bx1]
+            if bx1 <= bx0 or by1 <= by0 or not m0[by0:by1, bx0:bx1].any():
+                m0 = None
+        if m0 is not None:
+            # the kept pixels' weights (1 but in the gap), made only where they are read:
+            # the box, and with the high-pass the crop around it that its blur reads
+            sx0, sy0, sx1, sy1 = bx0, by0, bx1, by1
             if low is not None:
-                # the gap's pixels out of the neighbourhood's mean (no halo around it): a
-                # blur normalised by the kept pixels', which differs from the plain one
-                # only within the kernel's reach (OpenCV's float kernel: 4 sigma) of the
-                # gap, so it is computed on a crop twice that reach around the gap's box
                 sig = self.highpass_sigma_px
                 r = (int(round(sig * 8 + 1)) | 1) // 2
                 ix0, iy0 = max(bx0 - r, 0), max(by0 - r, 0)
                 ix1, iy1 = min(bx1 + r, gw), min(by1 + r, gh)
                 sx0, sy0 = max(bx0 - 2 * r, 0), max(by0 - 2 * r, 0)
                 sx1, sy1 = min(bx1 + 2 * r, gw), min(by1 + 2 * r, gh)
-                gs, ks = grey[sy0:sy1, sx0:sx1], keep[sy0:sy1, sx0:sx1]
-                norm = cv2.GaussianBlur(gs * ks, (0, 0), sig) / np.maximum(
-                    cv2.GaussianBlur(ks, (0, 0), sig), 1e-3
+            keep = np.ones((sy1 - sy0, sx1 - sx0), dtype=np.float32)
+            kbox = (slice(by0 - sy0, by1 - sy0), slice(bx0 - sx0, bx1 - sx0))
+            keep[kbox] -= m0[by0:by1, bx0:bx1]
+            if low is not None:
+                # the gap's pixels out of the neighbourhood's mean (no halo around it): a
+                # blur normalised by the kept pixels', which differs from the plain one
+                # only within the kernel's reach (OpenCV's float kernel: 4 sigma) of the
+                # gap, so it is computed on a crop twice that reach around the gap's box
+                gs = grey[sy0:sy1, sx0:sx1]
+                norm = cv2.GaussianBlur(gs * keep, (0, 0), sig) / np.maximum(
+                    cv2.GaussianBlur(keep, (0, 0), sig), 1e-3
                 )
                 hp[iy0:iy1, ix0:ix1] += (
                     low[iy0:iy1, ix0:ix1] - norm[iy0 - sy0 : iy1 - sy0, ix0 - sx0 : ix1 - sx0]
                 )
             # (the gap at the mean: what pyrDown mixes in is neutral)
-            hp[by0:by1, bx0:bx1] *= keep[by0:by1, bx0:bx1]
+            hp[by0:by1, bx0:bx1] *= keep[kbox]
         grey = hp
         levels = [grey]
         for _ in range(self.levels):
@@ -418,16 +424,21 @@ class ModelFlow:
         if len(levels) == 1:
             flat = grey.ravel()
         else:
-            flat = np.concatenate([lv.ravel() for lv in levels]).astype(np.float64)
-        mask = np.zeros_like(flat)
+            flat = np.concatenate([lv.ravel() for lv in levels])  # (float64 already)
         if m0 is not None and len(levels) == 1:
+            mask = np.zeros_like(flat)
             mask.reshape(grey.shape)[by0:by1, bx0:bx1] = m0[by0:by1, bx0:bx1]
         elif m0 is not None:
-            ml = [m0.astype(np.float32)]
+            # (each level written into the packed float64 array: no concatenation to copy)
+            mask = np.empty_like(flat)
+            ml = m0.astype(np.float32)
+            mask[: sizes[0]] = ml.ravel()
             for k in range(1, len(levels)):
-                ml.append(cv2.resize(ml[-1], (int(shapes[k, 1]), int(shapes[k, 0])),
-                                     interpolation=cv2.INTER_AREA))  # fmt: skip
-            mask = np.concatenate([m.ravel() for m in ml]).astype(np.float64)
+                ml = cv2.resize(ml, (int(shapes[k, 1]), int(shapes[k, 0])),
+                                interpolation=cv2.INTER_AREA)  # fmt: skip
+                mask[offsets[k] : offsets[k] + sizes[k]] = ml.ravel()
+        else:
+            mask = np.zeros_like(flat)
         return flat, mask, offsets, shapes, np.array([x0, y0], dtype=np.float64), crop[4]
 
     def _view(self, camera, pose, shape, triangles):

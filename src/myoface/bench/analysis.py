@@ -222,7 +222,15 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     frame, the flow's thread 5.2, the fit waiting for it 3.4 ms a frame (the machine had no
     core free); at a load of 2.6-5.5 (c5ab423, with the brow muscles): default 41.8 fps
     (0.184x), --flow 34.0 (0.149x), MediaPipe 227.7; process CPU 17.7 / 25.0 / 4.2 ms, the
-    flow's thread 5.0, the fit 4.5 ms against 3.1, its wait for the flow 0.19 ms a frame."""
+    flow's thread 5.0, the fit 4.5 ms against 3.1, its wait for the flow 0.19 ms a frame.
+    With the fit's kernels faster (branch ``speed``, 2026-12-02, full runs of this benchmark
+    alternating with the tree before them at a load of 2-16): the fit's CPU a frame 2.2
+    against 3.0 ms (default) and 2.65 against 4.2 (--flow), the process CPU 16.1 against
+    18.0 and 22.4 against 24.4 ms (medians of 3 and 4 runs); --flow 0.149-0.174x MediaPipe
+    (median 0.173) against 0.129-0.229x (median 0.150), the default 0.222-0.248x against
+    0.187-0.300x; MediaPipe alone 244-275 frames/s (3.6-4.3 ms) in those runs, so 0.25x is
+    15-17 ms a frame, where the calibration is 8-10 (MediaPipe on its 60 frames, which
+    bounds it) and the flow's thread 4.5-5.5."""
     path = _sample_video()
     m = None if not quick else 24
     # the default, MediaPipe alone and --flow (the points read against the calibration frame
