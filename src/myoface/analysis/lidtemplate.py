@@ -1,0 +1,459 @@
+"""The upper lids read against the calibration frame: how far each lid has slid over its eye.
+
+MediaPipe's lid points do not close in a blink (on ``single_face.mp4``'s blink, frames 26-28,
+the fit that follows them closed the lids to about 0.4 of the way while the person's met),
+and the lid margins' edges (:mod:`myoface.analysis.lidedges`) are lost as the eye closes: a
+closed lid has no margin edge near where the open one was. What does not go away in a blink
+is the lid itself: the band along its margin (the lashes, dark, and the lid's skin above them)
+slides down over the eye and stays in view down to the lower lid. This module follows that
+band, in the person's own appearance, against the calibration frame (never frame to frame, so
+it does not drift).
+
+The geometry (:class:`LidTemplate`), in the head frame of the person's calibrated neutral: for
+each interior vertex ``u`` of an eye's upper margin (:func:`~myoface.analysis.lidedges.
+lid_chains`; those within the middle :attr:`LidTemplateSettings.columns` of the eye's width)
+the lower margin's point below it (at the same x, along the lower chain), the gap ``G`` between
+them, and the column of points ``P(tau) = X_u + tau G``: ``tau`` 0 on the upper margin, 1 on the
+lower one. The model's lids move along these columns: the palpebral orbicularis brings the
+upper margin to ``tau = (1 - LOWER_SHARE) k`` at closure ``k``, and the levator raises it to
+``tau < 0`` (:mod:`myoface.muscles.lids`), the same ``tau`` along the whole lid.
+
+The reading (:meth:`LidTemplate.read`): the calibration frame's luma along each column
+(projected through the calibration's pose) over the band ``tau`` in
+:attr:`LidTemplateSettings.band` (above the margin to a little below it) is the template; the
+frame's luma along the same columns (through the frame's pose) is compared with it slid down by
+``delta`` (each column's band with its mean taken off, so a change of brightness does not
+count), summed over the eye's columns, for ``delta`` in :attr:`LidTemplateSettings.search`;
+the least sum, placed between samples by a parabola, is where the eye's upper margin is. The
+band is short and starts just below the margin, so what the opening shows (the iris turns with
+the gaze) and what the lid's skin does far above the margin (the fold unfolds as the lid
+closes) count little. A reading counts when its minimum is clear (:attr:`LidTemplateSettings.
+min_clarity`) and not at the search's ends.
+
+The term (:class:`LidTemplateTerm`): for each column of an eye read, the row ``(G^ . (X_u -
+X_u0) - delta |G|) / sigma`` (mm on the face): the model's upper margin vertex moved along its
+column by as much as the image says the lid moved, relative to the calibration, so a rest is
+a rest whatever offset MediaPipe's points had there. It reads the head frame only (no pose
+unknowns: the pose is the other terms'); Huber-weighted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from myoface.analysis.camera import HeadPose, PinholeCamera
+from myoface.analysis.lidedges import FACING_DEG, lid_chains
+from myoface.analysis.terms import Estimate
+
+
+@dataclass(frozen=True)
+class LidTemplateSettings:
+    """How the lids are read against the calibration frame, and weighed.
+
+    band : the template, in gap units from the upper margin (negative: above it).
+    search : the shifts tried (gap units; 1 is the lower margin's place at calibration).
+    step : the profile's sampling step (gap units).
+    columns : the share of the eye's width (about its middle) whose upper margin vertices
+        are read: near the corners the gap is too short to read.
+    min_gap_px : a column whose gap projects shorter than this (px) is not read.
+    min_contrast : a column whose template varies by less than this (luma SD) is not read.
+    min_clarity : a reading counts when its least cost is below ``1 - min_clarity`` of the
+        median cost over the shifts tried.
+    blur_px : the frame is smoothed by a Gaussian of this SD (px) before it is sampled.
+    sigma_mm : the term's unit, mm on the face, per column.
+    huber : Huber's threshold (sigmas).
+    redetect_px : the frame is read again at a Gauss-Newton step's start once the columns
+        have moved this far in the image since the last reading.
+    """
+
+    band: tuple[float, float] = (-0.5, 0.1)
+    search: tuple[float, float] = (-0.4, 1.1)
+    step: float = 0.025
+    columns: float = 0.6
+    min_gap_px: float = 2.0
+    min_contrast: float = 3.0
+    min_clarity: float = 0.3
+    blur_px: float = 0.7
+    sigma_mm: float = 0.5
+    huber: float = 1.5
+    redetect_px: float = 0.5
+    follow: float = 1.5
+    anchor: bool = False
+    anchor_patch: float = 0.6
+    anchor_search: float = 0.5
+    anchor_step: float = 0.5
+    anchor_out: float = 0.25
+    chroma_weight: float = 2.0
+
+
+def _luma(img) -> np.ndarray:
+    img = np.asarray(img)
+    if img.ndim == 2:
+        return img.astype(np.float32)
+    return (0.299 * img[..., 0] + 0.587 * img[..., 1] + 0.114 * img[..., 2]).astype(np.float32)
+
+
+def _sample(grey: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear samples of ``grey`` (H, W) at ``uv`` (..., 2) px (pixel centres at integers;
+    clamped to the image)."""
+    import cv2
+
+    shp = uv.shape[:-1]
+    flat = uv.reshape(-1, 2)
+    n = len(flat)
+    w = 1024  # (remap's maps are images: fewer than 32767 rows)
+    m = np.zeros((-(-n // w) * w, 2), dtype=np.float32)
+    m[:n] = flat
+    m = m.reshape(-1, w, 2)
+    out = cv2.remap(grey, m[..., 0], m[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(-1)[:n].reshape(shp).astype(np.float64)
+
+
+def _blurred(image, sigma: float) -> np.ndarray:
+    import cv2
+
+    g = _luma(image)
+    return cv2.GaussianBlur(g, (0, 0), sigma) if sigma > 0 else g
+
+
+def _chroma(image, sigma: float, weight: float) -> np.ndarray:
+    """(2, H, W) the frame's r and g chromaticities (each channel over their sum), smoothed,
+    times 255 ``weight`` (in luma levels)."""
+    import cv2
+
+    img = np.asarray(image, dtype=np.float32)
+    if sigma > 0:
+        img = cv2.GaussianBlur(img, (0, 0), sigma)
+    tot = np.maximum(img.sum(-1), 1.0)
+    return np.stack([img[..., 0] / tot, img[..., 1] / tot]) * np.float32(255.0 * weight)
+
+
+class LidTemplate:
+    """The columns of each eye's upper lid and the calibration frame's template along them
+    (see the module's docstring).
+
+    Parameters
+    ----------
+    face : the face model's face (its landmark groups ``eye_l``, ``eye_r``).
+    shape : (V, 3) mm, the person's calibrated neutral (head frame).
+    reference : the calibration frame (H, W, 3) RGB.
+    camera : PinholeCamera; pose : the calibration frame's HeadPose.
+    """
+
+    def __init__(self, face, shape, reference, camera: PinholeCamera, pose: HeadPose,
+                 settings: LidTemplateSettings | None = None):  # fmt: skip
+        s = self.settings = settings or LidTemplateSettings()
+        self.camera = camera
+        shape = np.asarray(shape, dtype=np.float64)
+        verts, x0, gaps, eyes = [], [], [], []
+        chains = lid_chains(face)
+        #: each eye's corners (the anchor: :meth:`anchor`), head frame
+        self.canthi = np.array([shape[[up[0], up[-1]]] for up, _ in chains])  # (2, 2, 3)
+        for e, (upper, lower) in enumerate(chains):
+            xs_l = shape[lower, 0]
+            order = np.argsort(xs_l)
+            lo, hi = shape[upper, 0].min(), shape[upper, 0].max()
+            mid, half = 0.5 * (lo + hi), 0.5 * s.columns * (hi - lo)
+            for u in upper[1:-1]:
+                x = shape[u, 0]
+                if abs(x - mid) > half:
+                    continue
+                below = np.array(
+                    [np.interp(x, xs_l[order], shape[lower[order], j]) for j in range(3)]
+                )
+                verts.append(u), x0.append(shape[u]), gaps.append(below - shape[u]), eyes.append(e)
+        self.vertices = np.array(verts, dtype=np.int64)
+        #: each eye's upper margin's interior vertices (MediaPipe's upper lid points)
+        self.upper_margin = [np.asarray(up[1:-1], dtype=np.int64) for up, _ in chains]
+        self.x0 = np.array(x0).reshape(-1, 3)
+        self.gap = np.array(gaps).reshape(-1, 3)
+        self.gap_mm = np.linalg.norm(self.gap, axis=1)
+        self.dir = self.gap / np.maximum(self.gap_mm[:, None], 1e-9)
+        self.eye = np.array(eyes, dtype=np.int64)
+        b0, b1 = s.band
+        self._band = np.arange(round(b0 / s.step), round(b1 / s.step) + 1) * s.step
+        self._shifts = np.arange(round(s.search[0] / s.step), round(s.search[1] / s.step) + 1)
+        self._shifts = self._shifts * s.step
+        # the frame's profile covers every shifted band
+        self._taus = np.arange(
+            round((s.search[0] + b0) / s.step), round((s.search[1] + b1) / s.step) + 1
+        ) * s.step  # fmt: skip
+        # how much of the margin's shift the band's samples follow: 1 at the margin, falling
+        # as a raised cosine to 0 at s.follow gaps above it
+        d = np.clip(-self._band / s.follow, 0.0, 1.0)
+        self._follow = 0.5 + 0.5 * np.cos(np.pi * d)
+        grey = _blurred(reference, s.blur_px)
+        # the anchor's patches: a grid in the head frame's x, y about each anchor point, a
+        # pixel's mm at calibration apart (:meth:`anchor`)
+        uv0 = self._uv(pose, np.array([0.0, 1.0]))
+        gap_px = float(np.median(np.linalg.norm(uv0[:, 1] - uv0[:, 0], axis=1)))
+        self._mm = float(np.median(self.gap_mm)) / max(gap_px, 1e-9)  # mm a pixel
+        h = max(2, int(round(s.anchor_patch * gap_px)))
+        g = np.arange(-h, h + 1, dtype=np.float64) * self._mm
+        gx, gy = np.meshgrid(g, g)
+        self._patch = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+        r = max(1, int(round(s.anchor_search * gap_px / s.anchor_step)))
+        self._offsets = np.arange(-r, r + 1) * s.anchor_step * self._mm
+        a = self._anchor_points()
+        self._corner_ref = _sample(grey, self._project(pose, a[:, :, None, :] + self._patch))
+        self._corner_ref -= self._corner_ref.mean(-1, keepdims=True)
+        self.template = _sample(grey, self._uv(pose, self._band))
+        self.template -= self.template.mean(1, keepdims=True)
+        self.chroma = None
+        if s.chroma_weight > 0 and np.ndim(reference) == 3:
+            ch = _chroma(reference, s.blur_px, s.chroma_weight)
+            self.chroma = np.stack([_sample(c, self._uv(pose, self._band)) for c in ch])
+        self.usable = self.template.std(1) >= s.min_contrast
+        uv0 = self._uv(pose, np.array([0.0, 1.0]))
+        self.usable &= np.linalg.norm(uv0[:, 1] - uv0[:, 0], axis=1) >= s.min_gap_px
+
+    def _uv(self, pose: HeadPose, taus) -> np.ndarray:
+        """(N, len(taus), 2) the columns' points at ``taus`` in the image at ``pose``."""
+        p = self.x0[:, None, :] + np.asarray(taus)[None, :, None] * self.gap[:, None, :]
+        return self.camera.project(pose.apply(p.reshape(-1, 3))).reshape(len(p), -1, 2)
+
+    def _project(self, pose: HeadPose, p) -> np.ndarray:
+        """Head-frame points (..., 3) -> image points (..., 2) at ``pose``."""
+        p = np.asarray(p)
+        return self.camera.project(pose.apply(p.reshape(-1, 3))).reshape(*p.shape[:-1], 2)
+
+    def _anchor_points(self) -> np.ndarray:
+        """(2, 2, 3) the anchor's points, head frame: beside each eye's corners,
+        :attr:`LidTemplateSettings.anchor_out` of the eye's width outwards (away from the
+        lids, which drag a corner's patch as they close)."""
+        c = self.canthi
+        return c + self.settings.anchor_out * (c - c[:, ::-1])
+
+    def anchor(self, grey, pose: HeadPose) -> np.ndarray:
+        """(2, 3) mm: per eye, how far (x, y of the head frame) the frame's skin beside the eye
+        corners lies from where ``pose`` puts it (each patch, a grid in the head frame's x, y
+        seen through ``pose``, matched against the calibration frame's by the least sum of
+        squared differences over shifts on a grid, placed between grid points by a parabola;
+        the two corners' mean): the pose's own error at the eye, which the lids are read
+        relative to."""
+        s = self.settings
+        a = self._anchor_points()
+        o = self._offsets
+        n = len(o)
+        ox, oy = np.meshgrid(o, o)
+        sh = np.column_stack([ox.ravel(), oy.ravel(), np.zeros(ox.size)])  # (S, 3)
+        out = np.zeros((2, 3))
+        step = s.anchor_step * self._mm
+        for e in (0, 1):
+            found = []
+            for c in (0, 1):
+                pts = a[e, c][None, None, :] + sh[:, None, :] + self._patch[None, :, :]
+                win = _sample(grey, self._project(pose, pts))
+                win -= win.mean(-1, keepdims=True)
+                cost = ((win - self._corner_ref[e, c][None]) ** 2).mean(-1).reshape(n, n)
+                iy, ix = np.unravel_index(int(np.argmin(cost)), cost.shape)
+                d = [o[ix], o[iy]]
+                for ax, (i, line) in enumerate(((ix, cost[iy, :]), (iy, cost[:, ix]))):
+                    if 0 < i < n - 1:
+                        den = line[i - 1] - 2 * line[i] + line[i + 1]
+                        if den > 1e-12:
+                            frac = 0.5 * (line[i - 1] - line[i + 1]) / den
+                            d[ax] += np.clip(frac, -0.5, 0.5) * step
+                found.append(d)
+            out[e, :2] = np.mean(found, axis=0)
+        return out
+
+    def _facing(self, pose: HeadPose) -> np.ndarray:
+        """(2,) whether each eye faces the camera within :data:`FACING_DEG`."""
+        fwd = pose.rotation[:, 2]
+        out = np.zeros(2, dtype=bool)
+        for e in (0, 1):
+            sel = self.eye == e
+            if not sel.any():
+                continue
+            pc = pose.apply(self.x0[sel].mean(0)[None])[0]
+            out[e] = -pc @ fwd / max(np.linalg.norm(pc), 1e-9) >= np.cos(np.radians(FACING_DEG))
+        return out
+
+    def read(self, image, pose: HeadPose, grey=None, chroma=None) -> dict:
+        """The upper lids of ``image`` at head pose ``pose``: per eye (0, 1) the shift
+        ``delta`` (gap units; NaN: not read), its clarity, and the cost curve."""
+        s = self.settings
+        if grey is None:
+            grey = _blurred(image, s.blur_px)
+        if chroma is None and self.chroma is not None:
+            chroma = _chroma(image, s.blur_px, s.chroma_weight)
+        # the frame along the columns where each template sample lands for each shift: the
+        # lid's skin above the margin moves with it, less the further up (self._follow)
+        where = self._band[None, :] + self._shifts[:, None] * self._follow[None, :]  # (S, nb)
+        shift = self.anchor(grey, pose) if s.anchor else np.zeros((2, 3))
+        p = self.x0[:, None, :] + where.reshape(-1)[None, :, None] * self.gap[:, None, :]
+        uv = self._project(pose, p + shift[self.eye][:, None, :])
+        win = _sample(grey, uv).reshape(len(self.x0), *where.shape)
+        win = win - win.mean(2, keepdims=True)
+        cost = ((win - self.template[:, None, :]) ** 2).mean(2)  # (N, S)
+        if self.chroma is not None:
+            for c, ref in zip(chroma, self.chroma, strict=True):
+                got = _sample(c, uv).reshape(len(self.x0), *where.shape)
+                cost += ((got - ref[:, None, :]) ** 2).mean(2)
+        delta = np.full(2, np.nan)
+        clarity = np.zeros(2)
+        curves = [None, None]
+        facing = self._facing(pose)
+        for e in (0, 1):
+            sel = (self.eye == e) & self.usable
+            if not sel.any() or not facing[e]:
+                continue
+            c = cost[sel].sum(0)
+            curves[e] = c
+            i = int(np.argmin(c))
+            med = float(np.median(c))
+            clarity[e] = 1.0 - c[i] / med if med > 0 else 0.0
+            if i == 0 or i == len(c) - 1 or clarity[e] < s.min_clarity:
+                continue
+            c0, c1, c2 = c[i - 1], c[i], c[i + 1]
+            den = c0 - 2 * c1 + c2
+            frac = 0.5 * (c0 - c2) / den if den > 1e-12 else 0.0
+            delta[e] = self._shifts[i] + np.clip(frac, -0.5, 0.5) * s.step
+        return {"delta": delta, "clarity": clarity, "cost": curves, "shifts": self._shifts,
+                "anchor_mm": shift}  # fmt: skip
+
+
+class LidTemplateTerm:
+    """The upper lids' margins moved along their columns as far as the frame shows
+    (:class:`LidTemplate`; see the module's docstring)."""
+
+    def __init__(self, image, template: LidTemplate, lid_muscles=None):
+        self.template = template
+        self.image = image
+        #: (M,) bool: the contractions the term moves (the lid muscles; None: all)
+        self.lid_muscles = None if lid_muscles is None else np.asarray(lid_muscles, bool)
+        self._grey = None
+        self._at = None
+        self.delta = np.full(2, np.nan)
+        self.rows = np.zeros(0, dtype=np.int64)
+        self.hw = np.zeros(0)
+
+    def detect(self, pose: HeadPose) -> dict:
+        """Read the lids at ``pose`` (the rows then follow the reading)."""
+        t = self.template
+        if self._grey is None:
+            self._grey = _blurred(self.image, t.settings.blur_px)
+            if t.chroma is not None:
+                self._chroma = _chroma(self.image, t.settings.blur_px, t.settings.chroma_weight)
+        out = t.read(None, pose, self._grey, getattr(self, "_chroma", None))
+        self._at = t._uv(pose, np.array([0.0]))[:, 0]
+        self.delta = out["delta"]
+        self.rows = np.flatnonzero(t.usable & np.isfinite(self.delta[t.eye]))
+        return out
+
+    def prepare(self, est: Estimate) -> None:
+        t = self.template
+        uv = t._uv(est.pose, np.array([0.0]))[:, 0]
+        if self._at is None or np.abs(uv - self._at).max() > t.settings.redetect_px:
+            self.detect(est.pose)
+        r = self._residuals(est)
+        h = t.settings.huber
+        self.hw = np.where(np.abs(r) > h, h / np.maximum(np.abs(r), 1e-12), 1.0)
+
+    def read_eyes(self) -> np.ndarray:
+        """(2,) bool: the eyes whose lids the last reading read."""
+        return np.isfinite(self.delta) & np.array(
+            [(self.template.usable & (self.template.eye == e)).any() for e in (0, 1)]
+        )
+
+    def _residuals(self, est: Estimate) -> np.ndarray:
+        t, j = self.template, self.rows
+        moved = ((est.shape[t.vertices[j]] - t.x0[j]) * t.dir[j]).sum(1)
+        return (moved - self.delta[t.eye[j]] * t.gap_mm[j]) / t.settings.sigma_mm
+
+    def normal_equations(self, est: Estimate):
+        n = est.n_unknowns
+        hmat, b = np.zeros((n, n)), np.zeros(n)
+        if not len(self.rows):
+            return hmat, b
+        t, j = self.template, self.rows
+        r = self._residuals(est)
+        # d r / d dc: the vertex's response along its column
+        jr = np.einsum("nk,nkf->nf", t.dir[j], est.jac[t.vertices[j]][:, :, est.free])
+        jr /= t.settings.sigma_mm
+        if self.lid_muscles is not None:
+            jr[:, ~self.lid_muscles[est.free]] = 0.0
+        w = self.hw
+        hmat[6:, 6:] = (jr * w[:, None]).T @ jr
+        b[6:] = -(jr * w[:, None]).T @ r
+        return hmat, b
+
+    def cost(self, est: Estimate) -> float:
+        if not len(self.rows):
+            return 0.0
+        r = np.abs(self._residuals(est))
+        h = self.template.settings.huber
+        return float(np.where(r <= h, r * r, 2 * h * r - h * h).sum())
+
+
+#: the weight of MediaPipe's upper lid margin points where the lids are read
+#: (:meth:`_Sum.landmark_weights`)
+LANDMARK_WEIGHT = 0.0
+#: which lid readers the fit's lid term uses (:func:`lid_term`): ``"template"`` (this
+#: module's), ``"edges"`` (:class:`~myoface.analysis.lidedges.LidEdgeTerm`) or both
+READERS = ("template",)
+
+
+class _Sum:
+    """Terms summed as one."""
+
+    def __init__(self, terms):
+        self.terms = list(terms)
+
+    def prepare(self, est: Estimate) -> None:
+        for t in self.terms:
+            t.prepare(est)
+
+    def normal_equations(self, est: Estimate):
+        n = est.n_unknowns
+        hmat, b = np.zeros((n, n)), np.zeros(n)
+        for t in self.terms:
+            h1, b1 = t.normal_equations(est)
+            hmat += h1
+            b += b1
+        return hmat, b
+
+    def cost(self, est: Estimate) -> float:
+        return float(sum(t.cost(est) for t in self.terms))
+
+    def landmark_weights(self, weights) -> np.ndarray:
+        """The landmarks' per-vertex ``weights`` (V,) with MediaPipe's upper lid margin
+        points, of the eyes whose lids are read here, times :data:`LANDMARK_WEIGHT` (they
+        do not close in a blink: the lids are read from the image instead)."""
+        w = np.array(weights, dtype=np.float64)
+        for t in self.terms:
+            if isinstance(t, LidTemplateTerm):
+                for e, read in enumerate(t.read_eyes()):
+                    if read:
+                        w[t.template.upper_margin[e]] *= LANDMARK_WEIGHT
+        return w
+
+
+def lid_term(fit, image, readers=None):
+    """The lids' term of the frame ``image`` for the fit ``fit``
+    (:class:`~myoface.analysis.modelfit.ModelFit`): the readers of :data:`READERS` summed
+    (the template's once the fit has its reference, :meth:`~myoface.analysis.modelfit.
+    ModelFit.set_lid_reference`)."""
+    from myoface.analysis.lidedges import LidEdgeTerm, MarginSamples
+
+    readers = READERS if readers is None else readers
+    terms = []
+    template = getattr(fit, "lid_template", None)
+    if "template" in readers and template is not None:
+        kinds = {m.id: getattr(m, "kind", "") for m in fit.model.muscles.muscles}
+        lid = np.array([kinds.get(i) == "lid" for i in fit.ids])
+        term = LidTemplateTerm(image, template, lid)
+        # read at once, at the last frame's pose (or the calibration's): the landmarks'
+        # weights (:meth:`_Sum.landmark_weights`) are set before the first step
+        prev = getattr(fit, "_prev", None)
+        pose = prev.pose if prev is not None else fit.calibration.pose
+        term.detect(pose)
+        terms.append(term)
+    if "edges" in readers:
+        if getattr(fit, "_lid_samples", None) is None:
+            fit._lid_samples = MarginSamples(fit.model.face)
+        terms.append(LidEdgeTerm(image, fit._lid_samples, fit.camera))
+    return _Sum(terms)
