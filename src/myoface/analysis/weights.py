@@ -134,7 +134,7 @@ class FitSettings:
     #: the closure of each eye's opening against the calibration frame, where it closes, in
     #: place of MediaPipe's upper lid points, which do not close in a blink; the lid margins'
     #: edges, :mod:`myoface.analysis.lidedges`, opt-in there). What was measured is in
-    #: :mod:`myoface.analysis.lidtemplate` (gaze 5.05 -> 4.98 deg, fidelity 0.756 -> 0.763)
+    #: :mod:`myoface.analysis.lidtemplate` (gaze 5.05 -> 5.03 deg, fidelity 0.756 -> 0.763)
     lid_edges: bool = True
     #: the photometric samples' weight for the model's own error, as :attr:`model_error` is
     #: the landmarks' (:func:`model_error_weights` at each sample: 1 where no muscle moves the
