@@ -339,7 +339,7 @@ class LidTemplate:
         c = self.canthi
         return c + self.settings.anchor_out * (c - c[:, ::-1])
 
-    def anchor(self, grey, pose: HeadPose) -> np.ndarray:
+    def anchor(self, grey, pose: HeadPose, origin=(0.0, 0.0)) -> np.ndarray:
         """(2, 3) mm: per eye, how far (x, y of the head frame) the frame's skin beside the eye
         corners lies from where ``pose`` puts it (each patch, a grid in the head frame's x, y
         seen through ``pose``, matched against the calibration frame's by the least sum of
@@ -358,7 +358,7 @@ class LidTemplate:
             found = []
             for c in (0, 1):
                 pts = a[e, c][None, None, :] + sh[:, None, :] + self._patch[None, :, :]
-                win = _sample(grey, self._project(pose, self._surface(pts)))
+                win = _sample(grey, self._project(pose, self._surface(pts)) - origin)
                 win -= win.mean(-1, keepdims=True)
                 cost = ((win - self._corner_ref[e, c][None]) ** 2).mean(-1).reshape(n, n)
                 iy, ix = np.unravel_index(int(np.argmin(cost)), cost.shape)
@@ -385,26 +385,31 @@ class LidTemplate:
             out[e] = -pc @ fwd / max(np.linalg.norm(pc), 1e-9) >= np.cos(np.radians(FACING_DEG))
         return out
 
-    def read(self, image, pose: HeadPose, grey=None, chroma=None) -> dict:
-        """The upper lids of ``image`` at head pose ``pose``: per eye (0, 1) the shift
-        ``delta`` (gap units; NaN: not read), its clarity, and the cost curve."""
+    def read(self, image, pose: HeadPose, grey=None, chroma=None, origin=None) -> dict:
+        """The lids of ``image`` at head pose ``pose``: per eye (0, 1) the upper lid's shift
+        ``delta``, the lower lid's ``delta_lower`` and the ``closure`` (the first less the
+        second; gap units; NaN: not read), the clarities, and the upper lid's cost curve.
+        ``grey``, ``chroma``: the frame's (:func:`_blurred`, :func:`_chroma`) if already
+        made, of the crop of the frame whose top left corner is ``origin`` (x, y) px."""
         s = self.settings
+        origin = np.zeros(2) if origin is None else np.asarray(origin, dtype=np.float64)
         if grey is None:
             grey = _blurred(image, s.blur_px)
         if chroma is None and self.chroma is not None:
             chroma = _chroma(image, s.blur_px, s.chroma_weight)
-        shift = self.anchor(grey, pose) if s.anchor else np.zeros((2, 3))
+        shift = self.anchor(grey, pose, origin) if s.anchor else np.zeros((2, 3))
         up = self._slide(grey, chroma, pose, shift, self._band, self._follow, self._shifts,
-                         self.template, self.chroma)  # fmt: skip
+                         self.template, self.chroma, origin)  # fmt: skip
         lo = self._slide(grey, chroma, pose, shift, self._band_lo, self._follow_lo,
-                         self._shifts_lo, self.template_lo, self.chroma_lo)  # fmt: skip
+                         self._shifts_lo, self.template_lo, self.chroma_lo, origin)  # fmt: skip
         return {
             "delta": up[0], "clarity": up[1], "cost": up[2], "shifts": self._shifts,
             "delta_lower": lo[0], "clarity_lower": lo[1], "closure": up[0] - lo[0],
             "anchor_mm": shift,
         }  # fmt: skip
 
-    def _slide(self, grey, chroma, pose, shift, band, follow, shifts, tmpl, tmpl_chroma):
+    def _slide(self, grey, chroma, pose, shift, band, follow, shifts, tmpl, tmpl_chroma,
+               origin):  # fmt: skip
         """Per eye the shift of ``band`` (the template ``tmpl``, ``tmpl_chroma``) along the
         columns that the frame matches best (see the module's docstring): (delta (2,), clarity
         (2,), the cost curves)."""
@@ -413,7 +418,7 @@ class LidTemplate:
         # lid's skin beyond the margin moves with it, less the further away (``follow``)
         where = band[None, :] + shifts[:, None] * follow[None, :]  # (S, nb)
         p = self.x0[:, None, :] + where.reshape(-1)[None, :, None] * self.gap[:, None, :]
-        uv = self._project(pose, p + shift[self.eye][:, None, :])
+        uv = self._project(pose, p + shift[self.eye][:, None, :]) - origin
         win = _sample(grey, uv).reshape(len(self.x0), *where.shape)
         win = win - win.mean(2, keepdims=True)
         cost = ((win - tmpl[:, None, :]) ** 2).mean(2)  # (N, S)
@@ -462,10 +467,21 @@ class LidTemplateTerm:
         """Read the lids at ``pose`` (the rows then follow the reading)."""
         t = self.template
         if self._grey is None:
-            self._grey = _blurred(self.image, t.settings.blur_px)
+            # the frame about the eyes only: the columns' whole search and a margin
+            uv = t._uv(pose, np.array([-1.2, 0.5, 1.8])).reshape(-1, 2)
+            h, w = np.shape(self.image)[:2]
+            m = CROP_MARGIN_PX
+            x0, y0 = (int(max(np.floor(uv[:, i].min()) - m, 0)) for i in (0, 1))
+            x1 = int(min(np.ceil(uv[:, 0].max()) + m + 1, w))
+            y1 = int(min(np.ceil(uv[:, 1].max()) + m + 1, h))
+            if x1 <= x0 + 2 or y1 <= y0 + 2:  # (off the frame)
+                x0, y0, x1, y1 = 0, 0, w, h
+            crop = np.asarray(self.image)[y0:y1, x0:x1]
+            self._origin = np.array([x0, y0], dtype=np.float64)
+            self._grey = _blurred(crop, t.settings.blur_px)
             if t.chroma is not None:
-                self._chroma = _chroma(self.image, t.settings.blur_px, t.settings.chroma_weight)
-        out = t.read(None, pose, self._grey, getattr(self, "_chroma", None))
+                self._chroma = _chroma(crop, t.settings.blur_px, t.settings.chroma_weight)
+        out = t.read(None, pose, self._grey, getattr(self, "_chroma", None), self._origin)
         self._at = t._uv(pose, np.array([0.0]))[:, 0]
         self.delta = out["closure"]
         self.rows = np.flatnonzero(t.usable & np.isfinite(self.delta[t.eye]))
@@ -537,6 +553,9 @@ class LidTemplateTerm:
         return float((share * np.where(r <= h, r * r, 2 * h * r - h * h)).sum())
 
 
+#: the frame is read about the eyes only: the columns' extent and this margin (px; the pose
+#: moves by less within a frame's fit)
+CROP_MARGIN_PX = 24
 #: the weight of MediaPipe's upper lid margin points where the lids are read
 #: (:meth:`_Sum.landmark_weights`)
 LANDMARK_WEIGHT = 0.0
