@@ -293,14 +293,15 @@ class LidTemplate:
         self._patch = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
         r = max(1, int(round(s.anchor_search * gap_px / s.anchor_step)))
         self._offsets = np.arange(-r, r + 1) * s.anchor_step * self._mm
-        a = self._anchor_points()
-        self._surface = _SurfaceDepth(
-            shape, a, float(np.abs(g).max() + np.abs(self._offsets).max())
-        )
-        self._corner_ref = _sample(
-            grey, self._project(pose, self._surface(a[:, :, None, :] + self._patch))
-        )
-        self._corner_ref -= self._corner_ref.mean(-1, keepdims=True)
+        if s.anchor:
+            a = self._anchor_points()
+            self._surface = _SurfaceDepth(
+                shape, a, float(np.abs(g).max() + np.abs(self._offsets).max())
+            )
+            self._corner_ref = _sample(
+                grey, self._project(pose, self._surface(a[:, :, None, :] + self._patch))
+            )
+            self._corner_ref -= self._corner_ref.mean(-1, keepdims=True)
         self.template = _sample(grey, self._uv(pose, self._band))
         self.template -= self.template.mean(1, keepdims=True)
         self.chroma = None
