@@ -54,18 +54,20 @@ they are, and lids placed by it moved the gaze's reading (``analysis.gaze_error_
 5.48 deg with the upper lid's reading counted at every closure; the closure counted from 0.15,
 in full from 0.35: 5.01, quick 7.45 against 6.88, its five partly closed frames read worse).
 
-Measured 2026-12-02 (the scripts in the report of branch ``lids``):
+Measured 2026-12-02:
 
 - the reader on known answers, renders of the default face (no lashes, no texture; head turned
   8/-4/3 deg) closing by 0.3, 0.6, 0.8, 1 (``tests/analysis/test_lidtemplate.py``): the upper
   margin within 0.01-0.07 of a gap up to 0.8, the closure within 0.00-0.10 (a little short as
   the lids close), the same through a pose 1.5 mm off, where the upper margin alone is 0.16-0.23
   off; the full closure (no line left to see) read at 0.74-0.77. The gaze benchmark's 90
-  degraded renders of the personal face (head +-30 deg, eyes turning +-24 deg, four blinks):
-  at the true poses the upper margin 0.11 of a gap RMS off on open eyes (the worst 0.28; 0.47
-  and 1.07 without the chroma: a dark iris turned under the margin reads as the lashes coming
-  down), 0.12 RMS at a gain of 0.99 in the blinks; at the fit's poses the upper margin 0.24 RMS
-  off on open eyes, the closure 0.15 (36 % of the readings not clear);
+  degraded renders of the personal face (head +-30 deg, eyes turning +-24 deg, four blinks;
+  ``tools/lidtemplate_check.py``): at the true poses the upper margin 0.11 of a gap RMS off
+  on open eyes (the worst 0.28; 0.47 and 1.07 without the chroma: a dark iris turned under
+  the margin reads as the lashes coming down), 0.12 RMS in the blinks (a quarter of the
+  readings not clear); the closure 0.095 RMS on open eyes (the worst 0.37), 0.08 in the
+  blinks at a gain of 0.95 (40 % not clear); at the fit's poses the upper margin 0.24 RMS off
+  on open eyes, the closure 0.15 (36 % of the readings not clear);
 - on ``single_face.mp4`` at the fit's poses, the upper margin: rest 0.00-0.05, the blink 0.51
   / 0.35 (frame 25), 0.83 / 0.73, 0.89 / 0.99, 0.71 / 0.68 (26-28), 0.52 / 0.33 (29), the
   smile 0.27-0.33 / 0.17-0.22 (of which 0.1-0.2 is the fit's pose: with the columns moved
