@@ -111,10 +111,13 @@ def test_closed_and_turned_away_eyes_are_not_read():
 
 
 @pytest.mark.slow
-def test_the_fit_with_lid_edges_puts_biased_lids_back_on_the_rendered_margins():
+def test_the_fit_with_lid_edges_puts_biased_lids_back_on_the_rendered_margins(monkeypatch):
     """A render of the default face with a detector that puts the upper lids' points 2 px too
-    high: the fit follows the points; with the lid edges (FitSettings.lid_edges) its upper
-    margins end nearer the rendered ones."""
+    high: the fit follows the points; with the lid edges (FitSettings.lid_edges, the edge
+    reader: lidtemplate.READERS) its upper margins end nearer the rendered ones."""
+    import myoface.analysis.lidtemplate as lt
+
+    monkeypatch.setattr(lt, "READERS", ("edges",))
     from myoface.analysis.modelfit import ModelFit
     from myoface.analysis.weights import FitSettings
     from myoface.bench.headmotion import camera_renderer

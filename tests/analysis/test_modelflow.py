@@ -366,7 +366,7 @@ def test_tracking_ahead_is_tracking_frame_by_frame(lag):
                 plain.append(np.full(len(tr.ids), np.nan))
                 continue
             flow = mf.track(f, p, predicted(fit), prepared=mf.prepare(f, p))
-            plain.append(fit.fit(p, deferred=tr.deferred_relax, flow=flow).contractions)
+            plain.append(fit.fit(p, deferred=tr.deferred_relax, flow=flow, image=f).contractions)
         tr.close()
         assert np.array_equal(np.array(plain), runs[0], equal_nan=True)
 

@@ -85,7 +85,18 @@ benchmark's two 90-frame clips, degraded renders of the personal face, head +-30
   ``analysis.fps`` with the term on 62.1 fps (0.244x MediaPipe), off 52.3 (0.178x), the same
   loaded machine one after the other: within its noise.
 
-So it is opt-in (:attr:`~myoface.analysis.weights.FitSettings.lid_edges`): it puts the upper
+In a blink (``single_face.mp4``, frames 25-29, 2026-12-02, with it on): at the frames where
+the person's lids meet (26, 27) it found no edge on any upper lid sample (0 of 13 an eye):
+the fit's margins, following MediaPipe's points, stayed 3.4-4.1 px apart (the mean gap) where
+the person's had closed, the closed lid's lash line lay beyond the +-3 px window below them,
+and the lid's skin within the window has no edge. At the blink's edges (25, 28, 29) it found
+edges 1.6-2.4 px into the opening on 12-92 % of the samples, pulling the lids down, and
+stopped reading an eye once its fitted opening fell below ``min_opening_px``. So it cannot
+close the lids; :mod:`myoface.analysis.lidtemplate` reads the lid itself sliding over the eye
+against the calibration frame, and is the fit's lid term
+(:data:`myoface.analysis.lidtemplate.READERS`; this term is there as ``"edges"``).
+
+So it is opt-in (:data:`myoface.analysis.lidtemplate.READERS`): it puts the upper
 lids nearer the image's margins on the renders and on the sample, but the gaze benchmark is
 better on one clip and worse on the other, and the lid muscles read at rest move with where
 the neutral's lids were put at calibration. What it needs to be the default: the person's

@@ -383,12 +383,20 @@ class ModelFit:
             self._lid_image = None
 
     def lid_edge_term(self, image):
-        """The lid margins' edge term of ``image`` (:mod:`myoface.analysis.lidedges`)."""
-        from myoface.analysis.lidedges import LidEdgeTerm, MarginSamples
+        """The lids' term of ``image`` (:func:`myoface.analysis.lidtemplate.lid_term`)."""
+        from myoface.analysis.lidtemplate import lid_term
 
-        if getattr(self, "_lid_samples", None) is None:
-            self._lid_samples = MarginSamples(self.model.face)
-        return LidEdgeTerm(image, self._lid_samples, self.camera)
+        return lid_term(self, image)
+
+    def set_lid_reference(self, frame) -> None:
+        """Take the calibration frame (after :meth:`calibrate`) as the lids' reference
+        (:class:`~myoface.analysis.lidtemplate.LidTemplate`)."""
+        from myoface.analysis.lidtemplate import LidTemplate
+
+        self.lid_template = LidTemplate(
+            self.model.face, self.neutral + self.identity_mm, frame, self.camera,
+            self.calibration.pose,
+        )  # fmt: skip
 
     def _fit_frame(self, points, synthesis, deferred, flow, photo, t0) -> FrameFit:
         """(:meth:`fit`'s body.)"""
@@ -633,7 +641,9 @@ class ModelFit:
             )
         out += [MagnitudePrior(s.magnitude_sigma), SparsityPrior(s.sparsity)]
         if getattr(self, "_lid_image", None) is not None:  # (FitSettings.lid_edges)
-            out.append(self.lid_edge_term(self._lid_image))
+            lid = self.lid_edge_term(self._lid_image)
+            out.append(lid)
+            weights = lid.landmark_weights(weights)  # (MediaPipe's lid points where read)
         # (the observations last: the priors' normal equations are summed first, then theirs)
         if photo is not None:
             # the pixels read the motion; MediaPipe's points stay as a weak term (they find

@@ -467,6 +467,8 @@ class FitTracker(TrackerBase):
             if frame is None:
                 raise MyofaceValueError("the calibration frame was not kept")
             self.fit.set_appearance(frame)
+        if self.settings.lid_edges and images[self.calibration.index] is not None:
+            self.fit.set_lid_reference(images[self.calibration.index])  # (the lids' template)
         if self.settings.flow and self.flow_method == "anchored":
             # the points read against the calibration frame, through the model (ModelFlow)
             frame = images[self.calibration.index]
