@@ -135,6 +135,9 @@ class FitSettings:
     #: :class:`~myoface.analysis.lidedges.LidEdgeSettings`): opt-in, see that module for what
     #: was measured
     lid_edges: bool = False
+    #: the AU-space prior (:mod:`myoface.analysis.au_prior`): contractions held near the AU
+    #: table's span, sigma in contraction units (None: off; opt-in, see that module)
+    au_prior_sigma: float | None = None
     #: the photometric samples' weight for the model's own error, as :attr:`model_error` is
     #: the landmarks' (:func:`model_error_weights` at each sample: 1 where no muscle moves the
     #: skin, 0.5 where one moves it 2 mm at full contraction). The calibration frame's

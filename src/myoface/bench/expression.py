@@ -365,23 +365,27 @@ def model_landmarks(poses, skins):
     return [cam.project(p.apply(s)) for p, s in zip(poses, skins, strict=True)]
 
 
-def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=False) -> dict:
-    """The synthetic run's detail (cached); ``still``: the head frontal and still; ``clean``:
-    on the renderer's own frames (:func:`~myoface.bench.headmotion.render_sequence`), not
-    degraded by a camera; ``exact``: the fit given the model's own projected vertices
-    (:func:`model_landmarks`) in place of MediaPipe's points on the frames (nothing
-    rendered)."""
-    key = ("synthetic", bool(quick), bool(still), bool(clean), bool(exact))
+#: the variants the detail has beside the default (name, tracker, AU-space prior), on the
+#: same clip, head moving
+VARIANTS = (
+    ("flow", "flow", False),
+    ("photometric", "photometric", False),
+    ("AU prior", "fit", True),
+    ("flow, AU prior", "flow", True),
+    ("photometric, AU prior", "photometric", True),
+)
+#: the trackers the detail measures: the analysis' default (the 3-D fit on MediaPipe's
+#: points), the fit with the model-anchored point tracker (``myoface analyze --flow``) and the
+#: fit with its photometric term (``myoface analyze --photometric``)
+TRACKERS = ("fit", "flow", "photometric", "flow+photometric")
+
+
+def _clip(quick: bool, still: bool, clean: bool) -> tuple:
+    """The synthetic clip (cached): truth, played, phase, intensity, poses, skins, frames,
+    the camera's report and MediaPipe's points on the frames."""
+    key = ("clip", bool(quick), bool(still), bool(clean))
     if key in _cache:
         return _cache[key]
-    import time
-
-    from myoface.analysis.expressions import (
-        expression_labels,
-        expression_scores,
-        expression_sequence,
-    )
-    from myoface.bench.headmotion import _cache as hm_cache
     from myoface.bench.headmotion import (
         _model,
         degraded_sequence,
@@ -389,10 +393,8 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
         head_trajectory,
         relaxed_skins,
         render_sequence,
-        run_headmotion,
     )
 
-    t0 = time.perf_counter()
     fm = _model()
     episodes = QUICK_EPISODES if quick else EPISODES
     phases = QUICK_PHASES if quick else PHASES
@@ -400,16 +402,74 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
     intensity = _intensities(episodes, phases)
     poses = head_trajectory(len(truth), still)
     skins = relaxed_skins(fm, truth)
+    if clean:
+        frames, camera = render_sequence(fm.face, poses, skins), None
+    else:
+        frames, camera = degraded_sequence(fm.face, poses, skins)
+    points, _ = detect_sequence(frames)
+    _cache[key] = (truth, played, phase, intensity, poses, skins, frames, camera, points)
+    return _cache[key]
+
+
+def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=False,
+               tracker: str = "fit", au_prior: bool = False) -> dict:  # fmt: skip
+    """The synthetic run's detail (cached); ``still``: the head frontal and still; ``clean``:
+    on the renderer's own frames (:func:`~myoface.bench.headmotion.render_sequence`), not
+    degraded by a camera; ``exact``: the fit given the model's own projected vertices
+    (:func:`model_landmarks`) in place of MediaPipe's points on the frames (nothing
+    rendered); ``tracker`` (:data:`TRACKERS`): ``"fit"`` the analysis' default, ``"flow"``
+    the fit with the model-anchored tracker's points (``myoface analyze --flow``),
+    ``"photometric"`` the fit with its photometric term (``myoface analyze --photometric``),
+    ``"flow+photometric"`` both; ``au_prior``: with the fit's AU-space prior
+    (:mod:`myoface.analysis.au_prior`, ``FitSettings(au_prior_sigma=AU_PRIOR_SIGMA)``)."""
+    if tracker not in TRACKERS:
+        raise ValueError(f"tracker must be one of {TRACKERS}; got {tracker!r}")
+    key = ("synthetic", bool(quick), bool(still), bool(clean), bool(exact), tracker,
+           bool(au_prior))  # fmt: skip
+    if key in _cache:
+        return _cache[key]
+    import time
+
+    from myoface.analysis.au_prior import AU_PRIOR_SIGMA
+    from myoface.analysis.expressions import (
+        expression_labels,
+        expression_scores,
+        expression_sequence,
+    )
+    from myoface.analysis.weights import FitSettings
+    from myoface.bench.headmotion import _cache as hm_cache
+    from myoface.bench.headmotion import (
+        _model,
+        head_trajectory,
+        relaxed_skins,
+        run_headmotion,
+    )
+
+    t0 = time.perf_counter()
+    fm = _model()
+    episodes = QUICK_EPISODES if quick else EPISODES
+    phases = QUICK_PHASES if quick else PHASES
+    frames = None
     if exact:
+        truth, played, phase = episode_programme(fm.ids, episodes, phases)
+        intensity = _intensities(episodes, phases)
+        poses = head_trajectory(len(truth), still)
+        skins = relaxed_skins(fm, truth)
         points, camera = model_landmarks(poses, skins), None
     else:
-        if clean:
-            frames, camera = render_sequence(fm.face, poses, skins), None
-        else:
-            frames, camera = degraded_sequence(fm.face, poses, skins)
-        points, _ = detect_sequence(frames)
-        del frames
-    res = run_headmotion(fm, points, truth, poses, skins)
+        truth, played, phase, intensity, poses, skins, frames, camera, points = _clip(
+            quick, still, clean
+        )
+    settings = None
+    if "photometric" in tracker or au_prior:
+        settings = FitSettings(
+            photometric="photometric" in tracker,
+            au_prior_sigma=AU_PRIOR_SIGMA if au_prior else None,
+        )
+    res = run_headmotion(
+        fm, points, truth, poses, skins, settings=settings,
+        frames=frames if tracker != "fit" else None, anchored_flow="flow" in tracker,
+    )  # fmt: skip
     # as contractions.csv has them: the frames in order, above the rest reference at the
     # fit's head pose (ExpressionReader)
     _, labels = expression_sequence(res.estimate, fm.ids, res.angles_est)
@@ -417,6 +477,13 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
     alone = expression_labels(expression_scores(res.estimate, fm.ids))  # (no reference)
     out = {
         "face": hm_cache.get("face_kind", "default"),
+        "tracker": {
+            "fit": "the 3-D fit on MediaPipe's points (the analysis' default)",
+            "flow": "the fit with the model-anchored tracker's points (--flow)",
+            "photometric": "the fit with its photometric term (--photometric)",
+            "flow+photometric": "the fit with both (--flow --photometric)",
+        }[tracker]
+        + (f", with the AU-space prior (sigma {AU_PRIOR_SIGMA:g})" if au_prior else ""),
         "frames": len(truth),
         "episodes": [f"{e} {i:g}" for e, i in episodes],
         "phases_frames": dict(
@@ -457,6 +524,13 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
         "seconds": round(time.perf_counter() - t0, 1),
     }
     _cache[key] = out
+    # (the run's arrays, for a study of the rule on them: scripts, not the benchmark)
+    _cache[("arrays", *key[1:])] = {
+        "estimate": res.estimate, "truth": truth, "angles_est": res.angles_est,
+        "angles_true": res.angles_true, "played": np.asarray(played),
+        "phase": np.asarray(phase), "intensity": np.asarray(intensity),
+        "ids": np.asarray(fm.ids),
+    }  # fmt: skip
     return out
 
 
@@ -541,6 +615,13 @@ def bench_expression_accuracy(quick: bool) -> Measurement:
     moving; the sample's first 40 frames): 34 s."""
     syn = _synthetic(quick)
     detail = {"synthetic": syn}
+    # the better trackers and the fit's AU-space prior on the same clip (the head moving)
+    for name, tracker, prior in VARIANTS:
+        detail[f"synthetic, {name}"] = _synthetic(quick, tracker=tracker, au_prior=prior)
+    detail["variants (apex / rest)"] = {
+        name: "{apex_accuracy:.3f} / {rest_accuracy:.3f}".format(**detail[k])
+        for name, k in [("default", "synthetic")] + [(n, f"synthetic, {n}") for n, _, _ in VARIANTS]
+    }
     if not quick:  # the same with the head still (what the head's motion costs), and on
         # the clean renders (what the camera costs)
         detail["synthetic, head still"] = _synthetic(quick, still=True)
