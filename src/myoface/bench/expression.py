@@ -233,7 +233,7 @@ def pattern_agreement(estimate, truth, ids, played, phase, intensity) -> dict:
     }
 
 
-def rest_readings_vs_pose(estimate, ids, phase, angles_deg) -> dict:
+def rest_readings_vs_pose(estimate, ids, phase, angles_deg, angles_true=None) -> dict:
     """Whether the AUs the fit reads at rest follow the head's pose (the fit's angles): per AU
     read at 0.05 or more on average on the rest frames, its mean reading, its correlation
     with the yaw, pitch and roll and with the turn (|yaw|), and the share of its variance a
@@ -241,7 +241,11 @@ def rest_readings_vs_pose(estimate, ids, phase, angles_deg) -> dict:
     :class:`~myoface.analysis.expressions.ExpressionReader`) on those frames, and with the
     turn |yaw| as a fourth term;
     ``{"AU17": {"mean": .., "corr yaw/pitch/roll": "+0.30 -0.51 +0.09", "corr |yaw|": ..,
-    "r2 linear in pose": ..}}``."""
+    "r2 linear in pose": ..}}``. With ``angles_true`` (the true angles, a synthetic clip's),
+    also its correlation with the fit's error in each angle (fit minus truth,
+    ``"corr yaw/pitch/roll error"``): readings that follow the pose but not its error come from
+    the points (the detector's or the tracker's view-dependent offsets), not from the fit
+    trading its pose for muscles."""
     from myoface.analysis.expressions import au_fractions, rule_aus
 
     x = au_fractions(estimate, ids)
@@ -265,6 +269,11 @@ def rest_readings_vs_pose(estimate, ids, phase, angles_deg) -> dict:
             "r2 linear in pose": round(r2[0], 2),
             "r2 with |yaw|": round(r2[1], 2),
         }
+        if angles_true is not None:
+            e = (a - np.asarray(angles_true, dtype=np.float64))[rest]
+            out[f"AU{au}"]["corr yaw/pitch/roll error"] = " ".join(
+                f"{_corr(y, e[:, i]):+.2f}" for i in range(3)
+            )
     return out
 
 
@@ -512,7 +521,9 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
             for k, v in score_labels(alone, played, phase).items()
             if k in ("apex_accuracy", "rest_accuracy")
         },
-        "rest_readings_vs_pose": rest_readings_vs_pose(res.estimate, fm.ids, phase, res.angles_est),
+        "rest_readings_vs_pose": rest_readings_vs_pose(
+            res.estimate, fm.ids, phase, res.angles_est, res.angles_true
+        ),
         "au_readings": au_readings(res.estimate, truth, fm.ids),
         "readings_by_class": readings_by_class(res.estimate, truth, fm.ids, played, phase),
         "pattern_agreement": pattern_agreement(
