@@ -32,6 +32,13 @@ head still on the clean renders (what the camera costs), and with the fit given 
 own projected vertices instead of MediaPipe's points, head moving and still (what the
 detector costs; :func:`model_landmarks`).
 
+**The better trackers and the AU-space prior** (:data:`VARIANTS`; docs/expression_trackers.md):
+the same clip, head moving, fitted with the model-anchored tracker (``--flow``), with the
+photometric term (``--photometric``), and each of those and the default with the fit's
+AU-space prior (:mod:`myoface.analysis.au_prior`, ``FitSettings(au_prior_sigma=0.1)``); in a
+full run also the flow on the clean renders (what the camera costs it) and the sample video
+with ``--flow``. The benchmark's value stays the default analysis'.
+
 **The sample video** (``single_face.mp4``, 72 frames at 30 fps: a man at rest who smiles):
 analysed as ``myoface analyze --tracker landmarks`` does (:func:`~myoface.analysis.outputs.analyze_to_folder`),
 its labels read from the CSV. Rest and smile were judged by eye on the frames (2026-12-02:
@@ -620,11 +627,13 @@ def bench_expression_accuracy(quick: bool) -> Measurement:
     labelled neutral. The detail has both, per expression and intensity, the confusion, the
     rule on the true contractions, what the fit makes of each AU (its gain and its reading
     where the AU is absent; per class of frame; whether it keeps each expression's pattern),
-    the same with the head still (not in a quick run), and the sample video's
+    the same with the head still (not in a quick run), the better trackers and the fit's
+    AU-space prior on the same clip (:data:`VARIANTS`), and the sample video's
     (``single_face.mp4``) share of rest frames labelled neutral and of smile frames labelled
-    happiness. Full run: 4 minutes on a loaded 2-core machine (2026-12-02; 2.2 GB at its
-    peak when measured before); quick (33 frames of three expressions at 0.75, the head
-    moving; the sample's first 40 frames): 34 s."""
+    happiness (also with ``--flow`` in a full run). Full run: 10-13 minutes on the 2-core
+    machine at a load of 10-15 (2026-12-02, with the variants; 4 minutes without them);
+    quick (33 frames of three expressions at 0.75, the head moving; the sample's first 40
+    frames): 34 s before the variants."""
     syn = _synthetic(quick)
     detail = {"synthetic": syn}
     # the better trackers and the fit's AU-space prior on the same clip (the head moving)
