@@ -586,6 +586,32 @@ def test_rest_readings_vs_pose_on_a_known_answer(ids):
     assert out["AU23"]["r2 linear in pose"] < 0.2 < 0.99 < out["AU23"]["r2 with |yaw|"]
 
 
+def test_rest_readings_vs_pose_tells_the_points_from_the_fits_pose(ids):
+    """With the true angles, the diagnosis says whether a reading follows the pose (the
+    points' view-dependent offsets) or the fit's error in it (the fit trading pose for
+    muscles): AU12 made to follow the true pitch, AU10 the fit's pitch error (an error that
+    does not follow the pitch)."""
+    from myoface.bench.expression import rest_readings_vs_pose
+
+    k = np.arange(60)
+    pitch = 15 * np.sin(k / 6.0)
+    err = 2 * np.sin(k / 2.3 + 0.7)
+    c = np.array(
+        [au_contractions({12: 0.3 - 0.2 * p / 15, 10: 0.2 + 0.1 * e / 2}, ids)
+         for p, e in zip(pitch, err, strict=True)]
+    )  # fmt: skip
+    true = np.column_stack([np.zeros_like(pitch), pitch, np.zeros_like(pitch)])
+    est = true + np.column_stack([np.zeros_like(err), err, np.zeros_like(err)])
+    out = rest_readings_vs_pose(c, ids, ["rest"] * len(k), est, true)
+    r12 = [float(v) for v in out["AU12"]["corr yaw/pitch/roll error"].split()]
+    r10 = [float(v) for v in out["AU10"]["corr yaw/pitch/roll error"].split()]
+    assert abs(r12[1]) < 0.3 < 0.95 < r10[1], out
+    assert (
+        "corr yaw/pitch/roll error"
+        not in rest_readings_vs_pose(c, ids, ["rest"] * len(k), est)["AU12"]
+    )
+
+
 def _ceiling_clip(ids, read=None):
     """A clip for readings_ceiling: rest frames between apex episodes of the six expressions
     (two each, at 0.5 and 1.0), the head turning; the estimate is the truth at 0.25 of its

@@ -62,6 +62,7 @@ from scipy import sparse
 from scipy.sparse.linalg import spsolve
 
 from myoface.analysis._fitkernels import vertex_normals
+from myoface.analysis.au_prior import au_prior_terms
 from myoface.analysis.camera import HeadPose, PinholeCamera, check_points, initial_pose
 from myoface.analysis.estimate import skin_response
 from myoface.analysis.photometric import Appearance, PhotometricTerm
@@ -640,6 +641,7 @@ class ModelFit:
                 )  # fmt: skip
             )
         out += [MagnitudePrior(s.magnitude_sigma), SparsityPrior(s.sparsity)]
+        out += au_prior_terms(self.model.ids, s)  # the AU table's span (analysis.au_prior)
         if getattr(self, "_lid_image", None) is not None:  # (FitSettings.lid_edges)
             lid = self.lid_edge_term(self._lid_image)
             out.append(lid)

@@ -187,6 +187,9 @@ class FitSettings:
     #: edges, :mod:`myoface.analysis.lidedges`, opt-in there). What was measured is in
     #: :mod:`myoface.analysis.lidtemplate` (gaze 5.05 -> 5.03 deg, fidelity 0.756 -> 0.763)
     lid_edges: bool = True
+    #: the AU-space prior (:mod:`myoface.analysis.au_prior`): contractions held near the AU
+    #: table's span, sigma in contraction units (None: off; opt-in, see that module)
+    au_prior_sigma: float | None = None
     #: the photometric samples' weight for the model's own error, as :attr:`model_error` is
     #: the landmarks' (:func:`model_error_weights` at each sample: 1 where no muscle moves the
     #: skin, 0.5 where one moves it 2 mm at full contraction). The calibration frame's

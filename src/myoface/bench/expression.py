@@ -32,6 +32,13 @@ head still on the clean renders (what the camera costs), and with the fit given 
 own projected vertices instead of MediaPipe's points, head moving and still (what the
 detector costs; :func:`model_landmarks`).
 
+**The better trackers and the AU-space prior** (:data:`VARIANTS`; docs/expression_trackers.md):
+the same clip, head moving, fitted with the model-anchored tracker (``--flow``), with the
+photometric term (``--photometric``), and each of those and the default with the fit's
+AU-space prior (:mod:`myoface.analysis.au_prior`, ``FitSettings(au_prior_sigma=0.1)``); in a
+full run also the flow on the clean renders (what the camera costs it) and the sample video
+with ``--flow``. The benchmark's value stays the default analysis'.
+
 **The sample video** (``single_face.mp4``, 72 frames at 30 fps: a man at rest who smiles):
 analysed as ``myoface analyze --tracker landmarks`` does (:func:`~myoface.analysis.outputs.analyze_to_folder`),
 its labels read from the CSV. Rest and smile were judged by eye on the frames (2026-12-02:
@@ -233,7 +240,7 @@ def pattern_agreement(estimate, truth, ids, played, phase, intensity) -> dict:
     }
 
 
-def rest_readings_vs_pose(estimate, ids, phase, angles_deg) -> dict:
+def rest_readings_vs_pose(estimate, ids, phase, angles_deg, angles_true=None) -> dict:
     """Whether the AUs the fit reads at rest follow the head's pose (the fit's angles): per AU
     read at 0.05 or more on average on the rest frames, its mean reading, its correlation
     with the yaw, pitch and roll and with the turn (|yaw|), and the share of its variance a
@@ -241,7 +248,11 @@ def rest_readings_vs_pose(estimate, ids, phase, angles_deg) -> dict:
     :class:`~myoface.analysis.expressions.ExpressionReader`) on those frames, and with the
     turn |yaw| as a fourth term;
     ``{"AU17": {"mean": .., "corr yaw/pitch/roll": "+0.30 -0.51 +0.09", "corr |yaw|": ..,
-    "r2 linear in pose": ..}}``."""
+    "r2 linear in pose": ..}}``. With ``angles_true`` (the true angles, a synthetic clip's),
+    also its correlation with the fit's error in each angle (fit minus truth,
+    ``"corr yaw/pitch/roll error"``): readings that follow the pose but not its error come from
+    the points (the detector's or the tracker's view-dependent offsets), not from the fit
+    trading its pose for muscles."""
     from myoface.analysis.expressions import au_fractions, rule_aus
 
     x = au_fractions(estimate, ids)
@@ -265,6 +276,11 @@ def rest_readings_vs_pose(estimate, ids, phase, angles_deg) -> dict:
             "r2 linear in pose": round(r2[0], 2),
             "r2 with |yaw|": round(r2[1], 2),
         }
+        if angles_true is not None:
+            e = (a - np.asarray(angles_true, dtype=np.float64))[rest]
+            out[f"AU{au}"]["corr yaw/pitch/roll error"] = " ".join(
+                f"{_corr(y, e[:, i]):+.2f}" for i in range(3)
+            )
     return out
 
 
@@ -365,23 +381,27 @@ def model_landmarks(poses, skins):
     return [cam.project(p.apply(s)) for p, s in zip(poses, skins, strict=True)]
 
 
-def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=False) -> dict:
-    """The synthetic run's detail (cached); ``still``: the head frontal and still; ``clean``:
-    on the renderer's own frames (:func:`~myoface.bench.headmotion.render_sequence`), not
-    degraded by a camera; ``exact``: the fit given the model's own projected vertices
-    (:func:`model_landmarks`) in place of MediaPipe's points on the frames (nothing
-    rendered)."""
-    key = ("synthetic", bool(quick), bool(still), bool(clean), bool(exact))
+#: the variants the detail has beside the default (name, tracker, AU-space prior), on the
+#: same clip, head moving
+VARIANTS = (
+    ("flow", "flow", False),
+    ("photometric", "photometric", False),
+    ("AU prior", "fit", True),
+    ("flow, AU prior", "flow", True),
+    ("photometric, AU prior", "photometric", True),
+)
+#: the trackers the detail measures: the analysis' default (the 3-D fit on MediaPipe's
+#: points), the fit with the model-anchored point tracker (``myoface analyze --flow``) and the
+#: fit with its photometric term (``myoface analyze --photometric``)
+TRACKERS = ("fit", "flow", "photometric", "flow+photometric")
+
+
+def _clip(quick: bool, still: bool, clean: bool) -> tuple:
+    """The synthetic clip (cached): truth, played, phase, intensity, poses, skins, frames,
+    the camera's report and MediaPipe's points on the frames."""
+    key = ("clip", bool(quick), bool(still), bool(clean))
     if key in _cache:
         return _cache[key]
-    import time
-
-    from myoface.analysis.expressions import (
-        expression_labels,
-        expression_scores,
-        expression_sequence,
-    )
-    from myoface.bench.headmotion import _cache as hm_cache
     from myoface.bench.headmotion import (
         _model,
         degraded_sequence,
@@ -389,10 +409,8 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
         head_trajectory,
         relaxed_skins,
         render_sequence,
-        run_headmotion,
     )
 
-    t0 = time.perf_counter()
     fm = _model()
     episodes = QUICK_EPISODES if quick else EPISODES
     phases = QUICK_PHASES if quick else PHASES
@@ -400,16 +418,74 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
     intensity = _intensities(episodes, phases)
     poses = head_trajectory(len(truth), still)
     skins = relaxed_skins(fm, truth)
+    if clean:
+        frames, camera = render_sequence(fm.face, poses, skins), None
+    else:
+        frames, camera = degraded_sequence(fm.face, poses, skins)
+    points, _ = detect_sequence(frames)
+    _cache[key] = (truth, played, phase, intensity, poses, skins, frames, camera, points)
+    return _cache[key]
+
+
+def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=False,
+               tracker: str = "fit", au_prior: bool = False) -> dict:  # fmt: skip
+    """The synthetic run's detail (cached); ``still``: the head frontal and still; ``clean``:
+    on the renderer's own frames (:func:`~myoface.bench.headmotion.render_sequence`), not
+    degraded by a camera; ``exact``: the fit given the model's own projected vertices
+    (:func:`model_landmarks`) in place of MediaPipe's points on the frames (nothing
+    rendered); ``tracker`` (:data:`TRACKERS`): ``"fit"`` the analysis' default, ``"flow"``
+    the fit with the model-anchored tracker's points (``myoface analyze --flow``),
+    ``"photometric"`` the fit with its photometric term (``myoface analyze --photometric``),
+    ``"flow+photometric"`` both; ``au_prior``: with the fit's AU-space prior
+    (:mod:`myoface.analysis.au_prior`, ``FitSettings(au_prior_sigma=AU_PRIOR_SIGMA)``)."""
+    if tracker not in TRACKERS:
+        raise ValueError(f"tracker must be one of {TRACKERS}; got {tracker!r}")
+    key = ("synthetic", bool(quick), bool(still), bool(clean), bool(exact), tracker,
+           bool(au_prior))  # fmt: skip
+    if key in _cache:
+        return _cache[key]
+    import time
+
+    from myoface.analysis.au_prior import AU_PRIOR_SIGMA
+    from myoface.analysis.expressions import (
+        expression_labels,
+        expression_scores,
+        expression_sequence,
+    )
+    from myoface.analysis.weights import FitSettings
+    from myoface.bench.headmotion import _cache as hm_cache
+    from myoface.bench.headmotion import (
+        _model,
+        head_trajectory,
+        relaxed_skins,
+        run_headmotion,
+    )
+
+    t0 = time.perf_counter()
+    fm = _model()
+    episodes = QUICK_EPISODES if quick else EPISODES
+    phases = QUICK_PHASES if quick else PHASES
+    frames = None
     if exact:
+        truth, played, phase = episode_programme(fm.ids, episodes, phases)
+        intensity = _intensities(episodes, phases)
+        poses = head_trajectory(len(truth), still)
+        skins = relaxed_skins(fm, truth)
         points, camera = model_landmarks(poses, skins), None
     else:
-        if clean:
-            frames, camera = render_sequence(fm.face, poses, skins), None
-        else:
-            frames, camera = degraded_sequence(fm.face, poses, skins)
-        points, _ = detect_sequence(frames)
-        del frames
-    res = run_headmotion(fm, points, truth, poses, skins)
+        truth, played, phase, intensity, poses, skins, frames, camera, points = _clip(
+            quick, still, clean
+        )
+    settings = None
+    if "photometric" in tracker or au_prior:
+        settings = FitSettings(
+            photometric="photometric" in tracker,
+            au_prior_sigma=AU_PRIOR_SIGMA if au_prior else None,
+        )
+    res = run_headmotion(
+        fm, points, truth, poses, skins, settings=settings,
+        frames=frames if tracker != "fit" else None, anchored_flow="flow" in tracker,
+    )  # fmt: skip
     # as contractions.csv has them: the frames in order, above the rest reference at the
     # fit's head pose (ExpressionReader)
     _, labels = expression_sequence(res.estimate, fm.ids, res.angles_est)
@@ -417,6 +493,13 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
     alone = expression_labels(expression_scores(res.estimate, fm.ids))  # (no reference)
     out = {
         "face": hm_cache.get("face_kind", "default"),
+        "tracker": {
+            "fit": "the 3-D fit on MediaPipe's points (the analysis' default)",
+            "flow": "the fit with the model-anchored tracker's points (--flow)",
+            "photometric": "the fit with its photometric term (--photometric)",
+            "flow+photometric": "the fit with both (--flow --photometric)",
+        }[tracker]
+        + (f", with the AU-space prior (sigma {AU_PRIOR_SIGMA:g})" if au_prior else ""),
         "frames": len(truth),
         "episodes": [f"{e} {i:g}" for e, i in episodes],
         "phases_frames": dict(
@@ -445,7 +528,9 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
             for k, v in score_labels(alone, played, phase).items()
             if k in ("apex_accuracy", "rest_accuracy")
         },
-        "rest_readings_vs_pose": rest_readings_vs_pose(res.estimate, fm.ids, phase, res.angles_est),
+        "rest_readings_vs_pose": rest_readings_vs_pose(
+            res.estimate, fm.ids, phase, res.angles_est, res.angles_true
+        ),
         "au_readings": au_readings(res.estimate, truth, fm.ids),
         "readings_by_class": readings_by_class(res.estimate, truth, fm.ids, played, phase),
         "pattern_agreement": pattern_agreement(
@@ -457,6 +542,13 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
         "seconds": round(time.perf_counter() - t0, 1),
     }
     _cache[key] = out
+    # (the run's arrays, for a study of the rule on them: scripts, not the benchmark)
+    _cache[("arrays", *key[1:])] = {
+        "estimate": res.estimate, "truth": truth, "angles_est": res.angles_est,
+        "angles_true": res.angles_true, "played": np.asarray(played),
+        "phase": np.asarray(phase), "intensity": np.asarray(intensity),
+        "ids": np.asarray(fm.ids),
+    }  # fmt: skip
     return out
 
 
@@ -468,9 +560,10 @@ def _intensities(episodes, phases) -> list[float]:
     return out
 
 
-def _sample(quick: bool) -> dict:
-    """The sample video's detail (cached): its rest and smile frames' labels."""
-    key = ("sample", bool(quick))
+def _sample(quick: bool, flow: bool = False) -> dict:
+    """The sample video's detail (cached): its rest and smile frames' labels; ``flow``: the
+    analysis with the model-anchored tracker (``myoface analyze --flow``)."""
+    key = ("sample", bool(quick), bool(flow))
     if key in _cache:
         return _cache[key]
     import tempfile
@@ -495,7 +588,7 @@ def _sample(quick: bool) -> dict:
     n = SAMPLE_QUICK_FRAMES if quick else None
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "sample"
-        res = analyze_to_folder(path, out, tracker="landmarks", max_frames=n)
+        res = analyze_to_folder(path, out, tracker="landmarks", max_frames=n, flow=flow)
         csv = out / "contractions.csv"
         _, _, quality = read_contractions_csv(csv, list(res.ids))
         _, labels = read_expressions(csv)
@@ -534,20 +627,38 @@ def bench_expression_accuracy(quick: bool) -> Measurement:
     labelled neutral. The detail has both, per expression and intensity, the confusion, the
     rule on the true contractions, what the fit makes of each AU (its gain and its reading
     where the AU is absent; per class of frame; whether it keeps each expression's pattern),
-    the same with the head still (not in a quick run), and the sample video's
+    the same with the head still (not in a quick run), the better trackers and the fit's
+    AU-space prior on the same clip (:data:`VARIANTS`), and the sample video's
     (``single_face.mp4``) share of rest frames labelled neutral and of smile frames labelled
-    happiness. Full run: 4 minutes on a loaded 2-core machine (2026-12-02; 2.2 GB at its
-    peak when measured before); quick (33 frames of three expressions at 0.75, the head
-    moving; the sample's first 40 frames): 34 s."""
+    happiness (also with ``--flow`` in a full run). Full run: 10-13 minutes on the 2-core
+    machine at a load of 10-15 (2026-12-02, with the variants; 4 minutes without them);
+    quick (33 frames of three expressions at 0.75, the head moving; the sample's first 40
+    frames): 34 s before the variants."""
     syn = _synthetic(quick)
     detail = {"synthetic": syn}
+    # the better trackers and the fit's AU-space prior on the same clip (the head moving)
+    for name, tracker, prior in VARIANTS:
+        detail[f"synthetic, {name}"] = _synthetic(quick, tracker=tracker, au_prior=prior)
     if not quick:  # the same with the head still (what the head's motion costs), and on
         # the clean renders (what the camera costs)
         detail["synthetic, head still"] = _synthetic(quick, still=True)
         detail["synthetic, head still, clean renders"] = _synthetic(quick, True, clean=True)
+        # the better tracker, head moving, on the clean renders (what the camera costs it)
+        detail["synthetic, flow, clean renders"] = _synthetic(quick, clean=True, tracker="flow")
+        detail["synthetic, flow, AU prior, clean renders"] = _synthetic(
+            quick, clean=True, tracker="flow", au_prior=True
+        )
         # ... and the fit given perfect landmarks (what MediaPipe's points cost)
         detail["synthetic, exact landmarks"] = _synthetic(quick, exact=True)
         detail["synthetic, head still, exact landmarks"] = _synthetic(quick, True, exact=True)
     detail["single_face.mp4"] = _sample(quick)
+    if not quick:  # the better tracker on the real smile too
+        detail["single_face.mp4, flow"] = _sample(quick, flow=True)
+    # every run's two numbers at a glance (the detail of each above)
+    detail["apex / rest, every run"] = {
+        k: "{apex_accuracy:.3f} / {rest_accuracy:.3f}".format(**v)
+        for k, v in detail.items()
+        if k.startswith("synthetic")
+    }
     value = min(syn["apex_accuracy"], syn["rest_accuracy"])
     return Measurement(value, syn["apex_frames"] + syn["rest_frames"], detail=detail)
