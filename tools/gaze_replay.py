@@ -7,6 +7,7 @@ alone on it with other settings: the reader's variants compared in seconds on th
     python tools/gaze_replay.py record bench-clean /tmp/clean.pkl # the clip undegraded
     python tools/gaze_replay.py record ~/.cache/myoface/single_face.mp4 /tmp/sample.pkl
     python tools/gaze_replay.py record ~/.cache/myoface/single_face.mp4 /tmp/s_cli.pkl default
+    python tools/gaze_replay.py record bench /tmp/bench_flow.pkl tracker=flow  # or photometric
     python tools/gaze_replay.py replay /tmp/bench.pkl /tmp/sample.pkl socket_prior_mm=1.0
     python tools/gaze_replay.py replay /tmp/bench.pkl oracle=skin     # the socket's ceiling
 
@@ -43,8 +44,16 @@ import time
 
 import numpy as np
 
+#: the 3-D fit's variants ``record`` can run (``tracker=NAME``): make_analyzer's arguments
+TRACKERS = {
+    "fit": {},
+    "photometric": {"photometric": True},
+    "flow": {"flow": True},
+    "synthesis": {"estimator": "fit-synthesis"},
+}
 
-def record(source: str, out: str, face: str = "bench") -> None:
+
+def record(source: str, out: str, face: str = "bench", tracker: str = "fit") -> None:
     import myoface.bench.gaze as B
     from myoface.analysis.pipeline import Tracking, make_analyzer
     from myoface.bench.headmotion import _Clip, _model
@@ -78,7 +87,8 @@ def record(source: str, out: str, face: str = "bench") -> None:
         from myoface.analysis.video import open_video
 
         video = open_video(os.path.expanduser(source))
-    an, first = make_analyzer(model, video, "landmarks", calibration_frame=None)
+    an, first = make_analyzer(model, video, "landmarks", calibration_frame=None,
+                              **TRACKERS[tracker])  # fmt: skip
     frames, neutral = [], []
     reader = an.gaze
     measure, calibrate = reader.measure, reader.calibrate
@@ -302,8 +312,9 @@ def _same(a, b) -> bool:
 def main(argv) -> None:
     from myoface.analysis.gaze import GazeSettings
 
-    if len(argv) in (3, 4) and argv[0] == "record":
-        record(*argv[1:])
+    if len(argv) >= 3 and argv[0] == "record":
+        kw = dict(a.split("=", 1) for a in argv[3:] if "=" in a)
+        record(*[a for a in argv[1:] if "=" not in a], **kw)
         return
     if len(argv) < 2 or argv[0] != "replay":
         sys.exit(__doc__)

@@ -204,7 +204,7 @@ frames (4.64 -> 4.59-4.64).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numba
 import numpy as np
@@ -402,6 +402,8 @@ class GazeSettings:
     socket_recentre: bool = False
     socket_agreement: float = 0.0
     pupil: str = "last"
+    yoke_pitch: bool = True
+    reopen_frames: int = 1
 
     def __post_init__(self):
         if self.pupil not in ("last", "all", "none"):
@@ -416,6 +418,8 @@ class GazeSettings:
             raise MyofaceValueError("coarse_deg, edge_px and smooth_deg must be > 0")
         if int(self.smooth_frames) < 0:
             raise MyofaceValueError(f"smooth_frames must be >= 0; got {self.smooth_frames}")
+        if int(self.reopen_frames) < 0:
+            raise MyofaceValueError(f"reopen_frames must be >= 0; got {self.reopen_frames}")
 
 
 @dataclass(frozen=True)
@@ -1623,6 +1627,9 @@ class GazeEstimator:
         self._last: tuple | None = None
         #: each eye's last contrasts read (for :attr:`GazeSettings.closed_contrast`)
         self._contrasts: dict[str, list] = {"l": [], "r": []}
+        #: each eye's frames read since its lids were last said closed (None: not since the
+        #: start or a reset), for :attr:`GazeSettings.reopen_frames`
+        self._since_closed: dict[str, int | None] = {"l": None, "r": None}
         #: where the time goes: frames read and the seconds they took
         self.timings = {"frames": 0, "seconds": 0.0}
 
@@ -1661,6 +1668,7 @@ class GazeEstimator:
         """Forget the past readings (after a frame without a face)."""
         self.smoother.reset()
         self._last = None
+        self._since_closed = {"l": None, "r": None}
 
     def read(self, frame, camera, pose, shape, points=None) -> Gaze:
         """Each eye's reading on ``frame`` (H, W, 3) for the fit's ``pose``
@@ -1680,6 +1688,7 @@ class GazeEstimator:
         self.agreements = {"l": None, "r": None}
         self.openings = {"l": None, "r": None}
         out: dict[str, EyeGaze] = {}
+        reopening: set[str] = set()  # (eyes read but withheld: their lids reopen)
         opening: dict[str, float] = {}  # each eye's aperture, of the open one's
         eyes: list[_Eye] = []
         for side, (_, upper, lower) in self._eyes.items():
@@ -1716,9 +1725,19 @@ class GazeEstimator:
                     start = start if again is None else again
             for e in eyes:
                 out[e.side] = self._closed_by_contrast(e.side, self._refine(e, camera, rot, start))
+                if self._reopening(e.side, out[e.side]):
+                    reopening.add(e.side)
+                    out[e.side] = replace(out[e.side], yaw_deg=np.nan, pitch_deg=np.nan,
+                                          state="closed")  # fmt: skip
                 patch = patches.get(e.side)
                 if patch is not None and self._wide_open(e.side, out[e.side], opening[e.side]):
                     self._learn(e, camera, rot, out[e.side], *patch)
+        for side in ("l", "r"):  # (the lids said closed on this frame, for the next ones')
+            n = self._since_closed[side]
+            shut = out[side].state == "closed" and side not in reopening
+            self._since_closed[side] = 0 if shut else (None if n is None else n + 1)
+        if st.yoke_pitch and out["l"].ok and out["r"].ok:
+            out = self._yoked(out)
         read = [out[s] for s in ("l", "r") if s in out and out[s].ok]
         self._last = (
             (np.mean([e.yaw_deg for e in read]), np.mean([e.pitch_deg for e in read]))
@@ -1853,6 +1872,20 @@ class GazeEstimator:
         if not explained >= st.min_explained:
             return EyeGaze(state="not_found", explained=explained, contrast=contrast)
         return EyeGaze(best[0], best[1], "ok", explained, contrast)
+
+    def _reopening(self, side: str, eye: EyeGaze) -> bool:
+        """Whether ``eye``'s reading is within :attr:`GazeSettings.reopen_frames` frames after
+        its lids were said closed (the lids reopen over a few frames, the iris half covered):
+        then it is withheld, ``closed``."""
+        n = self._since_closed[side]
+        return eye.ok and n is not None and n < int(self.settings.reopen_frames)
+
+    @staticmethod
+    def _yoked(out: dict) -> dict:
+        """Both eyes read: their pitch replaced by its mean (the eyes' vertical rotations are
+        yoked, see :attr:`GazeSettings.yoke_pitch`)."""
+        pitch = 0.5 * (out["l"].pitch_deg + out["r"].pitch_deg)
+        return {s: replace(e, pitch_deg=pitch) for s, e in out.items()}
 
     def _closed_by_contrast(self, side: str, eye: EyeGaze) -> EyeGaze:
         """``eye``, or ``closed`` when what was read (an iris, or too faint a one) is too faint
