@@ -7,6 +7,7 @@ alone on it with other settings: the reader's variants compared in seconds on th
     python tools/gaze_replay.py record bench-clean /tmp/clean.pkl # the clip undegraded
     python tools/gaze_replay.py record ~/.cache/myoface/single_face.mp4 /tmp/sample.pkl
     python tools/gaze_replay.py record ~/.cache/myoface/single_face.mp4 /tmp/s_cli.pkl default
+    python tools/gaze_replay.py record bench /tmp/bench_flow.pkl tracker=flow  # or photometric
     python tools/gaze_replay.py replay /tmp/bench.pkl /tmp/sample.pkl socket_prior_mm=1.0
     python tools/gaze_replay.py replay /tmp/bench.pkl oracle=skin     # the socket's ceiling
 
@@ -31,7 +32,9 @@ RMS; ``centre_minus_skin`` is what no 2-D move of the skin can take off, the hea
 error times the eyeball's depth behind the skin). ``oracle=skin`` replaces each socket offset by
 the move that puts the skin ring where the truth's is (a perfect registration of the eye's
 surroundings: the ceiling of a socket), ``oracle=centre`` by the one that puts the eyeball's
-centre where the truth's is."""
+centre where the truth's is; ``oracle=anchor`` moves each eye by one constant for the whole
+clip, the mean of the moves that put its centre where the truth's is (the best a per-video
+anchor of the eye could do, the socket left to take the rest)."""
 
 from __future__ import annotations
 
@@ -43,8 +46,16 @@ import time
 
 import numpy as np
 
+#: the 3-D fit's variants ``record`` can run (``tracker=NAME``): make_analyzer's arguments
+TRACKERS = {
+    "fit": {},
+    "photometric": {"photometric": True},
+    "flow": {"flow": True},
+    "synthesis": {"estimator": "fit-synthesis"},
+}
 
-def record(source: str, out: str, face: str = "bench") -> None:
+
+def record(source: str, out: str, face: str = "bench", tracker: str = "fit") -> None:
     import myoface.bench.gaze as B
     from myoface.analysis.pipeline import Tracking, make_analyzer
     from myoface.bench.headmotion import _Clip, _model
@@ -78,7 +89,8 @@ def record(source: str, out: str, face: str = "bench") -> None:
         from myoface.analysis.video import open_video
 
         video = open_video(os.path.expanduser(source))
-    an, first = make_analyzer(model, video, "landmarks", calibration_frame=None)
+    an, first = make_analyzer(model, video, "landmarks", calibration_frame=None,
+                              **TRACKERS[tracker])  # fmt: skip
     frames, neutral = [], []
     reader = an.gaze
     measure, calibrate = reader.measure, reader.calibrate
@@ -158,6 +170,51 @@ class _Oracle:
         return offset
 
 
+def _anchor(rec, reader) -> dict:
+    """``oracle=anchor``: each eye moved, in the head frame, by one constant for the whole
+    recording, the mean over the frames whose lids rest of the move that puts the eyeball's
+    centre, as the fit's pose places it, where the truth's is in the image: its centre, its
+    lids' margins and its socket's grid (a perfect per-video anchor, the frame-to-frame
+    misplacement left to the socket). Returns the moves (mm, head frame x and y)."""
+    from myoface.analysis.camera import PinholeCamera
+    from myoface.bench.headmotion import FOV_DEG, SIZE, _model
+    from myoface.face.eyes import eye_loop, eyeball_center
+
+    truth = rec["truth"]
+    cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
+    face = _model().face
+    moves = {}
+    for side, group in (("l", "eye_l"), ("r", "eye_r")):
+        true_c = eyeball_center(face.vertices, eye_loop(face, group))
+        c = reader.centres_mm[side]
+        ds = []
+        for (_, camera, pose, *_), k in zip(rec["frames"], rec["index"], strict=True):
+            if truth["closure"][k] > 0.05:
+                continue
+            want = cam.project(truth["poses"][k].apply(true_c[None]))[0]
+
+            def at(d, camera=camera, pose=pose, c=c):
+                return camera.project(pose.apply((c + np.array([d[0], d[1], 0.0]))[None]))[0]
+
+            h = 1e-3
+            jac = np.column_stack([(at((h, 0)) - at((0, 0))) / h, (at((0, h)) - at((0, 0))) / h])
+            ds.append(np.linalg.solve(jac, want - at((0, 0))))
+        moves[side] = np.array([*np.mean(ds, axis=0), 0.0])
+        reader.centres_mm[side] = c + moves[side]
+        if side in reader.sockets:
+            reader.sockets[side].points = reader.sockets[side].points + moves[side]
+
+    def placement(side, camera, pose, shape, points):
+        _, upper, lower = reader._eyes[side]
+        centre = pose.apply(reader.centres_mm[side][None])[0]
+        up2, lo2 = (camera.project(pose.apply(shape[c] + moves[side])) for c in (upper, lower))
+        return centre, up2, lo2
+
+    reader._placement = placement
+    print("anchor moves (mm, head frame):", {s: m[:2].round(2).tolist() for s, m in moves.items()})
+    return moves
+
+
 def _placed(rec, reader, frame_pose, k, acc) -> None:
     """Add frame ``k``'s misplacements (px) of each eye (its centre and its skin ring, moved by
     the socket's offset) against the truth's to ``acc``."""
@@ -214,7 +271,9 @@ def replay(path: str, settings, oracle: str | None = None) -> dict:
     reader.calibrate(rec["neutral"])
     if oracle is not None and rec["truth"] is None:
         sys.exit("an oracle needs a recording with the truth")
-    orc = None if oracle is None else _Oracle(oracle, rec, reader)
+    if oracle == "anchor":
+        _anchor(rec, reader)
+    orc = None if oracle in (None, "anchor") else _Oracle(oracle, rec, reader)
     out, prev, placed = [], None, {}
     t0 = time.process_time()
     for (frame, camera, pose, shape, points, _), k in zip(rec["frames"], rec["index"],
@@ -302,8 +361,9 @@ def _same(a, b) -> bool:
 def main(argv) -> None:
     from myoface.analysis.gaze import GazeSettings
 
-    if len(argv) in (3, 4) and argv[0] == "record":
-        record(*argv[1:])
+    if len(argv) >= 3 and argv[0] == "record":
+        kw = dict(a.split("=", 1) for a in argv[3:] if "=" in a)
+        record(*[a for a in argv[1:] if "=" not in a], **kw)
         return
     if len(argv) < 2 or argv[0] != "replay":
         sys.exit(__doc__)
@@ -311,8 +371,8 @@ def main(argv) -> None:
     kw = {k: ast.literal_eval(v) for k, v in (a.split("=", 1) for a in argv[1:] if "=" in a)
           if k != "oracle"}  # fmt: skip
     oracle = next((a.split("=", 1)[1] for a in argv[1:] if a.startswith("oracle=")), None)
-    if oracle not in (None, "skin", "centre"):
-        sys.exit(f"oracle must be skin or centre; got {oracle!r}")
+    if oracle not in (None, "skin", "centre", "anchor"):
+        sys.exit(f"oracle must be skin, centre or anchor; got {oracle!r}")
     settings = GazeSettings(**kw)
     for p in paths:
         print(p, replay(p, settings, oracle))

@@ -221,7 +221,7 @@ def _rotation_error_deg(fitted, true) -> np.ndarray:
 
 
 def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
-             photometric: bool = False) -> dict:  # fmt: skip
+             photometric: bool = False, flow: bool = False) -> dict:  # fmt: skip
     """Analyse ``frames`` end to end and compare each eye's gaze with the truth; also the
     reader alone on the true geometry. The detail's numbers (see the module)."""
     from myoface.analysis.camera import PinholeCamera
@@ -234,7 +234,7 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
     t0 = time.perf_counter()
     an, first = make_analyzer(
         model, clip, "landmarks", calibration_frame=None, estimator=estimator,
-        photometric=photometric,
+        photometric=photometric, flow=flow,
     )  # fmt: skip
     try:
         measured, offsets, openings = [], [], []
@@ -319,6 +319,9 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
                 "eyeball_centre_px_mean": [
                     round(float(v), 3) for v in np.mean(centre_side[s], axis=0)
                 ] if centre_side[s] else None,
+                "eyeball_centre_px_sd": [
+                    round(float(v), 3) for v in np.std(centre_side[s], axis=0)
+                ] if centre_side[s] else None,
                 "eyeball_centre_neutral_mm": [
                     round(float(v), 3) for v in centres[s] - true_c[s]
                 ],
@@ -345,7 +348,9 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
     }
     out["gaze_ms_per_frame"] = reader.describe()["ms_per_frame"]
     out["analysis_seconds"] = round(seconds, 2)
-    out["estimator"] = estimator + (" + photometric" if photometric else "")
+    out["estimator"] = (
+        estimator + (" + photometric" if photometric else "") + (" + flow" if flow else "")
+    )
     worst = [out["per_eye"][s]["rms_deg"] for s in ("l", "r")]
     out["value"] = None if None in worst else max(worst)
     return out
@@ -373,8 +378,9 @@ def bench_gaze_error(quick: bool) -> Measurement:
     as a webcam's and analysed end to end (:mod:`myoface.bench.gaze`; 90 frames, quick 30).
     The detail: per eye and angle, the reader alone on the true geometry, open eyes read,
     blinks said closed, saccade frames, the eyeball centres' image error, and the same with
-    the fit's analysis by synthesis (``fit-synthesis``) and its photometric term
-    (``photometric``; these two not in a quick run)."""
+    the fit's analysis by synthesis (``fit-synthesis``), its photometric term
+    (``photometric``) and its anchored optical flow (``flow``, ``myoface analyze --flow``;
+    these three not in a quick run)."""
     model, frames, poses, gaze, closure, skins, report, face_kind = _sequence(quick)
     res = run_gaze(model, frames, poses, gaze, closure, skins)
     detail = {"face": face_kind, "frames": len(frames), "camera": report, "fit": res}
@@ -385,5 +391,6 @@ def bench_gaze_error(quick: bool) -> Measurement:
         detail["photometric"] = run_gaze(
             model, frames, poses, gaze, closure, skins, photometric=True
         )
+        detail["flow"] = run_gaze(model, frames, poses, gaze, closure, skins, flow=True)
     value = res["value"] if res["value"] is not None else float("nan")
     return Measurement(value, len(frames), detail=detail)
