@@ -64,6 +64,19 @@ def trajectory(n, phase=0.0, amplitude=1.0):
     return out
 
 
+def face_model(face: str):
+    """The face a run plays on: ``"default"`` the bundled face's model, else the head-motion
+    benchmark's personal face (from the sample video's photo)."""
+    if face == "default":
+        from myoface.face import load_default_face
+        from myoface.model import build_face_model
+
+        return build_face_model(load_default_face())
+    from myoface.bench import headmotion as hm
+
+    return hm._model()
+
+
 def run(name: str, out: Path) -> None:
     from myoface.bench import headmotion as hm
     from myoface.bench.expression import EPISODES, PHASES, _intensities, episode_programme
@@ -84,13 +97,7 @@ def run(name: str, out: Path) -> None:
         exact = True
     elif name != "bench":
         raise SystemExit(f"unknown run {name}")
-    if face == "default":
-        from myoface.face import load_default_face
-        from myoface.model import build_face_model
-
-        fm = build_face_model(load_default_face())
-    else:
-        fm = hm._model()
+    fm = face_model(face)
     truth, played, ph = episode_programme(fm.ids, episodes, phases)
     inten = _intensities(episodes, phases)
     poses = hm.head_trajectory(len(truth), True) if still else trajectory(len(truth), phase, amp)

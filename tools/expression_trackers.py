@@ -49,13 +49,7 @@ def fit(out: Path, names) -> None:
             episodes, amp, phases = er.P2, 0.5, (20, 6, 12, 6, 12)
         elif name != "bench":
             raise SystemExit(f"unknown run {name}")
-        if face == "default":
-            from myoface.face import load_default_face
-            from myoface.model import build_face_model
-
-            fm = build_face_model(load_default_face())
-        else:
-            fm = hm._model()
+        fm = er.face_model(face)
         truth, played, ph = episode_programme(fm.ids, episodes, phases)
         poses = (
             hm.head_trajectory(len(truth), False)
