@@ -77,6 +77,22 @@ def face_model(face: str):
     return hm._model()
 
 
+def save_run(path: Path, fm, res, truth, played, ph, intensity) -> None:
+    """One run's fit beside its truth, as ``tools/expression_ceiling.py`` and
+    ``tools/expression_trackers.py score`` read it."""
+    np.savez(
+        path,
+        ids=np.array(fm.ids),
+        estimate=res.estimate,
+        truth=truth,
+        angles_est=res.angles_est,
+        angles_true=res.angles_true,
+        played=np.array(played),
+        phase=np.array(ph),
+        intensity=np.array(intensity),
+    )
+
+
 def run(name: str, out: Path) -> None:
     from myoface.bench import headmotion as hm
     from myoface.bench.expression import EPISODES, PHASES, _intensities, episode_programme
@@ -111,17 +127,7 @@ def run(name: str, out: Path) -> None:
         points, _ = hm.detect_sequence(frames)
         del frames
     res = hm.run_headmotion(fm, points, truth, poses, skins)
-    np.savez(
-        out / f"{name}.npz",
-        ids=np.array(fm.ids),
-        estimate=res.estimate,
-        truth=truth,
-        angles_est=res.angles_est,
-        angles_true=res.angles_true,
-        played=np.array(played),
-        phase=np.array(ph),
-        intensity=np.array(inten),
-    )
+    save_run(out / f"{name}.npz", fm, res, truth, played, ph, inten)
     print(name, "saved", flush=True)
 
 

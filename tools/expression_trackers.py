@@ -68,17 +68,10 @@ def fit(out: Path, names) -> None:
                     frames=frames if tracker != "fit" else None,
                     anchored_flow=tracker == "flow",
                 )  # fmt: skip
-                np.savez(
-                    out / f"{name}_{tracker}_{prior}.npz",
-                    ids=np.array(fm.ids),
-                    estimate=res.estimate,
-                    truth=truth,
-                    angles_est=res.angles_est,
-                    angles_true=res.angles_true,
-                    played=np.array(played),
-                    phase=np.array(ph),
-                    intensity=np.array(_intensities(episodes, phases)),
-                )
+                er.save_run(
+                    out / f"{name}_{tracker}_{prior}.npz", fm, res, truth, played, ph,
+                    _intensities(episodes, phases),
+                )  # fmt: skip
                 print(name, tracker, prior, f"{time.time() - t0:.0f} s", flush=True)
         del frames
 
