@@ -94,3 +94,77 @@ def test_ordered_worker_runs_in_order_and_stops():
     pending = w2.submit(order.append, 100)
     w2.close(timeout=10)
     assert pending.cancelled() or pending.done()
+
+
+def test_run_ahead_parallel_keeps_order_and_each_worker_its_own_work():
+    """Items worked on by several workers (each its own work: e.g. a detector of its own) come
+    back in order; the workers share the items (each worked on once); while serial_until is
+    False an item is finished before the next is taken; the source's and the works'
+    exceptions are raised in order, and the threads end (none left) with the source
+    closed."""
+    import random
+    import threading
+    import time
+
+    from myoface._threads import run_ahead_parallel
+
+    seen: list = []
+    closed: list = []
+    lock = threading.Lock()
+
+    def source(n, fail_at=None):
+        try:
+            for k in range(n):
+                if k == fail_at:
+                    raise KeyError("bad frame")
+                yield k
+        finally:
+            closed.append(True)
+
+    def make_work(tag):
+        def work(k):
+            time.sleep(random.uniform(0, 0.003))  # (finish out of order)
+            with lock:
+                seen.append((k, tag))
+            if k == 17:
+                raise ValueError("no such frame")
+            return 10 * k
+
+        return work
+
+    def names():
+        return [t for t in threading.enumerate() if t.name.startswith("myoface-test-par")]
+
+    works = [make_work("a"), make_work("b")]
+    got = list(run_ahead_parallel(source(15), works, 4, "myoface-test-par"))
+    assert got == [(k, 10 * k) for k in range(15)]
+    assert sorted(k for k, _ in seen) == list(range(15))  # each item once
+    assert {tag for _, tag in seen} == {"a", "b"}  # both workers worked
+    assert closed == [True] and not names()
+
+    # serial until the fifth item: the first five are worked on one at a time, in order
+    seen.clear()
+    list(run_ahead_parallel(source(12), works, 4, "myoface-test-par",
+                            serial_until=lambda: len(seen) >= 5))  # fmt: skip
+    assert [k for k, _ in seen[:5]] == [0, 1, 2, 3, 4]
+
+    # a work's exception, after the items before it
+    out = []
+    with pytest.raises(ValueError, match="no such frame"):
+        for item in run_ahead_parallel(source(30), works, 4, "myoface-test-par"):
+            out.append(item)
+    assert out == [(k, 10 * k) for k in range(17)] and not names()
+    # the source's exception, after the items before it
+    out = []
+    with pytest.raises(KeyError):
+        for item in run_ahead_parallel(source(30, fail_at=9), works, 4, "myoface-test-par"):
+            out.append(item)
+    assert out == [(k, 10 * k) for k in range(9)] and not names()
+    # stopping early closes the source and ends the threads
+    closed.clear()
+    gen = run_ahead_parallel(source(1000), works, 4, "myoface-test-par")
+    assert next(gen) == (0, 0)
+    gen.close()
+    assert closed == [True] and not names()
+    with pytest.raises(MyofaceValueError):
+        list(run_ahead_parallel(source(3), [], 2))

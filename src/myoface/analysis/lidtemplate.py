@@ -411,6 +411,34 @@ class LidTemplate:
             "anchor_mm": shift,
         }  # fmt: skip
 
+    def _cost(self, grey, chroma, pose, shift, where, tmpl, tmpl_chroma, origin):
+        """(N, S) each column's cost at each shift: the frame sampled where the template's
+        samples land (``where`` (S, nb), gaps along the column, plus the eye's ``shift``),
+        its luma less its mean against ``tmpl`` (N, nb), and its chromaticities against
+        ``tmpl_chroma`` (2, N, nb; None: luma alone), mean squared differences, summed."""
+        from myoface.analysis._lidkernels import slide_cost
+
+        use_chroma = tmpl_chroma is not None
+        imgs = np.ascontiguousarray(
+            np.concatenate([grey[None], np.asarray(chroma)]) if use_chroma else grey[None],
+            dtype=np.float32,
+        )
+        tmpls = np.ascontiguousarray(
+            np.concatenate([tmpl[None], np.asarray(tmpl_chroma)]) if use_chroma else tmpl[None],
+            dtype=np.float64,
+        )
+        cam = self.camera
+        return slide_cost(
+            np.ascontiguousarray(self.x0, dtype=np.float64),
+            np.ascontiguousarray(self.gap, dtype=np.float64),
+            np.ascontiguousarray(np.asarray(shift, dtype=np.float64)[self.eye]),
+            np.ascontiguousarray(where, dtype=np.float64),
+            np.ascontiguousarray(pose.rotation, dtype=np.float64),
+            np.ascontiguousarray(pose.translation_mm, dtype=np.float64),
+            float(cam.focal_px), float(cam.cx), float(cam.cy),
+            float(origin[0]), float(origin[1]), imgs, tmpls,
+        )  # fmt: skip
+
     def _slide(self, grey, chroma, pose, shift, band, follow, shifts, tmpl, tmpl_chroma,
                origin):  # fmt: skip
         """Per eye the shift of ``band`` (the template ``tmpl``, ``tmpl_chroma``) along the
@@ -420,15 +448,7 @@ class LidTemplate:
         # the frame along the columns where each template sample lands for each shift: the
         # lid's skin beyond the margin moves with it, less the further away (``follow``)
         where = band[None, :] + shifts[:, None] * follow[None, :]  # (S, nb)
-        p = self.x0[:, None, :] + where.reshape(-1)[None, :, None] * self.gap[:, None, :]
-        uv = self._project(pose, p + shift[self.eye][:, None, :]) - origin
-        win = _sample(grey, uv).reshape(len(self.x0), *where.shape)
-        win = win - win.mean(2, keepdims=True)
-        cost = ((win - tmpl[:, None, :]) ** 2).mean(2)  # (N, S)
-        if tmpl_chroma is not None:
-            for c, ref in zip(chroma, tmpl_chroma, strict=True):
-                got = _sample(c, uv).reshape(len(self.x0), *where.shape)
-                cost += ((got - ref[:, None, :]) ** 2).mean(2)
+        cost = self._cost(grey, chroma, pose, shift, where, tmpl, tmpl_chroma, origin)  # (N, S)
         delta = np.full(2, np.nan)
         clarity = np.zeros(2)
         curves = [None, None]
