@@ -508,6 +508,7 @@ class LidTemplateTerm:
         self._at = t._uv(pose, np.array([0.0]))[:, 0]
         self.delta = out["closure"]
         self.rows = np.flatnonzero(t.usable & np.isfinite(self.delta[t.eye]))
+        self._share = None
         return out
 
     def prepare(self, est: Estimate) -> None:
@@ -515,10 +516,14 @@ class LidTemplateTerm:
         uv = t._uv(est.pose, np.array([0.0]))[:, 0]
         if self._at is None or np.abs(uv - self._at).max() > t.settings.redetect_px:
             self.detect(est.pose)
+        share = self.share()[t.eye[self.rows]]
+        if not share.any():  # (open eyes: the term weighs nothing; nothing to compute)
+            self.hw = share
+            return
         r = self._residuals(est)
         h = t.settings.huber
         self.hw = np.where(np.abs(r) > h, h / np.maximum(np.abs(r), 1e-12), 1.0)
-        self.hw = self.hw * self.share()[t.eye[self.rows]]
+        self.hw = self.hw * share
 
     def share(self) -> np.ndarray:
         """(2,) how much each eye's reading counts: 0 up to :data:`CLOSING` [0] of a gap
@@ -527,9 +532,11 @@ class LidTemplateTerm:
         a gap RMS on the gaze benchmark's renders at the true poses, more at the fit's) is no
         better than theirs, and a lid placed by it moved the gaze's reading; what it is for
         is the closing lid, where the points stay open."""
-        a, b = CLOSING
-        x = np.clip((np.nan_to_num(self.delta, nan=-1.0) - a) / (b - a), 0.0, 1.0)
-        return x * x * (3 - 2 * x) * self.read_eyes()
+        if getattr(self, "_share", None) is None:  # (the reading's: made anew by detect())
+            a, b = CLOSING
+            x = np.clip((np.nan_to_num(self.delta, nan=-1.0) - a) / (b - a), 0.0, 1.0)
+            self._share = x * x * (3 - 2 * x) * self.read_eyes()
+        return self._share
 
     def read_eyes(self) -> np.ndarray:
         """(2,) bool: the eyes whose lids the last reading read."""
@@ -548,7 +555,7 @@ class LidTemplateTerm:
     def normal_equations(self, est: Estimate):
         n = est.n_unknowns
         hmat, b = np.zeros((n, n)), np.zeros(n)
-        if not len(self.rows):
+        if not len(self.rows) or not np.any(self.hw):
             return hmat, b
         t, j = self.template, self.rows
         r = self._residuals(est)
@@ -570,9 +577,11 @@ class LidTemplateTerm:
     def cost(self, est: Estimate) -> float:
         if not len(self.rows):
             return 0.0
+        share = self.share()[self.template.eye[self.rows]]
+        if not share.any():
+            return 0.0
         r = np.abs(self._residuals(est))
         h = self.template.settings.huber
-        share = self.share()[self.template.eye[self.rows]]
         return float((share * np.where(r <= h, r * r, 2 * h * r - h * h)).sum())
 
 

@@ -13,7 +13,7 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from myoface._threads import OrderedWorker, run_ahead_parallel
+from myoface._threads import OrderedWorker, run_ahead
 from myoface.analysis.camera import POSE_COLUMNS, HeadPose, PinholeCamera
 from myoface.analysis.flow import FlowDetector, FlowRefiner
 from myoface.analysis.gaze import GAZE_COLUMNS, GAZE_STATE_COLUMNS, Gaze, GazeEstimator
@@ -34,10 +34,6 @@ LANDMARK_ESTIMATORS = ("fit", "fit-synthesis", "paper")
 #: a frame whose landmarks stay farther than this (mm RMS) from the fitted model is not
 #: measured (``quality="misfit"``): MediaPipe lost the face, or the face is not the model's
 MISFIT_RMS_MM = 6.0
-#: MediaPipe's detectors (threads) on the calibration's frames, in image mode
-#: (:meth:`FitTracker._calibrate`): on two cores 60 frames of single_face.mp4 took 2.0 ms a
-#: frame with two against 3.55 with one, the same points (2026-12-03)
-CALIBRATION_DETECTORS = 2
 #: with the photometric term, a frame where more than this share of the face's visible,
 #: textured patches do not look as they did at calibration is not measured
 #: (``quality="occluded"``: a hand over the mouth is not an expression), and the next frame is
@@ -395,38 +391,19 @@ class FitTracker(TrackerBase):
                     f"no face found in the {k} frames of the video (MediaPipe face mesh)"
                 )
 
-        def detect(item, detector=det):
+        def detect(item):
             k, frame = item
-            obs = None if frame is None else self._observed(detector, frame)  # (None: no face)
+            obs = None if frame is None else self._observed(det, frame)  # (None: no face)
             if obs is not None and not first_face:
                 first_face.append(k)
             if obs is None and not first_face and window is not None:
                 images[k] = None  # (not kept: the search for a face may be long)
             return obs
 
-        # MediaPipe in image mode keeps nothing from one frame to the next, so the
-        # calibration's frames are detected on CALIBRATION_DETECTORS threads, each with a
-        # detector of its own (the same points as one detector gives, in about half the wall
-        # time on two cores: the analysis waits for these frames before its first fit);
-        # serially until the first face is found (the window counts from it)
-        parallel = self._own_detector and not self.settings.tracking and self._flow is None
-        extra: list = []
-
-        def detect_with_another(item):
-            if not extra:  # (made on its worker's thread, meanwhile)
-                extra.append(self._new_detector())
-            return detect(item, extra[0])
-
-        works = [detect] + [detect_with_another] * (CALIBRATION_DETECTORS - 1 if parallel else 0)
-
         def detected():
-            # MediaPipe on worker threads a few frames ahead while each frame is scored
+            # MediaPipe on a worker thread a few frames ahead while each frame is scored
             # (ModelFit.calibrate takes the points as they come)
-            ahead = run_ahead_parallel(
-                source(), works, DETECT_AHEAD_FRAMES * len(works), "myoface-detect",
-                serial_until=lambda: bool(first_face),
-            )  # fmt: skip
-            for _, obs in ahead:
+            for _, obs in run_ahead(source(), detect, DETECT_AHEAD_FRAMES, "myoface-detect"):
                 observed.append(obs)
                 # (the calibration reads the points where the flow put them)
                 pts = None if obs is None else obs.seen
@@ -445,10 +422,6 @@ class FitTracker(TrackerBase):
             if self._own_detector:
                 det.close()
             raise
-        finally:
-            stream.close()
-            for d in extra:
-                d.close()
         # the analysis goes on with this detector, and takes the calibration frames' points
         # from it rather than detecting them twice: the same points a detector tracking from
         # the first of these frames gives (the analysis starts there)
