@@ -202,3 +202,53 @@ def test_the_fit_follows_a_rendered_blink(tmp_path):
     assert got[False][15:17].max() < 0.4  # (MediaPipe's lid points do not close)
     assert gain(got[True]) >= 1.4 * gain(got[False])
     assert np.abs(got[True][rest]).max() <= 0.05
+
+
+def test_the_compiled_slide_cost_is_the_sampled_formula():
+    """The compiled cost of each column at each shift (_lidkernels.slide_cost) is the formula
+    it replaces: the frame sampled bilinearly (OpenCV's remap, border replicated) where each
+    template sample lands through the pose and the camera, the luma less its mean and the
+    chromaticities against their templates, mean squared differences summed (OpenCV's remap
+    places samples to 1/32 px, so the two agree to a small fraction of the costs' spread)."""
+    import cv2
+
+    from myoface.analysis._lidkernels import slide_cost
+    from myoface.analysis.camera import HeadPose, PinholeCamera
+
+    rng = np.random.default_rng(3)
+    h, w = 90, 140
+    imgs = np.stack(
+        [cv2.GaussianBlur(rng.uniform(0, 255, (h, w)).astype(np.float32), (0, 0), 2.0)
+         for _ in range(3)]
+    )  # fmt: skip
+    cam = PinholeCamera(500.0, 320.0, 180.0)
+    pose = HeadPose.from_euler(12.0, -5.0, 3.0, (4.0, -2.0, -550.0))
+    n, nb, ns = 6, 25, 41
+    x0 = rng.normal(0, 15, (n, 3))
+    gap = rng.normal(0, 4, (n, 3))
+    shift = rng.normal(0, 0.5, (n, 3))
+    band = np.linspace(-1.0, 1.0, nb)
+    follow = np.exp(-np.abs(band))
+    shifts = np.linspace(-1.5, 1.5, ns)
+    where = band[None, :] + shifts[:, None] * follow[None, :]
+    tmpls = rng.normal(0, 20, (3, n, nb))
+    origin = np.array([250.0, 100.0])
+    uv = x0[:, None, :] + where.reshape(-1)[None, :, None] * gap[:, None, :] + shift[:, None, :]
+    uv = cam.project(pose.apply(uv.reshape(-1, 3))) - origin
+    # (most samples inside the image, some beyond its border: replicated)
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
+    assert 0.3 < inside.mean() < 1.0
+    m = uv.astype(np.float32).reshape(1, -1, 2)
+    ref = np.zeros((n, ns))
+    for c in range(3):
+        got = cv2.remap(imgs[c], m[..., 0], m[..., 1], cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_REPLICATE).reshape(n, ns, nb).astype(np.float64)  # fmt: skip
+        if c == 0:
+            got = got - got.mean(2, keepdims=True)
+        ref += ((got - tmpls[c][:, None, :]) ** 2).mean(2)
+    cost = slide_cost(x0, gap, shift, where, pose.rotation, pose.translation_mm,
+                      cam.focal_px, cam.cx, cam.cy, origin[0], origin[1], imgs, tmpls)  # fmt: skip
+    assert cost.shape == (n, ns)
+    spread = ref.max() - ref.min()
+    assert np.abs(cost - ref).max() < 1e-3 * spread
+    assert (np.argmin(cost, axis=1) == np.argmin(ref, axis=1)).mean() >= 5 / 6

@@ -411,6 +411,34 @@ class LidTemplate:
             "anchor_mm": shift,
         }  # fmt: skip
 
+    def _cost(self, grey, chroma, pose, shift, where, tmpl, tmpl_chroma, origin):
+        """(N, S) each column's cost at each shift: the frame sampled where the template's
+        samples land (``where`` (S, nb), gaps along the column, plus the eye's ``shift``),
+        its luma less its mean against ``tmpl`` (N, nb), and its chromaticities against
+        ``tmpl_chroma`` (2, N, nb; None: luma alone), mean squared differences, summed."""
+        from myoface.analysis._lidkernels import slide_cost
+
+        use_chroma = tmpl_chroma is not None
+        imgs = np.ascontiguousarray(
+            np.concatenate([grey[None], np.asarray(chroma)]) if use_chroma else grey[None],
+            dtype=np.float32,
+        )
+        tmpls = np.ascontiguousarray(
+            np.concatenate([tmpl[None], np.asarray(tmpl_chroma)]) if use_chroma else tmpl[None],
+            dtype=np.float64,
+        )
+        cam = self.camera
+        return slide_cost(
+            np.ascontiguousarray(self.x0, dtype=np.float64),
+            np.ascontiguousarray(self.gap, dtype=np.float64),
+            np.ascontiguousarray(np.asarray(shift, dtype=np.float64)[self.eye]),
+            np.ascontiguousarray(where, dtype=np.float64),
+            np.ascontiguousarray(pose.rotation, dtype=np.float64),
+            np.ascontiguousarray(pose.translation_mm, dtype=np.float64),
+            float(cam.focal_px), float(cam.cx), float(cam.cy),
+            float(origin[0]), float(origin[1]), imgs, tmpls,
+        )  # fmt: skip
+
     def _slide(self, grey, chroma, pose, shift, band, follow, shifts, tmpl, tmpl_chroma,
                origin):  # fmt: skip
         """Per eye the shift of ``band`` (the template ``tmpl``, ``tmpl_chroma``) along the
@@ -420,15 +448,7 @@ class LidTemplate:
         # the frame along the columns where each template sample lands for each shift: the
         # lid's skin beyond the margin moves with it, less the further away (``follow``)
         where = band[None, :] + shifts[:, None] * follow[None, :]  # (S, nb)
-        p = self.x0[:, None, :] + where.reshape(-1)[None, :, None] * self.gap[:, None, :]
-        uv = self._project(pose, p + shift[self.eye][:, None, :]) - origin
-        win = _sample(grey, uv).reshape(len(self.x0), *where.shape)
-        win = win - win.mean(2, keepdims=True)
-        cost = ((win - tmpl[:, None, :]) ** 2).mean(2)  # (N, S)
-        if tmpl_chroma is not None:
-            for c, ref in zip(chroma, tmpl_chroma, strict=True):
-                got = _sample(c, uv).reshape(len(self.x0), *where.shape)
-                cost += ((got - ref[:, None, :]) ** 2).mean(2)
+        cost = self._cost(grey, chroma, pose, shift, where, tmpl, tmpl_chroma, origin)  # (N, S)
         delta = np.full(2, np.nan)
         clarity = np.zeros(2)
         curves = [None, None]
@@ -488,6 +508,7 @@ class LidTemplateTerm:
         self._at = t._uv(pose, np.array([0.0]))[:, 0]
         self.delta = out["closure"]
         self.rows = np.flatnonzero(t.usable & np.isfinite(self.delta[t.eye]))
+        self._share = None
         return out
 
     def prepare(self, est: Estimate) -> None:
@@ -495,10 +516,14 @@ class LidTemplateTerm:
         uv = t._uv(est.pose, np.array([0.0]))[:, 0]
         if self._at is None or np.abs(uv - self._at).max() > t.settings.redetect_px:
             self.detect(est.pose)
+        share = self.share()[t.eye[self.rows]]
+        if not share.any():  # (open eyes: the term weighs nothing; nothing to compute)
+            self.hw = share
+            return
         r = self._residuals(est)
         h = t.settings.huber
         self.hw = np.where(np.abs(r) > h, h / np.maximum(np.abs(r), 1e-12), 1.0)
-        self.hw = self.hw * self.share()[t.eye[self.rows]]
+        self.hw = self.hw * share
 
     def share(self) -> np.ndarray:
         """(2,) how much each eye's reading counts: 0 up to :data:`CLOSING` [0] of a gap
@@ -507,9 +532,11 @@ class LidTemplateTerm:
         a gap RMS on the gaze benchmark's renders at the true poses, more at the fit's) is no
         better than theirs, and a lid placed by it moved the gaze's reading; what it is for
         is the closing lid, where the points stay open."""
-        a, b = CLOSING
-        x = np.clip((np.nan_to_num(self.delta, nan=-1.0) - a) / (b - a), 0.0, 1.0)
-        return x * x * (3 - 2 * x) * self.read_eyes()
+        if getattr(self, "_share", None) is None:  # (the reading's: made anew by detect())
+            a, b = CLOSING
+            x = np.clip((np.nan_to_num(self.delta, nan=-1.0) - a) / (b - a), 0.0, 1.0)
+            self._share = x * x * (3 - 2 * x) * self.read_eyes()
+        return self._share
 
     def read_eyes(self) -> np.ndarray:
         """(2,) bool: the eyes whose lids the last reading read."""
@@ -528,7 +555,7 @@ class LidTemplateTerm:
     def normal_equations(self, est: Estimate):
         n = est.n_unknowns
         hmat, b = np.zeros((n, n)), np.zeros(n)
-        if not len(self.rows):
+        if not len(self.rows) or not np.any(self.hw):
             return hmat, b
         t, j = self.template, self.rows
         r = self._residuals(est)
@@ -550,9 +577,11 @@ class LidTemplateTerm:
     def cost(self, est: Estimate) -> float:
         if not len(self.rows):
             return 0.0
+        share = self.share()[self.template.eye[self.rows]]
+        if not share.any():
+            return 0.0
         r = np.abs(self._residuals(est))
         h = self.template.settings.huber
-        share = self.share()[self.template.eye[self.rows]]
         return float((share * np.where(r <= h, r * r, 2 * h * r - h * h)).sum())
 
 
