@@ -225,6 +225,14 @@ class HeadMotionResult:
             "rmse_worst_all": float(np.nanmax(rmse)),
             "skin_mm": float(np.sqrt(np.nanmean(self.skin_rms_mm[ok] ** 2))),
             "pose_deg": float(np.sqrt(np.mean((self.angles_est[ok] - self.angles_true[ok]) ** 2))),
+            # the head angles' error split into its mean (yaw, pitch, roll: a constant, the
+            # calibration's pose) and what changes from frame to frame (SD)
+            "pose_err_mean_deg": [
+                round(float(v), 3) for v in (self.angles_est[ok] - self.angles_true[ok]).mean(0)
+            ],
+            "pose_err_sd_deg": [
+                round(float(v), 3) for v in (self.angles_est[ok] - self.angles_true[ok]).std(0)
+            ],
             "residual_mm": float(np.nanmedian(self.residual_mm)),
             "frames_fitted": int(ok.sum()),
             "calibration_frame": int(self.calibration_index),
@@ -561,7 +569,7 @@ def _head(still: bool) -> str:
 
 def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = None,
          degraded: bool = True, photometric: bool | None = None, anchored: bool = False,
-         ) -> tuple[HeadMotionResult, dict]:  # fmt: skip
+         au_prior: bool = False) -> tuple[HeadMotionResult, dict]:  # fmt: skip
     """The loop (cached per run): 90 frames (16 with ``quick``) at 30 fps; the default
     estimator (the 3-D fit), or with ``synthesis`` the fit with analysis by synthesis;
     MediaPipe's points refined by optical flow or not (``flow``; default: as the analysis,
@@ -570,7 +578,9 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
     :attr:`~myoface.analysis.weights.FitSettings.photometric`); on the camera's frames
     (``degraded``, the benchmarks' numbers) or the clean renders. ``anchored``: MediaPipe's
     points with the model-anchored tracker's in the fit (``flow`` is then the chained
-    refinement of MediaPipe's points, which it replaces: False)."""
+    refinement of MediaPipe's points, which it replaces: False). ``au_prior``: with the
+    fit's AU-space prior (:mod:`myoface.analysis.au_prior`, ``FitSettings(au_prior_sigma=
+    AU_PRIOR_SIGMA)``)."""
     from myoface.analysis.weights import FitSettings
 
     flow = FitSettings().flow if flow is None else bool(flow)
@@ -578,7 +588,7 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
     if anchored:
         flow = False
     key = (bool(quick), bool(still), bool(synthesis), flow, bool(degraded), photometric,
-           bool(anchored))  # fmt: skip
+           bool(anchored), bool(au_prior))  # fmt: skip
     if key not in _cache:
         import time
 
@@ -586,7 +596,13 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
 
         fm, truth, poses, skins, points, t_det = _sequence(quick, still, flow, degraded)
         # (the flow's points are given as the points; the fit's own settings the default's)
-        settings = FitSettings(photometric=True) if photometric else None
+        settings = None
+        if photometric or au_prior:
+            from myoface.analysis.au_prior import AU_PRIOR_SIGMA
+
+            settings = FitSettings(
+                photometric=photometric, au_prior_sigma=AU_PRIOR_SIGMA if au_prior else None
+            )
         t0 = time.perf_counter()
         res = run_headmotion(
             fm, points, truth, poses, skins, settings=settings, synthesis=synthesis,
@@ -601,6 +617,7 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
             "estimator": "fit-synthesis" if synthesis else "fit",
             "optical_flow": "anchored" if anchored else ("chained" if flow else False),
             "photometric": photometric,
+            "au_prior": bool(au_prior),
             "summary_12_jaw": res.summary(),
             "per_muscle": {
                 m: {
@@ -656,6 +673,15 @@ def _both(quick: bool) -> dict:
         out[f"{head}, photometric"] = _run(quick, still, photometric=True)[1]
         # the fit with the model-anchored point tracker (myoface analyze --flow)
         out[f"{head}, fit with anchored flow"] = _run(quick, still, anchored=True)[1]
+        # with the AU-space prior (opt-in), alone, with the flow, and with the flow and the
+        # photometric term: the combinations measured best here (2026-12-03)
+        out[f"{head}, fit with AU prior"] = _run(quick, still, au_prior=True)[1]
+        out[f"{head}, fit with anchored flow and AU prior"] = _run(
+            quick, still, anchored=True, au_prior=True
+        )[1]
+        out[f"{head}, photometric with anchored flow and AU prior"] = _run(
+            quick, still, photometric=True, anchored=True, au_prior=True
+        )[1]
         if not quick:
             out[f"{head}, fit-synthesis"] = _run(quick, still, True)[1]
             # MediaPipe's points refined by the chained flow (FlowRefiner; before 2026-12-02
