@@ -188,7 +188,15 @@ class TrackerOffsets:
     the pitch goes from 3.1 to 0.4 deg. What it cannot see: the expression's own offsets
     (the table is of the neutral; analysis by synthesis measures those, at a render a
     frame), and whatever the camera's degradation adds (the degraded still frames keep about
-    2 deg of pitch).
+    2 deg of pitch). Of the degradations, it is the room behind the head (measured
+    2026-12-03, ``tools/headmotion_background.py``: the still head's calibration pitched 2.45
+    deg off with every degradation, 1.05 with none but the texture's resampling, 2.49 with the
+    room alone, 0.26-1.27 with blur, noise, H.264 or the moving light alone): MediaPipe places
+    its points differently over another background. This table rendered over the same room
+    takes the calibration's pitch to 1.25 deg (and the moving head's yaw from -1.69 to -0.88);
+    over the video's first frame with the face inpainted (what an analysis could know), only
+    part of it (the still head's pose 1.46 -> 1.14-1.29 deg RMS for hull margins 0-0.3), while
+    the moving head's worst muscle got worse (0.287 -> 0.31-0.33): not adopted.
 
     This is the table of analysis by synthesis (:attr:`FitSettings.synthesis_rounds`) at the
     neutral, paid once per view instead of once per frame.
