@@ -210,6 +210,16 @@ def _errors(est: np.ndarray, truth: np.ndarray, use: np.ndarray) -> dict:
     }
 
 
+def _by_head_yaw(est, truth, use, poses) -> dict:
+    """The RMS error and the mean error (yaw, pitch deg) binned by the true head's |yaw|
+    (the head frame's z axis against the camera's: 0-10, 10-20, 20+ deg)."""
+    yaw = np.array([abs(np.degrees(np.arctan2(p.rotation[0, 2], p.rotation[2, 2]))) for p in poses])
+    out = {}
+    for lo, hi in ((0, 10), (10, 20), (20, 90)):
+        out[f"{lo}-{hi}"] = _errors(est, truth, use & (yaw >= lo) & (yaw < hi))
+    return out
+
+
 def _rotation_error_deg(fitted, true) -> np.ndarray:
     """The fitted head rotation's error (3,) deg, about the head's own x (pitch), y (yaw) and z
     (roll) axes: the small-angle vector of ``true^T fitted`` (the fit's camera is its own, 45
@@ -303,6 +313,8 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
     partly = open_ & (closure > PARTLY_CLOSED)
     shut = closure >= 0.9
     jumps = np.flatnonzero(np.linalg.norm(np.diff(gaze, axis=0), axis=1) >= MIN_SACCADE_DEG) + 1
+    # open frames within 3 of a frame whose lids are at all closed in the truth
+    near_blink = np.convolve((closure > 0.05).astype(float), np.ones(7), mode="same") > 0
     out = {"per_eye": {}, "reader_on_true_geometry": {}}
     for s in ("l", "r"):
         out["per_eye"][s] = _errors(est[s], gaze, open_)
@@ -332,6 +344,9 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
                     round(float(v), 3) for v in np.mean(opening_err[s], axis=0)
                 ] if opening_err[s] else None,
                 "in_true_head_frame": _errors(est_true_frame[s], gaze, open_),
+                "by_head_yaw": _by_head_yaw(est[s], gaze, open_, poses),
+                "near_blinks": _errors(est[s], gaze, open_ & near_blink),
+                "away_from_blinks": _errors(est[s], gaze, open_ & ~near_blink),
             }
         )  # fmt: skip
     ce = np.array(centre_err) if centre_err else np.full((1, 2), np.nan)
