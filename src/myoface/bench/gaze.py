@@ -77,6 +77,21 @@ analysis by synthesis 0.40 / 0.55 mm in x), and the fit's poses put them 0.44 / 
 the image's right of the truth's on average (``eyeball_centre_px_mean``, before the socket;
 0.60 / 1.10 after it): the yaw's bias is the pose's, not the calibration's (the breakdown is
 in :mod:`myoface.analysis.gaze`).
+
+Where the error sits (2026-12-03, f1fa719 plus the detail's ``by_head_yaw``, ``near_blinks``
+and ``away_from_blinks``; ``myoface bench --only analysis.gaze_error_deg``, 4.425 deg, the
+same number twice): the default fit's worse eye (right) has yaw RMS 4.76 of which the mean is
+-4.38 (SD 1.85), pitch 4.06 (mean -1.55, SD 3.76); the left yaw 4.08 (mean -2.79, SD 2.98).
+With each eye's mean taken off the RMS would be 3.41 / 2.96. The right eye's yaw bias is the
+same at every head yaw (-5.1, -3.6, -4.4 deg at |yaw| 0-10, 10-20, 20+ deg: a constant offset,
+not the parallax of a turned head), and of it about -1.3 is the reader's own (on the true
+geometry the right eye's yaw mean is -1.28, the left's -0.04) and the rest the eyeball's
+centre where the pose puts it, 1.1 px to the image's right. The frames next to a blink (within
+3 of one whose lids move) are no worse than the others (4.40 against 4.43, right eye), nor
+the saccades' (3.29). The other variants alike: analysis by synthesis 5.21 (its left yaw
+bias +2.95, the other way), the photometric term 6.01 (pitch bias +4.7 / +4.8), flow 4.58
+(yaw bias -3.4 / -4.2). Re-expressed in the true head frame the readings are worse (5.4 /
+5.5): the reader reads the iris against the fitted eyeball, not the camera's direction.
 """
 
 from __future__ import annotations
