@@ -505,7 +505,33 @@ def _closing_frames(ref, seq, unsure=None) -> list:
     ]
 
 
-def _region_displacements(ref, seq, regions=None, rotation=None, face3d=None, unsure=None):
+def lids_unread(unsure) -> np.ndarray:
+    """Per frame, whether the reader's reading of any lid centre failed its forward-backward
+    check (``unsure``: (T, len(POINTS)), :func:`read_video_points`): where a closing lid covers
+    the eye, the flow at its margin mixes the lid's motion with the still eyeball's and the
+    check fails. Such frames are not scored in the eyelids region, on either side
+    (:func:`_region_displacements`' ``lids_out``). On a render of the person's face blinking
+    (``tests/analysis/test_fidelity.py::test_the_eyelids_reader_on_renders_at_known_
+    contractions``) the two closed frames failed it, the half-closed ones passed."""
+    u = np.asarray(unsure, bool)
+    return u[:, [_POS[i] for i in REGIONS["eyelids"]]].any(1)
+
+
+def _eyelids_only_vertical(d, lids_out=None):
+    """The lid centres' displacements ``d`` (T, len(POINTS), 2; head frame, x across, y up)
+    projected on the eye's vertical (the face's y: the lids open and close along it), and NaN
+    in the frames ``lids_out`` (:func:`lids_unread`). In place."""
+    lid = [_POS[i] for i in REGIONS["eyelids"]]
+    d[:, lid, 0] = np.where(np.isfinite(d[:, lid, 0]), 0.0, np.nan)
+    if lids_out is not None:
+        out = np.asarray(lids_out, bool)
+        d[np.ix_(out, lid)] = np.nan
+    return d
+
+
+def _region_displacements(
+    ref, seq, regions=None, rotation=None, face3d=None, unsure=None, lids_out=None
+):
     """{region: (T, P, 2)} displacements of ``seq`` (T, len(POINTS), 2; image axes, x right,
     y down; NaN rows: not measured) from ``ref`` (len(POINTS), 2), given in the head frame's
     axes (x to the subject's left, y up), over the inter-ocular distance.
@@ -542,7 +568,20 @@ def _region_displacements(ref, seq, regions=None, rotation=None, face3d=None, un
         if rotation is not None:
             d = d @ np.asarray(rotation).T
         d = d * np.array([1.0, -1.0])
+    d = _eyelids_only_vertical(d, lids_out)
     return {name: d[:, [_POS[i] for i in idx]] for name, idx in regions.items()}
+
+
+def _overall(d_in: dict, d_out: dict) -> Scores:
+    """:func:`scores` over every region's points together: a point left out on either side in a
+    frame (the lids in :func:`lids_unread`'s frames) is left out of that frame alone."""
+    a = np.concatenate(list(d_in.values()), axis=1)
+    b = np.concatenate(list(d_out.values()), axis=1)
+    ok = np.isfinite(a).all(-1) & np.isfinite(b).all(-1)  # (T, P)
+    some = ok.any(1)
+    a = np.where(ok[..., None], a, 0.0)[some]
+    b = np.where(ok[..., None], b, 0.0)[some]
+    return scores(a, b)
 
 
 #: how the input's side takes the head's motion out (:func:`input_displacements`): "3d", a
@@ -558,7 +597,7 @@ ALIGNMENTS = ("3d", "2d")
 
 
 def input_displacements(
-    ref, pts, side: dict, regions=None, alignment: str = ALIGNMENT, unsure=None
+    ref, pts, side: dict, regions=None, alignment: str = ALIGNMENT, unsure=None, lids_out=None
 ) -> dict:
     """The input's side of the measure: {region: (T, P, 2)} displacements of the reader's
     points ``pts`` (T, len(POINTS), 2; pixels) from the reference's ``ref``, the head's motion
@@ -567,15 +606,20 @@ def input_displacements(
     model's neutral (its 2-D points turn the 2-D alignment's frame into the face's frontal
     axes; its 3-D points are the 3-D alignment's depths). ``unsure``: the readings that failed
     the reader's forward-backward check (:func:`read_video_points`), which tell the 3-D
-    alignment where the eyes close."""
+    alignment where the eyes close. ``lids_out``: per frame, the lids not scored
+    (:func:`lids_unread`; default: from ``unsure`` when given)."""
+    if lids_out is None and unsure is not None:
+        lids_out = lids_unread(unsure)
     if alignment == "3d":
         face3d = side["neutral_3d"]
-        return _region_displacements(ref, pts, regions, face3d=face3d, unsure=unsure)
+        return _region_displacements(
+            ref, pts, regions, face3d=face3d, unsure=unsure, lids_out=lids_out
+        )
     if alignment == "2d":
         # the reference frame's rigid points turned onto the model's neutral ones (the head's
         # roll in the reference frame)
         _, rot, _ = similarity_2d(ref[_RIGID], side["neutral_points"][_RIGID])
-        return _region_displacements(ref, pts, regions, rotation=rot)
+        return _region_displacements(ref, pts, regions, rotation=rot, lids_out=lids_out)
     raise MyofaceValueError(f"alignment must be one of {ALIGNMENTS}; got {alignment!r}")
 
 
@@ -609,7 +653,7 @@ def model_points(model, table, ok=None) -> tuple[np.ndarray, np.ndarray, int]:
 
 
 def model_displacements(
-    model, table, ok=None, regions=None, alignment: str = ALIGNMENT
+    model, table, ok=None, regions=None, alignment: str = ALIGNMENT, lids_out=None
 ) -> tuple[dict, dict]:
     """The model's side of the measure, exact: :func:`model_points` of ``table``, their
     displacements from the neutral (contractions 0) with the head's motion that the rigid
@@ -622,10 +666,14 @@ def model_displacements(
     inter-ocular distance, in the head frame's axes (x to the subject's left, y up). Returns
     ({region: (T, P, 2)}, a dict of the neutral's points (image axes, mm, for the input's
     axes; and 3-D, head frame, for the input's depths) and the relaxations that did not
-    converge)."""
+    converge). The lids are taken along the eye's vertical alone, as on the input's side, and
+    not in the frames ``lids_out`` (the input's :func:`lids_unread`: both sides leave out the
+    same frames)."""
     pts, neutral, unconverged = model_points(model, table, ok)
     face3d = model.skin_vertices(model.rest_state())[list(POINTS)].astype(np.float64)
-    d = _region_displacements(neutral, pts, regions, face3d=_face3d_for(alignment, face3d))
+    d = _region_displacements(
+        neutral, pts, regions, face3d=_face3d_for(alignment, face3d), lids_out=lids_out
+    )
     return d, {"neutral_points": neutral, "neutral_3d": face3d, "unconverged": unconverged}
 
 
@@ -677,15 +725,16 @@ def model_reach(
     pos = [_POS[i] for k in names for i in _ALL_REGIONS[k]]
     ids = list(model.ids)
     jac = skin_response(model, ids)[idx][pos][:, :2, :].reshape(-1, len(ids)) / iod
-    a = np.vstack([jac, REACH_RIDGE * np.eye(len(ids))])
     zeros = np.zeros(len(ids))
     table = np.full((len(target), len(ids)), np.nan)
     c, state = zeros.copy(), None
     for t in progress(range(len(target)), total=len(target), desc="model reach",
                       enabled=show_progress):  # fmt: skip
         want = target[t].reshape(-1)
-        if not np.isfinite(want).all():
+        seen = np.isfinite(want)  # the lids, where the reader could not read them, are not
+        if not seen.any():
             continue
+        a_t = np.vstack([jac[seen], REACH_RIDGE * np.eye(len(ids))])
         for _ in range(REACH_ROUNDS):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RelaxWarning)
@@ -693,14 +742,13 @@ def model_reach(
             now = model.skin_vertices(res.state)[idx, :2] * flip
             d = _region_displacements(neutral, now[None], regions, face3d=face3d)
             have = np.concatenate([d[k] for k in names], axis=1)[0].reshape(-1)
-            c = lsq_linear(a, np.concatenate([want - have + jac @ c, zeros]), bounds=(0, 1)).x
+            step = (want - have + jac @ c)[seen]
+            c = lsq_linear(a_t, np.concatenate([step, zeros]), bounds=(0, 1)).x
         state = res.state
         table[t] = c
     d_out, _ = model_displacements(model, table, np.isfinite(table).all(1), regions, alignment)
-    cat_in = np.concatenate([d_in[k] for k in names], axis=1)
-    cat_out = np.concatenate([d_out[k] for k in names], axis=1)
     result = FidelityResult(
-        scores(cat_in, cat_out),
+        _overall({k: d_in[k] for k in names}, {k: d_out[k] for k in names}),
         {k: scores(d_in[k], d_out[k]) for k in names},
         0,
         int(np.isfinite(table).all(1).sum()),
@@ -887,15 +935,16 @@ def fidelity_of_analysis(
         detect_landmarks_too=mediapipe_on_both,
     )
     t_in = time.perf_counter() - t0
-    d_out, side = model_displacements(model, table, ok, JUDGED_REGIONS, alignment)
-    d_in = input_displacements(ref, pts_in, side, JUDGED_REGIONS, alignment, unsure)
+    lids_out = lids_unread(unsure)
+    d_out, side = model_displacements(model, table, ok, JUDGED_REGIONS, alignment, lids_out)
+    d_in = input_displacements(ref, pts_in, side, JUDGED_REGIONS, alignment, unsure, lids_out)
     per = {k: scores(d_in[k], d_out[k]) for k in d_in}
     cat_in = np.concatenate(list(d_in.values()), axis=1)
     cat_out = np.concatenate(list(d_out.values()), axis=1)
-    both = np.isfinite(cat_in).all((1, 2)) & np.isfinite(cat_out).all((1, 2))
+    both = (np.isfinite(cat_in).all(2) & np.isfinite(cat_out).all(2)).any(1)
     name = READER_NAMES.get(reader, reader)
     res = FidelityResult(
-        scores(cat_in, cat_out),
+        _overall(d_in, d_out),
         per,
         int(calibration_frame),
         int(both.sum()),
