@@ -58,6 +58,21 @@ the four tested renders (2026-12-02; 0.81-1.01 at the pixel), sadness' corners 0
 (0.58-0.59 at the pixel), and a change of the muscles that moves the corners by 0.03 mm no
 longer moves the reading of the smile clip's corners by 0.07 (0.01).
 
+**The lids** (2026-12-03). On a blink rendered on the person's face the flow at a lid's margin,
+where the lid covers the eye, mixes the lid's motion with the still eyeball's: with the lids
+closed it read the upper lids at 0.76 of their motion, the lower lids the wrong way and 0.03-
+0.045 IOD sideways, and the exact model (its own skin as the analysis) explained 0.615 of the
+eyelids region. There the reader's forward-backward check fails at the lids: such frames are
+left out of the eyelids region on both sides (:func:`lids_unread`; the other regions keep
+them), and the lids are read along the eye's vertical alone (the face's y). The half-closed
+frames are then read the right way at 0.80-0.82 of the margin vertex's motion, and the exact
+model explains 0.936-0.948 (``tests/analysis/test_fidelity.py::test_the_eyelids_reader_on_
+renders_at_known_contractions``). The rest of the gap is the render's: its lid skin 7 px
+above the margin moves 0.53 of the margin, so what a reader sees near the margin moves less
+than the margin vertex. The chin (measured by hand, the same renders): a jaw opening and the
+depressor labii inferioris are read at 0.90 (explained 0.98), the mentalis' push of the chin
+boss at 0.69 (explained 0.79).
+
 What the validation does not cover (measured on ``single_face.mp4``, 2026-12-01): where the
 lips part, the inner lip points (13, 14) sit on an edge that the teeth come out of, which no
 optical flow can follow through (hence not judged) (at the smile's apex DIS and MediaPipe differ there by 5.2 and
@@ -428,6 +443,28 @@ READER_VALIDATION = {
             "not judged: upper lip's outer edge": [0.60, 1.62],
             "not judged: inner lips": [0.27, 0.81],
         },
+        # the chin by the muscles that move it, one at a time rising to 0.3 (jaw) or 0.9
+        # (mentalis, depressor labii inferioris) and back, either alignment (2026-12-03,
+        # measured by hand, not a test): the mentalis' push of the chin boss up is read short
+        "chin_by_muscle": {
+            "jaw": {"gain": [0.899, 0.900], "explained": [0.985, 0.985]},
+            "depressor_labii_inferioris": {"gain": [0.903, 0.904], "explained": [0.978, 0.978]},
+            "mentalis": {"gain": [0.685, 0.687], "explained": [0.787, 0.788]},
+        },
+    },
+    # a blink rendered on the person's own face (the palpebral orbicularis oculi at 0.5, 1, 1,
+    # 0.5), 2026-12-03: the closed frames' lid readings fail the forward-backward check and are
+    # left out on both sides (:func:`lids_unread`), the half-closed ones read along the eye's
+    # vertical at a gain of 0.80 (2-D) and 0.82 (3-D); the exact model, its own skin as the
+    # analysis, explains 0.936 and 0.948 of it (0.615 when every frame was read)
+    "eyelids": {
+        "test": (
+            "tests/analysis/test_fidelity.py::test_the_eyelids_reader_on_renders_at_known_"
+            "contractions, ::test_the_exact_model_scores_near_one_on_its_own_blink"
+        ),
+        "gain": [0.80, 0.82],
+        "exact_model_explained": [0.936, 0.948],
+        "closed_frames_left_out": True,
     },
     # the same renders with the head turning in 3-D (5 degrees of yaw, of pitch, and 4, 4, 3
     # of all three), no expression: what each alignment reads as motion (IOD RMS, the worst
