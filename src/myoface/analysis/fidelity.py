@@ -1013,11 +1013,15 @@ def fidelity_of_analysis(
                         for k, v in JUDGED_REGIONS.items()
                     },
                 },
+                # frames whose lid readings failed the check: the eyelids region leaves them
+                # out on both sides (lids_unread)
+                "eyelids_frames_left_out": int(lids_out[ok].sum()),
                 "validation": {
                     "test": READER_VALIDATION["test"],
                     "bounds": READER_VALIDATION["bounds"],
                     "measured": READER_VALIDATION["measured"].get(reader),
                     "renders": READER_VALIDATION["renders"] if reader == "dis" else None,
+                    "eyelids": READER_VALIDATION["eyelids"] if reader == "dis" else None,
                 },
             },
             "head_motion_taken_out": ALIGNMENT_TEXT[alignment],
