@@ -58,6 +58,23 @@ the four tested renders (2026-12-02; 0.81-1.01 at the pixel), sadness' corners 0
 (0.58-0.59 at the pixel), and a change of the muscles that moves the corners by 0.03 mm no
 longer moves the reading of the smile clip's corners by 0.07 (0.01).
 
+**The lids** (2026-12-03). On a blink rendered on the person's face the flow at a lid's margin,
+where the lid covers the eye, mixes the lid's motion with the still eyeball's: with the lids
+closed it read the upper lids at 0.76 of their motion, the lower lids the wrong way and 0.03-
+0.045 IOD sideways, and the exact model (its own skin as the analysis) explained 0.615 of the
+eyelids region. There the reader's forward-backward check fails at the lids: such frames are
+left out of the eyelids region on both sides (:func:`lids_unread`; the other regions keep
+them), and the lids are read along the eye's vertical alone (the face's y). The half-closed
+frames are then read the right way at 0.80-0.82 of the margin vertex's motion, and the exact
+model explains 0.936-0.948 (``tests/analysis/test_fidelity.py::test_the_eyelids_reader_on_
+renders_at_known_contractions``). The rest of the gap is the render's: its lid skin 7 px
+above the margin moves 0.53 of the margin, so what a reader sees near the margin moves less
+than the margin vertex. The chin (``test_the_chin_reader_on_renders_of_its_muscles``): a
+jaw opening and the depressor labii inferioris are read at 0.90 (explained 0.98), the
+mentalis' push of the chin boss at 0.69 (explained 0.79). On ``single_face.mp4`` 58 % of the
+chin's motion is sideways (0.02 IOD to the subject's left from frame 18 on, the lower lip's
+centre staying put), which no muscle of the model makes: the model's reach there is 0.55.
+
 What the validation does not cover (measured on ``single_face.mp4``, 2026-12-01): where the
 lips part, the inner lip points (13, 14) sit on an edge that the teeth come out of, which no
 optical flow can follow through (hence not judged) (at the smile's apex DIS and MediaPipe differ there by 5.2 and
@@ -428,6 +445,29 @@ READER_VALIDATION = {
             "not judged: upper lip's outer edge": [0.60, 1.62],
             "not judged: inner lips": [0.27, 0.81],
         },
+        # the chin by the muscles that move it, one at a time rising to 0.3 (jaw) or 0.9
+        # (mentalis, depressor labii inferioris) and back, either alignment (2026-12-03,
+        # tests/analysis/test_fidelity.py::test_the_chin_reader_on_renders_of_its_muscles):
+        # the mentalis' push of the chin boss up is read short
+        "chin_by_muscle": {
+            "jaw": {"gain": [0.899, 0.900], "explained": [0.985, 0.985]},
+            "depressor_labii_inferioris": {"gain": [0.903, 0.904], "explained": [0.978, 0.978]},
+            "mentalis": {"gain": [0.685, 0.687], "explained": [0.787, 0.788]},
+        },
+    },
+    # a blink rendered on the person's own face (the palpebral orbicularis oculi at 0.5, 1, 1,
+    # 0.5), 2026-12-03: the closed frames' lid readings fail the forward-backward check and are
+    # left out on both sides (:func:`lids_unread`), the half-closed ones read along the eye's
+    # vertical at a gain of 0.80 (2-D) and 0.82 (3-D); the exact model, its own skin as the
+    # analysis, explains 0.936 and 0.948 of it (0.615 when every frame was read)
+    "eyelids": {
+        "test": (
+            "tests/analysis/test_fidelity.py::test_the_eyelids_reader_on_renders_at_known_"
+            "contractions, ::test_the_exact_model_scores_near_one_on_its_own_blink"
+        ),
+        "gain": [0.80, 0.82],
+        "exact_model_explained": [0.936, 0.948],
+        "closed_frames_left_out": True,
     },
     # the same renders with the head turning in 3-D (5 degrees of yaw, of pitch, and 4, 4, 3
     # of all three), no expression: what each alignment reads as motion (IOD RMS, the worst
@@ -505,7 +545,33 @@ def _closing_frames(ref, seq, unsure=None) -> list:
     ]
 
 
-def _region_displacements(ref, seq, regions=None, rotation=None, face3d=None, unsure=None):
+def lids_unread(unsure) -> np.ndarray:
+    """Per frame, whether the reader's reading of any lid centre failed its forward-backward
+    check (``unsure``: (T, len(POINTS)), :func:`read_video_points`): where a closing lid covers
+    the eye, the flow at its margin mixes the lid's motion with the still eyeball's and the
+    check fails. Such frames are not scored in the eyelids region, on either side
+    (:func:`_region_displacements`' ``lids_out``). On a render of the person's face blinking
+    (``tests/analysis/test_fidelity.py::test_the_eyelids_reader_on_renders_at_known_
+    contractions``) the two closed frames failed it, the half-closed ones passed."""
+    u = np.asarray(unsure, bool)
+    return u[:, [_POS[i] for i in REGIONS["eyelids"]]].any(1)
+
+
+def _eyelids_only_vertical(d, lids_out=None):
+    """The lid centres' displacements ``d`` (T, len(POINTS), 2; head frame, x across, y up)
+    projected on the eye's vertical (the face's y: the lids open and close along it), and NaN
+    in the frames ``lids_out`` (:func:`lids_unread`). In place."""
+    lid = [_POS[i] for i in REGIONS["eyelids"]]
+    d[:, lid, 0] = np.where(np.isfinite(d[:, lid, 0]), 0.0, np.nan)
+    if lids_out is not None:
+        out = np.asarray(lids_out, bool)
+        d[np.ix_(out, lid)] = np.nan
+    return d
+
+
+def _region_displacements(
+    ref, seq, regions=None, rotation=None, face3d=None, unsure=None, lids_out=None
+):
     """{region: (T, P, 2)} displacements of ``seq`` (T, len(POINTS), 2; image axes, x right,
     y down; NaN rows: not measured) from ``ref`` (len(POINTS), 2), given in the head frame's
     axes (x to the subject's left, y up), over the inter-ocular distance.
@@ -542,7 +608,20 @@ def _region_displacements(ref, seq, regions=None, rotation=None, face3d=None, un
         if rotation is not None:
             d = d @ np.asarray(rotation).T
         d = d * np.array([1.0, -1.0])
+    d = _eyelids_only_vertical(d, lids_out)
     return {name: d[:, [_POS[i] for i in idx]] for name, idx in regions.items()}
+
+
+def _overall(d_in: dict, d_out: dict) -> Scores:
+    """:func:`scores` over every region's points together: a point left out on either side in a
+    frame (the lids in :func:`lids_unread`'s frames) is left out of that frame alone."""
+    a = np.concatenate(list(d_in.values()), axis=1)
+    b = np.concatenate(list(d_out.values()), axis=1)
+    ok = np.isfinite(a).all(-1) & np.isfinite(b).all(-1)  # (T, P)
+    some = ok.any(1)
+    a = np.where(ok[..., None], a, 0.0)[some]
+    b = np.where(ok[..., None], b, 0.0)[some]
+    return scores(a, b)
 
 
 #: how the input's side takes the head's motion out (:func:`input_displacements`): "3d", a
@@ -558,7 +637,7 @@ ALIGNMENTS = ("3d", "2d")
 
 
 def input_displacements(
-    ref, pts, side: dict, regions=None, alignment: str = ALIGNMENT, unsure=None
+    ref, pts, side: dict, regions=None, alignment: str = ALIGNMENT, unsure=None, lids_out=None
 ) -> dict:
     """The input's side of the measure: {region: (T, P, 2)} displacements of the reader's
     points ``pts`` (T, len(POINTS), 2; pixels) from the reference's ``ref``, the head's motion
@@ -567,15 +646,20 @@ def input_displacements(
     model's neutral (its 2-D points turn the 2-D alignment's frame into the face's frontal
     axes; its 3-D points are the 3-D alignment's depths). ``unsure``: the readings that failed
     the reader's forward-backward check (:func:`read_video_points`), which tell the 3-D
-    alignment where the eyes close."""
+    alignment where the eyes close. ``lids_out``: per frame, the lids not scored
+    (:func:`lids_unread`; default: from ``unsure`` when given)."""
+    if lids_out is None and unsure is not None:
+        lids_out = lids_unread(unsure)
     if alignment == "3d":
         face3d = side["neutral_3d"]
-        return _region_displacements(ref, pts, regions, face3d=face3d, unsure=unsure)
+        return _region_displacements(
+            ref, pts, regions, face3d=face3d, unsure=unsure, lids_out=lids_out
+        )
     if alignment == "2d":
         # the reference frame's rigid points turned onto the model's neutral ones (the head's
         # roll in the reference frame)
         _, rot, _ = similarity_2d(ref[_RIGID], side["neutral_points"][_RIGID])
-        return _region_displacements(ref, pts, regions, rotation=rot)
+        return _region_displacements(ref, pts, regions, rotation=rot, lids_out=lids_out)
     raise MyofaceValueError(f"alignment must be one of {ALIGNMENTS}; got {alignment!r}")
 
 
@@ -609,7 +693,7 @@ def model_points(model, table, ok=None) -> tuple[np.ndarray, np.ndarray, int]:
 
 
 def model_displacements(
-    model, table, ok=None, regions=None, alignment: str = ALIGNMENT
+    model, table, ok=None, regions=None, alignment: str = ALIGNMENT, lids_out=None
 ) -> tuple[dict, dict]:
     """The model's side of the measure, exact: :func:`model_points` of ``table``, their
     displacements from the neutral (contractions 0) with the head's motion that the rigid
@@ -622,10 +706,14 @@ def model_displacements(
     inter-ocular distance, in the head frame's axes (x to the subject's left, y up). Returns
     ({region: (T, P, 2)}, a dict of the neutral's points (image axes, mm, for the input's
     axes; and 3-D, head frame, for the input's depths) and the relaxations that did not
-    converge)."""
+    converge). The lids are taken along the eye's vertical alone, as on the input's side, and
+    not in the frames ``lids_out`` (the input's :func:`lids_unread`: both sides leave out the
+    same frames)."""
     pts, neutral, unconverged = model_points(model, table, ok)
     face3d = model.skin_vertices(model.rest_state())[list(POINTS)].astype(np.float64)
-    d = _region_displacements(neutral, pts, regions, face3d=_face3d_for(alignment, face3d))
+    d = _region_displacements(
+        neutral, pts, regions, face3d=_face3d_for(alignment, face3d), lids_out=lids_out
+    )
     return d, {"neutral_points": neutral, "neutral_3d": face3d, "unconverged": unconverged}
 
 
@@ -677,15 +765,16 @@ def model_reach(
     pos = [_POS[i] for k in names for i in _ALL_REGIONS[k]]
     ids = list(model.ids)
     jac = skin_response(model, ids)[idx][pos][:, :2, :].reshape(-1, len(ids)) / iod
-    a = np.vstack([jac, REACH_RIDGE * np.eye(len(ids))])
     zeros = np.zeros(len(ids))
     table = np.full((len(target), len(ids)), np.nan)
     c, state = zeros.copy(), None
     for t in progress(range(len(target)), total=len(target), desc="model reach",
                       enabled=show_progress):  # fmt: skip
         want = target[t].reshape(-1)
-        if not np.isfinite(want).all():
+        seen = np.isfinite(want)  # the lids, where the reader could not read them, are not
+        if not seen.any():
             continue
+        a_t = np.vstack([jac[seen], REACH_RIDGE * np.eye(len(ids))])
         for _ in range(REACH_ROUNDS):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RelaxWarning)
@@ -693,14 +782,13 @@ def model_reach(
             now = model.skin_vertices(res.state)[idx, :2] * flip
             d = _region_displacements(neutral, now[None], regions, face3d=face3d)
             have = np.concatenate([d[k] for k in names], axis=1)[0].reshape(-1)
-            c = lsq_linear(a, np.concatenate([want - have + jac @ c, zeros]), bounds=(0, 1)).x
+            step = (want - have + jac @ c)[seen]
+            c = lsq_linear(a_t, np.concatenate([step, zeros]), bounds=(0, 1)).x
         state = res.state
         table[t] = c
     d_out, _ = model_displacements(model, table, np.isfinite(table).all(1), regions, alignment)
-    cat_in = np.concatenate([d_in[k] for k in names], axis=1)
-    cat_out = np.concatenate([d_out[k] for k in names], axis=1)
     result = FidelityResult(
-        scores(cat_in, cat_out),
+        _overall({k: d_in[k] for k in names}, {k: d_out[k] for k in names}),
         {k: scores(d_in[k], d_out[k]) for k in names},
         0,
         int(np.isfinite(table).all(1).sum()),
@@ -887,15 +975,16 @@ def fidelity_of_analysis(
         detect_landmarks_too=mediapipe_on_both,
     )
     t_in = time.perf_counter() - t0
-    d_out, side = model_displacements(model, table, ok, JUDGED_REGIONS, alignment)
-    d_in = input_displacements(ref, pts_in, side, JUDGED_REGIONS, alignment, unsure)
+    lids_out = lids_unread(unsure)
+    d_out, side = model_displacements(model, table, ok, JUDGED_REGIONS, alignment, lids_out)
+    d_in = input_displacements(ref, pts_in, side, JUDGED_REGIONS, alignment, unsure, lids_out)
     per = {k: scores(d_in[k], d_out[k]) for k in d_in}
     cat_in = np.concatenate(list(d_in.values()), axis=1)
     cat_out = np.concatenate(list(d_out.values()), axis=1)
-    both = np.isfinite(cat_in).all((1, 2)) & np.isfinite(cat_out).all((1, 2))
+    both = (np.isfinite(cat_in).all(2) & np.isfinite(cat_out).all(2)).any(1)
     name = READER_NAMES.get(reader, reader)
     res = FidelityResult(
-        scores(cat_in, cat_out),
+        _overall(d_in, d_out),
         per,
         int(calibration_frame),
         int(both.sum()),
@@ -927,11 +1016,15 @@ def fidelity_of_analysis(
                         for k, v in JUDGED_REGIONS.items()
                     },
                 },
+                # frames whose lid readings failed the check: the eyelids region leaves them
+                # out on both sides (lids_unread)
+                "eyelids_frames_left_out": int(lids_out[ok].sum()),
                 "validation": {
                     "test": READER_VALIDATION["test"],
                     "bounds": READER_VALIDATION["bounds"],
                     "measured": READER_VALIDATION["measured"].get(reader),
                     "renders": READER_VALIDATION["renders"] if reader == "dis" else None,
+                    "eyelids": READER_VALIDATION["eyelids"] if reader == "dis" else None,
                 },
             },
             "head_motion_taken_out": ALIGNMENT_TEXT[alignment],
