@@ -132,7 +132,7 @@ def run(mode: str, params: dict, lag: int, fit: dict | None = None, dump: str | 
     mfm.ModelFlow.__init__, mfm.ModelFlow._pyramid, mfm.ModelFlow.track = init, pyramid, track
     try:
         settings = FitSettings(**{"flow": True, **(fit or {})})
-        out = kwb.run_known_warp(moving, False, settings, flow_method="anchored")
+        out = kwb.run_known_warp(moving, False, settings, flow_method="anchored", field="flat")
     finally:
         for (obj, name), v in saved.items():
             setattr(obj, name, v)
