@@ -376,15 +376,26 @@ class LidTemplate:
             out[e, :2] = np.mean(found, axis=0)
         return out
 
+    def _eye_centres(self) -> list:
+        """Per eye the (1, 3) mean of its columns' margins, head frame (None: no columns);
+        made once (the columns do not move)."""
+        c = getattr(self, "_centres", None)
+        if c is None:
+            c = self._centres = [
+                self.x0[self.eye == e].mean(0)[None] if (self.eye == e).any() else None
+                for e in (0, 1)
+            ]
+        return c
+
     def _facing(self, pose: HeadPose) -> np.ndarray:
         """(2,) whether each eye faces the camera within :data:`FACING_DEG`."""
         fwd = pose.rotation[:, 2]
         out = np.zeros(2, dtype=bool)
+        centres = self._eye_centres()
         for e in (0, 1):
-            sel = self.eye == e
-            if not sel.any():
+            if centres[e] is None:
                 continue
-            pc = pose.apply(self.x0[sel].mean(0)[None])[0]
+            pc = pose.apply(centres[e])[0]
             out[e] = -pc @ fwd / max(np.linalg.norm(pc), 1e-9) >= np.cos(np.radians(FACING_DEG))
         return out
 
@@ -419,14 +430,29 @@ class LidTemplate:
         from myoface.analysis._lidkernels import slide_cost
 
         use_chroma = tmpl_chroma is not None
-        imgs = np.ascontiguousarray(
-            np.concatenate([grey[None], np.asarray(chroma)]) if use_chroma else grey[None],
-            dtype=np.float32,
-        )
-        tmpls = np.ascontiguousarray(
-            np.concatenate([tmpl[None], np.asarray(tmpl_chroma)]) if use_chroma else tmpl[None],
-            dtype=np.float64,
-        )
+        # (the frame's channels stacked once for both lids' slides; the templates' once)
+        key = (id(grey), id(chroma), use_chroma)
+        if getattr(self, "_imgs_key", None) != key or self._imgs_of[0] is not grey:
+            imgs = np.ascontiguousarray(
+                np.concatenate([grey[None], np.asarray(chroma)]) if use_chroma else grey[None],
+                dtype=np.float32,
+            )
+            self._imgs_key, self._imgs_of = key, (grey, chroma, imgs)
+        imgs = self._imgs_of[2]
+        tkey = (id(tmpl), id(tmpl_chroma))
+        cache = self.__dict__.setdefault("_tmpls", {})
+        if tkey not in cache or cache[tkey][0] is not tmpl or cache[tkey][1] is not tmpl_chroma:
+            cache[tkey] = (
+                tmpl,
+                tmpl_chroma,
+                np.ascontiguousarray(
+                    np.concatenate([tmpl[None], np.asarray(tmpl_chroma)])
+                    if use_chroma
+                    else tmpl[None],
+                    dtype=np.float64,
+                ),
+            )
+        tmpls = cache[tkey][2]
         cam = self.camera
         return slide_cost(
             np.ascontiguousarray(self.x0, dtype=np.float64),
