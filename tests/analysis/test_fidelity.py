@@ -390,9 +390,7 @@ def test_the_reader_on_renders_at_known_contractions(tmp_path):
     out (inner lips 0.27-0.81 of their motion, explained below 0.75)."""
     from myoface.analysis import fidelity
     from myoface.analysis.motionreader import explained, gain
-    from myoface.analysis.resynthesis import resynthesis_frames
     from myoface.control import expression_contractions
-    from myoface.render import VideoWriter
 
     path = shared_path("video", "single_face.mp4")
     if not path.exists():
@@ -405,12 +403,7 @@ def test_the_reader_on_renders_at_known_contractions(tmp_path):
         if apex is None:
             c = expression_contractions(name, 0.9, fm.ids)
             apex = {i: float(x) for i, x in zip(fm.ids, c, strict=True) if x > 0}
-        truth = np.array([fm.validate({k: x * a for k, x in apex.items()}) for a in ramp])
-        video = tmp_path / f"{name}.mp4"
-        with VideoWriter(video, fps=10) as vw:
-            for f in resynthesis_frames(fm, truth, 384):
-                vw.write(f)
-        ref, pts, _, _ = fidelity.read_video_points(video, list(range(len(ramp))), 0)
+        truth, ref, pts, _ = _render_ramp(fm, apex, ramp, tmp_path / f"{name}.mp4")
         for alignment in fidelity.ALIGNMENTS:
             d_out, side = fidelity.model_displacements(fm, truth, None, regions, alignment)
             d_in = fidelity.input_displacements(ref, pts, side, regions, alignment)
@@ -774,8 +767,6 @@ def test_the_chin_reader_on_renders_of_its_muscles(tmp_path):
     judge is no cause of the sample video's low chin score (0.17, the model's reach 0.55):
     there 58 % of the chin's motion is sideways, which no muscle of the model makes."""
     from myoface.analysis import fidelity
-    from myoface.analysis.resynthesis import resynthesis_frames
-    from myoface.render import VideoWriter
 
     path = shared_path("video", "single_face.mp4")
     if not path.exists():
@@ -792,15 +783,26 @@ def test_the_chin_reader_on_renders_of_its_muscles(tmp_path):
         "mentalis": ({"mentalis_l": 0.9, "mentalis_r": 0.9}, (0.6, 1.1), 0.7),
     }
     for name, (apex, (lo, hi), least) in cases.items():
-        truth = np.array([fm.validate({k: x * a for k, x in apex.items()}) for a in ramp])
-        video = tmp_path / f"{name}.mp4"
-        with VideoWriter(video, fps=10) as vw:
-            for f in resynthesis_frames(fm, truth, 384):
-                vw.write(f)
-        ref, pts, unsure, _ = fidelity.read_video_points(video, list(range(len(ramp))), 0)
+        truth, ref, pts, unsure = _render_ramp(fm, apex, ramp, tmp_path / f"{name}.mp4")
         for alignment in fidelity.ALIGNMENTS:
             d_out, side = fidelity.model_displacements(fm, truth, None, JUDGED_REGIONS, alignment)
             d_in = fidelity.input_displacements(ref, pts, side, JUDGED_REGIONS, alignment, unsure)
             s = scores(d_out["chin"], d_in["chin"])  # the reading over the truth
             assert s.rms_in > 0.01, (name, s)  # the chin moved
             assert lo <= s.gain <= hi and s.explained >= least, (name, alignment, s)
+
+
+def _render_ramp(fm, apex, ramp, video):
+    """The contractions ``apex`` ({muscle: contraction}) scaled by each of ``ramp``, the
+    person's face ``fm`` rendered so (384 px, 10 frames/s) to ``video`` and read by the judge's
+    reader from frame 0: (the contractions (T, M), reference points, points, unsure)."""
+    from myoface.analysis import fidelity
+    from myoface.analysis.resynthesis import resynthesis_frames
+    from myoface.render import VideoWriter
+
+    truth = np.array([fm.validate({k: x * a for k, x in apex.items()}) for a in ramp])
+    with VideoWriter(video, fps=10) as vw:
+        for f in resynthesis_frames(fm, truth, 384):
+            vw.write(f)
+    ref, pts, unsure, _ = fidelity.read_video_points(video, list(range(len(ramp))), 0)
+    return truth, ref, pts, unsure
