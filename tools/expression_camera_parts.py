@@ -2,12 +2,13 @@
 the benchmark's clip (head moving) degraded with parts of the camera off, read by MediaPipe,
 fitted with the flow without and with the AU-space prior, labelled as contractions.csv is.
 
-    python tools/expression_camera_parts.py [no_light] [light_only]
+    python tools/expression_camera_parts.py [no_light] [light_only] [no_room]
 
 ``no_light``: no moving light and no exposure drift (blur, sensor noise, H.264 kept);
 ``light_only``: the moving light and the drift, without blur, sensor noise and H.264. Both
-keep the half-resolution texture and the room behind the head. About 3 minutes a part on a
-loaded 2-core machine.
+keep the half-resolution texture and the room behind the head. ``no_room``: every part but the
+room behind the head (which pitches the calibration: ``tools/headmotion_background.py``).
+About 3 minutes a part on a loaded 2-core machine.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ def main() -> None:
             base, blur_sigma_px=0.0, full_scale_electrons=None, read_noise_electrons=0.0,
             crf=None,
         ),
+        "no_room": replace(base, background=False),
     }  # fmt: skip
     for name in sys.argv[1:] or list(parts):
         frames, _ = hm.degraded_sequence(fm.face, poses, skins, parts[name])
