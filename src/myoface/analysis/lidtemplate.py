@@ -113,6 +113,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from myoface.analysis._lidkernels import slide_cost
 from myoface.analysis.camera import HeadPose, PinholeCamera
 from myoface.analysis.lidedges import FACING_DEG, lid_chains
 from myoface.analysis.terms import Estimate
@@ -179,6 +180,13 @@ def _sample(grey: np.ndarray, uv: np.ndarray) -> np.ndarray:
     m = m.reshape(-1, w, 2)
     out = cv2.remap(grey, m[..., 0], m[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return out.reshape(-1)[:n].reshape(shp).astype(np.float64)
+
+
+def _channels(first, more, dtype) -> np.ndarray:
+    """(C, ...) ``first`` (...) and, unless None, the channels ``more`` (C - 1, ...) stacked,
+    contiguous, of ``dtype`` (the compiled slide's layout, :func:`_lidkernels.slide_cost`)."""
+    out = first[None] if more is None else np.concatenate([first[None], np.asarray(more)])
+    return np.ascontiguousarray(out, dtype=dtype)
 
 
 def _blurred(image, sigma: float) -> np.ndarray:
@@ -322,6 +330,15 @@ class LidTemplate:
         if self.chroma is not None:
             self.chroma_lo = np.stack([_sample(c, self._uv(pose, self._band_lo)) for c in ch])
         self.usable = self.template.std(1) >= s.min_contrast
+        # what the compiled slide (_lidkernels.slide_cost) takes that never changes: each
+        # lid's template stacked with its chromaticities, the columns, each eye's centre
+        self._stacked = (_channels(self.template, self.chroma, np.float64),
+                         _channels(self.template_lo, self.chroma_lo, np.float64))  # fmt: skip
+        self._x0c = np.ascontiguousarray(self.x0, dtype=np.float64)
+        self._gapc = np.ascontiguousarray(self.gap, dtype=np.float64)
+        self._centres = [
+            self.x0[self.eye == e].mean(0)[None] if (self.eye == e).any() else None for e in (0, 1)
+        ]
         uv0 = self._uv(pose, np.array([0.0, 1.0]))
         self.usable &= np.linalg.norm(uv0[:, 1] - uv0[:, 0], axis=1) >= s.min_gap_px
 
@@ -376,26 +393,14 @@ class LidTemplate:
             out[e, :2] = np.mean(found, axis=0)
         return out
 
-    def _eye_centres(self) -> list:
-        """Per eye the (1, 3) mean of its columns' margins, head frame (None: no columns);
-        made once (the columns do not move)."""
-        c = getattr(self, "_centres", None)
-        if c is None:
-            c = self._centres = [
-                self.x0[self.eye == e].mean(0)[None] if (self.eye == e).any() else None
-                for e in (0, 1)
-            ]
-        return c
-
     def _facing(self, pose: HeadPose) -> np.ndarray:
         """(2,) whether each eye faces the camera within :data:`FACING_DEG`."""
         fwd = pose.rotation[:, 2]
         out = np.zeros(2, dtype=bool)
-        centres = self._eye_centres()
         for e in (0, 1):
-            if centres[e] is None:
+            if self._centres[e] is None:
                 continue
-            pc = pose.apply(centres[e])[0]
+            pc = pose.apply(self._centres[e])[0]
             out[e] = -pc @ fwd / max(np.linalg.norm(pc), 1e-9) >= np.cos(np.radians(FACING_DEG))
         return out
 
@@ -412,61 +417,18 @@ class LidTemplate:
         if chroma is None and self.chroma is not None:
             chroma = _chroma(image, s.blur_px, s.chroma_weight)
         shift = self.anchor(grey, pose, origin) if s.anchor else np.zeros((2, 3))
-        up = self._slide(grey, chroma, pose, shift, self._band, self._follow, self._shifts,
-                         self.template, self.chroma, origin)  # fmt: skip
-        lo = self._slide(grey, chroma, pose, shift, self._band_lo, self._follow_lo,
-                         self._shifts_lo, self.template_lo, self.chroma_lo, origin)  # fmt: skip
+        imgs = _channels(grey, chroma if self.chroma is not None else None, np.float32)
+        up = self._slide(imgs, pose, shift, self._band, self._follow, self._shifts,
+                         self._stacked[0], origin)  # fmt: skip
+        lo = self._slide(imgs, pose, shift, self._band_lo, self._follow_lo, self._shifts_lo,
+                         self._stacked[1], origin)  # fmt: skip
         return {
             "delta": up[0], "clarity": up[1], "cost": up[2], "shifts": self._shifts,
             "delta_lower": lo[0], "clarity_lower": lo[1], "closure": up[0] - lo[0],
             "anchor_mm": shift,
         }  # fmt: skip
 
-    def _cost(self, grey, chroma, pose, shift, where, tmpl, tmpl_chroma, origin):
-        """(N, S) each column's cost at each shift: the frame sampled where the template's
-        samples land (``where`` (S, nb), gaps along the column, plus the eye's ``shift``),
-        its luma less its mean against ``tmpl`` (N, nb), and its chromaticities against
-        ``tmpl_chroma`` (2, N, nb; None: luma alone), mean squared differences, summed."""
-        from myoface.analysis._lidkernels import slide_cost
-
-        use_chroma = tmpl_chroma is not None
-        # (the frame's channels stacked once for both lids' slides; the templates' once)
-        key = (id(grey), id(chroma), use_chroma)
-        if getattr(self, "_imgs_key", None) != key or self._imgs_of[0] is not grey:
-            imgs = np.ascontiguousarray(
-                np.concatenate([grey[None], np.asarray(chroma)]) if use_chroma else grey[None],
-                dtype=np.float32,
-            )
-            self._imgs_key, self._imgs_of = key, (grey, chroma, imgs)
-        imgs = self._imgs_of[2]
-        tkey = (id(tmpl), id(tmpl_chroma))
-        cache = self.__dict__.setdefault("_tmpls", {})
-        if tkey not in cache or cache[tkey][0] is not tmpl or cache[tkey][1] is not tmpl_chroma:
-            cache[tkey] = (
-                tmpl,
-                tmpl_chroma,
-                np.ascontiguousarray(
-                    np.concatenate([tmpl[None], np.asarray(tmpl_chroma)])
-                    if use_chroma
-                    else tmpl[None],
-                    dtype=np.float64,
-                ),
-            )
-        tmpls = cache[tkey][2]
-        cam = self.camera
-        return slide_cost(
-            np.ascontiguousarray(self.x0, dtype=np.float64),
-            np.ascontiguousarray(self.gap, dtype=np.float64),
-            np.ascontiguousarray(np.asarray(shift, dtype=np.float64)[self.eye]),
-            np.ascontiguousarray(where, dtype=np.float64),
-            np.ascontiguousarray(pose.rotation, dtype=np.float64),
-            np.ascontiguousarray(pose.translation_mm, dtype=np.float64),
-            float(cam.focal_px), float(cam.cx), float(cam.cy),
-            float(origin[0]), float(origin[1]), imgs, tmpls,
-        )  # fmt: skip
-
-    def _slide(self, grey, chroma, pose, shift, band, follow, shifts, tmpl, tmpl_chroma,
-               origin):  # fmt: skip
+    def _slide(self, imgs, pose, shift, band, follow, shifts, tmpls, origin):
         """Per eye the shift of ``band`` (the template ``tmpl``, ``tmpl_chroma``) along the
         columns that the frame matches best (see the module's docstring): (delta (2,), clarity
         (2,), the cost curves)."""
@@ -474,7 +436,14 @@ class LidTemplate:
         # the frame along the columns where each template sample lands for each shift: the
         # lid's skin beyond the margin moves with it, less the further away (``follow``)
         where = band[None, :] + shifts[:, None] * follow[None, :]  # (S, nb)
-        cost = self._cost(grey, chroma, pose, shift, where, tmpl, tmpl_chroma, origin)  # (N, S)
+        # (N, S): the frame's channels ``imgs`` (:func:`_channels`) sampled where the templates'
+        # samples land, the luma less its mean, against the stacked templates ``tmpls``
+        cost = slide_cost(
+            self._x0c, self._gapc, np.ascontiguousarray(np.asarray(shift, float)[self.eye]),
+            np.ascontiguousarray(where, dtype=np.float64), pose.rotation, pose.translation_mm,
+            float(self.camera.focal_px), float(self.camera.cx), float(self.camera.cy),
+            float(origin[0]), float(origin[1]), imgs, tmpls,
+        )  # fmt: skip
         delta = np.full(2, np.nan)
         clarity = np.zeros(2)
         curves = [None, None]
@@ -509,6 +478,7 @@ class LidTemplateTerm:
         self._grey = None
         self._at = None
         self.delta = np.full(2, np.nan)
+        self._share = None  # (share()'s, made once a reading)
         self.rows = np.zeros(0, dtype=np.int64)
         self.hw = np.zeros(0)
 
@@ -558,7 +528,7 @@ class LidTemplateTerm:
         a gap RMS on the gaze benchmark's renders at the true poses, more at the fit's) is no
         better than theirs, and a lid placed by it moved the gaze's reading; what it is for
         is the closing lid, where the points stay open."""
-        if getattr(self, "_share", None) is None:  # (the reading's: made anew by detect())
+        if self._share is None:  # (the reading's: made anew by detect())
             a, b = CLOSING
             x = np.clip((np.nan_to_num(self.delta, nan=-1.0) - a) / (b - a), 0.0, 1.0)
             self._share = x * x * (3 - 2 * x) * self.read_eyes()
