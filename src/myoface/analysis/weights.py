@@ -172,6 +172,15 @@ class FitSettings:
     iterations: int = 8
     refine: int = 1
     relax_step_mm: float = 2.0
+    #: with the relax deferred: the fits made with the earlier linearisation while a relax
+    #: runs on the second thread (0: the next fit waits for it). A relax costs more than a
+    #: fit, so with 0 the fit's thread waits for most of each one. Measured 2026-12-03 on
+    #: single_face.mp4 (2 cores): the fit's wait for relaxes 3.2 ms a frame with 0, 0.9-1.3
+    #: with 1, ~0 with 2 (11 relaxes instead of 17: none starts while one runs);
+    #: analysis.fidelity 0.779 (0) / 0.783 (2); on the test ramp with exact points (a smile
+    #: and the jaw at 0.07 a frame) the skin's worst frame 0.12 / 0.17 / 0.27 mm RMS for 0 /
+    #: 1 / 2, against MediaPipe's scatter of :attr:`landmark_sigma_mm`.
+    relax_lag: int = 2
     #: with a :class:`LandmarkSynthesis`: rounds of analysis by synthesis per frame
     synthesis_rounds: int = 2
     #: the photometric term (:mod:`myoface.analysis.photometric`): read the frame's pixels
