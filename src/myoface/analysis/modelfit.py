@@ -782,7 +782,16 @@ class ModelFit:
                 c0, d0 = c.copy(), d_new
                 self._c0, self._d0, self._jac = c0, d0, None
             pose, c, it, conv = self._gauss_newton(
-                p, pose, c, c0, d0, jac, base, prev, flow=flow, photo=photo,
+                p,
+                pose,
+                c,
+                c0,
+                d0,
+                jac,
+                base,
+                prev,
+                flow=flow,
+                photo=photo,
                 iterations=iterations,
             )
             total_it += it
