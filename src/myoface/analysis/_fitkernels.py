@@ -334,3 +334,44 @@ def vertex_normals(vertices, triangles):
         else:
             vn[v, 0], vn[v, 1], vn[v, 2] = 0.0, 0.0, 1.0
     return vn
+
+
+@njit(cache=True, nogil=True)
+def nearest_triangles(pix, order, i0, i1, a, b, c, lo, hi, tri_depth):
+    """For each pixel of ``pix`` (N, 2) the nearest triangle over it (:func:`~myoface.analysis.
+    terms.patch_footprint`'s rasterisation): ``(owner (N,), bary (N, 3))``, owner -1 where no
+    triangle covers the pixel. The triangles' corners ``a``, ``b``, ``c`` (T, 2) px, their
+    boxes ``lo``, ``hi`` (T, 2), the depths of their corners ``tri_depth`` (T, 3); ``order``
+    sorts the pixels by x, and ``order[i0[t]:i1[t]]`` are those within triangle ``t``'s x range.
+    Ties in depth keep the earlier triangle (as a ``<`` test in triangle order does)."""
+    n = pix.shape[0]
+    owner = np.full(n, -1, dtype=np.int64)
+    best = np.full(n, np.inf)
+    bary = np.zeros((n, 3))
+    for t in range(a.shape[0]):
+        if i1[t] <= i0[t]:
+            continue
+        e1x, e1y = b[t, 0] - a[t, 0], b[t, 1] - a[t, 1]
+        e2x, e2y = c[t, 0] - a[t, 0], c[t, 1] - a[t, 1]
+        den = e1x * e2y - e1y * e2x
+        if abs(den) < 1e-9:
+            continue
+        for j in range(i0[t], i1[t]):
+            i = order[j]
+            y = pix[i, 1]
+            if y < lo[t, 1] or y > hi[t, 1]:
+                continue
+            qx, qy = pix[i, 0] - a[t, 0], y - a[t, 1]
+            l1 = (qx * e2y - qy * e2x) / den
+            l2 = (e1x * qy - e1y * qx) / den
+            l0 = 1.0 - l1 - l2
+            if l0 < -1e-9 or l1 < -1e-9 or l2 < -1e-9:
+                continue
+            z = l0 * tri_depth[t, 0] + l1 * tri_depth[t, 1] + l2 * tri_depth[t, 2]
+            if z < best[i]:
+                owner[i] = t
+                best[i] = z
+                bary[i, 0] = l0
+                bary[i, 1] = l1
+                bary[i, 2] = l2
+    return owner, bary

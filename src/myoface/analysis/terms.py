@@ -36,7 +36,7 @@ from typing import Protocol
 
 import numpy as np
 
-from myoface.analysis._fitkernels import landmark_cost, normal_equations
+from myoface.analysis._fitkernels import landmark_cost, nearest_triangles, normal_equations
 from myoface.analysis.camera import HeadPose, PinholeCamera, rotvec
 
 
@@ -279,39 +279,15 @@ def patch_footprint(uv, depth, triangles, half: int, gap=None):
     o = np.arange(-int(half), int(half) + 1, dtype=np.float64)
     off = np.stack(np.meshgrid(o, o), -1).reshape(-1, 2)
     pix = (uv[:, None, :] + off[None]).reshape(-1, 2)
-    owner = np.full(len(pix), -1, dtype=np.int64)
-    best = np.full(len(pix), np.inf)
-    bary = np.zeros((len(pix), 3))
     order = np.argsort(pix[:, 0])
     xs = pix[order, 0]
     a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
     lo, hi = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
     i0 = np.searchsorted(xs, lo[:, 0], side="left")
     i1 = np.searchsorted(xs, hi[:, 0], side="right")
-    for t in range(len(tri)):
-        if i1[t] <= i0[t]:
-            continue
-        idx = order[i0[t] : i1[t]]
-        y = pix[idx, 1]
-        idx = idx[(y >= lo[t, 1]) & (y <= hi[t, 1])]
-        if not len(idx):
-            continue
-        e1, e2 = b[t] - a[t], c[t] - a[t]
-        den = e1[0] * e2[1] - e1[1] * e2[0]
-        if abs(den) < 1e-9:
-            continue
-        q = pix[idx] - a[t]
-        l1 = (q[:, 0] * e2[1] - q[:, 1] * e2[0]) / den
-        l2 = (e1[0] * q[:, 1] - e1[1] * q[:, 0]) / den
-        l0 = 1.0 - l1 - l2
-        inside = (l0 >= -1e-9) & (l1 >= -1e-9) & (l2 >= -1e-9)
-        if not inside.any():
-            continue
-        idx, lam = idx[inside], np.column_stack([l0, l1, l2])[inside]
-        z = lam @ depth[tri[t]]
-        nearer = z < best[idx]
-        idx, lam, z = idx[nearer], lam[nearer], z[nearer]
-        owner[idx], best[idx], bary[idx] = t, z, lam
+    owner, bary = nearest_triangles(
+        pix, order, i0, i1, a, b, c, lo, hi, np.ascontiguousarray(depth[tri])
+    )
     row = np.repeat(np.arange(n), len(off))
     on = owner >= 0
     masked = np.zeros(len(pix), dtype=bool) if gap is None else _inside(pix, gap)
