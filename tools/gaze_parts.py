@@ -9,15 +9,16 @@ camera), ``no_room`` (the studio background in place of the room behind the head
 of the key, fill and rim) and ``no_texture`` (no room; the face without its texture); about 30
 s a part on two cores.
 
-Measured 2026-12-03 (the worse eye's RMS; yaw mean left / right; the reader's own yaw mean
-on the true geometry left / right): default 4.43 deg, -2.78 / -4.38, -0.04 / -1.28; no_room
-3.68, -1.61 / -3.82, -0.17 / -1.22; front_light 3.83, -3.00 / -3.16, -0.45 / -1.14;
-no_texture 8.69 (MediaPipe reads the untextured face badly), reader -0.39 / -0.82. The room
-costs 0.75 deg of the 4.43; the right eye's own reader bias stays with one frontal light, so
-it is not the key light's shading, and it shrinks without the texture (-0.82): part is how
-the person's texture around that eye looks to the reader's eyeball model, part the eye's own
-shape. What is left is the eyeballs' centres where the fit's poses put them (0.7 px to the
-image's right of the truth for the right eye without the room).
+Measured 2026-12-03 at 3ad5490 (the worse eye's RMS; yaw mean left / right; the reader's own
+yaw mean on the true geometry left / right): default 4.49 deg, -2.84 / -4.49, -0.04 / -1.28;
+no_room 3.70, -1.63 / -3.79, -0.17 / -1.22; front_light 5.46, -2.14 / -4.90, -0.47 / -1.11
+(the fit's poses worse under a flat light); no_texture 8.69 (MediaPipe reads the untextured
+face badly), the reader -0.39 / -0.82. The room costs about 0.8 deg of the 4.5; the right
+eye's own reader bias stays with one frontal light, so it is not the key light's shading, and
+it shrinks without the texture: part is how the person's texture around that eye looks to the
+reader's eyeball model, part the eye's own shape. The most of the yaw bias is where the fit's
+poses put the eyeballs' centres (0.7 px to the image's right of the truth for the right eye
+without the room): with the room gone and that taken off, both eyes would be near 2.6-2.9.
 """
 
 from __future__ import annotations
