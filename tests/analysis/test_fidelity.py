@@ -806,3 +806,48 @@ def _render_ramp(fm, apex, ramp, video):
             vw.write(f)
     ref, pts, unsure, _ = fidelity.read_video_points(video, list(range(len(ramp))), 0)
     return truth, ref, pts, unsure
+
+
+def test_the_stages_score_mediapipe_against_the_reader():
+    """fidelity.json's ``stages`` (:func:`~myoface.analysis.fidelity._stages`): MediaPipe's
+    points read like the input's side and scored against the judge's reading. Given the
+    judge's own points, MediaPipe scores gain 1 and explains all of it; given half of their
+    motion, gain 0.5 (explained 0.75); the model against MediaPipe's points is the model
+    against that reading."""
+    from myoface.analysis.fidelity import (
+        POINTS,
+        _stages,
+        input_displacements,
+        model_displacements,
+    )
+    from myoface.model import build_face_model
+
+    fm = build_face_model()
+    table = np.zeros((3, fm.n_muscles))
+    for k, c in ((1, 0.5), (2, 1.0)):
+        table[k, fm.ids.index("zygomaticus_major_l")] = c
+        table[k, fm.ids.index("zygomaticus_major_r")] = c
+    ok = np.ones(3, dtype=bool)
+    d_out, side = model_displacements(fm, table, ok, JUDGED_REGIONS)
+    # the judge's reading: the model's own points, frontal, as pixels (image axes already)
+    from myoface.analysis.fidelity import model_points
+
+    pts, _, _ = model_points(fm, table, ok)
+    px = pts * 2.0 + 300.0
+    d_in = input_displacements(px[0], px, side, JUDGED_REGIONS)
+
+    def mediapipe(points):
+        lm = np.zeros((3, 468, 3))
+        lm[:, list(POINTS), :2] = points
+        return lm
+
+    same = _stages(mediapipe(px), [0, 1, 2], ok, 0, side, d_in, d_out, None)
+    mc = same["mediapipe_vs_judge"]["mouth_corners"]
+    assert mc["gain"] == pytest.approx(1.0, abs=1e-6) and mc["explained"] == pytest.approx(1.0)
+    half = _stages(mediapipe(px[0] + 0.5 * (px - px[0])), [0, 1, 2], ok, 0, side, d_in, d_out, None)
+    mc = half["mediapipe_vs_judge"]["mouth_corners"]
+    assert mc["gain"] == pytest.approx(0.5, abs=0.02) and mc["explained"] == pytest.approx(
+        0.75, abs=0.03
+    )
+    assert half["model_vs_mediapipe"]["mouth_corners"]["gain"] == pytest.approx(2.0, rel=0.05)
+    assert _stages(mediapipe(px) * np.nan, [0, 1, 2], ok, 0, side, d_in, d_out, None) is None

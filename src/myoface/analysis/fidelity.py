@@ -1038,6 +1038,10 @@ def fidelity_of_analysis(
             "seconds_input": round(t_in, 2),
         }
     )
+    if lm_in is not None:
+        how["stages"] = _stages(
+            lm_in, frames, ok, calibration_frame, side, d_in, d_out, lids_out, alignment
+        )
     if mediapipe_on_both:
         video = open_video(video_path)
         if size is None:
@@ -1063,6 +1067,48 @@ def fidelity_of_analysis(
     how["seconds"] = round(time.perf_counter() - t0, 2)
     how["times_s"] = [float(x) for x in times]
     return res, how
+
+
+def _stages(
+    lm_in, frames, ok, calibration_frame, side, d_in, d_out, lids_out, alignment=ALIGNMENT
+) -> dict | None:
+    """Which stage holds each region's score: MediaPipe's points on the video (what the
+    default analysis fits) read like the input's side (the same points, the same 3-D head
+    alignment, from the calibration frame) and judged against the validated reader, and the
+    model against MediaPipe's points; ``{"mediapipe_vs_judge": {region: {gain, explained}},
+    "model_vs_mediapipe": {...}}`` (None when MediaPipe found no face on the calibration
+    frame). Where MediaPipe's gain against the judge is low, the tracker's input is short of
+    the motion and no fit on it can score; where the model's gain against MediaPipe is low,
+    the fit or the model is (:func:`model_reach` tells which)."""
+    rows = [k for k, f in enumerate(frames) if f == int(calibration_frame)]
+    if not rows or not np.isfinite(lm_in[rows[0]]).all():
+        return None
+    mp = np.asarray(lm_in, dtype=np.float64)[:, list(POINTS), :2].copy()
+    mp[~np.asarray(ok, dtype=bool)] = np.nan
+    d_mp = input_displacements(mp[rows[0]], mp, side, JUDGED_REGIONS, alignment, None, lids_out)
+
+    def table(a, b) -> dict:
+        out = {}
+        for k in a:
+            sc = scores(a[k], b[k])
+            out[k] = {"gain": _round(sc.gain), "explained": _round(sc.explained)}
+        sc = _overall(a, b)
+        out["overall"] = {"gain": _round(sc.gain), "explained": _round(sc.explained)}
+        return out
+
+    return {
+        "what": (
+            "MediaPipe's face mesh (image mode) on the video, the judged points read like the "
+            "input's side and scored against the validated reader (mediapipe_vs_judge), and "
+            "the model against those MediaPipe readings (model_vs_mediapipe)"
+        ),
+        "mediapipe_vs_judge": table(d_in, d_mp),
+        "model_vs_mediapipe": table(d_mp, d_out),
+    }
+
+
+def _round(v) -> float | None:
+    return None if v is None or not np.isfinite(v) else round(float(v), 4)
 
 
 def _head_turn(ref, pts, side: dict, unsure) -> dict:

@@ -446,6 +446,9 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
                 for k, v in reach.regions.items()
             },
         },
+        # which stage holds it, per region: MediaPipe's points (the default's input) against the
+        # judge, and the model against MediaPipe's points (fidelity._stages)
+        "stages": doc.get("stages"),
         "target": FIDELITY_TARGET,
         "target_met": bool(
             fid.overall.explained >= FIDELITY_TARGET["overall"]
