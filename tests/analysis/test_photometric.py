@@ -388,6 +388,34 @@ class _NumpyTerm(PhotometricTerm):
         h = (rows * sw[:, None]).T @ (rows * sw[:, None])
         return h, -(rows * sw[:, None]).T @ (res * sw)
 
+    def occlusion(self, est):
+        from myoface.analysis import photometric as ph
+
+        lev = len(self.app.levels) - 1
+        if not self._images:
+            self._crop(self._uv(est)[1])
+        pc, uv = self._uv(est)
+        a = self.app.values[lev]
+        b = self._at(self._images[lev][0], uv)
+        vis = ph.facing(self.app.samples, self.app.triangles, pc) > ph.FACING_MIN
+        ok = (vis & np.isfinite(a) & np.isfinite(b) & (self.app.prior > 0)).astype(np.float64)
+        a, b = np.nan_to_num(a), np.nan_to_num(b)
+        g = self.app.samples.membership(len(pc)).multiply(ok[None, :]).tocsr()
+        n = np.asarray(g.sum(1)).ravel()
+        ma, mb = g @ a / np.maximum(n, 1), g @ b / np.maximum(n, 1)
+        va = g @ (a * a) / np.maximum(n, 1) - ma**2
+        vb = g @ (b * b) / np.maximum(n, 1) - mb**2
+        cab = g @ (a * b) / np.maximum(n, 1) - ma * mb
+        ncc = cab / np.sqrt(np.maximum(va * vb, 1e-12))
+        textured = (n >= 9) & (va > ph.TEXTURED_GREY**2)
+        if not textured.any():
+            return 0.0
+        ratio = np.sqrt(np.maximum(vb, 0.0) / np.maximum(va, 1e-12))
+        lost = (ncc < ph.AGREEMENT_MIN) & (
+            (ratio < 1.0 / ph.CONTRAST_CHANGE) | (ratio > ph.CONTRAST_CHANGE)
+        )
+        return float(lost[textured].mean())
+
     def cost(self, est):
         _, uv = self._uv(est)
         r = np.nan_to_num(self._at(self._images[self._level][0], uv) - self._lit_np(slice(None)))
@@ -426,7 +454,7 @@ def test_the_compiled_step_is_the_numpy_step(rendered):
     every blur level and a second step on the finest (the light then fitted on the weighing
     samples only): the samples' weights, the normal equations, the cost at the step's
     estimate and at another (a trial step), and the rows at another, those of the numpy
-    formulas to 1e-9 relative."""
+    formulas to 1e-9 relative; the share of the patches occluded (once a frame) the same."""
     from myoface.analysis.camera import HeadPose
 
     fm, cam, rest, moved, calib, frame, smile = rendered
@@ -445,7 +473,7 @@ def test_the_compiled_step_is_the_numpy_step(rendered):
     ests = [est(rest, np.zeros(m)), est(moved, smile), est(between, 0.5 * smile)]
     trial = est(HeadPose(rotmat(np.radians([0.2, -0.1, 0.1])) @ moved.rotation,
                          moved.translation_mm + [0.2, 0.1, -0.4]), 0.8 * smile)  # fmt: skip
-    checked = 0
+    checked, occluded = 0, []
     for e in ests:
         new = PhotometricTerm(frame, app, cam)
         old = _NumpyTerm(frame, app, cam)
@@ -467,7 +495,10 @@ def test_the_compiled_step_is_the_numpy_step(rendered):
             assert np.array_equal(usen, useo)
             assert _close(rn, ro) and _close(resn, reso)
             checked += 1
+        assert new.occlusion(e) == old.occlusion(e)
+        occluded.append(old.occlusion(e))
     assert checked == 3 * (len(app.levels) + 1)
+    assert max(occluded) > 0.0  # (the frame at rest: patches that do not look as at rest)
 
 
 def test_clear_of_a_polyline_is_the_distance_test():

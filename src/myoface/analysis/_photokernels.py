@@ -351,3 +351,24 @@ def weighted_cost(val, lit, w, use, sigma):
         r = 0.0 if np.isnan(r) else r / sigma
         acc += w[s] * r * r
     return acc
+
+
+@njit(cache=True, nogil=True)
+def patch_sums(a, b, ok, tri, nv):
+    """Per vertex (V, 6), over the samples ``ok`` on its triangles: their count and the sums
+    of ``a``, ``b``, ``a^2``, ``b^2``, ``a b`` (:meth:`~myoface.analysis.photometric.
+    PhotometricTerm.occlusion`'s patches)."""
+    out = np.zeros((nv, 6))
+    for s in range(tri.shape[0]):
+        if not ok[s]:
+            continue
+        x, y = a[s], b[s]
+        for q in range(3):
+            v = tri[s, q]
+            out[v, 0] += 1.0
+            out[v, 1] += x
+            out[v, 2] += y
+            out[v, 3] += x * x
+            out[v, 4] += y * y
+            out[v, 5] += x * y
+    return out

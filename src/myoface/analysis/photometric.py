@@ -684,18 +684,20 @@ class PhotometricTerm:
         lev = len(self.app.levels) - 1
         if not self._images:
             self._crop(self._uv(est)[1])
-        pc, uv = self._uv(est)
+        pc = self._camera_points(est)
+        uv = self._pixels(pc, self._all)
         a = self.app.values[lev]
         b = self._at(self._images[lev][0], uv)
-        vis = facing(self.app.samples, self.app.triangles, pc) > FACING_MIN
-        ok = (vis & np.isfinite(a) & np.isfinite(b) & (self.app.prior > 0)).astype(np.float64)
-        a, b = np.nan_to_num(a), np.nan_to_num(b)
-        g = self.app.samples.membership(len(pc)).multiply(ok[None, :]).tocsr()
-        n = np.asarray(g.sum(1)).ravel()
-        ma, mb = g @ a / np.maximum(n, 1), g @ b / np.maximum(n, 1)
-        va = g @ (a * a) / np.maximum(n, 1) - ma**2
-        vb = g @ (b * b) / np.maximum(n, 1) - mb**2
-        cab = g @ (a * b) / np.maximum(n, 1) - ma * mb
+        vis = _pk.facing(pc, self._triangles, self._tri_index) > FACING_MIN
+        ok = vis & np.isfinite(a) & np.isfinite(b) & (self.app.prior > 0)
+        # per vertex, the sums over the samples on its triangles (the samples' membership
+        # of the vertices' patches, SurfaceSamples.membership, as a compiled loop)
+        sums = _pk.patch_sums(np.nan_to_num(a), np.nan_to_num(b), ok, self._tri, len(pc))
+        n = sums[:, 0]
+        ma, mb = sums[:, 1] / np.maximum(n, 1), sums[:, 2] / np.maximum(n, 1)
+        va = sums[:, 3] / np.maximum(n, 1) - ma**2
+        vb = sums[:, 4] / np.maximum(n, 1) - mb**2
+        cab = sums[:, 5] / np.maximum(n, 1) - ma * mb
         ncc = cab / np.sqrt(np.maximum(va * vb, 1e-12))
         textured = (n >= 9) & (va > TEXTURED_GREY**2)
         if not textured.any():
