@@ -639,6 +639,8 @@ class PhotometricTerm:
         its estimate."""
         if self._read is not None and self._read[0] is est and self._read[1] == self._level:
             return self._read[2] if gradient else self._read[3]
+        if len(self._use) == 0:  # (nothing weighs: nothing to read)
+            return np.empty((0, 3)) if gradient else np.empty(0)
         uv = self._pixels(self._camera_points(est), self._use)
         if gradient:
             return self._read_at(uv)
