@@ -41,6 +41,27 @@ mesh, :func:`unoccluded`: the nose at a large yaw, a cheek bulging over the naso
 Samples near one another see nearly the same blurred pixels: their errors are not independent.
 Each sample weighs ``min(1, (spacing / (2 blur))^2)`` so that the term counts about one
 independent measurement per blur-sized patch of skin.
+
+**What it costs.** A Gauss-Newton step reads the ~2600 samples (2556 on the default face) once
+at its estimate (one remap of the blurred image and its gradient together) and, in compiled
+loops (:mod:`~myoface.analysis._photokernels`), their pixels, facing, distance to the outline,
+the frame's light and their weights (:meth:`PhotometricTerm.prepare`); the normal equations
+and the cost at that estimate reuse what it read; each sample's row of the Jacobian is made
+from its triangle's three vertices' derivatives (no sparse matrix, no row slice), then their
+Gram matrix (45 x ~2500). Measured 2026-12-03 on the sample video (72 frames, 502 steps:
+``PYTHONPATH=src python tools/photometric_profile.py --repeats 3``, thread CPU, medians of 3
+passes, the tree before the kernels (``/work/main``, da45cf9) run just before this one on the
+shared 2-core machine): ``prepare`` 2.57 -> 1.20 ms, ``normal_equations`` 3.29 -> 0.60 ms,
+``cost`` 0.36 -> 0.09 ms (2.16 calls a step), the term 6.6 -> 2.0 ms a step (3.3x), the fit's
+CPU 62.9 -> 28.6 ms a frame (2.2x), the steps (502) and the analysis' CSV the same (``myoface
+analyze --photometric``: contractions.csv byte for byte). ``myoface bench --only
+analysis.fps``, two runs of each tree: ``fps_photometric`` 11.6, 14.0 -> 20.1, 24.1 frames/s
+(the default's 31.1, 34.5 and 29.0, 32.1 in the same runs: 0.37, 0.41 -> 0.69, 0.75 of it),
+the fit's CPU 58.5, 59.2 -> 27.0, 20.9 ms a frame, the process CPU 82.9, 83.5 -> 48.9, 40.6 ms
+a frame. Of a step what is left (``tools/photometric_profile.py --parts``): the rows ~0.3 ms
+and their Gram ~0.25 ms, the reads of the image (cv2's remap, ~0.17 ms the step's, ~0.1 ms a
+trial's: kept, its interpolation at 1/32 pixel is what the results are), the light ~0.2 ms;
+once a frame, the crop's blurs and gradients ~1.9 ms and the z-buffer ~1.3 ms.
 """
 
 from __future__ import annotations
