@@ -274,3 +274,272 @@ def test_the_shading_field_follows_smooth_shading(scene, monkeypatch):
             term.prepare(est)
         costs[order] = term.cost(est)
     assert costs[2] < 0.3 * costs[0], costs
+
+
+# ------------------------------------------------------------------------------------------
+# The compiled step (myoface.analysis._photokernels) against the numpy formulas it replaced
+# (2026-12-03: the term's code before the kernels, kept here verbatim as the reference).
+
+
+def _unoccluded_np(samples, triangles, camera, camera_points, shape_hw, tol_mm):
+    """:func:`~myoface.analysis.photometric.unoccluded` with its z-buffer on the whole frame."""
+    from myoface.analysis.photometric import _zbuffer
+
+    h, w = int(shape_hw[0]), int(shape_hw[1])
+    uv = camera.project(camera_points)
+    depth = -camera_points[:, 2]
+    z = _zbuffer(np.ascontiguousarray(uv), np.ascontiguousarray(depth),
+                 np.ascontiguousarray(triangles, dtype=np.int64), h, w)  # fmt: skip
+    pts = samples.points(camera_points)
+    su = camera.project(pts)
+    x = np.clip(np.round(su[:, 0]).astype(np.int64), 0, w - 1)
+    y = np.clip(np.round(su[:, 1]).astype(np.int64), 0, h - 1)
+    return -pts[:, 2] <= z[y, x] + tol_mm
+
+
+class _NumpyTerm(PhotometricTerm):
+    """The photometric term's step as numpy computed it before the compiled kernels."""
+
+    def _fit_light_np(self, pc, val, use):
+        from myoface.analysis import photometric as ph
+
+        alb = self.app.albedo[self._level]
+        basis = ph.shading_basis(ph.sample_normals(self.app.samples, self.app.triangles, pc))
+        m = use & np.isfinite(alb)
+        reg = self.app.region
+        onehot = np.eye(ph.LIGHT_REGIONS)[reg]
+        if ph.SHADE_FIELD_ORDER > 0:
+            basis = np.column_stack([basis, self._field()])
+        x = np.column_stack([alb[:, None] * basis, onehot])
+        if m.sum() < 40:
+            return np.ones(len(val)), np.zeros(len(val))
+        xm = x[m]
+        gram = np.einsum("si,sj->ij", xm, xm) + 1e-9 * np.eye(x.shape[1])
+        sol = np.linalg.solve(gram, np.einsum("si,s->i", xm, val[m]))
+        nb = basis.shape[1]
+        scale = basis @ sol[:nb]
+        return scale, sol[nb:][reg]
+
+    def _lit_np(self, idx):
+        scale, off = self._light
+        return np.nan_to_num(self.app.albedo[self._level][idx]) * scale[idx] + off[idx]
+
+    def prepare(self, est):
+        from myoface.analysis import photometric as ph
+
+        self._level = self._level_for(self._step)
+        self._step += 1
+        pc, uv = self._uv(est)
+        if not self._images:
+            self._crop(uv)
+        a = self.app.values[self._level]
+        val = self._at(self._images[self._level][0], uv)
+        cos = ph.facing(self.app.samples, self.app.triangles, pc)
+        vis = cos > ph.FACING_MIN
+        if self._unoccluded is None:
+            self._unoccluded = _unoccluded_np(self.app.samples, self.app.triangles, self.camera,
+                                              pc, self._grey.shape, ph.OCCLUSION_MM)  # fmt: skip
+        vis &= self._unoccluded
+        ok = vis & np.isfinite(a) & np.isfinite(val)
+        blur = self.app.levels[self._level]
+        if self.app.outline is not None:
+            edge = ph.distance_to_polyline(uv, self.camera.project(pc[self.app.outline]))
+            ok &= edge >= ph.OUTLINE_BLURS * blur + 1.0
+        self._light = self._fit_light_np(pc, val, ok if self._w is None else ok & (self._w > 0))
+        r = np.where(ok, val - self._lit_np(slice(None)), 0.0) / self.sigma
+        indep = min(1.0, (self.app.spacing_px / (2.0 * blur)) ** 2)
+        hub = np.where(np.abs(r) > self.huber, self.huber / np.maximum(np.abs(r), 1e-12), 1.0)
+        if not self.settling:
+            far = ok & (np.abs(r) > ph.OUTLIER_SIGMAS)
+            hub[far] = 0.0
+        own = 1.0 if self.app.prior is None else self.app.prior
+        self._w = np.where(ok, indep * hub * self.weight * own, 0.0)
+
+    def _rows(self, est):
+        free = est.free
+        nf = len(free)
+        n = 6 + nf
+        rot = est.pose.rotation
+        rx = est.shape @ rot.T
+        pc = rx + est.pose.translation_mm
+        dproj = self.camera.projection_jacobian(pc)
+        dp = np.zeros((len(pc), 3, n))
+        dp[:, 0, 1], dp[:, 0, 2] = rx[:, 2], -rx[:, 1]
+        dp[:, 1, 0], dp[:, 1, 2] = -rx[:, 2], rx[:, 0]
+        dp[:, 2, 0], dp[:, 2, 1] = rx[:, 1], -rx[:, 0]
+        dp[:, 0, 3] = dp[:, 1, 4] = dp[:, 2, 5] = 1.0
+        if nf:
+            dp[:, :, 6:] = np.einsum("ij,vjf->vif", rot, est.jac[:, :, free])
+        duv = np.einsum("vij,vjn->vin", dproj, dp)
+        use = np.flatnonzero(self._w > 0)
+        bm = self.app.samples.matrix(len(pc))[use]
+        dsample = (bm @ duv.reshape(len(pc), 2 * n)).reshape(len(use), 2, n)
+        uv = self.camera.project(bm @ pc)
+        _, gx, gy = self._images[self._level]
+        g = np.nan_to_num(np.column_stack([self._at(gx, uv), self._at(gy, uv)]))
+        rows = (g[:, :1] * dsample[:, 0] + g[:, 1:] * dsample[:, 1]) / self.sigma
+        val = self._at(self._images[self._level][0], uv)
+        res = np.nan_to_num(val - self._lit_np(use))
+        return rows, res / self.sigma, use
+
+    def normal_equations(self, est):
+        rows, res, use = self._rows(est)
+        sw = np.sqrt(self._w[use])
+        h = (rows * sw[:, None]).T @ (rows * sw[:, None])
+        return h, -(rows * sw[:, None]).T @ (res * sw)
+
+    def occlusion(self, est):
+        from myoface.analysis import photometric as ph
+
+        lev = len(self.app.levels) - 1
+        if not self._images:
+            self._crop(self._uv(est)[1])
+        pc, uv = self._uv(est)
+        a = self.app.values[lev]
+        b = self._at(self._images[lev][0], uv)
+        vis = ph.facing(self.app.samples, self.app.triangles, pc) > ph.FACING_MIN
+        ok = (vis & np.isfinite(a) & np.isfinite(b) & (self.app.prior > 0)).astype(np.float64)
+        a, b = np.nan_to_num(a), np.nan_to_num(b)
+        g = self.app.samples.membership(len(pc)).multiply(ok[None, :]).tocsr()
+        n = np.asarray(g.sum(1)).ravel()
+        ma, mb = g @ a / np.maximum(n, 1), g @ b / np.maximum(n, 1)
+        va = g @ (a * a) / np.maximum(n, 1) - ma**2
+        vb = g @ (b * b) / np.maximum(n, 1) - mb**2
+        cab = g @ (a * b) / np.maximum(n, 1) - ma * mb
+        ncc = cab / np.sqrt(np.maximum(va * vb, 1e-12))
+        textured = (n >= 9) & (va > ph.TEXTURED_GREY**2)
+        if not textured.any():
+            return 0.0
+        ratio = np.sqrt(np.maximum(vb, 0.0) / np.maximum(va, 1e-12))
+        lost = (ncc < ph.AGREEMENT_MIN) & (
+            (ratio < 1.0 / ph.CONTRAST_CHANGE) | (ratio > ph.CONTRAST_CHANGE)
+        )
+        return float(lost[textured].mean())
+
+    def cost(self, est):
+        _, uv = self._uv(est)
+        r = np.nan_to_num(self._at(self._images[self._level][0], uv) - self._lit_np(slice(None)))
+        r = r / self.sigma
+        return float((self._w * r * r).sum())
+
+
+@pytest.fixture(scope="module")
+def rendered():
+    """The default face rendered (320 x 240, 25 degrees' field of view) at rest, the
+    calibration frame, and smiling with its head turned, the frame read."""
+    from myoface.analysis.camera import HeadPose
+    from myoface.bench.headmotion import camera_renderer
+    from myoface.model import load_face_model
+
+    fm = load_face_model(None)
+    ren = camera_renderer(fm.face, size=(320, 240), fov_deg=25.0)
+    cam = PinholeCamera.for_image(320, 240, 25.0)
+    rest = HeadPose.from_euler(0, 0, 0, (0.0, 0.0, -500.0))
+    moved = HeadPose.from_euler(8, -4, 2, (3.0, -2.0, -505.0))
+    calib = ren.render(fm.skin_vertices(), pose=(rest.rotation, rest.translation_mm))
+    smile = expression_contractions("happiness", 0.7, fm.ids)
+    state = fm.relax(smile, fm.rest_state()).state
+    frame = ren.render(fm.skin_vertices(state), pose=(moved.rotation, moved.translation_mm))
+    return fm, cam, rest, moved, calib, frame, smile
+
+
+def _close(new, old, rel=1e-9):
+    new, old = np.asarray(new, dtype=float), np.asarray(old, dtype=float)
+    return float(np.abs(new - old).max()) <= rel * max(float(np.abs(old).max()), 1e-300)
+
+
+def test_the_compiled_step_is_the_numpy_step(rendered):
+    """On a rendered smile with the head turned, at three estimates (the calibration's pose
+    at rest, the frame's own pose and smile, a pose and contractions between), through
+    every blur level and a second step on the finest (the light then fitted on the weighing
+    samples only): the samples' weights, the normal equations, the cost at the step's
+    estimate and at another (a trial step), and the rows at another, those of the numpy
+    formulas to 1e-9 relative (measured 2026-12-03 at the frame's own pose and smile: the
+    weights and the cost to 3e-14, the normal equations to 1e-14: the sums' order); the share
+    of the patches occluded (once a frame) the same."""
+    from myoface.analysis.camera import HeadPose
+
+    fm, cam, rest, moved, calib, frame, smile = rendered
+    shape = fm.skin_vertices()
+    app = Appearance.from_frame(calib, fm.face, cam, rest, shape)
+    app.prior = np.where(np.arange(len(app.samples)) % 7 == 0, 0.5, 1.0) * app.prior
+    jac = skin_response(fm, fm.ids)
+    m = len(fm.ids)
+    free = np.flatnonzero(np.arange(m) % 5 != 3)  # (some contractions held)
+
+    def est(pose, c):
+        return Estimate(pose, c, shape + (jac.reshape(-1, m) @ c).reshape(-1, 3), jac, free)
+
+    between = HeadPose(rotmat(np.radians([1.5, 2.0, 0.5])) @ moved.rotation,
+                       moved.translation_mm + [0.5, -0.3, 1.0])  # fmt: skip
+    ests = [est(rest, np.zeros(m)), est(moved, smile), est(between, 0.5 * smile)]
+    trial = est(HeadPose(rotmat(np.radians([0.2, -0.1, 0.1])) @ moved.rotation,
+                         moved.translation_mm + [0.2, 0.1, -0.4]), 0.8 * smile)  # fmt: skip
+    checked, occluded = 0, []
+    for e in ests:
+        new = PhotometricTerm(frame, app, cam)
+        old = _NumpyTerm(frame, app, cam)
+        for step in range(len(app.levels) + 1):
+            for t in (new, old):
+                if step and t.settling:
+                    t.advance()
+                t.prepare(e)
+            assert new._level == old._level
+            assert np.count_nonzero(old._w) > 500
+            assert _close(new._w, old._w)
+            hn, bn = new.normal_equations(e)
+            ho, bo = old.normal_equations(e)
+            assert _close(hn, ho) and _close(bn, bo), (step, np.abs(hn - ho).max())
+            assert _close(new.cost(e), old.cost(e))
+            assert _close(new.cost(trial), old.cost(trial))
+            rn, resn, usen = new._rows(trial)
+            ro, reso, useo = old._rows(trial)
+            assert np.array_equal(usen, useo)
+            assert _close(rn, ro) and _close(resn, reso)
+            checked += 1
+        assert new.occlusion(e) == old.occlusion(e)
+        occluded.append(old.occlusion(e))
+    assert checked == 3 * (len(app.levels) + 1)
+    assert max(occluded) > 0.0  # (the frame at rest: patches that do not look as at rest)
+
+
+def test_clear_of_a_polyline_is_the_distance_test():
+    """The compiled test of the outline's distance (runs of segments boxed, stopping at the
+    first near one) against :func:`distance_to_polyline` ``>= dist``, on random points about
+    a wiggly closed line, points at exactly the distance included."""
+    from myoface.analysis._photokernels import clear_of_polyline
+    from myoface.analysis.photometric import distance_to_polyline
+
+    rng = np.random.default_rng(3)
+    ang = np.linspace(0, 2 * np.pi, 37)[:-1]
+    rad = 80 + 6 * np.sin(5 * ang)
+    line = np.column_stack([160 + rad * np.cos(ang), 120 + 1.2 * rad * np.sin(ang)])
+    pts = rng.uniform(40, 280, (4000, 2))
+    on = line[5] + np.array([0.0, 3.0])  # (3 px from a vertex: on the distance for 3)
+    pts = np.vstack([pts, on, line[:3]])
+    ok = rng.uniform(size=len(pts)) > 0.1
+    for dist in (2.0, 3.0, 5.0, 9.0):
+        want = (distance_to_polyline(pts, line) >= dist) & ok
+        got = clear_of_polyline(pts, line, dist, ok)
+        assert np.array_equal(got, want), dist
+        assert 0.05 < want.mean() < 0.95
+
+
+def test_the_windowed_zbuffer_hides_what_the_whole_frames_does(rendered):
+    """:func:`unoccluded` (its z-buffer on the window that holds the mesh) against the
+    z-buffer of the whole frame: the same samples hidden, at a large yaw (the nose covers a
+    cheek), with the face partly off the image, and wholly off it."""
+    from myoface.analysis.camera import HeadPose
+    from myoface.analysis.photometric import OCCLUSION_MM, unoccluded
+
+    fm, cam, *_ = rendered
+    shape = fm.skin_vertices()
+    samples = SurfaceSamples.on(fm.face.triangles)
+    hidden = []
+    for yaw, tx in ((0.0, 0.0), (55.0, 0.0), (30.0, 95.0), (0.0, 400.0)):
+        pc = HeadPose.from_euler(yaw, 5, 0, (tx, 0.0, -500.0)).apply(shape)
+        got = unoccluded(samples, fm.face.triangles, cam, pc, (240, 320))
+        want = _unoccluded_np(samples, fm.face.triangles, cam, pc, (240, 320), OCCLUSION_MM)
+        assert np.array_equal(got, want), yaw
+        hidden.append(int((~want).sum()))
+    assert hidden[1] > 100 and hidden[3] == 0, hidden

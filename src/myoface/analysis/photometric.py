@@ -41,6 +41,27 @@ mesh, :func:`unoccluded`: the nose at a large yaw, a cheek bulging over the naso
 Samples near one another see nearly the same blurred pixels: their errors are not independent.
 Each sample weighs ``min(1, (spacing / (2 blur))^2)`` so that the term counts about one
 independent measurement per blur-sized patch of skin.
+
+**What it costs.** A Gauss-Newton step reads the ~2600 samples (2556 on the default face) once
+at its estimate (one remap of the blurred image and its gradient together) and, in compiled
+loops (:mod:`~myoface.analysis._photokernels`), their pixels, facing, distance to the outline,
+the frame's light and their weights (:meth:`PhotometricTerm.prepare`); the normal equations
+and the cost at that estimate reuse what it read; each sample's row of the Jacobian is made
+from its triangle's three vertices' derivatives (no sparse matrix, no row slice), then their
+Gram matrix (45 x ~2500). Measured 2026-12-03 on the sample video (72 frames, 502 steps:
+``PYTHONPATH=src python tools/photometric_profile.py --repeats 3``, thread CPU, medians of 3
+passes, the tree before the kernels (``/work/main``, da45cf9) run just before this one on the
+shared 2-core machine): ``prepare`` 2.57 -> 1.20 ms, ``normal_equations`` 3.29 -> 0.60 ms,
+``cost`` 0.36 -> 0.09 ms (2.16 calls a step), the term 6.6 -> 2.0 ms a step (3.3x), the fit's
+CPU 62.9 -> 28.6 ms a frame (2.2x), the steps (502) and the analysis' CSV the same (``myoface
+analyze --photometric``: contractions.csv byte for byte). ``myoface bench --only
+analysis.fps``, two runs of each tree: ``fps_photometric`` 11.6, 14.0 -> 20.1, 24.1 frames/s
+(the default's 31.1, 34.5 and 29.0, 32.1 in the same runs: 0.37, 0.41 -> 0.69, 0.75 of it),
+the fit's CPU 58.5, 59.2 -> 27.0, 20.9 ms a frame, the process CPU 82.9, 83.5 -> 48.9, 40.6 ms
+a frame. Of a step what is left (``tools/photometric_profile.py --parts``): the rows ~0.3 ms
+and their Gram ~0.25 ms, the reads of the image (cv2's remap, ~0.17 ms the step's, ~0.1 ms a
+trial's: kept, its interpolation at 1/32 pixel is what the results are), the light ~0.2 ms;
+once a frame, the crop's blurs and gradients ~1.9 ms and the z-buffer ~1.3 ms.
 """
 
 from __future__ import annotations
@@ -50,6 +71,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from myoface.analysis import _photokernels as _pk
 from myoface.analysis._fitkernels import _gram
 from myoface.analysis.terms import Estimate
 from myoface.errors import MyofaceValueError
@@ -174,17 +196,33 @@ def _distance_to_polyline(points, line):
 
 def unoccluded(samples, triangles, camera, camera_points, shape_hw, tol_mm=OCCLUSION_MM):
     """Which samples (S,) no other part of the face covers, by a z-buffer of the mesh at the
-    vertices' camera-frame positions ``camera_points`` (V, 3) on an image of ``shape_hw``."""
+    vertices' camera-frame positions ``camera_points`` (V, 3) on an image of ``shape_hw``
+    (made on the window of the image that holds the mesh: :func:`_photokernels.zbuffer_window
+    <myoface.analysis._photokernels.zbuffer_window>`)."""
     h, w = int(shape_hw[0]), int(shape_hw[1])
-    uv = camera.project(camera_points)
-    depth = -camera_points[:, 2]
-    z = _zbuffer(np.ascontiguousarray(uv), np.ascontiguousarray(depth),
-                 np.ascontiguousarray(triangles, dtype=np.int64), h, w)  # fmt: skip
+    uv = np.ascontiguousarray(camera.project(camera_points))
+    depth = np.ascontiguousarray(-camera_points[:, 2])
+    tris = np.ascontiguousarray(triangles, dtype=np.int64)
     pts = samples.points(camera_points)
     su = camera.project(pts)
     x = np.clip(np.round(su[:, 0]).astype(np.int64), 0, w - 1)
     y = np.clip(np.round(su[:, 1]).astype(np.int64), 0, h - 1)
-    return -pts[:, 2] <= z[y, x] + tol_mm
+    if not np.isfinite(uv).all():  # (no window: the whole image, as it was)
+        z = _zbuffer(uv, depth, tris, h, w)
+        return -pts[:, 2] <= z[y, x] + tol_mm
+    # (every triangle's pixels lie in its corners' box, so in the vertices': outside it no
+    # triangle covers a pixel)
+    xa = max(int(np.floor(uv[:, 0].min())), 0)
+    xb = min(int(np.ceil(uv[:, 0].max())), w - 1)
+    ya = max(int(np.floor(uv[:, 1].min())), 0)
+    yb = min(int(np.ceil(uv[:, 1].max())), h - 1)
+    if xa > xb or ya > yb:
+        return np.ones(len(pts), dtype=bool)  # (no pixel covered: nothing hides a sample)
+    z = _pk.zbuffer_window(uv, depth, tris, xa, ya, xb, yb)
+    inside = (x >= xa) & (x <= xb) & (y >= ya) & (y <= yb)
+    zs = np.full(len(pts), np.inf)
+    zs[inside] = z[y[inside] - ya, x[inside] - xa]
+    return -pts[:, 2] <= zs + tol_mm
 
 
 def grey(frame) -> np.ndarray:
@@ -422,7 +460,11 @@ class PhotometricTerm:
     module's docstring). ``frame``: the RGB (or grey) frame; ``appearance``: the calibration
     frame's (:class:`Appearance`); ``sigma``: a sample's brightness error, grey levels (1 sd:
     the camera's noise and what the model's surface does not reproduce); ``huber``: robust
-    beyond this many sigmas; ``weight``: the whole term's (1: as the module says)."""
+    beyond this many sigmas; ``weight``: the whole term's (1: as the module says).
+
+    A step's work is compiled (:mod:`myoface.analysis._photokernels`); what a step's
+    :meth:`prepare` read at its estimate (the samples' pixels and the image, its gradient
+    there) is reused by :meth:`normal_equations` and :meth:`cost` at the same estimate."""
 
     def __init__(self, frame, appearance: Appearance, camera, sigma: float = 8.0,
                  huber: float = 2.0, weight: float = 1.0):  # fmt: skip
@@ -435,20 +477,40 @@ class PhotometricTerm:
         self.weight = float(weight)
         self._grey = grey(frame)
         #: per level (blurred, d/dx, d/dy) of the crop around the face, made at the first step
-        #: (:meth:`_crop`), and the crop's origin (x, y) pixels
+        #: (:meth:`_crop`), the three as one 3-channel image (one remap reads all three),
+        #: and the crop's origin (x, y) pixels
         self._images: list = []
+        self._stacked: list = []
         self._origin = np.zeros(2)
         #: the samples no other part of the face covers, at the round's first step
         self._unoccluded = None
         self._step = 0
         self._level = 0
         self._w = None  # per sample: weight (visibility, independence, Huber), fixed over a step
-        self._light = None  # (gain, offset) per region, fixed over a step
+        self._use = None  # the samples that weigh (w > 0), fixed over a step
+        self._light = None  # (scale, offset) per sample, fixed over a step
+        self._lit = None  # the appearance under the frame's light (S,), fixed over a step
+        #: what :meth:`prepare` read at its estimate: (est, level, the image and its gradient
+        #: (N, 3) at the weighing samples, the image (N,) there)
+        self._read = None
+        s = appearance.samples
+        #: the samples' triangles and coordinates, the albedo with 0 where unknown, per level
+        self._tri = np.ascontiguousarray(s.tri, dtype=np.int64)
+        self._bary = np.ascontiguousarray(s.bary, dtype=np.float64)
+        self._tri_index = np.ascontiguousarray(s.tri_index, dtype=np.int64)
+        self._triangles = np.ascontiguousarray(appearance.triangles, dtype=np.int64)
+        self._region = np.ascontiguousarray(appearance.region, dtype=np.int64)
+        self._all = np.arange(len(s), dtype=np.int64)
+        self._alb0 = [np.nan_to_num(a) for a in appearance.albedo]
+        prior = appearance.prior
+        self._own = np.ones(len(s)) if prior is None else np.asarray(prior, dtype=np.float64)
 
     def restart(self) -> None:
         """Start the coarse-to-fine schedule again (a new round of Gauss-Newton steps)."""
         self._step = 0
         self._w = None
+        self._use = None
+        self._read = None
         self._unoccluded = None
 
     def _crop(self, uv: np.ndarray) -> None:
@@ -467,39 +529,49 @@ class PhotometricTerm:
         crop = np.ascontiguousarray(self._grey[y0:y1, x0:x1])
         self._origin = np.array([x0, y0], dtype=np.float64)
         self._images = []
+        self._stacked = []
         for s in self.app.levels:
             b = blurred(crop, s)
             gx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3, scale=1 / 8)
             gy = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3, scale=1 / 8)
             self._images.append((b, gx, gy))
+            # (a 3-channel remap reads each channel as the 1-channel one does, to the bit)
+            self._stacked.append(cv2.merge([b, gx, gy]))
 
     def _at(self, image, uv):
         return _sample(image, uv - self._origin)
 
+    def _read_at(self, uv) -> np.ndarray:
+        """This level's image, its x and its y gradient (N, 3) at ``uv`` (N, 2) (NaN off
+        the crop)."""
+        cv2 = _cv2()
+        m = np.ascontiguousarray((uv - self._origin).reshape(1, -1, 2), dtype=np.float32)
+        out = cv2.remap(self._stacked[self._level], m[..., 0], m[..., 1], cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=(np.nan,) * 4)  # fmt: skip
+        return out.reshape(-1, 3).astype(np.float64)
+
     def _fit_light(self, pc, val, use):
         """The frame's light (least squares over the samples ``use``): brightness = albedo
-        times the shading of the samples' normals at the vertices ``pc`` (camera frame) (:func:`shading_basis`, one
-        light for the face: as the head turns under a lamp each point's shading changes with
-        its normal), plus an offset per region (:data:`LIGHT_REGIONS`: a camera's flare, a
-        second light's spill). Returns each sample's (scale (S,), offset (S,))."""
+        times the shading of the samples' normals at the vertices ``pc`` (camera frame)
+        (:func:`shading_basis`, one light for the face: as the head turns under a lamp each
+        point's shading changes with its normal), plus an offset per region
+        (:data:`LIGHT_REGIONS`: a camera's flare, a second light's spill). Returns each
+        sample's (scale (S,), offset (S,)) and its appearance under that light (S,)."""
         alb = self.app.albedo[self._level]
-        basis = shading_basis(sample_normals(self.app.samples, self.app.triangles, pc))
-        m = use & np.isfinite(alb)
-        reg = self.app.region
-        onehot = np.eye(LIGHT_REGIONS)[reg]
+        alb0 = self._alb0[self._level]
+        basis = _pk.shading_basis(pc, self._triangles, self._tri, self._bary, SHADING_ORDER)
         if SHADE_FIELD_ORDER > 0:
-            basis = np.column_stack([basis, self._field()])
-        x = np.column_stack([alb[:, None] * basis, onehot])
-        if m.sum() < 40:
-            return np.ones(len(val)), np.zeros(len(val))
-        # (normal equations summed by einsum, not BLAS: OpenBLAS's threads, woken for this
-        # 2600 x 8 product, then spin on the second core that MediaPipe runs on)
-        xm = x[m]
-        gram = np.einsum("si,sj->ij", xm, xm) + 1e-9 * np.eye(x.shape[1])
-        sol = np.linalg.solve(gram, np.einsum("si,s->i", xm, val[m]))
-        nb = basis.shape[1]
-        scale = basis @ sol[:nb]
-        return scale, sol[nb:][reg]
+            basis = np.ascontiguousarray(np.column_stack([basis, self._field()]))
+        m = use & np.isfinite(alb)
+        if np.count_nonzero(m) < 40:
+            n = len(val)
+            return np.ones(n), np.zeros(n), alb0.copy()
+        # (the normal equations summed in a compiled loop over the samples, not by BLAS:
+        # OpenBLAS's threads, woken for this 2600 x 8 product, then spin on the second core
+        # that MediaPipe runs on)
+        gram, rhs = _pk.light_system(basis, alb, self._region, LIGHT_REGIONS, val, m)
+        sol = np.linalg.solve(gram, rhs)
+        return _pk.light_apply(basis, sol, self._region, alb0)
 
     def _field(self):
         """A smooth field over the face (S, k): the monomials of the samples' head-frame x,
@@ -511,11 +583,6 @@ class PhotometricTerm:
             for i in range(n + 1):
                 cols.append(xy[:, 0] ** (n - i) * xy[:, 1] ** i)
         return np.column_stack(cols)
-
-    def _lit(self, idx):
-        """The samples ``idx``' brightness under the frame's light."""
-        scale, off = self._light
-        return np.nan_to_num(self.app.albedo[self._level][idx]) * scale[idx] + off[idx]
 
     # -------------------------------------------------------------- the schedule
     def _level_for(self, step: int) -> int:
@@ -542,21 +609,29 @@ class PhotometricTerm:
         pc = est.pose.apply(est.shape)
         return pc, self.camera.project(self.app.samples.points(pc))
 
-    def _residual(self, uv):
-        """Each sample's brightness at ``uv`` less its appearance under the frame's light
-        (this step's level)."""
-        return self._at(self._images[self._level][0], uv) - self._lit(slice(None))
+    def _camera_points(self, est: Estimate) -> np.ndarray:
+        return _pk.camera_points(
+            np.ascontiguousarray(est.pose.rotation, dtype=np.float64),
+            np.ascontiguousarray(est.pose.translation_mm, dtype=np.float64),
+            np.ascontiguousarray(est.shape, dtype=np.float64),
+        )
+
+    def _pixels(self, pc, idx) -> np.ndarray:
+        cam = self.camera
+        return _pk.sample_pixels(pc, self._tri, self._bary, idx, float(cam.focal_px),
+                                 float(cam.cx), float(cam.cy))  # fmt: skip
 
     def prepare(self, est: Estimate) -> None:
         self._level = self._level_for(self._step)
         self._step += 1
-        pc, uv = self._uv(est)
+        pc = self._camera_points(est)
+        uv = self._pixels(pc, self._all)
         if not self._images:
             self._crop(uv)
         a = self.app.values[self._level]
-        val = self._at(self._images[self._level][0], uv)
-        cos = facing(self.app.samples, self.app.triangles, pc)
-        vis = cos > FACING_MIN
+        read = self._read_at(uv)
+        val = np.ascontiguousarray(read[:, 0])
+        vis = _pk.facing(pc, self._triangles, self._tri_index) > FACING_MIN
         if self._unoccluded is None:
             # (once a round: a step moves the skin by far less than a part of the face is
             # thick)
@@ -567,54 +642,55 @@ class PhotometricTerm:
         ok = vis & np.isfinite(a) & np.isfinite(val)
         blur = self.app.levels[self._level]
         if self.app.outline is not None:
-            edge = distance_to_polyline(uv, self.camera.project(pc[self.app.outline]))
-            ok &= edge >= OUTLINE_BLURS * blur + 1.0
-        self._light = self._fit_light(pc, val, ok if self._w is None else ok & (self._w > 0))
-        r = np.where(ok, val - self._lit(slice(None)), 0.0) / self.sigma
+            line = self.camera.project(pc[self.app.outline])
+            ok = _pk.clear_of_polyline(uv, np.ascontiguousarray(line),
+                                       OUTLINE_BLURS * blur + 1.0, ok)  # fmt: skip
+        scale, off, lit = self._fit_light(pc, val, ok if self._w is None else ok & (self._w > 0))
+        self._light, self._lit = (scale, off), lit
         indep = min(1.0, (self.app.spacing_px / (2.0 * blur)) ** 2)
-        hub = np.where(np.abs(r) > self.huber, self.huber / np.maximum(np.abs(r), 1e-12), 1.0)
-        if not self.settling:
-            far = ok & (np.abs(r) > OUTLIER_SIGMAS)
-            hub[far] = 0.0
-        own = 1.0 if self.app.prior is None else self.app.prior
-        self._w = np.where(ok, indep * hub * self.weight * own, 0.0)
+        self._w = _pk.step_weights(val, lit, ok, self.sigma, self.huber, indep, self.weight,
+                                   self._own, not self.settling, OUTLIER_SIGMAS)  # fmt: skip
+        self._use = np.flatnonzero(self._w > 0)
+        at = read[self._use]
+        self._read = (est, self._level, at, np.ascontiguousarray(at[:, 0]))
+
+    def _reading(self, est: Estimate, gradient: bool = True) -> np.ndarray:
+        """The image and its x and y gradient (N, 3) (``gradient`` False: the image (N,)
+        only) at the weighing samples' pixels at ``est``: what :meth:`prepare` read, when at
+        its estimate."""
+        if self._read is not None and self._read[0] is est and self._read[1] == self._level:
+            return self._read[2] if gradient else self._read[3]
+        if len(self._use) == 0:  # (nothing weighs: nothing to read)
+            return np.empty((0, 3)) if gradient else np.empty(0)
+        uv = self._pixels(self._camera_points(est), self._use)
+        if gradient:
+            return self._read_at(uv)
+        return self._at(self._images[self._level][0], uv)
+
+    def _weighted_rows(self, est: Estimate, weighted: bool = True):
+        samp = self._reading(est)
+        cam = self.camera
+        return _pk.weighted_rows(
+            np.ascontiguousarray(est.pose.rotation, dtype=np.float64),
+            np.ascontiguousarray(est.pose.translation_mm, dtype=np.float64),
+            np.ascontiguousarray(est.shape, dtype=np.float64),
+            np.ascontiguousarray(est.jac, dtype=np.float64),
+            np.ascontiguousarray(est.free, dtype=np.int64),
+            float(cam.focal_px), float(cam.cx), float(cam.cy),
+            self._tri, self._bary, self._use, np.ascontiguousarray(samp), self._lit,
+            self._w if weighted else np.empty(0), self.sigma,
+        )  # fmt: skip
 
     def _rows(self, est: Estimate):
-        """The weighted rows' Jacobian (S, n) and residuals (S,) at ``est``."""
-        free = est.free
-        nf = len(free)
-        n = 6 + nf
-        rot = est.pose.rotation
-        rx = est.shape @ rot.T  # R X (V, 3)
-        pc = rx + est.pose.translation_mm
-        dproj = self.camera.projection_jacobian(pc)  # (V, 2, 3)
-        # dP/d(unknowns) per vertex (V, 3, n): omega x (R X) = -[RX]x omega, dt, R J dc
-        dp = np.zeros((len(pc), 3, n))
-        dp[:, 0, 1], dp[:, 0, 2] = rx[:, 2], -rx[:, 1]
-        dp[:, 1, 0], dp[:, 1, 2] = -rx[:, 2], rx[:, 0]
-        dp[:, 2, 0], dp[:, 2, 1] = rx[:, 1], -rx[:, 0]
-        dp[:, 0, 3] = dp[:, 1, 4] = dp[:, 2, 5] = 1.0
-        if nf:
-            dp[:, :, 6:] = np.einsum("ij,vjf->vif", rot, est.jac[:, :, free])
-        duv = np.einsum("vij,vjn->vin", dproj, dp)  # (V, 2, n)
-        # only the samples that weigh (the others' rows are 0)
-        use = np.flatnonzero(self._w > 0)
-        bm = self.app.samples.matrix(len(pc))[use]
-        dsample = (bm @ duv.reshape(len(pc), 2 * n)).reshape(len(use), 2, n)
-        uv = self.camera.project(bm @ pc)
-        _, gx, gy = self._images[self._level]
-        g = np.nan_to_num(np.column_stack([self._at(gx, uv), self._at(gy, uv)]))
-        rows = (g[:, :1] * dsample[:, 0] + g[:, 1:] * dsample[:, 1]) / self.sigma
-        val = self._at(self._images[self._level][0], uv)
-        res = np.nan_to_num(val - self._lit(use))
-        return rows, res / self.sigma, use
+        """The rows' Jacobian (N, n) and residuals (N,) at ``est`` (in sigmas, unweighted)
+        of the samples that weigh, and those samples (N,)."""
+        jt, res = self._weighted_rows(est, weighted=False)
+        return jt.T, res, self._use
 
     def normal_equations(self, est: Estimate):
-        rows, res, use = self._rows(est)
-        sw = np.sqrt(self._w[use])
         # (the compiled Gram of contiguous rows, on this thread: BLAS's threads on a busy
         # 2-core machine took 1-11 ms for this 41 x 2600 product)
-        return _gram(np.ascontiguousarray((rows * sw[:, None]).T), res * sw)
+        return _gram(*self._weighted_rows(est))
 
     def occlusion(self, est: Estimate) -> float:
         """The share of the face's visible, textured patches that do not look as they did
@@ -631,18 +707,20 @@ class PhotometricTerm:
         lev = len(self.app.levels) - 1
         if not self._images:
             self._crop(self._uv(est)[1])
-        pc, uv = self._uv(est)
+        pc = self._camera_points(est)
+        uv = self._pixels(pc, self._all)
         a = self.app.values[lev]
         b = self._at(self._images[lev][0], uv)
-        vis = facing(self.app.samples, self.app.triangles, pc) > FACING_MIN
-        ok = (vis & np.isfinite(a) & np.isfinite(b) & (self.app.prior > 0)).astype(np.float64)
-        a, b = np.nan_to_num(a), np.nan_to_num(b)
-        g = self.app.samples.membership(len(pc)).multiply(ok[None, :]).tocsr()
-        n = np.asarray(g.sum(1)).ravel()
-        ma, mb = g @ a / np.maximum(n, 1), g @ b / np.maximum(n, 1)
-        va = g @ (a * a) / np.maximum(n, 1) - ma**2
-        vb = g @ (b * b) / np.maximum(n, 1) - mb**2
-        cab = g @ (a * b) / np.maximum(n, 1) - ma * mb
+        vis = _pk.facing(pc, self._triangles, self._tri_index) > FACING_MIN
+        ok = vis & np.isfinite(a) & np.isfinite(b) & (self.app.prior > 0)
+        # per vertex, the sums over the samples on its triangles (the samples' membership
+        # of the vertices' patches, SurfaceSamples.membership, as a compiled loop)
+        sums = _pk.patch_sums(np.nan_to_num(a), np.nan_to_num(b), ok, self._tri, len(pc))
+        n = sums[:, 0]
+        ma, mb = sums[:, 1] / np.maximum(n, 1), sums[:, 2] / np.maximum(n, 1)
+        va = sums[:, 3] / np.maximum(n, 1) - ma**2
+        vb = sums[:, 4] / np.maximum(n, 1) - mb**2
+        cab = sums[:, 5] / np.maximum(n, 1) - ma * mb
         ncc = cab / np.sqrt(np.maximum(va * vb, 1e-12))
         textured = (n >= 9) & (va > TEXTURED_GREY**2)
         if not textured.any():
@@ -652,6 +730,5 @@ class PhotometricTerm:
         return float(lost[textured].mean())
 
     def cost(self, est: Estimate) -> float:
-        _, uv = self._uv(est)
-        r = np.nan_to_num(self._residual(uv)) / self.sigma
-        return float((self._w * r * r).sum())
+        val = self._reading(est, gradient=False)
+        return float(_pk.weighted_cost(val, self._lit, self._w, self._use, self.sigma))
