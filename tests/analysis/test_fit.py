@@ -595,3 +595,65 @@ def test_deferred_relax_is_deterministic_and_lags_little():
     imm = skin_rms(_ramp_fits(fm, False))
     deferred = skin_rms(a)
     assert imm < 0.5 and deferred < 0.5, (deferred, imm)
+
+
+@pytest.mark.parametrize("expressive_start", [False, True])
+def test_the_calibration_window_measured_while_it_is_scored_gives_the_same_results(
+    fm, monkeypatch, expressive_start
+):
+    """``landmark_fit.SPECULATE``: the frames of the calibration's window are measured on the
+    calibration the frames scored so far choose, while the rest of the window is scored.
+    The measurements are those of measuring after the calibration, bit for bit: when the
+    whole window chooses the same frames (a video that starts neutral: the speculation is
+    kept) and when it does not (the first frames smile and open the jaw, the neutral comes
+    later: the first speculation is dropped and the frames measured again)."""
+    from myoface.analysis.pipeline import measure_frames
+    from myoface.analysis.trackers import landmark_fit as lf
+
+    expr = fm.skin_vertices(
+        fm.relax({"zygomaticus_major_l": 0.9, "zygomaticus_major_r": 0.9, "jaw": 0.6}).state
+    )
+    smile = fm.skin_vertices(fm.relax({"zygomaticus_major_l": 0.5}).state)
+    shapes = [fm.face.vertices] * 8 + [smile] * 6
+    if expressive_start:
+        shapes = [expr] * 6 + [fm.face.vertices] * 6 + [smile] * 2
+    seq = [landmarks(s, HeadPose.from_euler(2.0 * k, -1.0 * k, 0)) for k, s in enumerate(shapes)]
+
+    class Video(list):
+        fps = 30.0
+
+    video = Video([np.zeros((480, 640, 3), np.uint8)] * len(seq))
+    kept = []
+    adopt = lf._Speculation.adopt
+    monkeypatch.setattr(
+        lf._Speculation, "adopt", lambda self, *a: kept.append(adopt(self, *a)) or kept[-1]
+    )
+    started = []
+    start = lf._Speculation._start
+    monkeypatch.setattr(
+        lf._Speculation,
+        "_start",
+        lambda self, f, s, c: started.append(c[0]) or start(self, f, s, c),
+    )
+
+    def run(speculate: bool):
+        monkeypatch.setattr(lf, "SPECULATE", speculate)
+        an = lf.FitTracker(fm, camera=CAMERA, detector=_StandInDetector(seq), deferred_relax=True)
+        try:
+            ms = [m for _, m in measure_frames(video, an)]
+            return ms, an.calibration_frame, an.describe()["calibration"]
+        finally:
+            an.close()
+
+    (a, cal_a, desc_a), (b, cal_b, desc_b) = run(True), run(False)
+    assert kept == [True]  # (the last speculation is kept in both cases)
+    assert started == ([0, 6] if expressive_start else [0])  # (frame 0 first, then dropped)
+    assert cal_a == cal_b == (6 if expressive_start else 0)
+    assert desc_a["scores_mm"] == desc_b["scores_mm"]
+    assert desc_a["frames_used"] == desc_b["frames_used"]
+    assert len(a) == len(b) == len(seq)  # (from the first frame: FitTracker.calibrate)
+    for ma, mb in zip(a, b, strict=True):
+        assert (ma.index, ma.time_s, ma.quality) == (mb.index, mb.time_s, mb.quality)
+        np.testing.assert_array_equal(ma.contractions, mb.contractions)
+        np.testing.assert_array_equal(ma.pose.rotation, mb.pose.rotation)
+    assert not _threads("myoface-detect", "myoface-fit")

@@ -181,6 +181,34 @@ class Calibration:
     extra: dict = field(default_factory=dict)
 
 
+def choose_calibration_frame(scores) -> int:
+    """The calibration frame among frames scored by :meth:`ModelFit.score`: the scores are
+    known to the tracker's scatter, so of the frames within :data:`NEUTRAL_MARGIN_MM` of the
+    lowest, the earliest (a video starts neutral more often than it ends so)."""
+    scores = np.asarray(scores, dtype=np.float64)
+    best = np.nanmin(scores)
+    return int(np.flatnonzero(scores <= best + NEUTRAL_MARGIN_MM)[0])
+
+
+def calibration_frames(scores, index: int) -> list[int]:
+    """The frames that calibrate with frame ``index``: itself first, then those within
+    :data:`CALIBRATION_FRAMES` - 1 of it whose scores are within :data:`NEUTRAL_MARGIN_MM` of
+    the lowest (their tracker noise averages out), the lowest first, at most
+    :data:`CALIBRATION_FRAMES` in all; ``index`` alone where its score is not known."""
+    scores = np.asarray(scores, dtype=np.float64)
+    use = [int(index)]
+    if np.isfinite(scores[index]):
+        near = [
+            k
+            for k in np.argsort(np.where(np.isfinite(scores), scores, np.inf))
+            if k != index
+            and abs(k - index) <= CALIBRATION_FRAMES - 1
+            and scores[k] <= np.nanmin(scores) + NEUTRAL_MARGIN_MM
+        ]
+        use += [int(k) for k in near[: CALIBRATION_FRAMES - 1]]
+    return use
+
+
 # ------------------------------------------------------------------ the fit
 
 
@@ -453,6 +481,53 @@ class ModelFit:
         self.timings["fit_cpu_s"] += time.thread_time() - t0  # (with immediate relaxes)
         return res
 
+    def score(self, frames, synthesis: LandmarkSynthesis | None = None, on_scored=None):
+        """Each frame's expression score (:meth:`calibrate`'s ranking of its candidate frames):
+        returns ``(frames, scores)``, the frames as a list and their (T,) scores (NaN where
+        ``frames`` gives None: no face). ``frames`` may be an iterator whose points are being
+        detected meanwhile: each is scored as it comes, and ``on_scored(frames, scores)``
+        (the lists so far) is called after each (:class:`FitTracker` starts measuring on a
+        provisional choice there). Each frame's fit is started from the previous frame's
+        (no temporal prior: each frame's score is its own), against the model's own neutral."""
+        saved = self.identity_mm
+        self.identity_mm = np.zeros_like(self.neutral)
+        flat = self.response.reshape(-1, self.n_muscles)
+        got, scored, last = [], [], None
+        try:
+            for pts in frames:
+                got.append(pts)
+                if pts is None:
+                    scored.append(np.nan)
+                    last = None
+                else:
+                    q = check_points(pts, len(self.neutral))
+                    if self.offsets is not None and synthesis is None and SCORE_CORRECTED:
+                        # scored on the points the calibration will read (the detector's
+                        # offsets at this view taken off), else a turned frame's offsets
+                        # read as expression and the choice falls on the wrong frames
+                        q = self._corrected(q, None if last is None else last.pose)
+                    r = self._fit(
+                        q, None, refine=0, start=last, rest=True, iterations=SCORE_ITERATIONS
+                    )
+                    last = r
+                    disp = np.linalg.norm((flat @ r.contractions).reshape(-1, 3), axis=1)
+                    scored.append(float(np.percentile(disp, NEUTRAL_PERCENTILE)))
+                if on_scored is not None:
+                    # (the scoring's neutral put back meanwhile: the callback may fit)
+                    self.identity_mm = saved
+                    try:
+                        on_scored(got, scored)
+                    finally:
+                        self.identity_mm = np.zeros_like(self.neutral)
+        finally:
+            self.identity_mm = saved
+        if not got:
+            raise MyofaceValueError("calibrate() needs at least one frame")
+        scores = np.array(scored, dtype=np.float64)
+        if not np.isfinite(scores).any():
+            raise MyofaceValueError("no face in any of the calibration frames")
+        return got, scores
+
     def calibrate(
         self, frames, index: int | None = None, synthesis: LandmarkSynthesis | None = None,
         scores=None,
@@ -476,44 +551,8 @@ class ModelFit:
         (without: the frame ``index`` alone).
         """
         if index is None:
-            # scored as they come (``frames`` may be an iterator whose points are being
-            # detected meanwhile), each frame's fit started from the previous frame's
-            # (no temporal prior: each frame's score is its own)
-            saved = self.identity_mm
-            self.identity_mm = np.zeros_like(self.neutral)
-            flat = self.response.reshape(-1, self.n_muscles)
-            got, scored, last = [], [], None
-            try:
-                for pts in frames:
-                    got.append(pts)
-                    if pts is None:
-                        scored.append(np.nan)
-                        last = None
-                        continue
-                    q = check_points(pts, len(self.neutral))
-                    if self.offsets is not None and synthesis is None and SCORE_CORRECTED:
-                        # scored on the points the calibration will read (the detector's
-                        # offsets at this view taken off), else a turned frame's offsets
-                        # read as expression and the choice falls on the wrong frames
-                        q = self._corrected(q, None if last is None else last.pose)
-                    r = self._fit(
-                        q, None, refine=0, start=last, rest=True, iterations=SCORE_ITERATIONS
-                    )
-                    last = r
-                    disp = np.linalg.norm((flat @ r.contractions).reshape(-1, 3), axis=1)
-                    scored.append(float(np.percentile(disp, NEUTRAL_PERCENTILE)))
-            finally:
-                self.identity_mm = saved
-            frames = got
-            if not frames:
-                raise MyofaceValueError("calibrate() needs at least one frame")
-            scores = np.array(scored, dtype=np.float64)
-            if not np.isfinite(scores).any():
-                raise MyofaceValueError("no face in any of the calibration frames")
-            # the scores are known to the tracker's scatter: of the frames within it of the
-            # lowest, the earliest (a video starts neutral more often than it ends so)
-            best = np.nanmin(scores)
-            index = int(np.flatnonzero(scores <= best + NEUTRAL_MARGIN_MM)[0])
+            frames, scores = self.score(frames, synthesis)
+            index = choose_calibration_frame(scores)
         else:
             frames = list(frames)
             if not frames:
@@ -523,18 +562,7 @@ class ModelFit:
             scores = np.asarray(scores, dtype=np.float64)
         if not 0 <= index < len(frames) or frames[index] is None:
             raise MyofaceValueError(f"calibration frame {index} has no face")
-        use = [index]
-        if np.isfinite(scores[index]):
-            # the frames around it nearly as neutral calibrate with it (their tracker noise
-            # averages out): within NEUTRAL_MARGIN_MM of the lowest score, the lowest first
-            near = [
-                k
-                for k in np.argsort(np.where(np.isfinite(scores), scores, np.inf))
-                if k != index
-                and abs(k - index) <= CALIBRATION_FRAMES - 1
-                and scores[k] <= np.nanmin(scores) + NEUTRAL_MARGIN_MM
-            ]
-            use += [int(k) for k in near[: CALIBRATION_FRAMES - 1]]
+        use = calibration_frames(scores, index)
         pts = [check_points(frames[k], len(self.neutral)) for k in use]
         if self.offsets is not None and synthesis is None:
             pts = [self._corrected(p) for p in pts]

@@ -37,7 +37,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from myoface._threads import run_ahead
+from myoface._threads import run_ahead, short_switch_interval
 from myoface.analysis.initfiles import load_init
 from myoface.analysis.trackers.base import KEEP_BYTES
 from myoface.analysis.trackers.landmark_fit import LANDMARK_ESTIMATORS, FitTracker
@@ -365,6 +365,12 @@ class Tracking:
             decoded.close()
 
     def __iter__(self):
+        # (MediaPipe and the decoder run on threads that release the GIL: they take it
+        # back sooner while the fit computes in Python)
+        with short_switch_interval():
+            yield from self._measured()
+
+    def _measured(self):
         tr = self.tracker
         frames = self._frames()
         if not tr.OBSERVES_AHEAD:

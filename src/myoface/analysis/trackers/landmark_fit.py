@@ -8,7 +8,7 @@ import itertools
 import threading
 import time
 from concurrent.futures import Future
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import ClassVar, NamedTuple
 
 import numpy as np
@@ -18,7 +18,14 @@ from myoface.analysis.camera import POSE_COLUMNS, HeadPose, PinholeCamera
 from myoface.analysis.flow import FlowDetector, FlowRefiner
 from myoface.analysis.gaze import GAZE_COLUMNS, GAZE_STATE_COLUMNS, Gaze, GazeEstimator
 from myoface.analysis.landmarks import TrackerOffsets
-from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, Calibration, ModelFit
+from myoface.analysis.modelfit import (
+    CALIBRATION_FRAMES,
+    CALIBRATION_WINDOW_S,
+    Calibration,
+    ModelFit,
+    calibration_frames,
+    choose_calibration_frame,
+)
 from myoface.analysis.modelflow import FLOW_METHODS, ModelFlow
 from myoface.analysis.sections import SECTIONS, section_vertices
 from myoface.analysis.synthesis import LandmarkSynthesis
@@ -42,6 +49,15 @@ OCCLUDED_FRACTION = 0.12
 # (measured 2026-12-01: on single_face.mp4's real smile the share is at most 0.086, 90 % of
 # frames under 0.064; a skin-toned blob over the mouth and chin of the known-warp smile makes
 # it 0.17-0.18, the frames around it 0.0)
+#: while the calibration's window is still being detected and scored, measure its frames on
+#: the calibration the frames scored so far choose (:class:`_Speculation`): kept when the
+#: whole window chooses the same frames, else measured again. The results are the same
+#: either way (the same calibration, the same frames fitted in the same order); the
+#: measuring is done while MediaPipe detects the window's later frames instead of after.
+#: Not with the optical flow or analysis by synthesis (their trackers start at calibration).
+SPECULATE = True
+#: provisional calibrations tried at most in one window (each costs an identity fit)
+MAX_SPECULATIONS = 3
 
 
 def _flow_method(method: str | None) -> str:
@@ -196,6 +212,8 @@ class FitTracker(TrackerBase):
             self._refiner = detector.refiner
         #: {frame index: landmarks or None} of the calibration frames, taken by measure()
         self._detected: dict = {}
+        #: {frame index: FitMeasurement} measured during the calibration (SPECULATE)
+        self._speculated: dict = {}
         #: relax the tissue on a second thread while the next frame is fitted
         #: (:meth:`ModelFit.fit`'s ``deferred``; the tissue then lags the estimate)
         self.deferred_relax = bool(deferred_relax)
@@ -411,14 +429,28 @@ class FitTracker(TrackerBase):
                 yield pts
 
         stream = detected()
+        spec = None
+        if calibration_frame is None and SPECULATE and self._can_speculate():
+            spec = _Speculation(self, images, observed, first_index)
+        finished = False  # (the calibration's frames set up on the fit: the speculation's)
         try:
             if calibration_frame is None:
-                self.calibration = self.fit.calibrate(stream, None)
+                scoring = self.fit
+                got, scores = scoring.score(stream, on_scored=spec and spec.scored)
+                index = choose_calibration_frame(scores)
+                if spec is not None and spec.adopt(index, scores):
+                    finished = True
+                else:
+                    if spec is not None:
+                        spec.drop()
+                    self.calibration = scoring.calibrate(got, index, scores=scores)
             else:
                 for _ in stream:
                     pass
         except BaseException:
             stream.close()  # (stops the detector's thread before the detector closes)
+            if spec is not None:
+                spec.drop()
             if self._own_detector:
                 det.close()
             raise
@@ -462,13 +494,8 @@ class FitTracker(TrackerBase):
                 )  # fmt: skip
             self.calibration = fit.calibrate(points, cal.index, synthesis=self.synthesis)
             self.calibration.scores = cal.scores
-        if self.settings.photometric:
-            frame = images[self.calibration.index]
-            if frame is None:
-                raise MyofaceValueError("the calibration frame was not kept")
-            self.fit.set_appearance(frame)
-        if self.settings.lid_edges and images[self.calibration.index] is not None:
-            self.fit.set_lid_reference(images[self.calibration.index])  # (the lids' template)
+        if not finished:
+            self._set_up(images[self.calibration.index])
         if self.settings.flow and self.flow_method == "anchored":
             # the points read against the calibration frame, through the model (ModelFlow)
             frame = images[self.calibration.index]
@@ -479,10 +506,32 @@ class FitTracker(TrackerBase):
             self._predictions.clear()
             self._ok_prediction = (None, None)
         self.calibration_frame = first_index + self.calibration.index
-        if self.gaze is not None:  # the person's eyeballs and open lids
-            self.gaze.calibrate(self.fit.neutral + self.fit.identity_mm)
         self.timings["calibration_s"] += time.perf_counter() - t_start
         return self.calibration_frame
+
+    def _set_up(self, frame) -> None:
+        """What the fit and the gaze take from the calibration (after :meth:`ModelFit.calibrate`;
+        ``frame``: the calibration frame, None where it was not kept): the appearance for the
+        photometric term, the lids' template, the person's eyeballs."""
+        if self.settings.photometric:
+            if frame is None:
+                raise MyofaceValueError("the calibration frame was not kept")
+            self.fit.set_appearance(frame)
+        if self.settings.lid_edges and frame is not None:
+            self.fit.set_lid_reference(frame)  # (the lids' template)
+        if self.gaze is not None:  # the person's eyeballs and open lids
+            self.gaze.calibrate(self.fit.neutral + self.fit.identity_mm)
+
+    def _can_speculate(self) -> bool:
+        """Whether the calibration's frames can be measured before it ends (SPECULATE): not
+        with the optical flow (its trackers start from the calibration) or analysis by
+        synthesis, nor with the offsets taken from the calibration frame."""
+        return not (
+            self.settings.flow
+            or self._flow is not None
+            or self.use_synthesis
+            or self.settings.tracker_offsets_frame
+        )
 
     def observe(self, frame, index: int = 0) -> LandmarkObservation | None:
         """The frame's :class:`LandmarkObservation`, or None without a face: the
@@ -576,6 +625,9 @@ class FitTracker(TrackerBase):
                 observation=NOT_OBSERVED) -> FitMeasurement:  # fmt: skip
         """The frame's measurement; ``observation``: its :meth:`observe` (None without a
         face; by default observed here)."""
+        done = self._speculated.pop(index, None)
+        if done is not None:  # (measured while the calibration's window was scored)
+            return replace(done, time_s=time_s)
         fit = self._ensure_fit(np.shape(frame))
         if observation is NOT_OBSERVED:
             obs = self._anchor(frame, self._observe(frame, index), ahead=False)
@@ -697,3 +749,95 @@ class FitTracker(TrackerBase):
             self.synthesis.close()
         if self.fit is not None and self.fit.offsets is not None:
             self.fit.offsets.close()
+
+
+class _Speculation:
+    """The calibration's frames measured while its window is still detected and scored
+    (:data:`SPECULATE`). After each scored frame (:meth:`ModelFit.score`'s ``on_scored``), the
+    frames scored so far choose a calibration frame and the frames around it
+    (:func:`~myoface.analysis.modelfit.choose_calibration_frame`,
+    :func:`~myoface.analysis.modelfit.calibration_frames`); once the frames that could
+    calibrate with it are scored, a fit of its own (:class:`ModelFit`, and a gaze estimator)
+    is calibrated on them and measures the window's frames scored so far, from the first, as
+    :meth:`FitTracker.measure` would after the calibration. The tracker's scoring fit is left as it was. When the whole
+    window chooses the same frames, that fit and its measurements are the tracker's
+    (:meth:`adopt`: the same calibration, the same frames fitted in the same order, so the
+    same results); when the choice changes, they are dropped (at most
+    :data:`MAX_SPECULATIONS` tries) and the frames are measured after the calibration."""
+
+    def __init__(self, tracker: FitTracker, images: list, observed: list, first_index: int):
+        self.tracker = tracker
+        self.images = images
+        self.observed = observed
+        self.first = int(first_index)
+        self.scoring = (tracker.fit, tracker.gaze)
+        self.fit: ModelFit | None = None
+        self.choice: tuple | None = None
+        self.results: dict = {}
+        self.next = 0  # the next frame of the window to measure
+        self.tries = 0
+
+    def scored(self, frames: list, scores: list) -> None:
+        sc = np.asarray(scores, dtype=np.float64)
+        last = len(sc) - 1
+        if not np.isfinite(sc).any():
+            return
+        index = choose_calibration_frame(sc)
+        if last < index + CALIBRATION_FRAMES - 1:
+            return  # (frames that could calibrate with it are still to come)
+        choice = (index, calibration_frames(sc, index))
+        if self.fit is not None and choice != self.choice:
+            self.drop()
+        if self.fit is None:
+            if self.tries >= MAX_SPECULATIONS:
+                return
+            self._start(frames, sc, choice)
+        tr = self.tracker
+        while self.next <= last:
+            k = self.next
+            self.next += 1
+            self.results[self.first + k] = tr.measure(
+                self.images[k], self.first + k, 0.0, observation=self.observed[k]
+            )  # fmt: skip
+
+    def _start(self, frames: list, scores: np.ndarray, choice: tuple) -> None:
+        tr = self.tracker
+        base, _ = self.scoring
+        self.tries += 1
+        fit = ModelFit(tr.model, base.camera, tr.settings, fps=tr.fps)
+        if base.offsets is not None:
+            fit.set_offsets(base.offsets)
+        self.fit, self.choice = fit, choice
+        tr.fit = fit
+        tr.gaze = None if self.scoring[1] is None else GazeEstimator(tr.model.face)
+        try:
+            tr.calibration = fit.calibrate(list(frames), choice[0], scores=scores)
+            tr._set_up(self.images[choice[0]])
+        except BaseException:
+            self.drop()
+            raise
+        self.next = 0  # (the analysis starts at the first frame given: FitTracker.calibrate)
+
+    def adopt(self, index: int, scores: np.ndarray) -> bool:
+        """The tracker keeps the speculation's fit and measurements if the whole window
+        chose the same frames (True), else nothing changes (False)."""
+        if self.fit is None or (index, calibration_frames(scores, index)) != self.choice:
+            return False
+        self.fit.calibration.scores = np.asarray(scores, dtype=np.float64)
+        tr = self.tracker
+        tr.calibration = self.fit.calibration
+        tr._speculated = self.results
+        self.scoring[0].close()
+        self.fit = None
+        return True
+
+    def drop(self) -> None:
+        """Forget the speculation: the tracker's scoring fit and gaze back."""
+        if self.fit is None:
+            return
+        self.fit.close()
+        tr = self.tracker
+        tr.fit, tr.gaze = self.scoring
+        tr.calibration = None
+        self.fit, self.choice = None, None
+        self.results = {}
