@@ -597,16 +597,19 @@ def test_deferred_relax_is_deterministic_and_lags_little():
     assert imm < 0.5 and deferred < 0.5, (deferred, imm)
 
 
-@pytest.mark.parametrize("expressive_start", [False, True])
+@pytest.mark.parametrize(
+    ("expressive_start", "flow"), [(False, False), (True, False), (True, True)]
+)
 def test_the_calibration_window_measured_while_it_is_scored_gives_the_same_results(
-    fm, monkeypatch, expressive_start
+    fm, monkeypatch, expressive_start, flow
 ):
     """``landmark_fit.SPECULATE``: the frames of the calibration's window are measured on the
     calibration the frames scored so far choose, while the rest of the window is scored.
     The measurements are those of measuring after the calibration, bit for bit: when the
     whole window chooses the same frames (a video that starts neutral: the speculation is
     kept) and when it does not (the first frames smile and open the jaw, the neutral comes
-    later: the first speculation is dropped and the frames measured again)."""
+    later: the first speculation is dropped and the frames measured again); with the anchored
+    optical flow too (the flow's tracking of each frame done in the speculation, in step)."""
     from myoface.analysis.pipeline import measure_frames
     from myoface.analysis.trackers import landmark_fit as lf
 
@@ -622,7 +625,8 @@ def test_the_calibration_window_measured_while_it_is_scored_gives_the_same_resul
     class Video(list):
         fps = 30.0
 
-    video = Video([np.zeros((480, 640, 3), np.uint8)] * len(seq))
+    texture = np.random.default_rng(5).integers(0, 255, (480, 640, 3), dtype=np.uint8)
+    video = Video([texture] * len(seq))
     kept = []
     adopt = lf._Speculation.adopt
     monkeypatch.setattr(
@@ -636,18 +640,27 @@ def test_the_calibration_window_measured_while_it_is_scored_gives_the_same_resul
         lambda self, f, s, c: started.append(c[0]) or start(self, f, s, c),
     )
 
+    tracked = []
+
     def run(speculate: bool):
         monkeypatch.setattr(lf, "SPECULATE", speculate)
-        an = lf.FitTracker(fm, camera=CAMERA, detector=_StandInDetector(seq), deferred_relax=True)
+        an = lf.FitTracker(
+            fm, camera=CAMERA, detector=_StandInDetector(seq), deferred_relax=True,
+            settings=FitSettings(flow=flow),
+        )  # fmt: skip
         try:
             ms = [m for _, m in measure_frames(video, an)]
-            return ms, an.calibration_frame, an.describe()["calibration"]
+            d = an.describe()
+            if flow:  # (the flow tracked points on these frames, the same number both ways)
+                tracked.append(d["optical_flow_points"]["tracked"])
+            return ms, an.calibration_frame, d["calibration"]
         finally:
             an.close()
 
     (a, cal_a, desc_a), (b, cal_b, desc_b) = run(True), run(False)
     assert kept == [True]  # (the last speculation is kept in both cases)
     assert started == ([0, 6] if expressive_start else [0])  # (frame 0 first, then dropped)
+    assert tracked == ([tracked[0]] * 2 if flow else []) and (not flow or tracked[0] > 1000)
     assert cal_a == cal_b == (6 if expressive_start else 0)
     assert desc_a["scores_mm"] == desc_b["scores_mm"]
     assert desc_a["frames_used"] == desc_b["frames_used"]

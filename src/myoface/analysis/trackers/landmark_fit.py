@@ -496,15 +496,6 @@ class FitTracker(TrackerBase):
             self.calibration.scores = cal.scores
         if not finished:
             self._set_up(images[self.calibration.index])
-        if self.settings.flow and self.flow_method == "anchored":
-            # the points read against the calibration frame, through the model (ModelFlow)
-            frame = images[self.calibration.index]
-            if frame is None:
-                raise MyofaceValueError("the calibration frame was not kept")
-            self._anchored = self._refiner = ModelFlow.of_fit(frame, self.fit)
-            self._n_observed = self._n_measured = 0
-            self._predictions.clear()
-            self._ok_prediction = (None, None)
         self.calibration_frame = first_index + self.calibration.index
         self.timings["calibration_s"] += time.perf_counter() - t_start
         return self.calibration_frame
@@ -521,16 +512,21 @@ class FitTracker(TrackerBase):
             self.fit.set_lid_reference(frame)  # (the lids' template)
         if self.gaze is not None:  # the person's eyeballs and open lids
             self.gaze.calibrate(self.fit.neutral + self.fit.identity_mm)
+        if self.settings.flow and self.flow_method == "anchored":
+            # the points read against the calibration frame, through the model (ModelFlow)
+            if frame is None:
+                raise MyofaceValueError("the calibration frame was not kept")
+            self._anchored = self._refiner = ModelFlow.of_fit(frame, self.fit)
+            self._n_observed = self._n_measured = 0
+            self._predictions = {}
+            self._ok_prediction = (None, None)
 
     def _can_speculate(self) -> bool:
         """Whether the calibration's frames can be measured before it ends (SPECULATE): not
-        with the optical flow (its trackers start from the calibration) or analysis by
-        synthesis, nor with the offsets taken from the calibration frame."""
+        with the chained optical flow (its tracks start with the calibration's detections)
+        or analysis by synthesis, nor with the offsets taken from the calibration frame."""
         return not (
-            self.settings.flow
-            or self._flow is not None
-            or self.use_synthesis
-            or self.settings.tracker_offsets_frame
+            self._flow is not None or self.use_synthesis or self.settings.tracker_offsets_frame
         )
 
     def observe(self, frame, index: int = 0) -> LandmarkObservation | None:
@@ -540,6 +536,8 @@ class FitTracker(TrackerBase):
         takes its result as ``observation``. With the model-anchored flow, its tracking of
         the frame is handed to a thread of its own (the observation's ``flow`` a future):
         it waits there for the fit of frame k - :attr:`flow_lag` (:meth:`_track_anchored`)."""
+        if index in self._speculated:  # (measured during the calibration: tracked there)
+            return self._observe(frame, index)
         replayed = index in self._detected  # (detected by the calibration: no MediaPipe here)
         return self._anchor(frame, self._observe(frame, index), ahead=True, prepare=replayed)
 
@@ -771,6 +769,8 @@ class _Speculation:
         self.observed = observed
         self.first = int(first_index)
         self.scoring = (tracker.fit, tracker.gaze)
+        #: the anchored flow's state before (made again by each calibration's set-up)
+        self.flow_state = self._flow_state()
         self.fit: ModelFit | None = None
         self.choice: tuple | None = None
         self.results: dict = {}
@@ -796,9 +796,19 @@ class _Speculation:
         while self.next <= last:
             k = self.next
             self.next += 1
+            # (the anchored flow tracks the frame here, as the driver's observe() would
+            # ahead: the same points whichever thread tracks them)
+            obs = tr._anchor(self.images[k], self.observed[k], ahead=False)
             self.results[self.first + k] = tr.measure(
-                self.images[k], self.first + k, 0.0, observation=self.observed[k]
+                self.images[k], self.first + k, 0.0, observation=obs
             )  # fmt: skip
+
+    def _flow_state(self) -> tuple:
+        tr = self.tracker
+        return (
+            tr._anchored, tr._refiner, tr._n_observed, tr._n_measured, tr._predictions,
+            tr._ok_prediction,
+        )  # fmt: skip
 
     def _start(self, frames: list, scores: np.ndarray, choice: tuple) -> None:
         tr = self.tracker
@@ -839,5 +849,9 @@ class _Speculation:
         tr = self.tracker
         tr.fit, tr.gaze = self.scoring
         tr.calibration = None
+        (
+            tr._anchored, tr._refiner, tr._n_observed, tr._n_measured, tr._predictions,
+            tr._ok_prediction,
+        ) = self.flow_state  # fmt: skip
         self.fit, self.choice = None, None
         self.results = {}
