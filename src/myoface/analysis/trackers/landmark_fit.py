@@ -212,8 +212,10 @@ class FitTracker(TrackerBase):
             self._refiner = detector.refiner
         #: {frame index: landmarks or None} of the calibration frames, taken by measure()
         self._detected: dict = {}
-        #: {frame index: FitMeasurement} measured during the calibration (SPECULATE)
+        #: {frame index: FitMeasurement} measured during the calibration (SPECULATE), and
+        #: {frame index: LandmarkObservation} observed then but not measured
         self._speculated: dict = {}
+        self._observed_ahead: dict = {}
         #: relax the tissue on a second thread while the next frame is fitted
         #: (:meth:`ModelFit.fit`'s ``deferred``; the tissue then lags the estimate)
         self.deferred_relax = bool(deferred_relax)
@@ -538,6 +540,9 @@ class FitTracker(TrackerBase):
         it waits there for the fit of frame k - :attr:`flow_lag` (:meth:`_track_anchored`)."""
         if index in self._speculated:  # (measured during the calibration: tracked there)
             return self._observe(frame, index)
+        if index in self._observed_ahead:  # (observed during the calibration, not measured)
+            self._observe(frame, index)
+            return self._observed_ahead.pop(index)
         replayed = index in self._detected  # (detected by the calibration: no MediaPipe here)
         return self._anchor(frame, self._observe(frame, index), ahead=True, prepare=replayed)
 
@@ -775,6 +780,8 @@ class _Speculation:
         self.choice: tuple | None = None
         self.results: dict = {}
         self.next = 0  # the next frame of the window to measure
+        self.anchored = 0  # the next frame of the window to observe (the anchored flow's)
+        self.observations: dict = {}  # {frame of the window: observation not yet measured}
         self.tries = 0
 
     def scored(self, frames: list, scores: list) -> None:
@@ -793,14 +800,20 @@ class _Speculation:
                 return
             self._start(frames, sc, choice)
         tr = self.tracker
-        while self.next <= last:
+        # the anchored flow tracks each frame on its own thread a frame ahead of the
+        # measurements, as with the driver's observe(): frame k is tracked while k - 1 is
+        # measured (its tracking waits for measurement k - flow_lag, done by then; the same
+        # points whichever thread tracks them)
+        while self.anchored <= last:
+            k = self.anchored
+            self.anchored += 1
+            self.observations[k] = tr._anchor(self.images[k], self.observed[k], ahead=True)
+        upto = last - 1 if tr._anchored is not None else last
+        while self.next <= upto:
             k = self.next
             self.next += 1
-            # (the anchored flow tracks the frame here, as the driver's observe() would
-            # ahead: the same points whichever thread tracks them)
-            obs = tr._anchor(self.images[k], self.observed[k], ahead=False)
             self.results[self.first + k] = tr.measure(
-                self.images[k], self.first + k, 0.0, observation=obs
+                self.images[k], self.first + k, 0.0, observation=self.observations.pop(k)
             )  # fmt: skip
 
     def _flow_state(self) -> tuple:
@@ -826,7 +839,7 @@ class _Speculation:
         except BaseException:
             self.drop()
             raise
-        self.next = 0  # (the analysis starts at the first frame given: FitTracker.calibrate)
+        self.next = self.anchored = 0  # (the analysis starts at the first frame given)
 
     def adopt(self, index: int, scores: np.ndarray) -> bool:
         """The tracker keeps the speculation's fit and measurements if the whole window
@@ -837,6 +850,7 @@ class _Speculation:
         tr = self.tracker
         tr.calibration = self.fit.calibration
         tr._speculated = self.results
+        tr._observed_ahead = {self.first + k: obs for k, obs in self.observations.items()}
         self.scoring[0].close()
         self.fit = None
         return True
@@ -845,6 +859,13 @@ class _Speculation:
         """Forget the speculation: the tracker's scoring fit and gaze back."""
         if self.fit is None:
             return
+        for obs in self.observations.values():  # (the flow's thread done with them)
+            if obs is not None and isinstance(obs.flow, Future):
+                try:
+                    obs.flow.result()
+                except Exception:  # (dropped with them)
+                    pass
+        self.observations = {}
         self.fit.close()
         tr = self.tracker
         tr.fit, tr.gaze = self.scoring
