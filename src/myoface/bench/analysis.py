@@ -230,7 +230,13 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     (median 0.173) against 0.129-0.229x (median 0.150), the default 0.222-0.248x against
     0.187-0.300x; MediaPipe alone 244-275 frames/s (3.6-4.3 ms) in those runs, so 0.25x is
     15-17 ms a frame, where the calibration is 8-10 (MediaPipe on its 60 frames, which
-    bounds it) and the flow's thread 4.5-5.5."""
+    bounds it) and the flow's thread 4.5-5.5. Since 2026-12-03 the photometric term's step
+    is compiled (``analysis/_photokernels.py``): its fit 63 -> 29 ms a frame, ``fps_photometric``
+    0.37-0.41 -> 0.69-0.75 of the default's. And the calibration's window is measured while
+    it is scored (``landmark_fit.SPECULATE``, the same results; the breakdown's
+    ``calibration_ms_per_frame`` then includes those frames' fits, ``fit_cpu_ms_per_frame``
+    counts them as before): alternating runs of five passes, the default 0.246 / 0.264 ->
+    0.288 / 0.326x MediaPipe, ``--flow`` unchanged at 0.22x (bound by the GIL)."""
     path = _sample_video()
     m = None if not quick else 24
     # the default, MediaPipe alone and --flow (the points read against the calibration frame
