@@ -799,6 +799,8 @@ class _Speculation:
             if self.tries >= MAX_SPECULATIONS:
                 return
             self._start(frames, sc, choice)
+            if self.fit is None:
+                return
         tr = self.tracker
         # the anchored flow tracks each frame on its own thread a frame ahead of the
         # measurements, as with the driver's observe(): frame k is tracked while k - 1 is
@@ -836,6 +838,11 @@ class _Speculation:
         try:
             tr.calibration = fit.calibrate(list(frames), choice[0], scores=scores)
             tr._set_up(self.images[choice[0]])
+        except MyofaceValueError:
+            # (no speculation on this window: the calibration at its end says what fails)
+            self.drop()
+            self.tries = MAX_SPECULATIONS
+            return
         except BaseException:
             self.drop()
             raise
