@@ -631,6 +631,11 @@ class FitTracker(TrackerBase):
         done = self._speculated.pop(index, None)
         if done is not None:  # (measured while the calibration's window was scored)
             return replace(done, time_s=time_s)
+        return self._measure(frame, index, time_s, observation)
+
+    def _measure(self, frame, index: int, time_s: float, observation) -> FitMeasurement:
+        """:meth:`measure`'s work (the speculation's measurements call it: the frames the
+        caller measures are the caller's calls to :meth:`measure`, one a frame)."""
         fit = self._ensure_fit(np.shape(frame))
         if observation is NOT_OBSERVED:
             obs = self._anchor(frame, self._observe(frame, index), ahead=False)
@@ -814,8 +819,8 @@ class _Speculation:
         while self.next <= upto:
             k = self.next
             self.next += 1
-            self.results[self.first + k] = tr.measure(
-                self.images[k], self.first + k, 0.0, observation=self.observations.pop(k)
+            self.results[self.first + k] = tr._measure(
+                self.images[k], self.first + k, 0.0, self.observations.pop(k)
             )  # fmt: skip
 
     def _flow_state(self) -> tuple:
