@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from myoface.cli import main
-from tests.conftest import REPO
+from tests.conftest import REPO, needs_mediapipe
 
 
 def test_no_command_is_a_usage_error(capsys):
@@ -137,3 +137,22 @@ def test_gaze_benchmark_runs_quick(quick_run):
     assert fit["value"] == pytest.approx(rec["value"], abs=1e-6)
     for eye in fit["per_eye"].values():
         assert eye["open_frames_read"] > 0.8 and eye["shut_frames_said_closed"] is not None
+
+
+@pytest.mark.shared_data
+@needs_mediapipe
+def test_the_known_warp_bench_reads_the_models_motion_in_the_warps_axes(quick_run):
+    """``analysis.known_warp_*``'s comparison (the whole analysis on the known-warp clips, the
+    model read from its vertices) in the warp's axes: every frame measured, every region's
+    gain and explained fraction finite, and the brows moving the model the way the warp
+    moved them (a sign or axis error would make it negative). Read from the session's quick
+    run of every benchmark (its head-still clips), not run again."""
+    from myoface.bench.knownwarp import EXPRESSIONS, NEUTRAL_FRAMES
+
+    res = quick_run[1]["analysis.known_warp_gain"]["head still"]
+    assert res["frames"] == len(EXPRESSIONS) * (NEUTRAL_FRAMES + 3 + 6 + 3)
+    for r, v in res["regions"].items():
+        assert np.isfinite(v["gain"]) and np.isfinite(v["explained"]), r
+        assert v["true_rms_iod"] > 0.002, r
+    assert res["regions"]["brows"]["gain"] > 0.3 and res["regions"]["brows"]["explained"] > 0.3
+    assert np.isfinite(res["leak"])

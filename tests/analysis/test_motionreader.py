@@ -170,25 +170,6 @@ def test_the_reader_reads_known_warps_at_gain_one(method, alignment, head_moves)
         assert explained(read, true) >= 0.9, (r, explained(read, true))
 
 
-@pytest.mark.shared_data
-@needs_mediapipe
-def test_the_known_warp_bench_reads_the_models_motion_in_the_warps_axes(quick_run):
-    """``analysis.known_warp_*``'s comparison (the whole analysis on the known-warp clips, the
-    model read from its vertices) in the warp's axes: every frame measured, every region's
-    gain and explained fraction finite, and the brows moving the model the way the warp
-    moved them (a sign or axis error would make it negative). Read from the session's quick
-    run of every benchmark (its head-still clips), not run again."""
-    from myoface.bench.knownwarp import EXPRESSIONS, NEUTRAL_FRAMES
-
-    res = quick_run[1]["analysis.known_warp_gain"]["head still"]
-    assert res["frames"] == len(EXPRESSIONS) * (NEUTRAL_FRAMES + 3 + 6 + 3)
-    for r, v in res["regions"].items():
-        assert np.isfinite(v["gain"]) and np.isfinite(v["explained"]), r
-        assert v["true_rms_iod"] > 0.002, r
-    assert res["regions"]["brows"]["gain"] > 0.3 and res["regions"]["brows"]["explained"] > 0.3
-    assert np.isfinite(res["leak"])
-
-
 def test_the_3d_alignment_takes_out_a_turn_of_the_head(default_face):
     """Known answer in closed form: the default face's points, their x and y moved by known
     amounts in the head frame, turned by a few degrees of yaw, pitch and roll, scaled and
