@@ -35,9 +35,9 @@ needs_mediapipe = pytest.mark.skipif(
 def quick_run(tmp_path_factory):
     """Every benchmark in quick mode, once for the session (``myoface bench --quick --json``):
     the records and their detail. Each benchmark's models and JIT compilation cost most of a
-    quick run; the tests that check a benchmark's output read this one run rather than start their own; they
-    are all in tests/test_cli_bench.py, so that the suite's workers (pytest-xdist, one file to a
-    worker) run it once."""
+    quick run; the tests that check a benchmark's output read this one run rather than start
+    their own; they are all in tests/test_cli_bench.py, so that the suite's workers
+    (pytest-xdist, one file to a worker) run it once."""
     import json
 
     from myoface.cli import main
