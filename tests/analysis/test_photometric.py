@@ -105,6 +105,45 @@ def test_the_photometric_fit_finds_a_known_shift(scene):
     assert np.abs(r.contractions).max() < 0.1  # (a shift is the head's, not an expression)
 
 
+def test_the_redness_reads_what_the_brightness_does_not_show(scene):
+    """A texture in colour only (red against green at one brightness, as the lips' border
+    against the skin nearly is) moved by 2 px: with the redness channel
+    (``FitSettings.photo_colour``) the fit finds the shift within 0.3 px, with the brightness
+    alone it cannot (it stays where it started); a grey frame has no redness to read."""
+    from dataclasses import replace
+
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.photometric import grey
+    from myoface.analysis.weights import FitSettings
+
+    model, cam, shape, pose, frame = scene
+    n = frame[..., 0].astype(np.float64) - 128.0
+    # luma 0.299 R + 0.587 G + 0.114 B held at 128: R up where G is down
+    rgb = np.stack([128 + 0.5 * n, 128 - 0.5 * 0.299 / 0.587 * n, np.full_like(n, 128)], -1)
+    colour = np.clip(np.round(rgb), 0, 255).astype(np.uint8)
+    assert np.ptp(grey(colour)) <= 2.0 and np.ptp(colour[..., 0].astype(int)) > 100
+    pts = cam.project(pose.apply(shape))
+    moved = np.ascontiguousarray(np.roll(colour, 2, axis=1))  # 2 px right
+    inner = (pts[:, 0] > 10) & (pts[:, 0] < 300)
+    errors = {}
+    for on in (True, False):
+        s = replace(FitSettings(), photometric=True, photo_colour=on, photo_landmark_weight=1e-6,
+                    iterations=30)  # fmt: skip
+        fit = ModelFit(model, cam, s)
+        fit.calibrate([pts], 0)
+        fit.set_appearance(colour)
+        assert (fit.appearance_colour is not None) == on
+        r = fit.fit(pts, image=moved)
+        uv = cam.project(r.pose.apply(fit.skin(r.contractions)))
+        err = uv - (pts + [2.0, 0.0])
+        errors[on] = float(np.sqrt((err[inner] ** 2).sum(1).mean()))
+    assert errors[True] < 0.3 and errors[False] > 1.0, errors
+    fit = ModelFit(model, cam, replace(FitSettings(), photometric=True))
+    fit.calibrate([pts], 0)
+    fit.set_appearance(frame)  # (grey: R = G everywhere)
+    assert fit.appearance_colour is None and len(fit.photometric_term(frame)) == 1
+
+
 def test_a_mesh_warp_moves_its_points_exactly_and_does_not_fold():
     rng = np.random.default_rng(1)
     pts = rng.uniform(50, 150, (60, 2))

@@ -176,7 +176,7 @@ def shading_basis(pc, triangles, tri, bary, order):
     :func:`~myoface.analysis.photometric.shading_basis`)."""
     vn = vertex_normals(pc, triangles)
     ns = tri.shape[0]
-    nb = 4 if order >= 1 else 1
+    nb = 9 if order >= 2 else (4 if order >= 1 else 1)
     out = np.empty((ns, nb))
     for s in range(ns):
         out[s, 0] = 1.0
@@ -188,7 +188,11 @@ def shading_basis(pc, triangles, tri, bary, order):
         n1 = w0 * vn[a, 1] + w1 * vn[b, 1] + w2 * vn[c, 1]
         n2 = w0 * vn[a, 2] + w1 * vn[b, 2] + w2 * vn[c, 2]
         nn = max(np.sqrt(n0 * n0 + n1 * n1 + n2 * n2), 1e-12)
-        out[s, 1], out[s, 2], out[s, 3] = n0 / nn, n1 / nn, n2 / nn
+        x, y, z = n0 / nn, n1 / nn, n2 / nn
+        out[s, 1], out[s, 2], out[s, 3] = x, y, z
+        if nb == 9:
+            out[s, 4], out[s, 5], out[s, 6] = x * y, x * z, y * z
+            out[s, 7], out[s, 8] = x * x - y * y, 3.0 * z * z - 1.0
     return out
 
 

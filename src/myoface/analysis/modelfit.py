@@ -65,7 +65,7 @@ from myoface.analysis._fitkernels import vertex_normals
 from myoface.analysis.au_prior import au_prior_terms
 from myoface.analysis.camera import HeadPose, PinholeCamera, check_points, initial_pose
 from myoface.analysis.estimate import skin_response
-from myoface.analysis.photometric import Appearance, PhotometricTerm
+from myoface.analysis.photometric import COLOURLESS_SD, Appearance, PhotometricTerm
 from myoface.analysis.solver import bounded_gauss_newton
 from myoface.analysis.synthesis import LandmarkSynthesis
 from myoface.analysis.terms import (
@@ -280,6 +280,8 @@ class ModelFit:
         self.calibration: Calibration | None = None
         #: the person's appearance for the photometric term (:meth:`set_appearance`)
         self.appearance: Appearance | None = None
+        #: ... and in the frame's redness (:attr:`FitSettings.photo_colour`)
+        self.appearance_colour: Appearance | None = None
         #: the detector's offsets on this face by view (:meth:`set_offsets`), taken off the
         #: points of every frame (None: the points as given)
         self.offsets = None
@@ -602,6 +604,17 @@ class ModelFit:
         own = self.appearance.samples.matrix(len(per_vertex)) @ per_vertex
         prior = self.appearance.prior
         self.appearance.prior = own if prior is None else prior * own
+        self.appearance_colour = None
+        if s.photo_colour:
+            self.appearance_colour = Appearance.from_frame(
+                frame, self.model.face, self.camera, self.calibration.pose,
+                self.neutral + self.identity_mm, channel="redness",
+            )  # fmt: skip
+            if not np.nanstd(self.appearance_colour.values[-1]) >= COLOURLESS_SD:
+                self.appearance_colour = None  # (a grey video: its redness says nothing)
+            else:
+                prior = self.appearance_colour.prior
+                self.appearance_colour.prior = own if prior is None else prior * own
 
     def set_offsets(self, offsets) -> None:
         """Take the detector's offsets on this face off every frame's points from now on
@@ -621,12 +634,19 @@ class ModelFit:
             pose = self._pose_only(self.offsets.correct(p, pose, base), pose, base)
         return self.offsets.correct(p, pose, base)
 
-    def photometric_term(self, image) -> PhotometricTerm | None:
-        """The photometric term of ``image`` (None without an image or an appearance)."""
+    def photometric_term(self, image) -> list[PhotometricTerm] | None:
+        """The photometric terms of ``image``: its brightness, and its redness with
+        :attr:`FitSettings.photo_colour` (None without an image or an appearance)."""
         if image is None or self.appearance is None:
             return None
         s = self.settings
-        return PhotometricTerm(image, self.appearance, self.camera, s.photo_sigma, s.photo_huber)
+        out = [PhotometricTerm(image, self.appearance, self.camera, s.photo_sigma, s.photo_huber)]
+        if self.appearance_colour is not None:
+            out.append(
+                PhotometricTerm(image, self.appearance_colour, self.camera,
+                                s.photo_colour_sigma, s.photo_huber, channel="redness")
+            )  # fmt: skip
+        return out
 
     def _scale_lids(self, shape) -> dict[str, float]:
         """Scale the lid muscles' response to the eye openings of ``shape`` (the person's
@@ -709,8 +729,9 @@ class ModelFit:
         if photo is not None:
             # the pixels read the motion; MediaPipe's points stay as a weak term (they find
             # the face and keep the fit from a wrong minimum of the pixels)
-            photo.restart()
-            out.append(photo)
+            for t in photo:
+                t.restart()
+                out.append(t)
             weights = weights * s.photo_landmark_weight
         if flow is None:
             out.append(self.landmark_term(points, weights))
@@ -829,7 +850,8 @@ class ModelFit:
         resid = float(np.sqrt(((uv - seen[:, :2]) ** 2).sum(1).mean()) * k)
         occlusion = float("nan")
         if photo is not None:
-            occlusion = photo.occlusion(Estimate(pose, c, shape, jac, np.arange(m)))
+            # (the brightness's patches: the redness of skin is nearly uniform)
+            occlusion = photo[0].occlusion(Estimate(pose, c, shape, jac, np.arange(m)))
         return FrameFit(c, pose, resid, total_it, conv, occlusion)
 
     def _gauss_newton(self, p, pose, c, c0, d0, jac, base, prev, free=None, flow=None,

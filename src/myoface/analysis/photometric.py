@@ -24,7 +24,16 @@ that a head turning under a lamp is shaded as it turns) and an offset per region
 camera's exposure, is followed, not fitted as expression. On the degraded head-motion renders
 (a light that moves, the head turning 30 degrees) this took the skin's error from 1.25 to
 1.15 mm and the head's from 1.0 to 0.9 degrees against a gain and an offset per region (head
-still: 0.63 to 0.53 mm; 2026-12-01). Second-order harmonics (Face2Face's) are not fitted.
+still: 0.63 to 0.53 mm; 2026-12-01). Second-order harmonics (Face2Face's) are not fitted
+(:data:`SHADING_ORDER` has what they measured).
+
+**Two channels.** The brightness (:func:`grey`) and, with
+:attr:`~myoface.analysis.weights.FitSettings.photo_colour` (the default), the redness
+(:func:`redness`, ``R - G``) as a second term of the same kind: the lips' border and the lips
+against the teeth and the mouth's dark show in it where the brightness shows them faintly.
+Its albedo is over the brightness's shading at calibration, and its light is the
+brightness's model plus a field linear in the normals (:meth:`PhotometricTerm.
+_fit_colour_light`). That weights module has its sigma and what it measured.
 
 **Coarse to fine.** The images are blurred by a Gaussian of :data:`BLUR_SCHEDULE_PX` pixels
 (the first steps on the most blurred: it reaches a few pixels of motion), each level with its
@@ -237,6 +246,23 @@ def grey(frame) -> np.ndarray:
     )
 
 
+def redness(frame) -> np.ndarray:
+    """A frame's red less its green (H, W) float32, ``R - G`` in grey levels (a grey frame:
+    zeros): where the lips' border shows (red against the skin's paler red, against the teeth'
+    and the mouth's none), which the brightness shows faintly."""
+    img = np.asarray(frame)
+    if img.ndim == 2:
+        return np.zeros(img.shape, np.float32)
+    return img[..., 0].astype(np.float32) - img[..., 1].astype(np.float32)
+
+
+#: the images a photometric term can read (:class:`PhotometricTerm`'s ``channel``)
+CHANNELS = {"grey": grey, "redness": redness}
+#: a calibration frame whose redness over the face's samples varies by less than this (grey
+#: levels, 1 sd) has none to read (a grey video): the fit reads its brightness only
+COLOURLESS_SD = 1.0
+
+
 def blurred(image: np.ndarray, sigma_px: float) -> np.ndarray:
     return _cv2().GaussianBlur(image, (0, 0), float(sigma_px))
 
@@ -340,10 +366,20 @@ def shading_basis(normals: np.ndarray) -> np.ndarray:
     Lambertian shading of distant light, ambient plus one direction, to first order;
     Ramamoorthi & Hanrahan 2001 keep the second order too, for 99 % of it)."""
     out = np.column_stack([np.ones(len(normals)), normals])
+    if SHADING_ORDER >= 2:  # (the second order's five: xy, xz, yz, x^2 - y^2, 3z^2 - 1)
+        x, y, z = normals[:, 0], normals[:, 1], normals[:, 2]
+        out = np.column_stack([out, x * y, x * z, y * z, x * x - y * y, 3 * z * z - 1])
     return out if SHADING_ORDER >= 1 else out[:, :1]
 
 
-#: the shading's order: 1 (ambient and one direction) or 0 (a gain only)
+#: the shading's order: 2 (second-order spherical harmonics, 9 terms), 1 (ambient and one
+#: direction) or 0 (a gain only). The second order was measured 2026-12-04 on the degraded
+#: head-motion renders (the renderer's three lights, clamped, and a specular lobe), head
+#: moving, 1 / 2: skin 0.98 / 0.97 mm, head 0.92 / 1.14 deg, median RMSE 0.138 / 0.138; head
+#: still 0.65 / 0.65 mm; with the model's exact points and no expression (the spurious
+#: contractions as the head turns, clean renders) the head 0.46 / 0.33 deg, but the nose
+#: wrinkler's spurious reading 0.34 / 0.52: the freer light takes some of the shading that
+#: tells the head's turn. Not justified: 1.
 SHADING_ORDER = 1
 #: the calibration frame's shading is not taken below this fraction of its mean (a sample
 #: in shadow there has an albedo no better known than its shading)
@@ -376,16 +412,17 @@ class Appearance:
 
     @classmethod
     def from_frame(cls, frame, face, camera, pose, shape, levels=BLUR_SCHEDULE_PX,
-                   subdivision: int = SUBDIVISION) -> Appearance:  # fmt: skip
+                   subdivision: int = SUBDIVISION, channel: str = "grey") -> Appearance:  # fmt: skip
         """The appearance of ``frame`` (the calibration frame), the model's skin ``shape``
-        (V, 3) mm head frame (the person's neutral) at ``pose`` through ``camera``."""
+        (V, 3) mm head frame (the person's neutral) at ``pose`` through ``camera``, in its
+        ``channel`` (:data:`CHANNELS`)."""
         samples = SurfaceSamples.on(face.triangles, subdivision)
         pc = pose.apply(shape)
         pts = samples.points(pc)
         uv = camera.project(pts)
         seen = facing(samples, face.triangles, pc) > 0.2
         seen &= unoccluded(samples, face.triangles, camera, pc, np.shape(frame)[:2])
-        img = grey(frame)
+        img = CHANNELS[channel](frame)
         values = []
         for s in levels:
             v = _sample(blurred(img, s), uv)
@@ -401,9 +438,13 @@ class Appearance:
         area = float(np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum() / 2)
         spacing = float(np.sqrt(area / max(len(samples), 1)))
         # the albedo: the brightness over the shading the calibration frame's light gives
-        # (the light fitted to the finest level's brightness as if the albedo were uniform)
+        # (the light fitted to the finest level's brightness as if the albedo were uniform;
+        # another channel's over the brightness's shading: a white light shades both alike)
         basis = shading_basis(sample_normals(samples, tri, pc))
         fine = values[-1]
+        if channel != "grey":
+            fine = _sample(blurred(grey(frame), levels[-1]), uv)
+            fine[~seen] = np.nan
         ok = np.isfinite(fine)
         light, *_ = np.linalg.lstsq(basis[ok], fine[ok], rcond=None)
         shade = basis @ light
@@ -467,7 +508,7 @@ class PhotometricTerm:
     there) is reused by :meth:`normal_equations` and :meth:`cost` at the same estimate."""
 
     def __init__(self, frame, appearance: Appearance, camera, sigma: float = 8.0,
-                 huber: float = 2.0, weight: float = 1.0):  # fmt: skip
+                 huber: float = 2.0, weight: float = 1.0, channel: str = "grey"):  # fmt: skip
         if not sigma > 0 or not huber > 0 or not weight >= 0:
             raise MyofaceValueError("the photometric term needs sigma > 0, huber > 0, weight >= 0")
         self.app = appearance
@@ -475,7 +516,11 @@ class PhotometricTerm:
         self.sigma = float(sigma)
         self.huber = float(huber)
         self.weight = float(weight)
-        self._grey = grey(frame)
+        if channel not in CHANNELS:
+            raise MyofaceValueError(f"channel must be one of {sorted(CHANNELS)}; got {channel!r}")
+        self.channel = channel
+        #: the channel's image (the brightness, or the redness: :data:`CHANNELS`)
+        self._grey = CHANNELS[channel](frame)
         #: per level (blurred, d/dx, d/dy) of the crop around the face, made at the first step
         #: (:meth:`_crop`), the three as one 3-channel image (one remap reads all three),
         #: and the crop's origin (x, y) pixels
@@ -559,6 +604,8 @@ class PhotometricTerm:
         sample's (scale (S,), offset (S,)) and its appearance under that light (S,)."""
         alb = self.app.albedo[self._level]
         alb0 = self._alb0[self._level]
+        if self.channel == "redness":
+            return self._fit_colour_light(pc, val, use, alb, alb0)
         basis = _pk.shading_basis(pc, self._triangles, self._tri, self._bary, SHADING_ORDER)
         if SHADE_FIELD_ORDER > 0:
             basis = np.ascontiguousarray(np.column_stack([basis, self._field()]))
@@ -572,6 +619,27 @@ class PhotometricTerm:
         gram, rhs = _pk.light_system(basis, alb, self._region, LIGHT_REGIONS, val, m)
         sol = np.linalg.solve(gram, rhs)
         return _pk.light_apply(basis, sol, self._region, alb0)
+
+    def _fit_colour_light(self, pc, val, use, alb, alb0):
+        """:meth:`_fit_light` of the redness (``R - G``): the shading of the samples' normals
+        times their albedo, as the brightness's, plus a field linear in the normals and an
+        offset per region. Lights of other colours (a warm lamp and a cool window, the
+        renderer's key and fill) shade red and green differently, ``r_R L_R(n) - r_G L_G(n)``;
+        the skin's and the lips' red reflectance ``r_R`` is nearly the same, so the
+        difference of the two lights is a field in the normals of its own (the head-motion
+        renders, head moving: the head 1.23 deg without the field, 1.11 with it; 2026-12-04)."""
+        basis = _pk.shading_basis(pc, self._triangles, self._tri, self._bary, 1)
+        m = use & np.isfinite(alb)
+        n = len(val)
+        if np.count_nonzero(m) < 40:
+            return np.ones(n), np.zeros(n), alb0.copy()
+        design = np.column_stack(
+            [alb0[:, None] * basis, basis[:, 1:], np.eye(LIGHT_REGIONS)[self._region]]
+        )
+        sol, *_ = np.linalg.lstsq(design[m], val[m], rcond=None)
+        scale = basis @ sol[:4]
+        lit = design @ sol
+        return scale, lit - alb0 * scale, lit
 
     def _field(self):
         """A smooth field over the face (S, k): the monomials of the samples' head-frame x,

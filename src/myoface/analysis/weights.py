@@ -199,6 +199,25 @@ class FitSettings:
     photo_sigma: float = 8.0
     photo_huber: float = 2.0
     photo_landmark_weight: float = 0.1
+    #: with :attr:`photometric`: the frame's redness (``R - G``) read as a second channel
+    #: (:func:`~myoface.analysis.photometric.redness`), against the calibration frame's,
+    #: and its sample's error (grey levels of ``R - G``, 1 sd). Where it shows: the lips'
+    #: border (red against the skin's paler red) and the lips against the teeth and the
+    #: mouth's dark, which the brightness shows faintly. Its sigma is the brightness's
+    #: (:attr:`photo_sigma`) in proportion to the two channels' residual spreads at the fit on
+    #: single_face.mp4 (robust sd over the finest level's samples, median over the frames:
+    #: brightness 6.7, redness 2.9 grey levels; 8 x 2.9 / 6.7 = 3.5): the redness is less
+    #: shaded, so what the model's surface does not reproduce of it is smaller. Measured
+    #: 2026-12-04 (off / on; the ``myoface analyze --photometric`` rows of the benchmarks,
+    #: run alone): single_face.mp4's ``analysis.fidelity`` 0.65 / 0.775 (lower lip -0.14 /
+    #: 0.61, chin -0.19 / 0.16, brows 0.59 / 0.64, mouth corners 0.90 / 0.90); the known warps
+    #: (head moving, plain) mouth corners' gain 0.79 / 0.85, brows 0.73 / 0.78, eyelids 0.77 /
+    #: 0.82, leak 0.145 / 0.12; the degraded head-motion renders, head moving: worst RMSE
+    #: 0.245 / 0.246, median 0.138 / 0.146, skin 0.98 / 0.97 mm, head 0.92 / 1.17 deg; the
+    #: expression clip (apex / rest) 0.51 / 0.75 -> 0.70 / 0.67 (sigma 4: weight 4 in place
+    #: of 5.2); gaze 6.07 -> 6.93 deg.
+    photo_colour: bool = True
+    photo_colour_sigma: float = 3.5
     #: the lids read from the image as a term (:func:`myoface.analysis.lidtemplate.lid_term`:
     #: the closure of each eye's opening against the calibration frame, where it closes, in
     #: place of MediaPipe's upper lid points, which do not close in a blink; the lid margins'
