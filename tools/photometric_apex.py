@@ -69,13 +69,15 @@ def main(argv=None) -> None:
     ap.add_argument("--out", default="photometric_apex.png")
     a = ap.parse_args(argv)
 
-    # the fit's last photometric term (the frame's), kept as the fit makes it
+    # the fit's last photometric term of the brightness (the frame's), kept as the fit makes
+    # it (the redness's, FitSettings.photo_colour, is not drawn)
     made = {}
     init = photometric.PhotometricTerm.__init__
 
     def keep(self, *args, **kw):
         init(self, *args, **kw)
-        made["term"] = self
+        if self.channel == "grey":
+            made["term"] = self
 
     photometric.PhotometricTerm.__init__ = keep
     frames = []
