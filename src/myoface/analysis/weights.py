@@ -214,8 +214,9 @@ class FitSettings:
     #: (head moving, plain) mouth corners' gain 0.79 / 0.85, brows 0.73 / 0.78, eyelids 0.77 /
     #: 0.82, leak 0.145 / 0.12; the degraded head-motion renders, head moving: worst RMSE
     #: 0.245 / 0.246, median 0.138 / 0.146, skin 0.98 / 0.97 mm, head 0.92 / 1.17 deg; the
-    #: expression clip (apex / rest) 0.51 / 0.75 -> 0.70 / 0.67 (sigma 4: weight 4 in place
-    #: of 5.2); gaze 6.07 -> 6.93 deg.
+    #: expression clip (apex / rest) 0.51 / 0.75 -> 0.70 / 0.76; gaze 6.07 -> 7.14 deg and
+    #: frames/s 0.64 -> 0.39 of the default's (BENCHMARKS.md's full runs, 2026-12-04 01:37 and
+    #: 03:50 UTC).
     photo_colour: bool = True
     photo_colour_sigma: float = 3.5
     #: the lids read from the image as a term (:func:`myoface.analysis.lidtemplate.lid_term`:
