@@ -197,27 +197,32 @@ def shading_basis(pc, triangles, tri, bary, order):
 
 
 @njit(cache=True, nogil=True)
-def light_system(basis, alb, region, n_regions, val, use):
-    """The normal equations (gram (k, k), rhs (k,), k = nb + ``n_regions``) of the frame's
-    light over the samples ``use`` (bool, S): the columns ``alb * basis`` and one per
-    region (:meth:`~myoface.analysis.photometric.PhotometricTerm._fit_light`), the gram
-    plus 1e-9 on its diagonal."""
+def light_system(basis, alb, region, n_regions, val, use, field):
+    """The normal equations (gram (k, k), rhs (k,)) of the frame's light over the samples
+    ``use`` (bool, S): the columns ``alb * basis``, with ``field`` the basis' normal columns
+    ``basis[:, 1:]`` too (a field linear in the normals, added:
+    :meth:`~myoface.analysis.photometric.PhotometricTerm._fit_colour_light`), and one per
+    region (:meth:`~myoface.analysis.photometric.PhotometricTerm._fit_light`); ``k = nb (+
+    nb - 1) + n_regions``, the gram plus 1e-9 on its diagonal."""
     ns, nb = basis.shape
-    k = nb + n_regions
+    nf = nb + nb - 1 if field else nb
+    k = nf + n_regions
     gram = np.zeros((k, k))
     rhs = np.zeros(k)
-    x = np.empty(nb)
+    x = np.empty(nf)
     for s in range(ns):
         if not use[s]:
             continue
         a = alb[s]
         for i in range(nb):
             x[i] = a * basis[s, i]
-        r = nb + region[s]
+        for i in range(nb, nf):
+            x[i] = basis[s, i - nb + 1]
+        r = nf + region[s]
         v = val[s]
-        for i in range(nb):
+        for i in range(nf):
             xi = x[i]
-            for j in range(i, nb):
+            for j in range(i, nf):
                 gram[i, j] += xi * x[j]
             gram[i, r] += xi  # (the region's column is 1 for this sample)
             rhs[i] += xi * v
@@ -231,50 +236,12 @@ def light_system(basis, alb, region, n_regions, val, use):
 
 
 @njit(cache=True, nogil=True)
-def colour_light_system(basis, alb, region, n_regions, val, use):
-    """The normal equations (gram (k, k), rhs (k,), k = nb + nb - 1 + ``n_regions``) of the
-    redness's light over the samples ``use`` (bool, S): the columns ``alb * basis``, the
-    basis' normal columns ``basis[:, 1:]`` (a field linear in the normals) and one per region
-    (:meth:`~myoface.analysis.photometric.PhotometricTerm._fit_colour_light`), the gram
-    plus 1e-9 on its diagonal."""
+def light_apply(basis, sol, region, alb0, field):
+    """Each sample's scale (S,) (``basis @ sol[:nb]``), offset (S,) (its region's, and with
+    ``field`` the field's, :func:`light_system`) and its appearance under that light (S,):
+    ``alb0 * scale + offset`` (``alb0``: the albedo, 0 where unknown)."""
     ns, nb = basis.shape
-    nf = nb + nb - 1
-    k = nf + n_regions
-    gram = np.zeros((k, k))
-    rhs = np.zeros(k)
-    x = np.empty(nf)
-    for s in range(ns):
-        if not use[s]:
-            continue
-        a = alb[s]
-        for i in range(nb):
-            x[i] = a * basis[s, i]
-        for i in range(1, nb):
-            x[nb + i - 1] = basis[s, i]
-        r = nf + region[s]
-        v = val[s]
-        for i in range(nf):
-            xi = x[i]
-            for j in range(i, nf):
-                gram[i, j] += xi * x[j]
-            gram[i, r] += xi
-            rhs[i] += xi * v
-        gram[r, r] += 1.0
-        rhs[r] += v
-    for i in range(k):
-        gram[i, i] += 1e-9
-        for j in range(i + 1, k):
-            gram[j, i] = gram[i, j]
-    return gram, rhs
-
-
-@njit(cache=True, nogil=True)
-def colour_light_apply(basis, sol, region, alb0):
-    """:func:`colour_light_system`'s light at each sample: its scale (S,) (``basis @
-    sol[:nb]``), its offset (S,) (the field's and its region's) and its appearance under that
-    light (S,), ``alb0 * scale + offset``."""
-    ns, nb = basis.shape
-    nf = nb + nb - 1
+    nf = nb + nb - 1 if field else nb
     scale = np.empty(ns)
     off = np.empty(ns)
     lit = np.empty(ns)
@@ -283,30 +250,11 @@ def colour_light_apply(basis, sol, region, alb0):
         for i in range(nb):
             acc += basis[s, i] * sol[i]
         o = sol[nf + region[s]]
-        for i in range(1, nb):
-            o += basis[s, i] * sol[nb + i - 1]
+        for i in range(nb, nf):
+            o += basis[s, i - nb + 1] * sol[i]
         scale[s] = acc
         off[s] = o
         lit[s] = alb0[s] * acc + o
-    return scale, off, lit
-
-
-@njit(cache=True, nogil=True)
-def light_apply(basis, sol, region, alb0):
-    """Each sample's scale (S,) (``basis @ sol[:nb]``), offset (S,) (its region's) and its
-    appearance under that light (S,): ``alb0 * scale + offset`` (``alb0``: the albedo, 0
-    where unknown)."""
-    ns, nb = basis.shape
-    scale = np.empty(ns)
-    off = np.empty(ns)
-    lit = np.empty(ns)
-    for s in range(ns):
-        acc = 0.0
-        for i in range(nb):
-            acc += basis[s, i] * sol[i]
-        scale[s] = acc
-        off[s] = sol[nb + region[s]]
-        lit[s] = alb0[s] * acc + off[s]
     return scale, off, lit
 
 

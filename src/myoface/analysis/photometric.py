@@ -616,9 +616,9 @@ class PhotometricTerm:
         # (the normal equations summed in a compiled loop over the samples, not by BLAS:
         # OpenBLAS's threads, woken for this 2600 x 8 product, then spin on the second core
         # that MediaPipe runs on)
-        gram, rhs = _pk.light_system(basis, alb, self._region, LIGHT_REGIONS, val, m)
+        gram, rhs = _pk.light_system(basis, alb, self._region, LIGHT_REGIONS, val, m, False)
         sol = np.linalg.solve(gram, rhs)
-        return _pk.light_apply(basis, sol, self._region, alb0)
+        return _pk.light_apply(basis, sol, self._region, alb0, False)
 
     def _fit_colour_light(self, pc, val, use, alb, alb0):
         """:meth:`_fit_light` of the redness (``R - G``): the shading of the samples' normals
@@ -635,9 +635,9 @@ class PhotometricTerm:
             return np.ones(n), np.zeros(n), alb0.copy()
         # (compiled normal equations, as the brightness's: numpy's least squares on this
         # 2600 x 11 design took ~6 ms a step, its BLAS threads spinning on MediaPipe's core)
-        gram, rhs = _pk.colour_light_system(basis, alb0, self._region, LIGHT_REGIONS, val, m)
+        gram, rhs = _pk.light_system(basis, alb0, self._region, LIGHT_REGIONS, val, m, True)
         sol = np.linalg.solve(gram, rhs)
-        return _pk.colour_light_apply(basis, sol, self._region, alb0)
+        return _pk.light_apply(basis, sol, self._region, alb0, True)
 
     def _field(self):
         """A smooth field over the face (S, k): the monomials of the samples' head-frame x,
