@@ -508,7 +508,8 @@ class PhotometricTerm:
     there) is reused by :meth:`normal_equations` and :meth:`cost` at the same estimate."""
 
     def __init__(self, frame, appearance: Appearance, camera, sigma: float = 8.0,
-                 huber: float = 2.0, weight: float = 1.0, channel: str = "grey"):  # fmt: skip
+                 huber: float = 2.0, weight: float = 1.0, channel: str = "grey",
+                 peer: PhotometricTerm | None = None):  # fmt: skip
         if not sigma > 0 or not huber > 0 or not weight >= 0:
             raise MyofaceValueError("the photometric term needs sigma > 0, huber > 0, weight >= 0")
         self.app = appearance
@@ -519,6 +520,10 @@ class PhotometricTerm:
         if channel not in CHANNELS:
             raise MyofaceValueError(f"channel must be one of {sorted(CHANNELS)}; got {channel!r}")
         self.channel = channel
+        #: a term on the same samples prepared before this one at each step (the brightness's,
+        #: for the redness's): its z-buffer of the round is taken, not made again
+        self._peer = peer
+        self._occluded_at = None  # (the estimate the z-buffer was made at)
         #: the channel's image (the brightness, or the redness: :data:`CHANNELS`)
         self._grey = CHANNELS[channel](frame)
         #: per level (blurred, d/dx, d/dy) of the crop around the face, made at the first step
@@ -701,9 +706,14 @@ class PhotometricTerm:
         if self._unoccluded is None:
             # (once a round: a step moves the skin by far less than a part of the face is
             # thick)
-            self._unoccluded = unoccluded(
-                self.app.samples, self.app.triangles, self.camera, pc, self._grey.shape
-            )
+            peer = self._peer
+            if peer is not None and peer._occluded_at is est:
+                self._unoccluded = peer._unoccluded
+            else:
+                self._unoccluded = unoccluded(
+                    self.app.samples, self.app.triangles, self.camera, pc, self._grey.shape
+                )
+            self._occluded_at = est
         vis &= self._unoccluded
         ok = vis & np.isfinite(a) & np.isfinite(val)
         blur = self.app.levels[self._level]

@@ -208,12 +208,13 @@ class FitSettings:
     #: single_face.mp4 (robust sd over the finest level's samples, median over the frames:
     #: brightness 6.7, redness 2.9 grey levels; 8 x 2.9 / 6.7 = 3.5): the redness is less
     #: shaded, so what the model's surface does not reproduce of it is smaller. Measured
-    #: 2026-12-04 (off / on; the ``myoface analyze --photometric`` rows of the benchmarks,
-    #: run alone): single_face.mp4's ``analysis.fidelity`` 0.65 / 0.775 (lower lip -0.14 /
-    #: 0.61, chin -0.19 / 0.16, brows 0.59 / 0.64, mouth corners 0.90 / 0.90); the known warps
-    #: (head moving, plain) mouth corners' gain 0.79 / 0.85, brows 0.73 / 0.78, eyelids 0.77 /
-    #: 0.82, leak 0.145 / 0.12; the degraded head-motion renders, head moving: worst RMSE
-    #: 0.245 / 0.246, median 0.138 / 0.146, skin 0.98 / 0.97 mm, head 0.92 / 1.17 deg; the
+    #: 2026-12-04 (off / on; ``myoface analyze single_face.mp4 --photometric --report`` and
+    #: the ``--photometric`` rows of the benchmarks' details): single_face.mp4's validated
+    #: fidelity 0.65 / 0.77 (lower lip -0.14 / 0.55, chin -0.19 / 0.14, brows 0.59 / 0.65,
+    #: mouth corners 0.90 / 0.90); the known warps (head moving, plain) mouth corners' gain
+    #: 0.79 / 0.85, brows 0.73 / 0.80, eyelids 0.77 / 0.86, leak 0.145 / 0.11; the degraded
+    #: head-motion renders, head moving: worst RMSE 0.245 / 0.248, median 0.138 / 0.146, skin
+    #: 0.98 / 0.96 mm, head 0.92 / 1.15 deg; the
     #: expression clip (apex / rest) 0.51 / 0.75 -> 0.70 / 0.76; gaze 6.07 -> 7.14 deg and
     #: frames/s 0.64 -> 0.39 of the default's (BENCHMARKS.md's full runs, 2026-12-04 01:37 and
     #: 03:50 UTC).
