@@ -377,7 +377,7 @@ class _NumpyTerm(PhotometricTerm):
         vis = cos > ph.FACING_MIN
         if self._unoccluded is None:
             self._unoccluded = _unoccluded_np(self.app.samples, self.app.triangles, self.camera,
-                                              pc, self._grey.shape, ph.OCCLUSION_MM)  # fmt: skip
+                                              pc, self._frame_hw, ph.OCCLUSION_MM)  # fmt: skip
         vis &= self._unoccluded
         ok = vis & np.isfinite(a) & np.isfinite(val)
         blur = self.app.levels[self._level]
@@ -582,3 +582,41 @@ def test_the_windowed_zbuffer_hides_what_the_whole_frames_does(rendered):
         assert np.array_equal(got, want), yaw
         hidden.append(int((~want).sum()))
     assert hidden[1] > 100 and hidden[3] == 0, hidden
+
+
+def test_the_channels_side_by_side_are_the_channels_one_after_the_other(rendered):
+    """The brightness's and the redness's steps made side by side (``ChannelTerms``: the
+    redness's on a second thread, its geometry the brightness's) give, through every level,
+    the normal equations and the cost of the two terms made one after the other, to the bit;
+    and the redness reads the render (it has colour)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from myoface.analysis.photometric import ChannelTerms
+
+    fm, cam, rest, moved, calib, frame, smile = rendered
+    shape = fm.skin_vertices()
+    grey_app = Appearance.from_frame(calib, fm.face, cam, rest, shape)
+    red_app = Appearance.from_frame(calib, fm.face, cam, rest, shape, channel="redness")
+    jac = skin_response(fm, fm.ids)
+    m = len(fm.ids)
+    c = 0.5 * smile
+    e = Estimate(moved, c, shape + (jac.reshape(-1, m) @ c).reshape(-1, 3), jac, np.arange(m))
+
+    def channels():
+        g = PhotometricTerm(frame, grey_app, cam)
+        return [g, PhotometricTerm(frame, red_app, cam, 3.5, channel="redness", peer=g)]
+
+    alone = channels()
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        both = ChannelTerms(channels(), pool)
+        for step in range(len(grey_app.levels) + 1):
+            for t in (both, *alone):
+                if step and t.settling:
+                    t.advance()
+                t.prepare(e)
+            h, b = both.normal_equations(e)
+            (hg, bg), (hr, br) = (t.normal_equations(e) for t in alone)
+            assert np.array_equal(h, hg + hr) and np.array_equal(b, bg + br)
+            assert both.cost(e) == alone[0].cost(e) + alone[1].cost(e)
+            assert np.count_nonzero(alone[1]._w) > 500 and np.abs(hr).max() > 0
+    assert not both.settling

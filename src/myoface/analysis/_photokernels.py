@@ -385,3 +385,206 @@ def patch_sums(a, b, ok, tri, nv):
             out[v, 4] += y * y
             out[v, 5] += x * y
     return out
+
+
+def vertex_pairs(triangles: np.ndarray, n_vertices: int):
+    """The mesh's vertex pairs that share a triangle (each vertex with itself too), as
+    compressed rows: ``ptr`` (V + 1,), ``nbr`` (P,) the pairs' second vertex, row by row, and
+    ``slot`` (T, 3, 3): the pair of each triangle's corners ``p``, ``q`` (its index in ``nbr``).
+    (:func:`pair_normal_equations`' sparse sum over the samples.)"""
+    tris = np.asarray(triangles, dtype=np.int64)
+    a = np.repeat(tris, 3, axis=1).ravel()  # corner p of each (p, q), row-major
+    b = np.tile(tris, (1, 3)).ravel()
+    key = a * int(n_vertices) + b
+    uniq = np.unique(key)
+    ptr = np.zeros(int(n_vertices) + 1, dtype=np.int64)
+    np.add.at(ptr, uniq // int(n_vertices) + 1, 1)
+    ptr = np.cumsum(ptr)
+    nbr = (uniq % int(n_vertices)).astype(np.int64)
+    slot = np.searchsorted(uniq, key).reshape(len(tris), 3, 3).astype(np.int64)
+    return ptr, nbr, np.ascontiguousarray(slot)
+
+
+@njit(cache=True, nogil=True)
+def vertex_duv(rot, trans, shape, jac, free, f, cx, cy):
+    """Per vertex, the derivative of its pixel (V, 2, n) in the unknowns (omega (3), dt (3),
+    dc[free]) at the pose ``rot``, ``trans`` and the skin ``shape`` with its response
+    ``jac``."""
+    nv = shape.shape[0]
+    nf = free.shape[0]
+    n = 6 + nf
+    duv = np.empty((nv, 2, n))
+    for v in range(nv):
+        x0, x1, x2 = shape[v, 0], shape[v, 1], shape[v, 2]
+        y0 = rot[0, 0] * x0 + rot[0, 1] * x1 + rot[0, 2] * x2
+        y1 = rot[1, 0] * x0 + rot[1, 1] * x1 + rot[1, 2] * x2
+        y2 = rot[2, 0] * x0 + rot[2, 1] * x1 + rot[2, 2] * x2
+        pc0, pc1, pc2 = y0 + trans[0], y1 + trans[1], y2 + trans[2]
+        d = max(-pc2, 1e-6)
+        # d(u, v)/dP: (a00, 0, a02), (0, a11, a12)
+        a00, a02 = f / d, f * pc0 / d**2
+        a11, a12 = -f / d, -f * pc1 / d**2
+        # omega x (R X) = -[RX]x omega; dt: I; dc: R dX/dc
+        duv[v, 0, 0] = a02 * y1
+        duv[v, 0, 1] = a00 * y2 - a02 * y0
+        duv[v, 0, 2] = -a00 * y1
+        duv[v, 1, 0] = -a11 * y2 + a12 * y1
+        duv[v, 1, 1] = -a12 * y0
+        duv[v, 1, 2] = a11 * y0
+        duv[v, 0, 3], duv[v, 0, 4], duv[v, 0, 5] = a00, 0.0, a02
+        duv[v, 1, 3], duv[v, 1, 4], duv[v, 1, 5] = 0.0, a11, a12
+        # (a R) . dX/dc
+        e00 = a00 * rot[0, 0] + a02 * rot[2, 0]
+        e01 = a00 * rot[0, 1] + a02 * rot[2, 1]
+        e02 = a00 * rot[0, 2] + a02 * rot[2, 2]
+        e10 = a11 * rot[1, 0] + a12 * rot[2, 0]
+        e11 = a11 * rot[1, 1] + a12 * rot[2, 1]
+        e12 = a11 * rot[1, 2] + a12 * rot[2, 2]
+        for j in range(nf):
+            m = free[j]
+            j0, j1, j2 = jac[v, 0, m], jac[v, 1, m], jac[v, 2, m]
+            duv[v, 0, 6 + j] = e00 * j0 + e01 * j1 + e02 * j2
+            duv[v, 1, 6 + j] = e10 * j0 + e11 * j1 + e12 * j2
+    return duv
+
+
+@njit(cache=True, nogil=True)
+def pair_sums(kb, e, tri, bary, tri_index, use, samp, lit, w, sigma, slot):
+    """Add the samples ``use`` (N,) of one channel to the sparse sums of
+    :func:`pair_normal_equations`: ``kb`` (P, 4), per vertex pair, ``sum c_p c_q^T`` (2 x 2,
+    row-major) of the samples' weights ``c`` on their corners' pixel motions (the image's
+    gradient times the barycentric coordinate, times ``sqrt(w) / sigma``), and ``e`` (V, 2),
+    per vertex, ``sum c_p r`` (``r`` the weighted residual in sigmas). Arguments as
+    :func:`weighted_rows`' (``w`` never empty here)."""
+    cu = np.empty(3)
+    cv = np.empty(3)
+    for i in range(use.shape[0]):
+        s = use[i]
+        gx, gy, val = samp[i, 1], samp[i, 2], samp[i, 0]
+        gx = 0.0 if np.isnan(gx) else gx  # (as nan_to_num)
+        gy = 0.0 if np.isnan(gy) else gy
+        sw = np.sqrt(w[s])
+        r = val - lit[s]
+        r = 0.0 if np.isnan(r) else r
+        rr = r / sigma * sw
+        q = sw / sigma
+        for p in range(3):
+            cu[p] = gx * bary[s, p] * q
+            cv[p] = gy * bary[s, p] * q
+        t = tri_index[s]
+        for p in range(3):
+            vert = tri[s, p]
+            up, vp = cu[p], cv[p]
+            e[vert, 0] += up * rr
+            e[vert, 1] += vp * rr
+            for qq in range(3):
+                sl = slot[t, p, qq]
+                kb[sl, 0] += up * cu[qq]
+                kb[sl, 1] += up * cv[qq]
+                kb[sl, 2] += vp * cu[qq]
+                kb[sl, 3] += vp * cv[qq]
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def pair_normal_equations(duv, kb, e, ptr, nbr):
+    """``(H, b)`` of the rows summed into ``kb``, ``e`` (:func:`pair_sums`), with the vertices'
+    pixel derivatives ``duv`` (V, 2, n) (:func:`vertex_duv`).
+
+    A sample's row is ``c^T D``: its six weights ``c`` on the pixel motions of its triangle's
+    corners, ``D`` the vertices' ``duv`` (2 V x n). So ``H = sum_s D^T c_s c_s^T D = D^T K D``
+    with ``K = sum_s c_s c_s^T``, which is sparse (a block per pair of vertices that share a
+    triangle) and cheap to sum (36 products a sample), and ``b = -D^T sum_s c_s r_s``: the
+    product with the ``n`` unknowns is then made once per vertex, not once per sample (a
+    vertex carries ~16 samples of two channels), and any number of channels summed into
+    ``kb`` costs one product."""
+    nv = duv.shape[0]
+    n = duv.shape[2]
+    # the vertices that carry a sample, as columns: D^T (n, 2 m) and (K D)^T (n, 2 m)
+    col = np.full(nv, -1, dtype=np.int64)
+    m = 0
+    for v in range(nv):
+        for sl in range(ptr[v], ptr[v + 1]):
+            if kb[sl, 0] != 0.0 or kb[sl, 3] != 0.0 or e[v, 0] != 0.0 or e[v, 1] != 0.0:
+                col[v] = m
+                m += 1
+                break
+    dt = np.empty((n, 2 * m))
+    gt = np.zeros((n, 2 * m))
+    b = np.zeros(n)
+    g0 = np.empty(n)
+    g1 = np.empty(n)
+    for v in range(nv):
+        c = col[v]
+        if c < 0:
+            continue
+        for j in range(n):
+            g0[j] = 0.0
+            g1[j] = 0.0
+        for sl in range(ptr[v], ptr[v + 1]):
+            k0, k1, k2, k3 = kb[sl, 0], kb[sl, 1], kb[sl, 2], kb[sl, 3]
+            if k0 == 0.0 and k1 == 0.0 and k2 == 0.0 and k3 == 0.0:
+                continue
+            v2 = nbr[sl]
+            for j in range(n):
+                d0, d1 = duv[v2, 0, j], duv[v2, 1, j]
+                g0[j] += k0 * d0 + k1 * d1
+                g1[j] += k2 * d0 + k3 * d1
+        e0, e1 = e[v, 0], e[v, 1]
+        for j in range(n):
+            dt[j, 2 * c] = duv[v, 0, j]
+            dt[j, 2 * c + 1] = duv[v, 1, j]
+            gt[j, 2 * c] = g0[j]
+            gt[j, 2 * c + 1] = g1[j]
+            b[j] -= duv[v, 0, j] * e0 + duv[v, 1, j] * e1
+    return _cross_gram(dt, gt), b
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _cross_gram(at, bt):
+    """The symmetric ``at bt^T`` (n, n) of ``at``, ``bt`` (n, R) whose product is symmetric
+    (``D^T (K D)``): its upper triangle, four rows by four (as
+    :func:`~myoface.analysis._fitkernels._gram`), mirrored."""
+    n, nr = at.shape
+    h = np.empty((n, n))
+    for i in range(0, n, 4):
+        for j in range(i, n, 4):
+            i1, j1 = min(i + 4, n), min(j + 4, n)
+            if i1 - i == 4 and j1 - j == 4:
+                a00, a01, a02, a03 = 0.0, 0.0, 0.0, 0.0
+                a10, a11, a12, a13 = 0.0, 0.0, 0.0, 0.0
+                a20, a21, a22, a23 = 0.0, 0.0, 0.0, 0.0
+                a30, a31, a32, a33 = 0.0, 0.0, 0.0, 0.0
+                for q in range(nr):
+                    x0, x1, x2, x3 = at[i, q], at[i + 1, q], at[i + 2, q], at[i + 3, q]
+                    y0, y1, y2, y3 = bt[j, q], bt[j + 1, q], bt[j + 2, q], bt[j + 3, q]
+                    a00 += x0 * y0
+                    a01 += x0 * y1
+                    a02 += x0 * y2
+                    a03 += x0 * y3
+                    a10 += x1 * y0
+                    a11 += x1 * y1
+                    a12 += x1 * y2
+                    a13 += x1 * y3
+                    a20 += x2 * y0
+                    a21 += x2 * y1
+                    a22 += x2 * y2
+                    a23 += x2 * y3
+                    a30 += x3 * y0
+                    a31 += x3 * y1
+                    a32 += x3 * y2
+                    a33 += x3 * y3
+                h[i, j], h[i, j + 1], h[i, j + 2], h[i, j + 3] = a00, a01, a02, a03
+                h[i + 1, j], h[i + 1, j + 1], h[i + 1, j + 2], h[i + 1, j + 3] = a10, a11, a12, a13
+                h[i + 2, j], h[i + 2, j + 1], h[i + 2, j + 2], h[i + 2, j + 3] = a20, a21, a22, a23
+                h[i + 3, j], h[i + 3, j + 1], h[i + 3, j + 2], h[i + 3, j + 3] = a30, a31, a32, a33
+            else:  # (the last rows, fewer than four)
+                for ii in range(i, i1):
+                    for jj in range(j, j1):
+                        acc = 0.0
+                        for q in range(nr):
+                            acc += at[ii, q] * bt[jj, q]
+                        h[ii, jj] = acc
+    for i in range(n):  # (the upper triangle, mirrored)
+        for j in range(i + 1, n):
+            h[j, i] = h[i, j]
+    return h

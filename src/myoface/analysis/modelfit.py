@@ -65,7 +65,7 @@ from myoface.analysis._fitkernels import vertex_normals
 from myoface.analysis.au_prior import au_prior_terms
 from myoface.analysis.camera import HeadPose, PinholeCamera, check_points, initial_pose
 from myoface.analysis.estimate import skin_response
-from myoface.analysis.photometric import COLOURLESS_SD, Appearance, PhotometricTerm
+from myoface.analysis.photometric import COLOURLESS_SD, Appearance, ChannelTerms, PhotometricTerm
 from myoface.analysis.solver import bounded_gauss_newton
 from myoface.analysis.synthesis import LandmarkSynthesis
 from myoface.analysis.terms import (
@@ -277,6 +277,7 @@ class ModelFit:
         self._pending = None
         self._pending_fits = 0
         self._worker = None
+        self._channel_pool = None  # (the photometric channels' steps side by side: ChannelTerms)
         self.calibration: Calibration | None = None
         #: the person's appearance for the photometric term (:meth:`set_appearance`)
         self.appearance: Appearance | None = None
@@ -387,11 +388,14 @@ class ModelFit:
         self._c0, self._d0, self._jac = c, d_new, jac
 
     def close(self) -> None:
-        """Finish the deferred relax and stop its thread."""
+        """Finish the deferred relax and stop its thread (and the photometric channels')."""
         if self._worker is not None:
             self._collect()
             self._worker.shutdown()
             self._worker = None
+        if self._channel_pool is not None:
+            self._channel_pool.shutdown()
+            self._channel_pool = None
 
     def fit(
         self,
@@ -732,7 +736,14 @@ class ModelFit:
             # the face and keep the fit from a wrong minimum of the pixels)
             for t in photo:
                 t.restart()
-                out.append(t)
+            if len(photo) > 1:  # (the channels' steps side by side: ChannelTerms)
+                if self._channel_pool is None:
+                    self._channel_pool = ThreadPoolExecutor(
+                        max_workers=len(photo) - 1, thread_name_prefix="myoface-photo"
+                    )
+                out.append(ChannelTerms(photo, self._channel_pool))
+            else:
+                out += photo
             weights = weights * s.photo_landmark_weight
         if flow is None:
             out.append(self.landmark_term(points, weights))
@@ -869,7 +880,12 @@ class ModelFit:
 
         w0 = self._weights(pose, forward(c))
         terms = self.terms(p, w0, prev, flow, photo)
-        steps = self.settings.iterations if iterations is None else int(iterations)
+        if iterations is not None:
+            steps = int(iterations)
+        elif photo is not None:  # (FitSettings.photo_iterations: the photometric fit's)
+            steps = self.settings.photo_iterations
+        else:
+            steps = self.settings.iterations
         return bounded_gauss_newton(terms, forward, jac, pose, c, free, steps)
 
     def _fit_identity(self, frames):

@@ -81,7 +81,6 @@ import numpy as np
 from numba import njit
 
 from myoface.analysis import _photokernels as _pk
-from myoface.analysis._fitkernels import _gram
 from myoface.analysis.terms import Estimate
 from myoface.errors import MyofaceValueError
 from myoface.facemesh import import_opencv
@@ -286,8 +285,8 @@ class SurfaceSamples:
     tri_index: np.ndarray
 
     @classmethod
-    def on(cls, triangles: np.ndarray, subdivision: int = SUBDIVISION) -> SurfaceSamples:
-        n = int(subdivision)
+    def on(cls, triangles: np.ndarray, subdivision: int | None = None) -> SurfaceSamples:
+        n = int(SUBDIVISION if subdivision is None else subdivision)
         if n < 3:
             raise MyofaceValueError(f"subdivision must be >= 3; got {subdivision}")
         b = (
@@ -410,9 +409,18 @@ class Appearance:
     #: the samples' head-frame x, y (S, 2) over the face's half-width, about its centre
     head_xy: np.ndarray | None = None
 
+    def pairs(self, n_vertices: int):
+        """The mesh's vertex pairs of ``n_vertices`` vertices
+        (:func:`~myoface.analysis._photokernels.vertex_pairs`), made once."""
+        cached = getattr(self, "_pairs", None)
+        if cached is None or len(cached[0]) != n_vertices + 1:
+            tri = np.asarray(self.triangles, dtype=np.int64)
+            cached = self._pairs = _pk.vertex_pairs(tri, int(n_vertices))
+        return cached
+
     @classmethod
     def from_frame(cls, frame, face, camera, pose, shape, levels=BLUR_SCHEDULE_PX,
-                   subdivision: int = SUBDIVISION, channel: str = "grey") -> Appearance:  # fmt: skip
+                   subdivision: int | None = None, channel: str = "grey") -> Appearance:  # fmt: skip
         """The appearance of ``frame`` (the calibration frame), the model's skin ``shape``
         (V, 3) mm head frame (the person's neutral) at ``pose`` through ``camera``, in its
         ``channel`` (:data:`CHANNELS`)."""
@@ -524,8 +532,18 @@ class PhotometricTerm:
         #: for the redness's): its z-buffer of the round is taken, not made again
         self._peer = peer
         self._occluded_at = None  # (the estimate the z-buffer was made at)
-        #: the channel's image (the brightness, or the redness: :data:`CHANNELS`)
-        self._grey = CHANNELS[channel](frame)
+        #: the frame; its channel (the brightness, or the redness: :data:`CHANNELS`) is made
+        #: on the crop around the face only (:meth:`_crop`)
+        self._frame = np.asarray(frame)
+        self._frame_hw = self._frame.shape[:2]
+        #: what :meth:`prepare` made of the estimate before the channel is read (the samples'
+        #: camera points, pixels, which are seen, their shading basis), and that estimate and
+        #: level: the peer's, when it made them at the same step, is taken
+        self._geom = None
+        #: (an estimate, its vertices' pixel derivatives: :meth:`_duv`)
+        self._duv_at = None
+        self._begun = None  # (the estimate of the step begun, :meth:`begin`, its geometry)
+        self._here = None
         #: per level (blurred, d/dx, d/dy) of the crop around the face, made at the first step
         #: (:meth:`_crop`), the three as one 3-channel image (one remap reads all three),
         #: and the crop's origin (x, y) pixels
@@ -562,12 +580,15 @@ class PhotometricTerm:
         self._use = None
         self._read = None
         self._unoccluded = None
+        self._geom = None
+        self._duv_at = None
+        self._begun = None
 
     def _crop(self, uv: np.ndarray) -> None:
         """Blur the frame and take its gradient on a crop around the samples ``uv`` (with a
         margin for the fit's steps and the blur): the face is a fraction of the frame."""
         cv2 = _cv2()
-        h, w = self._grey.shape
+        h, w = self._frame_hw
         margin = 24 + 3 * max(self.app.levels)
         ok = np.isfinite(uv).all(1)
         lo = np.floor(uv[ok].min(0) - margin).astype(int) if ok.any() else np.zeros(2, int)
@@ -576,7 +597,7 @@ class PhotometricTerm:
         x1, y1 = min(hi[0], w), min(hi[1], h)
         if x1 - x0 < 8 or y1 - y0 < 8:
             x0, y0, x1, y1 = 0, 0, w, h
-        crop = np.ascontiguousarray(self._grey[y0:y1, x0:x1])
+        crop = np.ascontiguousarray(CHANNELS[self.channel](self._frame[y0:y1, x0:x1]))
         self._origin = np.array([x0, y0], dtype=np.float64)
         self._images = []
         self._stacked = []
@@ -600,18 +621,18 @@ class PhotometricTerm:
                         borderMode=cv2.BORDER_CONSTANT, borderValue=(np.nan,) * 4)  # fmt: skip
         return out.reshape(-1, 3).astype(np.float64)
 
-    def _fit_light(self, pc, val, use):
+    def _fit_light(self, pc, basis, val, use):
         """The frame's light (least squares over the samples ``use``): brightness = albedo
         times the shading of the samples' normals at the vertices ``pc`` (camera frame)
         (:func:`shading_basis`, one light for the face: as the head turns under a lamp each
         point's shading changes with its normal), plus an offset per region
         (:data:`LIGHT_REGIONS`: a camera's flare, a second light's spill). Returns each
-        sample's (scale (S,), offset (S,)) and its appearance under that light (S,)."""
+        sample's (scale (S,), offset (S,)) and its appearance under that light (S,).
+        ``basis``: the samples' :func:`shading_basis` at ``pc`` (:meth:`_geometry`)."""
         alb = self.app.albedo[self._level]
         alb0 = self._alb0[self._level]
         if self.channel == "redness":
-            return self._fit_colour_light(pc, val, use, alb, alb0)
-        basis = _pk.shading_basis(pc, self._triangles, self._tri, self._bary, SHADING_ORDER)
+            return self._fit_colour_light(pc, basis, val, use, alb, alb0)
         if SHADE_FIELD_ORDER > 0:
             basis = np.ascontiguousarray(np.column_stack([basis, self._field()]))
         m = use & np.isfinite(alb)
@@ -625,7 +646,7 @@ class PhotometricTerm:
         sol = np.linalg.solve(gram, rhs)
         return _pk.light_apply(basis, sol, self._region, alb0, False)
 
-    def _fit_colour_light(self, pc, val, use, alb, alb0):
+    def _fit_colour_light(self, pc, basis, val, use, alb, alb0):
         """:meth:`_fit_light` of the redness (``R - G``): the shading of the samples' normals
         times their albedo, as the brightness's, plus a field linear in the normals and an
         offset per region. Lights of other colours (a warm lamp and a cool window, the
@@ -633,7 +654,8 @@ class PhotometricTerm:
         the skin's and the lips' red reflectance ``r_R`` is nearly the same, so the
         difference of the two lights is a field in the normals of its own (the head-motion
         renders, head moving: the head 1.23 deg without the field, 1.11 with it; 2026-12-04)."""
-        basis = _pk.shading_basis(pc, self._triangles, self._tri, self._bary, 1)
+        if SHADING_ORDER != 1:  # (the brightness's basis is of another order)
+            basis = _pk.shading_basis(pc, self._triangles, self._tri, self._bary, 1)
         m = use & np.isfinite(alb)
         n = len(val)
         if np.count_nonzero(m) < 40:
@@ -692,36 +714,67 @@ class PhotometricTerm:
         return _pk.sample_pixels(pc, self._tri, self._bary, idx, float(cam.focal_px),
                                  float(cam.cx), float(cam.cy))  # fmt: skip
 
-    def prepare(self, est: Estimate) -> None:
-        self._level = self._level_for(self._step)
-        self._step += 1
+    def _geometry(self, est: Estimate):
+        """The samples at ``est`` before the channel is read: their camera points' vertices
+        ``pc`` (V, 3), pixels ``uv`` (S, 2), which are seen (S,) (facing the camera, not
+        covered by another part of the face, clear of the face's outline by this level's
+        blur) and their shading basis (:func:`shading_basis`, the brightness's order). The
+        peer's (the brightness's term, prepared first at each step) when it made them at
+        ``est`` on this level: the same samples, the same pose."""
+        peer = self._peer
+        if peer is not None and peer._geom is not None:
+            at, level, geom = peer._geom
+            if at is est and level == self._level:
+                self._unoccluded, self._occluded_at = peer._unoccluded, est
+                return geom
         pc = self._camera_points(est)
         uv = self._pixels(pc, self._all)
+        seen = _pk.facing(pc, self._triangles, self._tri_index) > FACING_MIN
+        if self._unoccluded is None:
+            # (once a round: a step moves the skin by far less than a part of the face is
+            # thick)
+            if peer is not None and peer._occluded_at is est:
+                self._unoccluded = peer._unoccluded
+            else:
+                self._unoccluded = unoccluded(
+                    self.app.samples, self.app.triangles, self.camera, pc, self._frame_hw
+                )
+            self._occluded_at = est
+        seen &= self._unoccluded
+        if self.app.outline is not None:
+            line = self.camera.project(pc[self.app.outline])
+            blur = self.app.levels[self._level]
+            seen = _pk.clear_of_polyline(uv, np.ascontiguousarray(line),
+                                         OUTLINE_BLURS * blur + 1.0, seen)  # fmt: skip
+        basis = _pk.shading_basis(pc, self._triangles, self._tri, self._bary, SHADING_ORDER)
+        geom = (pc, uv, seen, basis)
+        self._geom = (est, self._level, geom)
+        return geom
+
+    def begin(self, est: Estimate) -> None:
+        """A step's start at ``est``: its level, and the samples' geometry there
+        (:meth:`_geometry`). :meth:`prepare` begins its step itself unless this was called
+        at ``est`` just before it (by :class:`ChannelTerms`, which wants the geometry made
+        before the step's other work)."""
+        self._level = self._level_for(self._step)
+        self._step += 1
+        self._here = self._geometry(est)
+        self._begun = est
+
+    def prepare(self, est: Estimate) -> None:
+        if self._begun is not est:
+            self.begin(est)
+        self._begun = None  # (the step begun is taken)
+        pc, uv, seen, basis = self._here
         if not self._images:
             self._crop(uv)
         a = self.app.values[self._level]
         read = self._read_at(uv)
         val = np.ascontiguousarray(read[:, 0])
-        vis = _pk.facing(pc, self._triangles, self._tri_index) > FACING_MIN
-        if self._unoccluded is None:
-            # (once a round: a step moves the skin by far less than a part of the face is
-            # thick)
-            peer = self._peer
-            if peer is not None and peer._occluded_at is est:
-                self._unoccluded = peer._unoccluded
-            else:
-                self._unoccluded = unoccluded(
-                    self.app.samples, self.app.triangles, self.camera, pc, self._grey.shape
-                )
-            self._occluded_at = est
-        vis &= self._unoccluded
-        ok = vis & np.isfinite(a) & np.isfinite(val)
+        ok = seen & np.isfinite(a) & np.isfinite(val)
         blur = self.app.levels[self._level]
-        if self.app.outline is not None:
-            line = self.camera.project(pc[self.app.outline])
-            ok = _pk.clear_of_polyline(uv, np.ascontiguousarray(line),
-                                       OUTLINE_BLURS * blur + 1.0, ok)  # fmt: skip
-        scale, off, lit = self._fit_light(pc, val, ok if self._w is None else ok & (self._w > 0))
+        scale, off, lit = self._fit_light(pc, basis, val,
+                                          ok if self._w is None else ok & (self._w > 0))  # fmt: skip
         self._light, self._lit = (scale, off), lit
         indep = min(1.0, (self.app.spacing_px / (2.0 * blur)) ** 2)
         self._w = _pk.step_weights(val, lit, ok, self.sigma, self.huber, indep, self.weight,
@@ -763,10 +816,37 @@ class PhotometricTerm:
         jt, res = self._weighted_rows(est, weighted=False)
         return jt.T, res, self._use
 
+    def _duv(self, est: Estimate) -> np.ndarray:
+        """The vertices' pixel derivatives (V, 2, n) at ``est``
+        (:func:`~myoface.analysis._photokernels.vertex_duv`; the peer's when made at ``est``)."""
+        peer = self._peer
+        if peer is not None and peer._duv_at is not None and peer._duv_at[0] is est:
+            return peer._duv_at[1]
+        if self._duv_at is not None and self._duv_at[0] is est:
+            return self._duv_at[1]
+        cam = self.camera
+        duv = _pk.vertex_duv(
+            np.ascontiguousarray(est.pose.rotation, dtype=np.float64),
+            np.ascontiguousarray(est.pose.translation_mm, dtype=np.float64),
+            np.ascontiguousarray(est.shape, dtype=np.float64),
+            np.ascontiguousarray(est.jac, dtype=np.float64),
+            np.ascontiguousarray(est.free, dtype=np.int64),
+            float(cam.focal_px), float(cam.cx), float(cam.cy),
+        )  # fmt: skip
+        self._duv_at = (est, duv)
+        return duv
+
     def normal_equations(self, est: Estimate):
-        # (the compiled Gram of contiguous rows, on this thread: BLAS's threads on a busy
-        # 2-core machine took 1-11 ms for this 41 x 2600 product)
-        return _gram(*self._weighted_rows(est))
+        # (summed over the vertex pairs the samples' triangles make, then one product with
+        # the unknowns per vertex: _photokernels.pair_normal_equations; compiled, on this
+        # thread: BLAS's threads on a busy 2-core machine took 1-11 ms for a 41 x 2600 Gram)
+        ptr, nbr, slot = self.app.pairs(len(est.shape))
+        kb = np.zeros((len(nbr), 4))
+        e = np.zeros((len(est.shape), 2))
+        _pk.pair_sums(kb, e, self._tri, self._bary, self._tri_index, self._use,
+                      np.ascontiguousarray(self._reading(est)), self._lit, self._w, self.sigma,
+                      slot)  # fmt: skip
+        return _pk.pair_normal_equations(self._duv(est), kb, e, ptr, nbr)
 
     def occlusion(self, est: Estimate) -> float:
         """The share of the face's visible, textured patches that do not look as they did
@@ -808,3 +888,58 @@ class PhotometricTerm:
     def cost(self, est: Estimate) -> float:
         val = self._reading(est, gradient=False)
         return float(_pk.weighted_cost(val, self._lit, self._w, self._use, self.sigma))
+
+
+class ChannelTerms:
+    """The photometric terms of one frame's channels (the brightness's first, then those that
+    take its geometry: ``peer``) as one term of the energy, their steps made side by side: at
+    each step the first term's geometry on the calling thread, then the other channels'
+    reads, lights, weights and normal equations on ``pool``'s thread while the calling thread
+    makes the first's (their compiled loops and OpenCV's reads release the interpreter's
+    lock: with the face detector's thread the fit has the machine's two cores). The
+    energy, its normal equations and the steps' schedule are the terms' own, summed."""
+
+    def __init__(self, terms, pool):
+        self.terms = list(terms)
+        self.pool = pool
+        self._ne = None  # (the estimate, the summed normal equations there)
+
+    def restart(self) -> None:
+        for t in self.terms:
+            t.restart()
+        self._ne = None
+
+    @property
+    def settling(self) -> bool:
+        return any(t.settling for t in self.terms)
+
+    def advance(self) -> None:
+        for t in self.terms:
+            if t.settling:
+                t.advance()
+
+    def occlusion(self, est: Estimate) -> float:
+        return self.terms[0].occlusion(est)
+
+    @staticmethod
+    def _step(term, est):
+        term.prepare(est)
+        return term.normal_equations(est)
+
+    def prepare(self, est: Estimate) -> None:
+        first, rest = self.terms[0], self.terms[1:]
+        first.begin(est)  # (the geometry the others take)
+        futures = [self.pool.submit(self._step, t, est) for t in rest]
+        h, b = self._step(first, est)
+        for f in futures:
+            h2, b2 = f.result()
+            h, b = h + h2, b + b2
+        self._ne = (est, (h, b))
+
+    def normal_equations(self, est: Estimate):
+        if self._ne is None or self._ne[0] is not est:
+            self.prepare(est)
+        return self._ne[1]
+
+    def cost(self, est: Estimate) -> float:
+        return float(sum(t.cost(est) for t in self.terms))
