@@ -5,7 +5,9 @@ One pass of ``myoface analyze --photometric`` over the sample video (as the benc
 output files), after a short warm-up pass (numba's compilation, the model's build). The
 term's ``prepare``, ``normal_equations`` and ``cost`` are timed in CPU time of the thread that
 calls them (``time.thread_time``: the machine is shared), and the fit's CPU per frame is the
-fit's own timing (``ModelFit.timings["fit_cpu_s"] / fits``). ``--repeats N`` runs the pass N
+fit's own timing (``ModelFit.timings["fit_cpu_s"] / fits``: the fit's thread; the
+photometric channels' second thread, :class:`~myoface.analysis.photometric.ChannelTerms`, is
+in the process CPU), and the pass's wall time a frame. ``--repeats N`` runs the pass N
 times and prints each and their medians; ``--cprofile`` adds the pass's cProfile (the top
 functions by own time, of the photometric module and what it calls; cProfile's overhead
 inflates small calls); ``--parts`` times the term's pieces (its private steps, the compiled
@@ -90,6 +92,7 @@ def one_pass(path, cprofile: bool = False, parts: bool = False) -> dict:
         "steps_per_frame": steps / max(n, 1),
         "process_cpu_s": cpu,
         "fit_cpu_ms_per_frame": 1e3 * t["fit_cpu_s"] / max(t["fits"], 1),
+        "wall_ms_per_frame": 1e3 * t["wall_s"] / max(n, 1),
     }
     for k in names:
         calls, s = acc[k]
@@ -125,11 +128,11 @@ def main(argv=None) -> None:
             f"ms  cost {r['cost_ms']:.3f} ms x {r['cost_calls'] / max(r['steps'], 1):.2f}/step  "
             f"term {r['term_ms_per_step']:.3f} ms/step  occlusion {r['occlusion_ms']:.2f} "
             f"ms/frame  fit CPU {r['fit_cpu_ms_per_frame']:.1f} ms/frame  "
-            f"process CPU {r['process_cpu_s']:.2f} s"
+            f"process CPU {r['process_cpu_s']:.2f} s  wall {r['wall_ms_per_frame']:.1f} ms/frame"
         )
     if a.repeats > 1:
         keys = ("prepare_ms", "normal_equations_ms", "cost_ms", "term_ms_per_step",
-                "fit_cpu_ms_per_frame")  # fmt: skip
+                "fit_cpu_ms_per_frame", "process_cpu_s", "wall_ms_per_frame")  # fmt: skip
         print("median: " + "  ".join(f"{k} {statistics.median(r[k] for r in runs):.3f}"
                                      for k in keys))  # fmt: skip
     if a.parts:

@@ -71,6 +71,24 @@ a frame. Of a step what is left (``tools/photometric_profile.py --parts``): the 
 and their Gram ~0.25 ms, the reads of the image (cv2's remap, ~0.17 ms the step's, ~0.1 ms a
 trial's: kept, its interpolation at 1/32 pixel is what the results are), the light ~0.2 ms;
 once a frame, the crop's blurs and gradients ~1.9 ms and the z-buffer ~1.3 ms.
+
+Since 2026-12-04 (session 32): with the redness (two terms) a step's work is made side by side
+(:class:`ChannelTerms`: the brightness's geometry first, on the fit's thread, then the
+redness's read, light, weights and normal equations on a second thread while the fit's thread
+makes the brightness's; the face detector's thread leaves most of the second core idle); the
+samples' geometry (camera points, pixels, facing, visibility, outline, shading basis) is made
+once a step for both channels; the normal equations are summed over the vertex pairs that
+share a triangle before the product with the unknowns (:func:`~myoface.analysis._photokernels.
+pair_normal_equations`, the same to 1e-14); a frame takes at most
+:attr:`~myoface.analysis.weights.FitSettings.photo_iterations` (5) steps; the channel is made
+on the crop only. Measured on the sample (``tools/photometric_profile.py``'s pass, its
+``wall`` and CPU; two passes of each tree alternating, f003df0 against this): wall 37.1,
+40.1 -> 28.5, 32.4 ms a frame, process CPU 46.1, 50.0 -> 38.5, 44.7 ms, the fit's thread 26.5,
+28.2 -> 15.4, 17.4 ms; of that the steps' cap alone 26.2 -> 21.0 ms. In the full run of
+BENCHMARKS.md (05:45 UTC) ``fps_photometric`` 29.7 frames/s against the default's 50.6 and
+MediaPipe's 159.9 (0.59 of the default's and 0.186x MediaPipe, where the run of 03:50 UTC had
+0.39 and 0.105x); every photometric variant's accuracy in that run the same as before to 0.01
+(the known warps to 2e-4; gaze 7.14 -> 7.03 deg).
 """
 
 from __future__ import annotations
