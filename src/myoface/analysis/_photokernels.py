@@ -1,8 +1,9 @@
 """Compiled inner loops of the photometric term (:class:`~myoface.analysis.photometric.
 PhotometricTerm`): per Gauss-Newton step, the samples' camera points and pixels, their
 triangles' facing, their distance to the face's outline, the frame's light (its normal
-equations over the samples), the samples' weights, the weighted rows of the term's Jacobian
-and its cost.
+equations over the samples), the samples' weights, the term's normal equations (summed over
+the mesh's vertex pairs, :func:`pair_normal_equations`), the weighted rows of its Jacobian
+(the rows themselves, :func:`weighted_rows`: the tests' and the tools') and its cost.
 
 They compute what the numpy code they replace computed (the same formulas, the same order of
 the operations on each sample; sums over the samples in another order, so the normal
@@ -288,43 +289,10 @@ def weighted_rows(rot, trans, shape, jac, free, f, cx, cy, tri, bary, use, samp,
     A sample's row is the image's gradient times the derivative of its pixel, its
     triangle's vertices' derivatives (``d(u, v)/dP dP/d(unknowns)``, made once per vertex)
     by its barycentric coordinates."""
-    nv = shape.shape[0]
-    nf = free.shape[0]
-    n = 6 + nf
     # per vertex, d(u, v)/d(unknowns) (V, 2, n): a sample's row is then its three vertices'
     # contiguous rows combined
-    duv = np.empty((nv, 2, n))
-    for v in range(nv):
-        x0, x1, x2 = shape[v, 0], shape[v, 1], shape[v, 2]
-        y0 = rot[0, 0] * x0 + rot[0, 1] * x1 + rot[0, 2] * x2
-        y1 = rot[1, 0] * x0 + rot[1, 1] * x1 + rot[1, 2] * x2
-        y2 = rot[2, 0] * x0 + rot[2, 1] * x1 + rot[2, 2] * x2
-        pc0, pc1, pc2 = y0 + trans[0], y1 + trans[1], y2 + trans[2]
-        d = max(-pc2, 1e-6)
-        # d(u, v)/dP: (a00, 0, a02), (0, a11, a12)
-        a00, a02 = f / d, f * pc0 / d**2
-        a11, a12 = -f / d, -f * pc1 / d**2
-        # omega x (R X) = -[RX]x omega; dt: I; dc: R dX/dc
-        duv[v, 0, 0] = a02 * y1
-        duv[v, 0, 1] = a00 * y2 - a02 * y0
-        duv[v, 0, 2] = -a00 * y1
-        duv[v, 1, 0] = -a11 * y2 + a12 * y1
-        duv[v, 1, 1] = -a12 * y0
-        duv[v, 1, 2] = a11 * y0
-        duv[v, 0, 3], duv[v, 0, 4], duv[v, 0, 5] = a00, 0.0, a02
-        duv[v, 1, 3], duv[v, 1, 4], duv[v, 1, 5] = 0.0, a11, a12
-        # (a R) . dX/dc
-        e00 = a00 * rot[0, 0] + a02 * rot[2, 0]
-        e01 = a00 * rot[0, 1] + a02 * rot[2, 1]
-        e02 = a00 * rot[0, 2] + a02 * rot[2, 2]
-        e10 = a11 * rot[1, 0] + a12 * rot[2, 0]
-        e11 = a11 * rot[1, 1] + a12 * rot[2, 1]
-        e12 = a11 * rot[1, 2] + a12 * rot[2, 2]
-        for j in range(nf):
-            m = free[j]
-            j0, j1, j2 = jac[v, 0, m], jac[v, 1, m], jac[v, 2, m]
-            duv[v, 0, 6 + j] = e00 * j0 + e01 * j1 + e02 * j2
-            duv[v, 1, 6 + j] = e10 * j0 + e11 * j1 + e12 * j2
+    duv = vertex_duv(rot, trans, shape, jac, free, f, cx, cy)
+    n = duv.shape[2]
     nu = use.shape[0]
     rw = np.empty(nu)
     jt = np.empty((n, nu))
