@@ -165,28 +165,36 @@ def normal_equations(
 @njit(cache=True, nogil=True, fastmath=True)
 def _gram(jt, r):
     """``(jt jt^T, -jt r)`` for ``jt`` (n, R): dot products of contiguous rows (vectorised:
-    the order of the sums is the compiler's), four rows by four at a time (each pair of
-    loads feeds 16 products, where a dot product at a time loads two numbers for each: 3-4x
-    faster on 45 x 1404)."""
+    the order of the sums is the compiler's; :func:`cross_gram`)."""
     n, nr = jt.shape
-    h = np.empty((n, n))
     b = np.empty(n)
     for i in range(n):
         acc = 0.0
         for q in range(nr):
             acc += jt[i, q] * r[q]
         b[i] = -acc
-    blk = np.empty((4, 4))
+    return cross_gram(jt, jt), b
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def cross_gram(at, bt):
+    """The symmetric ``at bt^T`` (n, n) of ``at``, ``bt`` (n, R) whose product is symmetric
+    (``jt jt^T``; the photometric term's ``D^T (K D)``): its upper triangle, four rows by four
+    (each pair of loads feeds 16 products, where a dot product at a time loads two numbers
+    for each: 3-4x faster on 45 x 1404), mirrored."""
+    n, nr = at.shape
+    h = np.empty((n, n))
     for i in range(0, n, 4):
         for j in range(i, n, 4):
-            if i + 4 <= n and j + 4 <= n:
+            i1, j1 = min(i + 4, n), min(j + 4, n)
+            if i1 - i == 4 and j1 - j == 4:
                 a00, a01, a02, a03 = 0.0, 0.0, 0.0, 0.0
                 a10, a11, a12, a13 = 0.0, 0.0, 0.0, 0.0
                 a20, a21, a22, a23 = 0.0, 0.0, 0.0, 0.0
                 a30, a31, a32, a33 = 0.0, 0.0, 0.0, 0.0
                 for q in range(nr):
-                    x0, x1, x2, x3 = jt[i, q], jt[i + 1, q], jt[i + 2, q], jt[i + 3, q]
-                    y0, y1, y2, y3 = jt[j, q], jt[j + 1, q], jt[j + 2, q], jt[j + 3, q]
+                    x0, x1, x2, x3 = at[i, q], at[i + 1, q], at[i + 2, q], at[i + 3, q]
+                    y0, y1, y2, y3 = bt[j, q], bt[j + 1, q], bt[j + 2, q], bt[j + 3, q]
                     a00 += x0 * y0
                     a01 += x0 * y1
                     a02 += x0 * y2
@@ -203,23 +211,21 @@ def _gram(jt, r):
                     a31 += x3 * y1
                     a32 += x3 * y2
                     a33 += x3 * y3
-                blk[0, 0], blk[0, 1], blk[0, 2], blk[0, 3] = a00, a01, a02, a03
-                blk[1, 0], blk[1, 1], blk[1, 2], blk[1, 3] = a10, a11, a12, a13
-                blk[2, 0], blk[2, 1], blk[2, 2], blk[2, 3] = a20, a21, a22, a23
-                blk[3, 0], blk[3, 1], blk[3, 2], blk[3, 3] = a30, a31, a32, a33
-                for di in range(4):
-                    for dj in range(4):
-                        h[i + di, j + dj] = blk[di, dj]
-                        h[j + dj, i + di] = blk[di, dj]
+                h[i, j], h[i, j + 1], h[i, j + 2], h[i, j + 3] = a00, a01, a02, a03
+                h[i + 1, j], h[i + 1, j + 1], h[i + 1, j + 2], h[i + 1, j + 3] = a10, a11, a12, a13
+                h[i + 2, j], h[i + 2, j + 1], h[i + 2, j + 2], h[i + 2, j + 3] = a20, a21, a22, a23
+                h[i + 3, j], h[i + 3, j + 1], h[i + 3, j + 2], h[i + 3, j + 3] = a30, a31, a32, a33
             else:  # (the last rows, fewer than four)
-                for ii in range(i, min(i + 4, n)):
-                    for jj in range(j, min(j + 4, n)):
+                for ii in range(i, i1):
+                    for jj in range(j, j1):
                         acc = 0.0
                         for q in range(nr):
-                            acc += jt[ii, q] * jt[jj, q]
+                            acc += at[ii, q] * bt[jj, q]
                         h[ii, jj] = acc
-                        h[jj, ii] = acc
-    return h, b
+    for i in range(n):  # (the upper triangle, mirrored)
+        for j in range(i + 1, n):
+            h[j, i] = h[i, j]
+    return h
 
 
 @njit(cache=True, nogil=True)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from myoface.analysis._fitkernels import vertex_normals
+from myoface.analysis._fitkernels import cross_gram, vertex_normals
 
 
 @njit(cache=True, nogil=True)
@@ -504,55 +504,4 @@ def pair_normal_equations(duv, kb, e, ptr, nbr):
             gt[j, 2 * c] = g0[j]
             gt[j, 2 * c + 1] = g1[j]
             b[j] -= duv[v, 0, j] * e0 + duv[v, 1, j] * e1
-    return _cross_gram(dt, gt), b
-
-
-@njit(cache=True, nogil=True, fastmath=True)
-def _cross_gram(at, bt):
-    """The symmetric ``at bt^T`` (n, n) of ``at``, ``bt`` (n, R) whose product is symmetric
-    (``D^T (K D)``): its upper triangle, four rows by four (as
-    :func:`~myoface.analysis._fitkernels._gram`), mirrored."""
-    n, nr = at.shape
-    h = np.empty((n, n))
-    for i in range(0, n, 4):
-        for j in range(i, n, 4):
-            i1, j1 = min(i + 4, n), min(j + 4, n)
-            if i1 - i == 4 and j1 - j == 4:
-                a00, a01, a02, a03 = 0.0, 0.0, 0.0, 0.0
-                a10, a11, a12, a13 = 0.0, 0.0, 0.0, 0.0
-                a20, a21, a22, a23 = 0.0, 0.0, 0.0, 0.0
-                a30, a31, a32, a33 = 0.0, 0.0, 0.0, 0.0
-                for q in range(nr):
-                    x0, x1, x2, x3 = at[i, q], at[i + 1, q], at[i + 2, q], at[i + 3, q]
-                    y0, y1, y2, y3 = bt[j, q], bt[j + 1, q], bt[j + 2, q], bt[j + 3, q]
-                    a00 += x0 * y0
-                    a01 += x0 * y1
-                    a02 += x0 * y2
-                    a03 += x0 * y3
-                    a10 += x1 * y0
-                    a11 += x1 * y1
-                    a12 += x1 * y2
-                    a13 += x1 * y3
-                    a20 += x2 * y0
-                    a21 += x2 * y1
-                    a22 += x2 * y2
-                    a23 += x2 * y3
-                    a30 += x3 * y0
-                    a31 += x3 * y1
-                    a32 += x3 * y2
-                    a33 += x3 * y3
-                h[i, j], h[i, j + 1], h[i, j + 2], h[i, j + 3] = a00, a01, a02, a03
-                h[i + 1, j], h[i + 1, j + 1], h[i + 1, j + 2], h[i + 1, j + 3] = a10, a11, a12, a13
-                h[i + 2, j], h[i + 2, j + 1], h[i + 2, j + 2], h[i + 2, j + 3] = a20, a21, a22, a23
-                h[i + 3, j], h[i + 3, j + 1], h[i + 3, j + 2], h[i + 3, j + 3] = a30, a31, a32, a33
-            else:  # (the last rows, fewer than four)
-                for ii in range(i, i1):
-                    for jj in range(j, j1):
-                        acc = 0.0
-                        for q in range(nr):
-                            acc += at[ii, q] * bt[jj, q]
-                        h[ii, jj] = acc
-    for i in range(n):  # (the upper triangle, mirrored)
-        for j in range(i + 1, n):
-            h[j, i] = h[i, j]
-    return h
+    return cross_gram(dt, gt), b
