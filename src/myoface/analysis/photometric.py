@@ -816,16 +816,23 @@ class PhotometricTerm:
 
     def _weighted_rows(self, est: Estimate, weighted: bool = True):
         samp = self._reading(est)
-        cam = self.camera
         return _pk.weighted_rows(
+            *self._estimate_args(est), self._tri, self._bary, self._use,
+            np.ascontiguousarray(samp), self._lit, self._w if weighted else np.empty(0),
+            self.sigma,
+        )  # fmt: skip
+
+    def _estimate_args(self, est: Estimate) -> tuple:
+        """The kernels' view of ``est`` and the camera: rotation, translation, skin, its
+        response, the free contractions, the focal length and principal point."""
+        cam = self.camera
+        return (
             np.ascontiguousarray(est.pose.rotation, dtype=np.float64),
             np.ascontiguousarray(est.pose.translation_mm, dtype=np.float64),
             np.ascontiguousarray(est.shape, dtype=np.float64),
             np.ascontiguousarray(est.jac, dtype=np.float64),
             np.ascontiguousarray(est.free, dtype=np.int64),
             float(cam.focal_px), float(cam.cx), float(cam.cy),
-            self._tri, self._bary, self._use, np.ascontiguousarray(samp), self._lit,
-            self._w if weighted else np.empty(0), self.sigma,
         )  # fmt: skip
 
     def _rows(self, est: Estimate):
@@ -842,15 +849,7 @@ class PhotometricTerm:
             return peer._duv_at[1]
         if self._duv_at is not None and self._duv_at[0] is est:
             return self._duv_at[1]
-        cam = self.camera
-        duv = _pk.vertex_duv(
-            np.ascontiguousarray(est.pose.rotation, dtype=np.float64),
-            np.ascontiguousarray(est.pose.translation_mm, dtype=np.float64),
-            np.ascontiguousarray(est.shape, dtype=np.float64),
-            np.ascontiguousarray(est.jac, dtype=np.float64),
-            np.ascontiguousarray(est.free, dtype=np.int64),
-            float(cam.focal_px), float(cam.cx), float(cam.cy),
-        )  # fmt: skip
+        duv = _pk.vertex_duv(*self._estimate_args(est))
         self._duv_at = (est, duv)
         return duv
 
