@@ -198,6 +198,16 @@ class FitSettings:
     photometric: bool = False
     photo_sigma: float = 8.0
     photo_huber: float = 2.0
+    #: (MediaPipe's points under the photometric term: they read 0.5-0.7 of an expression's
+    #: motion, so they pull the fit's gains down, but they keep it from the pixels' wrong
+    #: minima where the model's appearance is least like the frame. Measured 2026-12-04 with
+    #: the redness, 0.1 / 0.03 / 0.01: the known warps (head still, plain) mouth corners' gain
+    #: 0.84 / - / 0.90, brows 0.81 / - / 0.86, eyelids 0.88 / - / 0.93, leak 0.107 / - / 0.090;
+    #: but single_face.mp4's validated fidelity 0.771 / 0.726 / 0.689 (mouth corners' gain
+    #: 0.84 / 0.73 / 0.69), the degraded head-motion renders, head moving, skin 0.95 / 1.00 /
+    #: 1.05 mm, head 1.14 / 1.20 / 1.24 deg, worst RMSE 0.248 / 0.277 / 0.297; head still skin
+    #: 0.65 / 0.70 / 0.76 mm: the real smile and the renders a camera degraded lose more than
+    #: the clean known warps gain. Kept at 0.1.)
     photo_landmark_weight: float = 0.1
     #: with :attr:`photometric`: the frame's redness (``R - G``) read as a second channel
     #: (:func:`~myoface.analysis.photometric.redness`), against the calibration frame's,
