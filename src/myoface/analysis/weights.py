@@ -263,7 +263,12 @@ class FitSettings:
     #: otherwise unchanged: what favours reading the moving skin) lower, brows' gain 0.88 /
     #: 0.74, mouth corners' 0.79 / 0.72, leak 0.063 / 0.13. Fixing the pose from the rigid
     #: skin's pixels first and the muscles from all of them then (two stages) took the head to
-    #: 1.22-1.30 deg but the skin to 1.80-2.05 mm: not done.
+    #: 1.22-1.30 deg but the skin to 1.80-2.05 mm: not done. Again with the redness
+    #: (2026-12-04, 0 / 0.25 / 0.5): the known warps, head still, plain, mouth corners' gain
+    #: 0.90 / - / 0.84, brows 0.92 / - / 0.81, eyelids 0.97 / - / 0.88, leak 0.047 / - / 0.107;
+    #: but single_face.mp4's fidelity 0.705 / 0.768 / 0.771 and the degraded head-motion
+    #: renders, head moving, skin 1.37 / 1.03 / 0.95 mm, median RMSE 0.187 / 0.150 / 0.146,
+    #: head 1.23 / 1.20 / 1.14 deg: kept at 0.5.
     photo_model_error: float = 0.5
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
