@@ -42,9 +42,10 @@ def _timed(cls, name, acc):
 
 
 #: with ``--parts``: the term's pieces timed too (those that exist in the tree profiled)
-PARTS = ("_crop", "_fit_light", "_read_at", "_at", "_weighted_rows", "_rows", "_reading")
+PARTS = ("_crop", "_light_basis", "_read_at", "_at", "_weighted_rows", "_rows", "_reading")
 KERNELS = ("camera_points", "sample_pixels", "facing", "clear_of_polyline", "shading_basis",
-           "light_system", "light_apply", "step_weights", "weighted_rows", "weighted_cost")  # fmt: skip
+           "light_system", "light_apply", "step_weights", "step_light", "weighted_rows",
+           "weighted_cost")  # fmt: skip
 
 
 def one_pass(path, cprofile: bool = False, parts: bool = False) -> dict:

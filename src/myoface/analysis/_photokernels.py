@@ -202,8 +202,8 @@ def light_system(basis, alb, region, n_regions, val, use, field):
     """The normal equations (gram (k, k), rhs (k,)) of the frame's light over the samples
     ``use`` (bool, S): the columns ``alb * basis``, with ``field`` the basis' normal columns
     ``basis[:, 1:]`` too (a field linear in the normals, added:
-    :meth:`~myoface.analysis.photometric.PhotometricTerm._fit_colour_light`), and one per
-    region (:meth:`~myoface.analysis.photometric.PhotometricTerm._fit_light`); ``k = nb (+
+    :meth:`~myoface.analysis.photometric.PhotometricTerm._light_basis`), and one per
+    region (:meth:`~myoface.analysis.photometric.PhotometricTerm._light_basis`); ``k = nb (+
     nb - 1) + n_regions``, the gram plus 1e-9 on its diagonal."""
     ns, nb = basis.shape
     nf = nb + nb - 1 if field else nb
@@ -276,6 +276,58 @@ def step_weights(val, lit, ok, sigma, huber, indep, weight, own, outliers, outli
             hub = 0.0
         w[s] = indep * hub * weight * own[s]
     return w
+
+
+@njit(cache=True, nogil=True)
+def step_light(read, a, seen, prev_w, basis, alb_ok, alb0, region, n_regions, field, sigma,
+               huber, indep, weight, own, outliers, outlier_sigmas):  # fmt: skip
+    """A step's light and weights from what it read (:meth:`~myoface.analysis.photometric.
+    PhotometricTerm.prepare`): ``read`` (S, 3) the image and its gradient at the samples;
+    a sample is usable where it is ``seen``, its appearance ``a`` (S,) known and its pixel
+    read; the light (:func:`light_system`, :func:`light_apply`, ``basis`` and ``field`` as
+    there) fitted over the usable samples whose albedo is known (``alb_ok``) and, after the
+    first step (``prev_w`` not empty), that weighed at the last (at least 40 of them, else
+    no light: scale 1, offset 0); then their weights (:func:`step_weights`). Returns the
+    samples' scale, offset, appearance under the light and weight (S,), the samples that
+    weigh (N,), and what was read there (N, 3) and its image (N,)."""
+    ns = read.shape[0]
+    val = np.empty(ns)
+    ok = np.zeros(ns, dtype=np.bool_)
+    m = np.zeros(ns, dtype=np.bool_)
+    after = prev_w.shape[0] > 0
+    count = 0
+    for s in range(ns):
+        v = read[s, 0]
+        val[s] = v
+        usable = seen[s] and np.isfinite(a[s]) and np.isfinite(v)
+        ok[s] = usable
+        if usable and alb_ok[s] and (not after or prev_w[s] > 0):
+            m[s] = True
+            count += 1
+    if count < 40:
+        scale = np.ones(ns)
+        off = np.zeros(ns)
+        lit = alb0.copy()
+    else:
+        gram, rhs = light_system(basis, alb0, region, n_regions, val, m, field)
+        sol = np.linalg.solve(gram, rhs)
+        scale, off, lit = light_apply(basis, sol, region, alb0, field)
+    w = step_weights(val, lit, ok, sigma, huber, indep, weight, own, outliers, outlier_sigmas)
+    n = 0
+    for s in range(ns):
+        if w[s] > 0:
+            n += 1
+    use = np.empty(n, dtype=np.int64)
+    at = np.empty((n, 3))
+    at0 = np.empty(n)
+    i = 0
+    for s in range(ns):
+        if w[s] > 0:
+            use[i] = s
+            at[i, 0], at[i, 1], at[i, 2] = read[s, 0], read[s, 1], read[s, 2]
+            at0[i] = read[s, 0]
+            i += 1
+    return scale, off, lit, w, use, at, at0
 
 
 @njit(cache=True, nogil=True)

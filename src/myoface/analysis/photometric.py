@@ -33,7 +33,7 @@ still: 0.63 to 0.53 mm; 2026-12-01). Second-order harmonics (Face2Face's) are no
 against the teeth and the mouth's dark show in it where the brightness shows them faintly.
 Its albedo is over the brightness's shading at calibration, and its light is the
 brightness's model plus a field linear in the normals (:meth:`PhotometricTerm.
-_fit_colour_light`). That weights module has its sigma and what it measured.
+_light_basis`). That weights module has its sigma and what it measured.
 
 **Coarse to fine.** The images are blurred by a Gaussian of :data:`BLUR_SCHEDULE_PX` pixels
 (the first steps on the most blurred: it reaches a few pixels of motion), each level with its
@@ -127,7 +127,7 @@ LIGHT_SPLIT_Y_MM = -20.0
 LIGHT_REGIONS = 4
 #: the shading's smooth field over the face, opt-in: the appearance's scale multiplied also by
 #: the monomials of the samples' head-frame x, y up to this order (0: none), fitted with the
-#: light (:meth:`PhotometricTerm._fit_light`): the shading that a real expression changes
+#: light (:meth:`PhotometricTerm._light_basis`): the shading that a real expression changes
 #: over a broad patch (a cheek bulging in a smile turns its normals; the face model's skin
 #: does not bulge the same) which one light's shading of the model's normals and an offset
 #: per quarter do not follow. Measured 2026-12-02 (0 / 1 / 2): ``single_face.mp4``'s
@@ -588,6 +588,7 @@ class PhotometricTerm:
         self._region = np.ascontiguousarray(appearance.region, dtype=np.int64)
         self._all = np.arange(len(s), dtype=np.int64)
         self._alb0 = [np.nan_to_num(a) for a in appearance.albedo]
+        self._alb_ok = [np.isfinite(a) for a in appearance.albedo]
         prior = appearance.prior
         self._own = np.ones(len(s)) if prior is None else np.asarray(prior, dtype=np.float64)
 
@@ -639,50 +640,32 @@ class PhotometricTerm:
                         borderMode=cv2.BORDER_CONSTANT, borderValue=(np.nan,) * 4)  # fmt: skip
         return out.reshape(-1, 3).astype(np.float64)
 
-    def _fit_light(self, pc, basis, val, use):
-        """The frame's light (least squares over the samples ``use``): brightness = albedo
-        times the shading of the samples' normals at the vertices ``pc`` (camera frame)
-        (:func:`shading_basis`, one light for the face: as the head turns under a lamp each
-        point's shading changes with its normal), plus an offset per region
-        (:data:`LIGHT_REGIONS`: a camera's flare, a second light's spill). Returns each
-        sample's (scale (S,), offset (S,)) and its appearance under that light (S,).
-        ``basis``: the samples' :func:`shading_basis` at ``pc`` (:meth:`_geometry`)."""
-        alb = self.app.albedo[self._level]
-        alb0 = self._alb0[self._level]
+    def _light_basis(self, pc, basis):
+        """The columns of the frame's light, fitted by least squares at each step
+        (:func:`~myoface.analysis._photokernels.step_light`) over the samples that weigh:
+        brightness = albedo times the shading of the samples' normals at the vertices ``pc``
+        (camera frame) (``basis``, their :func:`shading_basis` there, :meth:`_geometry`: one
+        light for the face, so that as the head turns under a lamp each point's shading
+        changes with its normal), plus an offset per region (:data:`LIGHT_REGIONS`: a camera's
+        flare, a second light's spill). Returns the basis and whether the light has a field
+        of its own (the redness's).
+
+        The redness's (``R - G``) light is the brightness's model plus a field linear in the
+        normals: lights of other colours (a warm lamp and a cool window, the renderer's key
+        and fill) shade red and green differently, ``r_R L_R(n) - r_G L_G(n)``; the skin's and
+        the lips' red reflectance ``r_R`` is nearly the same, so the difference of the two
+        lights is a field in the normals of its own (the head-motion renders, head moving: the
+        head 1.23 deg without the field, 1.11 with it; 2026-12-04). (The normal equations are
+        summed in a compiled loop over the samples, not by BLAS: OpenBLAS's threads, woken
+        for this 2600 x 8 product, spun on the second core that MediaPipe runs on; numpy's
+        least squares on the redness's 2600 x 11 design took ~6 ms a step.)"""
         if self.channel == "redness":
-            return self._fit_colour_light(pc, basis, val, use, alb, alb0)
+            if SHADING_ORDER != 1:  # (the brightness's basis is of another order)
+                basis = _pk.shading_basis(pc, self._triangles, self._tri, self._bary, 1)
+            return basis, True
         if SHADE_FIELD_ORDER > 0:
             basis = np.ascontiguousarray(np.column_stack([basis, self._field()]))
-        m = use & np.isfinite(alb)
-        if np.count_nonzero(m) < 40:
-            n = len(val)
-            return np.ones(n), np.zeros(n), alb0.copy()
-        # (the normal equations summed in a compiled loop over the samples, not by BLAS:
-        # OpenBLAS's threads, woken for this 2600 x 8 product, then spin on the second core
-        # that MediaPipe runs on)
-        gram, rhs = _pk.light_system(basis, alb, self._region, LIGHT_REGIONS, val, m, False)
-        sol = np.linalg.solve(gram, rhs)
-        return _pk.light_apply(basis, sol, self._region, alb0, False)
-
-    def _fit_colour_light(self, pc, basis, val, use, alb, alb0):
-        """:meth:`_fit_light` of the redness (``R - G``): the shading of the samples' normals
-        times their albedo, as the brightness's, plus a field linear in the normals and an
-        offset per region. Lights of other colours (a warm lamp and a cool window, the
-        renderer's key and fill) shade red and green differently, ``r_R L_R(n) - r_G L_G(n)``;
-        the skin's and the lips' red reflectance ``r_R`` is nearly the same, so the
-        difference of the two lights is a field in the normals of its own (the head-motion
-        renders, head moving: the head 1.23 deg without the field, 1.11 with it; 2026-12-04)."""
-        if SHADING_ORDER != 1:  # (the brightness's basis is of another order)
-            basis = _pk.shading_basis(pc, self._triangles, self._tri, self._bary, 1)
-        m = use & np.isfinite(alb)
-        n = len(val)
-        if np.count_nonzero(m) < 40:
-            return np.ones(n), np.zeros(n), alb0.copy()
-        # (compiled normal equations, as the brightness's: numpy's least squares on this
-        # 2600 x 11 design took ~6 ms a step, its BLAS threads spinning on MediaPipe's core)
-        gram, rhs = _pk.light_system(basis, alb0, self._region, LIGHT_REGIONS, val, m, True)
-        sol = np.linalg.solve(gram, rhs)
-        return _pk.light_apply(basis, sol, self._region, alb0, True)
+        return basis, False
 
     def _field(self):
         """A smooth field over the face (S, k): the monomials of the samples' head-frame x,
@@ -786,20 +769,21 @@ class PhotometricTerm:
         pc, uv, seen, basis = self._here
         if not self._images:
             self._crop(uv)
-        a = self.app.values[self._level]
+        level = self._level
         read = self._read_at(uv)
-        val = np.ascontiguousarray(read[:, 0])
-        ok = seen & np.isfinite(a) & np.isfinite(val)
-        blur = self.app.levels[self._level]
-        scale, off, lit = self._fit_light(pc, basis, val,
-                                          ok if self._w is None else ok & (self._w > 0))  # fmt: skip
-        self._light, self._lit = (scale, off), lit
+        blur = self.app.levels[level]
         indep = min(1.0, (self.app.spacing_px / (2.0 * blur)) ** 2)
-        self._w = _pk.step_weights(val, lit, ok, self.sigma, self.huber, indep, self.weight,
-                                   self._own, not self.settling, OUTLIER_SIGMAS)  # fmt: skip
-        self._use = np.flatnonzero(self._w > 0)
-        at = read[self._use]
-        self._read = (est, self._level, at, np.ascontiguousarray(at[:, 0]))
+        light, field = self._light_basis(pc, basis)
+        # (the light's fit, the weights and the samples that weigh in one compiled call,
+        # without the interpreter's lock: the other channel's step runs beside it)
+        scale, off, lit, w, use, at, at0 = _pk.step_light(
+            read, self.app.values[level], seen, np.empty(0) if self._w is None else self._w,
+            light, self._alb_ok[level], self._alb0[level], self._region, LIGHT_REGIONS, field,
+            self.sigma, self.huber, indep, self.weight, self._own, not self.settling,
+            OUTLIER_SIGMAS,
+        )  # fmt: skip
+        self._light, self._lit, self._w, self._use = (scale, off), lit, w, use
+        self._read = (est, level, at, at0)
 
     def _reading(self, est: Estimate, gradient: bool = True) -> np.ndarray:
         """The image and its x and y gradient (N, 3) (``gradient`` False: the image (N,)
