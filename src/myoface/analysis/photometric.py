@@ -88,7 +88,13 @@ on the crop only. Measured on the sample (``tools/photometric_profile.py``'s pas
 BENCHMARKS.md (05:45 UTC) ``fps_photometric`` 29.7 frames/s against the default's 50.6 and
 MediaPipe's 159.9 (0.59 of the default's and 0.186x MediaPipe, where the run of 03:50 UTC had
 0.39 and 0.105x); every photometric variant's accuracy in that run the same as before to 0.01
-(the known warps to 2e-4; gaze 7.14 -> 7.03 deg).
+(the known warps to 2e-4; gaze 7.14 -> 7.03 deg). Where the rest goes (a pass with each
+piece timed): a step's wall time ~2.8 ms, of which the brightness's geometry 0.5 ms, its step
+1.7 ms (0.84 ms of CPU: the two threads share the interpreter's lock and the machine's two
+cores with the face detector) and the wait for the redness's step 0.5 ms. Its light, weights
+and read samples then went into one compiled call without the lock
+(:func:`~myoface.analysis._photokernels.step_light`; contractions.csv identical): wall 29.1,
+28.7 -> 27.9, 26.8 ms a frame (two passes of each, alternating).
 """
 
 from __future__ import annotations
