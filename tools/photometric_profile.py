@@ -36,6 +36,8 @@ def _timed(cls, name, acc):
             rec = acc[name]
             rec[0] += 1
             rec[1] += time.thread_time() - t0
+            if name == "prepare" and getattr(self, "channel", "grey") == "grey":
+                acc.setdefault("steps", [0, 0.0])[0] += 1  # (one brightness prepare a step)
 
     setattr(cls, name, wrapper)
     return orig
@@ -86,7 +88,8 @@ def one_pass(path, cprofile: bool = False, parts: bool = False) -> dict:
         for owner, k, f in reversed(patched):
             setattr(owner, k, f)
     t = bench._cache[("timings", "landmarks", None, True)]
-    steps = acc["prepare"][0]
+    # (a Gauss-Newton step prepares each channel's term: the brightness's count the steps)
+    steps = acc.get("steps", acc["prepare"])[0]
     out = {
         "frames": n,
         "steps": steps,
@@ -104,7 +107,7 @@ def one_pass(path, cprofile: bool = False, parts: bool = False) -> dict:
         1e3 * (acc["prepare"][1] + acc["normal_equations"][1] + acc["cost"][1]) / max(steps, 1)
     )
     out["profile"] = prof
-    out["parts"] = {k: v for k, v in acc.items() if k not in names}
+    out["parts"] = {k: v for k, v in acc.items() if k not in (*names, "steps")}
     return out
 
 

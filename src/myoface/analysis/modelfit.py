@@ -645,7 +645,7 @@ class ModelFit:
             return None
         s = self.settings
         out = [PhotometricTerm(image, self.appearance, self.camera, s.photo_sigma, s.photo_huber)]
-        if self.appearance_colour is not None:  # (the same samples: the brightness's z-buffer)
+        if self.appearance_colour is not None:  # (the same samples: the brightness's geometry)
             out.append(
                 PhotometricTerm(image, self.appearance_colour, self.camera,
                                 s.photo_colour_sigma, s.photo_huber, channel="redness",

@@ -553,9 +553,9 @@ class PhotometricTerm:
             raise MyofaceValueError(f"channel must be one of {sorted(CHANNELS)}; got {channel!r}")
         self.channel = channel
         #: a term on the same samples prepared before this one at each step (the brightness's,
-        #: for the redness's): its z-buffer of the round is taken, not made again
+        #: for the redness's): its geometry of the step (:meth:`_geometry`, its z-buffer of
+        #: the round too) is taken, not made again
         self._peer = peer
-        self._occluded_at = None  # (the estimate the z-buffer was made at)
         #: the frame; its channel (the brightness, or the redness: :data:`CHANNELS`) is made
         #: on the crop around the face only (:meth:`_crop`)
         self._frame = np.asarray(frame)
@@ -732,7 +732,7 @@ class PhotometricTerm:
         if peer is not None and peer._geom is not None:
             at, level, geom = peer._geom
             if at is est and level == self._level:
-                self._unoccluded, self._occluded_at = peer._unoccluded, est
+                self._unoccluded = peer._unoccluded
                 return geom
         pc = self._camera_points(est)
         uv = self._pixels(pc, self._all)
@@ -740,13 +740,9 @@ class PhotometricTerm:
         if self._unoccluded is None:
             # (once a round: a step moves the skin by far less than a part of the face is
             # thick)
-            if peer is not None and peer._occluded_at is est:
-                self._unoccluded = peer._unoccluded
-            else:
-                self._unoccluded = unoccluded(
-                    self.app.samples, self.app.triangles, self.camera, pc, self._frame_hw
-                )
-            self._occluded_at = est
+            self._unoccluded = unoccluded(
+                self.app.samples, self.app.triangles, self.camera, pc, self._frame_hw
+            )
         seen &= self._unoccluded
         if self.app.outline is not None:
             line = self.camera.project(pc[self.app.outline])
