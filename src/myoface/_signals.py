@@ -68,6 +68,22 @@ def interrupt_in(exc: BaseException | None) -> KeyboardInterrupt | None:
     return None
 
 
+def stop_signal_of(exc: BaseException | None) -> int | None:
+    """The stop signal that ``exc`` comes from, or None: the signal of the
+    :class:`Interrupted` among its causes (:func:`interrupt_in`; a plain KeyboardInterrupt is
+    SIGINT), or, for an ordinary error raised while a stop signal is noted and not yet raised
+    (:func:`pending`), that signal. The latter is a signal that landed inside a library and
+    broke it there: numba cut in the middle of compiling a function, its cache then failing
+    with "no compiled object yet" (a RuntimeError with no trace of the signal, seen in CI
+    2026-12-04); the user stopped the run, and that is what it says."""
+    interrupt = interrupt_in(exc)
+    if interrupt is not None:
+        return int(getattr(interrupt, "signum", signal.SIGINT))
+    if isinstance(exc, Exception) and _pending:
+        return _pending[-1]
+    return None
+
+
 def _signals() -> list[int]:
     return [getattr(signal, n) for n in STOP_SIGNALS if hasattr(signal, n)]
 

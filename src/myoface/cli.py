@@ -26,7 +26,7 @@ import warnings
 
 import myoface
 import myoface.commands
-from myoface._signals import interrupt_in, stop_signals
+from myoface._signals import clear_pending, interrupt_in, stop_signal_of, stop_signals
 from myoface.errors import MyofaceError, MyofaceUsageError, MyofaceWarning, user_message
 
 
@@ -121,22 +121,23 @@ def main(argv: list[str] | None = None) -> int:
                 raise
             print(f"{prog}: error: {_one_line(exc)}", file=sys.stderr)
             return 1
-        except (KeyboardInterrupt, SystemError) as err:
-            # (a signal that lands inside a C extension's callback, e.g. numba unpickling a
-            # compiled function, comes out as a SystemError caused by the Interrupted)
-            exc = interrupt_in(err)
-            if exc is None:
+        except BaseException as err:
+            # a stop signal, also one that came out of a library as another error: a
+            # SystemError caused by the Interrupted (numba unpickling a compiled function) or
+            # an error of a library cut by it (myoface._signals.stop_signal_of)
+            signum = stop_signal_of(err)
+            if signum is not None:
+                clear_pending()  # (seen: not delivered again)
+                name = signal.Signals(signum).name
+                # what the command kept, if it says (e.g. analyze's measured rows)
+                exc = interrupt_in(err) or err
+                kept = "".join(f"; {_one_line(n)}" for n in getattr(exc, "__notes__", ()))
+                print(f"{prog}: interrupted ({name}){kept}", file=sys.stderr)
+                return 128 + int(signum)
+            if debug or not isinstance(err, (OSError, MemoryError)):
                 raise
-            signum = getattr(exc, "signum", signal.SIGINT)
-            name = signal.Signals(signum).name
-            # what the command kept, if it says (e.g. analyze's measured rows)
-            kept = "".join(f"; {_one_line(n)}" for n in getattr(exc, "__notes__", ()))
-            print(f"{prog}: interrupted ({name}){kept}", file=sys.stderr)
-            return 128 + int(signum)
-        except (OSError, MemoryError) as exc:  # the machine's, not the input's: no traceback
-            if debug:
-                raise
-            what = "out of memory" if isinstance(exc, MemoryError) else _os_error(exc, args)
+            # the machine's, not the input's: no traceback
+            what = "out of memory" if isinstance(err, MemoryError) else _os_error(err, args)
             print(f"{prog}: error: {what}", file=sys.stderr)
             return 1
 
