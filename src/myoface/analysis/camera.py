@@ -13,6 +13,7 @@ term of the fit that compares the model with an image goes through them.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -152,15 +153,19 @@ def initial_pose(shape: np.ndarray, points: np.ndarray, camera: PinholeCamera) -
 
 
 def rotvec(rot: np.ndarray) -> np.ndarray:
-    """The rotation vector (3,) rad of a rotation matrix (the logarithm map)."""
-    cos = np.clip((np.trace(rot) - 1.0) / 2.0, -1.0, 1.0)
-    angle = np.arccos(cos)
-    axis = np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]])
+    """The rotation vector (3,) rad of a rotation matrix (the logarithm map). (In Python's
+    floats: the fit calls it for a 3 x 3 matrix at every step, where numpy's calls cost more
+    than the arithmetic.)"""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(rot, dtype=np.float64).tolist()
+    cos = min(max((r00 + r11 + r22 - 1.0) / 2.0, -1.0), 1.0)
+    angle = math.acos(cos)
+    axis = (r21 - r12, r02 - r20, r10 - r01)
     if angle < 1e-6:
-        return 0.5 * axis
+        return np.array([0.5 * a for a in axis])
     if angle > np.pi - 1e-6:
         return Rotation.from_matrix(rot).as_rotvec()
-    return axis * (angle / (2.0 * np.sin(angle)))
+    k = angle / (2.0 * math.sin(angle))
+    return np.array([a * k for a in axis])
 
 
 def rotmat(v: np.ndarray) -> np.ndarray:

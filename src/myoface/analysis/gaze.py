@@ -635,7 +635,7 @@ def _rss_numpy(px, bright, fixed, proj, centres, tilt, major, minor, edge_px, pu
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
 
 
-@numba.njit(cache=True, fastmath=_FAST, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, fastmath=_FAST, error_model="numpy", inline="always")
 def _logistic(z):  # pragma: no cover
     """The cover ``1 / (1 + exp(-z))`` of :func:`iris_cover` (1 above ``z`` = 30, 0 below -12),
     with ``exp`` as a polynomial the compiler can run on vectors: ``exp(t / 64) ** 64``, the
@@ -668,7 +668,7 @@ def _logistic(z):  # pragma: no cover
     return 0.0 if z < -12.0 else c
 
 
-@numba.njit(cache=True, fastmath=_FAST, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, fastmath=_FAST, error_model="numpy", inline="always")
 def _cover_z(x, y, cx, cy, tx, ty, ia, ib, major, edge_px):  # pragma: no cover
     """The logistic's argument of :func:`iris_cover` at the pixel ``(x, y)`` for the ellipse
     centred at ``(cx, cy)``, tilted ``(tx, ty)``, of inverse radii ``ia`` (major), ``ib``."""
@@ -681,7 +681,7 @@ def _cover_z(x, y, cx, cy, tx, ty, ia, ib, major, edge_px):  # pragma: no cover
     return z if rho > 1e-9 else major / edge_px
 
 
-@numba.njit(cache=True, fastmath=_FAST, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, fastmath=_FAST, error_model="numpy", inline="always")
 def _cover(x, y, cx, cy, tx, ty, ia, ib, major, edge_px):  # pragma: no cover
     """How much of the pixel ``(x, y)`` the ellipse covers (:func:`iris_cover`, one pixel):
     :func:`_logistic` of :func:`_cover_z`; 0 beyond 12 edge widths outside. Every compiled
@@ -689,7 +689,7 @@ def _cover(x, y, cx, cy, tx, ty, ia, ib, major, edge_px):  # pragma: no cover
     return _logistic(_cover_z(x, y, cx, cy, tx, ty, ia, ib, major, edge_px))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _rss_numba(px, bright, fixed, proj, centres, tilt, major, minor, edge_px,
                pupil_centres, pupil_major, pupil_minor):  # pragma: no cover  # fmt: skip
     """:func:`_rss_numpy`, compiled; no pupil when ``pupil_centres`` has no rows."""
@@ -784,7 +784,7 @@ def _candidates_rss(px, bright, fixed, proj, centres, tilt, major, minor, edge_p
     return _rss_numba(px, bright, fixed, proj, centres, tilt, major, minor, edge_px, *pupil)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _ellipse_of(ex, ey, ez, gx, gy, gz, depth, radius, f, cx, cy):  # pragma: no cover
     """:func:`iris_ellipses` for one gaze ``(gx, gy, gz)`` (camera frame) of the eyeball
     centred at ``(ex, ey, ez)``: centre (x, y), tilt (x, y), major, minor, cos."""
@@ -807,7 +807,7 @@ def _ellipse_of(ex, ey, ez, gx, gy, gz, depth, radius, f, cx, cy):  # pragma: no
     return x, y, tx, ty, major, minor, cos
 
 
-@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+@numba.njit(cache=True, nogil=True, fastmath=_FAST, error_model="numpy")
 def _iris_sums(xs, ys, bright, f0, f1, f2, f3, f4, i0, i1, cx, cy, tx, ty, ia, ib, major,
                edge_px, out):  # pragma: no cover  # fmt: skip
     """Over the pixels ``i0..i1``: the iris cover's sums of :func:`_rss_numba` (its square,
@@ -825,7 +825,7 @@ def _iris_sums(xs, ys, bright, f0, f1, f2, f3, f4, i0, i1, cx, cy, tx, ty, ia, i
     out[0], out[1], out[2], out[3], out[4], out[5], out[6] = ii, cb, u0, u1, u2, u3, u4
 
 
-@numba.njit(cache=True, fastmath=_FAST, error_model="numpy")
+@numba.njit(cache=True, nogil=True, fastmath=_FAST, error_model="numpy")
 def _pupil_sums(xs, ys, bright, f0, f1, f2, f3, f4, i0, i1, cx, cy, tx, ty, ia, ib, major,
                 qx, qy, pa, pb, pmajor, edge_px, out):  # pragma: no cover  # fmt: skip
     """:func:`_iris_sums` and the pupil's (centred at ``(qx, qy)``, the iris' tilt, inverse
@@ -858,7 +858,7 @@ def _pupil_sums(xs, ys, bright, f0, f1, f2, f3, f4, i0, i1, cx, cy, tx, ty, ia, 
     out[10], out[11], out[12], out[13], out[14] = v0, v1, v2, v3, v4
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _gaze_rss(xs, ys, bright, fx, proj, centre, rot, f, cx, cy, yaw, pitch, edge_px,
               pupil):  # pragma: no cover  # fmt: skip
     """:meth:`_Eye.rss` in one pass: for each candidate gaze ``(yaw, pitch)`` (K,) degrees,
@@ -957,7 +957,7 @@ def _gaze_rss(xs, ys, bright, fx, proj, centre, rot, f, cx, cy, yaw, pitch, edge
 # ------------------------------------------------------------------ the opening's pixels
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _opening_pixels(x0, y0, x1, y1, poly, upper, lower):  # pragma: no cover
     """The pixels (col, row) of the box ``x0..x1, y0..y1`` whose centres (col + 0.5, row +
     0.5) lie inside the closed polygon ``poly`` (M, 2) (even-odd rule), as (N, 2) centres,
@@ -990,7 +990,7 @@ def _opening_pixels(x0, y0, x1, y1, poly, upper, lower):  # pragma: no cover
     return px[:n], du[:n], dl[:n]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _polyline_distance(x, y, chain):  # pragma: no cover
     best = np.inf
     for i in range(chain.shape[0] - 1):
@@ -1028,7 +1028,7 @@ def _chain_distance(px, chain) -> np.ndarray:
     return np.sqrt(((p - q) ** 2).sum(-1)).min(axis=1)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _sorted_by_x(px, bright, fixed):  # pragma: no cover
     """The pixels' x, y, brightness and fixed columns (m, N), in the (stable) order of x."""
     o = np.argsort(px[:, 0], kind="mergesort")
@@ -1075,7 +1075,7 @@ class EyeSamples:
         return EyeSamples(*_checkerboard(self.px, self.bright, self.fixed))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _sample_columns(img, px, du, dl, iris_px, upper_margin, lower_margin, band, luma,
                     scale):  # pragma: no cover  # fmt: skip
     """What :func:`_eye_samples_numpy` makes of the opening's pixels ``px`` (N, 2) and their
@@ -1119,7 +1119,7 @@ def _sample_columns(img, px, du, dl, iris_px, upper_margin, lower_margin, band, 
     return out, bright, fixed, np.linalg.pinv(fixed.T @ fixed)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _checkerboard(px, bright, fixed):  # pragma: no cover
     """:meth:`EyeSamples.checkerboard`'s arrays: the pixels whose column + row is even, and
     the inverse of their fixed columns' normal matrix."""
@@ -1199,7 +1199,7 @@ def _eye_samples_numpy(frame, upper, lower, iris_px: float, settings: GazeSettin
 # ------------------------------------------------------------------ the eye's socket, learned
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _bilinear(img, r, c):  # pragma: no cover
     """``img`` (H, W) at (row ``r``, column ``c``), NaN outside or where a corner is NaN."""
     h, w = img.shape
@@ -1212,7 +1212,7 @@ def _bilinear(img, r, c):  # pragma: no cover
             + fr * ((1 - fc) * img[r0 + 1, c0] + fc * img[r0 + 1, c0 + 1]))  # fmt: skip
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _bilinear_at(img, rows, cols):  # pragma: no cover
     """:func:`_bilinear` at each of the points (N,)."""
     out = np.empty(rows.shape[0])
@@ -1221,7 +1221,7 @@ def _bilinear_at(img, rows, cols):  # pragma: no cover
     return out
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _project_head(points, rot, trans, f, cx, cy):  # pragma: no cover
     """Head-frame points (N, 3) mm through the pose (``rot``, ``trans``) and the pinhole
     camera (``f``, ``cx``, ``cy``) into the image (N, 2) px: ``camera.project(pose.apply(.))``."""
@@ -1238,7 +1238,7 @@ def _project_head(points, rot, trans, f, cx, cy):  # pragma: no cover
     return uv
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _luma_crop(img, x0, y0, x1, y1, luma, scale):  # pragma: no cover
     """The luma (rows ``y0..y1``, columns ``x0..x1``) of the image ``img`` (H, W, >= 3),
     divided by ``scale``."""
@@ -1250,7 +1250,7 @@ def _luma_crop(img, x0, y0, x1, y1, luma, scale):  # pragma: no cover
     return out
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _sample_patch(img, x0, y0, uv, valid):  # pragma: no cover
     """:func:`_bilinear` of the crop ``img`` (its pixel (0, 0) the frame's (``x0``, ``y0``))
     at the image points ``uv`` (N, 2) (pixel centres at + 0.5), NaN where not ``valid``."""
@@ -1261,7 +1261,7 @@ def _sample_patch(img, x0, y0, uv, valid):  # pragma: no cover
     return out
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _align_socket(img, x0, y0, points, rot, trans, f, cx, cy, tmpl, gx, gy, step_mm,
                   iris_c, iris_r, iterations, limit_mm, robust, prior_mm):  # pragma: no cover  # fmt: skip
     """The shift ``d`` (2,) mm (head frame x, y) by which the socket's grid ``points`` (N, 3),
@@ -1558,7 +1558,7 @@ def _grid(centre, step, half) -> tuple[np.ndarray, np.ndarray]:
 _GRIDS: dict = {}
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _iris_at(centre, rot, yaw, pitch, f, cx, cy):  # pragma: no cover
     """The iris' centre (x, y) px and radius (px) for the gaze ``(yaw, pitch)`` degrees, head
     frame (as :func:`iris_ellipses`)."""
@@ -1573,7 +1573,7 @@ def _iris_at(centre, rot, yaw, pitch, f, cx, cy):  # pragma: no cover
     return x, y, major
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _along_chain(v, chain, at):  # pragma: no cover
     """The points (len(at), 3) at the shares ``at`` of the polyline ``v[chain]``'s length."""
     m = chain.shape[0]
@@ -1589,7 +1589,7 @@ def _along_chain(v, chain, at):  # pragma: no cover
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _aperture_mm(v, upper, lower):  # pragma: no cover
     """The mean gap (mm) between the upper and the lower lid's margins (vertex chains) of the
     skin ``v`` (V, 3): their distance at 7 shares of their lengths, 0.2 to 0.8."""

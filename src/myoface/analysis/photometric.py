@@ -157,7 +157,7 @@ def _cv2():
 OCCLUSION_MM = 1.5
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _zbuffer(uv, depth, tris, h, w):
     """The nearest depth (H, W) of the triangles ``tris`` with vertices at ``uv`` (V, 2)
     pixels and ``depth`` (V,) mm (inf where no triangle covers a pixel's centre)."""

@@ -348,27 +348,25 @@ class TemporalPrior:
         dtr = est.pose.translation_mm - self.prev.pose.translation_mm
         return rv, dtr
 
-    def rows(self, est: Estimate) -> tuple[np.ndarray, np.ndarray]:
-        """(A, b): the rows in the step's unknowns and their right-hand side (``-r``)."""
-        free = est.free
-        nf = len(free)
-        rv, dtr = self._pose_residuals(est)
-        a = np.zeros((6, 6 + nf))
-        a[:3, :3] = np.eye(3) / self.sigma_r
-        a[3:, 3:6] = np.eye(3) / self.sigma_t
-        rows_a = [a]
-        rows_b = [np.concatenate([-rv / self.sigma_r, -dtr / self.sigma_t])]
-        if nf:
-            a = np.zeros((nf, 6 + nf))
-            a[:, 6:] = np.eye(nf) / self.sigma_c
-            rows_a.append(a)
-            dc = est.contractions[free] - self.prev.contractions[free]
-            rows_b.append(-dc / self.sigma_c)
-        return np.vstack(rows_a), np.concatenate(rows_b)
+    def _diagonal(self, nf: int) -> np.ndarray:
+        """Each row's weight squared: the normal equations' diagonal (the rows are the
+        unknowns themselves over their sigmas)."""
+        d = np.empty(6 + nf)
+        d[:3] = 1.0 / self.sigma_r**2
+        d[3:6] = 1.0 / self.sigma_t**2
+        d[6:] = 1.0 / self.sigma_c**2
+        return d
 
     def normal_equations(self, est: Estimate):
-        a, b = self.rows(est)
-        return a.T @ a, a.T @ b
+        # (the rows are the unknowns over their sigmas: A^T A is diagonal)
+        free = est.free
+        d = self._diagonal(len(free))
+        rv, dtr = self._pose_residuals(est)
+        r = np.empty(len(d))
+        r[:3] = rv
+        r[3:6] = dtr
+        r[6:] = est.contractions[free] - self.prev.contractions[free]
+        return np.diag(d), -d * r
 
     def cost(self, est: Estimate) -> float:
         rv, dtr = self._pose_residuals(est)
