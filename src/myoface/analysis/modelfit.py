@@ -103,7 +103,18 @@ NEUTRAL_PERCENTILE = 90
 #: score up to ~1 mm apart. The earliest frame within it of the lowest score
 #: calibrates, with ...
 NEUTRAL_MARGIN_MM = 1.0
-#: ... at most this many frames around it (within the margin too): their noise averages out
+#: ... at most this many frames around it (within the margin too): their noise averages out.
+#: More of them, from further away, show the neutral face from more directions where the head
+#: turns, which the person's depth needs (a wrong depth under a turn reads as expression: on
+#: the expression benchmark's rest frames the AU6, AU10 and AU12 readings follow the head's
+#: pitch, r^2 0.75-0.78). Measured 2026-12-04 with 30 (5 / 15 / 30): the degraded head-motion
+#: renders, head moving, the default fit's worst RMSE 0.287 / 0.313 / 0.273, median 0.178 /
+#: 0.177 / 0.168, skin 1.44 / 1.44 / 1.37 mm, head 1.85 / 1.84 / 1.71 deg (the photometric
+#: fit's head 1.14 / - / 0.98 deg, worst 0.248 / - / 0.239); head still, median 0.126 / - /
+#: 0.114, skin 1.11 / - / 1.15 mm; but the expression clip (default fit) apex 0.562 / 0.562 /
+#: 0.479 (rest 0.672 / 0.672 / 0.793), single_face.mp4's fidelity 0.783 / - / 0.775 and the
+#: photometric known warps' gains 0.01-0.02 lower: not taken until the apex's loss is
+#: understood (frames near an expression's onset let in, or the rest reference's change).
 CALIBRATION_FRAMES = 5
 #: with the detector's offsets (:meth:`ModelFit.set_offsets`): each frame's expression is
 #: scored on its points corrected at its view, the points the calibration then fits. Scored
