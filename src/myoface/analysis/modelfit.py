@@ -104,17 +104,23 @@ NEUTRAL_PERCENTILE = 90
 #: calibrates, with ...
 NEUTRAL_MARGIN_MM = 1.0
 #: ... at most this many frames around it (within the margin too): their noise averages out.
-#: More of them, from further away, show the neutral face from more directions where the head
-#: turns, which the person's depth needs (a wrong depth under a turn reads as expression: on
-#: the expression benchmark's rest frames the AU6, AU10 and AU12 readings follow the head's
-#: pitch, r^2 0.75-0.78). Measured 2026-12-04 with 30 (5 / 15 / 30): the degraded head-motion
-#: renders, head moving, the default fit's worst RMSE 0.287 / 0.313 / 0.273, median 0.178 /
-#: 0.177 / 0.168, skin 1.44 / 1.44 / 1.37 mm, head 1.85 / 1.84 / 1.71 deg (the photometric
-#: fit's head 1.14 / - / 0.98 deg, worst 0.248 / - / 0.239); head still, median 0.126 / - /
-#: 0.114, skin 1.11 / - / 1.15 mm; but the expression clip (default fit) apex 0.562 / 0.562 /
-#: 0.479 (rest 0.672 / 0.672 / 0.793), single_face.mp4's fidelity 0.783 / - / 0.775 and the
-#: photometric known warps' gains 0.01-0.02 lower: not taken until the apex's loss is
-#: understood (frames near an expression's onset let in, or the rest reference's change).
+#: More of them, from further away, would show the neutral face from more directions where the
+#: head turns, which the person's depth needs (a wrong depth under a turn reads as expression:
+#: on the expression benchmark's rest frames the AU6, AU10 and AU12 readings follow the head's
+#: pitch, r^2 0.75-0.78). But the scores are against the model's neutral, not the person's:
+#: on the expression clip's first rest (the head turning) they wander 2.4-4.1 mm and the
+#: lowest fall in an expression's offset, so 30 frames let in frames 22 and 25 of the first
+#: smile's onset (measured 2026-12-04, 5 / 15 / 30: the degraded head-motion renders, head
+#: moving, the default fit's worst RMSE 0.287 / 0.313 / 0.273, skin 1.44 / 1.44 / 1.37 mm, head
+#: 1.85 / 1.84 / 1.71 deg; the expression clip's apex 0.562 / 0.562 / 0.479, rest 0.672 /
+#: 0.672 / 0.793). Scored again against the person's neutral of these 5 frames, the expression
+#: clip's first rest scores 0.2-1.6 mm and its first smile 2.7-3.9; the frames within 0.5 mm of
+#: the least, up to 30 within 29 of the calibration frame, then calibrating again, gave the
+#: expression clip apex 0.562, rest 0.750, the head-motion renders head still median RMSE
+#: 0.126 -> 0.115, head 1.46 -> 1.41 deg, head moving the same (within 1 mm of the least:
+#: head moving 0.280 / 0.165 / 1.40 mm / 1.67 deg, but the apex 0.490). Not taken yet: the
+#: second scoring and the larger identity fit cost ~0.45 s once (6 ms a frame of the
+#: benchmark's 72-frame clip, which would take the analysis below 0.25x of MediaPipe).
 CALIBRATION_FRAMES = 5
 #: with the detector's offsets (:meth:`ModelFit.set_offsets`): each frame's expression is
 #: scored on its points corrected at its view, the points the calibration then fits. Scored
