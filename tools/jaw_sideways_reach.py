@@ -28,7 +28,6 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from myoface.analysis import fidelity as F
-from myoface.analysis.estimate import skin_response
 from myoface.analysis.sample import fetch_sample_video
 
 RIDGE = 0.02
@@ -74,14 +73,10 @@ def main(argv=None) -> None:
     print(f"chin's mean displacement from frame {args.start}: x {chin[0]:+.2f}, y {chin[1]:+.2f}"
           " % of the inter-ocular distance")  # fmt: skip
 
-    idx = list(F.POINTS)
-    rest = model.skin_vertices(model.rest_state())[idx].astype(np.float64)
-    neutral = rest[:, :2] * np.array([1.0, -1.0])
-    iod = float(np.linalg.norm(neutral[F._EYES[0]] - neutral[F._EYES[1]]))
-    pos = [F._POS[i] for k in names for i in F.JUDGED_REGIONS[k]]
-    jac = skin_response(model, list(model.ids))[idx][pos][:, :2, :]  # (P, 2, M) mm
-    w = np.asarray(model.muscles.jaw.weights)[idx][pos]
-    side_cols = np.zeros((len(pos), 2, 2))
+    jac, iod = F.region_response(model, names)  # (P, 2, M) mm
+    verts = [i for k in names for i in F.JUDGED_REGIONS[k]]
+    w = np.asarray(model.muscles.jaw.weights)[verts]
+    side_cols = np.zeros((len(verts), 2, 2))
     side_cols[:, 0, 0] = w * args.lateral_mm
     side_cols[:, 0, 1] = -w * args.lateral_mm
     target = np.concatenate([d_in[k] for k in names], axis=1)

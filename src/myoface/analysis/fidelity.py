@@ -734,6 +734,20 @@ REACH_ROUNDS = 5
 REACH_RIDGE = 0.02
 
 
+def region_response(model, names) -> tuple[np.ndarray, float]:
+    """The skin's response at the judged points of regions ``names`` (in order), x and y of the
+    head frame (P, 2, M) mm per unit contraction, at rest (:func:`~myoface.analysis.estimate.
+    skin_response`), and the model's inter-ocular distance (mm) the measure divides by: the
+    linear side of :func:`model_reach` (and of ``tools/jaw_sideways_reach.py``)."""
+    from myoface.analysis.estimate import skin_response
+
+    idx = list(POINTS)
+    rest = model.skin_vertices(model.rest_state())[idx].astype(np.float64)
+    iod = float(np.linalg.norm(rest[_EYES[0], :2] - rest[_EYES[1], :2]))
+    verts = [i for k in names for i in _ALL_REGIONS[k]]
+    return skin_response(model, list(model.ids))[verts][:, :2, :], iod
+
+
 def model_reach(
     model, d_in: dict, show_progress: bool = False, alignment: str = ALIGNMENT
 ) -> tuple[FidelityResult, np.ndarray]:
@@ -751,8 +765,6 @@ def model_reach(
     the forward-backward share). Returns the scores and the contractions (T, M)."""
     from scipy.optimize import lsq_linear
 
-    from myoface.analysis.estimate import skin_response
-
     names = list(d_in)
     regions = {k: _ALL_REGIONS[k] for k in names}
     target = np.concatenate([d_in[k] for k in names], axis=1)  # (T, P, 2)
@@ -761,10 +773,9 @@ def model_reach(
     rest = model.skin_vertices(model.rest_state())[idx].astype(np.float64)
     neutral = rest[:, :2] * flip
     face3d = _face3d_for(alignment, rest)
-    iod = float(np.linalg.norm(neutral[_EYES[0]] - neutral[_EYES[1]]))
-    pos = [_POS[i] for k in names for i in _ALL_REGIONS[k]]
     ids = list(model.ids)
-    jac = skin_response(model, ids)[idx][pos][:, :2, :].reshape(-1, len(ids)) / iod
+    response, iod = region_response(model, names)
+    jac = response.reshape(-1, len(ids)) / iod
     zeros = np.zeros(len(ids))
     table = np.full((len(target), len(ids)), np.nan)
     c, state = zeros.copy(), None
