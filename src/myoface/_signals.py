@@ -39,6 +39,10 @@ STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 REDELIVER_S = 0.01
 
 _pending: list[int] = []
+#: bumped whenever the noted signals are seen or dropped (:func:`_forget`): a redelivery
+#: started before that is stale and does not fire (in CI one fired 10 ms later into the next
+#: run, which had noted a signal of its own, and stopped it with the wrong one)
+_generation = 0
 _defer_depth = 0  # deferred() blocks the main thread is in
 _installed = 0  # stop_signals() blocks the main thread is in (with their handlers set)
 _exit_hook_registered = False
@@ -84,6 +88,14 @@ def stop_signal_of(exc: BaseException | None) -> int | None:
     return None
 
 
+def _forget() -> None:
+    """The noted stop signals were seen or dropped: cleared, and any redelivery of them
+    started before now cancelled."""
+    global _generation
+    _pending.clear()
+    _generation += 1
+
+
 def _signals() -> list[int]:
     return [getattr(signal, n) for n in STOP_SIGNALS if hasattr(signal, n)]
 
@@ -116,10 +128,11 @@ def _redeliver(signum: int) -> None:
     thread after :data:`REDELIVER_S` (unless :func:`raise_pending` has raised it meanwhile)."""
     if not _pending:
         _pending.append(int(signum))
+    generation = _generation
 
     def later() -> None:
         time.sleep(REDELIVER_S)
-        if _pending and _installed:
+        if _pending and _installed and _generation == generation:
             _thread.interrupt_main(int(signum))
 
     threading.Thread(target=later, name="myoface-signal", daemon=True).start()
@@ -170,7 +183,7 @@ def stop_signals():
                     _exit_hook_registered = True
         finally:
             _defer_depth -= 1
-            _pending.clear()
+            _forget()
 
 
 def raise_pending() -> None:
@@ -178,13 +191,13 @@ def raise_pending() -> None:
     where Python could not raise it, or held off by :func:`deferred`)."""
     if _pending and not _defer_depth:
         signum = _pending[-1]
-        _pending.clear()
+        _forget()
         raise Interrupted(signum)
 
 
 def clear_pending() -> None:
     """The stop signal was seen (its exception caught by the run)."""
-    _pending.clear()
+    _forget()
 
 
 def pending() -> int | None:
@@ -222,7 +235,7 @@ def _deferring(drop: bool):
         finally:
             _defer_depth -= 1
             if drop and not _defer_depth:
-                _pending.clear()
+                _forget()
 
 
 @contextlib.contextmanager
