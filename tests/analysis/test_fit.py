@@ -670,3 +670,53 @@ def test_the_calibration_window_measured_while_it_is_scored_gives_the_same_resul
         np.testing.assert_array_equal(ma.contractions, mb.contractions)
         np.testing.assert_array_equal(ma.pose.rotation, mb.pose.rotation)
     assert not _threads("myoface-detect", "myoface-fit")
+
+
+def test_the_photometric_window_measured_while_it_is_scored_gives_the_same_results(fm, monkeypatch):
+    """The same with the photometric term, whose appearance is registered on the neutral
+    frames up to ``modelfit.REGISTRATION_SPAN`` after the calibration frame: the speculation
+    waits for them, registers on the same frames and measures the same, bit for bit."""
+    from myoface.analysis.modelfit import REGISTRATION_SPAN
+    from myoface.analysis.pipeline import measure_frames
+    from myoface.analysis.trackers import landmark_fit as lf
+
+    smile = fm.skin_vertices(fm.relax({"zygomaticus_major_l": 0.5}).state)
+    n_neutral = REGISTRATION_SPAN + 3
+    shapes = [fm.face.vertices] * n_neutral + [smile] * 3
+    seq = [landmarks(s, HeadPose.from_euler(0.3 * k, -0.2 * k, 0)) for k, s in enumerate(shapes)]
+
+    class Video(list):
+        fps = 30.0
+
+    rng = np.random.default_rng(5)
+    texture = rng.integers(0, 255, (480, 640, 3), dtype=np.uint8)
+    video = Video([texture] * len(seq))
+    kept = []
+    adopt = lf._Speculation.adopt
+    monkeypatch.setattr(
+        lf._Speculation, "adopt", lambda self, *a: kept.append(adopt(self, *a)) or kept[-1]
+    )
+
+    def run(speculate: bool):
+        monkeypatch.setattr(lf, "SPECULATE", speculate)
+        an = lf.FitTracker(
+            fm, camera=CAMERA, detector=_StandInDetector(seq), deferred_relax=True,
+            settings=FitSettings(photometric=True, photo_colour=False, lid_edges=False),
+        )  # fmt: skip
+        try:
+            ms = [m for _, m in measure_frames(video, an)]
+            return ms, an.describe()["calibration"]
+        finally:
+            an.close()
+
+    (a, desc_a), (b, desc_b) = run(True), run(False)
+    assert kept == [True]
+    assert desc_a["frames_used"] == desc_b["frames_used"]
+    reg = desc_a["appearance_registered_on"]
+    assert reg == desc_b["appearance_registered_on"] and len(reg) > 5
+    assert desc_a["appearance_offset"] == desc_b["appearance_offset"]
+    assert len(a) == len(b) == len(seq)
+    for ma, mb in zip(a, b, strict=True):
+        assert (ma.index, ma.quality) == (mb.index, mb.quality)
+        np.testing.assert_array_equal(ma.contractions, mb.contractions)
+        np.testing.assert_array_equal(ma.pose.rotation, mb.pose.rotation)

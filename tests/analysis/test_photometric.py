@@ -620,3 +620,37 @@ def test_the_channels_side_by_side_are_the_channels_one_after_the_other(rendered
             assert both.cost(e) == alone[0].cost(e) + alone[1].cost(e)
             assert np.count_nonzero(alone[1]._w) > 500 and np.abs(hr).max() > 0
     assert not both.settling
+
+
+@pytest.mark.parametrize("register", [True, False])
+def test_the_appearance_is_registered_on_many_frames_landmarks(scene, monkeypatch, register):
+    """A known answer for the appearance's registration (``modelfit.REGISTER_APPEARANCE``):
+    twelve neutral frames of a still head, the calibration frame's landmarks 1.5 px right and
+    1 px down of the truth, the others' +-(0.4, 0.3) px about it. The appearance taken where
+    the calibration frame's landmarks put the face makes the pixels-only fit of a frame
+    inherit their error (1.5, -1.0) px; registered on the twelve frames' landmarks, the error
+    left is their mean, (0.16, -0.06) px."""
+    from dataclasses import replace
+
+    from myoface.analysis import modelfit
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.weights import FitSettings
+
+    model, cam, shape, pose, frame = scene
+    monkeypatch.setattr(modelfit, "REGISTER_APPEARANCE", register)
+    pts = cam.project(pose.apply(shape))
+    n = 12
+    errors = [np.array([1.5, -1.0])] + [
+        np.array([0.4, 0.3]) * (1 if k % 2 else -1) for k in range(1, n)
+    ]
+    s = replace(FitSettings(), photometric=True, photo_landmark_weight=1e-6, iterations=30)
+    fit = ModelFit(model, cam, s)
+    cal = fit.calibrate([pts + e for e in errors], 0, scores=np.zeros(n))
+    assert cal.extra.get("registration", list(range(n))) == list(range(n))
+    fit.set_appearance(frame, {k: frame for k in range(1, n)})
+    r = fit.fit(pts, image=frame)
+    err = cam.project(r.pose.apply(fit.skin(r.contractions))) - pts
+    inner = (pts[:, 0] > 10) & (pts[:, 0] < 300)
+    want = np.mean(errors, axis=0) if register else errors[0]
+    assert np.abs(err[inner].mean(axis=0) - want).max() < 0.05, (err[inner].mean(axis=0), want)
+    assert ("appearance_offset" in cal.extra) == register

@@ -113,11 +113,21 @@ from myoface.facemesh import import_opencv
 #: three >= 1 (inside the triangle): N = 4 gives 3 per triangle, ~2700 on the default face
 SUBDIVISION = 4
 #: the Gaussian blurs (pixels) of the coarse-to-fine levels, and how many of a frame's
-#: Gauss-Newton steps each gets (the last level takes the rest)
+#: Gauss-Newton steps each coarse level gets (one where not said; the last level takes the
+#: rest)
 BLUR_SCHEDULE_PX = (4.0, 2.0, 1.0)
 STEPS_PER_LEVEL = (1, 1)
 # (two steps per coarse level gave the same known-warp gains to 0.001 and the same degraded
-# head-motion numbers to 0.01, at a third more of the fit's time; 2026-12-01)
+# head-motion numbers to 0.01, at a third more of the fit's time; 2026-12-01. Without the
+# 4 px level (2026-12-04; measured with the appearance registered on many frames,
+# modelfit.REGISTER_APPEARANCE, and 4 steps: one at 2 px, three at 1 px, against 5 steps with
+# it): the known warps the same to 0.002, the degraded head-motion renders, the expression
+# clip and the gaze clips the same within their scatter, single_face.mp4's fidelity 0.762 ->
+# 0.764, the fit 18-20 -> 13-16 ms a frame; with 3 steps (two at 1 px) the sample's brows'
+# gain fell 0.82 -> 0.75. Not taken: a frame the fit starts 2 px from is then out of reach
+# where only the redness shows the texture (tests/analysis/test_photometric.py's colour-only
+# texture: 3.5 px off where the 4 px level finds it within 0.3): the landmarks and the last
+# frame start the benchmarks' frames nearer than that, a fast turn need not.)
 #: a sample whose residual is beyond this many sigmas weighs 0 (on the finest level): it is not
 #: the person's skin as the calibration frame showed it (a hand, hair, a reflection)
 OUTLIER_SIGMAS = 5.0
@@ -686,13 +696,15 @@ class PhotometricTerm:
 
     # -------------------------------------------------------------- the schedule
     def _level_for(self, step: int) -> int:
-        k = 0
-        for n in STEPS_PER_LEVEL:
+        # (a coarse level STEPS_PER_LEVEL does not name takes one step: the schedule always
+        # reaches the finest level, where the solver may stop)
+        last = len(self.app.levels) - 1
+        for k in range(last):
+            n = STEPS_PER_LEVEL[k] if k < len(STEPS_PER_LEVEL) else 1
             if step < n:
                 return k
             step -= n
-            k += 1
-        return min(k, len(self.app.levels) - 1)
+        return last
 
     @property
     def settling(self) -> bool:

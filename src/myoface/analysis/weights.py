@@ -239,7 +239,8 @@ class FitSettings:
     #: head moving, worst RMSE 0.248 / 0.247, median 0.146 / 0.146, skin 0.96 / 0.95 mm, head
     #: 1.15 / 1.15 deg; single_face.mp4's fidelity by region (8 / 5 / 4 steps) the same to
     #: 0.02. The fit's CPU a frame 26.2 -> 21.0 ms (one pass of each on the sample,
-    #: ``tools/photometric_profile.py``).
+    #: ``tools/photometric_profile.py``). (Without the 4 px level, 4: measured, not taken, at
+    #: :data:`~myoface.analysis.photometric.BLUR_SCHEDULE_PX`.)
     photo_iterations: int = 5
     #: the lids read from the image as a term (:func:`myoface.analysis.lidtemplate.lid_term`:
     #: the closure of each eye's opening against the calibration frame, where it closes, in

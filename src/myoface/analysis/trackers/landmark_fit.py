@@ -21,10 +21,12 @@ from myoface.analysis.landmarks import TrackerOffsets
 from myoface.analysis.modelfit import (
     CALIBRATION_FRAMES,
     CALIBRATION_WINDOW_S,
+    REGISTRATION_SPAN,
     Calibration,
     ModelFit,
     calibration_frames,
     choose_calibration_frame,
+    registration_frames,
 )
 from myoface.analysis.modelflow import FLOW_METHODS, ModelFlow
 from myoface.analysis.sections import SECTIONS, section_vertices
@@ -497,19 +499,23 @@ class FitTracker(TrackerBase):
             self.calibration = fit.calibrate(points, cal.index, synthesis=self.synthesis)
             self.calibration.scores = cal.scores
         if not finished:
-            self._set_up(images[self.calibration.index])
+            self._set_up(images)
         self.calibration_frame = first_index + self.calibration.index
         self.timings["calibration_s"] += time.perf_counter() - t_start
         return self.calibration_frame
 
-    def _set_up(self, frame) -> None:
+    def _set_up(self, images) -> None:
         """What the fit and the gaze take from the calibration (after :meth:`ModelFit.calibrate`;
-        ``frame``: the calibration frame, None where it was not kept): the appearance for the
-        photometric term, the lids' template, the person's eyeballs."""
+        ``images``: the calibration window's frames by position, None where one was not
+        kept): the appearance for the photometric term (registered on every frame the
+        calibration used), the lids' template, the person's eyeballs."""
+        cal = self.fit.calibration
+        frame = images[cal.index]
         if self.settings.photometric:
             if frame is None:
                 raise MyofaceValueError("the calibration frame was not kept")
-            self.fit.set_appearance(frame)
+            others = {k: images[k] for k in cal.extra.get("registration", ()) if k != cal.index}
+            self.fit.set_appearance(frame, others)
         if self.settings.lid_edges and frame is not None:
             self.fit.set_lid_reference(frame)  # (the lids' template)
         if self.gaze is not None:  # the person's eyeballs and open lids
@@ -740,6 +746,13 @@ class FitTracker(TrackerBase):
                 "lid_gains": cal.extra.get("lid_gains", {}),
                 "pose": cal.pose.columns(),
             }
+            if "registration" in cal.extra:
+                # the photometric fit's appearance: the frames it was registered on, and how
+                # far their landmarks moved it from the calibration frame's (head frame)
+                out["calibration"]["appearance_registered_on"] = [
+                    self.calibration_frame - cal.index + k for k in cal.extra["registration"]
+                ]
+                out["calibration"]["appearance_offset"] = cal.extra.get("appearance_offset")
         return out
 
     def close(self) -> None:
@@ -795,9 +808,9 @@ class _Speculation:
         if not np.isfinite(sc).any():
             return
         index = choose_calibration_frame(sc)
-        if last < index + CALIBRATION_FRAMES - 1:
+        if last < index + self._reach():
             return  # (frames that could calibrate with it are still to come)
-        choice = (index, calibration_frames(sc, index))
+        choice = self._choice(sc, index)
         if self.fit is not None and choice != self.choice:
             self.drop()
         if self.fit is None:
@@ -823,6 +836,27 @@ class _Speculation:
                 self.images[k], self.first + k, 0.0, self.observations.pop(k)
             )  # fmt: skip
 
+    def _reach(self) -> int:
+        """How many frames after the calibration frame its choice depends on: the frames
+        that calibrate with it, and with the photometric term those that register its
+        appearance (:func:`~myoface.analysis.modelfit.registration_frames`)."""
+        if self._registers():
+            return max(CALIBRATION_FRAMES - 1, REGISTRATION_SPAN)
+        return CALIBRATION_FRAMES - 1
+
+    def _registers(self) -> bool:
+        from myoface.analysis import modelfit
+
+        return self.tracker.settings.photometric and modelfit.REGISTER_APPEARANCE
+
+    def _choice(self, scores, index: int) -> tuple:
+        """The frames calibration frame ``index`` calibrates with (and registers the
+        appearance on), from ``scores``: the speculation's fit holds while they stay."""
+        choice = (index, calibration_frames(scores, index))
+        if self._registers():
+            choice += (registration_frames(scores, index),)
+        return choice
+
     def _flow_state(self) -> tuple:
         tr = self.tracker
         return (
@@ -842,7 +876,7 @@ class _Speculation:
         tr.gaze = None if self.scoring[1] is None else GazeEstimator(tr.model.face)
         try:
             tr.calibration = fit.calibrate(list(frames), choice[0], scores=scores)
-            tr._set_up(self.images[choice[0]])
+            tr._set_up(self.images)
         except MyofaceValueError:
             # (no speculation on this window: the calibration at its end says what fails)
             self.drop()
@@ -856,7 +890,7 @@ class _Speculation:
     def adopt(self, index: int, scores: np.ndarray) -> bool:
         """The tracker keeps the speculation's fit and measurements if the whole window
         chose the same frames (True), else nothing changes (False)."""
-        if self.fit is None or (index, calibration_frames(scores, index)) != self.choice:
+        if self.fit is None or self._choice(scores, index) != self.choice:
             return False
         self.fit.calibration.scores = np.asarray(scores, dtype=np.float64)
         tr = self.tracker
