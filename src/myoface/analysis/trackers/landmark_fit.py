@@ -777,8 +777,10 @@ class _Speculation:
     (:data:`SPECULATE`). After each scored frame (:meth:`ModelFit.score`'s ``on_scored``), the
     frames scored so far choose a calibration frame and the frames around it
     (:func:`~myoface.analysis.modelfit.choose_calibration_frame`,
-    :func:`~myoface.analysis.modelfit.calibration_frames`); once the frames that could
-    calibrate with it are scored, a fit of its own (:class:`ModelFit`, and a gaze estimator)
+    :func:`~myoface.analysis.modelfit.calibration_frames`, and with the photometric term the
+    frames its appearance is registered on, :func:`~myoface.analysis.modelfit.
+    registration_frames`); once the frames that could calibrate (and register) with it are
+    scored, a fit of its own (:class:`ModelFit`, and a gaze estimator)
     is calibrated on them and measures the window's frames scored so far, from the first, as
     :meth:`FitTracker.measure` would after the calibration. The tracker's scoring fit is left as it was. When the whole
     window chooses the same frames, that fit and its measurements are the tracker's
