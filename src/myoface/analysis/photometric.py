@@ -123,8 +123,8 @@ STEPS_PER_LEVEL = (1, 1)
 # modelfit.REGISTER_APPEARANCE, and 4 steps: one at 2 px, three at 1 px, against 5 steps with
 # it): the known warps the same to 0.002, the degraded head-motion renders, the expression
 # clip and the gaze clips the same within their scatter, single_face.mp4's fidelity 0.762 ->
-# 0.764, the fit 18-20 -> 13-16 ms a frame; with 3 steps (two at 1 px) the sample's brows'
-# gain fell 0.82 -> 0.75. Not taken: a frame the fit starts 2 px from is then out of reach
+# 0.764, the fit 18-20 -> 13-16 ms a frame (a machine with one core busy); with 3 steps (two
+# at 1 px) the sample's brows' gain fell 0.82 -> 0.75. Not taken: a frame the fit starts 2 px from is then out of reach
 # where only the redness shows the texture (tests/analysis/test_photometric.py's colour-only
 # texture: 3.5 px off where the 4 px level finds it within 0.3): the landmarks and the last
 # frame start the benchmarks' frames nearer than that, a fast turn need not.)
