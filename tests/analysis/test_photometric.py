@@ -647,7 +647,7 @@ def test_the_appearance_is_registered_on_many_frames_landmarks(scene, monkeypatc
     fit = ModelFit(model, cam, s)
     cal = fit.calibrate([pts + e for e in errors], 0, scores=np.zeros(n))
     assert cal.extra.get("registration", list(range(n))) == list(range(n))
-    fit.set_appearance(frame, {k: frame for k in range(1, n)})
+    fit.set_appearance(frame, [frame] * n)
     r = fit.fit(pts, image=frame)
     err = cam.project(r.pose.apply(fit.skin(r.contractions))) - pts
     inner = (pts[:, 0] > 10) & (pts[:, 0] < 300)

@@ -184,6 +184,12 @@ REGISTRATION_SPAN = 29
 REGISTRATION_MAX = 12
 
 
+def registers_appearance(settings) -> bool:
+    """Whether a fit with ``settings`` registers its appearance on many frames
+    (:data:`REGISTER_APPEARANCE`, with the photometric term)."""
+    return bool(settings.photometric) and REGISTER_APPEARANCE
+
+
 # ------------------------------------------------------------------ results
 
 
@@ -667,7 +673,7 @@ class ModelFit:
         gains = self._scale_lids(self.neutral + identity)
         extra = {"frames": use, "lid_gains": gains}
         self._registration = {}
-        if self.settings.photometric and REGISTER_APPEARANCE:  # (its appearance's frames)
+        if registers_appearance(self.settings):  # (the frames its appearance is registered on)
             extra["registration"] = registration_frames(scores, index)
             for k in extra["registration"][1:]:
                 p = check_points(frames[k], len(self.neutral))
@@ -675,20 +681,20 @@ class ModelFit:
         self.calibration = Calibration(index, scores, identity, pose, resid, extra)
         return self.calibration
 
-    def set_appearance(self, frame, others=None) -> None:
+    def set_appearance(self, frame, window=None) -> None:
         """Take the person's appearance from ``frame``, the calibration frame (after
         :meth:`calibrate`): the photometric term then reads every frame given to :meth:`fit`
-        with its ``image`` against it. ``others``: {index: image} of the calibration's
-        ``extra["registration"]`` frames (:func:`registration_frames`): with
-        :data:`REGISTER_APPEARANCE`, the appearance is then registered on all of them
-        (:meth:`_appearance_offset`), not on the calibration frame's landmarks alone."""
+        with its ``image`` against it. ``window``: the images of the frames given to
+        :meth:`calibrate`, by position (None where one was not kept): the appearance is then
+        registered on its ``extra["registration"]`` frames (:func:`registration_frames`,
+        :meth:`_appearance_offset`), not on the calibration frame's landmarks alone."""
         if self.calibration is None:
             raise MyofaceValueError("set_appearance() needs a calibration first")
         cal = self.calibration
         pose = cal.pose
         self._take_appearance(frame, pose)
-        if others and REGISTER_APPEARANCE:
-            offset = self._appearance_offset(others)
+        if window is not None and self._registration:
+            offset = self._appearance_offset(window)
             if offset is not None:
                 # the calibration frame as the frames' landmarks place it on average
                 rot, t = offset
@@ -699,7 +705,6 @@ class ModelFit:
                     "rotation_deg": [round(float(v), 4) for v in np.degrees(rotvec(rot))],
                     "translation_mm": [round(float(v), 4) for v in t],
                 }
-        cal.extra["appearance_pose"] = pose
 
     def _take_appearance(self, frame, pose) -> None:
         """The appearance (and the redness's) of ``frame`` seen at ``pose``
@@ -727,7 +732,7 @@ class ModelFit:
                 prior = self.appearance_colour.prior
                 self.appearance_colour.prior = own if prior is None else prior * own
 
-    def _appearance_offset(self, others) -> tuple[np.ndarray, np.ndarray] | None:
+    def _appearance_offset(self, window) -> tuple[np.ndarray, np.ndarray] | None:
         """How far the appearance, taken at the calibration frame's pose, sits from where
         the registration frames' landmarks put it on average: a rigid motion of the head frame
         (rotation (3, 3), translation (3,) mm; None with fewer than two frames). An appearance
@@ -744,7 +749,7 @@ class ModelFit:
         jac0 = np.zeros((len(base), 3, self.n_muscles))
         rvecs, ts = [np.zeros(3)], [np.zeros(3)]  # (the calibration frame's: the identity)
         for k, p in self._registration.items():
-            image = others.get(k)
+            image = window[k] if k < len(window) else None
             if image is None:
                 continue
             lm = self._pose_only(p, initial_pose(base, p, self.camera), base)

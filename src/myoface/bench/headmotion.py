@@ -400,8 +400,7 @@ def run_headmotion(
     window = max(1, int(round(CALIBRATION_WINDOW_S * fps)))
     cal = fit.calibrate(points[:window], synthesis=syn)
     if photometric:
-        others = {k: frames[k] for k in cal.extra.get("registration", ()) if k != cal.index}
-        fit.set_appearance(frames[cal.index], others)
+        fit.set_appearance(frames[cal.index], frames[:window])
     tracker = ModelFlow.of_fit(frames[cal.index], fit) if anchored_flow else None
     n, m = len(points), model.n_muscles
     est = np.full((n, m), np.nan)

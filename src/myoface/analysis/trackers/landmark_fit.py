@@ -26,6 +26,7 @@ from myoface.analysis.modelfit import (
     ModelFit,
     calibration_frames,
     choose_calibration_frame,
+    registers_appearance,
     registration_frames,
 )
 from myoface.analysis.modelflow import FLOW_METHODS, ModelFlow
@@ -514,8 +515,7 @@ class FitTracker(TrackerBase):
         if self.settings.photometric:
             if frame is None:
                 raise MyofaceValueError("the calibration frame was not kept")
-            others = {k: images[k] for k in cal.extra.get("registration", ()) if k != cal.index}
-            self.fit.set_appearance(frame, others)
+            self.fit.set_appearance(frame, images)
         if self.settings.lid_edges and frame is not None:
             self.fit.set_lid_reference(frame)  # (the lids' template)
         if self.gaze is not None:  # the person's eyeballs and open lids
@@ -847,9 +847,7 @@ class _Speculation:
         return CALIBRATION_FRAMES - 1
 
     def _registers(self) -> bool:
-        from myoface.analysis import modelfit
-
-        return self.tracker.settings.photometric and modelfit.REGISTER_APPEARANCE
+        return registers_appearance(self.tracker.settings)
 
     def _choice(self, scores, index: int) -> tuple:
         """The frames calibration frame ``index`` calibrates with (and registers the
