@@ -428,7 +428,7 @@ def _clip(quick: bool, still: bool, clean: bool) -> tuple:
 
 
 def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=False,
-               tracker: str = "fit", au_prior: bool = False) -> dict:  # fmt: skip
+               tracker: str = "fit", au_prior: bool = False, overrides=()) -> dict:  # fmt: skip
     """The synthetic run's detail (cached); ``still``: the head frontal and still; ``clean``:
     on the renderer's own frames (:func:`~myoface.bench.headmotion.render_sequence`), not
     degraded by a camera; ``exact``: the fit given the model's own projected vertices
@@ -437,11 +437,14 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
     the fit with the model-anchored tracker's points (``myoface analyze --flow``),
     ``"photometric"`` the fit with its photometric term (``myoface analyze --photometric``),
     ``"flow+photometric"`` both; ``au_prior``: with the fit's AU-space prior
-    (:mod:`myoface.analysis.au_prior`, ``FitSettings(au_prior_sigma=AU_PRIOR_SIGMA)``)."""
+    (:mod:`myoface.analysis.au_prior`, ``FitSettings(au_prior_sigma=AU_PRIOR_SIGMA)``);
+    ``overrides``: ``((field, value), ...)`` of :class:`~myoface.analysis.weights.FitSettings`
+    set on top (a study's variant, e.g. ``(("sparsity", 0.0),)``: ``tools/expression_stages.py``)."""
     if tracker not in TRACKERS:
         raise ValueError(f"tracker must be one of {TRACKERS}; got {tracker!r}")
+    overrides = tuple((str(k), v) for k, v in overrides)
     key = ("synthetic", bool(quick), bool(still), bool(clean), bool(exact), tracker,
-           bool(au_prior))  # fmt: skip
+           bool(au_prior)) + ((overrides,) if overrides else ())  # fmt: skip
     if key in _cache:
         return _cache[key]
     import time
@@ -477,10 +480,11 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
             quick, still, clean
         )
     settings = None
-    if "photometric" in tracker or au_prior:
+    if "photometric" in tracker or au_prior or overrides:
         settings = FitSettings(
             photometric="photometric" in tracker,
             au_prior_sigma=AU_PRIOR_SIGMA if au_prior else None,
+            **dict(overrides),
         )
     res = run_headmotion(
         fm, points, truth, poses, skins, settings=settings,
