@@ -144,6 +144,43 @@ def test_the_redness_reads_what_the_brightness_does_not_show(scene):
     assert fit.appearance_colour is None and len(fit.photometric_term(frame)) == 1
 
 
+def test_a_frame_starts_on_the_coarsest_level_only_where_the_face_moved(scene, monkeypatch):
+    """The coarse-to-fine schedule's first level (4 px) is made and stepped on only for a
+    frame whose landmarks moved more than COARSE_START_PX (median) since the last frame fitted,
+    or after none: a still face starts on the 2 px level; a face that moved 2 px starts
+    coarse and is found within 0.3 px."""
+    from dataclasses import replace
+
+    import myoface.analysis.photometric as ph
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.weights import FitSettings
+
+    model, cam, shape, pose, frame = scene
+    pts = cam.project(pose.apply(shape))
+    assert ph.coarse_start(pts, None) == 0
+    assert ph.coarse_start(pts, pts + 0.5) == 1
+    assert ph.coarse_start(pts, pts + [2.0, 0.0]) == 0
+    monkeypatch.setattr(ph, "COARSE_START_PX", None)
+    assert ph.coarse_start(pts, pts) == 0
+    monkeypatch.undo()
+
+    s = replace(FitSettings(), photometric=True, photo_landmark_weight=1e-6)
+    fit = ModelFit(model, cam, s)
+    fit.calibrate([pts], 0)
+    fit.set_appearance(frame)
+    fit.fit(pts, image=frame)  # (no frame before it: coarse)
+    assert fit.timings["photo_coarse_starts"] == 1
+    fit.fit(pts, image=frame)  # (nothing moved: from the 2 px level)
+    assert fit.timings["photo_coarse_starts"] == 1
+    moved = np.ascontiguousarray(np.roll(frame, 2, axis=1))  # 2 px right, and so its points
+    r = fit.fit(pts + [2.0, 0.0], image=moved)
+    assert fit.timings["photo_coarse_starts"] == 2
+    uv = cam.project(r.pose.apply(fit.skin(r.contractions)))
+    inner = (pts[:, 0] > 10) & (pts[:, 0] < 300)
+    err = uv - (pts + [2.0, 0.0])
+    assert float(np.sqrt((err[inner] ** 2).sum(1).mean())) < 0.3
+
+
 def test_a_mesh_warp_moves_its_points_exactly_and_does_not_fold():
     rng = np.random.default_rng(1)
     pts = rng.uniform(50, 150, (60, 2))

@@ -72,7 +72,13 @@ from myoface.analysis.camera import (
     rotvec,
 )
 from myoface.analysis.estimate import skin_response
-from myoface.analysis.photometric import COLOURLESS_SD, Appearance, ChannelTerms, PhotometricTerm
+from myoface.analysis.photometric import (
+    COLOURLESS_SD,
+    Appearance,
+    ChannelTerms,
+    PhotometricTerm,
+    coarse_start,
+)
 from myoface.analysis.solver import bounded_gauss_newton
 from myoface.analysis.synthesis import LandmarkSynthesis
 from myoface.analysis.terms import (
@@ -381,7 +387,11 @@ class ModelFit:
         #: wall time (s) fits waited for a deferred relax
         self.timings = {
             "fits": 0, "fit_cpu_s": 0.0, "relaxes": 0, "relax_cpu_s": 0.0, "relax_wait_s": 0.0,
+            "photo_coarse_starts": 0,
         }  # fmt: skip
+        #: the points of the last frame fitted with the photometric term (its schedule's start:
+        #: :func:`~myoface.analysis.photometric.coarse_start`)
+        self._photo_points = None
         #: {frame: its points} of the frames the appearance is registered on (:meth:`calibrate`)
         self._registration: dict = {}
 
@@ -515,7 +525,14 @@ class ModelFit:
         (:class:`~myoface.analysis.photometric.PhotometricTerm`) against the calibration
         frame's appearance, once :meth:`set_appearance` has taken it (else not used)."""
         t0 = time.thread_time()
-        photo = self.photometric_term(image)
+        photo = None
+        if image is not None:
+            # the schedule's coarsest level only where the face moved far since the last fit
+            start = coarse_start(points, self._photo_points if self._prev is not None else None)
+            photo = self.photometric_term(image, start)
+            self._photo_points = np.asarray(points, dtype=np.float64)
+            if photo is not None:
+                self.timings["photo_coarse_starts"] += start == 0
         # the lid margins' edges (FitSettings.lid_edges) read on this frame's fits only
         self._lid_image = image if self.settings.lid_edges else None
         try:
@@ -782,18 +799,21 @@ class ModelFit:
             pose = self._pose_only(self.offsets.correct(p, pose, base), pose, base)
         return self.offsets.correct(p, pose, base)
 
-    def photometric_term(self, image) -> list[PhotometricTerm] | None:
+    def photometric_term(self, image, start_level: int = 0) -> list[PhotometricTerm] | None:
         """The photometric terms of ``image``: its brightness, and its redness with
-        :attr:`FitSettings.photo_colour` (None without an image or an appearance)."""
+        :attr:`FitSettings.photo_colour` (None without an image or an appearance); their
+        coarse-to-fine schedule from ``start_level`` (:func:`~myoface.analysis.photometric.
+        coarse_start`)."""
         if image is None or self.appearance is None:
             return None
         s = self.settings
-        out = [PhotometricTerm(image, self.appearance, self.camera, s.photo_sigma, s.photo_huber)]
+        out = [PhotometricTerm(image, self.appearance, self.camera, s.photo_sigma, s.photo_huber,
+                               start_level=start_level)]  # fmt: skip
         if self.appearance_colour is not None:  # (the same samples: the brightness's geometry)
             out.append(
                 PhotometricTerm(image, self.appearance_colour, self.camera,
                                 s.photo_colour_sigma, s.photo_huber, channel="redness",
-                                peer=out[0])
+                                peer=out[0], start_level=start_level)
             )  # fmt: skip
         return out
 
@@ -1027,7 +1047,8 @@ class ModelFit:
         if iterations is not None:
             steps = int(iterations)
         elif photo is not None:  # (FitSettings.photo_iterations: the photometric fit's)
-            steps = self.settings.photo_iterations
+            # (less the steps of the coarse levels a schedule skips: photometric.coarse_start)
+            steps = self.settings.photo_iterations - min(t._first_step() for t in photo)
         else:
             steps = self.settings.iterations
         return bounded_gauss_newton(terms, forward, jac, pose, c, free, steps)

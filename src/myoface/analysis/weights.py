@@ -240,7 +240,9 @@ class FitSettings:
     #: 1.15 / 1.15 deg; single_face.mp4's fidelity by region (8 / 5 / 4 steps) the same to
     #: 0.02. The fit's CPU a frame 26.2 -> 21.0 ms (one pass of each on the sample,
     #: ``tools/photometric_profile.py``). (Without the 4 px level, 4: measured, not taken, at
-    #: :data:`~myoface.analysis.photometric.BLUR_SCHEDULE_PX`.)
+    #: :data:`~myoface.analysis.photometric.BLUR_SCHEDULE_PX`.) A frame whose schedule skips
+    #: the coarsest level (:data:`~myoface.analysis.photometric.COARSE_START_PX`) takes one
+    #: step fewer: the same steps on the levels it is on.
     photo_iterations: int = 5
     #: the lids read from the image as a term (:func:`myoface.analysis.lidtemplate.lid_term`:
     #: the closure of each eye's opening against the calibration frame, where it closes, in
