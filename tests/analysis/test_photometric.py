@@ -181,6 +181,48 @@ def test_a_frame_starts_on_the_coarsest_level_only_where_the_face_moved(scene, m
     assert float(np.sqrt((err[inner] ** 2).sum(1).mean())) < 0.3
 
 
+def test_the_eyes_rim_weighs_less_as_the_head_turns_from_the_calibration(scene, monkeypatch):
+    """The samples on the triangles at the eyes' openings (not the mouth's, not the outline's)
+    weigh 1 / (1 + (turn / EYE_RIM_TURN_DEG)^2) in a frame whose head is turned from the
+    calibration's pose; the fit turns them down by the last frame's turn."""
+    from dataclasses import replace
+
+    import myoface.analysis.photometric as ph
+    from myoface.analysis.camera import HeadPose, rotation_angle_deg
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.photometric import EYE_RIM_TURN_DEG, eye_rim, eye_rim_weight, rim_weights
+    from myoface.analysis.weights import FitSettings
+
+    model, cam, shape, pose, frame = scene
+    samples = SurfaceSamples.on(model.face.triangles)
+    rim = eye_rim(model.face, samples)
+    assert 100 < rim.sum() < 400 and not (rim & (rim_weights(model.face, samples) == 0)).any()
+    assert eye_rim_weight(0.0) == 1.0
+    assert eye_rim_weight(EYE_RIM_TURN_DEG) == pytest.approx(0.5)
+    assert eye_rim_weight(3 * EYE_RIM_TURN_DEG) == pytest.approx(0.1)
+    turned = HeadPose.from_euler(25, -3, 2, (0, 0, -450))
+    assert rotation_angle_deg(turned.rotation, pose.rotation) == pytest.approx(20.0, abs=0.05)
+
+    fit = ModelFit(model, cam, FitSettings(photometric=True))
+    pts = cam.project(pose.apply(shape))
+    fit.calibrate([pts], 0)
+    fit.set_appearance(frame)
+    own = fit.photometric_term(frame)[0]._own
+    half = fit.photometric_term(frame, eye_weight=0.5)[0]._own
+    assert np.allclose(half[rim], 0.5 * own[rim]) and np.array_equal(half[~rim], own[~rim])
+    seen = []
+    real = fit.photometric_term
+    monkeypatch.setattr(
+        fit, "photometric_term", lambda img, s=0, w=1.0: seen.append(w) or real(img, s, w)
+    )
+    fit.fit(pts, image=frame)  # (no frame before: the calibration's pose)
+    fit._prev = replace(fit._prev, pose=turned)  # (as if the last frame had turned 20 deg)
+    fit.fit(cam.project(turned.apply(shape)), image=frame)
+    assert seen[0] == 1.0 and seen[1] == pytest.approx(eye_rim_weight(20.0), abs=0.01)
+    monkeypatch.setattr(ph, "EYE_RIM_TURN_DEG", None)
+    assert eye_rim_weight(20.0) == 1.0
+
+
 def test_a_mesh_warp_moves_its_points_exactly_and_does_not_fold():
     rng = np.random.default_rng(1)
     pts = rng.uniform(50, 150, (60, 2))

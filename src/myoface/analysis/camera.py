@@ -168,6 +168,12 @@ def rotvec(rot: np.ndarray) -> np.ndarray:
     return np.array([a * k for a in axis])
 
 
+def rotation_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """The angle (degrees) of the rotation that takes rotation ``b`` (3, 3) to ``a``."""
+    c = 0.5 * (float(np.trace(np.asarray(a) @ np.asarray(b).T)) - 1.0)
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
 def rotmat(v: np.ndarray) -> np.ndarray:
     """The rotation matrix of a rotation vector (Rodrigues' formula)."""
     angle = float(np.linalg.norm(v))

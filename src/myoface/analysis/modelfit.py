@@ -68,6 +68,7 @@ from myoface.analysis.camera import (
     PinholeCamera,
     check_points,
     initial_pose,
+    rotation_angle_deg,
     rotmat,
     rotvec,
 )
@@ -78,6 +79,7 @@ from myoface.analysis.photometric import (
     ChannelTerms,
     PhotometricTerm,
     coarse_start,
+    eye_rim_weight,
 )
 from myoface.analysis.solver import bounded_gauss_newton
 from myoface.analysis.synthesis import LandmarkSynthesis
@@ -529,7 +531,11 @@ class ModelFit:
         if image is not None:
             # the schedule's coarsest level only where the face moved far since the last fit
             start = coarse_start(points, self._photo_points if self._prev is not None else None)
-            photo = self.photometric_term(image, start)
+            # (the head's turn from the calibration's pose: the last frame's, else none known)
+            turn = 0.0
+            if self._prev is not None and self.calibration is not None:
+                turn = rotation_angle_deg(self._prev.pose.rotation, self.calibration.pose.rotation)
+            photo = self.photometric_term(image, start, eye_rim_weight(turn))
             self._photo_points = np.asarray(points, dtype=np.float64)
             if photo is not None:
                 self.timings["photo_coarse_starts"] += start == 0
@@ -799,21 +805,23 @@ class ModelFit:
             pose = self._pose_only(self.offsets.correct(p, pose, base), pose, base)
         return self.offsets.correct(p, pose, base)
 
-    def photometric_term(self, image, start_level: int = 0) -> list[PhotometricTerm] | None:
+    def photometric_term(self, image, start_level: int = 0,
+                         eye_weight: float = 1.0) -> list[PhotometricTerm] | None:  # fmt: skip
         """The photometric terms of ``image``: its brightness, and its redness with
         :attr:`FitSettings.photo_colour` (None without an image or an appearance); their
         coarse-to-fine schedule from ``start_level`` (:func:`~myoface.analysis.photometric.
-        coarse_start`)."""
+        coarse_start`), the eyes' rim samples weighing ``eye_weight``
+        (:func:`~myoface.analysis.photometric.eye_rim_weight`)."""
         if image is None or self.appearance is None:
             return None
         s = self.settings
         out = [PhotometricTerm(image, self.appearance, self.camera, s.photo_sigma, s.photo_huber,
-                               start_level=start_level)]  # fmt: skip
+                               start_level=start_level, eye_weight=eye_weight)]  # fmt: skip
         if self.appearance_colour is not None:  # (the same samples: the brightness's geometry)
             out.append(
                 PhotometricTerm(image, self.appearance_colour, self.camera,
                                 s.photo_colour_sigma, s.photo_huber, channel="redness",
-                                peer=out[0], start_level=start_level)
+                                peer=out[0], start_level=start_level, eye_weight=eye_weight)
             )  # fmt: skip
         return out
 

@@ -481,6 +481,8 @@ class Appearance:
     outline: np.ndarray | None = None
     #: the samples' head-frame x, y (S, 2) over the face's half-width, about its centre
     head_xy: np.ndarray | None = None
+    #: the samples on the triangles at the eyes' openings (S,) bool (:func:`eye_rim`)
+    eye_rim: np.ndarray | None = None
 
     def pairs(self, n_vertices: int):
         """The mesh's vertex pairs of ``n_vertices`` vertices
@@ -543,7 +545,7 @@ class Appearance:
         hxy = head[:, :2] - head[:, :2].mean(0)
         hxy = hxy / max(float(np.abs(hxy[:, 0]).max()), 1e-9)
         return cls(samples, tri, tuple(levels), values, region, spacing, prior, albedo, outline,
-                   hxy)  # fmt: skip
+                   hxy, eye_rim(face, samples))  # fmt: skip
 
 
 #: the weight of the samples on triangles with a vertex on the mouth's opening (the inner lip
@@ -554,6 +556,51 @@ class Appearance:
 MOUTH_RIM_WEIGHT = 0.0
 #: a sample is seen where its triangle faces the camera by more than this cosine
 FACING_MIN = 0.2
+
+
+#: the samples at the eyes' openings weigh ``1 / (1 + (turn / EYE_RIM_TURN_DEG)^2)`` in a
+#: frame whose head is turned by ``turn`` degrees from the calibration frame's pose
+#: (:func:`eye_rim_weight`; None: always 1). What shows at a lid's margin at calibration is
+#: partly the eyeball behind it, which does not move with the lid: as the head turns, the
+#: eyeball's surface seen past the margin slides along it by about the margin's depth in
+#: front of it times the turn's sine (a few millimetres: a pixel at this scale by a turn of
+#: 10-15 degrees), which the fit reads as the lid moving (a false upper lid raise, AU5, with
+#: the turn of the head: docs/expression_trackers.md). Weighing them 0 always took that away
+#: but lost the lids' own motion (the known warps' eyelids 0.80 -> 0.51, 2026-12-04); near
+#: the calibration's pose they are the lid's skin. Measured 2026-12-04 against None (the same
+#: tree): the expression clip (head moving, the camera's frames) 0.698 / 0.707 -> 0.729 /
+#: 0.776, its readings at rest (the sum of the AUs' means) 1.32 -> 0.97, AU5's 0.24 -> under
+#: 0.08; the known warps the same to 0.002; single_face.mp4's fidelity 0.764 both; the
+#: degraded head-motion renders, head moving, worst RMSE 0.267 -> 0.274, median 0.127 both,
+#: skin 0.916 -> 0.949 mm, head 1.162 -> 1.093 deg (head still the same); the five gaze clips
+#: 3.36, 5.72, 5.55, 3.44, 4.50 -> 3.61, 5.68, 4.78, 3.13, 5.27 deg (mean 4.51 -> 4.49)
+EYE_RIM_TURN_DEG: float | None = 10.0
+
+
+def eye_rim(face, samples: SurfaceSamples) -> np.ndarray:
+    """(S,) bool: the samples on the triangles touching the eyes' openings (the mesh's holes
+    other than its outline and the mouth's)."""
+    out = np.zeros(len(samples), dtype=bool)
+    loops = face.boundary_loops
+    if len(loops) < 3:
+        return out
+    verts = np.asarray(face.vertices)
+    inner = loops[1:]  # (loops[0] is the face's outline)
+    mouth = min(inner, key=lambda lp: float(verts[lp, 1].mean()))
+    on = np.zeros(len(verts), dtype=bool)
+    for lp in inner:
+        if lp is not mouth:
+            on[lp] = True
+    rim = on[np.asarray(face.triangles)].any(1)
+    return rim[samples.tri_index]
+
+
+def eye_rim_weight(turn_deg: float) -> float:
+    """The eyes' rim samples' weight in a frame whose head is turned by ``turn_deg`` from the
+    calibration frame's pose (:data:`EYE_RIM_TURN_DEG`)."""
+    if EYE_RIM_TURN_DEG is None or not np.isfinite(turn_deg):
+        return 1.0
+    return float(1.0 / (1.0 + (float(turn_deg) / EYE_RIM_TURN_DEG) ** 2))
 
 
 def rim_weights(face, samples: SurfaceSamples) -> np.ndarray:
@@ -590,7 +637,8 @@ class PhotometricTerm:
 
     def __init__(self, frame, appearance: Appearance, camera, sigma: float = 8.0,
                  huber: float = 2.0, weight: float = 1.0, channel: str = "grey",
-                 peer: PhotometricTerm | None = None, start_level: int = 0):  # fmt: skip
+                 peer: PhotometricTerm | None = None, start_level: int = 0,
+                 eye_weight: float = 1.0):  # fmt: skip
         if not sigma > 0 or not huber > 0 or not weight >= 0:
             raise MyofaceValueError("the photometric term needs sigma > 0, huber > 0, weight >= 0")
         self.app = appearance
@@ -649,6 +697,10 @@ class PhotometricTerm:
         self._alb_ok = [np.isfinite(a) for a in appearance.albedo]
         prior = appearance.prior
         self._own = np.ones(len(s)) if prior is None else np.asarray(prior, dtype=np.float64)
+        if eye_weight != 1.0 and appearance.eye_rim is not None:
+            # (the eyes' rim samples in this frame: eye_rim_weight)
+            self._own = self._own.copy()
+            self._own[appearance.eye_rim] *= float(eye_weight)
 
     def restart(self) -> None:
         """Start the coarse-to-fine schedule again (a new round of Gauss-Newton steps)."""
