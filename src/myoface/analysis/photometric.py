@@ -577,22 +577,30 @@ FACING_MIN = 0.2
 EYE_RIM_TURN_DEG: float | None = 10.0
 
 
+def _openings(face) -> tuple[list, list]:
+    """The mesh's openings other than its outline: (the mouth's loop (the lowest on the face)
+    or none, the others: the eyes'), each a list of vertex index arrays."""
+    loops = face.boundary_loops
+    inner = list(loops[1:])  # (loops[0] is the face's outline)
+    if not inner:
+        return [], []
+    verts = np.asarray(face.vertices)
+    k = min(range(len(inner)), key=lambda i: float(verts[inner[i], 1].mean()))
+    return [inner[k]], inner[:k] + inner[k + 1 :]
+
+
+def _on_loops(face, samples: SurfaceSamples, loops) -> np.ndarray:
+    """(S,) bool: the samples on the triangles touching the vertices of ``loops``."""
+    on = np.zeros(len(face.vertices), dtype=bool)
+    for lp in loops:
+        on[lp] = True
+    return on[np.asarray(face.triangles)].any(1)[samples.tri_index]
+
+
 def eye_rim(face, samples: SurfaceSamples) -> np.ndarray:
     """(S,) bool: the samples on the triangles touching the eyes' openings (the mesh's holes
     other than its outline and the mouth's)."""
-    out = np.zeros(len(samples), dtype=bool)
-    loops = face.boundary_loops
-    if len(loops) < 3:
-        return out
-    verts = np.asarray(face.vertices)
-    inner = loops[1:]  # (loops[0] is the face's outline)
-    mouth = min(inner, key=lambda lp: float(verts[lp, 1].mean()))
-    on = np.zeros(len(verts), dtype=bool)
-    for lp in inner:
-        if lp is not mouth:
-            on[lp] = True
-    rim = on[np.asarray(face.triangles)].any(1)
-    return rim[samples.tri_index]
+    return _on_loops(face, samples, _openings(face)[1])
 
 
 def eye_rim_weight(turn_deg: float) -> float:
@@ -610,17 +618,7 @@ def rim_weights(face, samples: SurfaceSamples) -> np.ndarray:
     skin's error on the degraded head-motion renders from 0.53 to 0.48 mm with the head still
     but lowered the known-warp brows' gain from 0.91 to 0.87: not done.)"""
     w = np.ones(len(samples))
-    loops = face.boundary_loops
-    if len(loops) < 2:
-        return w
-    verts = np.asarray(face.vertices)
-    inner = loops[1:]  # (loops[0] is the face's outline)
-    mouth = min(inner, key=lambda lp: float(verts[lp, 1].mean()))
-    on = np.zeros(len(verts), dtype=bool)
-    on[mouth] = True
-    tri = np.asarray(face.triangles)
-    rim = on[tri].any(1)
-    w[rim[samples.tri_index]] = MOUTH_RIM_WEIGHT
+    w[_on_loops(face, samples, _openings(face)[0])] = MOUTH_RIM_WEIGHT
     return w
 
 
