@@ -154,7 +154,7 @@ def coarse_start(points, last_points) -> int:
     """The level a frame's schedule starts on (0: the coarsest; 1: the next,
     :data:`COARSE_START_PX`): ``points`` the frame's landmarks (V, 2+), ``last_points`` the
     last fitted frame's (None: there was none)."""
-    if COARSE_START_PX is None or last_points is None or len(BLUR_SCHEDULE_PX) < 3:
+    if COARSE_START_PX is None or last_points is None:
         return 0
     p = np.asarray(points, dtype=np.float64)[:, :2]
     q = np.asarray(last_points, dtype=np.float64)[:, :2]
@@ -672,8 +672,10 @@ class PhotometricTerm:
         #: the samples no other part of the face covers, at the round's first step
         self._unoccluded = None
         #: the schedule's first level (0: the coarsest; :func:`coarse_start`): the levels
-        #: before it are neither made nor stepped on
-        self.start_level = int(np.clip(start_level, 0, len(appearance.levels) - 1))
+        #: before it are neither made nor stepped on (a schedule of two levels or one always
+        #: starts on its coarsest: the finest alone does not reach)
+        levels = len(appearance.levels)
+        self.start_level = int(np.clip(start_level, 0, levels - 2)) if levels >= 3 else 0
         self._step = self._first_step()
         self._level = self.start_level
         self._w = None  # per sample: weight (visibility, independence, Huber), fixed over a step
@@ -791,17 +793,20 @@ class PhotometricTerm:
         return np.column_stack(cols)
 
     # -------------------------------------------------------------- the schedule
-    def _first_step(self) -> int:
-        """The step the schedule starts at: the first of :attr:`start_level`."""
-        return sum(STEPS_PER_LEVEL[k] if k < len(STEPS_PER_LEVEL) else 1
-                   for k in range(self.start_level))  # fmt: skip
-
-    def _level_for(self, step: int) -> int:
+    @staticmethod
+    def _steps_on(level: int) -> int:
         # (a coarse level STEPS_PER_LEVEL does not name takes one step: the schedule always
         # reaches the finest level, where the solver may stop)
+        return STEPS_PER_LEVEL[level] if level < len(STEPS_PER_LEVEL) else 1
+
+    def _first_step(self) -> int:
+        """The step the schedule starts at: the first of :attr:`start_level`."""
+        return sum(self._steps_on(k) for k in range(self.start_level))
+
+    def _level_for(self, step: int) -> int:
         last = len(self.app.levels) - 1
         for k in range(last):
-            n = STEPS_PER_LEVEL[k] if k < len(STEPS_PER_LEVEL) else 1
+            n = self._steps_on(k)
             if step < n:
                 return k
             step -= n
