@@ -720,3 +720,32 @@ def test_the_photometric_window_measured_while_it_is_scored_gives_the_same_resul
         assert (ma.index, ma.quality) == (mb.index, mb.quality)
         np.testing.assert_array_equal(ma.contractions, mb.contractions)
         np.testing.assert_array_equal(ma.pose.rotation, mb.pose.rotation)
+
+
+def test_a_detector_depth_tilted_against_the_face_does_not_pitch_the_head(fm, monkeypatch):
+    """The model's own face under a known pose, its points exact in x, y but their relative
+    depth tilted against the face's true depth (z + 0.1 y, pixels), as MediaPipe's is: the
+    calibration takes the person's neutral from x, y (modelfit.IDENTITY_DEPTH off), so the
+    tilt neither shears the neutral nor pitches the head frame. With the depth read into the
+    neutral (on) the neutral is sheared (offset y = 0.015 z) and the head comes out pitched
+    by 1.05 deg (0.52 with a tilt of 0.05)."""
+    import myoface.analysis.modelfit as mf
+
+    true = HeadPose.from_euler(4.0, -2.0, 1.0, (0.0, 0.0, -520.0))
+    p = landmarks(fm.face.vertices, true)
+    p[:, 2] += 0.1 * (p[:, 1] - p[:, 1].mean())
+    frames = [p] * 2
+
+    def pitch_error(depth: bool) -> float:
+        monkeypatch.setattr(mf, "IDENTITY_DEPTH", depth)
+        fit = ModelFit(fm, CAMERA, FitSettings(refine=0))
+        cal = fit.calibrate(frames, index=0)
+        return abs(cal.pose.angles_deg[1] - true.angles_deg[1]), cal.identity_mm
+
+    err, ident = pitch_error(False)
+    assert err < 0.2, err
+    v = fm.face.vertices
+    x = np.column_stack([v - v.mean(0), np.ones(len(v))])
+    lin, *_ = np.linalg.lstsq(x, ident, rcond=None)
+    assert abs(lin[2, 1]) < 0.003 and abs(lin[1, 2]) < 0.003, lin  # (no y-z shear)
+    assert pitch_error(True)[0] > 0.5  # (the tilt read into the neutral: pitched)
