@@ -1093,7 +1093,8 @@ class ModelFit:
     def _fit_identity(self, frames):
         """The poses and a smooth identity offset (V, 3) shared by the landmark ``frames``, every
         contraction at zero; then what the offset left of the frames' mean residual (in the
-        image plane) is added to it, so that the neutral reproduces the calibration frames."""
+        image plane) is added to it, so that the neutral reproduces the calibration frames.
+        The points' x, y only, unless :data:`IDENTITY_DEPTH`."""
         s = self.settings
         nv = len(self.neutral)
         ident = np.zeros_like(self.neutral)

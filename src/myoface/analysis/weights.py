@@ -27,7 +27,9 @@ class FitSettings:
     depth_sigma_mm : the same for MediaPipe's relative depth z: about a linear fit to the true
         depth it scatters by 1.3-2.2 mm, but it follows a turning head less than x and y do
         (on the closed loop, weighing it like x, y / 3 made the skin error 1.5 mm, like
-        x, y / 10 1.1 mm), so it only keeps the depth of the pose from being ill-posed.
+        x, y / 10 1.1 mm), so it only keeps the depth of the pose from being ill-posed. The
+        calibration does not read it into the person's neutral
+        (:data:`~myoface.analysis.modelfit.IDENTITY_DEPTH`: its tilt pitched the head frame).
     oval_weight : weight of the face oval's points (the mesh's outer rim), which MediaPipe
         puts on the face's silhouette, not on fixed skin, as the head turns.
     model_error : the model's own error at a point, as a fraction of the largest skin
