@@ -726,7 +726,8 @@ def test_a_detector_depth_tilted_against_the_face_does_not_pitch_the_head(fm, mo
     """The model's own face under a known pose, its points exact in x, y but their relative
     depth tilted against the face's true depth (z + 0.1 y, pixels), as MediaPipe's is: the
     calibration takes the person's neutral from x, y (modelfit.IDENTITY_DEPTH off), so the
-    tilt neither shears the neutral nor pitches the head frame. With the depth read into the
+    tilt neither shears the neutral nor pitches the head frame (the default on a face that is
+    the person's own, made from their photo or scan). With the depth read into the
     neutral (on) the neutral is sheared (offset y = 0.015 z) and the head comes out pitched
     by 1.05 deg (0.52 with a tilt of 0.05)."""
     import myoface.analysis.modelfit as mf
@@ -736,7 +737,7 @@ def test_a_detector_depth_tilted_against_the_face_does_not_pitch_the_head(fm, mo
     p[:, 2] += 0.1 * (p[:, 1] - p[:, 1].mean())
     frames = [p] * 2
 
-    def pitch_error(depth: bool) -> float:
+    def pitch_error(depth: bool | None) -> float:
         monkeypatch.setattr(mf, "IDENTITY_DEPTH", depth)
         fit = ModelFit(fm, CAMERA, FitSettings(refine=0))
         cal = fit.calibrate(frames, index=0)
@@ -748,4 +749,8 @@ def test_a_detector_depth_tilted_against_the_face_does_not_pitch_the_head(fm, mo
     x = np.column_stack([v - v.mean(0), np.ones(len(v))])
     lin, *_ = np.linalg.lstsq(x, ident, rcond=None)
     assert abs(lin[2, 1]) < 0.003 and abs(lin[1, 2]) < 0.003, lin  # (no y-z shear)
-    assert pitch_error(True)[0] > 0.5  # (the tilt read into the neutral: pitched)
+    on = pitch_error(True)[0]
+    assert on > 0.5  # (the tilt read into the neutral: pitched)
+    # (by default the generic face, which has no texture, reads its depth: its own depth is
+    # not the person's)
+    assert pitch_error(None)[0] == pytest.approx(on)

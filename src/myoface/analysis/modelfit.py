@@ -193,9 +193,11 @@ REGISTRATION_MAX = 12
 
 
 #: the calibration reads MediaPipe's relative depth (its points' z) into the person's neutral
-#: (:meth:`ModelFit._fit_identity`). Off: the neutral and the calibration's poses are fitted
-#: to the points' x, y only, and the neutral's depth is the model's, smoothed where x, y move
-#: it. Why: MediaPipe's z is a learned guess whose profile is tilted against the face's true
+#: (:meth:`ModelFit._fit_identity`): True, False, or None (the default): only on a face that
+#: is not the person's own, the generic face, which has no texture (a face made from the
+#: person's photo or scan has one, and their depth). Off: the neutral and the calibration's
+#: poses are fitted to the points' x, y only, and the neutral's depth is the model's,
+#: smoothed where x, y move it. Why not on the person's own face: MediaPipe's z is a learned guess whose profile is tilted against the face's true
 #: depth; fitted vertex by vertex (its weight is the only thing that holds the offset's
 #: depth, and the smoothness prior does not see a linear field) it shears the neutral (on the
 #: head-motion benchmark's own face, clean renders, head still: offset z = 0.010 y, offset y
@@ -217,8 +219,13 @@ REGISTRATION_MAX = 12
 #: 0.604 / 0.672 -> 0.646 / 0.664; known warps within 0.02, fidelity 0.783 -> 0.779.
 #: (MediaPipe's z left out of every frame's fit too, ``FitSettings.depth_sigma_mm`` 1000:
 #: with the photometric term head moving 0.89 deg, gaze 3.47, 4.87, 4.45, 3.02, 4.42, but
-#: single_face.mp4's fidelity 0.757, its brows' gain 0.83 -> 0.76: not taken.)
-IDENTITY_DEPTH = False
+#: single_face.mp4's fidelity 0.757, its brows' gain 0.83 -> 0.76: not taken.) Why on the
+#: generic face: its depth is not the person's, and MediaPipe's z is the only word on theirs;
+#: off there (the sample video, the generic face; the full benchmarks of 16:20 UTC against
+#: 14:25), the sample's fidelity 0.783 -> 0.779, the codec's decoded fidelity 0.665 -> 0.636
+#: and its bytes against x264's 2.99 -> 2.92x, synth.smile_gain 0.825 -> 0.805, the known
+#: warps' gain 0.456 -> 0.439.
+IDENTITY_DEPTH: bool | None = None
 
 
 def registers_appearance(settings) -> bool:
@@ -1094,11 +1101,11 @@ class ModelFit:
         """The poses and a smooth identity offset (V, 3) shared by the landmark ``frames``, every
         contraction at zero; then what the offset left of the frames' mean residual (in the
         image plane) is added to it, so that the neutral reproduces the calibration frames.
-        The points' x, y only, unless :data:`IDENTITY_DEPTH`."""
+        Their z too only where :data:`IDENTITY_DEPTH` says (the generic face)."""
         s = self.settings
         nv = len(self.neutral)
         ident = np.zeros_like(self.neutral)
-        if not IDENTITY_DEPTH:  # (the points' x, y only: see IDENTITY_DEPTH)
+        if not self._reads_identity_depth():  # (the points' x, y only: IDENTITY_DEPTH)
             frames = [np.column_stack([p[:, :2], np.full(len(p), np.nan)]) for p in frames]
         poses = [initial_pose(self.neutral, p, self.camera) for p in frames]
         lap = laplacian(self.model.face)
@@ -1144,6 +1151,13 @@ class ModelFit:
             uv = self.camera.project(pose.apply(base))
             resid.append(np.sqrt(((uv - p[:, :2]) ** 2).sum(1).mean()) * self._pixel_mm(pose))
         return ident, poses, float(np.mean(resid))
+
+    def _reads_identity_depth(self) -> bool:
+        """Whether the calibration reads MediaPipe's depth into the neutral
+        (:data:`IDENTITY_DEPTH`; by default only on a face without the person's texture)."""
+        if IDENTITY_DEPTH is None:
+            return getattr(self.model.face, "texture", None) is None
+        return bool(IDENTITY_DEPTH)
 
     def _gauge(self, ident, poses):
         """The identity offset with no rigid motion in it: the rotation and translation that
