@@ -170,8 +170,7 @@ def rotvec(rot: np.ndarray) -> np.ndarray:
 
 def rotation_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     """The angle (degrees) of the rotation that takes rotation ``b`` (3, 3) to ``a``."""
-    c = 0.5 * (float(np.trace(np.asarray(a) @ np.asarray(b).T)) - 1.0)
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    return float(np.degrees(np.linalg.norm(rotvec(np.asarray(a) @ np.asarray(b).T))))
 
 
 def rotmat(v: np.ndarray) -> np.ndarray:

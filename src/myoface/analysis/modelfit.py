@@ -1156,7 +1156,7 @@ class ModelFit:
         """Whether the calibration reads MediaPipe's depth into the neutral
         (:data:`IDENTITY_DEPTH`; by default only on a face without the person's texture)."""
         if IDENTITY_DEPTH is None:
-            return getattr(self.model.face, "texture", None) is None
+            return self.model.face.texture is None
         return bool(IDENTITY_DEPTH)
 
     def _gauge(self, ident, poses):
