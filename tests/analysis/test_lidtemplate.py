@@ -157,7 +157,8 @@ def test_the_fit_follows_a_rendered_blink(tmp_path):
     (FitSettings.lid_edges). Measured 2026-12-02: at the blink's closed frames 0.30-0.35
     without, 0.53-0.71 with; the half closure 0.16 / 0.20-0.22 (the term counts in full from
     a closure of 0.6, lidtemplate.CLOSING); over the clip the gain 0.32 / 0.52; at rest 0 in
-    both."""
+    both. With ``--photometric`` (the term off, FitSettings.reads_lids) the pixels read it
+    themselves: gain 0.82."""
     import functools
 
     import myoface.analysis.pipeline as pipeline
@@ -185,13 +186,16 @@ def test_the_fit_follows_a_rendered_blink(tmp_path):
         for f in resynthesis_frames(fm, table, 384):
             vw.write(f)
     got = {}
-    for on in (False, True):
-        settings = functools.partial(FitSettings, lid_edges=on)
+    for on in (False, True, "photometric"):
+        # (with --photometric the lids' term is off by default, FitSettings.reads_lids)
+        photo = on == "photometric"
+        settings = functools.partial(FitSettings, lid_edges=None if photo else on)
         with pytest.MonkeyPatch.context() as mp:
             mp.setattr(pipeline, "FitSettings", settings)
             res = analyze_to_folder(
-                video, tmp_path / f"a{int(on)}", model=build_face_model(), tracker="landmarks"
-            )
+                video, tmp_path / f"a{on}", model=build_face_model(), tracker="landmarks",
+                photometric=photo,
+            )  # fmt: skip
         got[on] = read_contractions_csv(res.folder / "contractions.csv", ids)[1][:, cols]
 
     def gain(c):
@@ -202,6 +206,12 @@ def test_the_fit_follows_a_rendered_blink(tmp_path):
     assert got[False][15:17].max() < 0.4  # (MediaPipe's lid points do not close)
     assert gain(got[True]) >= 1.4 * gain(got[False])
     assert np.abs(got[True][rest]).max() <= 0.05
+    # the photometric fit reads the closure from its samples on the lids, without the term
+    # (measured 2026-12-04: closed frames 0.64-0.82, half closure 0.45, gain 0.82; with the
+    # term as well 0.79)
+    photo = got["photometric"]
+    assert photo[15:17].min() >= 0.55 and gain(photo) >= gain(got[True])
+    assert np.abs(photo[rest]).max() <= 0.05
 
 
 def test_the_compiled_slide_cost_is_the_sampled_formula():

@@ -575,8 +575,8 @@ class ModelFit:
             self._photo_points = np.asarray(points, dtype=np.float64)
             if photo is not None:
                 self.timings["photo_coarse_starts"] += start == 0
-        # the lid margins' edges (FitSettings.lid_edges) read on this frame's fits only
-        self._lid_image = image if self.settings.lid_edges else None
+        # the lid margins' edges (FitSettings.reads_lids) read on this frame's fits only
+        self._lid_image = image if self.settings.reads_lids else None
         try:
             return self._fit_frame(points, synthesis, deferred, flow, photo, t0)
         finally:
@@ -934,7 +934,7 @@ class ModelFit:
             )
         out += [MagnitudePrior(s.magnitude_sigma), SparsityPrior(s.sparsity)]
         out += au_prior_terms(self.model.ids, s)  # the AU table's span (analysis.au_prior)
-        if getattr(self, "_lid_image", None) is not None:  # (FitSettings.lid_edges)
+        if getattr(self, "_lid_image", None) is not None:  # (FitSettings.reads_lids)
             lid = self.lid_edge_term(self._lid_image)
             out.append(lid)
             weights = lid.landmark_weights(weights)  # (MediaPipe's lid points where read)

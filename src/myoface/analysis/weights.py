@@ -250,8 +250,16 @@ class FitSettings:
     #: the closure of each eye's opening against the calibration frame, where it closes, in
     #: place of MediaPipe's upper lid points, which do not close in a blink; the lid margins'
     #: edges, :mod:`myoface.analysis.lidedges`, opt-in there). What was measured is in
-    #: :mod:`myoface.analysis.lidtemplate` (gaze 5.05 -> 5.03 deg, fidelity 0.756 -> 0.763)
-    lid_edges: bool = True
+    #: :mod:`myoface.analysis.lidtemplate` (gaze 5.05 -> 5.03 deg, fidelity 0.756 -> 0.763).
+    #: None (the default): on without the photometric term, off with it (:attr:`reads_lids`),
+    #: whose samples on the lids read their closure themselves. Measured 2026-12-04 with
+    #: ``--photometric`` (on / off): single_face.mp4's validated fidelity 0.764 / 0.765 (its
+    #: eyelids 0.811 / 0.812), the blink's frames said closed both ways and the gaze there
+    #: held alike (SD 1.5 / 1.2 deg either way); gaze on the benchmark's clip and four more
+    #: 3.31, 5.10, 4.58, 2.99, 5.16 / 3.33, 5.15, 4.53, 3.00, 4.66 deg; the known warps the
+    #: same to 0.005; the expression clip 0.740 / 0.784 both; the pass over the sample 3-11 %
+    #: faster (interleaved runs; the template's reading is 1.2-1.4 ms of a frame's fit).
+    lid_edges: bool | None = None
     #: the AU-space prior (:mod:`myoface.analysis.au_prior`): contractions held near the AU
     #: table's span, sigma in contraction units (None: off; opt-in, see that module)
     au_prior_sigma: float | None = None
@@ -343,6 +351,12 @@ class FitSettings:
     #: damps), and a damped fit is what the analysis must not be rewarded for. Opt in with
     #: ``FitSettings(offset_spread=1.0)``.
     offset_spread: float = 0.0
+
+    @property
+    def reads_lids(self) -> bool:
+        """Whether the lids' term is read (:attr:`lid_edges`; None: without the photometric
+        term only)."""
+        return (not self.photometric) if self.lid_edges is None else bool(self.lid_edges)
 
 
 # ------------------------------------------------------------------ the model's structure

@@ -516,7 +516,7 @@ class FitTracker(TrackerBase):
             if frame is None:
                 raise MyofaceValueError("the calibration frame was not kept")
             self.fit.set_appearance(frame, images)
-        if self.settings.lid_edges and frame is not None:
+        if self.settings.reads_lids and frame is not None:
             self.fit.set_lid_reference(frame)  # (the lids' template)
         if self.gaze is not None:  # the person's eyeballs and open lids
             self.gaze.calibrate(self.fit.neutral + self.fit.identity_mm)
@@ -660,7 +660,7 @@ class FitTracker(TrackerBase):
         try:
             r = fit.fit(
                 obs.points, self.synthesis, deferred=self.deferred_relax, flow=flow,
-                image=frame if self.settings.photometric or self.settings.lid_edges else None,
+                image=frame if self.settings.photometric or self.settings.reads_lids else None,
             )  # fmt: skip
         except (np.linalg.LinAlgError, MyofaceValueError):
             self._lose_track()
