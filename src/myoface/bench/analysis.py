@@ -236,7 +236,31 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     it is scored (``landmark_fit.SPECULATE``, the same results; the breakdown's
     ``calibration_ms_per_frame`` then includes those frames' fits, ``fit_cpu_ms_per_frame``
     counts them as before): alternating runs of five passes, the default 0.246 / 0.264 ->
-    0.288 / 0.326x MediaPipe, ``--flow`` unchanged at 0.22x (bound by the GIL)."""
+    0.288 / 0.326x MediaPipe, ``--flow`` unchanged at 0.22x (bound by the GIL).
+
+    Where ``--photometric``'s pass goes, and what did not shorten it (2026-12-04, the pass
+    timed per stage and per compiled kernel, and alternating runs of five interleaved passes
+    with MediaPipe alone): at 24-27 ms a frame against the default's 14-17 (MediaPipe alone
+    4-5), a quarter of it is the calibration before the first frame is measured (0.44-0.58 s
+    of a 1.7-2.0 s pass: MediaPipe and the scoring of the 29 frames the appearance's
+    registration waits for, the identity fit 0.1 s, the appearance taken twice and registered
+    on 11 frames 0.13-0.16 s) and the rest the frames' fits, 12-14 ms each, of which the
+    compiled kernels on the fit's thread are 4.2 ms (the photometric normal equations 1.1,
+    the occlusion's z-buffer 0.9, the light's fit 0.5, the pair sums 0.45) and the
+    interpreter's work between them the rest: the fit's thread holds the interpreter's lock
+    for most of a frame, so work moved to another thread does not shorten the pass. Measured,
+    not kept: each frame's gaze read on a thread of its own beside the next frame's fit
+    (the same readings): 24.6 against 23.9 ms a frame, the default 14.0 against 14.3 (within
+    the runs' spread); the calibration started on the first five frames scored, the
+    appearance's registration when its frames are in, MediaPipe 34 frames ahead in the window
+    (the same results): the first frame measured at 0.47-0.60 s against 0.52-0.58 (the
+    scoring and the registration then contend with MediaPipe's thread); the interpreter's
+    switch interval 2 or 5 ms instead of 0.5: 25.7 / 27.2 against 24.6 ms. What does shorten
+    it costs accuracy: 3 steps a frame instead of 5 (``FitSettings.photo_iterations``), 19
+    % faster, the expression clip's apex 0.74 -> 0.66; the brightness alone
+    (``photo_colour=False``), 17 %, the sample's fidelity 0.77 -> 0.65. 0.25x MediaPipe needs
+    the fit's own time a frame cut by about 40 %: fewer interpreted operations a step, not
+    threads."""
     path = _sample_video()
     m = None if not quick else 24
     # the default, MediaPipe alone and --flow (the points read against the calibration frame
