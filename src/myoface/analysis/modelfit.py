@@ -197,8 +197,8 @@ REGISTRATION_MAX = 12
 #: is not the person's own, the generic face, which has no texture (a face made from the
 #: person's photo or scan has one, and their depth). Off: the neutral and the calibration's
 #: poses are fitted to the points' x, y only, and the neutral's depth is the model's,
-#: smoothed where x, y move it. Why not on the person's own face: MediaPipe's z is a learned guess whose profile is tilted against the face's true
-#: depth; fitted vertex by vertex (its weight is the only thing that holds the offset's
+#: smoothed where x, y move it. Why not on the person's own face: MediaPipe's z is a
+#: learned guess whose profile is tilted against the face's true depth; fitted vertex by vertex (its weight is the only thing that holds the offset's
 #: depth, and the smoothness prior does not see a linear field) it shears the neutral (on the
 #: head-motion benchmark's own face, clean renders, head still: offset z = 0.010 y, offset y
 #: = 0.015 z, least squares over the vertices), and a face sheared so is, seen from the
