@@ -67,10 +67,13 @@ class PinholeCamera:
 
     def project(self, p: np.ndarray) -> np.ndarray:
         """Camera-frame points (N, 3) mm -> (N, 2) pixels (x, y)."""
-        d = np.maximum(-p[:, 2], 1e-6)
-        return np.column_stack(
-            [self.cx + self.focal_px * p[:, 0] / d, self.cy - self.focal_px * p[:, 1] / d]
-        )
+        f = self.focal_px / np.maximum(-p[:, 2], 1e-6)
+        out = np.empty((len(p), 2))
+        np.multiply(p[:, 0], f, out=out[:, 0])
+        np.multiply(p[:, 1], -f, out=out[:, 1])
+        out[:, 0] += self.cx
+        out[:, 1] += self.cy
+        return out
 
     def projection_jacobian(self, p: np.ndarray) -> np.ndarray:
         """d(x, y)/dP (N, 2, 3), pixels per mm, of :meth:`project` at camera-frame points
@@ -175,9 +178,17 @@ def rotation_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
 
 def rotmat(v: np.ndarray) -> np.ndarray:
     """The rotation matrix of a rotation vector (Rodrigues' formula)."""
-    angle = float(np.linalg.norm(v))
-    k = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    # (in Python's floats, R = cos I + sin [a]x + (1 - cos) a a^T for the unit axis a: the fit
+    # calls it at every step, where numpy's calls on 3 x 3 arrays cost more than the work)
+    x, y, z = (float(c) for c in v)
+    angle = math.sqrt(x * x + y * y + z * z)
     if angle < 1e-9:
-        return np.eye(3) + k
-    k /= angle
-    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+        return np.array([[1.0, -z, y], [z, 1.0, -x], [-y, x, 1.0]])
+    x, y, z = x / angle, y / angle, z / angle
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return np.array([
+        [c + t * x * x, t * x * y - s * z, t * x * z + s * y],
+        [t * x * y + s * z, c + t * y * y, t * y * z - s * x],
+        [t * x * z - s * y, t * y * z + s * x, c + t * z * z],
+    ])  # fmt: skip

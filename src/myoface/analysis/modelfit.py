@@ -398,6 +398,9 @@ class ModelFit:
         self._c0 = np.zeros(self.n_muscles)  # contractions the tissue was last relaxed at
         self._d0 = np.zeros_like(self.neutral)  # ... and its skin displacement there
         self._prev: FrameFit | None = None
+        #: the frame intervals from :attr:`_prev`'s frame to the next one fitted (1, or more
+        #: after frames fitted and then not measured: :meth:`restore_frame_state`)
+        self._prev_age = 1
         #: deferred relaxes (``fit(deferred=True)``): the response Broyden-corrected at the
         #: last relax, the relax running on the worker thread (contractions, future)
         self._jac: np.ndarray | None = None
@@ -438,6 +441,24 @@ class ModelFit:
         """Forget the previous frame (after frames without a face): the next fit starts from a
         closed-form pose and no temporal prior."""
         self._prev = None
+
+    def frame_state(self) -> tuple:
+        """What the next fit starts from (the previous frame's fit, how many frames back it
+        is, and for the photometric term's schedule its points): :meth:`restore_frame_state`
+        takes it back."""
+        return self._prev, self._prev_age, self._photo_points
+
+    def restore_frame_state(self, state: tuple) -> None:
+        """The next fit starts from ``state`` (:meth:`frame_state`, taken before a frame that
+        is then not measured, e.g. ``occluded``): from that frame's fit, its temporal prior
+        as wide as the frames since then allow (the head moved on meanwhile: with the prior
+        of one frame's interval the fit lagged the turning head further at each frame, and
+        every frame after the first not measured was not measured either; 2026-12-04, the
+        degraded head-motion renders with the photometric term), and the photometric term's
+        schedule from its coarsest level unless the face has not moved since that frame's
+        points (:func:`~myoface.analysis.photometric.coarse_start`)."""
+        self._prev, age, self._photo_points = state
+        self._prev_age = age + 1
 
     def skin(self, contractions=None) -> np.ndarray:
         """The person's skin (V, 3) mm, head frame, at ``contractions`` (default: neutral),
@@ -611,7 +632,15 @@ class ModelFit:
         else:
             self._collect()
         refine = 0 if deferred else self.settings.refine
-        res = self._fit(p, prev, refine=refine, flow=flow, photo=photo)
+        start = None
+        if photo is not None and prev is not None and self._prev_age > 1:
+            # the last fit is frames back (the frames since were not measured): the
+            # landmarks move the start to this frame first; the photometric steps, a few
+            # pixels' reach, lost a head that had turned on meanwhile (2026-12-04, the
+            # degraded head-motion renders: from a frame marked occluded on, every frame
+            # diverged, MediaPipe's points ending up to 66 mm RMS from the fit)
+            start = self._fit(p, prev, refine=0, flow=flow)
+        res = self._fit(p, prev, refine=refine, flow=flow, photo=photo, start=start)
         if synthesis is not None:
             for _ in range(self.settings.synthesis_rounds):
                 err = synthesis.tracker_error(self.shape(res.contractions), res.pose)
@@ -627,6 +656,7 @@ class ModelFit:
         ):
             self._relax_later(res.contractions)
         self._prev = res
+        self._prev_age = 1
         self.timings["fits"] += 1
         self.timings["fit_cpu_s"] += time.thread_time() - t0  # (with immediate relaxes)
         return res
@@ -923,10 +953,12 @@ class ModelFit:
         s = self.settings
         out: list = []
         if prev is not None:
+            # (the frames since prev: more than one after frames not measured)
+            age = self._prev_age if prev is self._prev else 1
             out.append(
                 TemporalPrior(
                     prev,
-                    1.0 / self.fps,
+                    age / self.fps,
                     s.rotation_rate_deg_per_s,
                     s.translation_rate_mm_per_s,
                     s.rate_per_s,

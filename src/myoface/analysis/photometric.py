@@ -176,6 +176,13 @@ OUTLIER_SIGMAS = 5.0
 TEXTURED_GREY = 4.0
 AGREEMENT_MIN = 0.5
 CONTRAST_CHANGE = 2.0
+#: :meth:`PhotometricTerm.occlusion` compares the patches with the appearance as the frame's
+#: light shows it (the fit's last step's light, when it was on the finest level), not with
+#: the calibration frame's brightness: a head turned under a lamp shades its patches anew
+#: (the head-motion renders, head turning to 30 deg: the share 0.12-0.20 on frames fitted
+#: right, 0.07-0.12 so; single_face.mp4's smile 0.062 / 0.068 at most; a blob over the mouth
+#: 0.18-0.19 / 0.19-0.21; 2026-12-04)
+OCCLUSION_LIT = True
 #: the lighting's regions: the face split at the head frame's x = 0 (left, right) and at this
 #: height (mm, head frame; about the nose's tip)
 LIGHT_SPLIT_Y_MM = -20.0
@@ -493,6 +500,16 @@ class Appearance:
             cached = self._pairs = _pk.vertex_pairs(tri, int(n_vertices))
         return cached
 
+    def known_albedo(self) -> tuple[list, list]:
+        """Per level, the albedo with 0 where unknown and where it is known (made once: every
+        frame's terms read them)."""
+        key = tuple(map(id, self.albedo))
+        cached = getattr(self, "_known_albedo", None)
+        if cached is None or cached[0] is not self.albedo or cached[1] != key:
+            made = ([np.nan_to_num(a) for a in self.albedo], [np.isfinite(a) for a in self.albedo])
+            cached = self._known_albedo = (self.albedo, key, made)
+        return cached[2]
+
     @classmethod
     def from_frame(cls, frame, face, camera, pose, shape, levels=BLUR_SCHEDULE_PX,
                    subdivision: int | None = None, channel: str = "grey") -> Appearance:  # fmt: skip
@@ -693,8 +710,7 @@ class PhotometricTerm:
         self._triangles = np.ascontiguousarray(appearance.triangles, dtype=np.int64)
         self._region = np.ascontiguousarray(appearance.region, dtype=np.int64)
         self._all = np.arange(len(s), dtype=np.int64)
-        self._alb0 = [np.nan_to_num(a) for a in appearance.albedo]
-        self._alb_ok = [np.isfinite(a) for a in appearance.albedo]
+        self._alb0, self._alb_ok = appearance.known_albedo()
         prior = appearance.prior
         self._own = np.ones(len(s)) if prior is None else np.asarray(prior, dtype=np.float64)
         if eye_weight != 1.0 and appearance.eye_rim is not None:
@@ -973,7 +989,7 @@ class PhotometricTerm:
         """The share of the face's visible, textured patches that do not look as they did
         at calibration at ``est`` (a hand over the mouth, hair over the brows): per vertex,
         the samples on its triangles, their brightness against the appearance's (the finest
-        level) by normalised correlation; a patch whose appearance varies by more than
+        level; under the frame's light, :data:`OCCLUSION_LIT`) by normalised correlation; a patch whose appearance varies by more than
         :data:`TEXTURED_GREY` grey levels and correlates below :data:`AGREEMENT_MIN` counts.
         Brightness that the light changes keeps its correlation; an expression's folds and
         stretched skin lower it, but keep the patch's contrast; what covers the skin changes
@@ -987,6 +1003,9 @@ class PhotometricTerm:
         pc = self._camera_points(est)
         uv = self._pixels(pc, self._all)
         a = self.app.values[lev]
+        if OCCLUSION_LIT and self._lit is not None and self._level == lev:
+            # the appearance as the frame's light shows it (the last step's, on this level)
+            a = np.where(self._alb_ok[lev], self._lit, np.nan)
         b = self._at(self._images[lev][0], uv)
         vis = _pk.facing(pc, self._triangles, self._tri_index) > FACING_MIN
         ok = vis & np.isfinite(a) & np.isfinite(b) & (self.app.prior > 0)

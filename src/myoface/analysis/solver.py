@@ -77,14 +77,24 @@ def bounded_gauss_newton(
             h, b = t.normal_equations(est)
             hess, rhs = (h, b) if hess is None else (hess + h, rhs + b)
         cost0 = sum(t.cost(est) for t in terms)
-        lo = np.concatenate([np.full(6, -np.inf), -c[free]])
-        hi = np.concatenate([np.full(6, np.inf), 1.0 - c[free]])
-        dg = np.maximum(np.diag(hess), 1e-12)
+        # (a few dozen unknowns: numpy's calls cost more than their arithmetic, so as few
+        # as will do)
+        n = len(rhs)
+        cf = c[free]
+        lo = np.empty(n)
+        lo[:6] = -np.inf
+        np.negative(cf, out=lo[6:])
+        hi = np.empty(n)
+        hi[:6] = np.inf
+        np.subtract(1.0, cf, out=hi[6:])
+        dg = np.maximum(hess.diagonal(), 1e-12)
         for _ in range(RETRIES):
-            step = box_qp(hess + np.diag(lam * dg), rhs, lo, hi)
+            damped = hess.copy()
+            damped.flat[:: n + 1] += lam * dg
+            step = box_qp(damped, rhs, lo, hi)
             new_pose = HeadPose(rotmat(step[:3]) @ pose.rotation, pose.translation_mm + step[3:6])
             new_c = c.copy()
-            new_c[free] = np.clip(c[free] + step[6:], 0.0, 1.0)
+            new_c[free] = np.minimum(np.maximum(cf + step[6:], 0.0), 1.0)
             trial = Estimate(new_pose, new_c, forward(new_c), jac, free)
             cost1 = sum(t.cost(trial) for t in terms)
             if cost1 <= cost0 + 1e-9 * abs(cost0):

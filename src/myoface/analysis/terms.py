@@ -339,13 +339,20 @@ class TemporalPrior:
         self.sigma_r = float(np.radians(rotation_rate_deg_per_s) * dt_s)
         self.sigma_t = float(translation_rate_mm_per_s * dt_s)
         self.sigma_c = float(rate_per_s * dt_s)
+        self._at = None  # (the last estimate asked, its rotation and translation residuals)
+        self._hess = None  # (the diagonal, the normal matrix)
 
     def prepare(self, est: Estimate) -> None:
         pass
 
     def _pose_residuals(self, est: Estimate):
+        # (once per estimate: its normal equations and its cost both ask)
+        at = self._at
+        if at is not None and at[0] is est:
+            return at[1], at[2]
         rv = rotvec(est.pose.rotation @ self.prev.pose.rotation.T)
         dtr = est.pose.translation_mm - self.prev.pose.translation_mm
+        self._at = (est, rv, dtr)
         return rv, dtr
 
     def _diagonal(self, nf: int) -> np.ndarray:
@@ -358,15 +365,21 @@ class TemporalPrior:
         return d
 
     def normal_equations(self, est: Estimate):
-        # (the rows are the unknowns over their sigmas: A^T A is diagonal)
+        # (the rows are the unknowns over their sigmas: A^T A is diagonal, the same matrix at
+        # every step of a frame: made once, read only)
         free = est.free
-        d = self._diagonal(len(free))
+        if self._hess is None or len(self._hess[0]) != len(free):
+            d = self._diagonal(len(free))
+            h = np.diag(d)
+            h.setflags(write=False)
+            self._hess = (d, h)
+        d, h = self._hess
         rv, dtr = self._pose_residuals(est)
         r = np.empty(len(d))
         r[:3] = rv
         r[3:6] = dtr
         r[6:] = est.contractions[free] - self.prev.contractions[free]
-        return np.diag(d), -d * r
+        return h, -d * r
 
     def cost(self, est: Estimate) -> float:
         rv, dtr = self._pose_residuals(est)
@@ -382,18 +395,23 @@ class MagnitudePrior:
 
     def __init__(self, sigma: float):
         self.sigma = float(sigma)
+        self._hess = None
 
     def prepare(self, est: Estimate) -> None:
         pass
 
     def normal_equations(self, est: Estimate):
-        h, b = _zeros(est)
         free = est.free
-        if len(free):
+        n = 6 + len(free)
+        if self._hess is None or len(self._hess) != n:  # (the same at every step: read only)
+            h = np.zeros((n, n))
             idx = 6 + np.arange(len(free))
             h[idx, idx] = 1.0 / self.sigma**2
-            b[6:] = -est.contractions[free] / self.sigma**2
-        return h, b
+            h.setflags(write=False)
+            self._hess = h
+        b = np.zeros(n)
+        b[6:] = est.contractions[free] * (-1.0 / self.sigma**2)
+        return self._hess, b
 
     def cost(self, est: Estimate) -> float:
         cf = est.contractions[est.free]
@@ -408,14 +426,19 @@ class SparsityPrior:
 
     def __init__(self, weight: float):
         self.weight = float(weight)
+        self._ne = None  # (its normal equations: the same at every step, read only)
 
     def prepare(self, est: Estimate) -> None:
         pass
 
     def normal_equations(self, est: Estimate):
-        h, b = _zeros(est)
-        b[6:] = -0.5 * self.weight
-        return h, b
+        if self._ne is None or len(self._ne[1]) != est.n_unknowns:
+            h, b = _zeros(est)
+            b[6:] = -0.5 * self.weight
+            h.setflags(write=False)
+            b.setflags(write=False)
+            self._ne = (h, b)
+        return self._ne
 
     def cost(self, est: Estimate) -> float:
         return self.weight * float(est.contractions[est.free].sum())
