@@ -78,3 +78,27 @@ def test_pose_and_contractions_are_recovered_on_a_degraded_render(degraded_smile
     others = [ids.index(m) for m in ids if m in PAPER_MUSCLES and m not in SMILE]
     assert got[others].max() < 0.3, {ids[i]: round(float(got[i]), 2) for i in others}
     assert np.nanmean(res.skin_rms_mm[held]) < 1.5, res.skin_rms_mm
+
+
+@needs_mediapipe
+@pytest.mark.slow
+@pytest.mark.shared_data
+def test_the_benchmark_fit_takes_frames_as_the_tracker_does(degraded_smile, monkeypatch):
+    """``run_headmotion`` fits the frames itself; it takes each as ``FitTracker`` does
+    (:func:`~myoface.analysis.trackers.landmark_fit.frame_quality`): on this render every frame
+    is measured with the photometric term, and with a gate every frame fails (the occlusion's
+    share above -1) none is, each counted as occluded (until 2026-12-04 the benchmark measured
+    every frame whatever the gate said, and missed the tracker losing a turning head)."""
+    import myoface.analysis.trackers.landmark_fit as lf
+    from myoface.analysis.weights import FitSettings
+    from myoface.bench.headmotion import run_headmotion
+
+    fm, frames, points, truth, poses, skins = degraded_smile
+    settings = FitSettings(photometric=True)
+    res = run_headmotion(fm, points, truth, poses, skins, settings=settings, frames=frames)
+    assert res.not_measured == {}
+    assert np.isfinite(res.estimate).all()
+    monkeypatch.setattr(lf, "OCCLUDED_FRACTION", -1.0)
+    res = run_headmotion(fm, points, truth, poses, skins, settings=settings, frames=frames)
+    assert res.not_measured == {"occluded": len(frames)}
+    assert np.isnan(res.estimate).all()

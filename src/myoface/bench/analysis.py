@@ -255,7 +255,14 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     appearance's registration when its frames are in, MediaPipe 34 frames ahead in the window
     (the same results): the first frame measured at 0.47-0.60 s against 0.52-0.58 (the
     scoring and the registration then contend with MediaPipe's thread); the interpreter's
-    switch interval 2 or 5 ms instead of 0.5: 25.7 / 27.2 against 24.6 ms. What does shorten
+    switch interval 2 or 5 ms instead of 0.5: 25.7 / 27.2 against 24.6 ms; each frame's
+    blurred images and gradients (2 ms a frame of OpenCV on the fit's thread, 2.2 on the
+    channels' thread) made on a thread of their own while the frame before is fitted, ready
+    in time for 71 of the 72 frames (the same results to 1e-5): the frames' fits took 18-21
+    ms against 15-17.5 without it, the pass no faster (0.163-0.165x against 0.176-0.186x in
+    alternating passes; a pass's CPU on the two cores is 1.35-1.4 times its wall time, yet
+    work beside the fit's thread slows it as much as it takes off; and the upper bound, the
+    images made for free, was 10 %). What does shorten
     it costs accuracy: 3 steps a frame instead of 5 (``FitSettings.photo_iterations``), 19
     % faster, the expression clip's apex 0.74 -> 0.66; the brightness alone
     (``photo_colour=False``), 17 %, the sample's fidelity 0.77 -> 0.65. 0.25x MediaPipe needs

@@ -197,6 +197,9 @@ class HeadMotionResult:
     #: with the anchored flow: its tracker's counts (:attr:`~myoface.analysis.modelflow.
     #: ModelFlow.stats`)
     flow_stats: dict | None = None
+    #: the frames fitted but not measured, by why (:func:`~myoface.analysis.trackers.
+    #: landmark_fit.frame_quality`: ``occluded``, ``misfit``)
+    not_measured: dict | None = None
 
     def rmse(self) -> np.ndarray:
         return np.sqrt(np.nanmean((self.estimate - self.truth) ** 2, axis=0))
@@ -235,6 +238,7 @@ class HeadMotionResult:
             ],
             "residual_mm": float(np.nanmedian(self.residual_mm)),
             "frames_fitted": int(ok.sum()),
+            "frames_not_measured": dict(self.not_measured or {}),
             "calibration_frame": int(self.calibration_index),
         }
 
@@ -380,6 +384,7 @@ def run_headmotion(
     from myoface.analysis.modelfit import CALIBRATION_WINDOW_S, ModelFit
     from myoface.analysis.modelflow import ModelFlow, predicted
     from myoface.analysis.synthesis import LandmarkSynthesis
+    from myoface.analysis.trackers.landmark_fit import frame_quality
 
     photometric = settings is not None and settings.photometric
     if (photometric or anchored_flow) and (frames is None or len(frames) != len(points)):
@@ -409,6 +414,8 @@ def run_headmotion(
     t_fit = np.zeros(n)
     lag = modelflow.PREDICTION_LAG
     lagged = []  # (the prediction each frame's fit leaves, its points), as FitTracker keeps
+    last_ok: tuple = (None, None)
+    not_measured: dict = {}
     for k, p in enumerate(points):
         if p is None:
             fit.lose_track()
@@ -420,10 +427,23 @@ def run_headmotion(
             pred, since = lagged[k - lag] if k >= lag else (None, None)
             prep = tracker.prepare(frames[k], p)
             flow = tracker.track(frames[k], p, pred, prepared=prep, since=since)
+        before = fit.frame_state()
         r = fit.fit(p, syn, image=frames[k] if photometric else None, flow=flow)
-        lagged.append((predicted(fit), p))
         t_fit[k] = time.perf_counter() - t0
-        est[k], ang[k], resid[k] = r.contractions, r.pose.angles_deg, r.residual_mm
+        resid[k] = r.residual_mm
+        quality = frame_quality(r, photometric)
+        if quality != "ok":  # (not measured, as FitTracker takes it)
+            not_measured[quality] = not_measured.get(quality, 0) + 1
+            if quality == "occluded":  # (the next frame starts from the last measured one)
+                fit.restore_frame_state(before)
+                lagged.append(last_ok)
+            else:
+                fit.lose_track()
+                lagged.append((None, None))
+            continue
+        last_ok = (predicted(fit), p)
+        lagged.append(last_ok)
+        est[k], ang[k] = r.contractions, r.pose.angles_deg
     if fit.offsets is not None:
         fit.offsets.close()
     # the skin the estimates produce, against the true skin (head frame, the model's own)
@@ -437,7 +457,7 @@ def run_headmotion(
     true_ang = np.array([p.angles_deg for p in poses])
     return HeadMotionResult(
         tuple(model.ids), truth, est, true_ang, ang, skin_err, resid, cal.index, t_fit,
-        None if tracker is None else dict(tracker.stats),
+        None if tracker is None else dict(tracker.stats), not_measured,
     )  # fmt: skip
 
 

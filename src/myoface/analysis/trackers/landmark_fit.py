@@ -62,6 +62,23 @@ OCCLUDED_FRACTION = 0.15
 # 0.068, the blob 0.19-0.21, the head-motion renders, head turning to 30 deg and every frame
 # fitted, at most 0.122 clean and degraded (0.197 and 0.168 against the calibration frame's
 # brightness, which the turning head's shading changes), where 0.12 had marked frames occluded)
+
+
+def frame_quality(fit, photometric: bool) -> str:
+    """How :class:`FitTracker` takes a frame's fit ``fit`` (a
+    :class:`~myoface.analysis.modelfit.FrameFit`): ``"occluded"`` (the photometric term's share
+    of patches unlike the appearance over :data:`OCCLUDED_FRACTION`), ``"misfit"`` (the
+    landmarks farther from the model than :data:`MISFIT_RMS_MM`, or with the photometric term
+    :data:`MISFIT_RMS_MM_PHOTOMETRIC`) or ``"ok"`` (measured). The benchmarks that fit frames
+    themselves (:func:`~myoface.bench.headmotion.run_headmotion`) take them alike."""
+    if fit.occlusion > OCCLUDED_FRACTION:
+        return "occluded"
+    limit = MISFIT_RMS_MM_PHOTOMETRIC if photometric else MISFIT_RMS_MM
+    if not fit.residual_mm <= limit:
+        return "misfit"
+    return "ok"
+
+
 #: while the calibration's window is still being detected and scored, measure its frames on
 #: the calibration the frames scored so far choose (:class:`_Speculation`): kept when the
 #: whole window chooses the same frames, else measured again. The results are the same
@@ -679,10 +696,11 @@ class FitTracker(TrackerBase):
         # the prediction this frame leaves for the anchored flow (ModelFlow.track; as soon
         # as it is known, so that the next frame's tracking runs while this one's gaze is
         # read): the fit's pose and skin here, unless the frame is not measured
-        occluded = r.occlusion > OCCLUDED_FRACTION
+        quality = frame_quality(r, self.settings.photometric)
+        occluded = quality == "occluded"
         if occluded:
             self._publish(*self._ok_prediction)  # (the last measured frame's)
-        elif r.residual_mm <= self._misfit_mm:
+        elif quality == "ok":
             self._ok_prediction = ((r.pose, shape), obs.points)
             self._publish(*self._ok_prediction)
         uv = fit.camera.project(r.pose.apply(shape))
@@ -695,7 +713,7 @@ class FitTracker(TrackerBase):
                 index, time_s, "occluded", nan, r.pose, r.residual_mm, contours, r.iterations,
                 r.occlusion,
             )  # fmt: skip
-        if not r.residual_mm <= self._misfit_mm:
+        if quality == "misfit":
             self._lose_track()
             return FitMeasurement(
                 index, time_s, "misfit", nan, r.pose, r.residual_mm, contours, r.iterations
@@ -707,12 +725,6 @@ class FitTracker(TrackerBase):
             index, time_s, "ok", r.contractions, r.pose, r.residual_mm, contours, r.iterations,
             r.occlusion, gaze,
         )  # fmt: skip
-
-    @property
-    def _misfit_mm(self) -> float:
-        """A measured frame's largest landmark residual (mm RMS): :data:`MISFIT_RMS_MM`, or
-        :data:`MISFIT_RMS_MM_PHOTOMETRIC` with the photometric term."""
-        return MISFIT_RMS_MM_PHOTOMETRIC if self.settings.photometric else MISFIT_RMS_MM
 
     def _lose_track(self) -> None:
         """After a frame not measured: the fit and the gaze's filter start again (and the
