@@ -989,8 +989,9 @@ class PhotometricTerm:
         """The share of the face's visible, textured patches that do not look as they did
         at calibration at ``est`` (a hand over the mouth, hair over the brows): per vertex,
         the samples on its triangles, their brightness against the appearance's (the finest
-        level; under the frame's light, :data:`OCCLUSION_LIT`) by normalised correlation; a patch whose appearance varies by more than
-        :data:`TEXTURED_GREY` grey levels and correlates below :data:`AGREEMENT_MIN` counts.
+        level; under the frame's light, :data:`OCCLUSION_LIT`) by normalised correlation; a
+        patch whose appearance varies by more than :data:`TEXTURED_GREY` grey levels and
+        correlates below :data:`AGREEMENT_MIN` counts.
         Brightness that the light changes keeps its correlation; an expression's folds and
         stretched skin lower it, but keep the patch's contrast; what covers the skin changes
         the contrast too, so a patch counts only when its brightness' spread has also
