@@ -193,38 +193,36 @@ REGISTRATION_MAX = 12
 
 
 #: the calibration reads MediaPipe's relative depth (its points' z) into the person's neutral
-#: (:meth:`ModelFit._fit_identity`): True, False, or None (the default): only on a face that
-#: is not the person's own, the generic face, which has no texture (a face made from the
-#: person's photo or scan has one, and their depth). Off: the neutral and the calibration's
-#: poses are fitted to the points' x, y only, and the neutral's depth is the model's,
-#: smoothed where x, y move it. Why not on the person's own face: MediaPipe's z is a
-#: learned guess whose profile is tilted against the face's true depth; fitted vertex by vertex (its weight is the only thing that holds the offset's
+#: (:meth:`ModelFit._fit_identity`): True, False, or None (the default): only on a face that is not
+#: the person's own, the generic face, which has no texture (a face made from the person's photo or
+#: scan has one, and their depth). Off: the neutral and the calibration's poses are fitted to the
+#: points' x, y only, and the neutral's depth is the model's, smoothed where x, y move it. Why not
+#: on the person's own face: MediaPipe's z is a learned guess whose profile is tilted against the
+#: face's true depth; fitted vertex by vertex (its weight is the only thing that holds the offset's
 #: depth, and the smoothness prior does not see a linear field) it shears the neutral (on the
-#: head-motion benchmark's own face, clean renders, head still: offset z = 0.010 y, offset y
-#: = 0.015 z, least squares over the vertices), and a face sheared so is, seen from the
-#: front, the same face pitched: the head frame came out pitched by 1.17 deg (sd 0.13) over
-#: a clip whose head held still (0.97 with the landmarks alone). Measured 2026-12-04 (on /
-#: off on one tree; ``tools/pose_bias.py`` for the head's angles and the shear, the
-#: benchmarks' own functions for the rest): clean renders, head still, photometric, the
-#: angles' bias (yaw, pitch) 0.18, 1.17 -> 0.57, 0.40 deg, the head's RMS 0.69 -> 0.43 deg
-#: (landmarks alone: 0.02, 0.97 -> 0.40, 0.21; 0.78 -> 0.61 deg, but median RMSE 0.128 ->
-#: 0.146); the degraded head-motion renders with the photometric term, head moving, head 1.09 -> 0.88
-#: deg, skin 0.95 -> 0.93 mm, median RMSE 0.127 -> 0.114 (head still 1.52 -> 1.48 deg: a
-#: bias MediaPipe's x, y leave on the degraded renders, 2.4 deg of pitch, stays); its gaze
-#: on five clips (the benchmark's and four more seeds) 3.61, 5.68, 4.78, 3.13, 5.27 -> 3.31,
-#: 5.10, 4.58, 2.99, 5.16 deg; the expression clip 0.729 / 0.776 -> 0.740 / 0.784; known
-#: warps and single_face.mp4's fidelity the same (0.764 / 0.763). The default (landmarks):
-#: head moving, head 1.85 -> 1.82 deg, median RMSE 0.178 -> 0.194, skin 1.44 -> 1.47 mm;
-#: gaze 4.30, 5.30, 5.39, 4.80, 6.10 -> 4.28, 5.21, 5.40, 4.62, 5.62; the expression clip
-#: 0.604 / 0.672 -> 0.646 / 0.664; known warps within 0.02, fidelity 0.783 -> 0.779.
-#: (MediaPipe's z left out of every frame's fit too, ``FitSettings.depth_sigma_mm`` 1000:
-#: with the photometric term head moving 0.89 deg, gaze 3.47, 4.87, 4.45, 3.02, 4.42, but
-#: single_face.mp4's fidelity 0.757, its brows' gain 0.83 -> 0.76: not taken.) Why on the
-#: generic face: its depth is not the person's, and MediaPipe's z is the only word on theirs;
-#: off there (the sample video, the generic face; the full benchmarks of 16:20 UTC against
-#: 14:25), the sample's fidelity 0.783 -> 0.779, the codec's decoded fidelity 0.665 -> 0.636
-#: and its bytes against x264's 2.99 -> 2.92x, synth.smile_gain 0.825 -> 0.805, the known
-#: warps' gain 0.456 -> 0.439.
+#: head-motion benchmark's own face, clean renders, head still: offset z = 0.010 y, offset y = 0.015
+#: z, least squares over the vertices), and a face sheared so is, seen from the front, the same face
+#: pitched: the head frame came out pitched by 1.17 deg (sd 0.13) over a clip whose head held still
+#: (0.97 with the landmarks alone). Measured 2026-12-04 (on / off on one tree;
+#: ``tools/pose_bias.py`` for the head's angles and the shear, the benchmarks' own functions for the
+#: rest): clean renders, head still, photometric, the angles' bias (yaw, pitch) 0.18, 1.17 -> 0.57,
+#: 0.40 deg, the head's RMS 0.69 -> 0.43 deg (landmarks alone: 0.02, 0.97 -> 0.40, 0.21; 0.78 ->
+#: 0.61 deg, but median RMSE 0.128 -> 0.146); the degraded head-motion renders with the photometric
+#: term, head moving, head 1.09 -> 0.88 deg, skin 0.95 -> 0.93 mm, median RMSE 0.127 -> 0.114 (head
+#: still 1.52 -> 1.48 deg: a bias MediaPipe's x, y leave on the degraded renders, 2.4 deg of pitch,
+#: stays); its gaze on five clips (the benchmark's and four more seeds) 3.61, 5.68, 4.78, 3.13, 5.27
+#: -> 3.31, 5.10, 4.58, 2.99, 5.16 deg; the expression clip 0.729 / 0.776 -> 0.740 / 0.784; known
+#: warps and single_face.mp4's fidelity the same (0.764 / 0.763). The default (landmarks): head
+#: moving, head 1.85 -> 1.82 deg, median RMSE 0.178 -> 0.194, skin 1.44 -> 1.47 mm; gaze 4.30, 5.30,
+#: 5.39, 4.80, 6.10 -> 4.28, 5.21, 5.40, 4.62, 5.62; the expression clip 0.604 / 0.672 -> 0.646 /
+#: 0.664; known warps within 0.02, fidelity 0.783 -> 0.779. (MediaPipe's z left out of every frame's
+#: fit too, ``FitSettings.depth_sigma_mm`` 1000: with the photometric term head moving 0.89 deg,
+#: gaze 3.47, 4.87, 4.45, 3.02, 4.42, but single_face.mp4's fidelity 0.757, its brows' gain 0.83 ->
+#: 0.76: not taken.) Why on the generic face: its depth is not the person's, and MediaPipe's z is
+#: the only word on theirs; off there (the sample video, the generic face; the full benchmarks of
+#: 16:20 UTC against 14:25), the sample's fidelity 0.783 -> 0.779, the codec's decoded fidelity
+#: 0.665 -> 0.636 and its bytes against x264's 2.99 -> 2.92x, synth.smile_gain 0.825 -> 0.805, the
+#: known warps' gain 0.456 -> 0.439.
 IDENTITY_DEPTH: bool | None = None
 
 

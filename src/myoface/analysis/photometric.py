@@ -503,12 +503,11 @@ class Appearance:
     def known_albedo(self) -> tuple[list, list]:
         """Per level, the albedo with 0 where unknown and where it is known (made once: every
         frame's terms read them)."""
-        key = tuple(map(id, self.albedo))
         cached = getattr(self, "_known_albedo", None)
-        if cached is None or cached[0] is not self.albedo or cached[1] != key:
+        if cached is None or cached[0] is not self.albedo:
             made = ([np.nan_to_num(a) for a in self.albedo], [np.isfinite(a) for a in self.albedo])
-            cached = self._known_albedo = (self.albedo, key, made)
-        return cached[2]
+            cached = self._known_albedo = (self.albedo, made)
+        return cached[1]
 
     @classmethod
     def from_frame(cls, frame, face, camera, pose, shape, levels=BLUR_SCHEDULE_PX,

@@ -64,17 +64,17 @@ OCCLUDED_FRACTION = 0.15
 # brightness, which the turning head's shading changes), where 0.12 had marked frames occluded)
 
 
-def frame_quality(fit, photometric: bool) -> str:
-    """How :class:`FitTracker` takes a frame's fit ``fit`` (a
+def frame_quality(result, photometric: bool) -> str:
+    """How :class:`FitTracker` takes a frame's fit ``result`` (a
     :class:`~myoface.analysis.modelfit.FrameFit`): ``"occluded"`` (the photometric term's share
     of patches unlike the appearance over :data:`OCCLUDED_FRACTION`), ``"misfit"`` (the
     landmarks farther from the model than :data:`MISFIT_RMS_MM`, or with the photometric term
     :data:`MISFIT_RMS_MM_PHOTOMETRIC`) or ``"ok"`` (measured). The benchmarks that fit frames
     themselves (:func:`~myoface.bench.headmotion.run_headmotion`) take them alike."""
-    if fit.occlusion > OCCLUDED_FRACTION:
+    if result.occlusion > OCCLUDED_FRACTION:
         return "occluded"
     limit = MISFIT_RMS_MM_PHOTOMETRIC if photometric else MISFIT_RMS_MM
-    if not fit.residual_mm <= limit:
+    if not result.residual_mm <= limit:
         return "misfit"
     return "ok"
 
