@@ -22,8 +22,9 @@ fresh :class:`~myoface.analysis.gaze.GazeEstimator` (``key=value``: fields of
 :class:`~myoface.analysis.gaze.GazeSettings`, as Python literals) over each recording and
 prints, with the truth, each eye's RMS error over the frames open in the truth (the
 benchmark's ``per_eye``; its headline is the worse eye) and the same for the reader on the
-true geometry (the true pose, skin and camera: ``true_geometry``), else each eye's mean and SD
-and the frames said closed; and whether the readings are those recorded (the same settings and code
+true geometry (the true pose, skin and camera: ``true_geometry``), else each eye's mean and SD,
+the median of its change from one frame to the next (``step_median_deg``: the reading's
+jitter) and the frames said closed; and whether the readings are those recorded (the same settings and code
 give the same readings, bit for bit). With the truth, also where the reader put each eye
 (``placed``: over the frames whose lids rest in the truth, the eyeball's centre and the eye's
 skin ring, the neutral's vertices within 15 x 10 mm of the eyeball's centre and 5 mm or more
@@ -91,27 +92,31 @@ def record(source: str, out: str, face: str = "bench", tracker: str = "fit") -> 
         video = open_video(os.path.expanduser(source))
     an, first = make_analyzer(model, video, "landmarks", calibration_frame=None,
                               **TRACKERS[tracker])  # fmt: skip
-    frames, neutral = [], []
-    reader = an.gaze
-    measure, calibrate = reader.measure, reader.calibrate
+    by_reader, neutrals = {}, {}  # (per reader: a speculative calibration makes a new one)
+    from myoface.analysis.gaze import GazeEstimator
 
-    def recorded(frame, camera, pose, shape, points=None):
-        g = measure(frame, camera, pose, shape, points)
-        frames.append((np.array(frame), camera, pose, np.array(shape),
-                       None if points is None else np.array(points), g))  # fmt: skip
+    measure, calibrate = GazeEstimator.measure, GazeEstimator.calibrate
+
+    def recorded(self, frame, camera, pose, shape, points=None):
+        g = measure(self, frame, camera, pose, shape, points)
+        kept_frame = (np.array(frame), camera, pose, np.array(shape),
+                      None if points is None else np.array(points), g)  # fmt: skip
+        by_reader.setdefault(id(self), []).append(kept_frame)
         return g
 
-    def kept(v):
-        neutral.append(np.array(v))
-        return calibrate(v)
+    def kept(self, v):
+        neutrals[id(self)] = np.array(v)
+        return calibrate(self, v)
 
-    reader.measure, reader.calibrate = recorded, kept
+    GazeEstimator.measure, GazeEstimator.calibrate = recorded, kept
     try:
         index = [m.index for _, m in Tracking(video, an, first) if m.gaze is not None]
     finally:
         an.close()
+        GazeEstimator.measure, GazeEstimator.calibrate = measure, calibrate
+    frames, neutral = by_reader.get(id(an.gaze), []), neutrals[id(an.gaze)]  # (the one kept)
     with open(out, "wb") as f:
-        pickle.dump({"frames": frames, "index": index, "neutral": neutral[-1],
+        pickle.dump({"frames": frames, "index": index, "neutral": neutral,
                      "truth": truth, "face": face}, f)  # fmt: skip
     print(f"recorded {len(frames)} frames of {source} into {out}")
 
@@ -300,8 +305,12 @@ def replay(path: str, settings, oracle: str | None = None) -> dict:
             ok = np.isfinite(got).all(axis=1)
             closed = [k for g, k in zip(out, rec["index"], strict=True)
                       if g.eye(s).state == "closed"]  # fmt: skip
+            step = np.diff(got, axis=0)  # (frame to frame: the reading's jitter, and saccades)
+            step = step[np.isfinite(step).all(axis=1)]
             res[s] = {"read": int(ok.sum()), "mean_deg": got[ok].mean(0).round(2).tolist(),
-                      "sd_deg": got[ok].std(0).round(2).tolist(), "closed": closed}  # fmt: skip
+                      "sd_deg": got[ok].std(0).round(2).tolist(),
+                      "step_median_deg": np.median(np.abs(step), axis=0).round(2).tolist(),
+                      "closed": closed}  # fmt: skip
             continue
         open_ = np.asarray(truth["closure"]) < 0.5
         ok = open_[: len(got)] & np.isfinite(got).all(axis=1)
