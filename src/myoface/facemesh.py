@@ -6,6 +6,23 @@ analysis' trackers, the benchmarks).
 Surface Geometry from Monocular Video on Mobile GPUs") ships its models inside the wheel and
 runs offline. Its 468 points have the topology of myoface's default face (both are the
 MediaPipe canonical face): point i is vertex i.
+
+Why ``refine_landmarks=False`` (the attention mesh, which refines the eyes', the lips' and
+the irises' points, is not run). Measured 2026-12-04 (issue 35; the gaze benchmark's two
+clips, ``tools/gaze_replay.py record`` with the detector switched, and the benchmarks'
+own functions): it is the better detector of the eyes, and a mixed one for the analysis.
+The eye openings' centroid against the truth's, px RMS (x, y), base -> attention mesh: left
+(1.21, 1.27) -> (0.90, 0.54), right (1.39, 1.15) -> (1.12, 0.77) on the first clip, (1.80,
+1.32) -> (1.22, 0.93) and (1.38, 1.02) -> (1.02, 1.08) on the second; all 468 points 4.9 ->
+4.3 and 5.0 -> 4.7 px RMS. Through the 3-D fit (its offsets table made with the same graph):
+the moving head's pose 1.82 -> 1.48 deg, its median muscle 0.194 -> 0.182, skin 1.47 -> 1.37
+mm, but the still head's median muscle 0.127 -> 0.163; the expressions' apex / rest 0.646 /
+0.664 -> 0.448 / 0.897 (the AUs' leak at rest gone, and the apexes read short), with
+``--photometric`` 0.740 / 0.784 -> 0.771 / 0.828; the gaze's worse eye 4.28 -> 4.78 and
+5.21 -> 6.21 deg (the fit's head pitch 2.5 -> 1.3 deg RMS, but the eyes placed 1.2-1.8 px
+nearer each other: the offsets table, read on clean renders, takes off more than the
+degraded frames show), with ``--photometric`` 3.33 -> 4.08 and 5.15 -> 5.56. It costs
+MediaPipe 2.63 -> 3.34 ms a frame (tracking mode, single_face.mp4, medians of 3).
 """
 
 from __future__ import annotations
