@@ -247,9 +247,11 @@ neutral frames' landmarks; the photometric fit's gaze on this clip 7.03 -> 3.36 
 registration 2.98), on four more clips 3.79, 3.66, 3.55, 7.68 -> 5.72, 5.55, 3.44, 4.50: the
 lottery of one frame gone, MediaPipe's own bias at the eyes left.
 
-Where the 4.28 deg sits now, and what did not move it (2026-12-04, issue 35; recordings of
+Where the 4.28 deg sits, and what did not move it (2026-12-04, issue 35; recordings of
 the benchmark's clip and the second clip, gaze seed 7 and camera seed 3, by
-``tools/gaze_replay.py``; the worse eye, clip 1 / clip 2, 4.28 / 5.21 deg as committed). The
+``tools/gaze_replay.py``; the worse eye, clip 1 / clip 2, 4.28 / 5.21 deg; on the renders
+whose eye sockets were near-black, before :data:`~myoface.render.dressing.SOCKET` took the
+conjunctiva's pink again: the benchmark's number since is in BENCHMARKS.md). The
 right eye's yaw bias (-3.96 deg: its centre 0.92 px to the image's right) and both eyes'
 pitch (4.1 deg RMS, its SD 3.9) hold it; the reader on the true geometry is 2.27 / 2.54 on
 clip 1 and 3.50 / 3.65 on clip 2, so clip 2 fails on the reader alone. Measured, not kept:

@@ -311,7 +311,7 @@ class Renderer:
             tri_tex.append(np.zeros(k, bool))
             tri_cull.append(np.zeros(k, bool))
             uv.append(np.zeros((k + 1, 2)))
-            vcol.append(np.tile(op.color, (k + 1, 1)))
+            vcol.append(op.vertex_colors(f.vertices))
             fans.append((op.loop, first, center, op.depth_mm))
             n += k + 1
         cavity = None
