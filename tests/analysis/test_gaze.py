@@ -608,6 +608,29 @@ def test_real_video_holds_its_gaze_and_says_the_blink(tmp_path):
     assert np.linalg.norm(g) == pytest.approx(1.0, abs=1e-5) and g[2] < -0.8  # towards the camera
 
 
+def test_each_reading_keeps_where_its_frame_put_the_eyes(renderer, camera, default_face):
+    """A reading carries the eyes' placement of its own frame (:attr:`Gaze.placed`: the
+    socket's offset, the fit's opening), not the reader's state after later frames: the
+    tracker hands the frames it measured while choosing its calibration over later, and the
+    gaze benchmark's detail read the reader's last state for them (its openings' mean error
+    27 px on 2026-12-04, where each frame's own is under 1 px)."""
+    est = GazeEstimator(default_face)
+    readings, openings = [], []
+    for k, yaw in enumerate((-20, -10, 0, 10, 20)):
+        head = HeadPose.from_euler(4 * k - 8, 2, 0, (3 * k, 0, -480))
+        img = renderer.render(default_face.vertices, pose=(head.rotation, head.translation_mm),
+                              gaze=(np.radians(yaw), 0.0))  # fmt: skip
+        readings.append(est.measure(img, camera, head, default_face.vertices))
+        openings.append({s: est.openings[s].copy() for s in ("l", "r")})
+        want = {s: (est.offsets[s], est.openings[s]) for s in ("l", "r")}
+        assert readings[-1].placed.keys() == want.keys()
+    for g, op in zip(readings, openings, strict=True):
+        for s in ("l", "r"):
+            np.testing.assert_array_equal(g.placed[s][1], op[s])
+    # the frames moved the head: the openings kept are the frames' own, not the last one's
+    assert np.linalg.norm(readings[0].placed["l"][1] - readings[-1].placed["l"][1]) > 20
+
+
 @pytest.mark.parametrize("prior_mm", [1e6, None])
 def test_socket_finds_a_known_misplacement(renderer, camera, default_face, prior_mm):
     """The instrument on a known answer (GUIDE §8): each eye's socket template learnt from

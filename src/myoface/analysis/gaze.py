@@ -559,6 +559,11 @@ class Gaze:
 
     left: EyeGaze = field(default_factory=EyeGaze)
     right: EyeGaze = field(default_factory=EyeGaze)
+    #: where the reader put each eye on this frame, ``{side: (offset, opening)}``: its
+    #: socket's offset (mm, head frame x and y; None: none found) and the fit's opening before
+    #: it (px; None: not placed), as :attr:`GazeEstimator.offsets` and ``openings`` had them
+    #: right after the frame was read (:meth:`GazeEstimator.measure`; the benchmark's detail)
+    placed: dict | None = field(default=None, compare=False, repr=False)
 
     def eye(self, side: str) -> EyeGaze:
         return self.left if side == "l" else self.right
@@ -2012,8 +2017,11 @@ class GazeEstimator:
         return eye
 
     def measure(self, frame, camera, pose, shape, points=None) -> Gaze:
-        """:meth:`read`, filtered in time (:class:`GazeSmoother`)."""
-        return self.smoother.update(self.read(frame, camera, pose, shape, points))
+        """:meth:`read`, filtered in time (:class:`GazeSmoother`), with where each eye was
+        placed (:attr:`Gaze.placed`)."""
+        g = self.smoother.update(self.read(frame, camera, pose, shape, points))
+        placed = {s: (self.offsets.get(s), self.openings.get(s)) for s in ("l", "r")}
+        return replace(g, placed=placed)
 
     def describe(self) -> dict:
         """For analysis.json: the settings and the time a frame's reading took."""

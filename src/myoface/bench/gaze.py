@@ -264,9 +264,13 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
     try:
         measured, offsets, openings = [], [], []
         for _, m in Tracking(clip, an, first):
+            # (where the reader put the eyes as it read this frame: the tracker hands the
+            # frames it measured while it was still choosing its calibration later, when the
+            # reader has gone on)
+            placed = {} if m.gaze is None or m.gaze.placed is None else m.gaze.placed
             measured.append(m)
-            offsets.append({s: an.gaze.offsets.get(s) for s in ("l", "r")})
-            openings.append({s: an.gaze.openings.get(s) for s in ("l", "r")})
+            offsets.append({s: placed.get(s, (None, None))[0] for s in ("l", "r")})
+            openings.append({s: placed.get(s, (None, None))[1] for s in ("l", "r")})
         reader = an.gaze
         margins = {s: np.concatenate(reader._eyes[s][1:]) for s in ("l", "r")}
         centres = {s: reader.centres_mm[s] for s in ("l", "r")}
