@@ -10,7 +10,9 @@ MediaPipe canonical face): point i is vertex i.
 Why ``refine_landmarks=False`` (the attention mesh, which refines the eyes', the lips' and
 the irises' points, is not run). Measured 2026-12-04 (issue 35; the gaze benchmark's two
 clips, ``tools/gaze_replay.py record`` with the detector switched, and the benchmarks'
-own functions): it is the better detector of the eyes, and a mixed one for the analysis.
+own functions; on the renders whose eye sockets were still near-black, see
+:data:`myoface.render.dressing.SOCKET`): it is the better detector of the eyes, and a mixed
+one for the analysis.
 The eye openings' centroid against the truth's, px RMS (x, y), base -> attention mesh: left
 (1.21, 1.27) -> (0.90, 0.54), right (1.39, 1.15) -> (1.12, 0.77) on the first clip, (1.80,
 1.32) -> (1.22, 0.93) and (1.38, 1.02) -> (1.02, 1.08) on the second; all 468 points 4.9 ->
