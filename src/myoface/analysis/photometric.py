@@ -97,6 +97,26 @@ cores with the face detector) and the wait for the redness's step 0.5 ms. Its li
 and read samples then went into one compiled call without the lock
 (:func:`~myoface.analysis._photokernels.step_light`; contractions.csv identical): wall 29.1,
 28.7 -> 27.9, 26.8 ms a frame (two passes of each, alternating).
+
+**A turning head read as expression** (measured 2026-12-05, not solved). On the head-motion
+renders, clean, with the person's true neutral given, the fit's rest frames (no muscle
+moving) still come out 0.44 mm RMS from the true skin with the head moving (0.02 with it
+still), the spurious contractions following the turn (the left orbital sphincter and upper
+lip raiser +0.9 with the yaw); degraded by the camera 0.74 mm. At the *true* state the
+pixels' residual is small (0.2-0.35 sigma within 7 degrees of the calibration pose, 0.75-0.85
+at 25-40), but the pixels alone would move the skin 0.91 mm from there
+(``tools/photometric_truth_probe.py``): directions of the muscles they see only weakly
+amplify it. A third of it is the shading model's (0.64 mm with the renders' lights replaced
+by ambient light alone); the rest is not the lights, not the blur's footprint on a skin seen
+at another slant (the reading corrected to second order for it: the residual 0.626 -> 0.621
+sigma) and not the steps (12 a frame the same as 5). Tried and not taken: the samples seen at
+a slant weighing less (a ramp from :data:`FACING_MIN` to a cosine of 0.5: the rest frames
+0.44 -> 0.25 mm but the expressions' frames the same, their gain 0.83 -> 0.77; degraded
+renders, head moving, skin 1.06 -> 1.01 mm, median RMSE 0.113 -> 0.102, head still the same;
+the known warps' brows 0.81 -> 0.78, leak 0.106 -> 0.117), weighing them by how much their
+slant changed since calibration (the same trade), and the contractions' sparsity prior as a
+log penalty (reweighted L1, Candes, Wakin & Boyd 2008: head still, median RMSE 0.092 ->
+0.116, skin the same).
 """
 
 from __future__ import annotations
