@@ -293,6 +293,29 @@ def test_jaw_file_slide(tmp_path, default_face):
         load_muscles(f, default_face)
 
 
+def test_jaw_and_point_specs_of_the_wrong_type_are_format_errors(tmp_path, default_face):
+    """A vertex list, a landmark or a depth of the wrong type says so (the parser's property
+    test found ``lower = 0`` raising a TypeError)."""
+    f = tmp_path / "m.toml"
+    muscle = (
+        '[[muscle]]\nid = "pull"\ntype = "linear"\norigin = { vertex = 345, depth_mm = 12 }\n'
+        "insertion = { vertex = 291 }\nradius_mm = 10\nmax_shortening_mm = 3\n"
+    )
+    jaw = "[jaw]\nhinge = { xyz_mm = [0, -20, -30] }\nmax_angle_rad = 0.4\n"
+    for body, match in (
+        (muscle + jaw + 'lower = 0\nupper = ["nose_base"]\n', r"\[jaw\].lower must be a list"),
+        (muscle + jaw + 'lower = ["chin"]\nupper = "nose_base"\n', r"\[jaw\].upper must be a list"),
+        (muscle + jaw + 'lower = [1.5]\nupper = ["nose_base"]\n', "landmark must be a name"),
+        (muscle + jaw + 'lower = [true]\nupper = ["nose_base"]\n', "landmark must be a name"),
+        (muscle.replace("depth_mm = 12", 'depth_mm = "deep"'), "depth_mm must be a number"),
+        (muscle.replace("{ vertex = 291 }", "{ landmark = 3 }"), "landmark must be a name"),
+        (muscle.replace("{ vertex = 291 }", "{ vertex = true }"), "vertex must be an index"),
+    ):
+        f.write_text(body)
+        with pytest.raises(MyofaceFormatError, match=match):
+            load_muscles(f, default_face)
+
+
 def test_rotate_about_axis_is_rigid_rotation():
     rng = np.random.default_rng(0)
     p = rng.normal(size=(10, 3))

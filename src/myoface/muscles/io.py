@@ -106,7 +106,7 @@ class _Placer:
     def _vertices(self, spec: dict, ctx: str) -> np.ndarray:
         if "vertex" in spec:
             i = spec["vertex"]
-            if not isinstance(i, int) or not 0 <= i < self.face.n_vertices:
+            if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < self.face.n_vertices:
                 raise MyofaceFormatError(
                     f"{self.where}: {ctx}: vertex must be an index in 0..{self.face.n_vertices - 1}"
                     f"; got {i!r}"
@@ -114,7 +114,12 @@ class _Placer:
             return np.array([i])
         if "landmark" in spec:
             names = spec["landmark"]
-            names = [names] if isinstance(names, str) else list(names)
+            names = [names] if isinstance(names, str) else names
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise MyofaceFormatError(
+                    f"{self.where}: {ctx}: landmark must be a name or a list of names; got "
+                    f"{spec['landmark']!r}"
+                )
             try:
                 return np.concatenate([np.asarray(self.face.landmark(n)) for n in names])
             except (KeyError, MyofaceValueError) as exc:
@@ -137,7 +142,7 @@ class _Placer:
             normal = n / np.linalg.norm(n)
         if "offset_mm" in spec:
             p = p + _floats(spec["offset_mm"], 3, f"{self.where}: {ctx}.offset_mm")
-        depth = float(spec.get("depth_mm", 0.0))
+        depth = _number(spec, "depth_mm", f"{self.where}: {ctx}") if "depth_mm" in spec else 0.0
         if depth:
             if normal is None:
                 raise MyofaceFormatError(f"{self.where}: {ctx}: depth_mm needs a vertex/landmark")
@@ -151,9 +156,14 @@ class _Placer:
         return np.array([0.0, 0.0, 1.0])
 
     def vertex_set(self, items, ctx: str) -> np.ndarray:
+        if not isinstance(items, list):
+            raise MyofaceFormatError(
+                f"{self.where}: {ctx} must be a list of vertex indices and landmark names; "
+                f"got {items!r}"
+            )
         out = []
         for it in items:
-            if isinstance(it, int):
+            if isinstance(it, int) and not isinstance(it, bool):
                 out.append(self._vertices({"vertex": it}, ctx))
             else:
                 out.append(self._vertices({"landmark": it}, ctx))
