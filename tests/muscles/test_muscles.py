@@ -310,6 +310,16 @@ def test_jaw_and_point_specs_of_the_wrong_type_are_format_errors(tmp_path, defau
         (muscle.replace("depth_mm = 12", 'depth_mm = "deep"'), "depth_mm must be a number"),
         (muscle.replace("{ vertex = 291 }", "{ landmark = 3 }"), "landmark must be a name"),
         (muscle.replace("{ vertex = 291 }", "{ vertex = true }"), "vertex must be an index"),
+        ("jaw = 3\n" + muscle, r"\[jaw\] must be a table"),
+        ("meta = 1\n" + muscle, r"\[meta\] must be a table"),
+        (
+            muscle.replace('type = "linear"', 'type = "sphincter"')
+            .replace("origin = { vertex = 345, depth_mm = 12 }\n", "")
+            .replace("insertion = { vertex = 291 }\nradius_mm = 10\nmax_shortening_mm = 3\n", "")
+            + "center = { vertex = 13 }\nsemi_axes_mm = [20, 8]\nfalloff = 1.0\n"
+            + "max_contraction_mm = 4.0\nprotrusion_mm = []\n",
+            "protrusion_mm must be a number",
+        ),
     ):
         f.write_text(body)
         with pytest.raises(MyofaceFormatError, match=match):

@@ -236,7 +236,7 @@ def _build(entry: dict, placer: _Placer, ctx: str):
             tuple(_floats(entry["semi_axes_mm"], 2, f"{ctx}.semi_axes_mm")),
             _number(entry, "falloff", ctx),
             _number(entry, "max_contraction_mm", ctx),
-            float(entry.get("protrusion_mm", 0.0)),
+            _number(entry, "protrusion_mm", ctx) if "protrusion_mm" in entry else 0.0,
             region,
         )
     if kind == "lid":
@@ -251,7 +251,7 @@ def _build(entry: dict, placer: _Placer, ctx: str):
             entry["action"],
             placer.point(entry["origin"], f"{ctx}.origin"),
             placer.point(entry["insertion"], f"{ctx}.insertion"),
-            float(entry["angle_deg"]) if "angle_deg" in entry else 0.0,
+            _number(entry, "angle_deg", ctx) if "angle_deg" in entry else 0.0,
         )
     return WatersMuscle(
         mid,
@@ -278,6 +278,8 @@ def _build_jaw(spec: dict, placer: _Placer, where: str) -> Jaw:
         "lower_below",
         "upper_above",
     }
+    if not isinstance(spec, dict):
+        raise MyofaceFormatError(f"{where}: [jaw] must be a table; got {spec!r}")
     unknown = set(spec) - allowed - {"note"}
     if unknown:
         raise MyofaceFormatError(f"{where}: [jaw]: unknown keys {sorted(unknown)}")
@@ -354,7 +356,10 @@ def muscles_from_dict(
                 raise
             raise MyofaceFormatError(f"{ctx}: {exc}") from None
     jaw = _build_jaw(doc["jaw"], placer, where) if "jaw" in doc else None
-    name = str(doc.get("meta", {}).get("name", where))
+    meta = doc.get("meta", {})
+    if not isinstance(meta, dict):
+        raise MyofaceFormatError(f"{where}: [meta] must be a table; got {meta!r}")
+    name = str(meta.get("name", where))
     bound = _build_bound_skin(doc["bound_skin"], face, where) if "bound_skin" in doc else None
     return MuscleSet(muscles, jaw, name=name, bound_skin=bound)
 
@@ -364,7 +369,11 @@ def _build_bound_skin(spec, face: FaceMesh, where: str) -> BoundSkin:
     if not isinstance(spec, dict) or set(spec) - {"vertices", "fat", "note"}:
         raise MyofaceFormatError(f"{ctx}: needs vertices and fat (and an optional note)")
     v = spec.get("vertices")
-    if not isinstance(v, list) or not v or not all(isinstance(i, int) for i in v):
+    if (
+        not isinstance(v, list)
+        or not v
+        or not all(isinstance(i, int) and not isinstance(i, bool) for i in v)
+    ):
         raise MyofaceFormatError(f"{ctx}: vertices must be a list of vertex indices")
     if max(v) >= face.n_vertices or min(v) < 0:
         raise MyofaceFormatError(f"{ctx}: vertex index outside [0, {face.n_vertices - 1}]")
