@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import HealthCheck, example, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from myoface.errors import MyofaceError  # noqa: E402
@@ -676,6 +676,7 @@ def test_head_poses_and_performances_of_any_values(scratch, rows, quality, dt):
     text=st.text(max_size=12)
     | st.sampled_from(["12=1.5", "12=nan", "X=3", "L12=C", "=", "12==0.5", f"12={BIG}", BIG])
 )
+@example(text="0\n0=")  # (a name with a newline was echoed as it was: two lines)
 def test_option_values_of_any_text(text):
     """The command line's number and request types: a value in its limits, or argparse's
     usage error with a message of at most a line's length (never the 5000 digits)."""
@@ -700,6 +701,7 @@ def test_option_values_of_any_text(text):
 
 @SETTINGS
 @given(text=st.text(max_size=200) | st.sampled_from([BIG, f"[Errno 1094995529] {BIG}"]))
+@example(text="[Errno")  # (the user's own text, not an errno prefix)
 def test_user_message_is_one_short_line(text):
     from myoface.errors import user_message
 

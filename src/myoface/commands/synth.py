@@ -64,8 +64,9 @@ def _request(what: str):
                 f"expected NAME=VALUE (e.g. 12=0.7); got {_shown(text)}"
             )
         k, v = (x.strip() for x in text.split("=", 1))
+        name = k if k.isprintable() and len(k) <= 40 else _shown(k)  # (a newline: repr)
         try:
-            parse_intensity(v, f"AU{k}" if what == "au" else f"muscle {k}")
+            parse_intensity(v, f"AU{name}" if what == "au" else f"muscle {name}")
         except MyofaceError as exc:
             raise argparse.ArgumentTypeError(str(exc)) from None
         return text
