@@ -106,8 +106,15 @@ lip raiser +0.9 with the yaw); degraded by the camera 0.74 mm. At the *true* sta
 pixels' residual is small (0.2-0.35 sigma within 7 degrees of the calibration pose, 0.75-0.85
 at 25-40), but the pixels alone would move the skin 0.91 mm from there
 (``tools/photometric_truth_probe.py``): directions of the muscles they see only weakly
-amplify it. A third of it is the shading model's (0.64 mm with the renders' lights replaced
-by ambient light alone); the rest is not the lights, not the blur's footprint on a skin seen
+amplify it. Not the pose's coupling: with every frame's pose pinned to the truth the rest
+frames come out 0.59 mm (0.44 free). Where it comes from, by the samples' share of the pull
+(the others' right-hand side zeroed): the skin away from the eyes, mouth, nose and brows 0.66
+mm of the 0.92 (0.47 of 0.64 in ambient light, of which the samples facing the camera at
+less than a cosine of 0.5 0.40, those facing it at more 0.24), the mouth's rim 0.38, the
+nose 0.29, the eyes' rims 0.28. A third of it is the shading model's (0.64 mm with the
+renders' lights replaced by ambient light alone); the rest is not the lights, not the
+texture's detail (with the renders' texture at a quarter of its resolution the pull grows,
+0.64 -> 0.75 mm: less texture, weaker pixels), not the blur's footprint on a skin seen
 at another slant (the reading corrected to second order for it: the residual 0.626 -> 0.621
 sigma) and not the steps (12 a frame the same as 5). Tried and not taken: the samples seen at
 a slant weighing less (a ramp from :data:`FACING_MIN` to a cosine of 0.5: the rest frames
