@@ -125,7 +125,9 @@ slant changed since calibration (the same trade), the samples within a blur (plu
 a break of the surface in the z-buffer (the silhouette, the nose's edge over the cheek; the
 eyes' and the mouth's openings not counted) weighing 0 (clean: rest 0.44 -> 0.24 mm, the
 expressions' frames 0.80 -> 0.82, gain 0.83 -> 0.75; degraded, head moving, skin 1.06 ->
-0.98 mm but the head 1.25 -> 1.38 deg), and the contractions' sparsity prior as a log
+0.98 mm but the head 1.25 -> 1.38 deg), MediaPipe's weak term comparing its points with
+the model's motion scaled by its gain (0.6: head moving, skin 1.06 -> 1.27 mm, head still the
+same), and the contractions' sparsity prior as a log
 penalty (reweighted L1, Candes, Wakin & Boyd 2008: head still, median RMSE 0.092 -> 0.116,
 skin the same; the expression clip's rest frames 0.724 -> 0.388, apex 0.698 -> 0.688). Each
 mask that takes the turn's readings off the rest frames takes as much of the expressions'
