@@ -137,6 +137,37 @@ def test_batch_local_pool_records_each_failure(tmp_path, capsys):
     assert len(capsys.readouterr().err.strip().splitlines()) == 3
 
 
+def test_an_error_a_stop_signal_caused_is_an_interruption_not_a_failed_video(tmp_path, monkeypatch):
+    """A stop signal that lands inside a library comes out as that library's error (numba's
+    cache, a C callback); analyze_job raises it as the interruption it is, so the batch stops
+    and does not record the video as failed (a video of a batch stopped by Ctrl-C was in its
+    summary as failed in CI); an ordinary error is still a failed row."""
+    import signal
+
+    from myoface._signals import Interrupted
+    from myoface.analysis import batch
+
+    job = batch._Job(str(tmp_path / "v.mp4"), str(tmp_path / "out"), "v", {})
+
+    def cut_by_a_signal(path):
+        try:
+            raise Interrupted(signal.SIGTERM)
+        except Interrupted as exc:
+            raise RuntimeError("no compiled object yet") from exc
+
+    monkeypatch.setattr(batch, "open_video", cut_by_a_signal)
+    with pytest.raises(Interrupted) as got:
+        batch.analyze_job(job)
+    assert got.value.signum == signal.SIGTERM
+
+    def broken(path):
+        raise RuntimeError("a broken file")
+
+    monkeypatch.setattr(batch, "open_video", broken)
+    row = batch.analyze_job(job)
+    assert row["status"] == "failed" and "a broken file" in row["error"]
+
+
 def test_expand_videos(tmp_path):
     from myoface.analysis.batch import expand_videos
 

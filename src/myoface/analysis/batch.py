@@ -53,7 +53,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from myoface._io import atomic_output, ensure_output_dir, sha256_file
-from myoface._signals import STOP_SIGNALS, Interrupted, raise_pending, stop_signals
+from myoface._signals import (
+    STOP_SIGNALS,
+    Interrupted,
+    raise_pending,
+    stop_signal_of,
+    stop_signals,
+)
 from myoface.analysis.estimate import skin_response
 from myoface.analysis.initfiles import load_init
 from myoface.analysis.outputs import FolderResult, analyze_to_folder
@@ -354,6 +360,9 @@ def analyze_job(job: _Job) -> dict:
             tmp.write_text(json.dumps(doc, indent=1))
         return row
     except Exception as exc:  # a bad video is recorded, never raised
+        signum = stop_signal_of(exc)
+        if signum is not None:  # (a stop signal that broke a library: not a bad video)
+            raise Interrupted(signum) from exc
         return _failed_row(job, _error_text(exc), time.perf_counter() - t0)
 
 
@@ -584,6 +593,10 @@ def _run_local(jobs: list[_Job], workers: int, record, stop: _Stop, closing, exe
                 row = _pool_row(fut, jobs[k])
                 if row is None and stop.signum is None:
                     row = _failed_row(jobs[k], "interrupted: its worker got a stop signal")
+                if row is not None and stop.signum is not None and row["status"] != "ok":
+                    # (a video being analysed when the stop came and not finished: stopped,
+                    # not failed; its folder has no done.json and the next run analyses it)
+                    row = None
                 if row is not None:
                     record(k, row)
     finally:
@@ -825,6 +838,8 @@ def _run_dask(jobs: list[_Job], client, record, stop: _Stop) -> None:
                         exc = err
                     row = _failed_row(jobs[k], _error_text(exc))
                 fut.release()
+                if stop.signum is not None and row["status"] != "ok":
+                    continue  # (stopped as the batch was, not failed: as _run_local)
                 record(k, row)
     finally:
         if pending:
