@@ -269,8 +269,9 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
             # reader has gone on)
             placed = {} if m.gaze is None or m.gaze.placed is None else m.gaze.placed
             measured.append(m)
-            offsets.append({s: placed.get(s, (None, None))[0] for s in ("l", "r")})
-            openings.append({s: placed.get(s, (None, None))[1] for s in ("l", "r")})
+            at = {s: placed.get(s, (None, None)) for s in ("l", "r")}
+            offsets.append({s: at[s][0] for s in at})
+            openings.append({s: at[s][1] for s in at})
         reader = an.gaze
         margins = {s: np.concatenate(reader._eyes[s][1:]) for s in ("l", "r")}
         centres = {s: reader.centres_mm[s] for s in ("l", "r")}

@@ -106,7 +106,7 @@ class _Placer:
     def _vertices(self, spec: dict, ctx: str) -> np.ndarray:
         if "vertex" in spec:
             i = spec["vertex"]
-            if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < self.face.n_vertices:
+            if not _is_index(i) or not 0 <= i < self.face.n_vertices:
                 raise MyofaceFormatError(
                     f"{self.where}: {ctx}: vertex must be an index in 0..{self.face.n_vertices - 1}"
                     f"; got {i!r}"
@@ -142,7 +142,7 @@ class _Placer:
             normal = n / np.linalg.norm(n)
         if "offset_mm" in spec:
             p = p + _floats(spec["offset_mm"], 3, f"{self.where}: {ctx}.offset_mm")
-        depth = _number(spec, "depth_mm", f"{self.where}: {ctx}") if "depth_mm" in spec else 0.0
+        depth = _number(spec, "depth_mm", f"{self.where}: {ctx}", 0.0)
         if depth:
             if normal is None:
                 raise MyofaceFormatError(f"{self.where}: {ctx}: depth_mm needs a vertex/landmark")
@@ -163,7 +163,7 @@ class _Placer:
             )
         out = []
         for it in items:
-            if isinstance(it, int) and not isinstance(it, bool):
+            if _is_index(it):
                 out.append(self._vertices({"vertex": it}, ctx))
             else:
                 out.append(self._vertices({"landmark": it}, ctx))
@@ -180,11 +180,23 @@ def _floats(v, n: int, ctx: str) -> np.ndarray:
     return a
 
 
-def _number(entry: dict, key: str, ctx: str) -> float:
+_REQUIRED = object()
+
+
+def _number(entry: dict, key: str, ctx: str, default=_REQUIRED) -> float:
+    """``entry[key]`` as a float (a format error unless it is a number); ``default`` when
+    the key is absent and one is given."""
+    if default is not _REQUIRED and key not in entry:
+        return default
     v = entry.get(key)
     if isinstance(v, bool) or not isinstance(v, int | float):
         raise MyofaceFormatError(f"{ctx}: {key} must be a number; got {v!r}")
     return float(v)
+
+
+def _is_index(v) -> bool:
+    """An integer (TOML's booleans are not indices)."""
+    return isinstance(v, int) and not isinstance(v, bool)
 
 
 def _build(entry: dict, placer: _Placer, ctx: str):
@@ -208,7 +220,7 @@ def _build(entry: dict, placer: _Placer, ctx: str):
             _number(entry, "radius_mm", ctx),
             _number(entry, "max_shortening_mm", ctx),
             region,
-            _number(entry, "lower_share", ctx) if "lower_share" in entry else 1.0,
+            _number(entry, "lower_share", ctx, 1.0),
         )
     if kind == "sheet":
         return SheetMuscle(
@@ -236,7 +248,7 @@ def _build(entry: dict, placer: _Placer, ctx: str):
             tuple(_floats(entry["semi_axes_mm"], 2, f"{ctx}.semi_axes_mm")),
             _number(entry, "falloff", ctx),
             _number(entry, "max_contraction_mm", ctx),
-            _number(entry, "protrusion_mm", ctx) if "protrusion_mm" in entry else 0.0,
+            _number(entry, "protrusion_mm", ctx, 0.0),
             region,
         )
     if kind == "lid":
@@ -251,7 +263,7 @@ def _build(entry: dict, placer: _Placer, ctx: str):
             entry["action"],
             placer.point(entry["origin"], f"{ctx}.origin"),
             placer.point(entry["insertion"], f"{ctx}.insertion"),
-            _number(entry, "angle_deg", ctx) if "angle_deg" in entry else 0.0,
+            _number(entry, "angle_deg", ctx, 0.0),
         )
     return WatersMuscle(
         mid,
@@ -311,8 +323,8 @@ def _build_jaw(spec: dict, placer: _Placer, where: str) -> Jaw:
         _number(spec, "max_angle_rad", f"{where}: [jaw]"),
         w,
         _floats(spec.get("slide_mm", [0.0, 0.0, 0.0]), 3, f"{where}: [jaw].slide_mm"),
-        _number(spec, "hinge_angle_rad", f"{where}: [jaw]") if "hinge_angle_rad" in spec else None,
-        _number(spec, "translation_from", f"{where}: [jaw]") if "translation_from" in spec else 0.0,
+        _number(spec, "hinge_angle_rad", f"{where}: [jaw]", None),
+        _number(spec, "translation_from", f"{where}: [jaw]", 0.0),
     )
 
 
@@ -369,11 +381,7 @@ def _build_bound_skin(spec, face: FaceMesh, where: str) -> BoundSkin:
     if not isinstance(spec, dict) or set(spec) - {"vertices", "fat", "note"}:
         raise MyofaceFormatError(f"{ctx}: needs vertices and fat (and an optional note)")
     v = spec.get("vertices")
-    if (
-        not isinstance(v, list)
-        or not v
-        or not all(isinstance(i, int) and not isinstance(i, bool) for i in v)
-    ):
+    if not isinstance(v, list) or not v or not all(_is_index(i) for i in v):
         raise MyofaceFormatError(f"{ctx}: vertices must be a list of vertex indices")
     if max(v) >= face.n_vertices or min(v) < 0:
         raise MyofaceFormatError(f"{ctx}: vertex index outside [0, {face.n_vertices - 1}]")
