@@ -73,6 +73,7 @@ from myoface.analysis.camera import (
     rotvec,
 )
 from myoface.analysis.estimate import skin_response
+from myoface.analysis.landmarks import view_angles
 from myoface.analysis.photometric import (
     COLOURLESS_SD,
     Appearance,
@@ -190,6 +191,43 @@ REGISTER_APPEARANCE = True
 #: errors on neighbouring frames are alike: frames farther apart average them)
 REGISTRATION_SPAN = 29
 REGISTRATION_MAX = 12
+
+#: the appearance's pose refined by the parallax the registration frames show
+#: (:meth:`ModelFit._appearance_parallax`). An appearance taken at a pose that is off by a
+#: small rotation ``D`` reproduces the calibration frame exactly (its pixels are whatever that
+#: pose projects the surface onto) but slides the texture over the skin, and the slide shows
+#: wherever the head is seen from another view: the nose, the cheeks and the brows, at other
+#: depths than the skin about them, land elsewhere than the slid texture says, and the fit
+#: reads it as expression and as a turned head. So ``D`` (a rotation about the neutral's
+#: centroid, yaw and pitch) is the one under which the registration frames seen from the
+#: views farthest from the calibration frame's are reproduced best: each such frame fitted by
+#: its pixels (pose and contractions free, as a frame of the video is) and its photometric
+#: cost summed, ``D`` found by a parabola along each axis in turn. The landmarks'
+#: registration (:meth:`ModelFit._appearance_offset`) is its start: MediaPipe's bias is the
+#: same in every frame, so their mean keeps it; the parallax does not see it.
+#: Measured 2026-12-05 (the head-motion renders, head moving, the photometric fit): with the
+#: appearance taken at the calibration frame's *true* pose (an oracle; clean renders in
+#: ambient light) the rest frames' skin 0.38 -> 0.10 mm and the head 1.00 -> 0.39 deg; the
+#: appearance taken from a neutral render at each frame's own true pose instead (another
+#: oracle) the same, so what the turning head reads is the calibration pose's error, not the
+#: view's change of look. Roll is left to the landmarks (the eyes' line): searched too it
+#: went wrong under the renders' lights (0.3 -> 0.8 deg of roll error).
+PARALLAX_REFINE = True
+#: the registration frames it reads, those seen from the farthest views, at most this many,
+#: and none seen within :data:`PARALLAX_MIN_DEG` of the calibration frame's view (no parallax)
+PARALLAX_FRAMES = 4
+PARALLAX_MIN_DEG = 8.0
+#: the search: passes along one axis each (head frame: 1 yaw, 0 pitch), each the cost at
+#: :data:`PARALLAX_SAMPLES` turns evenly over +-its half-range (deg) about the best turn so far
+#: and a parabola fitted to them by least squares (each evaluation refits the frames: the
+#: cost is a bumpy function of the turn, some tens of its units about a smooth one). Its
+#: vertex is taken where it is a minimum within the range and its standard error (from the
+#: fit's residuals) is below :data:`PARALLAX_MAX_SE_DEG`; where the lowest cost is at the
+#: range's end instead, the pass is made again about that end (once). Yaw first (the head
+#: turns most about it), then pitch, then yaw again finer: the two are coupled.
+PARALLAX_PASSES = ((1, 4.0), (1, 2.0))
+PARALLAX_SAMPLES = 9
+PARALLAX_MAX_SE_DEG = 0.75
 
 
 #: the calibration reads MediaPipe's relative depth (its points' z) into the person's neutral
@@ -332,6 +370,26 @@ def registration_frames(scores, index: int) -> list[int]:
         pick = np.round(np.linspace(0, len(near) - 1, REGISTRATION_MAX - 1)).astype(int)
         near = [near[i] for i in pick]
     return [int(index)] + [int(k) for k in near]
+
+
+def parabola_vertex(x, y) -> tuple[float, float] | None:
+    """The minimum of the parabola fitted to ``(x, y)`` by least squares and its standard
+    error (the delta method on the fit's covariance, the residuals' variance as the noise):
+    ``(vertex, se)``, or None where the parabola has no minimum within ``x``'s range."""
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    a = np.column_stack([np.ones_like(x), x, x * x])
+    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    _, b, c = coef
+    if not c > 0:
+        return None
+    v = -b / (2.0 * c)
+    if not x.min() <= v <= x.max():
+        return None
+    dof = max(len(x) - 3, 1)
+    s2 = float(((a @ coef - y) ** 2).sum()) / dof
+    cov = s2 * np.linalg.pinv(a.T @ a)
+    g = np.array([0.0, -1.0 / (2.0 * c), b / (2.0 * c * c)])  # d vertex / d (a, b, c)
+    return float(v), float(np.sqrt(max(g @ cov @ g, 0.0)))
 
 
 # ------------------------------------------------------------------ the fit
@@ -792,6 +850,8 @@ class ModelFit:
                     "rotation_deg": [round(float(v), 4) for v in np.degrees(rotvec(rot))],
                     "translation_mm": [round(float(v), 4) for v in t],
                 }
+        if window is not None and self._registration and PARALLAX_REFINE:
+            self._appearance_parallax(frame, window, pose)
 
     def _take_appearance(self, frame, pose) -> None:
         """The appearance (and the redness's) of ``frame`` seen at ``pose``
@@ -850,6 +910,106 @@ class ModelFit:
         if len(rvecs) < 2:
             return None
         return rotmat(np.mean(rvecs, axis=0)), np.mean(ts, axis=0)
+
+    def _appearance_parallax(self, frame, window, pose) -> None:
+        """The appearance taken again from ``frame`` at ``pose`` turned by the rotation about
+        the person's neutral's centroid under which the registration frames seen from the
+        farthest views are reproduced best (:data:`PARALLAX_REFINE`); recorded in the
+        calibration's ``extra["appearance_parallax"]``. Unchanged where no registration frame
+        is seen from :data:`PARALLAX_MIN_DEG` or more away."""
+        cal = self.calibration
+        base = self.neutral + self.identity_mm
+        centre = base.mean(axis=0)
+        views = []
+        for k, p in self._registration.items():
+            image = window[k] if k < len(window) else None
+            if image is None:
+                continue
+            lm = self._pose_only(p, initial_pose(base, p, self.camera), base)
+            views.append((rotation_angle_deg(lm.rotation, cal.pose.rotation), k, p, image, lm))
+        views = sorted((v for v in views if v[0] >= PARALLAX_MIN_DEG), key=lambda v: -v[0])
+        views = views[:PARALLAX_FRAMES]
+        # (an axis is searched where the views differ across it: the yaw where the frames
+        # are seen from other azimuths, the pitch from other elevations)
+        here = np.array(view_angles(cal.pose))
+        spread = np.zeros(3)
+        for v in views:
+            az, el = np.abs(np.array(view_angles(v[4])) - here)
+            spread = np.maximum(spread, [el, az, 0.0])
+        passes = [(a, h) for a, h in PARALLAX_PASSES if spread[a] >= PARALLAX_MIN_DEG]
+        if not passes:
+            return
+        zeros = np.zeros(self.n_muscles)
+        response = np.ascontiguousarray(self.response)
+
+        def turned(d):
+            r = rotmat(d)
+            return HeadPose(pose.rotation @ r, pose.rotation @ (centre - r @ centre)
+                            + pose.translation_mm)  # fmt: skip
+
+        def cost(d) -> float:
+            self._take_appearance(frame, turned(d))
+            total = 0.0
+            for _, _, p, image, lm in views:
+                px, c, _, _ = self._gauss_newton(
+                    p, lm, zeros, zeros, np.zeros_like(base), response, base, None,
+                    photo=self.photometric_term(image),
+                )  # fmt: skip
+                total += self._photo_cost(image, px, base + _linear(response, c))
+            return total
+
+        d = np.zeros(3)
+        known = {}  # (the costs evaluated, by turn)
+
+        def at(trial) -> float:
+            key = tuple(np.round(np.degrees(trial), 6))
+            if key not in known:
+                known[key] = cost(trial)
+            return known[key]
+
+        found: list = []  # (per pass: its axis, vertex and standard error, deg, or None)
+        for axis, half in passes:
+            turns = np.linspace(-half, half, PARALLAX_SAMPLES)
+            for again in (False, True):
+                e = []
+                for x in turns:
+                    trial = d.copy()
+                    trial[axis] += np.radians(x)
+                    e.append(at(trial))
+                vertex = parabola_vertex(turns, np.asarray(e))
+                low = int(np.argmin(e))
+                if vertex is None and not again and low in (0, len(turns) - 1):
+                    d[axis] += np.radians(turns[low])  # (the minimum lies beyond: once more)
+                    continue
+                break
+            found.append([axis, None if vertex is None else [round(v, 3) for v in vertex]])
+            if vertex is not None and vertex[1] <= PARALLAX_MAX_SE_DEG:
+                d[axis] += np.radians(vertex[0])
+            elif vertex is None and again:
+                d[axis] -= np.radians(turns[low])  # (no minimum found beyond either)
+        n = len(known)
+        self._take_appearance(frame, turned(d))
+        cal.extra["appearance_parallax"] = {
+            "rotation_deg": [round(float(v), 4) for v in np.degrees(d)],
+            "frames": [int(v[1]) for v in views],
+            "views_deg": [round(float(v[0]), 2) for v in views],
+            "view_spread_deg": [round(float(v), 2) for v in spread[:2]],
+            "vertex_and_se_deg": found,
+            "evaluations": n,
+        }
+
+    def _photo_cost(self, image, pose, shape) -> float:
+        """The photometric terms' cost of ``image`` on their finest level at ``pose`` and
+        skin ``shape`` (V, 3) mm, head frame."""
+        est = Estimate(pose, np.zeros(self.n_muscles), shape,
+                       np.zeros((len(shape), 3, self.n_muscles)), np.zeros(0, dtype=np.int64))  # fmt: skip
+        total = 0.0
+        for t in self.photometric_term(image):
+            while t.settling:
+                t.advance()
+            t.prepare(est)
+            total += t.cost(est)
+        return total
 
     def set_offsets(self, offsets) -> None:
         """Take the detector's offsets on this face off every frame's points from now on

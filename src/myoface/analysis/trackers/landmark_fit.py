@@ -781,6 +781,13 @@ class FitTracker(TrackerBase):
                     self.calibration_frame - cal.index + k for k in cal.extra["registration"]
                 ]
                 out["calibration"]["appearance_offset"] = cal.extra.get("appearance_offset")
+                # and the turn the parallax of the frames seen from other views gave it
+                # (modelfit.PARALLAX_REFINE; its frames as the video counts them)
+                par = cal.extra.get("appearance_parallax")
+                if par is not None:
+                    par = {**par, "frames": [self.calibration_frame - cal.index + k
+                                             for k in par["frames"]]}  # fmt: skip
+                out["calibration"]["appearance_parallax"] = par
         return out
 
     def close(self) -> None:
