@@ -198,33 +198,48 @@ REGISTRATION_MAX = 12
 #: pose projects the surface onto) but slides the texture over the skin, and the slide shows
 #: wherever the head is seen from another view: the nose, the cheeks and the brows, at other
 #: depths than the skin about them, land elsewhere than the slid texture says, and the fit
-#: reads it as expression and as a turned head. So ``D`` (a rotation about the neutral's
-#: centroid, yaw and pitch) is the one under which the registration frames seen from the
-#: views farthest from the calibration frame's are reproduced best: each such frame fitted by
-#: its pixels (pose and contractions free, as a frame of the video is) and its photometric
-#: cost summed, ``D`` found by a parabola along each axis in turn. The landmarks'
-#: registration (:meth:`ModelFit._appearance_offset`) is its start: MediaPipe's bias is the
-#: same in every frame, so their mean keeps it; the parallax does not see it.
-#: Measured 2026-12-05 (the head-motion renders, head moving, the photometric fit): with the
-#: appearance taken at the calibration frame's *true* pose (an oracle; clean renders in
-#: ambient light) the rest frames' skin 0.38 -> 0.10 mm and the head 1.00 -> 0.39 deg; the
-#: appearance taken from a neutral render at each frame's own true pose instead (another
-#: oracle) the same, so what the turning head reads is the calibration pose's error, not the
-#: view's change of look. Roll is left to the landmarks (the eyes' line): searched too it
-#: went wrong under the renders' lights (0.3 -> 0.8 deg of roll error).
+#: reads it as expression and as a turned head. So ``D`` (a turn about the neutral's centroid)
+#: is the one under which the registration frames seen from the views farthest from the
+#: calibration frame's are reproduced best: each such frame fitted by its pixels (pose and
+#: contractions free, as a frame of the video is) and its photometric cost on the finest
+#: level summed. The landmarks' registration (:meth:`ModelFit._appearance_offset`) is its
+#: start: MediaPipe's bias is alike in every frame, so their mean keeps it; the parallax
+#: does not.
+#: Why (2026-12-05, ``bench.headmotion.run_headmotion``, the photometric fit, head moving):
+#: with the appearance taken at the calibration frame's *true* pose (an oracle; clean renders
+#: in ambient light) the rest frames' skin 0.38 -> 0.10 mm and the head 1.00 -> 0.39 deg;
+#: with the appearance taken from a neutral render at each frame's own true pose instead
+#: (another oracle: the view's change of look taken away too) the same, 0.06 mm: what the
+#: turning head read as expression was the calibration pose's error, not the view's change
+#: of look. With this search: the same clean renders in ambient light 0.38 -> 0.08 mm, head
+#: 1.00 -> 0.41 deg; the degraded renders (the benchmark's) skin 1.06 -> 0.93 mm (its rest
+#: frames 0.74 -> 0.42), head 1.25 -> 0.53 deg, worst correlation -0.02 -> 0.52, worst RMSE
+#: 0.250 -> 0.238, median 0.113 -> 0.120; clean renders in the renderer's lights 0.91 ->
+#: 0.78 mm, head 1.21 -> 0.84 deg (the yaw found short by the lights: 1.4 where ambient light
+#: gives 2.3-2.7); the expression clip's fit skin 0.96 -> 0.90 mm, head 1.27 -> 0.91 deg. Head
+#: still: no frame seen from another view, nothing done. About 1.7 s once (18-22 costs).
 PARALLAX_REFINE = True
 #: the registration frames it reads, those seen from the farthest views, at most this many,
-#: and none seen within :data:`PARALLAX_MIN_DEG` of the calibration frame's view (no parallax)
+#: and none seen within :data:`PARALLAX_MIN_DEG` of the calibration frame's view: a slide of a
+#: degree moves the skin seen 2 degrees away by a few hundredths of a millimetre (on
+#: single_face.mp4, whose frames are all within 2.5 degrees, a first search from 2 degrees
+#: turned the pitch 2.5 degrees for a 1.6 % lower cost and took the validated fidelity from 0.765 to 0.751)
 PARALLAX_FRAMES = 4
 PARALLAX_MIN_DEG = 8.0
 #: the search: passes along one axis each (head frame: 1 yaw, 0 pitch), each the cost at
 #: :data:`PARALLAX_SAMPLES` turns evenly over +-its half-range (deg) about the best turn so far
-#: and a parabola fitted to them by least squares (each evaluation refits the frames: the
-#: cost is a bumpy function of the turn, some tens of its units about a smooth one). Its
-#: vertex is taken where it is a minimum within the range and its standard error (from the
-#: fit's residuals) is below :data:`PARALLAX_MAX_SE_DEG`; where the lowest cost is at the
-#: range's end instead, the pass is made again about that end (once). Yaw first (the head
-#: turns most about it), then pitch, then yaw again finer: the two are coupled.
+#: and a parabola fitted to them by least squares (each cost refits the frames: it is a bumpy
+#: function of the turn, some tens of its units about a smooth one, and a parabola through
+#: three costs a degree apart went astray). Its vertex is taken where it is a minimum within
+#: the range and its standard error (the fit's residuals as the noise) is below
+#: :data:`PARALLAX_MAX_SE_DEG`; where the lowest cost is at the range's end instead, the pass
+#: is made again about that end (once). An axis is searched where the frames' views differ
+#: across it by :data:`PARALLAX_MIN_DEG` (the yaw: their azimuths). Yaw only: the pitch and
+#: the roll searched too (the pitch where the elevations differ) went wrong under the
+#: renders' lights (degraded, head moving: the pitch's mean error 0.24 -> 1.07 deg with 11.5
+#: deg of elevation between the views; the roll's 0.3 -> 0.8); in ambient light they were
+#: found right. The lights' shading, which the shading model follows only to first order,
+#: tells a vertical slide less well than the yaw's parallax does.
 PARALLAX_PASSES = ((1, 4.0), (1, 2.0))
 PARALLAX_SAMPLES = 9
 PARALLAX_MAX_SE_DEG = 0.75
@@ -832,7 +847,9 @@ class ModelFit:
         with its ``image`` against it. ``window``: the images of the frames given to
         :meth:`calibrate`, by position (None where one was not kept): the appearance is then
         registered on its ``extra["registration"]`` frames (:func:`registration_frames`,
-        :meth:`_appearance_offset`), not on the calibration frame's landmarks alone."""
+        :meth:`_appearance_offset`), not on the calibration frame's landmarks alone, and then
+        turned by the parallax of those seen from other views (:data:`PARALLAX_REFINE`,
+        :meth:`_appearance_parallax`)."""
         if self.calibration is None:
             raise MyofaceValueError("set_appearance() needs a calibration first")
         cal = self.calibration

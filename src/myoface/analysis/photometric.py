@@ -98,6 +98,18 @@ and read samples then went into one compiled call without the lock
 (:func:`~myoface.analysis._photokernels.step_light`; contractions.csv identical): wall 29.1,
 28.7 -> 27.9, 26.8 ms a frame (two passes of each, alternating).
 
+**A turning head read as expression: the calibration's pose** (2026-12-05). What made the
+rest frames below follow the turn was mostly the appearance's own pose: taken at a pose a
+degree or two off, the texture sits slid over the skin, which the calibration frame cannot
+show and every other view does. With the appearance taken at the calibration frame's true
+pose (clean renders in ambient light, the head moving) the rest frames' skin came out 0.38 ->
+0.10 mm from the truth and the head 1.00 -> 0.39 deg; the appearance taken afresh at each
+frame's own true pose (the view's change of look taken away as well) no better. The fit now
+finds that pose by the parallax of the frames of the calibration's window seen from other
+views (:data:`~myoface.analysis.modelfit.PARALLAX_REFINE`, which has the numbers: on the
+degraded renders the head 1.25 -> 0.53 deg, the skin 1.06 -> 0.93 mm). What follows was
+measured before it, with the pose's error in it.
+
 **A turning head read as expression** (measured 2026-12-05, not solved). On the head-motion
 renders, clean, with the person's true neutral given, the fit's rest frames (no muscle
 moving) still come out 0.44 mm RMS from the true skin with the head moving (0.02 with it
