@@ -833,3 +833,20 @@ def test_the_appearance_pose_is_found_by_the_parallax_of_turned_frames(
         assert err < 1.0, err
     else:
         assert found is None and err > 2.0, err
+
+
+def test_the_parallax_search_parabola_finds_a_noisy_minimum():
+    """``modelfit.parabola_vertex``: the vertex of a least-squares parabola and its standard
+    error, on costs with a known minimum (2.3) and noise; None where the costs have no
+    minimum within the turns (a slope, or a maximum)."""
+    from myoface.analysis.modelfit import parabola_vertex
+
+    x = np.linspace(-4.0, 4.0, 9)
+    rng = np.random.default_rng(3)
+    v, se = parabola_vertex(x, 30.0 * (x - 2.3) ** 2 + 2000.0 + rng.normal(0, 20.0, 9))
+    assert abs(v - 2.3) < 3 * se and se < 0.2, (v, se)
+    v2, se2 = parabola_vertex(x, 30.0 * (x - 2.3) ** 2 + rng.normal(0, 200.0, 9))
+    assert se2 > 2 * se  # (more noise, less sure)
+    assert parabola_vertex(x, -5.0 * x) is None
+    assert parabola_vertex(x, -((x - 1.0) ** 2)) is None
+    assert parabola_vertex(x, (x - 6.0) ** 2) is None  # (its minimum beyond the turns)

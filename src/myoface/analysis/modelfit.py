@@ -987,6 +987,7 @@ class ModelFit:
         found: list = []  # (per pass: its axis, vertex and standard error, deg, or None)
         for axis, half in passes:
             turns = np.linspace(-half, half, PARALLAX_SAMPLES)
+            moved = 0.0  # (the pass made again about its range's end: how far, deg)
             for again in (False, True):
                 e = []
                 for x in turns:
@@ -996,14 +997,15 @@ class ModelFit:
                 vertex = parabola_vertex(turns, np.asarray(e))
                 low = int(np.argmin(e))
                 if vertex is None and not again and low in (0, len(turns) - 1):
-                    d[axis] += np.radians(turns[low])  # (the minimum lies beyond: once more)
+                    moved = float(turns[low])  # (the minimum lies beyond: once more there)
+                    d[axis] += np.radians(moved)
                     continue
                 break
             found.append([axis, None if vertex is None else [round(v, 3) for v in vertex]])
             if vertex is not None and vertex[1] <= PARALLAX_MAX_SE_DEG:
                 d[axis] += np.radians(vertex[0])
-            elif vertex is None and again:
-                d[axis] -= np.radians(turns[low])  # (no minimum found beyond either)
+            else:
+                d[axis] -= np.radians(moved)  # (none found: the pass leaves the turn as it was)
         n = len(known)
         self._take_appearance(frame, turned(d))
         cal.extra["appearance_parallax"] = {
