@@ -223,7 +223,8 @@ PARALLAX_REFINE = True
 #: and none seen within :data:`PARALLAX_MIN_DEG` of the calibration frame's view: a slide of a
 #: degree moves the skin seen 2 degrees away by a few hundredths of a millimetre (on
 #: single_face.mp4, whose frames are all within 2.5 degrees, a first search from 2 degrees
-#: turned the pitch 2.5 degrees for a 1.6 % lower cost and took the validated fidelity from 0.765 to 0.751)
+#: turned the pitch 2.5 degrees for a 1.6 % lower cost and took the validated fidelity from
+#: 0.765 to 0.751)
 PARALLAX_FRAMES = 4
 PARALLAX_MIN_DEG = 8.0
 #: the search: passes along one axis each (head frame: 1 yaw, 0 pitch), each the cost at
@@ -1012,7 +1013,10 @@ class ModelFit:
             "rotation_deg": [round(float(v), 4) for v in np.degrees(d)],
             "frames": [int(v[1]) for v in views],
             "views_deg": [round(float(v[0]), 2) for v in views],
-            "view_spread_deg": [round(float(v), 2) for v in spread[:2]],
+            "view_spread_deg": {
+                "azimuth": round(float(spread[1]), 2),
+                "elevation": round(float(spread[0]), 2),
+            },
             "vertex_and_se_deg": found,
             "evaluations": n,
         }
