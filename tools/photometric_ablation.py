@@ -9,12 +9,18 @@ module constants (``--const``: ``module.NAME`` under ``myoface.analysis``, JSON;
   with the look the expressions add (``--look``), some expressions (``--expressions``):
   prints each region's gain / explained and the leak;
 - ``video``: ``myoface analyze VIDEO --photometric --report`` into ``--out`` with the same
-  overrides: prints the validated fidelity per region (explained / gain).
+  overrides: prints the validated fidelity per region (explained / gain);
+- ``headmotion``: the head-motion renders (:func:`myoface.bench.headmotion.run_headmotion`,
+  the benchmark's clip), head moving unless ``--still``, degraded by the camera unless
+  ``--clean``: prints the benchmark's summary (worst and median RMSE, worst correlation,
+  skin mm, its rest and expression frames apart, head deg and its mean error yaw / pitch /
+  roll) and the appearance's parallax turn (``modelfit.PARALLAX_REFINE``).
 
     python tools/photometric_ablation.py warp --look --expressions happiness \\
         --set '{"photo_landmark_weight": 0.01}'
     python tools/photometric_ablation.py video --out /tmp/pm \\
         --const '{"photometric.SHADE_FIELD_ORDER": 2}'
+    python tools/photometric_ablation.py headmotion --const '{"modelfit.PARALLAX_REFINE": false}'
 
 The numbers of issue 30's report (2026-12-02) were taken this way.
 """
@@ -37,10 +43,12 @@ def _constants(consts: dict) -> None:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("mode", choices=("warp", "video"))
+    ap.add_argument("mode", choices=("warp", "video", "headmotion"))
     ap.add_argument("--set", default="{}", help="FitSettings fields (JSON)")
     ap.add_argument("--const", default="{}", help="module constants (JSON)")
     ap.add_argument("--moving", action="store_true", help="warp: with fake head motion")
+    ap.add_argument("--still", action="store_true", help="headmotion: the head still")
+    ap.add_argument("--clean", action="store_true", help="headmotion: the renderer's frames")
     ap.add_argument("--look", action="store_true", help="warp: with the expressions' look")
     ap.add_argument("--expressions", default="happiness,surprise")
     ap.add_argument("--video", default=None, help="video: default the sample video")
@@ -65,6 +73,9 @@ def main(argv=None) -> None:
             f"{exprs} {fs} {consts}: {regions} leak {r['leak']:.3f}"
         )
         return
+    if a.mode == "headmotion":
+        _headmotion(a.still, not a.clean, fs, consts)
+        return
     import myoface.analysis.pipeline as pipeline
     from myoface.analysis.sample import fetch_sample_video
     from myoface.analysis.weights import FitSettings
@@ -86,6 +97,45 @@ def main(argv=None) -> None:
     d = json.load(open(f"{a.out}/fidelity.json"))
     regions = " ".join(f"{k} {v['explained']:.2f}/{v['gain']:.2f}" for k, v in d["regions"].items())
     print(f"video {fs} {consts}: fidelity {d['overall']['explained']:.3f} ({regions})")
+
+
+def _headmotion(still: bool, degraded: bool, fs: dict, consts: dict) -> None:
+    import numpy as np
+
+    from myoface.analysis import modelfit
+    from myoface.analysis.weights import FitSettings
+    from myoface.bench import headmotion as hm
+
+    fm, truth, poses, skins, points, _ = hm._sequence(False, still, False, degraded)
+    frames = hm._frames(False, still, degraded)
+    turned = {}
+    take = modelfit.ModelFit.set_appearance
+
+    def kept(fit, *args, **kw):  # (the calibration's record of the parallax)
+        take(fit, *args, **kw)
+        turned.update(fit.calibration.extra.get("appearance_parallax") or {})
+
+    modelfit.ModelFit.set_appearance = kept
+    try:
+        s = FitSettings(**{"photometric": True, **fs})
+        r = hm.run_headmotion(fm, points, truth, poses, skins, settings=s, frames=frames)
+    finally:
+        modelfit.ModelFit.set_appearance = take
+    m = r.summary()
+    ok = np.isfinite(r.estimate).all(axis=1)
+    act = truth.max(axis=1) > 0.05
+    skin = r.skin_rms_mm
+
+    def rms(sel):
+        return float(np.sqrt(np.nanmean(skin[ok & sel] ** 2)))
+
+    print(
+        f"headmotion {'still' if still else 'moving'} {'degraded' if degraded else 'clean'} "
+        f"{fs} {consts}: worst {m['rmse_worst']:.3f} median {m['rmse_median_all']:.3f} "
+        f"corr {m['corr_worst']:.2f} skin {m['skin_mm']:.3f} mm (rest {rms(~act):.3f}, "
+        f"expressions {rms(act):.3f}) head {m['pose_deg']:.3f} deg (mean error "
+        f"{m['pose_err_mean_deg']}); parallax turn {turned.get('rotation_deg')}"
+    )
 
 
 if __name__ == "__main__":
