@@ -13,11 +13,11 @@ the photometric fit. The README's tables of the photometric fit's gaze were made
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 from dataclasses import replace
 
 import numpy as np
+from photometric_ablation import _constants  # (this folder's: the constants it sets)
 
 #: (gaze programme seed, camera degradation seed) of each clip; the first is the benchmark's
 CLIPS = ((0, 0), (7, 3), (11, 5), (23, 9), (31, 1))
@@ -28,12 +28,7 @@ def main(argv=None) -> None:
     ap.add_argument("--photometric", action="store_true", help="the fit with its pixels")
     ap.add_argument("--const", default="{}", help="module constants (JSON)")
     a = ap.parse_args(argv)
-    for key, value in json.loads(a.const).items():
-        mod, name = key.rsplit(".", 1)
-        m = importlib.import_module("myoface.analysis." + mod)
-        if not hasattr(m, name):
-            raise SystemExit(f"myoface.analysis.{mod} has no {name}")
-        setattr(m, name, tuple(value) if isinstance(value, list) else value)
+    _constants(json.loads(a.const))
     import myoface.bench.gaze as bg
     from myoface.bench.headmotion import _model
     from myoface.render.degrade import CameraDegradation

@@ -856,8 +856,10 @@ class ModelFit:
         cal = self.calibration
         pose = cal.pose
         self._take_appearance(frame, pose)
-        if window is not None and self._registration:
-            offset = self._appearance_offset(window)
+        # (each registration frame kept, with the pose its landmarks give the neutral)
+        seen = self._registration_views(window) if window is not None else []
+        if seen:
+            offset = self._appearance_offset(seen)
             if offset is not None:
                 # the calibration frame as the frames' landmarks place it on average
                 rot, t = offset
@@ -868,8 +870,8 @@ class ModelFit:
                     "rotation_deg": [round(float(v), 4) for v in np.degrees(rotvec(rot))],
                     "translation_mm": [round(float(v), 4) for v in t],
                 }
-        if window is not None and self._registration and PARALLAX_REFINE:
-            self._appearance_parallax(frame, window, pose)
+        if seen and PARALLAX_REFINE:
+            self._appearance_parallax(frame, seen, pose)
 
     def _take_appearance(self, frame, pose) -> None:
         """The appearance (and the redness's) of ``frame`` seen at ``pose``
@@ -897,7 +899,19 @@ class ModelFit:
                 prior = self.appearance_colour.prior
                 self.appearance_colour.prior = own if prior is None else prior * own
 
-    def _appearance_offset(self, window) -> tuple[np.ndarray, np.ndarray] | None:
+    def _registration_views(self, window) -> list:
+        """The registration frames whose images ``window`` kept (by position), each as
+        ``(k, points, image, pose)``: its landmarks' pose of the person's neutral."""
+        base = self.neutral + self.identity_mm
+        out = []
+        for k, p in self._registration.items():
+            image = window[k] if k < len(window) else None
+            if image is not None:
+                out.append((k, p, image, self._pose_only(p, initial_pose(base, p, self.camera),
+                                                         base)))  # fmt: skip
+        return out
+
+    def _appearance_offset(self, views) -> tuple[np.ndarray, np.ndarray] | None:
         """How far the appearance, taken at the calibration frame's pose, sits from where
         the registration frames' landmarks put it on average: a rigid motion of the head frame
         (rotation (3, 3), translation (3,) mm; None with fewer than two frames). An appearance
@@ -908,16 +922,12 @@ class ModelFit:
         pose alone), and ``P_landmarks(k)^-1 P_pixels(k)`` is one reading of ``D`` with the
         error of frame ``k``'s landmarks (the calibration frame's own reads the identity: its
         error is the one to find); their mean (rotation vectors and translations averaged)
-        reads it with the frames' errors averaged."""
+        reads it with the frames' errors averaged. ``views``: :meth:`_registration_views`."""
         base = self.neutral + self.identity_mm
         zeros = np.zeros(self.n_muscles)
         jac0 = np.zeros((len(base), 3, self.n_muscles))
         rvecs, ts = [np.zeros(3)], [np.zeros(3)]  # (the calibration frame's: the identity)
-        for k, p in self._registration.items():
-            image = window[k] if k < len(window) else None
-            if image is None:
-                continue
-            lm = self._pose_only(p, initial_pose(base, p, self.camera), base)
+        for _, p, image, lm in views:
             px, _, _, _ = self._gauss_newton(
                 p, lm, zeros, zeros, np.zeros_like(base), jac0, base, None,
                 free=np.zeros(0, dtype=np.int64), photo=self.photometric_term(image),
@@ -929,22 +939,18 @@ class ModelFit:
             return None
         return rotmat(np.mean(rvecs, axis=0)), np.mean(ts, axis=0)
 
-    def _appearance_parallax(self, frame, window, pose) -> None:
+    def _appearance_parallax(self, frame, registration, pose) -> None:
         """The appearance taken again from ``frame`` at ``pose`` turned by the rotation about
         the person's neutral's centroid under which the registration frames seen from the
         farthest views are reproduced best (:data:`PARALLAX_REFINE`); recorded in the
         calibration's ``extra["appearance_parallax"]``. Unchanged where no registration frame
-        is seen from :data:`PARALLAX_MIN_DEG` or more away."""
+        is seen from :data:`PARALLAX_MIN_DEG` or more away. ``registration``:
+        :meth:`_registration_views`."""
         cal = self.calibration
         base = self.neutral + self.identity_mm
         centre = base.mean(axis=0)
-        views = []
-        for k, p in self._registration.items():
-            image = window[k] if k < len(window) else None
-            if image is None:
-                continue
-            lm = self._pose_only(p, initial_pose(base, p, self.camera), base)
-            views.append((rotation_angle_deg(lm.rotation, cal.pose.rotation), k, p, image, lm))
+        views = [(rotation_angle_deg(lm.rotation, cal.pose.rotation), k, p, image, lm)
+                 for k, p, image, lm in registration]  # fmt: skip
         views = sorted((v for v in views if v[0] >= PARALLAX_MIN_DEG), key=lambda v: -v[0])
         views = views[:PARALLAX_FRAMES]
         # (an axis is searched where the views differ across it: the yaw where the frames
