@@ -283,9 +283,11 @@ def test_analyze_and_batch_read_the_same_analysis_options():
     none = analysis_settings(parser.parse_args(["batch", "v.mp4", "-o", "o"]))
     assert none == analysis_settings(parser.parse_args(["analyze", "v.mp4", "-o", "o"]))
     assert none == default_analysis_settings() and none["tracker"] == "landmarks"
-    assert none["flow"] is False and none["photometric"] is False
+    # (the photometric term on by default with the 3-D fit, since 2026-12-05)
+    assert none["flow"] is False and none["photometric"] is True
     # initial contours are the snakes': given alone, they name the tracker
-    with_init = {**none, "tracker": "snakes", "init": "c.json"}
+    # (and the photometric term, the 3-D fit's, is then off)
+    with_init = {**none, "tracker": "snakes", "init": "c.json", "photometric": False}
     assert default_analysis_settings(init="c.json") == with_init
     assert analysis_settings(parser.parse_args(["analyze", "v.mp4", "--init", "c.json"])) == {
         **with_init,

@@ -132,7 +132,7 @@ def test_gaze_benchmark_runs_quick(quick_run):
     (rec,) = [r for r in records if r["name"] == "analysis.gaze_error_deg"]
     assert rec["unit"] == "deg"
     assert np.isfinite(rec["value"]) and 0 < rec["value"] < 45 and rec["n"] == 30
-    fit = detail["analysis.gaze_error_deg"]["fit"]
+    fit = detail["analysis.gaze_error_deg"]["photometric"]  # (the default analysis)
     assert set(fit["per_eye"]) == {"l", "r"} == set(fit["reader_on_true_geometry"])
     assert fit["value"] == pytest.approx(rec["value"], abs=1e-6)
     for eye in fit["per_eye"].values():

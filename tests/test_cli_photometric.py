@@ -1,6 +1,7 @@
-"""``--photometric`` (``myoface analyze``, ``myoface batch``): the 3-D fit's photometric term
-(:attr:`~myoface.analysis.weights.FitSettings.photometric`) switched on from the command line,
-as ``--flow`` is; refused where there is no 3-D fit (the snakes, ``--estimator paper``)."""
+"""``--photometric`` / ``--no-photometric`` (``myoface analyze``, ``myoface batch``): the 3-D
+fit's photometric term (:attr:`~myoface.analysis.weights.FitSettings.photometric`), on by
+default with the 3-D fit since 2026-12-05 and switched off from the command line; refused
+where there is no 3-D fit (the snakes, ``--estimator paper``), where the default is off."""
 
 import json
 from types import SimpleNamespace
@@ -27,7 +28,14 @@ def _settings(*argv):
 
 def test_the_option_reads_back_and_is_the_fits():
     assert _settings("--tracker", "landmarks", "--photometric")["photometric"] is True
-    assert _settings("--tracker", "landmarks")["photometric"] is False
+    assert _settings("--tracker", "landmarks")["photometric"] is True  # (the default)
+    assert _settings()["photometric"] is True
+    assert _settings("--no-photometric")["photometric"] is False
+    assert _settings("--tracker", "landmarks", "--estimator", "fit-synthesis")["photometric"]
+    # where there is no 3-D fit the default is off, and --no-photometric is accepted
+    for argv in (("--tracker", "snakes"), ("--tracker", "landmarks", "--estimator", "paper")):
+        assert _settings(*argv)["photometric"] is False
+        assert _settings(*argv, "--no-photometric")["photometric"] is False
     assert _settings("--photometric")["tracker"] == "landmarks"  # (the default tracker)
     with pytest.raises(MyofaceValueError) as e:
         _settings("--tracker", "snakes", "--photometric")
@@ -46,19 +54,20 @@ def test_make_analyzer_gives_the_fit_the_setting(monkeypatch):
     made = []
     monkeypatch.setattr(pipeline, "FitTracker", lambda model, **kw: made.append(kw) or "fit")
     video = SimpleNamespace(n_frames=10, fps=25.0)
-    for photometric in (True, False):
+    for photometric in (True, False, None):
         an, first = pipeline.make_analyzer(
             None, video, "landmarks", calibration_frame=None, refine=2, photometric=photometric
         )
         assert (an, first) == ("fit", 0)
-    assert [kw["settings"].photometric for kw in made] == [True, False]
-    assert [kw["settings"].refine for kw in made] == [2, 2]
+    # (None, the default: on with the 3-D fit)
+    assert [kw["settings"].photometric for kw in made] == [True, False, True]
+    assert [kw["settings"].refine for kw in made] == [2, 2, 2]
     assert made[0]["fps"] == 25.0 and made[0]["synthesis"] is False
     with pytest.raises(MyofaceValueError, match="--photometric is a term"):
         pipeline.make_analyzer(None, video, "snakes", photometric=True)
     with pytest.raises(MyofaceValueError, match="not --estimator paper"):
         pipeline.make_analyzer(None, video, "landmarks", estimator="paper", photometric=True)
-    assert len(made) == 2
+    assert len(made) == 3
 
 
 def test_batch_refuses_it_before_any_video_is_analysed(tmp_path, capsys):
@@ -80,18 +89,19 @@ def test_batch_refuses_it_before_any_video_is_analysed(tmp_path, capsys):
         assert not out.exists()
     with pytest.raises(MyofaceValueError, match="--photometric is a term"):
         run_batch([video], out, photometric=True)
-    with pytest.raises(MyofaceValueError, match="True or False"):
+    with pytest.raises(MyofaceValueError, match="True, False or None"):
         run_batch([video], out, tracker="landmarks", photometric=1)
     assert not out.exists()
 
 
 @needs_mediapipe
 @pytest.mark.shared_data
-@pytest.mark.slow  # 7.5-9 s on a loaded 2-core machine: the model, three short analyses
+@pytest.mark.slow  # 7.5-9 s on a loaded 2-core machine: the model, four short analyses
 def test_analyze_and_batch_with_photometric_on_the_sample_video(tmp_path):
-    """Four frames of single_face.mp4, calibrated on frame 0: with --photometric every frame
-    is measured, analysis.json records the fit's settings with the term on, and the
-    contractions differ from the default fit's on the same frames (the term acts; measured
+    """Four frames of single_face.mp4, calibrated on frame 0: with --photometric (the
+    default) every frame is measured, analysis.json records the fit's settings with the term
+    on, and the contractions differ from --no-photometric's on the same frames (the term
+    acts; measured
     2026-12-01: the largest difference over the muscles and the jaw 0 on the calibration
     frame, 0.033, 0.089 and 0.145 on frames 1-3); batch records it in done.json and gives its
     worker the same analysis."""
@@ -114,9 +124,14 @@ def test_analyze_and_batch_with_photometric_on_the_sample_video(tmp_path):
         return doc, np.array([[float(r[k]) for k in muscles] for r in rows])
 
     assert main(["analyze", str(video), "-o", str(tmp_path / "photo"), *argv, "--photometric"]) == 0
-    assert main(["analyze", str(video), "-o", str(tmp_path / "default"), *argv]) == 0
+    assert main(["analyze", str(video), "-o", str(tmp_path / "default"), *argv,
+                 "--no-photometric"]) == 0  # fmt: skip
+    assert main(["analyze", str(video), "-o", str(tmp_path / "implied"), *argv]) == 0
     doc, photo = analysed(tmp_path / "photo")
     doc0, default = analysed(tmp_path / "default")
+    doc1, implied = analysed(tmp_path / "implied")  # (the default: the same as --photometric)
+    assert doc1["fit_settings"] == doc["fit_settings"]
+    np.testing.assert_allclose(implied, photo, atol=1e-9)
     assert doc["fit_settings"]["photometric"] is True
     assert doc0["fit_settings"]["photometric"] is False
     assert {k: v for k, v in doc["fit_settings"].items() if k != "photometric"} == {

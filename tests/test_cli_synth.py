@@ -269,7 +269,10 @@ def test_demo_real_video(model, tmp_path, monkeypatch, capsys):
         f"wrote {ana / 'resynth_person.mp4'} (72 frames at 30.0 fps)",
     ]
     lines = text.splitlines()
-    k = lines.index(f"analysing the sample face video {sample} (MediaPipe face mesh tracker)")
+    k = lines.index(
+        f"analysing the sample face video {sample} (the 3-D fit to its pixels and "
+        "MediaPipe's face mesh)"
+    )
     assert [a[: len(b)] for a, b in zip(lines[k + 1 :], said, strict=False)] == said, lines
     video = iio.imread(sample, plugin="pyav")
     assert video.shape == (72, 360, 640, 3)

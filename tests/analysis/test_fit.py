@@ -646,7 +646,7 @@ def test_the_calibration_window_measured_while_it_is_scored_gives_the_same_resul
         monkeypatch.setattr(lf, "SPECULATE", speculate)
         an = lf.FitTracker(
             fm, camera=CAMERA, detector=_StandInDetector(seq), deferred_relax=True,
-            settings=FitSettings(flow=flow),
+            settings=FitSettings(flow=flow, photometric=False),  # (the points' speculation)
         )  # fmt: skip
         try:
             ms = [m for _, m in measure_frames(video, an)]

@@ -150,7 +150,8 @@ def test_track_needs_a_calibration():
 def test_the_fit_reads_the_tracked_points():
     """The 3-D fit with --flow (the anchored tracker): on a textured frame moved 3 px where
     the detector reads 1.5 px, the fitted head moves the model's points by ~3 px (without
-    the flow, by the detector's 1.5)."""
+    the flow, on the points alone, by the detector's 1.5; the default fit, which reads the
+    pixels, by ~3 px too)."""
     from myoface.analysis.trackers.landmark_fit import FitTracker
     from myoface.analysis.weights import FitSettings
     from myoface.model import build_face_model
@@ -176,20 +177,24 @@ def test_the_fit_reads_the_tracked_points():
             pass
 
     moved = {}
-    for flow in (False, True):
+    for flow in (False, True, "default"):
+        settings = (
+            FitSettings() if flow == "default" else FitSettings(flow=flow, photometric=False)
+        )
         tr = FitTracker(fm, camera=cam, detector=Damped(), calibration_frame=0,
-                        settings=FitSettings(flow=flow), flow_method="anchored", gaze=False)  # fmt: skip
+                        settings=settings, flow_method="anchored", gaze=False)  # fmt: skip
         tr.calibrate(iter([img0]), 0)
         tr.measure(img0, 0, 0.0)
         m = tr.measure(img1, 1, 1 / 30)
         uv = cam.project(m.pose.apply(tr.fit.shape(m.contractions)))
         moved[flow] = float(np.median(uv[:, 0] - pts0[:, 0]))
-        if flow:
+        if flow is True:
             stats = tr.describe()["optical_flow_points"]
             assert stats["frames"] == 2 and stats["tracked"] > 0.6 * 2 * 468
         tr.close()
     assert abs(moved[False] - 1.5) < 0.3
     assert abs(moved[True] - 3.0) < 0.3
+    assert abs(moved["default"] - 3.0) < 0.3
 
 
 def test_the_mouths_gap_weighs_nothing():

@@ -63,7 +63,7 @@ from myoface._signals import (
 from myoface.analysis.estimate import skin_response
 from myoface.analysis.initfiles import load_init
 from myoface.analysis.outputs import FolderResult, analyze_to_folder
-from myoface.analysis.pipeline import PHOTOMETRIC_NEEDS_LANDMARKS, PHOTOMETRIC_NOT_PAPER
+from myoface.analysis.pipeline import resolve_photometric
 from myoface.analysis.sections import PAPER_MUSCLES
 from myoface.analysis.trackers.landmark_fit import LANDMARK_ESTIMATORS
 from myoface.analysis.trackers.snakes import ESTIMATORS
@@ -918,7 +918,7 @@ def run_batch(
     sigma: float | None = None,
     estimator: str | None = None,
     flow: bool = False,
-    photometric: bool = False,
+    photometric: bool | None = None,
     face: str | os.PathLike | None = None,
     muscles: str | os.PathLike | None = None,
     show_progress: bool = False,
@@ -992,12 +992,8 @@ def run_batch(
         )
     if flow and estimator in ("paper", "fiducials"):
         raise MyofaceValueError("--flow is for the 3-D fit, not --estimator paper")
-    if not isinstance(photometric, bool):
-        raise MyofaceValueError(f"photometric must be True or False; got {photometric!r}")
-    if photometric and tracker != "landmarks":
-        raise MyofaceValueError(PHOTOMETRIC_NEEDS_LANDMARKS)
-    if photometric and estimator in ("paper", "fiducials"):
-        raise MyofaceValueError(PHOTOMETRIC_NOT_PAPER)
+    # (resolved here: done.json records what ran)
+    photometric = resolve_photometric(photometric, tracker, estimator)
     if workers is None:
         workers = os.cpu_count() or 1
     if not (_is_int(workers) and workers >= 1):

@@ -232,7 +232,7 @@ def analyze_to_folder(
     show_progress: bool = False,
     finish=None,
     flow: bool = False,
-    photometric: bool = False,
+    photometric: bool | None = None,
 ) -> FolderResult:
     """Analyse ``video`` and write the analysis into the folder ``out`` (see the module's
     table); the code path of ``myoface analyze``.

@@ -594,7 +594,8 @@ class Appearance:
         ok = np.isfinite(fine)
         light, *_ = np.linalg.lstsq(basis[ok], fine[ok], rcond=None)
         shade = basis @ light
-        shade = np.maximum(shade, SHADE_FLOOR * float(np.mean(shade[ok])))
+        # (and above zero where the frame is black: an unlit frame's albedo is 0, not 0 / 0)
+        shade = np.maximum(shade, max(SHADE_FLOOR * float(np.mean(shade[ok])), 1e-3))
         albedo = [v / shade for v in values]
         prior = rim_weights(face, samples)
         loops = face.boundary_loops

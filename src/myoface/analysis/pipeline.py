@@ -57,6 +57,30 @@ PHOTOMETRIC_NEEDS_LANDMARKS = (
 PHOTOMETRIC_NOT_PAPER = "--photometric is for the 3-D fit, not --estimator paper"
 
 
+def resolve_photometric(photometric, tracker: str, estimator) -> bool:
+    """Whether the analysis reads the frames' pixels (the 3-D fit's photometric term,
+    :attr:`~myoface.analysis.weights.FitSettings.photometric`): ``photometric`` True or
+    False as given, None (the default) on wherever there is a 3-D fit to add it to (the
+    landmark tracker with the estimator ``"fit"`` or ``"fit-synthesis"``: the best measured
+    analysis, README's "How well the analysis works") and off elsewhere (the snakes, the
+    paper's landmark scheme).
+
+    Raises
+    ------
+    MyofaceValueError
+        ``photometric`` not None, True or False, or True where there is no 3-D fit.
+    """
+    if photometric is None:
+        return tracker == "landmarks" and estimator not in ("paper", "fiducials")
+    if not isinstance(photometric, bool):
+        raise MyofaceValueError(f"photometric must be True, False or None; got {photometric!r}")
+    if photometric and tracker != "landmarks":
+        raise MyofaceValueError(PHOTOMETRIC_NEEDS_LANDMARKS)
+    if photometric and estimator in ("paper", "fiducials"):
+        raise MyofaceValueError(PHOTOMETRIC_NOT_PAPER)
+    return bool(photometric)
+
+
 def make_analyzer(
     model,
     video,
@@ -68,7 +92,7 @@ def make_analyzer(
     estimator: str = "curves",
     show_progress: bool | None = None,
     flow: bool = False,
-    photometric: bool = False,
+    photometric: bool | None = None,
 ):
     """The tracker for ``video`` (a :class:`~myoface.analysis.video.Video`), not yet
     calibrated, and the frame from which :func:`measure_frames` hands it the video's frames
@@ -93,15 +117,15 @@ def make_analyzer(
     ``flow``: the 3-D fit's points refined
     by optical flow (:attr:`~myoface.analysis.weights.FitSettings.flow`). ``photometric``:
     the 3-D fit also reads the frame's pixels against the calibration frame's appearance
-    (:attr:`~myoface.analysis.weights.FitSettings.photometric`); both are the fit's, refused
-    with the snakes and with ``estimator="paper"``.
+    (:attr:`~myoface.analysis.weights.FitSettings.photometric`; None, the default: on with
+    the 3-D fit, :func:`resolve_photometric`); both are the fit's, refused with the snakes
+    and with ``estimator="paper"``.
     """
     if flow and tracker != "landmarks":
         raise MyofaceValueError(
             "--flow refines the landmark tracker's points; use it with --tracker landmarks"
         )
-    if photometric and tracker != "landmarks":
-        raise MyofaceValueError(PHOTOMETRIC_NEEDS_LANDMARKS)
+    photometric = resolve_photometric(photometric, tracker, estimator)
     first = 0 if calibration_frame is None else int(calibration_frame)
     if first < 0 or (video.n_frames is not None and first >= video.n_frames):
         raise MyofaceValueError(

@@ -85,20 +85,22 @@ def _sample_video():
 
 
 def _analysis_pass(path, tracker: str, max_frames: int | None, refine=None,
-                   photometric: bool = False, flow: bool = False) -> int:  # fmt: skip
+                   photometric: bool | None = None, flow: bool = False) -> int:  # fmt: skip
     """Decode ``path`` and analyse every frame (no output files) as ``myoface analyze``
     does (for the landmarks' 3-D fit: calibrated on the most neutral frame of the first 2 s,
-    the analysis from frame 0; ``photometric``: with ``--photometric``; ``flow``: with
+    the analysis from frame 0; ``photometric``: None as the command's default, the 3-D fit
+    with its photometric term, False ``--no-photometric``; ``flow``: with
     ``--flow``, the model-anchored point tracker); returns the frame
     count. The run's process CPU time and the analyzer's own timings
     (:attr:`FitTracker.timings`, :attr:`ModelFit.timings`) are kept for the benchmark's
     breakdown."""
     import time
 
-    from myoface.analysis.pipeline import make_analyzer, measure_frames
+    from myoface.analysis.pipeline import make_analyzer, measure_frames, resolve_photometric
     from myoface.analysis.video import open_video
     from myoface.model import build_face_model
 
+    photometric = resolve_photometric(photometric, tracker, None)
     fm = _cache.get("model")
     if fm is None:
         fm = _cache["model"] = build_face_model()
@@ -272,31 +274,37 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     m = None if not quick else 24
     # the default, MediaPipe alone and --flow (the points read against the calibration frame
     # through the model, on a thread of their own: modelflow.PREDICTION_LAG), interleaved
-    (ours, peer, flow), n = _fps_interleaved(
+    # the default (the 3-D fit with its photometric term), MediaPipe alone and the fit on
+    # MediaPipe's points alone (--no-photometric), interleaved
+    (ours, peer, points), n = _fps_interleaved(
         [
             lambda: _analysis_pass(path, "landmarks", m),
             lambda: _mediapipe_pass(path, m),
-            lambda: _analysis_pass(path, "landmarks", m, flow=True),
+            lambda: _analysis_pass(path, "landmarks", m, photometric=False),
         ],
         quick,
     )
-    flow_t = _breakdown(("timings", "landmarks", None, False, "flow"))
-    ours_t = _breakdown(("timings", "landmarks", None, False))
+    ours_t = _breakdown(("timings", "landmarks", None, True))
+    points_t = _breakdown(("timings", "landmarks", None, False))
     peer_t = _breakdown(("timings", "mediapipe"))
-    lin, _ = _fps(lambda: _analysis_pass(path, "landmarks", m, refine=0), quick)
-    # --photometric (the fit also reads the frame's pixels against the calibration frame's)
-    photo, _ = _fps(lambda: _analysis_pass(path, "landmarks", m, photometric=True), quick)
-    photo_t = _breakdown(("timings", "landmarks", None, True))
+    # --no-photometric --flow (the points read against the calibration frame through the
+    # model, on a thread of their own: modelflow.PREDICTION_LAG), and --refine 0 on the points
+    flow, _ = _fps(lambda: _analysis_pass(path, "landmarks", m, photometric=False, flow=True),
+                   quick)  # fmt: skip
+    flow_t = _breakdown(("timings", "landmarks", None, False, "flow"))
+    lin, _ = _fps(lambda: _analysis_pass(path, "landmarks", m, refine=0, photometric=False),
+                  quick)  # fmt: skip
     detail = {
         "fit_share_of_frame": 1.0 - ours / peer,
         "fps_refine0": lin,
         "fit_share_of_frame_refine0": 1.0 - lin / peer,
-        # the same video, frames and repeats, the same breakdown (below), with --photometric
-        "fps_photometric": photo,
-        "fit_share_of_frame_photometric": 1.0 - photo / peer,
+        # the same video, frames and repeats, the same breakdown (below), --no-photometric
+        "fps_points": points,
+        "points_ratio": points / peer,
+        "fit_share_of_frame_points": 1.0 - points / peer,
         "fps_side_by_side": {
             "default": ours,
-            "photometric": photo,
+            "points": points,
             "flow": flow,
             "mediapipe": peer,
         },
@@ -313,7 +321,7 @@ def bench_analysis_fps(quick: bool) -> Measurement:
         # stage: the calibration's wall time, MediaPipe's wall time on the frames after it
         # (on the thread that runs ahead of the fit), the fit's and the relaxes' thread CPU
         # and the time a fit waited for a deferred relax
-        "breakdown": {"ours": ours_t, "photometric": photo_t, "flow": flow_t, "mediapipe": peer_t},
+        "breakdown": {"ours": ours_t, "points": points_t, "flow": flow_t, "mediapipe": peer_t},
         "cpu_ratio": (
             peer_t["cpu_ms_per_frame"] / ours_t["cpu_ms_per_frame"]
             if ours_t.get("cpu_ms_per_frame") and peer_t.get("cpu_ms_per_frame")
@@ -385,8 +393,11 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
     region's gain (< 1: the model moves less than the face), explained fraction and
     correlation, the mouth corners' gain, and beside each the measure of earlier reports
     (MediaPipe's face mesh on the video and on the render, ``mediapipe_on_both``; not a valid
-    judge), the targets (0.85 overall, 0.7 per region), and the explained fractions with
-    ``--flow`` (MediaPipe's points refined by optical flow; not in a quick run).
+    judge), the targets (0.85 overall, 0.7 per region), and the explained fractions of the
+    fit on MediaPipe's points alone (``points_alone``: ``--no-photometric``, the default
+    before 2026-12-05) and with them refined by optical flow (``--no-photometric --flow``;
+    both not in a quick run). The analysis is the default, the 3-D fit with its photometric
+    term.
 
     Measured 2026-12-01: 0.20 (MediaPipe on both 0.87); per region explained / gain: mouth
     corners 0.90 / 0.82 (0.94 / 0.78), lips -0.74 / 0.77 (0.78 / 0.55), brows 0.08 / 0.23
@@ -429,17 +440,27 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
             path, res.folder / "contractions.csv", calibration_frame=fid.reference,
             mediapipe_on_both=False, alignment="2d",
         )  # fmt: skip
-        flow = None
+        flow = points = None
         if not quick:
-            # the same with MediaPipe's points refined by optical flow (--flow; not the default)
-            res_f = analyze_to_folder(
-                path, Path(tmp) / "flow", model=fm, tracker="landmarks", flow=True
-            )
-            fid_f = write_fidelity_report(res_f.folder, path, mediapipe_on_both=False)
-            flow = {
-                "overall": round(float(fid_f.overall.explained), 4),
-                "regions": {k: round(float(v.explained), 4) for k, v in fid_f.regions.items()},
-            }
+            # the same on MediaPipe's points alone (--no-photometric, the default before
+            # 2026-12-05), and with them refined by optical flow (--no-photometric --flow)
+            for name, kw in (("points", {}), ("flow", {"flow": True})):
+                res_f = analyze_to_folder(
+                    path, Path(tmp) / name, model=fm, tracker="landmarks", photometric=False,
+                    **kw,
+                )  # fmt: skip
+                fid_f = write_fidelity_report(res_f.folder, path, mediapipe_on_both=False)
+                got = {
+                    "overall": round(float(fid_f.overall.explained), 4),
+                    "regions": {
+                        k: round(float(v.explained), 4) for k, v in fid_f.regions.items()
+                    },
+                    "mouth_corners_gain": round(float(fid_f.regions["mouth_corners"].gain), 4),
+                }
+                if name == "points":
+                    points = got
+                else:
+                    flow = got
     # which stage holds the measure: the best any contractions of the same face could do,
     # fitted to the reader's own displacements (a diagnostic, never the analysis)
     from myoface.analysis.fidelity import model_reach, person_model
@@ -491,6 +512,7 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
             fid.overall.explained >= FIDELITY_TARGET["overall"]
             and all(v >= FIDELITY_TARGET["region"] for v in regions.values())
         ),
+        "points_alone": points,
         "with_optical_flow": flow,
         "head_motion_taken_out": doc.get("head_motion_taken_out"),
         "head_turn_deg": doc.get("head_turn_deg"),

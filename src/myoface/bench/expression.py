@@ -384,16 +384,19 @@ def model_landmarks(poses, skins):
 #: the variants the detail has beside the default (name, tracker, AU-space prior), on the
 #: same clip, head moving
 VARIANTS = (
+    ("points", "fit", False),
     ("flow", "flow", False),
-    ("photometric", "photometric", False),
     ("AU prior", "fit", True),
     ("flow, AU prior", "flow", True),
     ("photometric, AU prior", "photometric", True),
 )
-#: the trackers the detail measures: the analysis' default (the 3-D fit on MediaPipe's
-#: points), the fit with the model-anchored point tracker (``myoface analyze --flow``) and the
-#: fit with its photometric term (``myoface analyze --photometric``)
+#: the trackers the detail measures: the 3-D fit on MediaPipe's points alone (``myoface
+#: analyze --no-photometric``, the default before 2026-12-05), that fit with the
+#: model-anchored point tracker (``--no-photometric --flow``), the fit with its photometric
+#: term (``myoface analyze``'s default) and the photometric fit with the flow (``--flow``)
 TRACKERS = ("fit", "flow", "photometric", "flow+photometric")
+#: the analysis' default among :data:`TRACKERS`
+DEFAULT_TRACKER = "photometric"
 
 
 def _clip(quick: bool, still: bool, clean: bool) -> tuple:
@@ -428,18 +431,22 @@ def _clip(quick: bool, still: bool, clean: bool) -> tuple:
 
 
 def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=False,
-               tracker: str = "fit", au_prior: bool = False, overrides=()) -> dict:  # fmt: skip
+               tracker: str | None = None, au_prior: bool = False,
+               overrides=()) -> dict:  # fmt: skip
     """The synthetic run's detail (cached); ``still``: the head frontal and still; ``clean``:
     on the renderer's own frames (:func:`~myoface.bench.headmotion.render_sequence`), not
     degraded by a camera; ``exact``: the fit given the model's own projected vertices
     (:func:`model_landmarks`) in place of MediaPipe's points on the frames (nothing
-    rendered); ``tracker`` (:data:`TRACKERS`): ``"fit"`` the analysis' default, ``"flow"``
-    the fit with the model-anchored tracker's points (``myoface analyze --flow``),
-    ``"photometric"`` the fit with its photometric term (``myoface analyze --photometric``),
-    ``"flow+photometric"`` both; ``au_prior``: with the fit's AU-space prior
+    rendered); ``tracker`` (:data:`TRACKERS`; None: :data:`DEFAULT_TRACKER`, or ``"fit"``
+    with ``exact``, which has no frames to read): ``"fit"`` the fit on MediaPipe's points
+    alone (``--no-photometric``), ``"flow"`` that fit with the model-anchored tracker's points
+    (``--no-photometric --flow``), ``"photometric"`` the fit with its photometric term (the
+    analysis' default), ``"flow+photometric"`` both (``--flow``); ``au_prior``: with the fit's AU-space prior
     (:mod:`myoface.analysis.au_prior`, ``FitSettings(au_prior_sigma=AU_PRIOR_SIGMA)``);
     ``overrides``: ``((field, value), ...)`` of :class:`~myoface.analysis.weights.FitSettings`
     set on top (a study's variant, e.g. ``(("sparsity", 0.0),)``: ``tools/expression_stages.py``)."""
+    if tracker is None:
+        tracker = "fit" if exact else DEFAULT_TRACKER
     if tracker not in TRACKERS:
         raise ValueError(f"tracker must be one of {TRACKERS}; got {tracker!r}")
     overrides = tuple((str(k), v) for k, v in overrides)
@@ -479,13 +486,12 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
         truth, played, phase, intensity, poses, skins, frames, camera, points = _clip(
             quick, still, clean
         )
-    settings = None
-    if "photometric" in tracker or au_prior or overrides:
-        settings = FitSettings(
-            photometric="photometric" in tracker,
-            au_prior_sigma=AU_PRIOR_SIGMA if au_prior else None,
-            **dict(overrides),
-        )
+    # (the tracker's settings, explicit: FitSettings' default is the photometric fit)
+    settings = FitSettings(
+        photometric="photometric" in tracker,
+        au_prior_sigma=AU_PRIOR_SIGMA if au_prior else None,
+        **dict(overrides),
+    )
     res = run_headmotion(
         fm, points, truth, poses, skins, settings=settings,
         frames=frames if tracker != "fit" else None, anchored_flow="flow" in tracker,
@@ -498,10 +504,10 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
     out = {
         "face": hm_cache.get("face_kind", "default"),
         "tracker": {
-            "fit": "the 3-D fit on MediaPipe's points (the analysis' default)",
-            "flow": "the fit with the model-anchored tracker's points (--flow)",
-            "photometric": "the fit with its photometric term (--photometric)",
-            "flow+photometric": "the fit with both (--flow --photometric)",
+            "fit": "the 3-D fit on MediaPipe's points alone (--no-photometric)",
+            "flow": "that fit with the model-anchored tracker's points (--no-photometric --flow)",
+            "photometric": "the fit with its photometric term (the analysis' default)",
+            "flow+photometric": "the fit with both (--flow)",
         }[tracker]
         + (f", with the AU-space prior (sigma {AU_PRIOR_SIGMA:g})" if au_prior else ""),
         "frames": len(truth),
@@ -565,8 +571,9 @@ def _intensities(episodes, phases) -> list[float]:
 
 
 def _sample(quick: bool, flow: bool = False) -> dict:
-    """The sample video's detail (cached): its rest and smile frames' labels; ``flow``: the
-    analysis with the model-anchored tracker (``myoface analyze --flow``)."""
+    """The sample video's detail (cached): its rest and smile frames' labels, by the default
+    analysis; ``flow``: by the fit on MediaPipe's points with the model-anchored tracker
+    (``myoface analyze --no-photometric --flow``)."""
     key = ("sample", bool(quick), bool(flow))
     if key in _cache:
         return _cache[key]
@@ -592,7 +599,10 @@ def _sample(quick: bool, flow: bool = False) -> dict:
     n = SAMPLE_QUICK_FRAMES if quick else None
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "sample"
-        res = analyze_to_folder(path, out, tracker="landmarks", max_frames=n, flow=flow)
+        res = analyze_to_folder(
+            path, out, tracker="landmarks", max_frames=n, flow=flow,
+            photometric=False if flow else None,
+        )  # fmt: skip
         csv = out / "contractions.csv"
         _, _, quality = read_contractions_csv(csv, list(res.ids))
         _, labels = read_expressions(csv)

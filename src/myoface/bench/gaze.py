@@ -246,14 +246,17 @@ def _rotation_error_deg(fitted, true) -> np.ndarray:
 
 
 def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
-             photometric: bool = False, flow: bool = False) -> dict:  # fmt: skip
+             photometric: bool | None = None, flow: bool = False) -> dict:  # fmt: skip
     """Analyse ``frames`` end to end and compare each eye's gaze with the truth; also the
-    reader alone on the true geometry. The detail's numbers (see the module)."""
+    reader alone on the true geometry. The detail's numbers (see the module).
+    ``photometric``: None as ``myoface analyze`` (the fit with its photometric term), False
+    MediaPipe's points alone (``--no-photometric``)."""
     from myoface.analysis.camera import PinholeCamera
     from myoface.analysis.gaze import GazeEstimator, gaze_angles, gaze_directions
-    from myoface.analysis.pipeline import Tracking, make_analyzer
+    from myoface.analysis.pipeline import Tracking, make_analyzer, resolve_photometric
     from myoface.bench.headmotion import FOV_DEG, SIZE, _Clip
 
+    photometric = resolve_photometric(photometric, "landmarks", estimator)
     n = len(frames)
     clip = _Clip(frames)
     t0 = time.perf_counter()
@@ -413,19 +416,21 @@ def bench_gaze_error(quick: bool) -> Measurement:
     as a webcam's and analysed end to end (:mod:`myoface.bench.gaze`; 90 frames, quick 30).
     The detail: per eye and angle, the reader alone on the true geometry, open eyes read,
     blinks said closed, saccade frames, the eyeball centres' image error, and the same with
-    the fit's analysis by synthesis (``fit-synthesis``), its photometric term
-    (``photometric``) and its anchored optical flow (``flow``, ``myoface analyze --flow``;
-    these three not in a quick run)."""
+    the fit on MediaPipe's points alone (``points``, ``myoface analyze --no-photometric``, the
+    default before 2026-12-05), that fit with analysis by synthesis (``fit-synthesis``) and
+    with its anchored optical flow (``flow``, ``--no-photometric --flow``; these three not in
+    a quick run). The default is the fit with its photometric term (``photometric``)."""
     model, frames, poses, gaze, closure, skins, report, face_kind = _sequence(quick)
     res = run_gaze(model, frames, poses, gaze, closure, skins)
-    detail = {"face": face_kind, "frames": len(frames), "camera": report, "fit": res}
+    detail = {"face": face_kind, "frames": len(frames), "camera": report, "photometric": res}
     if not quick:
+        detail["points"] = run_gaze(model, frames, poses, gaze, closure, skins, photometric=False)
         detail["fit-synthesis"] = run_gaze(
-            model, frames, poses, gaze, closure, skins, estimator="fit-synthesis"
+            model, frames, poses, gaze, closure, skins, estimator="fit-synthesis",
+            photometric=False,
+        )  # fmt: skip
+        detail["flow"] = run_gaze(
+            model, frames, poses, gaze, closure, skins, photometric=False, flow=True
         )
-        detail["photometric"] = run_gaze(
-            model, frames, poses, gaze, closure, skins, photometric=True
-        )
-        detail["flow"] = run_gaze(model, frames, poses, gaze, closure, skins, flow=True)
     value = res["value"] if res["value"] is not None else float("nan")
     return Measurement(value, len(frames), detail=detail)

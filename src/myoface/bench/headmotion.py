@@ -616,13 +616,11 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
 
         fm, truth, poses, skins, points, t_det = _sequence(quick, still, flow, degraded)
         # (the flow's points are given as the points; the fit's own settings the default's)
-        settings = None
-        if photometric or au_prior:
-            from myoface.analysis.au_prior import AU_PRIOR_SIGMA
+        from myoface.analysis.au_prior import AU_PRIOR_SIGMA
 
-            settings = FitSettings(
-                photometric=photometric, au_prior_sigma=AU_PRIOR_SIGMA if au_prior else None
-            )
+        settings = FitSettings(
+            photometric=photometric, au_prior_sigma=AU_PRIOR_SIGMA if au_prior else None
+        )
         t0 = time.perf_counter()
         res = run_headmotion(
             fm, points, truth, poses, skins, settings=settings, synthesis=synthesis,
@@ -681,32 +679,43 @@ def _snakes(quick: bool, still: bool, degraded: bool = True) -> dict:
 
 
 def _both(quick: bool) -> dict:
-    """Every variant's detail: moving / still head; the fit on the camera's frames and on the
-    clean renders; the fit with its photometric term (``photometric``) on the camera's frames;
-    the fit with synthesis, the fit on MediaPipe's points refined by optical flow and the
-    paper's snakes, on the camera's frames, the snakes also on the clean renders (these not in
-    a quick run); what the camera did."""
+    """Every variant's detail: moving / still head; the default (the fit with its
+    photometric term, ``..., photometric``) on the camera's frames and on the clean renders
+    (not in a quick run); the fit on MediaPipe's points alone (``..., fit``: ``myoface
+    analyze --no-photometric``, the default before 2026-12-05) on both; that fit with
+    synthesis, with MediaPipe's points refined by optical flow, and the paper's snakes, on
+    the camera's frames, the snakes also on the clean renders (these not in a quick run);
+    what the camera did."""
     out = {}
     for head, still in (("moving", False), ("still", True)):
-        out[f"{head}, fit"] = _run(quick, still)[1]
-        out[f"{head}, fit, clean renders"] = _run(quick, still, degraded=False)[1]
         out[f"{head}, photometric"] = _run(quick, still, photometric=True)[1]
-        # the fit with the model-anchored point tracker (myoface analyze --flow)
-        out[f"{head}, fit with anchored flow"] = _run(quick, still, anchored=True)[1]
+        out[f"{head}, fit"] = _run(quick, still, photometric=False)[1]
+        out[f"{head}, fit, clean renders"] = _run(
+            quick, still, degraded=False, photometric=False
+        )[1]
+        # the points' fit with the model-anchored point tracker (--no-photometric --flow)
+        out[f"{head}, fit with anchored flow"] = _run(
+            quick, still, anchored=True, photometric=False
+        )[1]
         # with the AU-space prior (opt-in), alone, with the flow, and with the flow and the
         # photometric term: the combinations measured best here (2026-12-03)
-        out[f"{head}, fit with AU prior"] = _run(quick, still, au_prior=True)[1]
+        out[f"{head}, fit with AU prior"] = _run(quick, still, au_prior=True, photometric=False)[1]
         out[f"{head}, fit with anchored flow and AU prior"] = _run(
-            quick, still, anchored=True, au_prior=True
+            quick, still, anchored=True, au_prior=True, photometric=False
         )[1]
         out[f"{head}, photometric with anchored flow and AU prior"] = _run(
             quick, still, photometric=True, anchored=True, au_prior=True
         )[1]
         if not quick:
-            out[f"{head}, fit-synthesis"] = _run(quick, still, True)[1]
+            out[f"{head}, photometric, clean renders"] = _run(
+                quick, still, degraded=False, photometric=True
+            )[1]
+            out[f"{head}, fit-synthesis"] = _run(quick, still, True, photometric=False)[1]
             # MediaPipe's points refined by the chained flow (FlowRefiner; before 2026-12-02
             # what --flow did)
-            out[f"{head}, fit with optical flow"] = _run(quick, still, False, True)[1]
+            out[f"{head}, fit with optical flow"] = _run(
+                quick, still, False, True, photometric=False
+            )[1]
             out[f"{head}, snakes"] = _snakes(quick, still)
             out[f"{head}, snakes, clean renders"] = _snakes(quick, still, False)
         out[f"{head}, camera"] = _cache[("camera", bool(quick), still, True)]
@@ -720,14 +729,15 @@ def bench_headmotion_rmse_worst(quick: bool) -> Measurement:
     photo, perspective camera 640x480, a 3-D head trajectory, the six expressions; rendered
     with the texture at half resolution and degraded as a webcam would (room, moving light,
     blur, noise, H.264 CRF 28: :func:`degraded_sequence`); MediaPipe's face mesh on those
-    frames; the calibration frame chosen automatically; the default estimator, ``fit``). The
-    detail gives every muscle, the confounded muscles, the fit's and the tracker's time per
-    frame, for the head moving and still, on the clean renders too (``..., clean renders``),
-    for the fit with analysis by synthesis (``--estimator fit-synthesis``), for the fit with
-    MediaPipe's points refined by optical flow (``myoface analyze --flow``), for the fit with
-    its photometric term (``..., photometric``: ``myoface analyze --photometric``), for the
-    paper's snakes (``--tracker snakes``; on both renders), and what the camera did
-    (``..., camera``: its parameters, the H.264 stream's kbit/s and PSNR)."""
+    frames; the calibration frame chosen automatically; the default analysis: the 3-D fit
+    with its photometric term, ``myoface analyze``'s since 2026-12-05). The detail gives
+    every muscle, the confounded muscles, the fit's and the tracker's time per frame, for the
+    head moving and still, on the clean renders too (``..., clean renders``), for the fit on
+    MediaPipe's points alone (``..., fit``: ``--no-photometric``), and that fit with analysis
+    by synthesis (``--estimator fit-synthesis``), with MediaPipe's points refined by optical
+    flow (``--flow``), for the paper's snakes (``--tracker snakes``; on both renders), and
+    what the camera did (``..., camera``: its parameters, the H.264 stream's kbit/s and
+    PSNR)."""
     res, _ = _run(quick, False)
     return Measurement(res.summary()["rmse_worst"], len(res.truth), detail=_both(quick))
 

@@ -129,14 +129,16 @@ LOOK_KEYS = ("head still, with the look", "head moving, with the look")
 PLAIN_KEYS = ("head still", "head moving")
 GAIN_TARGET = (0.9, 1.1)
 EXPLAINED_TARGET = 0.9
-#: the analyses compared: the default, the photometric fit, and the fit with optical flow
-#: (``--flow``) by each of its point trackers (:data:`~myoface.analysis.modelflow.
-#: FLOW_METHODS`): FitSettings' changes, and the flow's tracker (key ``"flow_method"``)
+#: the analyses compared: the default (the 3-D fit with its photometric term, since
+#: 2026-12-05), the fit on MediaPipe's points alone (``--no-photometric``, the default before),
+#: and that fit with optical flow (``--no-photometric --flow``) by each of its point trackers
+#: (:data:`~myoface.analysis.modelflow.FLOW_METHODS`): FitSettings' changes, and the flow's
+#: tracker (key ``"flow_method"``)
 VARIANTS = {
     "default": {},
-    "photometric": {"photometric": True},
-    "flow, anchored": {"flow": True, "flow_method": "anchored"},
-    "flow, chained": {"flow": True, "flow_method": "chained"},
+    "points": {"photometric": False},
+    "flow, anchored": {"photometric": False, "flow": True, "flow_method": "anchored"},
+    "flow, chained": {"photometric": False, "flow": True, "flow_method": "chained"},
 }
 
 
@@ -156,8 +158,11 @@ def calibrated_geometry(frame, model):
     the head's pose). The same for every analysis compared (whatever the variant's settings):
     the clips are the same, only their analysis differs."""
     from myoface.analysis.trackers.landmark_fit import FitTracker
+    from myoface.analysis.weights import FitSettings
 
-    tracker = FitTracker(model, fps=30.0)
+    # (MediaPipe's points alone: the clips as they were made before the photometric term
+    # became the default; the pose and the skin are the points' either way)
+    tracker = FitTracker(model, fps=30.0, settings=FitSettings(photometric=False))
     try:
         tracker.calibrate(iter(_Clip([frame] * NEUTRAL_FRAMES, 30.0)), 0)
         return tracker.fit, tracker.calibration.pose

