@@ -2,7 +2,8 @@
 reproduces the frame's pixels at the model's visible surface points (the image-level analysis
 the paper's discussion asks for; the photometric term of model-based trackers such as
 Face2Face, Thies et al. 2016, and optical flow as a constraint on a deformable face model,
-DeCarlo & Metaxas 2000).
+DeCarlo & Metaxas 2000). On by default since 2026-12-05 (:attr:`~myoface.analysis.weights.
+FitSettings.photometric`; ``myoface analyze --no-photometric`` fits MediaPipe's points alone).
 
 **Why pixels, not points.** A landmark detector reads an expression's motion short (MediaPipe's
 face mesh 0.5-0.7 of it), and a tracker of patches (Lucas-Kanade) assumes that the motion is
