@@ -178,9 +178,7 @@ def test_the_fit_reads_the_tracked_points():
 
     moved = {}
     for flow in (False, True, "default"):
-        settings = (
-            FitSettings() if flow == "default" else FitSettings(flow=flow, photometric=False)
-        )
+        settings = FitSettings() if flow == "default" else FitSettings(flow=flow, photometric=False)
         tr = FitTracker(fm, camera=cam, detector=Damped(), calibration_frame=0,
                         settings=settings, flow_method="anchored", gaze=False)  # fmt: skip
         tr.calibrate(iter([img0]), 0)

@@ -452,9 +452,7 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
                 fid_f = write_fidelity_report(res_f.folder, path, mediapipe_on_both=False)
                 got = {
                     "overall": round(float(fid_f.overall.explained), 4),
-                    "regions": {
-                        k: round(float(v.explained), 4) for k, v in fid_f.regions.items()
-                    },
+                    "regions": {k: round(float(v.explained), 4) for k, v in fid_f.regions.items()},
                     "mouth_corners_gain": round(float(fid_f.regions["mouth_corners"].gain), 4),
                 }
                 if name == "points":

@@ -690,9 +690,8 @@ def _both(quick: bool) -> dict:
     for head, still in (("moving", False), ("still", True)):
         out[f"{head}, photometric"] = _run(quick, still, photometric=True)[1]
         out[f"{head}, fit"] = _run(quick, still, photometric=False)[1]
-        out[f"{head}, fit, clean renders"] = _run(
-            quick, still, degraded=False, photometric=False
-        )[1]
+        clean = _run(quick, still, degraded=False, photometric=False)
+        out[f"{head}, fit, clean renders"] = clean[1]
         # the points' fit with the model-anchored point tracker (--no-photometric --flow)
         out[f"{head}, fit with anchored flow"] = _run(
             quick, still, anchored=True, photometric=False
