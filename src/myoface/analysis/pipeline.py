@@ -62,7 +62,7 @@ def resolve_photometric(photometric, tracker: str, estimator) -> bool:
     :attr:`~myoface.analysis.weights.FitSettings.photometric`): ``photometric`` True or
     False as given, None (the default) on wherever there is a 3-D fit to add it to (the
     landmark tracker with the estimator ``"fit"`` or ``"fit-synthesis"``: the best measured
-    analysis, README's "How well the analysis works") and off elsewhere (the snakes, the
+    analysis, README's "The default analysis reads the pixels") and off elsewhere (the snakes, the
     paper's landmark scheme).
 
     Raises

@@ -200,10 +200,10 @@ class FitSettings:
     #: On by default since 2026-12-05 (``myoface analyze``; ``--no-photometric`` for the fit
     #: on MediaPipe's points alone): it measured best on every known answer (the known warps'
     #: gains 0.80-1.01 against 0.46-0.62, the degraded head-motion renders' skin 0.93 against
-    #: 1.40 mm and head 0.53 against 1.63 deg, the expression clip 0.70 / 0.72 against 0.57 /
+    #: 1.40 mm and head 0.53 against 1.63 deg, the expression clip 0.69 / 0.67 against 0.57 /
     #: 0.68), at 0.98 of the points' validated fidelity on the sample video (0.765 against
-    #: 0.783) and about 0.6 of their frames a second (README, "The photometric fit, the
-    #: default"). Without a frame given (:meth:`~myoface.analysis.modelfit.ModelFit.fit`'s
+    #: 0.783) and about 0.65 of their frames a second (README, "The default analysis reads the
+    #: pixels"; BENCHMARKS.md, 2026-12-05 10:45 UTC). Without a frame given (:meth:`~myoface.analysis.modelfit.ModelFit.fit`'s
     #: ``image``) a fit reads the points alone either way.
     photometric: bool = True
     photo_sigma: float = 8.0

@@ -440,7 +440,7 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
             path, res.folder / "contractions.csv", calibration_frame=fid.reference,
             mediapipe_on_both=False, alignment="2d",
         )  # fmt: skip
-        flow = points = None
+        alone: dict = {}  # (the points' fit, and with the flow; not in a quick run)
         if not quick:
             # the same on MediaPipe's points alone (--no-photometric, the default before
             # 2026-12-05), and with them refined by optical flow (--no-photometric --flow)
@@ -450,15 +450,11 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
                     **kw,
                 )  # fmt: skip
                 fid_f = write_fidelity_report(res_f.folder, path, mediapipe_on_both=False)
-                got = {
+                alone[name] = {
                     "overall": round(float(fid_f.overall.explained), 4),
                     "regions": {k: round(float(v.explained), 4) for k, v in fid_f.regions.items()},
                     "mouth_corners_gain": round(float(fid_f.regions["mouth_corners"].gain), 4),
                 }
-                if name == "points":
-                    points = got
-                else:
-                    flow = got
     # which stage holds the measure: the best any contractions of the same face could do,
     # fitted to the reader's own displacements (a diagnostic, never the analysis)
     from myoface.analysis.fidelity import model_reach, person_model
@@ -510,8 +506,8 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
             fid.overall.explained >= FIDELITY_TARGET["overall"]
             and all(v >= FIDELITY_TARGET["region"] for v in regions.values())
         ),
-        "points_alone": points,
-        "with_optical_flow": flow,
+        "points_alone": alone.get("points"),
+        "with_optical_flow": alone.get("flow"),
         "head_motion_taken_out": doc.get("head_motion_taken_out"),
         "head_turn_deg": doc.get("head_turn_deg"),
         "with_2d_alignment": flat,
