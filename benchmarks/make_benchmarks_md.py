@@ -55,6 +55,7 @@ TARGETS = {
     "analysis.headmotion_pose_deg": [("<=", 1)],
     "analysis.headmotion_still_rmse_median": [("<=", 0.06)],
     "analysis.headmotion_still_skin_mm": [("<=", 0.5)],
+    "analysis.headmotion_still_pose_deg": [("<=", 1)],
     "analysis.known_warp_gain": [("in", 0.9, 1.1)],
     "analysis.known_warp_explained": [(">=", 0.9)],
     "analysis.expression_accuracy": [(">=", 0.9)],

@@ -14,13 +14,17 @@ module constants (``--const``: ``module.NAME`` under ``myoface.analysis``, JSON;
   the benchmark's clip), head moving unless ``--still``, degraded by the camera unless
   ``--clean``: prints the benchmark's summary (worst and median RMSE, worst correlation,
   skin mm, its rest and expression frames apart, head deg and its mean error yaw / pitch /
-  roll) and the appearance's parallax turn (``modelfit.PARALLAX_REFINE``).
+  roll) and the appearance's parallax turn (``modelfit.PARALLAX_REFINE``);
+- ``expression``: the expression benchmark's synthetic clip (:func:`myoface.bench.expression.
+  _synthetic`, the default analysis with the overrides): prints the apex and rest accuracy
+  and the contractions' median RMSE.
 
     python tools/photometric_ablation.py warp --look --expressions happiness \\
         --set '{"photo_landmark_weight": 0.01}'
     python tools/photometric_ablation.py video --out /tmp/pm \\
         --const '{"photometric.SHADE_FIELD_ORDER": 2}'
     python tools/photometric_ablation.py headmotion --const '{"modelfit.PARALLAX_REFINE": false}'
+    python tools/photometric_ablation.py expression --set '{"photo_rate_per_s": 4.0}'
 
 The numbers of issue 30's report (2026-12-02) were taken this way.
 """
@@ -43,7 +47,7 @@ def _constants(consts: dict) -> None:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("mode", choices=("warp", "video", "headmotion"))
+    ap.add_argument("mode", choices=("warp", "video", "headmotion", "expression"))
     ap.add_argument("--set", default="{}", help="FitSettings fields (JSON)")
     ap.add_argument("--const", default="{}", help="module constants (JSON)")
     ap.add_argument("--moving", action="store_true", help="warp: with fake head motion")
@@ -75,6 +79,15 @@ def main(argv=None) -> None:
         return
     if a.mode == "headmotion":
         _headmotion(a.still, not a.clean, fs, consts)
+        return
+    if a.mode == "expression":
+        from myoface.bench.expression import _synthetic
+
+        r = _synthetic(False, overrides=tuple(fs.items()))
+        print(
+            f"expression {fs} {consts}: apex {r['apex_accuracy']:.3f} rest "
+            f"{r['rest_accuracy']:.3f} median RMSE {r['contraction_rmse_median']:.4f}"
+        )
         return
     import myoface.analysis.pipeline as pipeline
     from myoface.analysis.sample import fetch_sample_video

@@ -77,6 +77,16 @@ def _terms(fit, p, prev, huber):
         "landmarks_beside_flow": LandmarkTerm(
             p, CAMERA, w0, s.landmark_sigma_mm, s.depth_sigma_mm, huber, xy_weights=~tracked
         ),
+        # the detector reading the skin's motion from the neutral at a gain of 0.6
+        "landmarks_at_gain": LandmarkTerm(
+            p,
+            CAMERA,
+            w0,
+            s.landmark_sigma_mm,
+            s.depth_sigma_mm,
+            huber,
+            gain=(0.6, fit.neutral + fit.identity_mm),
+        ),  # fmt: skip
         "flow": OpticalFlowTerm(moved, tracked, CAMERA, w0, s.landmark_sigma_mm, huber),
         # each point against the model's motion averaged over its patch
         "flow_footprint": OpticalFlowTerm(
@@ -101,6 +111,7 @@ def _terms(fit, p, prev, huber):
     [
         "landmarks",
         "landmarks_beside_flow",
+        "landmarks_at_gain",
         "flow",
         "flow_footprint",
         "temporal",
@@ -137,6 +148,28 @@ def test_a_terms_normal_equations_give_its_costs_gradient(frame, name, use_depth
             2 * eps
         )
         assert slope == pytest.approx(-2 * b @ d, rel=1e-5, abs=1e-6 * (1 + abs(b @ d)))
+
+
+def test_the_landmark_term_at_a_gain_reads_the_motion_scaled_from_the_neutral(frame):
+    """At gain g the term's cost at an estimate is the plain term's at the skin whose motion
+    from the neutral is g times the estimate's (the head's pose as it is), and its rows in
+    the contractions are g times the plain term's there: a detector that reads g of the
+    skin's motion agrees with the model moving in full."""
+    fit, p, pose, c, _ = frame
+    s = fit.settings
+    base = fit.neutral + fit.identity_mm
+    est = _estimate(fit, pose, c, np.arange(fit.n_muscles))
+    seen = Estimate(pose, c, base + 0.6 * (est.shape - base), 0.6 * est.jac, est.free)
+    args = (p, CAMERA, fit.base_weights, s.landmark_sigma_mm, s.depth_sigma_mm, np.inf)
+    at_gain, plain = LandmarkTerm(*args, gain=(0.6, base)), LandmarkTerm(*args)
+    for t in (at_gain, plain):
+        t.prepare(est)
+    assert at_gain.cost(est) == pytest.approx(plain.cost(seen), rel=1e-12)
+    assert not at_gain.cost(est) == pytest.approx(plain.cost(est), rel=1e-3)
+    for a, b in zip(at_gain.normal_equations(est), plain.normal_equations(seen), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
+    # (gain 1: the plain term itself)
+    assert LandmarkTerm(*args, gain=(1.0, base)).gain is None
 
 
 def test_the_landmark_terms_huber_weights_hold_outliers(frame):

@@ -850,3 +850,40 @@ def test_the_parallax_search_parabola_finds_a_noisy_minimum():
     assert parabola_vertex(x, -5.0 * x) is None
     assert parabola_vertex(x, -((x - 1.0) ** 2)) is None
     assert parabola_vertex(x, (x - 6.0) ** 2) is None  # (its minimum beyond the turns)
+
+
+def test_the_detectors_gain_is_read_off_the_video_and_the_pixels_move_the_face_in_full(scene):
+    """A frame warped by the model's smile (the texture's motion known), and a detector that
+    reads half of the skin's motion (the points a 0.5 of the way from the neutral's to the
+    smile's, as MediaPipe reads 0.5-0.7 of a known warp's): the fit estimates the detector's
+    gain from the frames (:meth:`~myoface.analysis.modelfit.ModelFit.landmark_gain`) near
+    0.5, and its skin then moves by nearly the warp's motion, where with the detector taken
+    at its word (gain 1) the points pull it short."""
+    from dataclasses import replace
+
+    from myoface.analysis.knownwarp import projected_warp
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.weights import FitSettings
+
+    model, cam, shape, pose, frame = scene
+    pts0 = cam.project(pose.apply(shape))
+    c_apex = expression_contractions("happiness", 0.8, model.ids)
+    ramp = np.concatenate([np.linspace(0.0, 1.0, 7)[1:], np.ones(6)])
+    gains = {}
+    for gain in (None, 1.0):
+        fit = ModelFit(model, cam, replace(FitSettings(), photo_landmark_gain=gain))
+        fit.calibrate([pts0], 0)
+        fit.set_appearance(frame)
+        base = fit.skin()
+        for a in ramp:
+            s1 = fit.skin(a * c_apex)
+            img = projected_warp(pts0, base, s1, cam, pose).apply(frame)
+            seen = pts0 + 0.5 * (cam.project(pose.apply(s1)) - pts0)
+            r = fit.fit(seen, image=img)
+        moved = (fit.skin(r.contractions) - base).ravel()
+        want = (s1 - base).ravel()
+        gains[gain] = (float(moved @ want / (want @ want)), fit.landmark_gain())
+    (read, g_read), (at_word, g_word) = gains[None], gains[1.0]
+    assert 0.4 <= g_read <= 0.65 and g_word == 1.0
+    assert 0.9 <= read <= 1.1, gains
+    assert read - at_word > 0.05, gains

@@ -245,6 +245,13 @@ PARALLAX_PASSES = ((1, 4.0), (1, 2.0))
 PARALLAX_SAMPLES = 9
 PARALLAX_MAX_SE_DEG = 0.75
 
+#: the detector's gain on an expression's motion (:meth:`ModelFit.landmark_gain`, with
+#: :attr:`~myoface.analysis.weights.FitSettings.photo_landmark_gain` None): the prior (the
+#: gain, and its weight in mm^2 of the model's motion squared, summed over the points: about
+#: one frame of a full smile) and the range the estimate is held to
+LANDMARK_GAIN_PRIOR = (0.6, 500.0)
+LANDMARK_GAIN_RANGE = (0.3, 1.0)
+
 
 #: the calibration reads MediaPipe's relative depth (its points' z) into the person's neutral
 #: (:meth:`ModelFit._fit_identity`): True, False, or None (the default): only on a face that is not
@@ -507,6 +514,12 @@ class ModelFit:
         self._photo_points = None
         #: {frame: its points} of the frames the appearance is registered on (:meth:`calibrate`)
         self._registration: dict = {}
+        #: the detector's gain on this video's expression motion (:meth:`landmark_gain`): the
+        #: sums over the frames fitted with the photometric term so far, and the last fit's
+        self._gain_sums = (0.0, 0.0)
+        self._gain_last = None
+        self._gain_mask = None
+        self._calibrating = False  # (set_appearance's parallax search: the points at gain 1)
 
     # -------------------------------------------------------------- public
     def lose_track(self) -> None:
@@ -518,7 +531,7 @@ class ModelFit:
         """What the next fit starts from (the previous frame's fit, how many frames back it
         is, and for the photometric term's schedule its points): :meth:`restore_frame_state`
         takes it back."""
-        return self._prev, self._prev_age, self._photo_points
+        return self._prev, self._prev_age, self._photo_points, self._gain_sums
 
     def restore_frame_state(self, state: tuple) -> None:
         """The next fit starts from ``state`` (:meth:`frame_state`, taken before a frame that
@@ -529,7 +542,7 @@ class ModelFit:
         degraded head-motion renders with the photometric term), and the photometric term's
         schedule from its coarsest level unless the face has not moved since that frame's
         points (:func:`~myoface.analysis.photometric.coarse_start`)."""
-        self._prev, age, self._photo_points = state
+        self._prev, age, self._photo_points, self._gain_sums = state
         self._prev_age = age + 1
 
     def skin(self, contractions=None) -> np.ndarray:
@@ -720,6 +733,10 @@ class ModelFit:
                     break
                 moved = None if flow is None else (flow[0] - err[:, :2], flow[1])
                 res = self._fit(p - err, prev, refine=0, start=res, flow=moved, photo=photo)
+        if photo is not None and synthesis is None and self._gain_last is not None:
+            dm, mm = self._gain_last
+            self._gain_sums = (self._gain_sums[0] + dm, self._gain_sums[1] + mm)
+        self._gain_last = None
         if (
             deferred
             and self.settings.refine > 0
@@ -840,6 +857,7 @@ class ModelFit:
                 p = check_points(frames[k], len(self.neutral))
                 self._registration[k] = p if self.offsets is None else self._corrected(p)
         self.calibration = Calibration(index, scores, identity, pose, resid, extra)
+        self._gain_sums, self._gain_last = (0.0, 0.0), None  # (a new neutral: a new start)
         return self.calibration
 
     def set_appearance(self, frame, window=None) -> None:
@@ -984,35 +1002,39 @@ class ModelFit:
 
         d = np.zeros(3)
         known = {}  # (the costs evaluated, by turn)
+        self._calibrating = True
+        try:
 
-        def at(trial) -> float:
-            key = tuple(np.round(np.degrees(trial), 6))
-            if key not in known:
-                known[key] = cost(trial)
-            return known[key]
+            def at(trial) -> float:
+                key = tuple(np.round(np.degrees(trial), 6))
+                if key not in known:
+                    known[key] = cost(trial)
+                return known[key]
 
-        found: list = []  # (per pass: its axis, vertex and standard error, deg, or None)
-        for axis, half in passes:
-            turns = np.linspace(-half, half, PARALLAX_SAMPLES)
-            moved = 0.0  # (the pass made again about its range's end: how far, deg)
-            for again in (False, True):
-                e = []
-                for x in turns:
-                    trial = d.copy()
-                    trial[axis] += np.radians(x)
-                    e.append(at(trial))
-                vertex = parabola_vertex(turns, np.asarray(e))
-                low = int(np.argmin(e))
-                if vertex is None and not again and low in (0, len(turns) - 1):
-                    moved = float(turns[low])  # (the minimum lies beyond: once more there)
-                    d[axis] += np.radians(moved)
-                    continue
-                break
-            found.append([axis, None if vertex is None else [round(v, 3) for v in vertex]])
-            if vertex is not None and vertex[1] <= PARALLAX_MAX_SE_DEG:
-                d[axis] += np.radians(vertex[0])
-            else:
-                d[axis] -= np.radians(moved)  # (none found: the pass leaves the turn as it was)
+            found: list = []  # (per pass: its axis, vertex and standard error, deg, or None)
+            for axis, half in passes:
+                turns = np.linspace(-half, half, PARALLAX_SAMPLES)
+                moved = 0.0  # (the pass made again about its range's end: how far, deg)
+                for again in (False, True):
+                    e = []
+                    for x in turns:
+                        trial = d.copy()
+                        trial[axis] += np.radians(x)
+                        e.append(at(trial))
+                    vertex = parabola_vertex(turns, np.asarray(e))
+                    low = int(np.argmin(e))
+                    if vertex is None and not again and low in (0, len(turns) - 1):
+                        moved = float(turns[low])  # (the minimum lies beyond: once more there)
+                        d[axis] += np.radians(moved)
+                        continue
+                    break
+                found.append([axis, None if vertex is None else [round(v, 3) for v in vertex]])
+                if vertex is not None and vertex[1] <= PARALLAX_MAX_SE_DEG:
+                    d[axis] += np.radians(vertex[0])
+                else:
+                    d[axis] -= np.radians(moved)  # (none found: the pass leaves the turn as it was)
+        finally:
+            self._calibrating = False
         n = len(known)
         self._take_appearance(frame, turned(d))
         cal.extra["appearance_parallax"] = {
@@ -1125,11 +1147,20 @@ class ModelFit:
             )
         return self._spread_w
 
-    def landmark_term(self, points, weights) -> LandmarkTerm:
-        """The landmark term of ``points`` (V, 3) with per-vertex ``weights`` (V,)."""
+    def landmark_term(self, points, weights, gain: float = 1.0, xy_weights=None) -> LandmarkTerm:
+        """The landmark term of ``points`` (V, 3) with per-vertex ``weights`` (V,), the
+        detector reading the skin's motion from the person's neutral at ``gain``
+        (:class:`~myoface.analysis.terms.LandmarkTerm`)."""
         s = self.settings
         return LandmarkTerm(
-            points, self.camera, weights, s.landmark_sigma_mm, s.depth_sigma_mm, s.huber
+            points,
+            self.camera,
+            weights,
+            s.landmark_sigma_mm,
+            s.depth_sigma_mm,
+            s.huber,
+            xy_weights=xy_weights,
+            gain=None if gain == 1.0 else (gain, self.neutral + self.identity_mm),
         )
 
     def terms(self, points, weights, prev: FrameFit | None, flow=None, photo=None) -> list:
@@ -1148,7 +1179,7 @@ class ModelFit:
                     age / self.fps,
                     s.rotation_rate_deg_per_s,
                     s.translation_rate_mm_per_s,
-                    s.rate_per_s,
+                    s.rate_per_s if photo is None else s.photo_rate_per_s,
                 )  # fmt: skip
             )
         out += [MagnitudePrior(s.magnitude_sigma), SparsityPrior(s.sparsity)]
@@ -1172,20 +1203,18 @@ class ModelFit:
             else:
                 out += photo
             weights = weights * s.photo_landmark_weight
+        # (the detector's gain on the expression's motion: not at calibration, whose frames
+        # are the neutral's views, and whose parallax search needs the muscles held by the
+        # points as they are: at a gain below 1 they took up the turn it searches for)
+        gain = self.landmark_gain() if photo is not None and not self._calibrating else 1.0
         if flow is None:
-            out.append(self.landmark_term(points, weights))
+            out.append(self.landmark_term(points, weights, gain))
             return out
         xy, tracked = flow
         out.append(
-            LandmarkTerm(
-                points,
-                self.camera,
-                weights,
-                s.landmark_sigma_mm,
-                s.depth_sigma_mm,
-                s.huber,
-                xy_weights=(1.0 - tracked) * self._detector_weights,
-            )  # fmt: skip
+            self.landmark_term(
+                points, weights, gain, xy_weights=(1.0 - tracked) * self._detector_weights
+            )
         )
         out.append(
             OpticalFlowTerm(
@@ -1291,7 +1320,34 @@ class ModelFit:
         if photo is not None:
             # (the brightness's patches: the redness of skin is nearly uniform)
             occlusion = photo[0].occlusion(Estimate(pose, c, shape, jac, np.arange(m)))
+            self._gain_last = self._gain_stats(p, pose, base, uv, k)
         return FrameFit(c, pose, resid, total_it, conv, occlusion)
+
+    def landmark_gain(self) -> float:
+        """The detector's gain on the skin's motion under the photometric term
+        (:attr:`FitSettings.photo_landmark_gain`; None there: this video's, estimated from the
+        frames fitted so far, :data:`LANDMARK_GAIN_PRIOR` until they show expression)."""
+        g = self.settings.photo_landmark_gain
+        if g is not None:
+            return float(g)
+        dm, mm = self._gain_sums
+        prior, weight = LANDMARK_GAIN_PRIOR
+        return float(np.clip((dm + prior * weight) / (mm + weight), *LANDMARK_GAIN_RANGE))
+
+    def _gain_stats(self, p, pose, base, uv, k) -> tuple[float, float]:
+        """One fit's sums for :meth:`landmark_gain`: the detector's motion from the person's
+        neutral (at the fitted pose) against the model's, both in the image (mm on the face),
+        over the points that are neither the face's oval nor the lids'."""
+        if self._gain_mask is None:
+            mask = landmark_weights(self.model.face, 0.0) > 0
+            for _, verts in lid_gains(self.model, base).values():
+                mask[verts] = False
+            self._gain_mask = mask
+        j = self._gain_mask
+        uv0 = self.camera.project(pose.apply(base[j]))
+        mod = (uv[j] - uv0) * k
+        det = (p[j, :2] - uv0) * k
+        return float((det * mod).sum()), float((mod * mod).sum())
 
     def _gauss_newton(self, p, pose, c, c0, d0, jac, base, prev, free=None, flow=None,
                       photo=None, iterations=None):  # fmt: skip

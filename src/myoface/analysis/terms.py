@@ -96,10 +96,15 @@ class LandmarkTerm:
     xy_weights : (V,) a further weight of each vertex's x, y rows only (default 1): 0 where
         another term reads the point's position in the image (:class:`OpticalFlowTerm`),
         its depth row still read here.
+    gain : None, or (g, ``base`` (V, 3) mm, head frame): the detector reads the skin's motion
+        from ``base`` (the person's neutral) at gain ``g``: each point is compared with
+        ``base + g (shape - base)`` posed and projected, not with the vertex (the head's
+        pose read in full; :attr:`~myoface.analysis.weights.FitSettings.photo_landmark_gain`).
     """
 
     def __init__(self, points, camera: PinholeCamera, weights, sigma_mm: float,
-                 depth_sigma_mm: float, huber: float, xy_weights=None):  # fmt: skip
+                 depth_sigma_mm: float, huber: float, xy_weights=None,
+                 gain=None):  # fmt: skip
         self.points = np.asarray(points, dtype=np.float64)
         self.camera = camera
         self.weights = np.asarray(weights, dtype=np.float64)
@@ -112,6 +117,10 @@ class LandmarkTerm:
         self.huber = float(huber)
         self.use_z = bool(np.isfinite(self.points[:, 2]).all())
         self.mm_per_px: float | None = None
+        self.gain = None
+        if gain is not None and float(gain[0]) != 1.0:
+            self.gain = (float(gain[0]), np.asarray(gain[1], dtype=np.float64))
+        self._seen = None  # (the estimate last read at the gain, and its reading)
 
     def pixel_mm(self, pose: HeadPose) -> float:
         """mm on the face per pixel at the head's depth."""
@@ -119,6 +128,20 @@ class LandmarkTerm:
 
     def prepare(self, est: Estimate) -> None:
         self.mm_per_px = self.pixel_mm(est.pose)
+
+    def _as_seen(self, est: Estimate) -> Estimate:
+        """``est`` as the detector reads it (:attr:`gain`): the skin's motion from the base
+        scaled by ``g``, and its response with it; ``est`` itself without a gain."""
+        if self.gain is None:
+            return est
+        last = self._seen
+        if last is not None and last[0] is est:
+            return last[1]  # (a step asks for its normal equations and its cost alike)
+        g, base = self.gain
+        out = Estimate(est.pose, est.contractions, base + g * (est.shape - base), g * est.jac,
+                       est.free)  # fmt: skip
+        self._seen = (est, out)
+        return out
 
     def _kernel_args(self, est: Estimate):
         k = self.mm_per_px if self.mm_per_px is not None else self.pixel_mm(est.pose)
@@ -141,11 +164,12 @@ class LandmarkTerm:
         )
 
     def normal_equations(self, est: Estimate):
+        est = self._as_seen(est)
         ka = self._kernel_args(est)
         return normal_equations(*ka[:3], est.jac, est.free, *ka[3:])
 
     def cost(self, est: Estimate) -> float:
-        return float(landmark_cost(*self._kernel_args(est)))
+        return float(landmark_cost(*self._kernel_args(self._as_seen(est))))
 
     def residuals(self, pose: HeadPose, shape: np.ndarray, k: float | None = None):
         """The weighted rows' residuals before the weights: xy (V, 2) and z (V,) in sigmas,

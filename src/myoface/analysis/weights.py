@@ -219,6 +219,47 @@ class FitSettings:
     #: 0.65 / 0.70 / 0.76 mm: the real smile and the renders a camera degraded lose more than
     #: the clean known warps gain. Kept at 0.1.)
     photo_landmark_weight: float = 0.1
+    #: with :attr:`photometric`: the gain at which MediaPipe reads the skin's motion from the
+    #: person's neutral (its points compared with ``neutral + g (skin - neutral)``, posed and
+    #: projected: :class:`~myoface.analysis.terms.LandmarkTerm`'s ``gain``; the head's pose
+    #: read in full). None (the default): this video's, estimated as it is analysed
+    #: (:meth:`~myoface.analysis.modelfit.ModelFit.landmark_gain`: the least-squares slope of
+    #: the detector's motion on the fitted model's, in the image, over every frame fitted so
+    #: far, from 0.6 until the frames show expression; held to 0.3-1). 1: MediaPipe's points
+    #: taken at their word, as before 2026-12-05. Why: a detector that reads part of the
+    #: motion (0.49-0.66 of a known warp's on real frames, issue 30) pulled the pixels' reading
+    #: short by as much as the points weigh, wherever both read the skin; how much it reads is
+    #: the detector's and the face's, not a constant: the estimate came out 0.61-0.64 on the
+    #: known-warp clips, 0.58 / 0.69 on the degraded head-motion renders (head moving / still)
+    #: and 0.83 on single_face.mp4's real smile, whose look (the teeth, the lips' shape)
+    #: MediaPipe reads as well as its motion (its mouth corners at 1.18 of the validated
+    #: reader's motion there; ``myoface bench --only analysis.fidelity``'s ``stages``). The
+    #: fit reaches a fixed point at the detector's true gain (the pixels weigh more than the
+    #: points: each frame's estimate moves the fit's by a small fraction of its error).
+    #: Measured with :attr:`photo_rate_per_s` (below; ``tools/photometric_ablation.py warp |
+    #: headmotion | video | expression --set ...``, the benchmarks' own clips).
+    photo_landmark_gain: float | None = None
+    #: with :attr:`photometric`: the temporal prior's rate (in place of :attr:`rate_per_s`,
+    #: which stays the points' fit's: there it takes out MediaPipe's scatter from frame to
+    #: frame). The pixels read a frame with far less scatter than the points, and at 4 / s the
+    #: prior held back every rise and fall: an expression that rises in 0.2 s (the known-warp
+    #: clips, a posed smile) was read with a lag, and short. 8: a contraction changes by 0.27
+    #: a frame at 30 frames/s (1 sd). Measured 2026-12-05 (gain 1 and rate 4, as before /
+    #: gain estimated, rate 4 / gain 0.6, rate 8 / the two defaults, gain estimated and rate
+    #: 8): the known warps' worst gain 0.803 / 0.875 / 0.901 / 0.897 (head still, mouth
+    #: corners), explained >= 0.948 / 0.961 / 0.975 / 0.971, leak 0.110 / 0.086 / 0.060 /
+    #: 0.060; the degraded head-motion renders, head moving, worst RMSE 0.238 / 0.223 / 0.220
+    #: / 0.224, median 0.120 / 0.109 / 0.118 / 0.117, worst correlation 0.52 / 0.25 / 0.28 /
+    #: 0.24, skin 0.93 / 0.98 / 0.98 / 0.98 mm, head 0.53 / 0.53 / 0.52 / 0.53 deg; head
+    #: still skin 0.70 / 0.70 / 0.65 / 0.66 mm, median RMSE 0.092 / 0.099 / 0.101 / 0.099;
+    #: single_face.mp4's validated fidelity 0.765 / 0.752 / 0.766 / 0.766, its mouth
+    #: corners' gain 0.81 / 0.82 / 0.87 / 0.87; the expression clip (apex / rest) 0.69 / 0.67,
+    #: 0.69 / 0.68, -, 0.75 / 0.81 (rate 8 alone 0.73 / 0.71). Rate 12 with the gain
+    #: estimated: the same known warps (0.895), the expression clip 0.77 / 0.76. Not taken:
+    #: one gain per point (each drawn to the face's; known warps 0.891, expression clip 0.79 /
+    #: 0.76), sparsity 2 (known warps 0.908, but the moving head's skin 1.15 mm, median RMSE
+    #: 0.148), :attr:`photo_model_error` 0.35 (0.897; skin 1.21 mm).
+    photo_rate_per_s: float = 8.0
     #: with :attr:`photometric`: the frame's redness (``R - G``) read as a second channel
     #: (:func:`~myoface.analysis.photometric.redness`), against the calibration frame's,
     #: and its sample's error (grey levels of ``R - G``, 1 sd). Where it shows: the lips'
