@@ -519,7 +519,11 @@ class ModelFit:
         self._gain_sums = (0.0, 0.0)
         self._gain_last = None
         self._gain_mask = None
-        self._calibrating = False  # (set_appearance's parallax search: the points at gain 1)
+        #: MediaPipe's points at gain 1 whatever :meth:`landmark_gain` says: in the appearance's
+        #: parallax search (its frames are the neutral's, and at a gain below 1 the muscles took
+        #: up the turn it searches for) and with analysis by synthesis (whose rounds take the
+        #: detector's shortfall on the model's own render off the points)
+        self._gain_one = False
 
     # -------------------------------------------------------------- public
     def lose_track(self) -> None:
@@ -683,10 +687,12 @@ class ModelFit:
                 self.timings["photo_coarse_starts"] += start == 0
         # the lid margins' edges (FitSettings.reads_lids) read on this frame's fits only
         self._lid_image = image if self.settings.reads_lids else None
+        self._gain_one = synthesis is not None
         try:
             return self._fit_frame(points, synthesis, deferred, flow, photo, t0)
         finally:
             self._lid_image = None
+            self._gain_one = False
 
     def lid_edge_term(self, image):
         """The lids' term of ``image`` (:func:`myoface.analysis.lidtemplate.lid_term`)."""
@@ -1002,7 +1008,7 @@ class ModelFit:
 
         d = np.zeros(3)
         known = {}  # (the costs evaluated, by turn)
-        self._calibrating = True
+        self._gain_one = True
         try:
 
             def at(trial) -> float:
@@ -1034,7 +1040,7 @@ class ModelFit:
                 else:
                     d[axis] -= np.radians(moved)  # (none found: the pass leaves the turn as it was)
         finally:
-            self._calibrating = False
+            self._gain_one = False
         n = len(known)
         self._take_appearance(frame, turned(d))
         cal.extra["appearance_parallax"] = {
@@ -1203,10 +1209,7 @@ class ModelFit:
             else:
                 out += photo
             weights = weights * s.photo_landmark_weight
-        # (the detector's gain on the expression's motion: not at calibration, whose frames
-        # are the neutral's views, and whose parallax search needs the muscles held by the
-        # points as they are: at a gain below 1 they took up the turn it searches for)
-        gain = self.landmark_gain() if photo is not None and not self._calibrating else 1.0
+        gain = self.landmark_gain() if photo is not None and not self._gain_one else 1.0
         if flow is None:
             out.append(self.landmark_term(points, weights, gain))
             return out
