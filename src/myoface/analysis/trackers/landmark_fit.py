@@ -759,6 +759,10 @@ class FitTracker(TrackerBase):
             cam = self.fit.camera
             out["camera"] = {"focal_px": cam.focal_px, "cx": cam.cx, "cy": cam.cy}
             out["unconverged_relaxes"] = self.fit.unconverged_relaxes
+            if self.settings.photometric:
+                # the gain at which MediaPipe read the skin's motion on this video, as the
+                # photometric fit estimated it (FitSettings.photo_landmark_gain)
+                out["landmark_gain"] = round(self.fit.landmark_gain(), 4)
         if self.calibration is not None:
             cal = self.calibration
             out["calibration_frame"] = self.calibration_frame
