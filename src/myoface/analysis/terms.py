@@ -129,19 +129,28 @@ class LandmarkTerm:
     def prepare(self, est: Estimate) -> None:
         self.mm_per_px = self.pixel_mm(est.pose)
 
+    def _once(self, slot: str, est: Estimate, make) -> Estimate:
+        """``make(est)``, kept in ``slot`` for the estimate last asked (a step asks for its
+        normal equations and its cost alike)."""
+        last = getattr(self, slot)
+        if last is None or last[0] is not est:
+            last = (est, make(est))
+            setattr(self, slot, last)
+        return last[1]
+
     def _as_seen(self, est: Estimate) -> Estimate:
         """``est`` as the detector reads it (:attr:`gain`): the skin's motion from the base
         scaled by ``g``, and its response with it; ``est`` itself without a gain."""
         if self.gain is None:
             return est
-        last = self._seen
-        if last is not None and last[0] is est:
-            return last[1]  # (a step asks for its normal equations and its cost alike)
         g, base = self.gain
-        out = Estimate(est.pose, est.contractions, base + g * (est.shape - base), g * est.jac,
-                       est.free)  # fmt: skip
-        self._seen = (est, out)
-        return out
+        return self._once(
+            "_seen",
+            est,
+            lambda e: Estimate(
+                e.pose, e.contractions, base + g * (e.shape - base), g * e.jac, e.free
+            ),  # fmt: skip
+        )
 
     def _kernel_args(self, est: Estimate):
         k = self.mm_per_px if self.mm_per_px is not None else self.pixel_mm(est.pose)
@@ -258,9 +267,9 @@ class OpticalFlowTerm(LandmarkTerm):
         """``est`` with each tracked vertex's skin and response averaged over its patch."""
         if self.footprint is None:
             return est
-        last = self._last
-        if last is not None and last[0] is est:
-            return last[1]  # (a step asks for its normal equations and its cost alike)
+        return self._once("_last", est, self._average)
+
+    def _average(self, est: Estimate) -> Estimate:
         fmat, base = self.footprint
         rows = self._rows
         shape = est.shape.copy()
@@ -271,9 +280,7 @@ class OpticalFlowTerm(LandmarkTerm):
             jac = est.jac.copy()
             jac[rows] = (fmat @ est.jac.reshape(len(est.jac), -1)).reshape(-1, 3, m)
             self._jac_of, self._jac_avg = est.jac, np.ascontiguousarray(jac)
-        out = Estimate(est.pose, est.contractions, shape, self._jac_avg, est.free)
-        self._last = (est, out)
-        return out
+        return Estimate(est.pose, est.contractions, shape, self._jac_avg, est.free)
 
     def normal_equations(self, est: Estimate):
         return super().normal_equations(self._averaged(est))
