@@ -999,48 +999,50 @@ class ModelFit:
             self._take_appearance(frame, turned(d))
             total = 0.0
             for _, _, p, image, lm in views:
-                px, c, _, _ = self._gauss_newton(
-                    p, lm, zeros, zeros, np.zeros_like(base), response, base, None,
-                    photo=self.photometric_term(image),
-                )  # fmt: skip
+                # (the points at gain 1: these frames are the neutral's views, and at a gain
+                # below 1 the muscles took up the turn searched for)
+                self._gain_one = True
+                try:
+                    px, c, _, _ = self._gauss_newton(
+                        p, lm, zeros, zeros, np.zeros_like(base), response, base, None,
+                        photo=self.photometric_term(image),
+                    )  # fmt: skip
+                finally:
+                    self._gain_one = False
                 total += self._photo_cost(image, px, base + _linear(response, c))
             return total
 
         d = np.zeros(3)
         known = {}  # (the costs evaluated, by turn)
-        self._gain_one = True
-        try:
 
-            def at(trial) -> float:
-                key = tuple(np.round(np.degrees(trial), 6))
-                if key not in known:
-                    known[key] = cost(trial)
-                return known[key]
+        def at(trial) -> float:
+            key = tuple(np.round(np.degrees(trial), 6))
+            if key not in known:
+                known[key] = cost(trial)
+            return known[key]
 
-            found: list = []  # (per pass: its axis, vertex and standard error, deg, or None)
-            for axis, half in passes:
-                turns = np.linspace(-half, half, PARALLAX_SAMPLES)
-                moved = 0.0  # (the pass made again about its range's end: how far, deg)
-                for again in (False, True):
-                    e = []
-                    for x in turns:
-                        trial = d.copy()
-                        trial[axis] += np.radians(x)
-                        e.append(at(trial))
-                    vertex = parabola_vertex(turns, np.asarray(e))
-                    low = int(np.argmin(e))
-                    if vertex is None and not again and low in (0, len(turns) - 1):
-                        moved = float(turns[low])  # (the minimum lies beyond: once more there)
-                        d[axis] += np.radians(moved)
-                        continue
-                    break
-                found.append([axis, None if vertex is None else [round(v, 3) for v in vertex]])
-                if vertex is not None and vertex[1] <= PARALLAX_MAX_SE_DEG:
-                    d[axis] += np.radians(vertex[0])
-                else:
-                    d[axis] -= np.radians(moved)  # (none found: the pass leaves the turn as it was)
-        finally:
-            self._gain_one = False
+        found: list = []  # (per pass: its axis, vertex and standard error, deg, or None)
+        for axis, half in passes:
+            turns = np.linspace(-half, half, PARALLAX_SAMPLES)
+            moved = 0.0  # (the pass made again about its range's end: how far, deg)
+            for again in (False, True):
+                e = []
+                for x in turns:
+                    trial = d.copy()
+                    trial[axis] += np.radians(x)
+                    e.append(at(trial))
+                vertex = parabola_vertex(turns, np.asarray(e))
+                low = int(np.argmin(e))
+                if vertex is None and not again and low in (0, len(turns) - 1):
+                    moved = float(turns[low])  # (the minimum lies beyond: once more there)
+                    d[axis] += np.radians(moved)
+                    continue
+                break
+            found.append([axis, None if vertex is None else [round(v, 3) for v in vertex]])
+            if vertex is not None and vertex[1] <= PARALLAX_MAX_SE_DEG:
+                d[axis] += np.radians(vertex[0])
+            else:
+                d[axis] -= np.radians(moved)  # (none found: the pass leaves the turn as it was)
         n = len(known)
         self._take_appearance(frame, turned(d))
         cal.extra["appearance_parallax"] = {
