@@ -387,3 +387,19 @@ def test_box_qp_finds_the_bounded_minimum(seed, n_muscles, conditioning):
     inside = (x > lo) & (x < hi)
     assert np.abs(g[inside]).max(initial=0) < tol
     assert (g[x == lo] >= -tol).all() and (g[x == hi] <= tol).all()
+
+
+@pytest.mark.parametrize(
+    "bad", [{"photo_landmark_gain": 0.0}, {"photo_landmark_gain": -0.5},
+            {"photo_landmark_gain": 3.0}, {"photo_rate_per_s": 0.0}, {"rate_per_s": -1.0}],
+)  # fmt: skip
+def test_the_fits_gain_and_rates_are_checked(bad):
+    """A detector's gain outside (0, 1.5] or a rate that is not positive is refused with the
+    field's name (None, the default, estimates the gain from the video)."""
+    from myoface.analysis.weights import FitSettings
+    from myoface.errors import MyofaceValueError
+
+    with pytest.raises(MyofaceValueError, match=next(iter(bad))):
+        FitSettings(**bad)
+    assert FitSettings().photo_landmark_gain is None
+    assert FitSettings(photo_landmark_gain=0.6).photo_landmark_gain == 0.6

@@ -405,6 +405,16 @@ class FitSettings:
     #: ``FitSettings(offset_spread=1.0)``.
     offset_spread: float = 0.0
 
+    def __post_init__(self) -> None:
+        g = self.photo_landmark_gain
+        if g is not None and not 0 < g <= 1.5:
+            raise MyofaceValueError(
+                f"photo_landmark_gain must be None (estimated) or in (0, 1.5]; got {g}"
+            )
+        for name in ("rate_per_s", "photo_rate_per_s"):
+            if not getattr(self, name) > 0:
+                raise MyofaceValueError(f"{name} must be > 0; got {getattr(self, name)}")
+
     @property
     def reads_lids(self) -> bool:
         """Whether the lids' term is read (:attr:`lid_edges`; None: without the photometric
