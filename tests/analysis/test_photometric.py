@@ -858,7 +858,8 @@ def test_the_detectors_gain_is_read_off_the_video_and_the_pixels_move_the_face_i
     smile's, as MediaPipe reads 0.5-0.7 of a known warp's): the fit estimates the detector's
     gain from the frames (:meth:`~myoface.analysis.modelfit.ModelFit.landmark_gain`) near
     0.5, and its skin then moves by nearly the warp's motion, where with the detector taken
-    at its word (gain 1) the points pull it short."""
+    at its word (gain 1) the points pull it short. A frame taken back (not measured) leaves
+    the estimate as it was."""
     from dataclasses import replace
 
     from myoface.analysis.knownwarp import projected_warp
@@ -883,6 +884,14 @@ def test_the_detectors_gain_is_read_off_the_video_and_the_pixels_move_the_face_i
         moved = (fit.skin(r.contractions) - base).ravel()
         want = (s1 - base).ravel()
         gains[gain] = (float(moved @ want / (want @ want)), fit.landmark_gain())
+        if gain is None:
+            # a frame not measured (e.g. occluded) is taken back out of the estimate with
+            # the rest of the frame's state
+            state, before = fit.frame_state(), fit.landmark_gain()
+            fit.fit(pts0 + 0.5 * (seen - pts0), image=img)  # (a detector reading a quarter)
+            assert fit.landmark_gain() < before
+            fit.restore_frame_state(state)
+            assert fit.landmark_gain() == before
     (read, g_read), (at_word, g_word) = gains[None], gains[1.0]
     assert 0.4 <= g_read <= 0.65 and g_word == 1.0
     assert 0.9 <= read <= 1.1, gains
