@@ -389,6 +389,7 @@ VARIANTS = (
     ("AU prior", "fit", True),
     ("flow, AU prior", "flow", True),
     ("photometric, AU prior", "photometric", True),
+    ("photometric with flow", "flow+photometric", False),  # (myoface analyze --flow)
 )
 #: the trackers the detail measures: the 3-D fit on MediaPipe's points alone (``myoface
 #: analyze --no-photometric``, the default before 2026-12-05), that fit with the

@@ -705,6 +705,10 @@ def _both(quick: bool) -> dict:
         out[f"{head}, photometric with anchored flow and AU prior"] = _run(
             quick, still, photometric=True, anchored=True, au_prior=True
         )[1]
+        # the default with the model-anchored flow (myoface analyze --flow)
+        out[f"{head}, photometric with anchored flow"] = _run(
+            quick, still, photometric=True, anchored=True
+        )[1]
         if not quick:
             out[f"{head}, photometric, clean renders"] = _run(
                 quick, still, degraded=False, photometric=True

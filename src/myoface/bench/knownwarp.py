@@ -142,12 +142,15 @@ PLAIN_KEYS = ("head still", "head moving")
 GAIN_TARGET = (0.9, 1.1)
 EXPLAINED_TARGET = 0.9
 #: the analyses compared: the default (the 3-D fit with its photometric term, since
-#: 2026-12-05), the fit on MediaPipe's points alone (``--no-photometric``, the default before),
-#: and that fit with optical flow (``--no-photometric --flow``) by each of its point trackers
+#: 2026-12-05) alone and with the model-anchored flow (``--flow``), the fit on MediaPipe's
+#: points alone (``--no-photometric``, the default before), and that fit with optical flow
+#: (``--no-photometric --flow``) by each of its point trackers
 #: (:data:`~myoface.analysis.modelflow.FLOW_METHODS`): FitSettings' changes, and the flow's
 #: tracker (key ``"flow_method"``)
 VARIANTS = {
     "default": {},
+    # the default with the model-anchored flow's points (myoface analyze --flow)
+    "default with flow, anchored": {"flow": True, "flow_method": "anchored"},
     "points": {"photometric": False},
     "flow, anchored": {"photometric": False, "flow": True, "flow_method": "anchored"},
     "flow, chained": {"photometric": False, "flow": True, "flow_method": "chained"},
