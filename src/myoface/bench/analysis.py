@@ -395,9 +395,10 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
     (MediaPipe's face mesh on the video and on the render, ``mediapipe_on_both``; not a valid
     judge), the targets (0.85 overall, 0.7 per region), and the explained fractions of the
     fit on MediaPipe's points alone (``points_alone``: ``--no-photometric``, the default
-    before 2026-12-05) and with them refined by optical flow (``--no-photometric --flow``;
-    both not in a quick run). The analysis is the default, the 3-D fit with its photometric
-    term.
+    before 2026-12-05) and with them refined by optical flow (``--no-photometric --flow``),
+    and of the default with the model-anchored flow (``--flow``: ``default_with_optical_flow``;
+    the three not in a quick run). The analysis is the default, the 3-D fit with its
+    photometric term.
 
     Measured 2026-12-01: 0.20 (MediaPipe on both 0.87); per region explained / gain: mouth
     corners 0.90 / 0.82 (0.94 / 0.78), lips -0.74 / 0.77 (0.78 / 0.55), brows 0.08 / 0.23
@@ -444,10 +445,14 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
         if not quick:
             # the same on MediaPipe's points alone (--no-photometric, the default before
             # 2026-12-05), and with them refined by optical flow (--no-photometric --flow)
-            for name, kw in (("points", {}), ("flow", {"flow": True})):
+            # (and the default with the model-anchored flow: myoface analyze --flow)
+            for name, kw in (
+                ("points", {"photometric": False}),
+                ("flow", {"photometric": False, "flow": True}),
+                ("default_flow", {"flow": True}),
+            ):
                 res_f = analyze_to_folder(
-                    path, Path(tmp) / name, model=fm, tracker="landmarks", photometric=False,
-                    **kw,
+                    path, Path(tmp) / name, model=fm, tracker="landmarks", **kw
                 )  # fmt: skip
                 fid_f = write_fidelity_report(res_f.folder, path, mediapipe_on_both=False)
                 alone[name] = {
@@ -508,6 +513,7 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
         ),
         "points_alone": alone.get("points"),
         "with_optical_flow": alone.get("flow"),
+        "default_with_optical_flow": alone.get("default_flow"),
         "head_motion_taken_out": doc.get("head_motion_taken_out"),
         "head_turn_deg": doc.get("head_turn_deg"),
         "with_2d_alignment": flat,
