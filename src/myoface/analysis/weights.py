@@ -255,7 +255,7 @@ class FitSettings:
     #: single_face.mp4's validated fidelity 0.765 / 0.752 / 0.766 / 0.766, its mouth
     #: corners' gain 0.81 / 0.82 / 0.87 / 0.87; the expression clip (apex / rest) 0.69 / 0.67,
     #: 0.69 / 0.68, -, 0.75 / 0.81 (rate 8 alone 0.73 / 0.71; the defaults 0.76 / 0.84, and 0.76 / 0.81
-    #: in BENCHMARKS.md's full run of 13:37 UTC, once the appearance's parallax search read the
+    #: in BENCHMARKS.md's full runs of 13:37 and 14:23 UTC, once the appearance's parallax search read the
     #: points at gain 1, :meth:`~myoface.analysis.
     #: modelfit.ModelFit.landmark_gain`, the rest the same to 0.002; the other columns were
     #: measured before that). Rate 12 with the gain
