@@ -739,7 +739,7 @@ class ModelFit:
                     break
                 moved = None if flow is None else (flow[0] - err[:, :2], flow[1])
                 res = self._fit(p - err, prev, refine=0, start=res, flow=moved, photo=photo)
-        if photo is not None and synthesis is None and self._gain_last is not None:
+        if self._gain_last is not None:
             dm, mm = self._gain_last
             self._gain_sums = (self._gain_sums[0] + dm, self._gain_sums[1] + mm)
         self._gain_last = None
@@ -1325,7 +1325,8 @@ class ModelFit:
         if photo is not None:
             # (the brightness's patches: the redness of skin is nearly uniform)
             occlusion = photo[0].occlusion(Estimate(pose, c, shape, jac, np.arange(m)))
-            self._gain_last = self._gain_stats(p, pose, base, uv, k)
+            if not self._gain_one:  # (analysis by synthesis: its rounds' fits not counted)
+                self._gain_last = self._gain_stats(p, pose, base, uv, k)
         return FrameFit(c, pose, resid, total_it, conv, occlusion)
 
     def landmark_gain(self) -> float:
