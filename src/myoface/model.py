@@ -48,6 +48,7 @@ from myoface.muscles import (
     muscles_from_dict,
     read_waters_expressions,
     read_waters_muscles,
+    rotate_about_axis,
 )
 from myoface.muscles.io import with_later_defaults
 from myoface.muscles.lids import build_eyelids
@@ -148,6 +149,9 @@ class FaceModel:
                 f"the muscle set's jaw has {len(jaw_w)} weights but the face {nv} vertices"
             )
         fb = muscles.basis(base.rest_positions[fascia], jaw_w)
+        # muscles that move the mandible (the lateral pterygoids) drive no fascia of their own
+        on_bone = [i for i in muscles.bone_index if i != muscles.jaw_index]
+        fb[:, :, on_bone] = 0.0
         reach = np.abs(fb).max(axis=(1, 2))
         driven_v = np.flatnonzero(reach > DRIVEN_MIN_MM)
         driven = fascia[driven_v]
@@ -161,6 +165,10 @@ class FaceModel:
         s("_kin_jaw", _frozen(jaw_w[kin % nv]))
         basis = np.zeros((len(kin), 3, len(self.ids)))
         basis[np.searchsorted(kin, driven)] = fb[driven_v]
+        # ... and, as the jaw's opening, on the fascia nodes the other muscles hold
+        for i in on_bone:
+            basis[:, :, i] = muscles.muscles[i].field(tissue.rest_positions[kin], jaw_w[kin % nv])
+        s("_mandible_muscles", tuple(on_bone))
         s("_kin_basis", _frozen(basis))
         s("expressions", dict(expressions or {}))
         s(
@@ -257,7 +265,19 @@ class FaceModel:
         j = self.muscles.jaw_index
         if j is None:
             return np.eye(3), np.zeros(3)
-        return self.muscles.jaw.pose(float(s.contractions[j]))
+        rot, shift = self.muscles.jaw.pose(float(s.contractions[j]))
+        turn, moved = 0.0, np.zeros(3)
+        for i in self._mandible_muscles:  # the lateral pterygoids' turn, before the opening
+            m, c = self.muscles.muscles[i], float(s.contractions[i])
+            turn += c * m.turn_rad
+            moved -= c * np.cross([0.0, m.turn_rad, 0.0], m.pivot)
+        if turn == 0.0:
+            return rot, shift
+        # the bone layer follows the turns' linear sum (exact to second order in the angle,
+        # 0.5 mm at the chin at a full excursion); the teeth its rotation, with the same motion
+        # of the hinge axis' origin
+        lat = rotate_about_axis(np.eye(3), np.zeros(3), [0.0, 1.0, 0.0], turn).T
+        return rot @ lat, rot @ moved + shift
 
     def skin_mesh(self, state: FaceState | None = None) -> FaceMesh:
         """The skin of ``state`` (default: rest) as a FaceMesh (same topology, UVs, texture,

@@ -40,6 +40,13 @@ def contractions_csv_header(ids, first=None) -> list[str]:
     return ["frame", "time_s", "quality", *ids, "jaw_angle_rad", *head, *expr]
 
 
+#: muscles of the default set added after contractions CSVs were first written (2026-12-05,
+#: the mandible's sideways turn): a CSV without their columns holds them at rest, as the
+#: analysis does by default (:attr:`~myoface.analysis.weights.FitSettings.jaw_sideways`),
+#: without a warning
+QUIETLY_AT_REST = ("lateral_pterygoid_l", "lateral_pterygoid_r")
+
+
 def jaw_angle_function(jaw):
     """The jaw's rotation (rad) as a function of its control: ``jaw`` a
     :class:`~myoface.muscles.jaw.Jaw` (its :meth:`~myoface.muscles.jaw.Jaw.angle_rad`: the
@@ -281,7 +288,7 @@ def read_contractions_csv(
             f"{', '.join(ids[:6])}{', ...' if len(ids) > 6 else ''})"
         )
     unknown = [c for c in head if c not in CSV_OTHER_COLUMNS and c not in ids]
-    missing = [m for m in ids if m not in col]
+    missing = [m for m in ids if m not in col and m not in QUIETLY_AT_REST]
     if unknown or (warn_missing and missing):
         said = []
         if unknown:

@@ -105,7 +105,6 @@ from myoface.analysis.weights import (
 )
 from myoface.errors import MyofaceValueError
 from myoface.face.personal import fit_similarity_3d
-from myoface.muscles import JAW_ID
 from myoface.tissue import RelaxWarning
 
 #: seconds at the start of a video searched for the most neutral frame to calibrate on
@@ -457,8 +456,17 @@ class ModelFit:
         # the model's own error grows with what its muscles do to the soft tissue; the jaw is
         # a rotation of bone that the chin's skin follows, so it does not count (with it, the
         # chin and lower lip, which the jaw moves ~22 mm, weighed 0.16 and the fit raised them
-        # by 4.5 mm with the smile's zygomatici where the video's stayed or dropped)
-        soft = [k for k, mid in enumerate(self.ids) if mid != JAW_ID]
+        # by 4.5 mm with the smile's zygomatici where the video's stayed or dropped); nor do
+        # the lateral pterygoids, which turn the same bone sideways
+        bone = set(model.muscles.bone_index)
+        soft = [k for k in range(self.n_muscles) if k not in bone]
+        #: the contractions the fit moves: all but the mandible's sideways turn, unless
+        #: :attr:`FitSettings.jaw_sideways`
+        sideways = [k for k in bone if k != model.muscles.jaw_index]
+        self._fitted = np.array(
+            [k for k in range(self.n_muscles) if self.settings.jaw_sideways or k not in sideways],
+            dtype=np.int64,
+        )
         self._soft = soft
         self.base_weights = landmark_weights(
             model.face, self.settings.oval_weight
@@ -1190,7 +1198,7 @@ class ModelFit:
                     s.rate_per_s if photo is None else s.photo_rate_per_s,
                 )  # fmt: skip
             )
-        out += [MagnitudePrior(s.magnitude_sigma), SparsityPrior(s.sparsity)]
+        out += [MagnitudePrior(s.magnitude_sigma), SparsityPrior(s.sparsity, s.sparsity_knee)]
         out += au_prior_terms(self.model.ids, s)  # the AU table's span (analysis.au_prior)
         if getattr(self, "_lid_image", None) is not None:  # (FitSettings.reads_lids)
             lid = self.lid_edge_term(self._lid_image)
@@ -1361,7 +1369,7 @@ class ModelFit:
         :func:`~myoface.analysis.solver.bounded_gauss_newton` from ``pose``, ``c`` with the
         forward model ``base + d0 + jac (c - c0)``; only the contractions ``free`` move.
         Returns (pose, contractions, steps, converged)."""
-        free = np.arange(self.n_muscles) if free is None else np.asarray(free, dtype=np.int64)
+        free = self._fitted if free is None else np.asarray(free, dtype=np.int64)
         jac = np.ascontiguousarray(jac)
 
         def forward(cc):

@@ -453,16 +453,31 @@ class SparsityPrior:
     """An L1 prior on the free contractions, ``weight * sum(c)`` (they are in [0, 1], so it
     is linear): a muscle has to lower the rest of the energy by ``weight`` per unit before it
     is used. Between muscles whose pulls nearly coincide it gives the motion to the one that
-    makes it with the least contraction."""
+    makes it with the least contraction.
 
-    def __init__(self, weight: float):
+    With ``knee`` (a contraction, > 0) it is the minimax concave penalty (C.-H. Zhang, "Nearly
+    unbiased variable selection under minimax concave penalty", Ann. Statist. 38:894-942,
+    2010): ``weight * (c - c^2 / (2 knee))`` up to the knee and ``weight * knee / 2`` past
+    it. It starts as the L1 prior, so a muscle still has to earn its first contraction, and
+    its pull fades to nothing at the knee: the L1 prior takes the same ``weight`` off every
+    contraction however large, and so reads every motion short. Its normal equations carry
+    the gradient only (its curvature is negative; the solver's steps are kept where they
+    lower the whole energy)."""
+
+    def __init__(self, weight: float, knee: float | None = None):
         self.weight = float(weight)
+        self.knee = None if knee is None else float(knee)
         self._ne = None  # (its normal equations: the same at every step, read only)
 
     def prepare(self, est: Estimate) -> None:
         pass
 
     def normal_equations(self, est: Estimate):
+        if self.knee is not None:
+            h, b = _zeros(est)
+            cf = est.contractions[est.free]
+            b[6:] = -0.5 * self.weight * np.maximum(1.0 - cf / self.knee, 0.0)
+            return h, b
         if self._ne is None or len(self._ne[1]) != est.n_unknowns:
             h, b = _zeros(est)
             b[6:] = -0.5 * self.weight
@@ -472,4 +487,8 @@ class SparsityPrior:
         return self._ne
 
     def cost(self, est: Estimate) -> float:
-        return self.weight * float(est.contractions[est.free].sum())
+        cf = est.contractions[est.free]
+        if self.knee is not None:
+            k = self.knee
+            return self.weight * float(np.where(cf < k, cf - cf * cf / (2 * k), k / 2).sum())
+        return self.weight * float(cf.sum())

@@ -404,6 +404,20 @@ class FitSettings:
     #: damps), and a damped fit is what the analysis must not be rewarded for. Opt in with
     #: ``FitSettings(offset_spread=1.0)``.
     offset_spread: float = 0.0
+    #: fit the mandible's sideways turn (the lateral pterygoids, FACS AD30;
+    #: :class:`~myoface.muscles.types.PterygoidMuscle`) as well; off, the fit holds them at
+    #: rest. Off by default, measured 2026-12-05 (on / off): single_face.mp4's validated
+    #: fidelity 0.767 / 0.767 (chin 0.023 / 0.014): the fit set them below 0.1 on every frame
+    #: although the validated reader reads the chin 2 % of the inter-ocular distance
+    #: sideways through the smile; on a degraded head-motion render (head moving) with a known
+    #: sideways jaw (0.3 and 0.25, 2.4 and 2.0 mm at the chin) it read them at correlation
+    #: 0.72 and 0.65, up to 0.24 and 0.10; and it took up head turns: the appearance's
+    #: parallax search (calibration) found 2.5 degrees of turn where there was none, and a
+    #: looped clip was not read alike loop after loop (0.06 apart).
+    jaw_sideways: bool = False
+    #: the sparsity prior as the minimax concave penalty with this knee (a contraction; None:
+    #: the L1 prior, :class:`~myoface.analysis.terms.SparsityPrior`)
+    sparsity_knee: float | None = None
 
     def __post_init__(self) -> None:
         g = self.photo_landmark_gain

@@ -17,6 +17,7 @@ from myoface.muscles.lids import Eyelids, LidMuscle, build_eyelids
 from myoface.muscles.muscleset import JAW_ID, MuscleSet
 from myoface.muscles.types import (
     LinearMuscle,
+    PterygoidMuscle,
     SheetMuscle,
     SphincterMuscle,
     WatersMuscle,
@@ -30,6 +31,7 @@ __all__ = [
     "LidMuscle",
     "LinearMuscle",
     "MuscleSet",
+    "PterygoidMuscle",
     "SheetMuscle",
     "SphincterMuscle",
     "WatersMuscle",

@@ -34,6 +34,9 @@ Types and their keys:
 - ``lid``: eye (the landmark group of the eye opening), action (``raise``: levator palpebrae
   superioris; ``close``: orbicularis oculi pars palpebralis), origin, insertion, optional
   angle_deg (see :mod:`myoface.muscles.lids`): moves the eyelid skin, not the tissue.
+- ``pterygoid``: origin, insertion (its condyle), reference (where the travel is given, e.g.
+  the chin), max_travel_mm, optional pivot (the other condyle): turns the mandible, the bone
+  layer, sideways (:class:`~myoface.muscles.types.PterygoidMuscle`).
 
 An optional ``[jaw]`` table: ``hinge`` (a point), ``axis`` (default [1, 0, 0]),
 ``max_angle_rad``, optionally a translation phase (see :mod:`myoface.muscles.jaw`):
@@ -67,10 +70,16 @@ from myoface.face.mesh import FaceMesh
 from myoface.muscles.jaw import Jaw, harmonic_weights
 from myoface.muscles.lids import LidMuscle
 from myoface.muscles.muscleset import BoundSkin, MuscleSet
-from myoface.muscles.types import LinearMuscle, SheetMuscle, SphincterMuscle, WatersMuscle
+from myoface.muscles.types import (
+    LinearMuscle,
+    PterygoidMuscle,
+    SheetMuscle,
+    SphincterMuscle,
+    WatersMuscle,
+)
 
 DEFAULT_MUSCLES_FILE = "default_muscles.toml"
-TYPES = ("linear", "sheet", "sphincter", "waters", "lid")
+TYPES = ("linear", "sheet", "sphincter", "waters", "lid", "pterygoid")
 SIDES = ("lr", "mid")
 _COMMON_KEYS = {"id", "sides", "type", "region", "note"}
 _KEYS = {
@@ -87,11 +96,13 @@ _KEYS = {
     },
     "waters": {"skin", "bone", "fall_start_mm", "fall_end_mm", "zone_deg", "clamp"},
     "lid": {"eye", "action", "origin", "insertion", "angle_deg"},
+    "pterygoid": {"origin", "insertion", "reference", "max_travel_mm", "pivot"},
 }
 _OPTIONAL = {
     "linear": {"lower_share"},
     "sphincter": {"axis_u", "normal", "protrusion_mm"},
     "lid": {"angle_deg"},
+    "pterygoid": {"pivot"},
 }
 
 
@@ -265,6 +276,15 @@ def _build(entry: dict, placer: _Placer, ctx: str):
             placer.point(entry["insertion"], f"{ctx}.insertion"),
             _number(entry, "angle_deg", ctx, 0.0),
         )
+    if kind == "pterygoid":
+        return PterygoidMuscle(
+            mid,
+            placer.point(entry["origin"], f"{ctx}.origin"),
+            placer.point(entry["insertion"], f"{ctx}.insertion"),
+            placer.point(entry["reference"], f"{ctx}.reference"),
+            _number(entry, "max_travel_mm", ctx),
+            placer.point(entry["pivot"], f"{ctx}.pivot") if "pivot" in entry else None,
+        )
     return WatersMuscle(
         mid,
         placer.point(entry["skin"], f"{ctx}.skin"),
@@ -425,11 +445,12 @@ def with_default_lids(doc: dict) -> dict:
 
 #: default muscles added after personal faces were first saved, and not recognisable by their
 #: type as the lids are: a face file without them gets the default set's (AU24 needs the first,
-#: AU4 the depressor supercilii, AU6 the orbicularis oculi's upper part)
+#: AU4 the depressor supercilii, AU6 the orbicularis oculi's upper part, AD30 the lateral pterygoids)
 LATER_DEFAULT_MUSCLES = (
     "orbicularis_oris_marginalis",
     "depressor_supercilii",
     "orbicularis_oculi_superior",
+    "lateral_pterygoid",
 )
 
 

@@ -92,6 +92,13 @@ class MuscleSet:
         """Position of ``"jaw"`` in :attr:`ids` (None without a jaw)."""
         return self._index.get(JAW_ID)
 
+    @property
+    def bone_index(self) -> tuple[int, ...]:
+        """Positions in :attr:`ids` of what moves bone, not soft tissue: the muscles that turn
+        the mandible (``acts_on == "bone"``, the lateral pterygoids) and the jaw."""
+        out = [i for i, m in enumerate(self.muscles) if getattr(m, "acts_on", "") == "bone"]
+        return tuple(out) + ((self.jaw_index,) if self.jaw_index is not None else ())
+
     def index(self, muscle_id: str) -> int:
         try:
             return self._index[muscle_id]

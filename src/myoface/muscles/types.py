@@ -383,4 +383,84 @@ class SphincterMuscle:
         )
 
 
-Muscle = LinearMuscle | WatersMuscle | SheetMuscle | SphincterMuscle
+@dataclass(frozen=True)
+class PterygoidMuscle:
+    """A lateral pterygoid: it moves the mandible (the bone layer), not the fascia.
+
+    Contracted alone, a lateral pterygoid pulls its own condyle forward and in, down the
+    articular eminence, and the mandible swings about the other condyle: the chin goes to the
+    opposite side (FACS AD30, jaw sideways). Both together bring the jaw forward (AU29, jaw
+    thrust). Its field is the mandible's turn about a vertical axis through the opposite
+    condyle, linear in the contraction (T&W 1993, eq. (5): contractions superpose), and weighted
+    per point by the jaw's following weight (1 on the chin and lower lip, 0 above the mouth).
+    The turn is ``max_travel_mm`` at the ``reference`` point (the chin) at full contraction.
+    :class:`myoface.model.FaceModel` applies it to the bone nodes only, so the skin follows the
+    bone through the tissue as it does the jaw's opening, and the lower teeth follow it
+    (:meth:`myoface.model.FaceModel.jaw_pose`).
+
+    Parameters
+    ----------
+    id : str — e.g. ``"lateral_pterygoid_l"``.
+    origin : (3,) mm — the lateral pterygoid plate (for overlays: the muscle's line).
+    insertion : (3,) mm — the neck of its own condyle.
+    reference : (3,) mm — where the travel is given (the chin).
+    max_travel_mm : float — the reference point's travel at contraction 1.
+    pivot : (3,) mm, optional — the opposite condyle, about which the mandible turns (default:
+        the insertion mirrored in x, for a face centred on x = 0).
+    """
+
+    id: str
+    origin: np.ndarray
+    insertion: np.ndarray
+    reference: np.ndarray
+    max_travel_mm: float
+    pivot: np.ndarray | None = None
+    kind = "pterygoid"
+    region = "lower"
+    #: what the muscle moves: the bone layer (see :class:`myoface.model.FaceModel`)
+    acts_on = "bone"
+
+    def __post_init__(self):
+        for name in ("origin", "insertion", "reference"):
+            object.__setattr__(self, name, _vec3(f"{name} of {self.id}", getattr(self, name)))
+        pivot = self.insertion * np.array([-1.0, 1.0, 1.0]) if self.pivot is None else self.pivot
+        object.__setattr__(self, "pivot", _vec3(f"pivot of {self.id}", pivot))
+        _positive(f"max_travel_mm of {self.id}", self.max_travel_mm)
+        arm = np.cross([0.0, 1.0, 0.0], self.reference - self.pivot)
+        if np.linalg.norm(arm) < 1.0 or np.linalg.norm(self.insertion - self.pivot) < 1.0:
+            raise MyofaceValueError(
+                f"muscle {self.id!r}: the reference and the insertion must lie away from the "
+                "pivot's vertical axis"
+            )
+        if np.linalg.norm(self.origin - self.insertion) < 1e-6:
+            raise MyofaceValueError(f"muscle {self.id!r}: origin and insertion coincide")
+
+    @property
+    def turn_rad(self) -> float:
+        """The mandible's signed turn about +y at contraction 1: the sign that brings the
+        insertion (its condyle) towards the origin."""
+        up = np.array([0.0, 1.0, 0.0])
+        arm = np.linalg.norm(np.cross(up, self.reference - self.pivot))
+        pull = np.cross(up, self.insertion - self.pivot) @ (self.origin - self.insertion)
+        return float(np.sign(pull) or 1.0) * self.max_travel_mm / arm
+
+    def field(self, points: np.ndarray, lower: np.ndarray) -> np.ndarray:
+        """Displacement (N, 3) mm of ``points`` (N, 3) per unit contraction: the linearised
+        turn about the pivot's vertical axis, times each point's jaw weight ``lower``."""
+        p = np.asarray(points, dtype=np.float64)
+        d = np.cross([0.0, self.turn_rad, 0.0], p - self.pivot)
+        return np.asarray(lower, dtype=np.float64)[:, None] * d
+
+    def mirrored(self, new_id: str) -> PterygoidMuscle:
+        f = np.array([-1.0, 1.0, 1.0])
+        return PterygoidMuscle(
+            new_id,
+            self.origin * f,
+            self.insertion * f,
+            self.reference * f,
+            self.max_travel_mm,
+            self.pivot * f,
+        )
+
+
+Muscle = LinearMuscle | WatersMuscle | SheetMuscle | SphincterMuscle | PterygoidMuscle

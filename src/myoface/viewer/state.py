@@ -39,7 +39,7 @@ REGIONS = {
     ),
     "nose and upper lip": ("levator", "zygomaticus_minor"),
     "mouth corners": ("zygomaticus_major", "risorius", "buccinator", "depressor_anguli"),
-    "lower lip and chin": ("depressor_labii", "mentalis", "orbicularis_oris"),
+    "lower lip and chin": ("depressor_labii", "mentalis", "orbicularis_oris", "lateral_pterygoid"),
 }
 
 
