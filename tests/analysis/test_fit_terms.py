@@ -103,6 +103,7 @@ def _terms(fit, p, prev, huber):
         ),
         "magnitude": MagnitudePrior(s.magnitude_sigma),
         "sparsity": SparsityPrior(s.sparsity),
+        "sparsity_concave": SparsityPrior(s.sparsity, knee=0.2),
     }
 
 
@@ -117,6 +118,7 @@ def _terms(fit, p, prev, huber):
         "temporal",
         "magnitude",
         "sparsity",
+        "sparsity_concave",
     ],  # fmt: skip
 )
 @pytest.mark.parametrize("use_depth", [True, False])

@@ -409,14 +409,31 @@ class FitSettings:
     #: rest. Off by default, measured 2026-12-05 (on / off): single_face.mp4's validated
     #: fidelity 0.767 / 0.767 (chin 0.023 / 0.014): the fit set them below 0.1 on every frame
     #: although the validated reader reads the chin 2 % of the inter-ocular distance
-    #: sideways through the smile; on a degraded head-motion render (head moving) with a known
-    #: sideways jaw (0.3 and 0.25, 2.4 and 2.0 mm at the chin) it read them at correlation
-    #: 0.72 and 0.65, up to 0.24 and 0.10; and it took up head turns: the appearance's
-    #: parallax search (calibration) found 2.5 degrees of turn where there was none, and a
-    #: looped clip was not read alike loop after loop (0.06 apart).
+    #: sideways through the smile. On a degraded head-motion render (head moving) with a known
+    #: sideways jaw (0.3 and 0.25 of the travel, 2.4 and 2.0 mm at the chin;
+    #: ``tools/jaw_sideways_render.py [--on]``) the default fit read them at correlations
+    #: 0.76 and 0.83, but at up to 0.68 where the truth was 0.24 and 0.5 where it was 0 (the
+    #: skin 1.29 mm from the truth, 1.00 with them held); the points' fit alone at 0.72 and
+    #: 0.65, up to 0.24 and 0.10.
+    #: Free, they took up head turns: the appearance's parallax search (calibration) found 2.5
+    #: degrees of turn where there was none, and a looped clip was not read alike loop after
+    #: loop (0.06 apart; tests/analysis/test_photometric.py).
     jaw_sideways: bool = False
     #: the sparsity prior as the minimax concave penalty with this knee (a contraction; None:
-    #: the L1 prior, :class:`~myoface.analysis.terms.SparsityPrior`)
+    #: the L1 prior, :class:`~myoface.analysis.terms.SparsityPrior`): the L1 prior's pull
+    #: fades to nothing at the knee, so that large contractions are not read short. Measured
+    #: 2026-12-05 (the L1 prior / knee 0.1 / 0.2 / 0.35 / :attr:`sparsity` 8 with knee 0.2):
+    #: the known warps' worst gain 0.897 / 0.906 / 0.900 / 0.899 / 0.925 (brows 0.90 ->
+    #: 0.94-0.95, eyelids 0.90-0.92 -> 0.95-0.97; leak 0.060 -> 0.043-0.045);
+    #: single_face.mp4's validated fidelity 0.767 / 0.774 / 0.767 / 0.768 / 0.767 (mouth
+    #: corners' gain 0.87 -> 0.88-0.89); but the degraded head-motion renders, head moving,
+    #: worst RMSE 0.22 / 0.30 / 0.29 / 0.26 / 0.28, median 0.12 / 0.18 / 0.18 / 0.17 / 0.15,
+    #: skin 0.98 / 1.40 / 1.39 / 1.29 / 1.27 mm: there many muscles read high (with 8 and
+    #: 0.2 the depressor anguli oris' mean error +0.08 -> +0.24), which the L1 prior's pull
+    #: had held down. On the clean renders (no camera) the concave prior was as good or better
+    #: (skin 0.84 -> 0.80 mm, head 0.84 -> 0.45 deg, median 0.10 -> 0.12), without the
+    #: moving light still worse (skin 0.89 -> 1.07 mm): the camera's other degradations are
+    #: read as muscle. Not taken.
     sparsity_knee: float | None = None
 
     def __post_init__(self) -> None:
