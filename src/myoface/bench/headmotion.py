@@ -548,33 +548,49 @@ def _truth(quick: bool, still: bool):
     return _cache[key]
 
 
-def _frames(quick: bool, still: bool, degraded: bool = True) -> list[np.ndarray]:
+#: the camera's random seeds (:attr:`~myoface.render.degrade.CameraDegradation.seed`: its
+#: noise, the room behind the head, the light's and the exposure's phases) whose runs the
+#: headline numbers are the median of (a quick run: the first alone). One clip's numbers
+#: move with the camera's draw as much as with a change of the fit's settings (2026-12-05,
+#: the default, head moving, seeds 0 / 1 / 2: worst RMSE 0.224 / 0.299 / 0.237, median
+#: 0.117 / 0.157 / 0.136, skin 0.98 / 1.17 / 0.99 mm, head 0.53 / 0.68 / 0.83 deg), and
+#: settings chosen on seed 0 alone were chosen on its draw.
+CAMERA_SEEDS = (0, 1, 2)
+
+
+def _frames(quick: bool, still: bool, degraded: bool = True, seed: int = 0) -> list[np.ndarray]:
     """The rendered frames (cached): degraded by the camera (:func:`degraded_sequence`, its
-    report kept) or clean (:func:`render_sequence`)."""
-    key = ("frames", bool(quick), bool(still), bool(degraded))
+    report kept; ``seed``: the camera's) or clean (:func:`render_sequence`)."""
+    key = ("frames", bool(quick), bool(still), bool(degraded)) + ((int(seed),) if seed else ())
     if key not in _cache:
+        from myoface.render.degrade import CameraDegradation
+
         fm = _model()
         truth, poses, skins = _truth(quick, still)
         if degraded:
-            _cache[key], _cache[("camera", *key[1:])] = degraded_sequence(fm.face, poses, skins)
+            _cache[key], _cache[("camera", *key[1:])] = degraded_sequence(
+                fm.face, poses, skins, CameraDegradation(seed=int(seed))
+            )
         else:
             _cache[key] = render_sequence(fm.face, poses, skins)
     return _cache[key]
 
 
-def _sequence(quick: bool, still: bool, flow: bool = False, degraded: bool = True):
+def _sequence(quick: bool, still: bool, flow: bool = False, degraded: bool = True,
+              seed: int = 0):  # fmt: skip
     """The model, truth, poses, skins, MediaPipe's points and its time per frame (cached);
     ``flow``: the points refined by optical flow, and MediaPipe's time plus the flow's;
-    ``degraded``: on the camera's frames (:func:`degraded_sequence`), else the clean renders."""
-    key = ("seq", bool(quick), bool(still), bool(degraded))
+    ``degraded``: on the camera's frames (:func:`degraded_sequence`, the camera's ``seed``),
+    else the clean renders."""
+    key = ("seq", bool(quick), bool(still), bool(degraded)) + ((int(seed),) if seed else ())
     if key not in _cache:
         fm = _model()
         truth, poses, skins = _truth(quick, still)
-        points, t_det = detect_sequence(_frames(quick, still, degraded))
+        points, t_det = detect_sequence(_frames(quick, still, degraded, seed))
         _cache[key] = (fm, truth, poses, skins, points, t_det)
     if flow and (*key, "flow") not in _cache:
         fm, truth, poses, skins, points, t_det = _cache[key]
-        flowed, t_flow = flow_sequence(_frames(quick, still, degraded), points)
+        flowed, t_flow = flow_sequence(_frames(quick, still, degraded, seed), points)
         _cache[(*key, "flow")] = (fm, truth, poses, skins, flowed, t_det + t_flow)
     return _cache[(*key, "flow")] if flow else _cache[key]
 
@@ -589,7 +605,7 @@ def _head(still: bool) -> str:
 
 def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = None,
          degraded: bool = True, photometric: bool | None = None, anchored: bool = False,
-         au_prior: bool = False) -> tuple[HeadMotionResult, dict]:  # fmt: skip
+         au_prior: bool = False, seed: int = 0) -> tuple[HeadMotionResult, dict]:  # fmt: skip
     """The loop (cached per run): 90 frames (16 with ``quick``) at 30 fps; the default
     estimator (the 3-D fit), or with ``synthesis`` the fit with analysis by synthesis;
     MediaPipe's points refined by optical flow or not (``flow``; default: as the analysis,
@@ -600,7 +616,7 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
     points with the model-anchored tracker's in the fit (``flow`` is then the chained
     refinement of MediaPipe's points, which it replaces: False). ``au_prior``: with the
     fit's AU-space prior (:mod:`myoface.analysis.au_prior`, ``FitSettings(au_prior_sigma=
-    AU_PRIOR_SIGMA)``)."""
+    AU_PRIOR_SIGMA)``). ``seed``: the camera's (:data:`CAMERA_SEEDS`)."""
     from myoface.analysis.weights import FitSettings
 
     flow = FitSettings().flow if flow is None else bool(flow)
@@ -608,13 +624,13 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
     if anchored:
         flow = False
     key = (bool(quick), bool(still), bool(synthesis), flow, bool(degraded), photometric,
-           bool(anchored), bool(au_prior))  # fmt: skip
+           bool(anchored), bool(au_prior)) + ((int(seed),) if seed else ())  # fmt: skip
     if key not in _cache:
         import time
 
         from myoface.analysis.weights import confounded_muscles
 
-        fm, truth, poses, skins, points, t_det = _sequence(quick, still, flow, degraded)
+        fm, truth, poses, skins, points, t_det = _sequence(quick, still, flow, degraded, seed)
         # (the flow's points are given as the points; the fit's own settings the default's)
         from myoface.analysis.au_prior import AU_PRIOR_SIGMA
 
@@ -624,7 +640,7 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
         t0 = time.perf_counter()
         res = run_headmotion(
             fm, points, truth, poses, skins, settings=settings, synthesis=synthesis,
-            frames=_frames(quick, still, degraded) if photometric or anchored else None,
+            frames=_frames(quick, still, degraded, seed) if photometric or anchored else None,
             anchored_flow=anchored,
         )  # fmt: skip
         detail = {
@@ -632,6 +648,7 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
             "frames": len(truth),
             "head": _head(still),
             "renders": _renders(degraded),
+            "camera_seed": int(seed) if degraded else None,
             "estimator": "fit-synthesis" if synthesis else "fit",
             "optical_flow": "anchored" if anchored else ("chained" if flow else False),
             "photometric": photometric,
@@ -659,6 +676,33 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
             detail["flow_ms_per_frame"] = 1e3 * res.flow_stats["cpu_s"] / max(len(truth), 1)
         _cache[key] = (res, detail)
     return _cache[key]
+
+
+#: the summary's numbers the headline benchmarks give
+_HEADLINE = ("rmse_worst", "corr_worst", "rmse_median_all", "skin_mm", "pose_deg")
+
+
+def _headline(quick: bool, still: bool) -> dict:
+    """The default analysis on the camera's frames for each of :data:`CAMERA_SEEDS` (the
+    first alone in a quick run): each seed's summary numbers and their medians (cached)."""
+    key = ("headline", bool(quick), bool(still))
+    if key not in _cache:
+        seeds = CAMERA_SEEDS[:1] if quick else CAMERA_SEEDS
+        runs = [_run(quick, still, seed=seed)[0] for seed in seeds]
+        sums = [r.summary() for r in runs]
+        _cache[key] = {
+            "what": "the default (photometric) on the camera's frames drawn with each seed",
+            "camera_seeds": list(seeds),
+            "frames": int(sum(len(r.truth) for r in runs)),
+            "per_seed": {k: [round(float(x[k]), 4) for x in sums] for k in _HEADLINE},
+            "median": {k: float(np.nanmedian([x[k] for x in sums])) for k in _HEADLINE},
+        }
+    return _cache[key]
+
+
+def _median(quick: bool, still: bool, what: str) -> Measurement:
+    h = _headline(quick, still)
+    return Measurement(h["median"][what], h["frames"])
 
 
 def _snakes(quick: bool, still: bool, degraded: bool = True) -> dict:
@@ -689,6 +733,9 @@ def _both(quick: bool) -> dict:
     out = {}
     for head, still in (("moving", False), ("still", True)):
         out[f"{head}, photometric"] = _run(quick, still, photometric=True)[1]
+        out[f"{head}, photometric, camera seeds"] = _headline(quick, still)
+        for seed in CAMERA_SEEDS[1:] if not quick else ():
+            out[f"{head}, photometric, camera seed {seed}"] = _run(quick, still, seed=seed)[1]
         out[f"{head}, fit"] = _run(quick, still, photometric=False)[1]
         clean = _run(quick, still, degraded=False, photometric=False)
         out[f"{head}, fit, clean renders"] = clean[1]
@@ -740,47 +787,45 @@ def bench_headmotion_rmse_worst(quick: bool) -> Measurement:
     by synthesis (``--estimator fit-synthesis``), with MediaPipe's points refined by optical
     flow (``--flow``), for the paper's snakes (``--tracker snakes``; on both renders), and
     what the camera did (``..., camera``: its parameters, the H.264 stream's kbit/s and
-    PSNR)."""
-    res, _ = _run(quick, False)
-    return Measurement(res.summary()["rmse_worst"], len(res.truth), detail=_both(quick))
+    PSNR). The value is the median over the camera's seeds (:data:`CAMERA_SEEDS`; a quick
+    run the first alone), as every ``analysis.headmotion_*`` headline's; the detail's
+    ``..., photometric, camera seeds`` has each seed's, ``..., photometric`` seed 0's
+    detail."""
+    m = _median(quick, False, "rmse_worst")
+    return Measurement(m.value, m.n, detail=_both(quick))
 
 
 @benchmark("analysis.headmotion_rmse_median", "contraction", higher_is_better=False)
 def bench_headmotion_rmse_median(quick: bool) -> Measurement:
     """Median RMSE over every muscle of the model and the jaw, same loop."""
-    res, _ = _run(quick, False)
-    return Measurement(res.summary()["rmse_median_all"], len(res.truth))
+    return _median(quick, False, "rmse_median_all")
 
 
 @benchmark("analysis.headmotion_corr", "-", higher_is_better=True)
 def bench_headmotion_corr(quick: bool) -> Measurement:
     """Worst correlation of recovered vs true contractions over the paper's 12 muscles + jaw
     that move in the programme, same loop."""
-    res, _ = _run(quick, False)
-    return Measurement(res.summary()["corr_worst"], len(res.truth))
+    return _median(quick, False, "corr_worst")
 
 
 @benchmark("analysis.headmotion_skin_mm", "mm", higher_is_better=False)
 def bench_headmotion_skin_mm(quick: bool) -> Measurement:
     """RMS distance (mm, over the face's vertices and the frames, head frame) between the skin
     the recovered contractions produce and the true skin, same loop."""
-    res, _ = _run(quick, False)
-    return Measurement(res.summary()["skin_mm"], len(res.truth))
+    return _median(quick, False, "skin_mm")
 
 
 @benchmark("analysis.headmotion_pose_deg", "deg", higher_is_better=False)
 def bench_headmotion_pose_deg(quick: bool) -> Measurement:
     """RMS error (deg) of the head's yaw, pitch and roll, same loop."""
-    res, _ = _run(quick, False)
-    return Measurement(res.summary()["pose_deg"], len(res.truth))
+    return _median(quick, False, "pose_deg")
 
 
 @benchmark("analysis.headmotion_still_rmse_median", "contraction", higher_is_better=False)
 def bench_headmotion_still_rmse_median(quick: bool) -> Measurement:
     """analysis.headmotion_rmse_median with the head still (frontal); the detail has the rest
     of its numbers."""
-    res, _ = _run(quick, True)
-    return Measurement(res.summary()["rmse_median_all"], len(res.truth))
+    return _median(quick, True, "rmse_median_all")
 
 
 @benchmark("analysis.headmotion_still_pose_deg", "deg", higher_is_better=False)
@@ -797,12 +842,10 @@ def bench_headmotion_still_pose_deg(quick: bool) -> Measurement:
     face's lower outline 2.6 px higher (5 px at the jaw's sides; the face has no neck, and
     the room's shapes meet its chin), and the points inside follow by 0.2-0.8 px
     (``tools/headmotion_background.py`` has the earlier study)."""
-    res, _ = _run(quick, True)
-    return Measurement(res.summary()["pose_deg"], len(res.truth))
+    return _median(quick, True, "pose_deg")
 
 
 @benchmark("analysis.headmotion_still_skin_mm", "mm", higher_is_better=False)
 def bench_headmotion_still_skin_mm(quick: bool) -> Measurement:
     """analysis.headmotion_skin_mm with the head still (frontal)."""
-    res, _ = _run(quick, True)
-    return Measurement(res.summary()["skin_mm"], len(res.truth))
+    return _median(quick, True, "skin_mm")
