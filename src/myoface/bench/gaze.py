@@ -159,12 +159,13 @@ def blink_programme(n_frames: int) -> np.ndarray:
     return out
 
 
-def make_gaze_sequence(model, n_frames: int):
-    """The truth: head poses, gaze (T, 2) deg, lid closure (T,) and the skin (T, V, 3) mm."""
+def make_gaze_sequence(model, n_frames: int, gaze_seed: int = 0):
+    """The truth: head poses, gaze (T, 2) deg (:func:`gaze_programme` with ``gaze_seed``),
+    lid closure (T,) and the skin (T, V, 3) mm."""
     from myoface.bench.headmotion import head_trajectory
 
     poses = head_trajectory(n_frames)
-    gaze = gaze_programme(n_frames)
+    gaze = gaze_programme(n_frames, gaze_seed)
     closure = blink_programme(n_frames)
     cols = [list(model.ids).index(m) for m in BLINK_MUSCLES]
     state = model.rest_state()
@@ -394,17 +395,28 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
     return out
 
 
-def _sequence(quick: bool):
-    """The model, the truth and the frames (cached)."""
-    key = ("seq", bool(quick))
+#: the clips the headline is the median of, (the gaze programme's seed, the camera's seed):
+#: the first is the benchmark's clip of before 2026-12-05, the others the first two of the
+#: four clips earlier sessions checked it against (README, *Gaze*). One clip's number moved
+#: with its draw by more than the settings changed it (the photometric fit on five clips,
+#: 2026-12-05 morning: 3.3-7.2 deg).
+CLIPS = ((0, 0), (7, 3), (11, 5))
+
+
+def _sequence(quick: bool, clip: tuple[int, int] = CLIPS[0]):
+    """The model, the truth and the frames of ``clip`` (cached)."""
+    key = ("seq", bool(quick), tuple(clip))
     if key not in _cache:
         from myoface.bench.headmotion import _cache as hm_cache
         from myoface.bench.headmotion import _model
+        from myoface.render.degrade import CameraDegradation
 
         model = _model()
         n = 30 if quick else 90
-        poses, gaze, closure, skins = make_gaze_sequence(model, n)
-        frames, report = render_gaze_sequence(model.face, poses, gaze, skins)
+        poses, gaze, closure, skins = make_gaze_sequence(model, n, clip[0])
+        frames, report = render_gaze_sequence(
+            model.face, poses, gaze, skins, CameraDegradation(seed=clip[1])
+        )
         _cache[key] = (model, frames, poses, gaze, closure, skins, report, hm_cache["face_kind"])
     return _cache[key]
 
@@ -419,10 +431,24 @@ def bench_gaze_error(quick: bool) -> Measurement:
     the fit on MediaPipe's points alone (``points``, ``myoface analyze --no-photometric``, the
     default before 2026-12-05), that fit with analysis by synthesis (``fit-synthesis``) and
     with its anchored optical flow (``flow``, ``--no-photometric --flow``; these three not in
-    a quick run). The default is the fit with its photometric term (``photometric``)."""
+    a quick run). The default is the fit with its photometric term (``photometric``). The
+    value is the median over :data:`CLIPS` (other gaze programmes and camera draws; a quick
+    run the first alone): ``clips`` in the detail has each clip's value and eyes, the rest of
+    the detail is the first clip's."""
     model, frames, poses, gaze, closure, skins, report, face_kind = _sequence(quick)
     res = run_gaze(model, frames, poses, gaze, closure, skins)
     detail = {"face": face_kind, "frames": len(frames), "camera": report, "photometric": res}
+    values = [res["value"]]
+    detail["clips"] = {str(CLIPS[0]): {"value": res["value"]}}
+    for clip in CLIPS[1:] if not quick else ():
+        m, f, p, g, c, sk, _, _ = _sequence(quick, clip)
+        r = run_gaze(m, f, p, g, c, sk)
+        values.append(r["value"])
+        detail["clips"][str(clip)] = {
+            "value": r["value"],
+            **{e: r["per_eye"][e]["rms_deg"] for e in ("l", "r")},
+        }
+    detail["clips"]["median"] = float(np.nanmedian(np.array(values, dtype=float)))
     if not quick:
         detail["points"] = run_gaze(model, frames, poses, gaze, closure, skins, photometric=False)
         detail["fit-synthesis"] = run_gaze(
@@ -432,5 +458,5 @@ def bench_gaze_error(quick: bool) -> Measurement:
         detail["flow"] = run_gaze(
             model, frames, poses, gaze, closure, skins, photometric=False, flow=True
         )
-    value = res["value"] if res["value"] is not None else float("nan")
-    return Measurement(value, len(frames), detail=detail)
+    value = detail["clips"]["median"]
+    return Measurement(value, len(frames) * len(values), detail=detail)
