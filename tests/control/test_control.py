@@ -44,7 +44,21 @@ def test_table_covers_required_aus_and_known_muscles():
     for au in table.values():
         for base in au.muscles:
             assert base in IDS or f"{base}_l" in IDS, (au.number, base)
-    assert not missing_muscles({n: 1.0 for n in table}, IDS)
+    # (a crossed AU, AD30, is scored with a side only)
+    assert not missing_muscles({f"L{n}" if au.crossed else n: 1.0 for n, au in table.items()}, IDS)
+
+
+def test_jaw_sideways_is_scored_by_where_the_jaw_goes():
+    """AD30: L30 takes the jaw to the subject's left (+x), by the right lateral pterygoid; it
+    needs a side (both would cancel)."""
+    left = au_contractions({"L30": 1.0}, IDS)
+    assert left[IDS.index("lateral_pterygoid_r")] > 0 and left.sum() == pytest.approx(
+        left[IDS.index("lateral_pterygoid_r")]
+    )
+    right = au_contractions({"30R": 0.5}, IDS)
+    assert right[IDS.index("lateral_pterygoid_l")] == pytest.approx(0.5 * left.max())
+    with pytest.raises(MyofaceValueError, match="needs a side"):
+        au_contractions({30: 1.0}, IDS)
 
 
 @settings(max_examples=60, deadline=None)

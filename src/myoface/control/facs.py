@@ -42,6 +42,10 @@ class ActionUnit:
     muscles: dict[str, float]  # base muscle name (no side suffix) -> weight
     sides: bool
     note: str = ""
+    #: the AU's side names where the jaw goes, its muscles acting from the other side (AD30:
+    #: "L30", the jaw to the subject's left, is the right lateral pterygoid); such an AU is
+    #: scored with a side only
+    crossed: bool = False
 
 
 @lru_cache(maxsize=1)
@@ -50,7 +54,12 @@ def au_table() -> dict[int, ActionUnit]:
     doc = _load("facs_action_units.toml")["au"]
     return {
         int(k): ActionUnit(
-            int(k), v["name"], dict(v["muscles"]), bool(v["sides"]), v.get("note", "")
+            int(k),
+            v["name"],
+            dict(v["muscles"]),
+            bool(v["sides"]),
+            v.get("note", ""),
+            bool(v.get("crossed", False)),
         )
         for k, v in doc.items()
     }
@@ -122,6 +131,10 @@ def parse_au(key) -> tuple[int, str]:
     side = (m.group("pre") or m.group("post") or "").lower()
     if side and not table[num].sides:
         raise MyofaceValueError(f"AU{num} ({table[num].name}) has no left/right variant")
+    if table[num].crossed and not side:
+        raise MyofaceValueError(
+            f"AU{num} ({table[num].name}) needs a side: L{num} (to the subject's left) or R{num}"
+        )
     return num, side
 
 
@@ -170,6 +183,8 @@ def _au_requests(aus: Mapping) -> list[tuple[int, str, float]]:
 def _apply_aus(mixer: _Mixer, aus: Mapping, scale: float = 1.0) -> None:
     table = au_table()
     for num, side, inten in _au_requests(aus):
+        if table[num].crossed:  # (parse_au has made sure there is a side)
+            side = {"l": "r", "r": "l"}[side]
         for base, w in table[num].muscles.items():
             for mid in _expand(base, side, mixer.ids):
                 mixer.add(mid, w * inten * scale)
