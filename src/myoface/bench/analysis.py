@@ -518,6 +518,18 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
         "head_turn_deg": doc.get("head_turn_deg"),
         "with_2d_alignment": flat,
     }
+    if not quick:
+        from myoface.bench.judge import summary
+
+        # the judge on renders with the exact truth, the head turning (myoface.bench.judge)
+        detail["judge_on_turning_renders"] = {
+            "what": (
+                "the measure of the true contractions on renders of the person's face, the "
+                "head following the head-motion benchmark's trajectory scaled by the turn "
+                "(1: yaw +-30, pitch and roll +-15 deg): 1 for a valid judge"
+            ),
+            **summary((0.0, 0.05, 0.1, 0.2)),
+        }
     return Measurement(float(fid.overall.explained), fid.n_frames, detail=detail)
 
 
