@@ -20,8 +20,12 @@ Measured 2026-12-05 (90 frames; overall explained / gain, and the regions' expla
   0.81 at a gain of 0.79);
 - ``turn`` 0.2 (yaw +-6, pitch and roll +-3): 0.791 / 0.76 (brows 0.62, eyelids 0.58).
 
-So the judge holds for a head held still or nearly so, and not for turns of a few degrees:
-its 3-D alignment (:class:`~myoface.analysis.motionreader.HeadPose3D`) fits the head's pose to
+So the judge holds for a head held still or nearly so, and not for turns of a few degrees.
+Which of its two stages: given the renders' exact points in place of the flow's (the true
+vertices projected), the same alignment scores 0.990 still, 0.969 at ``turn`` 0.1 and 0.894
+at 0.2: at small turns the reader loses most (DIS from the calibration frame, whose
+brightness constancy the head's turn under a fixed light breaks: the face's shading
+changes), at larger ones the alignment as well. Its 3-D alignment (:class:`~myoface.analysis.motionreader.HeadPose3D`) fits the head's pose to
 eight rigid points (the eye corners and the nose's ridge, about 30 mm of depth) with a prior
 that holds the turn out of the image plane towards the reference's
 (:data:`~myoface.analysis.motionreader.POSE_PRIOR`, which leaves about a third of a turn's
@@ -33,7 +37,10 @@ rows. Tried the same day, not kept: the nose's tip among the rigid points (0.818
 the prior 0.1 (0.802 at 0.1); both (0.828 at 0.2); no prior (the pose diverges); every point
 that no muscle moves by 1.5 mm (the nose and the face's sides) as rigid, 0.897 at 0.1 and
 0.957 still, but the eyelids 0.44 at 0.1 and every region lost at 0.2 (the face's sides leave
-the flow as the head turns).
+the flow as the head turns); DIS on the logarithm of the brightness, stretched by the
+reference's range (a shading's factor becomes an offset, which DIS's patches' mean
+normalisation takes away): 0.962 still and 0.931 at 0.1, but 0.881 at 0.05 and 0.785 at 0.2,
+and the judge's render tests of the eyelids and the chin failed.
 """
 
 from __future__ import annotations
