@@ -393,7 +393,8 @@ def test_box_qp_finds_the_bounded_minimum(seed, n_muscles, conditioning):
 
 @pytest.mark.parametrize(
     "bad", [{"photo_landmark_gain": 0.0}, {"photo_landmark_gain": -0.5},
-            {"photo_landmark_gain": 3.0}, {"photo_rate_per_s": 0.0}, {"rate_per_s": -1.0}],
+            {"photo_landmark_gain": 3.0}, {"photo_rate_per_s": 0.0}, {"rate_per_s": -1.0},
+            {"sparsity_knee": 0.0}, {"sparsity_knee": 2.0}],
 )  # fmt: skip
 def test_the_fits_gain_and_rates_are_checked(bad):
     """A detector's gain outside (0, 1.5] or a rate that is not positive is refused with the

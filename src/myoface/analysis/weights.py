@@ -445,6 +445,9 @@ class FitSettings:
         for name in ("rate_per_s", "photo_rate_per_s"):
             if not getattr(self, name) > 0:
                 raise MyofaceValueError(f"{name} must be > 0; got {getattr(self, name)}")
+        k = self.sparsity_knee
+        if k is not None and not 0 < k <= 1:
+            raise MyofaceValueError(f"sparsity_knee must be None (L1) or in (0, 1]; got {k}")
 
     @property
     def reads_lids(self) -> bool:
