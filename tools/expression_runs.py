@@ -42,26 +42,9 @@ P2 = (
 def trajectory(n, phase=0.0, amplitude=1.0):
     """The benchmark's head loop (headmotion.head_trajectory), started ``phase`` of the way
     round and scaled by ``amplitude``."""
-    from myoface.analysis.camera import HeadPose
-    from myoface.bench.headmotion import DISTANCE_MM
+    from myoface.bench.headmotion import head_trajectory
 
-    out = []
-    for s in np.linspace(0.0, 1.0, n) + phase:
-        w = 2 * np.pi * s
-        a = amplitude
-        out.append(
-            HeadPose.from_euler(
-                a * 30 * np.sin(1.5 * w),
-                a * 15 * np.sin(2.0 * w + 1.0),
-                a * 15 * np.sin(1.2 * w + 2.0),
-                (
-                    a * 20 * np.sin(w + 0.5),
-                    a * 10 * np.sin(1.7 * w),
-                    -DISTANCE_MM + a * 40 * np.sin(0.8 * w + 1.3),
-                ),
-            )
-        )
-    return out
+    return head_trajectory(n, phase=phase, amplitude=amplitude)
 
 
 def face_model(face: str):

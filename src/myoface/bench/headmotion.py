@@ -116,13 +116,16 @@ def expression_programme(ids, n_frames: int) -> np.ndarray:
     return 1.0 - keep
 
 
-def head_trajectory(n_frames: int, still: bool = False):
+def head_trajectory(n_frames: int, still: bool = False, *, phase: float = 0.0,
+                    amplitude: float = 1.0):  # fmt: skip
     """Head poses (:class:`~myoface.analysis.camera.HeadPose`) along a smooth trajectory: yaw +-30
     deg, pitch and roll +-15 deg, +-20 mm across, +-10 mm up and down, +-40 mm in depth, about
-    :data:`DISTANCE_MM` from the camera; ``still``: frontal, at that distance."""
+    :data:`DISTANCE_MM` from the camera; ``still``: frontal, at that distance. ``phase``: the
+    loop started that fraction of the way round; ``amplitude``: every angle and shift scaled."""
     from myoface.analysis.camera import HeadPose
 
-    t = np.linspace(0.0, 1.0, n_frames)
+    t = np.linspace(0.0, 1.0, n_frames) + float(phase)
+    a = float(amplitude)
     out = []
     for s in t:
         if still:
@@ -131,13 +134,13 @@ def head_trajectory(n_frames: int, still: bool = False):
         w = 2 * np.pi * s
         out.append(
             HeadPose.from_euler(
-                30 * np.sin(1.5 * w),
-                15 * np.sin(2.0 * w + 1.0),
-                15 * np.sin(1.2 * w + 2.0),
+                a * 30 * np.sin(1.5 * w),
+                a * 15 * np.sin(2.0 * w + 1.0),
+                a * 15 * np.sin(1.2 * w + 2.0),
                 (
-                    20 * np.sin(w + 0.5),
-                    10 * np.sin(1.7 * w),
-                    -DISTANCE_MM + 40 * np.sin(0.8 * w + 1.3),
+                    a * 20 * np.sin(w + 0.5),
+                    a * 10 * np.sin(1.7 * w),
+                    -DISTANCE_MM + a * 40 * np.sin(0.8 * w + 1.3),
                 ),
             )
         )

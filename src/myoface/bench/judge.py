@@ -63,32 +63,15 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 
 def turning_renders(turn: float, n_frames: int = 90):
     """The model, the true contractions (T, M) and the clean frames of the head-motion
     benchmark's programme with its head trajectory scaled by ``turn``."""
-    from myoface.analysis.camera import HeadPose
     from myoface.bench import headmotion as H
 
     fm = H._model()
     truth, _, skins = H.make_sequence(fm, n_frames, still=False)
-    w = 2 * np.pi * np.linspace(0.0, 1.0, n_frames)
-    k = float(turn)
-    poses = [
-        HeadPose.from_euler(
-            k * 30 * np.sin(1.5 * x),
-            k * 15 * np.sin(2 * x + 1),
-            k * 15 * np.sin(1.2 * x + 2),
-            (
-                k * 20 * np.sin(x + 0.5),
-                k * 10 * np.sin(1.7 * x),
-                -H.DISTANCE_MM + k * 40 * np.sin(0.8 * x + 1.3),
-            ),
-        )  # fmt: skip
-        for x in w
-    ]
+    poses = H.head_trajectory(n_frames, amplitude=turn)
     return fm, truth, H.render_sequence(fm.face, poses, skins)
 
 
