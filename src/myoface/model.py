@@ -150,7 +150,7 @@ class FaceModel:
             )
         fb = muscles.basis(base.rest_positions[fascia], jaw_w)
         # muscles that move the mandible (the lateral pterygoids) drive no fascia of their own
-        on_bone = [i for i in muscles.bone_index if i != muscles.jaw_index]
+        on_bone = muscles.mandible_index
         fb[:, :, on_bone] = 0.0
         reach = np.abs(fb).max(axis=(1, 2))
         driven_v = np.flatnonzero(reach > DRIVEN_MIN_MM)
@@ -168,7 +168,6 @@ class FaceModel:
         # ... and, as the jaw's opening, on the fascia nodes the other muscles hold
         for i in on_bone:
             basis[:, :, i] = muscles.muscles[i].field(tissue.rest_positions[kin], jaw_w[kin % nv])
-        s("_mandible_muscles", tuple(on_bone))
         s("_kin_basis", _frozen(basis))
         s("expressions", dict(expressions or {}))
         s(
@@ -267,7 +266,7 @@ class FaceModel:
             return np.eye(3), np.zeros(3)
         rot, shift = self.muscles.jaw.pose(float(s.contractions[j]))
         turn, moved = 0.0, np.zeros(3)
-        for i in self._mandible_muscles:  # the lateral pterygoids' turn, before the opening
+        for i in self.muscles.mandible_index:  # the pterygoids' turn, before the opening
             m, c = self.muscles.muscles[i], float(s.contractions[i])
             turn += c * m.turn_rad
             moved -= c * np.cross([0.0, m.turn_rad, 0.0], m.pivot)

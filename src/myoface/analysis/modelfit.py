@@ -462,7 +462,7 @@ class ModelFit:
         soft = [k for k in range(self.n_muscles) if k not in bone]
         #: the contractions the fit moves: all but the mandible's sideways turn, unless
         #: :attr:`FitSettings.jaw_sideways`
-        sideways = [k for k in bone if k != model.muscles.jaw_index]
+        sideways = set(model.muscles.mandible_index)
         self._fitted = np.array(
             [k for k in range(self.n_muscles) if self.settings.jaw_sideways or k not in sideways],
             dtype=np.int64,

@@ -438,16 +438,15 @@ def bench_gaze_error(quick: bool) -> Measurement:
     model, frames, poses, gaze, closure, skins, report, face_kind = _sequence(quick)
     res = run_gaze(model, frames, poses, gaze, closure, skins)
     detail = {"face": face_kind, "frames": len(frames), "camera": report, "photometric": res}
-    values = [res["value"]]
-    detail["clips"] = {str(CLIPS[0]): {"value": res["value"]}}
+    runs = [res]
     for clip in CLIPS[1:] if not quick else ():
         m, f, p, g, c, sk, _, _ = _sequence(quick, clip)
-        r = run_gaze(m, f, p, g, c, sk)
-        values.append(r["value"])
-        detail["clips"][str(clip)] = {
-            "value": r["value"],
-            **{e: r["per_eye"][e]["rms_deg"] for e in ("l", "r")},
-        }
+        runs.append(run_gaze(m, f, p, g, c, sk))
+    values = [r["value"] for r in runs]
+    detail["clips"] = {
+        str(clip): {"value": r["value"], **{e: r["per_eye"][e]["rms_deg"] for e in ("l", "r")}}
+        for clip, r in zip(CLIPS, runs, strict=False)
+    }
     detail["clips"]["median"] = float(np.nanmedian(np.array(values, dtype=float)))
     if not quick:
         detail["points"] = run_gaze(model, frames, poses, gaze, closure, skins, photometric=False)

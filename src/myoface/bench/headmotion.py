@@ -561,10 +561,15 @@ def _truth(quick: bool, still: bool):
 CAMERA_SEEDS = (0, 1, 2)
 
 
+def _seed_key(seed: int) -> tuple:
+    """The cache keys' part for the camera's ``seed`` (none for 0: the keys of before)."""
+    return (int(seed),) if seed else ()
+
+
 def _frames(quick: bool, still: bool, degraded: bool = True, seed: int = 0) -> list[np.ndarray]:
     """The rendered frames (cached): degraded by the camera (:func:`degraded_sequence`, its
     report kept; ``seed``: the camera's) or clean (:func:`render_sequence`)."""
-    key = ("frames", bool(quick), bool(still), bool(degraded)) + ((int(seed),) if seed else ())
+    key = ("frames", bool(quick), bool(still), bool(degraded)) + _seed_key(seed)
     if key not in _cache:
         from myoface.render.degrade import CameraDegradation
 
@@ -585,7 +590,7 @@ def _sequence(quick: bool, still: bool, flow: bool = False, degraded: bool = Tru
     ``flow``: the points refined by optical flow, and MediaPipe's time plus the flow's;
     ``degraded``: on the camera's frames (:func:`degraded_sequence`, the camera's ``seed``),
     else the clean renders."""
-    key = ("seq", bool(quick), bool(still), bool(degraded)) + ((int(seed),) if seed else ())
+    key = ("seq", bool(quick), bool(still), bool(degraded)) + _seed_key(seed)
     if key not in _cache:
         fm = _model()
         truth, poses, skins = _truth(quick, still)
@@ -627,7 +632,7 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
     if anchored:
         flow = False
     key = (bool(quick), bool(still), bool(synthesis), flow, bool(degraded), photometric,
-           bool(anchored), bool(au_prior)) + ((int(seed),) if seed else ())  # fmt: skip
+           bool(anchored), bool(au_prior)) + _seed_key(seed)  # fmt: skip
     if key not in _cache:
         import time
 

@@ -93,11 +93,16 @@ class MuscleSet:
         return self._index.get(JAW_ID)
 
     @property
+    def mandible_index(self) -> tuple[int, ...]:
+        """Positions in :attr:`ids` of the muscles that turn the mandible (``acts_on ==
+        "bone"``: the lateral pterygoids)."""
+        return tuple(i for i, m in enumerate(self.muscles) if getattr(m, "acts_on", "") == "bone")
+
+    @property
     def bone_index(self) -> tuple[int, ...]:
         """Positions in :attr:`ids` of what moves bone, not soft tissue: the muscles that turn
-        the mandible (``acts_on == "bone"``, the lateral pterygoids) and the jaw."""
-        out = [i for i, m in enumerate(self.muscles) if getattr(m, "acts_on", "") == "bone"]
-        return tuple(out) + ((self.jaw_index,) if self.jaw_index is not None else ())
+        the mandible (:attr:`mandible_index`) and the jaw."""
+        return self.mandible_index + ((self.jaw_index,) if self.jaw_index is not None else ())
 
     def index(self, muscle_id: str) -> int:
         try:
