@@ -59,21 +59,31 @@ def test_the_lateral_and_vertical_parts_say_where_the_gain_is_lost():
     assert detail["lateral_ratio"] == pytest.approx(-1.0)
 
 
-def test_region_gains_are_the_share_of_the_motion_read():
-    """A tracker that reads half of one region's motion (plus a fixed offset of its own, which
-    the displacements cancel) and all of another's scores 0.5 and 1; a region that does not
-    move has no gain; a probe without a face is left out."""
-    from myoface.bench.smile import region_gains
+def test_the_smile_reach_says_when_the_muscles_are_at_their_bound():
+    """:func:`smile_reach` on known answers: the model's own smile (the zygomatici at 0.6) is
+    reached at a ratio of 1 with the zygomatici at 0.6 (within the 5 % that the reach's ridge
+    takes off, as ``test_the_models_reach_finds_what_the_model_can_make`` allows); the same
+    smile made 1.6 times larger than the model's strongest is reached short, its zygomatici at
+    their bound, 1."""
+    from myoface.analysis.fidelity import model_displacements
+    from myoface.bench.smile import smile_reach
+    from myoface.model import build_face_model
 
-    rng = np.random.default_rng(3)
-    true = np.repeat(rng.normal(100, 20, (1, 6, 2)), 4, axis=0)  # neutral + 3 probes
-    true[1:, :4] += rng.normal(0, 3, (3, 4, 2))  # points 0-3 move; 4-5 stay
-    read = true + 7.0  # the tracker's own offset
-    read[1:, :2] = read[0, :2] + 0.5 * (true[1:, :2] - true[0, :2])
-    read[2] = np.nan
-    gains = region_gains(true, read, {"half": (0, 1), "all": (2, 3), "still": (4, 5)})
-    assert gains["half"] == pytest.approx(0.5, abs=1e-3)
-    assert gains["all"] == pytest.approx(1.0, abs=1e-3)
-    assert gains["still"] is None
-    with pytest.raises(ValueError, match="alike"):
-        region_gains(true, read[:, :5], {"half": (0, 1)})
+    fm = build_face_model()
+    zyg = [fm.ids.index("zygomaticus_major_l"), fm.ids.index("zygomaticus_major_r")]
+    table = np.zeros((4, fm.n_muscles))
+    table[1:, zyg] = np.array([0.3, 0.6, 0.6])[:, None]
+    d_in = model_displacements(fm, table)[0]["mouth_corners"]
+    apex = [2, 3]
+    reach = smile_reach(fm, d_in, apex)
+    assert reach["ratio"] == pytest.approx(1.0, abs=0.05), reach
+    assert reach["vertical_ratio"] == pytest.approx(1.0, abs=0.06), reach
+    for m in ("zygomaticus_major_l", "zygomaticus_major_r"):
+        assert reach["muscles_at_apex"][m] == pytest.approx(0.6, abs=0.08), reach
+    big = smile_reach(fm, d_in * 1.6 / 0.6 * np.where(np.arange(4) > 1, 1.0, 0.0)[:, None, None],
+                      apex)  # fmt: skip
+    assert big["ratio"] < 0.9, big
+    assert (
+        min(big["muscles_at_apex"][m] for m in ("zygomaticus_major_l", "zygomaticus_major_r"))
+        > 0.97
+    )

@@ -89,8 +89,9 @@ rigid points are not quite rigid: in the blink at frames 25-29 the outer eye cor
 ``mediapipe_on_both``): MediaPipe's face mesh on the input and on the resynthesis rendered
 front on, each frame aligned to its reference frame by a 3-D similarity on the rigid points
 (Umeyama 1991) and expressed in the default face's axes (:func:`displacements`). It is not a
-valid judge: MediaPipe's gain differs on real faces (about 0.5) and on renders (about 0.7;
-``synth.smile_gain``'s ``mediapipe_gain_on_renders``), and the fit consumes its points. The displacements are measured in the face's frontal
+valid judge: MediaPipe's gain differs on real faces (about 0.5) and on renders (about 0.7 on
+the sample person's face at the mouth corners; ``tools/detector_gains.py`` measures it per
+muscle), and the fit consumes its points. The displacements are measured in the face's frontal
 plane (``dims=2``): MediaPipe's monocular depth scatters by more than an expression moves the
 skin towards the camera; ``dims=3`` keeps it.
 

@@ -1116,6 +1116,22 @@ class ModelFit:
             )  # fmt: skip
         return out
 
+    def _sparsity_scale(self) -> np.ndarray | None:
+        """Each muscle's share of the sparsity prior (:attr:`FitSettings.sparsity_reach`):
+        its reach (the skin's motion per unit contraction: the norm over the vertices of
+        the model's response) over the median reach of the fitted muscles, to that power; None
+        at 0 (every muscle alike)."""
+        p = self.settings.sparsity_reach
+        if not p:
+            return None
+        cached = getattr(self, "_sparsity_scale_cache", None)
+        if cached is not None and cached[0] == p:
+            return cached[1]
+        reach = np.sqrt((self.model_response**2).sum(axis=(0, 1)))
+        scale = (reach / np.median(reach[self._fitted])) ** p
+        self._sparsity_scale_cache = (p, scale)
+        return scale
+
     def _scale_lids(self, shape) -> dict[str, float]:
         """Scale the lid muscles' response to the eye openings of ``shape`` (the person's
         neutral; :func:`lid_gains`): the fit then reads a lid's contraction as the fraction of
@@ -1198,7 +1214,10 @@ class ModelFit:
                     s.rate_per_s if photo is None else s.photo_rate_per_s,
                 )  # fmt: skip
             )
-        out += [MagnitudePrior(s.magnitude_sigma), SparsityPrior(s.sparsity, s.sparsity_knee)]
+        out += [
+            MagnitudePrior(s.magnitude_sigma),
+            SparsityPrior(s.sparsity, s.sparsity_knee, self._sparsity_scale()),
+        ]
         out += au_prior_terms(self.model.ids, s)  # the AU table's span (analysis.au_prior)
         if getattr(self, "_lid_image", None) is not None:  # (FitSettings.reads_lids)
             lid = self.lid_edge_term(self._lid_image)

@@ -462,33 +462,46 @@ class SparsityPrior:
     its pull fades to nothing at the knee: the L1 prior takes the same ``weight`` off every
     contraction however large, and so reads every motion short. Its normal equations carry
     the gradient only (its curvature is negative; the solver's steps are kept where they
-    lower the whole energy)."""
+    lower the whole energy).
 
-    def __init__(self, weight: float, knee: float | None = None):
+    ``scale`` (M,): each muscle's weight is ``weight * scale[m]`` (the fit's
+    :attr:`~myoface.analysis.weights.FitSettings.sparsity_reach`); None, all alike."""
+
+    def __init__(self, weight: float, knee: float | None = None, scale=None):
         self.weight = float(weight)
         self.knee = None if knee is None else float(knee)
+        #: (M,) each muscle's weight relative to ``weight`` (None: 1 for every muscle)
+        self.scale = None if scale is None else np.asarray(scale, dtype=np.float64)
         self._ne = None  # (its normal equations: the same at every step, read only)
+
+    def _weights(self, free) -> np.ndarray | float:
+        return self.weight if self.scale is None else self.weight * self.scale[free]
 
     def prepare(self, est: Estimate) -> None:
         pass
 
     def normal_equations(self, est: Estimate):
+        w = self._weights(est.free)
         if self.knee is not None:
             h, b = _zeros(est)
             cf = est.contractions[est.free]
-            b[6:] = -0.5 * self.weight * np.maximum(1.0 - cf / self.knee, 0.0)
+            b[6:] = -0.5 * w * np.maximum(1.0 - cf / self.knee, 0.0)
             return h, b
-        if self._ne is None or len(self._ne[1]) != est.n_unknowns:
+        if self._ne is None or self._ne[0] is not est.free:
             h, b = _zeros(est)
-            b[6:] = -0.5 * self.weight
+            b[6:] = -0.5 * w
             h.setflags(write=False)
             b.setflags(write=False)
-            self._ne = (h, b)
-        return self._ne
+            self._ne = (est.free, h, b)
+        return self._ne[1:]
 
     def cost(self, est: Estimate) -> float:
         cf = est.contractions[est.free]
         if self.knee is not None:
             k = self.knee
-            return self.weight * float(np.where(cf < k, cf - cf * cf / (2 * k), k / 2).sum())
-        return self.weight * float(cf.sum())
+            part = np.where(cf < k, cf - cf * cf / (2 * k), k / 2)
+        else:
+            part = cf
+        if self.scale is None:
+            return self.weight * float(part.sum())
+        return float(np.sum(self._weights(est.free) * part))

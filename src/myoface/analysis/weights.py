@@ -435,6 +435,22 @@ class FitSettings:
     #: moving light still worse (skin 0.89 -> 1.07 mm): the camera's other degradations are
     #: read as muscle. Not taken.
     sparsity_knee: float | None = None
+    #: the sparsity prior weighs each muscle by its reach (the skin's motion per unit of its
+    #: contraction, over the fitted muscles' median) to this power: 0, every muscle alike
+    #: (a unit of contraction costs the same whatever skin it moves); 1, a millimetre of the
+    #: skin's motion costs the same whichever muscle makes it. The reach (the norm over the
+    #: vertices of its response, mm per unit contraction) runs from 4 mm
+    #: (depressor supercilii, mentalis) through 20 (the median) to 59 (zygomaticus major) and
+    #: 210 (the jaw), so at 1 the zygomaticus pays three times the median muscle's prior and
+    #: the mentalis a quarter. Measured 2026-12-05 (0 / 0.5 / 1; the degraded head-motion
+    #: renders over the camera seeds 0, 1, 2): head moving, skin 0.98, 1.17, 0.99 / 0.93,
+    #: 1.14, 0.97 / 0.90, 0.84, 0.98 mm; head still 0.66, 0.60, 0.76 / 0.63, 0.57, 0.69 /
+    #: 0.62, 0.56, 0.63 mm; but the expression clip (apex / rest) 0.76 / 0.83 -> 0.56 / 0.58
+    #: -> 0.42 / 0.62 (the lids' raiser, cheap, read at rest and in smiles: AU5 0.04 -> 0.14
+    #: at rest), the known warps' worst gain 0.897 -> 0.878 -> 0.858 (the corners),
+    #: single_face.mp4's validated fidelity 0.766 -> 0.774 -> 0.731 (the corners' gain 0.87
+    #: -> 0.86 -> 0.69). Not taken.
+    sparsity_reach: float = 0.0
 
     def __post_init__(self) -> None:
         g = self.photo_landmark_gain

@@ -32,8 +32,7 @@ def smile_gain(d_in: np.ndarray, d_out: np.ndarray, apex_fraction: float = APEX_
     ok = np.isfinite(a).all(axis=(1, 2)) & np.isfinite(b).all(axis=(1, 2))
     if not ok.any():
         raise ValueError("no frame has the mouth corners in both sequences")
-    m_in = np.linalg.norm(a, axis=2).mean(axis=1)
-    m_out = np.linalg.norm(b, axis=2).mean(axis=1)
+    m_in, m_out = _corner_motion(a), _corner_motion(b)
     m_in[~ok] = np.nan
     peak = float(np.nanmax(m_in))
     if not peak > 0:
@@ -72,70 +71,56 @@ def _component_ratios(a: np.ndarray, b: np.ndarray) -> dict:
 #: the target range for the ratio: the person's smile within 15 %
 SMILE_GAIN_TARGET = (0.85, 1.15)
 
-#: the expressions rendered to measure how much of a render's motion MediaPipe reads
-#: (:func:`tracker_gain`): the six EMFACS prototypes, at full intensity
-PROBE_EXPRESSIONS = ("happiness", "sadness", "surprise", "fear", "anger", "disgust")
+#: the strongest muscles of the model's best smile (:func:`smile_reach`) the detail lists
+REACH_MUSCLES = 6
 
 
-def region_gains(true_px: np.ndarray, read_px: np.ndarray, regions: dict) -> dict:
-    """How much of the points' true motion a tracker reads, per region: ``true_px`` and
-    ``read_px`` (T, V, 2) image positions (the model's own vertices projected, and what the
-    tracker found) of a neutral frame (row 0) and probes; each region's gain is the
-    least-squares factor from the true displacements from row 0 to the read ones,
-    ``sum d_read . d_true / sum |d_true|^2`` over the probes and the region's points (1: the
-    tracker follows the skin; below 1 it reads less motion than there is). None for a region
-    that does not move."""
-    t = np.asarray(true_px, dtype=np.float64)[..., :2]
-    r = np.asarray(read_px, dtype=np.float64)[..., :2]
-    if t.shape != r.shape or t.ndim != 3 or len(t) < 2:
-        raise ValueError(
-            f"true_px and read_px must be (T >= 2, V, 2) alike; got {t.shape}, {r.shape}"
-        )
-    dt, dr = t[1:] - t[0], r[1:] - r[0]
-    ok = np.isfinite(dr).all(axis=(1, 2))
-    out = {}
-    for name, idx in regions.items():
-        a, b = dt[ok][:, list(idx)], dr[ok][:, list(idx)]
-        den = float((a * a).sum())
-        out[name] = round(float((a * b).sum()) / den, 3) if den > 1e-12 else None
-    return out
+def smile_reach(model, d_in: np.ndarray, apex) -> dict:
+    """What the person's face could do at best on the input's mouth corners ``d_in`` (T, 2, 2,
+    as :func:`smile_gain` takes them): the contractions fitted frame by frame to the corners'
+    displacements alone (:func:`myoface.analysis.fidelity.model_reach`, every muscle in [0, 1]),
+    the same ratio and its parts (:func:`smile_gain`) over the same ``apex`` frames, and the
+    strongest muscles there (their mean contraction). Where the best smile is short too, the
+    analysis is not what holds the ratio; a muscle at 1 there is a muscle at its bound: the
+    person's corners go farther than the model's muscles take them."""
+    from myoface.analysis.fidelity import model_reach
+
+    reach, table = model_reach(model, {"mouth_corners": d_in})
+    d_out = reach.d_out["mouth_corners"]
+    apex = list(apex)
+    ratio = float(np.median(_corner_motion(d_out)[apex] / _corner_motion(d_in)[apex]))
+    parts = _component_ratios(np.asarray(d_in)[apex], np.asarray(d_out)[apex])
+    mean = np.nanmean(table[apex], axis=0)
+    top = np.argsort(-mean)[:REACH_MUSCLES]
+    return {
+        "ratio": round(ratio, 3),
+        **parts,
+        "muscles_at_apex": {model.ids[j]: round(float(mean[j]), 3) for j in top},
+    }
 
 
-def tracker_gain(model, size: int = 360, expressions=PROBE_EXPRESSIONS) -> dict:
-    """MediaPipe's gain on renders of ``model``: the face rendered front on as the fidelity's
-    resynthesis is (:func:`myoface.analysis.fidelity.resynthesis_frames`), neutral and each of
-    ``expressions`` at intensity 1, MediaPipe's face mesh on each render, and per region of
-    :data:`myoface.analysis.fidelity.REGIONS` the share of the rendered skin's motion it reads
-    (:func:`region_gains`). Where it reads less than there is, the resynthesis' motion as
-    MediaPipe measures it is short of the model's by that factor."""
-    from myoface.analysis.fidelity import REGIONS, detect_landmarks, resynthesis_frames
-    from myoface.control import expression_contractions
-    from myoface.synth import make_camera
-
-    table = np.array(
-        [np.zeros(len(model.ids))]
-        + [expression_contractions(e, 1.0, model.ids) for e in expressions]
-    )
-    read = detect_landmarks(resynthesis_frames(model, table, size))
-    cam = make_camera(model.face.vertices, "front", size, size)
-    true = np.array([cam.project(model.skin_vertices(model.relax(c).state))[:, :2] for c in table])
-    return region_gains(true, read, REGIONS)
+def _corner_motion(d: np.ndarray) -> np.ndarray:
+    """(T,): the two corners' mean displacement (IOD) per frame."""
+    return np.linalg.norm(np.asarray(d, dtype=np.float64), axis=2).mean(axis=1)
 
 
 @benchmark("synth.smile_gain", "-", higher_is_better=True)
 def bench_smile_gain(quick: bool) -> Measurement:
     """The person's own face (``face_from_photo`` on the calibration frame of
     ``single_face.mp4``) driven by the contractions the analysis measures on that video (the
-    3-D fit, ``myoface analyze --tracker landmarks``), rendered front on, and MediaPipe's face
-    mesh on the render and on the video: each frame aligned to the first by a 3-D similarity
-    on rigid points, the mouth corners' displacement over the inter-ocular distance
-    (:mod:`myoface.analysis.fidelity`). Value: the median over the smile's apex frames (the
-    input's corners at 90 % or more of their largest displacement) of the resynthesis'
-    displacement over the video's: 1 when the model smiles as widely as the person. Target
-    within [0.85, 1.15]. The detail: the apex frames, both displacements, the
-    cosine between their directions, the ratio across the face and up, and MediaPipe's gain on
-    renders of the same face (:func:`tracker_gain`): the resynthesis is measured through
-    MediaPipe, so where it reads a render's motion short, the ratio is short by as much."""
+    3-D fit, ``myoface analyze --tracker landmarks``), against the video, both sides read as
+    ``analysis.fidelity`` reads them (:func:`myoface.analysis.fidelity.fidelity_of_analysis`):
+    the video by the validated motion reader (optical flow from the calibration frame, the
+    head's motion taken out), the model from its own skin vertices, the mouth corners'
+    displacement over each side's inter-ocular distance. Value: the median over the smile's
+    apex frames (the input's corners at 90 % or more of their largest displacement) of the
+    resynthesis' displacement over the video's: 1 when the model smiles as widely as the
+    person. Target within [0.85, 1.15]. The detail: the apex frames, both displacements, the
+    cosine between their directions, the ratio across the face and up, and the model's reach
+    (:func:`smile_reach`: the same ratio for the contractions fitted to the video's corners
+    alone, and the muscles that make it), which says whether the analysis or the model's
+    muscles hold the ratio. (Before 2026-12-05 the detail had MediaPipe's gain on renders of
+    the same face, from when both sides were read by MediaPipe.)"""
     import json
     import tempfile
     from pathlib import Path
@@ -155,11 +140,13 @@ def bench_smile_gain(quick: bool) -> Measurement:
         # make it), built once for the report and for MediaPipe's gain below
         cal = json.loads((Path(res.folder) / "analysis.json").read_text())["calibration_frame"]
         person = person_model(path, int(cal))[0]
-        fid = write_fidelity_report(res.folder, path, model=person, calibration_frame=int(cal))
-    ratio, detail = smile_gain(fid.d_in["mouth_corners"], fid.d_out["mouth_corners"])
+        fid = write_fidelity_report(
+            res.folder, path, model=person, calibration_frame=int(cal), mediapipe_on_both=False
+        )
+    d_in = fid.d_in["mouth_corners"]
+    ratio, detail = smile_gain(d_in, fid.d_out["mouth_corners"])
     detail["target"] = list(SMILE_GAIN_TARGET)
-    # what MediaPipe reads of the same face's rendered motion (the resynthesis is measured
-    # through it): the ratio cannot pass this gain unless the analysis moves the model more
-    # than MediaPipe saw the person move
-    detail["mediapipe_gain_on_renders"] = tracker_gain(person)
+    detail["input_reader"] = fid.reader or fid.method
+    # which stage holds it: the best the person's face does on the video's corners alone
+    detail["model_reach"] = smile_reach(person, d_in, detail["apex_frames"])
     return Measurement(ratio, len(detail["apex_frames"]), detail=detail)
