@@ -802,14 +802,9 @@ def _render_ramp(fm, apex, ramp, video):
     person's face ``fm`` rendered so (384 px, 10 frames/s) to ``video`` and read by the judge's
     reader from frame 0: (the contractions (T, M), reference points, points, unsure)."""
     from myoface.analysis import fidelity
-    from myoface.analysis.resynthesis import resynthesis_frames
-    from myoface.render import VideoWriter
 
     truth = np.array([fm.validate({k: x * a for k, x in apex.items()}) for a in ramp])
-    with VideoWriter(video, fps=10) as vw:
-        for f in resynthesis_frames(fm, truth, 384):
-            vw.write(f)
-    ref, pts, unsure, _ = fidelity.read_video_points(video, list(range(len(ramp))), 0)
+    ref, pts, unsure = fidelity.render_and_read(fm, truth, video)
     return truth, ref, pts, unsure
 
 
@@ -888,3 +883,28 @@ def test_the_judge_scores_the_exact_truth_near_one_as_the_head_turns(turn):
     assert res.overall.explained >= 0.9 and 0.9 <= res.overall.gain <= 1.1, res.overall
     for region in ("lower_lip", "brows", "chin"):
         assert res.regions[region].explained >= 0.9, (region, res.regions[region])
+
+
+@needs_mediapipe
+def test_the_judge_on_a_resynthesis_scores_its_known_answer(tmp_path):
+    """:func:`~myoface.analysis.fidelity.judge_on_resynthesis` renders a face at given
+    contractions, reads the render with the judge's reader and scores it against the model's
+    own vertices: on a smile with the brows raised (a motion the reader is validated on) it
+    scores near 1 where the face moves, every region has its share of unsure readings, and a
+    face that does not move has no score (nothing to explain)."""
+    from myoface.analysis.fidelity import judge_on_resynthesis
+    from myoface.model import build_face_model
+
+    fm = build_face_model()
+    apex = {m: 0.8 for m in ("zygomaticus_major_l", "zygomaticus_major_r")}
+    apex.update({f"frontalis_{p}_{s}": 0.7 for p in ("inner", "outer") for s in "lr"})
+    ramp = (0.0, 0.3, 0.6, 0.9, 0.9, 0.6, 0.3, 0.0)
+    table = np.array([fm.validate({k: v * a for k, v in apex.items()}) for a in ramp])
+    out = judge_on_resynthesis(fm, table, tmp_path / "smile.mp4")
+    assert set(out) == {*JUDGED_REGIONS, "overall"}
+    assert out["overall"]["explained"] >= 0.9, out
+    for region in ("mouth_corners", "brows"):
+        assert 0.85 <= out[region]["gain"] <= 1.1 and out[region]["explained"] >= 0.9, out
+    assert all(0.0 <= out[r]["unsure"] <= 1.0 for r in JUDGED_REGIONS)
+    still = judge_on_resynthesis(fm, np.zeros((3, fm.n_muscles)), tmp_path / "still.mp4")
+    assert still["overall"]["explained"] is None and still["brows"]["gain"] is None, still

@@ -813,6 +813,50 @@ def model_reach(
     return result, table
 
 
+def render_and_read(model, table, video, size: int = 384, fps: float = 10.0,
+                    reader: str = READER):  # fmt: skip
+    """A known answer for the judge: ``model`` at each row of ``table`` (T, M) rendered front
+    on (:func:`~myoface.analysis.resynthesis.resynthesis_frames`, ``size`` px) into ``video``
+    (H.264) and read back by the input's reader ``reader`` from its first frame
+    (:func:`read_video_points`): (reference points, points, unsure), to compare with the
+    model's own vertices (:func:`model_displacements` of ``table``)."""
+    from myoface.render import VideoWriter
+
+    with VideoWriter(video, fps=fps) as vw:
+        for f in resynthesis_frames(model, table, size):
+            vw.write(f)
+    ref, pts, unsure, _ = read_video_points(video, list(range(len(table))), 0, reader)
+    return ref, pts, unsure
+
+
+def judge_on_resynthesis(model, table, video, size: int = 384,
+                         alignment: str = ALIGNMENT) -> dict:  # fmt: skip
+    """The judge on a known answer with the analysed video's own motion: ``model`` (the
+    person's face) rendered at the analysis' contractions ``table`` (T, M; the frames it
+    measured, in order, starting at rest) and read by the input's reader
+    (:func:`render_and_read`), its readings scored against the model's own vertices as the
+    measure scores an analysis (:func:`scores`). A valid judge scores 1 (gain and explained)
+    in every region; where it does not, its reading of the real video's motion there is
+    suspect as much. Per region and overall: gain, explained, and the share of the region's
+    readings that failed the reader's forward-backward check (``unsure``)."""
+    table = np.asarray(table, dtype=np.float64)
+    ref, pts, unsure = render_and_read(model, table, video, size)
+    d_out, side = model_displacements(model, table, None, JUDGED_REGIONS, alignment)
+    d_in = input_displacements(ref, pts, side, JUDGED_REGIONS, alignment, unsure)
+
+    def r(v):
+        return round(float(v), 3) if np.isfinite(v) else None
+
+    out = {}
+    for name, idx in JUDGED_REGIONS.items():
+        sc = scores(d_in[name], d_out[name])
+        share = np.asarray(unsure, dtype=bool)[:, [_POS[i] for i in idx]].mean()
+        out[name] = {"gain": r(sc.gain), "explained": r(sc.explained), "unsure": r(share)}
+    sc = _overall(d_in, d_out)
+    out["overall"] = {"gain": r(sc.gain), "explained": r(sc.explained)}
+    return out
+
+
 def read_video_points(video_path, frames, calibration_frame: int, reader: str = READER,
                       detect_landmarks_too: bool = False):  # fmt: skip
     """The input's side: MediaPipe's face mesh (image mode) on the video's frame

@@ -421,7 +421,13 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
     import tempfile
     from pathlib import Path
 
-    from myoface.analysis.fidelity import fidelity_of_analysis, write_fidelity_report
+    from myoface.analysis.contractions_csv import read_contractions_csv
+    from myoface.analysis.fidelity import (
+        fidelity_of_analysis,
+        judge_on_resynthesis,
+        person_model,
+        write_fidelity_report,
+    )
     from myoface.analysis.outputs import analyze_to_folder
     from myoface.model import build_face_model
 
@@ -436,6 +442,12 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
         )  # fmt: skip
         fid = write_fidelity_report(res.folder, path)
         doc = json.loads((res.folder / "fidelity.json").read_text())
+        # the judge on a known answer with this video's own motion: the person's face
+        # rendered at the contractions measured (fidelity.judge_on_resynthesis)
+        person = person_model(path, fid.reference)[0]
+        _, table, quality = read_contractions_csv(res.folder / "contractions.csv", person.ids)
+        measured = table[np.array([q == "ok" for q in quality])]
+        judge_self = judge_on_resynthesis(person, measured, Path(tmp) / "resynthesis.mp4")
         # the judge's earlier alignment, for comparison (see below)
         fid2, _ = fidelity_of_analysis(
             path, res.folder / "contractions.csv", calibration_frame=fid.reference,
@@ -462,9 +474,8 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
                 }
     # which stage holds the measure: the best any contractions of the same face could do,
     # fitted to the reader's own displacements (a diagnostic, never the analysis)
-    from myoface.analysis.fidelity import model_reach, person_model
+    from myoface.analysis.fidelity import model_reach
 
-    person = person_model(path, fid.reference)[0]
     reach, _ = model_reach(person, fid.d_in)
     regions = {k: v.explained for k, v in fid.regions.items()}
     reach2, _ = model_reach(person, fid2.d_in, alignment="2d")
@@ -506,6 +517,16 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
         # which stage holds it, per region: MediaPipe's points (the default's input) against the
         # judge, and the model against MediaPipe's points (fidelity._stages)
         "stages": doc.get("stages"),
+        "judge_on_resynthesis": {
+            "what": (
+                "the judge on a known answer with this video's motion: the person's face "
+                "rendered front on (384 px) at the contractions the analysis measured, read "
+                "by the input's reader and scored against the model's own vertices "
+                "(fidelity.judge_on_resynthesis): 1 for a valid judge; unsure, the share of "
+                "the region's readings that failed the reader's forward-backward check"
+            ),
+            **judge_self,
+        },
         "target": FIDELITY_TARGET,
         "target_met": bool(
             fid.overall.explained >= FIDELITY_TARGET["overall"]
