@@ -523,7 +523,9 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
                 "rendered front on (384 px) at the contractions the analysis measured, read "
                 "by the input's reader and scored against the model's own vertices "
                 "(fidelity.judge_on_resynthesis): 1 for a valid judge; unsure, the share of "
-                "the region's readings that failed the reader's forward-backward check"
+                "the region's readings that failed the reader's forward-backward check. As "
+                "good as the render's look: the lower lip's texture is the photo's closed "
+                "lips stretched open, which no face shows"
             ),
             **judge_self,
         },
