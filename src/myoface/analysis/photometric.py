@@ -164,8 +164,20 @@ from myoface.facemesh import import_opencv
 SUBDIVISION = 4
 #: the Gaussian blurs (pixels) of the coarse-to-fine levels, and how many of a frame's
 #: Gauss-Newton steps each coarse level gets (one where not said; the last level takes the
-#: rest)
-BLUR_SCHEDULE_PX = (4.0, 2.0, 1.0)
+#: rest). The finest is below a pixel: a webcam's frames come blurred by about a pixel
+#: already (the lens, the sensor, the codec), and a pixel more took off the texture's detail
+#: that tells a muscle's pull from its neighbour's. Measured 2026-12-05 (finest level 1.0 /
+#: 0.7 / 0.5 / 0.35 px; the degraded head-motion renders over the camera seeds 0, 1, 2):
+#: the known warps' worst gain 0.897 / 0.905 / 0.912 / 0.914, leak 0.060 / 0.050 / 0.046 /
+#: 0.042; head moving, skin 0.98, 1.17, 0.99 / 0.97, 1.14, 0.97 / 0.96, 1.12, 0.98 / 0.96,
+#: 1.11, 0.98 mm; head still 0.66, 0.60, 0.76 / 0.66, 0.59, 0.78 / 0.67, 0.60, 0.77 / 0.67,
+#: 0.61, 0.77 mm (the same within the seeds' scatter); single_face.mp4's validated fidelity
+#: 0.766 / 0.771 / 0.775 / 0.777, but its mouth corners' gain 0.868 / 0.858 / 0.852 / 0.848
+#: (the target is 0.85 or more); the gaze clips (median) 5.36 / 5.15 / 5.23 / 5.06 deg; the
+#: expression clip (apex / rest) 0.76 / 0.83 -> 0.78 / 0.79 -> 0.80 / 0.82 -> 0.79 / 0.82. A
+#: fourth level (4, 2, 1, 0.6 or 0.7 px) was no better than three. 0.7 keeps the corners'
+#: gain clear of its bound.
+BLUR_SCHEDULE_PX = (4.0, 2.0, 0.7)
 STEPS_PER_LEVEL = (1, 1)
 # (two steps per coarse level gave the same known-warp gains to 0.001 and the same degraded
 # head-motion numbers to 0.01, at a third more of the fit's time; 2026-12-01. Without the
