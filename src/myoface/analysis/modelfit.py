@@ -1124,13 +1124,8 @@ class ModelFit:
         p = self.settings.sparsity_reach
         if not p:
             return None
-        cached = getattr(self, "_sparsity_scale_cache", None)
-        if cached is not None and cached[0] == p:
-            return cached[1]
         reach = np.sqrt((self.model_response**2).sum(axis=(0, 1)))
-        scale = (reach / np.median(reach[self._fitted])) ** p
-        self._sparsity_scale_cache = (p, scale)
-        return scale
+        return (reach / np.median(reach[self._fitted])) ** p
 
     def _scale_lids(self, shape) -> dict[str, float]:
         """Scale the lid muscles' response to the eye openings of ``shape`` (the person's
