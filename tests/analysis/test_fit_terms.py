@@ -21,7 +21,9 @@ from myoface.analysis.terms import (
     MagnitudePrior,
     OpticalFlowTerm,
     SparsityPrior,
+    SymmetryPrior,
     TemporalPrior,
+    mirror_pairs,
     patch_footprint,
 )
 from tests.analysis.test_fit import CAMERA, landmarks
@@ -107,6 +109,9 @@ def _terms(fit, p, prev, huber):
         # each muscle its own weight (FitSettings.sparsity_reach)
         "sparsity_scaled": SparsityPrior(s.sparsity, scale=_scale(fit)),
         "sparsity_concave_scaled": SparsityPrior(s.sparsity, knee=0.2, scale=_scale(fit)),
+        # the two sides alike: quadratic, and Cauchy's (FitSettings.symmetry_scale)
+        "symmetry": SymmetryPrior(mirror_pairs(fit.model.ids), 0.1),
+        "symmetry_robust": SymmetryPrior(mirror_pairs(fit.model.ids), 0.1, scale=0.2),
     }
 
 
@@ -128,6 +133,8 @@ def _scale(fit) -> np.ndarray:
         "sparsity_concave",
         "sparsity_scaled",
         "sparsity_concave_scaled",
+        "symmetry",
+        "symmetry_robust",
     ],  # fmt: skip
 )
 @pytest.mark.parametrize("use_depth", [True, False])

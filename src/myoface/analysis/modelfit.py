@@ -90,7 +90,9 @@ from myoface.analysis.terms import (
     MagnitudePrior,
     OpticalFlowTerm,
     SparsityPrior,
+    SymmetryPrior,
     TemporalPrior,
+    mirror_pairs,
     patch_footprint,
     pixel_mm,
 )
@@ -1213,6 +1215,10 @@ class ModelFit:
             MagnitudePrior(s.magnitude_sigma),
             SparsityPrior(s.sparsity, s.sparsity_knee, self._sparsity_scale()),
         ]
+        if s.symmetry_sigma is not None:
+            out.append(
+                SymmetryPrior(mirror_pairs(self.model.ids), s.symmetry_sigma, s.symmetry_scale)
+            )
         out += au_prior_terms(self.model.ids, s)  # the AU table's span (analysis.au_prior)
         if getattr(self, "_lid_image", None) is not None:  # (FitSettings.reads_lids)
             lid = self.lid_edge_term(self._lid_image)

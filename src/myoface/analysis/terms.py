@@ -421,6 +421,101 @@ class TemporalPrior:
         return cost
 
 
+class SymmetryPrior:
+    """The two sides of the face contract alike, about: for each pair of muscles that mirror
+    one another (``pairs``, model indices (P, 2): :func:`mirror_pairs`) whose both members
+    are free, the difference ``d = c_l - c_r`` costs ``(d / sigma)^2``, or with ``scale``
+    Cauchy's ``(scale / sigma)^2 log(1 + (d / scale)^2)``: quadratic for a difference well
+    under ``scale``, growing only as its logarithm beyond, so that a one-sided action the
+    frames show is hardly pulled (its normal equations weigh each pair by ``1 / (1 + (d /
+    scale)^2)`` at the step's estimate, iteratively reweighted as Huber's weights are). Most
+    expressions are bilateral, and where the head turns one side of the face is seen at a
+    slant; without it the fit reads a symmetric action on the side it sees best and gives
+    the other side's motion to a neighbouring muscle
+    (:attr:`~myoface.analysis.weights.FitSettings.symmetry_sigma` has what it measured)."""
+
+    def __init__(self, pairs, sigma: float, scale: float | None = None):
+        self.pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+        self.sigma = float(sigma)
+        self.scale = None if scale is None else float(scale)
+        self._ne = None  # (the free set last asked, the pairs' positions in it, the matrix)
+
+    def prepare(self, est: Estimate) -> None:
+        pass
+
+    def _positions(self, est: Estimate):
+        """The pairs' positions among the unknowns (P', 2) (the pairs both of whose members
+        are free) and the normal matrix (the same at every step of a frame: read only)."""
+        if self._ne is None or self._ne[0] is not est.free:
+            where = {int(m): 6 + k for k, m in enumerate(est.free)}
+            pos = np.array(
+                [(where[a], where[b]) for a, b in self.pairs if a in where and b in where],
+                dtype=np.int64,
+            ).reshape(-1, 2)
+            n = 6 + len(est.free)
+            h = np.zeros((n, n))
+            w = 1.0 / self.sigma**2
+            for i, j in pos:
+                h[i, i] += w
+                h[j, j] += w
+                h[i, j] -= w
+                h[j, i] -= w
+            h.setflags(write=False)
+            self._ne = (est.free, pos, h)
+        return self._ne[1], self._ne[2]
+
+    def _differences(self, est: Estimate, pos) -> np.ndarray:
+        cf = est.contractions[est.free]
+        return cf[pos[:, 0] - 6] - cf[pos[:, 1] - 6]
+
+    def normal_equations(self, est: Estimate):
+        pos, h = self._positions(est)
+        b = np.zeros(h.shape[0])
+        if not len(pos):
+            return h, b
+        d = self._differences(est, pos)
+        w = np.ones(len(d)) if self.scale is None else 1.0 / (1.0 + (d / self.scale) ** 2)
+        if self.scale is not None:  # (Cauchy's weights at this estimate: h scaled per pair)
+            n = h.shape[0]
+            h = np.zeros((n, n))
+            for (i, j), wk in zip(pos, w / self.sigma**2, strict=True):
+                h[i, i] += wk
+                h[j, j] += wk
+                h[i, j] -= wk
+                h[j, i] -= wk
+        g = w * d / self.sigma**2
+        np.subtract.at(b, pos[:, 0], g)
+        np.add.at(b, pos[:, 1], g)
+        return h, b
+
+    def cost(self, est: Estimate) -> float:
+        pos, _ = self._positions(est)
+        if not len(pos):
+            return 0.0
+        d = self._differences(est, pos)
+        if self.scale is None:
+            return float(d @ d) / self.sigma**2
+        k = self.scale**2 / self.sigma**2
+        return float(k * np.log1p((d / self.scale) ** 2).sum())
+
+
+#: muscles that mirror one another but act apart (:func:`mirror_pairs` leaves them out): the
+#: lateral pterygoids turn the mandible sideways one at a time (together they thrust it
+#: forward)
+NOT_MIRRORED = ("lateral_pterygoid",)
+
+
+def mirror_pairs(ids) -> np.ndarray:
+    """The pairs (P, 2) of indices into ``ids`` of muscles that mirror one another: the ids
+    ``NAME_l`` and ``NAME_r`` (but :data:`NOT_MIRRORED`)."""
+    ids = list(ids)
+    index = {m: k for k, m in enumerate(ids)}
+    out = [(k, index[m[:-2] + "_r"]) for k, m in enumerate(ids)
+           if m.endswith("_l") and m[:-2] + "_r" in index
+           and not m.startswith(NOT_MIRRORED)]  # fmt: skip
+    return np.array(out, dtype=np.int64).reshape(-1, 2)
+
+
 class MagnitudePrior:
     """A weak Gaussian prior on each free contraction about 0: rows ``c / sigma``."""
 

@@ -451,8 +451,49 @@ class FitSettings:
     #: single_face.mp4's validated fidelity 0.766 -> 0.774 -> 0.731 (the corners' gain 0.87
     #: -> 0.86 -> 0.69). Not taken.
     sparsity_reach: float = 0.0
+    #: the symmetry prior (:class:`~myoface.analysis.terms.SymmetryPrior`): each pair of
+    #: muscles that mirror one another contract alike, within this sigma (a contraction; None:
+    #: no prior), robustly: Cauchy's loss beyond :attr:`symmetry_scale` (None: quadratic), so
+    #: that a difference of a few tenths, a one-sided action the frames show, is hardly pulled
+    #: at all (at 0.6 a tenth of the quadratic prior's weight). Why: on the degraded
+    #: head-motion renders the fit read a symmetric action on one side and gave the other's to
+    #: a neighbouring muscle (frontalis inner 0.71 on both sides read 0.61 and 0.00, the left's
+    #: motion given to the frontalis major, 0.67 against 0.47; the depressor anguli oris 0.63
+    #: on both read 0.66 and 0.00), with the head turned and also nearly frontal.
+    #: Measured 2026-12-05 (off / quadratic 0.3 / quadratic 0.1 / Cauchy 0.1 with scale 0.2,
+    #: the default), the degraded head-motion renders over camera seeds 0, 1, 2: head moving,
+    #: skin 0.97, 1.14, 0.97 / 0.85, 0.96, 0.90 / 0.84, 0.88, 0.83 / 0.84, 0.98, 0.84 mm,
+    #: worst correlation 0.30, 0.21, 0.25 / 0.64, 0.24, 0.31 / 0.20, 0.46, 0.38 / 0.36, 0.42,
+    #: 0.38, median RMSE 0.113, 0.144, 0.136 / 0.103, 0.131, 0.119 / 0.112, 0.133, 0.113 /
+    #: 0.099, 0.142, 0.115; head still, skin 0.66, 0.59, 0.78 / 0.63, 0.59, 0.76 / 0.62,
+    #: 0.58, 0.76 / 0.62, 0.58, 0.76 mm, median RMSE 0.099, 0.076, 0.077 / 0.086, 0.074,
+    #: 0.067 / 0.083, 0.072, 0.064 / 0.082, 0.072, 0.064; the known warps' worst gain 0.905 /
+    #: 0.899 / 0.901 / 0.900 (the mouth corners, head still); single_face.mp4's validated
+    #: fidelity 0.771 / 0.777 / 0.778 / 0.778 (brows 0.66 -> 0.70). A smile of one zygomaticus
+    #: major (0.7) on the turned, degraded render (tests/analysis/test_degraded.py), head
+    #: turned 20 / 30 degrees: the person's left read 0.58 / 0.48 without the prior, 0.54 /
+    #: 0.45 with quadratic 0.3, 0.38 / - with quadratic 0.1, 0.54 / 0.42 with the default;
+    #: the right 0.65 / 0.64, 0.60 / 0.59, 0.47 / -, 0.63 / 0.60; the other side at most 0.13
+    #: (quadratic 0.1), else 0.05. The expressions: the benchmark's clip (apex / rest) 0.78 /
+    #: 0.79 -> 0.71 / 0.88 (quadratic 0.3) and 0.71 / 0.76 (the default), its sadness read
+    #: as neutral (AU4 0.14 -> 0.09 of 0.45: the corrugators' one-sided readings go with it);
+    #: on the four held-out clips of ``tools/expression_runs.py`` (heldp, p2, held, small)
+    #: 40/62, 28/73, 53/49, 35/84 -> 39/61, 34/65, 53/72, 31/86 % with the default (mean
+    #: 39 / 67 -> 39 / 71), the contractions' median RMSE 0.155, 0.179, 0.203, 0.167 ->
+    #: 0.149, 0.171, 0.176, 0.167 and the worst muscle's 0.42, 0.57, 0.73, 0.58 -> 0.39,
+    #: 0.49, 0.68, 0.48. The quadratic prior strong enough to help as much damps a one-sided
+    #: smile by a third; weak enough not to, it helps half as much.
+    symmetry_sigma: float | None = 0.1
+    #: the symmetry prior's scale (a contraction): Cauchy's loss ``scale^2 log(1 + (d /
+    #: scale)^2)`` of the two sides' difference ``d`` (over ``symmetry_sigma^2``); None: the
+    #: quadratic ``d^2``
+    symmetry_scale: float | None = 0.2
 
     def __post_init__(self) -> None:
+        for name in ("symmetry_sigma", "symmetry_scale"):
+            v = getattr(self, name)
+            if v is not None and not (np.isfinite(v) and v > 0):
+                raise MyofaceValueError(f"{name} must be None (none) or > 0; got {v}")
         g = self.photo_landmark_gain
         if g is not None and not 0 < g <= 1.5:
             raise MyofaceValueError(
