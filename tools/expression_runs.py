@@ -2,7 +2,7 @@
 without refitting (:mod:`myoface.bench.expression` runs one of them end to end; the others are
 held out: other orders, intensities, faces and phases of the head's loop).
 
-    python tools/expression_runs.py OUTDIR [RUN ...]
+    python tools/expression_runs.py OUTDIR [RUN ...] [--points]
 
 Each run is saved as ``OUTDIR/RUN.npz``: the fitted contractions (``estimate``), the true ones
 (``truth``), the fit's and the true head angles, and per frame the played expression, its
@@ -16,6 +16,11 @@ phase and intensity. Runs (all with the head moving along the benchmark's loop u
 - ``small``: the person's face, the head's loop at 0.5 of its amplitude, longer apexes.
 - ``still``: the benchmark's clip with the head still.
 - ``exact``: the benchmark's clip with the fit given the model's own projected vertices.
+
+Every run but ``exact`` is fitted as the benchmark fits (the default analysis: MediaPipe's
+points and the photometric term, :class:`~myoface.analysis.weights.FitSettings`); with
+``--points``, on MediaPipe's points alone (until 2026-12-05 the tool fitted every run so,
+also after the photometric fit became the default).
 
 About a minute a run on a loaded 2-core machine.
 """
@@ -101,6 +106,7 @@ def run(name: str, out: Path) -> None:
     inten = _intensities(episodes, phases)
     poses = hm.head_trajectory(len(truth), True) if still else trajectory(len(truth), phase, amp)
     skins = hm.relaxed_skins(fm, truth)
+    settings, frames = None, None
     if exact:
         from myoface.bench.expression import model_landmarks
 
@@ -108,13 +114,27 @@ def run(name: str, out: Path) -> None:
     else:
         frames, _ = hm.degraded_sequence(fm.face, poses, skins)
         points, _ = hm.detect_sequence(frames)
-        del frames
-    res = hm.run_headmotion(fm, points, truth, poses, skins)
+        if not POINTS_ONLY:
+            from myoface.analysis.weights import FitSettings
+
+            settings = FitSettings()  # (the default analysis': its photometric term)
+        else:
+            frames = None
+    res = hm.run_headmotion(fm, points, truth, poses, skins, settings=settings, frames=frames)
     save_run(out / f"{name}.npz", fm, res, truth, played, ph, inten)
     print(name, "saved", flush=True)
 
 
+#: the runs fitted on MediaPipe's points alone (``--points``), as the tool did before the
+#: photometric fit was the default (2026-12-05): the default analysis' fit otherwise
+POINTS_ONLY = False
+
+
 def main() -> None:
+    global POINTS_ONLY
+    if "--points" in sys.argv:
+        sys.argv.remove("--points")
+        POINTS_ONLY = True
     out = Path(sys.argv[1])
     out.mkdir(parents=True, exist_ok=True)
     for name in sys.argv[2:] or ["bench", "heldp", "p2", "held", "small", "still", "exact"]:
