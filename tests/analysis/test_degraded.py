@@ -115,18 +115,18 @@ def test_the_benchmark_fit_takes_frames_as_the_tracker_does(degraded_smile, monk
 @pytest.mark.shared_data
 @pytest.mark.parametrize("side", ["l", "r"])
 def test_a_one_sided_smile_is_read_on_its_side(side):
-    """The symmetry prior (FitSettings.symmetry_sigma, opt-in) holds the two sides alike where
-    the frames do not tell them apart, not where they do: a smile of one zygomaticus major
-    (0.7) on the turned, degraded render is read by the analysis with it (and its photometric
-    term) on its side at 0.4 or more and on the other at 0.15 or less. Measured 2026-12-05 (the prior off / on): the person's left 0.58 / 0.54, right
-    0.65 / 0.60, the other side 0.00-0.03 / 0.00-0.04; head turned 30 degrees, left 0.48 /
-    0.42, right 0.64 / 0.60."""
+    """The symmetry prior (FitSettings.symmetry_sigma) holds the two sides alike where the
+    frames do not tell them apart, not where they do: a smile of one zygomaticus major (0.7)
+    on the turned, degraded render is read by the default analysis on its side at 0.4 or more
+    and on the other at 0.15 or less. Measured 2026-12-05 (the prior off / on): the person's
+    left 0.58 / 0.54, right 0.65 / 0.63, the other side at most 0.03 / 0.02; with the head
+    turned 30 degrees, left 0.48 / 0.42, right 0.64 / 0.60. A quadratic prior of sigma 0.1
+    fails it (left 0.38)."""
     from myoface.analysis.weights import FitSettings
     from myoface.bench.headmotion import run_headmotion
 
     fm, frames, points, truth, poses, skins = _degraded({f"zygomaticus_major_{side}": 0.7})
-    settings = FitSettings(symmetry_sigma=0.1, symmetry_scale=0.2)
-    res = run_headmotion(fm, points, truth, poses, skins, settings=settings, frames=frames)
+    res = run_headmotion(fm, points, truth, poses, skins, settings=FitSettings(), frames=frames)
     got = np.nanmean(res.estimate[NEUTRAL + RISE :], axis=0)
     ids = list(fm.ids)
     other = "r" if side == "l" else "l"

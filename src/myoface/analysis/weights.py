@@ -493,8 +493,8 @@ class FitSettings:
     #: moves the head frame the gaze is read in (clip (11, 5): both eyes' mean pitch error
     #: -4.5 -> -5.9 deg). Cauchy 0.2: gaze mean 5.67, the head-motion skin 0.85, 1.07, 0.94
     #: mm, the known warps 0.899. Leaving the lids' muscles or the mentalis out of the pairs
-    #: did not change the gaze (the benchmark's
-    #: three clips' median 6.55; the five clips' mean 6.35 deg).
+    #: did not change the gaze (the benchmark's three clips' median 6.55; the five clips'
+    #: mean 6.35 deg).
     symmetry_sigma: float | None = 0.1
     #: the symmetry prior's scale (a contraction): Cauchy's loss ``scale^2 log(1 + (d /
     #: scale)^2)`` of the two sides' difference ``d`` (over ``symmetry_sigma^2``); None: the
