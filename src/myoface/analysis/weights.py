@@ -494,7 +494,10 @@ class FitSettings:
     #: -4.5 -> -5.9 deg). Cauchy 0.2: gaze mean 5.67, the head-motion skin 0.85, 1.07, 0.94
     #: mm, the known warps 0.899. Leaving the lids' muscles or the mentalis out of the pairs
     #: did not change the gaze (the benchmark's three clips' median 6.55; the five clips'
-    #: mean 6.35 deg).
+    #: mean 6.35 deg), nor did leaving out every pair of the upper face (the brows', the
+    #: eyes' and the lids': the five clips 4.48, 6.61, 6.43, 7.36, 6.55, mean 6.29), which
+    #: also kept less of the head-motion gain (skin 0.85, 0.91, 0.90 mm): the lower face's
+    #: symmetric spurious readings move the head frame as well.
     symmetry_sigma: float | None = 0.1
     #: the symmetry prior's scale (a contraction): Cauchy's loss ``scale^2 log(1 + (d /
     #: scale)^2)`` of the two sides' difference ``d`` (over ``symmetry_sigma^2``); None: the
