@@ -445,24 +445,30 @@ class SymmetryPrior:
 
     def _positions(self, est: Estimate):
         """The pairs' positions among the unknowns (P', 2) (the pairs both of whose members
-        are free) and the normal matrix (the same at every step of a frame: read only)."""
+        are free) and, quadratic, the normal matrix (the same at every step of a frame: read
+        only)."""
         if self._ne is None or self._ne[0] is not est.free:
             where = {int(m): 6 + k for k, m in enumerate(est.free)}
             pos = np.array(
                 [(where[a], where[b]) for a, b in self.pairs if a in where and b in where],
                 dtype=np.int64,
             ).reshape(-1, 2)
-            n = 6 + len(est.free)
-            h = np.zeros((n, n))
-            w = 1.0 / self.sigma**2
-            for i, j in pos:
-                h[i, i] += w
-                h[j, j] += w
-                h[i, j] -= w
-                h[j, i] -= w
-            h.setflags(write=False)
+            h = None
+            if self.scale is None:
+                h = self._matrix(pos, np.ones(len(pos)), 6 + len(est.free))
+                h.setflags(write=False)
             self._ne = (est.free, pos, h)
         return self._ne[1], self._ne[2]
+
+    def _matrix(self, pos, w, n: int) -> np.ndarray:
+        """The normal matrix (n, n) of the pairs ``pos`` weighing ``w`` (P',) each."""
+        h = np.zeros((n, n))
+        wk = w / self.sigma**2
+        np.add.at(h, (pos[:, 0], pos[:, 0]), wk)
+        np.add.at(h, (pos[:, 1], pos[:, 1]), wk)
+        np.subtract.at(h, (pos[:, 0], pos[:, 1]), wk)
+        np.subtract.at(h, (pos[:, 1], pos[:, 0]), wk)
+        return h
 
     def _differences(self, est: Estimate, pos) -> np.ndarray:
         cf = est.contractions[est.free]
@@ -470,19 +476,12 @@ class SymmetryPrior:
 
     def normal_equations(self, est: Estimate):
         pos, h = self._positions(est)
-        b = np.zeros(h.shape[0])
-        if not len(pos):
-            return h, b
+        n = 6 + len(est.free)
         d = self._differences(est, pos)
         w = np.ones(len(d)) if self.scale is None else 1.0 / (1.0 + (d / self.scale) ** 2)
-        if self.scale is not None:  # (Cauchy's weights at this estimate: h scaled per pair)
-            n = h.shape[0]
-            h = np.zeros((n, n))
-            for (i, j), wk in zip(pos, w / self.sigma**2, strict=True):
-                h[i, i] += wk
-                h[j, j] += wk
-                h[i, j] -= wk
-                h[j, i] -= wk
+        if h is None:  # (Cauchy's weights at this estimate)
+            h = self._matrix(pos, w, n)
+        b = np.zeros(n)
         g = w * d / self.sigma**2
         np.subtract.at(b, pos[:, 0], g)
         np.add.at(b, pos[:, 1], g)
