@@ -9,9 +9,13 @@ Each run is saved as ``OUTDIR/RUN.npz``: the fitted contractions (``estimate``),
 phase and intensity. Runs (all with the head moving along the benchmark's loop unless said):
 
 - ``bench``: the benchmark's clip (its episodes, the person's face from single_face.mp4).
-- ``heldp``: the person's face, another order, intensities 0.6-0.9.
+- ``heldp``: the person's face, another order, intensities 0.6-0.9 (camera seed 1).
 - ``p2``: the person's face, a third order, intensities 0.5-1.0, the head's loop started a
-  third of the way round (other poses meet each expression).
+  third of the way round (other poses meet each expression; camera seed 2).
+
+``bench``, ``heldp`` and ``p2`` are the benchmark's three clips
+(:data:`myoface.bench.expression.CLIPS`, since 2026-12-06; before, ``heldp`` and ``p2`` had
+the camera's seed 0).
 - ``held``: the default face (not the person's), ``heldp``'s episodes.
 - ``small``: the person's face, the head's loop at 0.5 of its amplitude, longer apexes.
 - ``still``: the benchmark's clip with the head still.
@@ -31,17 +35,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-HELDP = (
-    ("anger", 0.7), ("surprise", 0.6), ("disgust", 0.9), ("sadness", 0.8), ("happiness", 0.6),
-    ("fear", 0.7), ("surprise", 0.9), ("sadness", 0.6), ("anger", 0.9), ("fear", 0.8),
-    ("disgust", 0.6), ("happiness", 0.9),
-)  # fmt: skip
-P2 = (
-    ("fear", 1.0), ("disgust", 0.5), ("sadness", 1.0), ("happiness", 0.5), ("anger", 0.5),
-    ("surprise", 1.0), ("fear", 0.5), ("sadness", 0.5), ("disgust", 1.0), ("anger", 1.0),
-    ("happiness", 1.0), ("surprise", 0.5),
-)  # fmt: skip
 
 
 def trajectory(n, phase=0.0, amplitude=1.0):
@@ -82,15 +75,24 @@ def save_run(path: Path, fm, res, truth, played, ph, intensity) -> None:
 
 
 def run(name: str, out: Path) -> None:
+    from dataclasses import replace
+
     from myoface.bench import headmotion as hm
-    from myoface.bench.expression import EPISODES, PHASES, _intensities, episode_programme
+    from myoface.bench.expression import (
+        CLIPS,
+        EPISODES,
+        HELDP,
+        P2,
+        PHASES,
+        _intensities,
+        episode_programme,
+    )
+    from myoface.render.degrade import CameraDegradation
 
     episodes, phases, face, still, exact = EPISODES, PHASES, "person", False, False
-    phase, amp = 0.0, 1.0
-    if name == "heldp":
-        episodes = HELDP
-    elif name == "p2":
-        episodes, phase = P2, 1 / 3
+    phase, amp, seed = 0.0, 1.0, 0
+    if name in CLIPS:  # (the benchmark's clips, as it plays them)
+        episodes, phase, seed = CLIPS[name]
     elif name == "held":
         episodes, face = HELDP, "default"
     elif name == "small":
@@ -112,7 +114,9 @@ def run(name: str, out: Path) -> None:
 
         points = model_landmarks(poses, skins)
     else:
-        frames, _ = hm.degraded_sequence(fm.face, poses, skins)
+        frames, _ = hm.degraded_sequence(
+            fm.face, poses, skins, replace(CameraDegradation(), seed=seed)
+        )
         points, _ = hm.detect_sequence(frames)
         if not POINTS_ONLY:
             from myoface.analysis.weights import FitSettings

@@ -392,6 +392,26 @@ def test_score_labels():
     assert r["apex_accuracy_per_episode"] == {"happiness 1": 0.5, "fear 0.5": 0.0}
 
 
+def test_pool_scores_counts_each_frame_once():
+    """The headline over several clips: apex frames and rest frames pooled, not the clips'
+    shares averaged (a short clip does not weigh as much as a long one)."""
+    from myoface.bench.expression import CLIPS, pool_scores
+
+    runs = {
+        "a": {"apex_accuracy": 1.0, "rest_accuracy": 0.5, "apex_frames": 30, "rest_frames": 10},
+        "b": {"apex_accuracy": 0.0, "rest_accuracy": 1.0, "apex_frames": 10, "rest_frames": 30},
+    }
+    r = pool_scores(runs)
+    assert r["apex_accuracy"] == pytest.approx(0.75) and r["rest_accuracy"] == pytest.approx(0.875)
+    assert r["apex_frames"] == 40 and r["rest_frames"] == 40
+    assert r["per_clip (apex / rest)"] == {"a": "1.000 / 0.500", "b": "0.000 / 1.000"}
+    # the benchmark's clips: the first is the clip of before, each differs in its episodes,
+    # its head's loop or its camera's noise
+    assert next(iter(CLIPS)) == "bench"
+    assert len({(e, loop, seed) for e, loop, seed in CLIPS.values()}) == len(CLIPS)
+    assert len({seed for *_, seed in CLIPS.values()}) == len(CLIPS)
+
+
 def test_model_landmarks_project_the_skin(ids):
     """The benchmark's perfect detector: the posed vertices through the fit's camera (a
     frontal head 500 mm away lands its nose tip near the image's centre)."""
