@@ -105,6 +105,8 @@ def test_analyze_then_resynth(smile_video, tmp_path, capsys):
     assert side["muscles"] == list(PAPER_MUSCLES)
     assert [f["frame"] for f in side["frames"]] == list(range(len(SMILE)))
     assert all(f["quality"] == "ok" for f in side["frames"])
+    # the smile peaks at 0.9: no muscle is at the model's limit
+    assert side["at_limit"] == {}
     _check_plot(iio.imread(out / "contractions.png"))
     # overlay.mp4: the input frames, with the contours drawn in yellow on the features
     frames = iio.imread(video, plugin="pyav").astype(int)

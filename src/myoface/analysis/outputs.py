@@ -74,9 +74,50 @@ def draw_contours(frame: np.ndarray, contours: dict, color=(255, 215, 0)) -> np.
     return img
 
 
+#: a contraction at or above this is at the model's limit (the fit's bound is 1: the most
+#: the model's muscle makes)
+AT_LIMIT = 0.99
+#: :func:`limit_note` names the muscles at their limit on at least this share of the frames
+#: measured
+LIMIT_NOTE_SHARE = 0.1
+
+
+def at_limit(ids, table, quality) -> dict[str, float]:
+    """Each muscle's share of the measured frames (``quality`` "ok") whose contraction in
+    ``table`` (T, M) is at the model's limit (:data:`AT_LIMIT`), for the muscles that reach it,
+    largest first. A muscle held there over many frames means the person moved more than the
+    model's muscle can move the skin (or the fit gave it motion that belongs to another):
+    its contraction reads the model's limit, not the person's effort."""
+    table = np.asarray(table, dtype=np.float64)
+    ok = np.array([q == "ok" for q in quality], dtype=bool)
+    if not ok.any():
+        return {}
+    share = (table[ok] >= AT_LIMIT).mean(axis=0)
+    order = np.argsort(-share, kind="stable")
+    return {str(ids[j]): round(float(share[j]), 3) for j in order if share[j] > 0}
+
+
+def limit_note(shares: dict[str, float]) -> str | None:
+    """The line ``myoface analyze`` prints when muscles sit at their limit
+    (:func:`at_limit`'s ``shares``) on :data:`LIMIT_NOTE_SHARE` of the frames or more; None
+    when none does."""
+    many = {k: v for k, v in shares.items() if v >= LIMIT_NOTE_SHARE}
+    if not many:
+        return None
+    named = ", ".join(f"{k} {v:.0%}" for k, v in list(many.items())[:6])
+    more = f" and {len(many) - 6} more" if len(many) > 6 else ""
+    return (
+        f"note: {len(many)} muscle{'s' if len(many) > 1 else ''} at the model's limit "
+        f"(contraction 1) on {LIMIT_NOTE_SHARE:.0%} of the measured frames or more ({named}"
+        f"{more}): the skin moved more there than the model's muscles can move it "
+        '(analysis.json\'s "at_limit"; red ticks in contractions.png)'
+    )
+
+
 def plot_contractions(path, ids, times, table, quality) -> None:
     """The contractions ``table`` (T, M) over ``times`` (T,) s, one panel per muscle pair
-    (the paper's Fig. 8); frames whose ``quality`` is not "ok" shaded grey."""
+    (the paper's Fig. 8); frames whose ``quality`` is not "ok" shaded grey, and red ticks at
+    the top of a panel where a contraction is at the model's limit (:func:`at_limit`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -91,7 +132,13 @@ def plot_contractions(path, ids, times, table, quality) -> None:
     for ax, (base, cols) in zip(axes, groups.items(), strict=True):
         for j in cols:
             ax.plot(times, table[:, j], label=ids[j][-1] if ids[j][-2] == "_" else "")
-        ax.set_ylim(-0.02, 1.02)
+        top = np.zeros(len(times), dtype=bool)
+        for j in cols:
+            top |= np.nan_to_num(np.asarray(table[:, j], dtype=np.float64)) >= AT_LIMIT
+        if top.any():
+            ax.plot(np.asarray(times)[top], np.full(int(top.sum()), 1.05), "|", color="tab:red",
+                    ms=5, zorder=3)  # fmt: skip
+        ax.set_ylim(-0.02, 1.09)
         ax.set_ylabel(base.replace("_", " "), rotation=0, ha="right", fontsize=8)
         ax.tick_params(labelsize=7)
         bad = [t for t, q in zip(times, quality, strict=True) if q != "ok"]
@@ -99,8 +146,12 @@ def plot_contractions(path, ids, times, table, quality) -> None:
             ax.axvline(t, color="0.85", lw=2, zorder=0)
     axes[0].legend(loc="upper right", fontsize=7, ncol=2)
     axes[-1].set_xlabel("time (s)")
-    fig.suptitle("estimated contractions (grey: frames that could not be measured)", fontsize=9)
-    fig.tight_layout()
+    fig.suptitle(
+        "estimated contractions (grey: frames that could not be measured; red ticks: at the "
+        "model's limit)",
+        fontsize=9,
+    )
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / fig.get_figheight()))  # (the title clear)
     with atomic_output(path) as tmp:
         fig.savefig(tmp, dpi=100)
     plt.close(fig)
@@ -197,6 +248,10 @@ class FolderResult:
     def n_measured(self) -> int:
         """Frames whose quality is "ok"."""
         return sum(q == "ok" for q in self.frames.quality)
+
+    def at_limit(self) -> dict[str, float]:
+        """:func:`at_limit` of the frames analysed."""
+        return at_limit(self.ids, self.frames.contractions, self.frames.quality)
 
     @property
     def measured_fraction(self) -> float:
@@ -439,6 +494,8 @@ def _write_results(out, run, log, how_init, tracker, face, *, interrupted, plot=
         {"frame": int(k), "quality": q, "iterations": int(it)}
         for k, q, it in zip(log.index, log.quality, log.iterations, strict=True)
     ]
+    # the muscles at the model's limit, and on what share of the measured frames
+    side["at_limit"] = at_limit(an.ids, log.contractions, log.quality)
     # the tracker's own account: how it was initialised, mm per pixel, its settings
     side.update(an.describe())
     if how_init is not None:

@@ -210,6 +210,11 @@ def analyze_video(
             lines=lines,
         ),
     )  # fmt: skip
+    from myoface.analysis.outputs import limit_note
+
+    note = limit_note(res.at_limit())
+    if note is not None:
+        lines.append(note)
     try:
         for line in lines:
             print(line)
