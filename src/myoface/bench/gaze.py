@@ -433,8 +433,9 @@ def bench_gaze_error(quick: bool) -> Measurement:
     with its anchored optical flow (``flow``, ``--no-photometric --flow``; these three not in
     a quick run). The default is the fit with its photometric term (``photometric``). The
     value is the median over :data:`CLIPS` (other gaze programmes and camera draws; a quick
-    run the first alone): ``clips`` in the detail has each clip's value and eyes, the rest of
-    the detail is the first clip's."""
+    run the first alone): ``clips`` in the detail has each clip's value and eyes (with each
+    eye's mean error and where the fit put its eyeball's centre, the steady part of the
+    error), the rest of the detail is the first clip's."""
     model, frames, poses, gaze, closure, skins, report, face_kind = _sequence(quick)
     res = run_gaze(model, frames, poses, gaze, closure, skins)
     detail = {"face": face_kind, "frames": len(frames), "camera": report, "photometric": res}
@@ -443,8 +444,19 @@ def bench_gaze_error(quick: bool) -> Measurement:
         m, f, p, g, c, sk, _, _ = _sequence(quick, clip)
         runs.append(run_gaze(m, f, p, g, c, sk))
     values = [r["value"] for r in runs]
+    # each clip's eyes: their RMS error, their mean error (yaw, pitch: a steady bias) and
+    # where the fit put their eyeball's centre in the image against the truth (mean, px: the
+    # bias that the mean error mostly is), and the fitted head's mean rotation error
     detail["clips"] = {
-        str(clip): {"value": r["value"], **{e: r["per_eye"][e]["rms_deg"] for e in ("l", "r")}}
+        str(clip): {
+            "value": r["value"],
+            **{e: r["per_eye"][e]["rms_deg"] for e in ("l", "r")},
+            "mean_error_deg": {e: r["per_eye"][e]["mean_deg"] for e in ("l", "r")},
+            "eyeball_centre_px_mean": {
+                e: r["per_eye"][e]["eyeball_centre_px_mean"] for e in ("l", "r")
+            },
+            "head_rotation_error_mean_deg": r["head_rotation_error_deg"]["mean"],
+        }
         for clip, r in zip(CLIPS, runs, strict=False)
     }
     detail["clips"]["median"] = float(np.nanmedian(np.array(values, dtype=float)))
