@@ -286,6 +286,25 @@ each eye (``oracle=anchor``) with the pupil in every step reads 2.22 / 2.22 deg 
 pupil 2.72 / 3.81); with the landmark fit the same oracle reads 4.1-4.6. So the reader and the
 photometric fit's head would meet 3 deg, and the eye's place in the first frames would not:
 it needs a detector of the eye's opening better than MediaPipe's 1 px.
+
+A detector of the opening from the frame itself, measured 2026-12-06 (not built; the three
+clips of the benchmark, the default analysis, median 6.56 deg): the model's lid loop slid over
+the image to where a two-region model fits best (a plane of brightness, and a step across the
+loop's soft edge, 0.5 px, over a band of 3 px either side). On the true geometry (the true
+pose and skin) of clip (7, 3) it found the right eye's opening 1.6 px left of where it is
+(SD 1.0 px a frame) and both 0.5 px low: the iris, the lashes and the corners' shading inside
+the opening pull a region's edge. On the socket's template (:class:`EyeSocket`: the mean of the
+open frames, the iris left out) of the three clips, the fitted poses' anchor error found with
+0.4-1.0 mm of error (the right eye's 0.9-1.5 mm too far out, both 0.4-0.7 mm low): no better
+than MediaPipe's. Nor is the placement the face's shape or the camera's: with the identity held
+at zero (the person's exact neutral, which the benchmark's model is) or the analysis' camera at
+the renders' field of view, the eyeballs' centres sit where they did (clip (7, 3), right eye:
+1.44 and 1.89 px right of the truth against 1.54). It is the head pose, which the
+photometric fit keeps from the calibration's registration: without the registration
+(:data:`~myoface.analysis.modelfit.REGISTER_APPEARANCE` off) the clips read 3.40, 4.73 and
+4.34 deg (median 4.34) with the head's rotation worse (clip (7, 3): mean pitch error 2.3
+against 1.5 deg), the lottery of one frame's landmarks that the registration removed (its
+docstring has the five clips).
 """
 
 from __future__ import annotations
