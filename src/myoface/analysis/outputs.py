@@ -132,9 +132,7 @@ def plot_contractions(path, ids, times, table, quality) -> None:
     for ax, (base, cols) in zip(axes, groups.items(), strict=True):
         for j in cols:
             ax.plot(times, table[:, j], label=ids[j][-1] if ids[j][-2] == "_" else "")
-        top = np.zeros(len(times), dtype=bool)
-        for j in cols:
-            top |= np.nan_to_num(np.asarray(table[:, j], dtype=np.float64)) >= AT_LIMIT
+        top = (np.nan_to_num(np.asarray(table[:, cols], dtype=np.float64)) >= AT_LIMIT).any(1)
         if top.any():
             ax.plot(np.asarray(times)[top], np.full(int(top.sum()), 1.05), "|", color="tab:red",
                     ms=5, zorder=3)  # fmt: skip

@@ -194,7 +194,7 @@ def analyze_video(
     ``myoface batch`` runs for each video; then openface.csv (``fmt="openface"``) and the
     fidelity report (``report``); the command's lines printed. Returns the
     :class:`~myoface.analysis.outputs.FolderResult`."""
-    from myoface.analysis.outputs import analyze_to_folder
+    from myoface.analysis.outputs import analyze_to_folder, limit_note
 
     video_path = video if video_path is None else video_path
     lines: list[str] = []  # the report's, said once its files are in place
@@ -210,8 +210,6 @@ def analyze_video(
             lines=lines,
         ),
     )  # fmt: skip
-    from myoface.analysis.outputs import limit_note
-
     note = limit_note(res.at_limit())
     if note is not None:
         lines.append(note)
