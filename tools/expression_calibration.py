@@ -6,7 +6,7 @@ neighbours, scores and appearance registration chosen as for any calibration fra
 whole clip's scores).
 
     PYTHONPATH=src python tools/expression_calibration.py [--clip h4] [--frames auto,42,183]
-                                                           [--points-without-room]
+                                        [--points-without-room] [--wide-registration]
 
 Clips: the benchmark's (``bench``, ``heldp``, ``p2``: :data:`myoface.bench.expression.CLIPS`)
 and three more held out of it (:data:`HELD_OUT`: the same episodes in other orders, the head's
@@ -14,6 +14,10 @@ loop started elsewhere, other camera seeds), which start with the head turned 30
 (``h4``, ``h5``) or nearly frontal (``h3``). ``--points-without-room``: the first rest's
 MediaPipe points (the frames the calibration is chosen among and fitted on) taken from the
 same frames rendered without the room behind the head, every other frame as the benchmark's.
+``--wide-registration``: each run twice, the second with the appearance registered on the
+first's frames labelled neutral, spread over the clip
+(:func:`~myoface.analysis.modelfit.neutral_views`, ``ModelFit.set_appearance``'s ``views``);
+the second is printed (measured 2026-12-06: docs/expressions.md, "What holds the readings").
 
 Prints per run: the calibration frame and its true head angles (yaw, pitch, roll), the apex
 and rest accuracies (the benchmark's ``score_labels``), the rest frames' mean AU sum (the
@@ -84,10 +88,12 @@ def readings(arrays) -> dict:
     return {"rest_au_sum": float(x[rest].sum(1).mean()), "apex_gain": gain}
 
 
-def run(clip: str, frame: int | None, without_room: bool) -> dict:
+def run(clip: str, frame: int | None, without_room: bool, wide: bool = False) -> dict:
     """One analysis of ``clip`` calibrated as the benchmark does (``frame`` None) or at
-    ``frame``; returns the benchmark's detail with :func:`readings` and the true angles of the
-    calibration frame."""
+    ``frame``; ``wide``: then again, the appearance registered on the first pass's neutral
+    frames (:func:`~myoface.analysis.modelfit.neutral_views`); returns the (last) run's
+    benchmark detail with :func:`readings`, the true angles of the calibration frame and, with
+    ``wide``, the frames registered on."""
     import functools
 
     import myoface.analysis.modelfit as mf
@@ -115,9 +121,20 @@ def run(clip: str, frame: int | None, without_room: bool) -> dict:
             mf.CALIBRATION_WINDOW_S = 1e6  # (every frame of the clip scored)
             mf.choose_calibration_frame = lambda scores: int(frame)
         out = ex._synthetic(False, clip=clip)
+        if wide:
+            from myoface.analysis.expressions import expression_sequence
+            from myoface.analysis.modelfit import neutral_views
+
+            first = [v for k, v in ex._cache.items() if k[0] == "arrays"][-1]
+            _, labels = expression_sequence(
+                first["estimate"], list(first["ids"]), first["angles_est"]
+            )
+            views = neutral_views(labels)
+            out = ex._synthetic(False, clip=clip, registration=views)
+            out["registration"] = views
     finally:
         mf.CALIBRATION_WINDOW_S, mf.choose_calibration_frame, degrade.CameraDegradation = saved
-    arrays = next(v for k, v in ex._cache.items() if k[0] == "arrays")
+    arrays = [v for k, v in ex._cache.items() if k[0] == "arrays"][-1]
     poses = ex._clip(False, False, False, clip)[4]
     out.update(readings(arrays))
     out["calibration_angles"] = poses[out["calibration_frame"]].angles_deg
@@ -130,15 +147,18 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", default="auto", help="comma-separated: auto or frame indices")
     ap.add_argument("--points-without-room", action="store_true",
                     help="the first rest's points from frames without the room")  # fmt: skip
+    ap.add_argument("--wide-registration", action="store_true",
+                    help="then again, the appearance registered on the first pass's neutral "
+                    "frames (modelfit.neutral_views)")  # fmt: skip
     a = ap.parse_args(argv)
     register_held_out()
     print("| clip | calibration (yaw, pitch, roll) | apex / rest | rest AU sum | apex gain |")
     print("|---|---|---|---|---|")
     for f in a.frames.split(","):
         frame = None if f.strip() == "auto" else int(f)
-        r = run(a.clip, frame, a.points_without_room)
+        r = run(a.clip, frame, a.points_without_room, a.wide_registration)
         ang = ", ".join(f"{v:.0f}" for v in r["calibration_angles"])
-        how = "auto: " if frame is None else ""
+        how = ("auto: " if frame is None else "") + ("wide, " if a.wide_registration else "")
         print(f"| {a.clip} | {how}{r['calibration_frame']} ({ang}) | "
               f"{r['apex_accuracy']:.3f} / {r['rest_accuracy']:.3f} | "
               f"{r['rest_au_sum']:.2f} | {r['apex_gain']:.2f} |", flush=True)  # fmt: skip

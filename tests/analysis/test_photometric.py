@@ -896,3 +896,45 @@ def test_the_detectors_gain_is_read_off_the_video_and_the_pixels_move_the_face_i
     assert 0.4 <= g_read <= 0.65 and g_word == 1.0
     assert 0.9 <= read <= 1.1, gains
     assert read - at_word > 0.05, gains
+
+
+def test_the_appearance_is_registered_on_views_from_anywhere_in_the_video(turning):
+    """``set_appearance``'s ``views``: neutral frames from elsewhere in the video (a first
+    pass's, :func:`~myoface.analysis.modelfit.neutral_views`) register the appearance in
+    place of the calibration window's. The calibration on the frontal frame alone (no
+    registration frames of its own), the four turned frames given as views: the parallax
+    finds the landmarks' shared bias of 2.5 degrees of yaw as it does from the window's
+    frames (the test above), and the calibration records the frames it was registered on."""
+    from dataclasses import replace
+
+    from myoface.analysis.camera import rotation_angle_deg
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.weights import FitSettings
+
+    fm, cam, poses, frames, points = turning
+    fit = ModelFit(fm, cam, replace(FitSettings(), photometric=True))
+    cal = fit.calibrate(points[:1], 0)
+    views = {k: (points[k], frames[k]) for k in range(len(frames))}  # (0 itself: left out)
+    fit.set_appearance(frames[0], views=views)
+    found = cal.extra.get("appearance_parallax")
+    assert cal.extra["registration"] == [0, 1, 2, 3, 4]
+    assert found is not None and found["frames"] == [4, 3, 2, 1]
+    assert abs(found["rotation_deg"][1] + 2.5) < 0.5, found
+    r = fit.fit(points[3], image=frames[3])
+    assert rotation_angle_deg(r.pose.rotation, poses[3].rotation) < 1.0
+
+
+def test_neutral_views_are_spread_over_runs_of_neutral_frames():
+    """:func:`~myoface.analysis.modelfit.neutral_views`: only frames that end a run of three
+    neutral labels (not a lone neutral frame inside an expression, not a frame not measured),
+    at most ``n``, spread evenly over them in time."""
+    from myoface.analysis.modelfit import neutral_views
+
+    labels = ["neutral"] * 6 + ["happiness"] * 4 + ["neutral"] + ["fear"] * 3 + [""]
+    labels += ["neutral"] * 2 + [""] + ["neutral"] * 20
+    assert neutral_views(labels[:14], n=12) == [2, 3, 4, 5]
+    got = neutral_views(labels, n=5)
+    ok = [2, 3, 4, 5] + list(range(20, 38))
+    assert len(got) == 5 and set(got) <= set(ok)
+    assert got[0] == 2 and got[-1] == 37  # (the first and the last of them: spread)
+    assert neutral_views(["neutral", "neutral", "sadness"]) == []

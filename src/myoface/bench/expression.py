@@ -475,7 +475,7 @@ def _episodes(quick: bool, clip: str) -> tuple:
 
 def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=False,
                tracker: str | None = None, au_prior: bool = False,
-               overrides=(), clip: str = "bench") -> dict:  # fmt: skip
+               overrides=(), clip: str = "bench", registration=None) -> dict:  # fmt: skip
     """The synthetic run's detail (cached) on ``clip`` (:data:`CLIPS`); ``still``: the head
     frontal and still; ``clean``:
     on the renderer's own frames (:func:`~myoface.bench.headmotion.render_sequence`), not
@@ -488,7 +488,9 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
     analysis' default), ``"flow+photometric"`` both (``--flow``); ``au_prior``: with the fit's AU-space prior
     (:mod:`myoface.analysis.au_prior`, ``FitSettings(au_prior_sigma=AU_PRIOR_SIGMA)``);
     ``overrides``: ``((field, value), ...)`` of :class:`~myoface.analysis.weights.FitSettings`
-    set on top (a study's variant, e.g. ``(("sparsity", 0.0),)``: ``tools/expression_stages.py``)."""
+    set on top (a study's variant, e.g. ``(("sparsity", 0.0),)``: ``tools/expression_stages.py``);
+    ``registration``: frames that register the appearance in place of the calibration
+    window's (:func:`~myoface.bench.headmotion.run_headmotion`'s; ``tools/expression_calibration.py``)."""
     if tracker is None:
         tracker = "fit" if exact else DEFAULT_TRACKER
     if tracker not in TRACKERS:
@@ -496,7 +498,9 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
     overrides = tuple((str(k), v) for k, v in overrides)
     key = ("synthetic", bool(quick), bool(still), bool(clean), bool(exact), tracker,
            bool(au_prior)) + ((overrides,) if overrides else ()) + (
-        (("clip", clip),) if clip != "bench" else ())  # fmt: skip
+        (("clip", clip),) if clip != "bench" else ()) + (
+        (("registration", tuple(int(k) for k in registration)),) if registration is not None
+        else ())  # fmt: skip
     if key in _cache:
         return _cache[key]
     import time
@@ -540,6 +544,7 @@ def _synthetic(quick: bool, still: bool = False, clean: bool = False, exact=Fals
     res = run_headmotion(
         fm, points, truth, poses, skins, settings=settings,
         frames=frames if tracker != "fit" else None, anchored_flow="flow" in tracker,
+        registration=registration,
     )  # fmt: skip
     # as contractions.csv has them: the frames in order, above the rest reference at the
     # fit's head pose (ExpressionReader)

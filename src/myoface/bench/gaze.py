@@ -247,11 +247,14 @@ def _rotation_error_deg(fitted, true) -> np.ndarray:
 
 
 def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
-             photometric: bool | None = None, flow: bool = False) -> dict:  # fmt: skip
+             photometric: bool | None = None, flow: bool = False,
+             registration=None) -> dict:  # fmt: skip
     """Analyse ``frames`` end to end and compare each eye's gaze with the truth; also the
     reader alone on the true geometry. The detail's numbers (see the module).
     ``photometric``: None as ``myoface analyze`` (the fit with its photometric term), False
-    MediaPipe's points alone (``--no-photometric``)."""
+    MediaPipe's points alone (``--no-photometric``). ``registration``: None, or
+    ``{frame index: (landmarks, image)}`` that register the appearance in place of the
+    calibration window's (:attr:`~myoface.analysis.trackers.landmark_fit.FitTracker.registration_views`)."""
     from myoface.analysis.camera import PinholeCamera
     from myoface.analysis.gaze import GazeEstimator, gaze_angles, gaze_directions
     from myoface.analysis.pipeline import Tracking, make_analyzer, resolve_photometric
@@ -265,6 +268,8 @@ def run_gaze(model, frames, poses, gaze, closure, skins, estimator: str = "fit",
         model, clip, "landmarks", calibration_frame=None, estimator=estimator,
         photometric=photometric, flow=flow,
     )  # fmt: skip
+    if registration is not None:
+        an.registration_views = registration
     try:
         measured, offsets, openings = [], [], []
         for _, m in Tracking(clip, an, first):

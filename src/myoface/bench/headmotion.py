@@ -361,6 +361,7 @@ def flow_sequence(frames, points) -> tuple[list, np.ndarray]:
 def run_headmotion(
     model, points, truth, poses, skins, fps: float = 30.0, settings=None, synthesis=False,
     frames=None, detector_offsets: bool | None = None, anchored_flow: bool = False,
+    registration=None,
 ):  # fmt: skip
     """Fit the model to the landmark ``points`` of each frame (the 3-D fit, calibration frame
     chosen automatically in the first :data:`~myoface.analysis.modelfit.CALIBRATION_WINDOW_S` s)
@@ -379,7 +380,10 @@ def run_headmotion(
     (:class:`~myoface.analysis.modelflow.ModelFlow`, ``myoface analyze --flow``), each frame
     predicted by the fit's previous one, as
     :class:`~myoface.analysis.trackers.landmark_fit.FitTracker` does; the fit reads them in
-    place of MediaPipe's x, y where the tracker is sure."""
+    place of MediaPipe's x, y where the tracker is sure. ``registration``: None, or frame
+    indices whose points and images register the appearance in place of the calibration
+    window's (:meth:`~myoface.analysis.modelfit.ModelFit.set_appearance`'s ``views``; e.g. a
+    first pass's :func:`~myoface.analysis.modelfit.neutral_views`)."""
     import time
 
     from myoface.analysis import modelflow
@@ -408,7 +412,10 @@ def run_headmotion(
     window = max(1, int(round(CALIBRATION_WINDOW_S * fps)))
     cal = fit.calibrate(points[:window], synthesis=syn)
     if photometric:
-        fit.set_appearance(frames[cal.index], frames[:window])
+        views = None
+        if registration is not None:
+            views = {int(k): (points[k], frames[k]) for k in registration if points[k] is not None}
+        fit.set_appearance(frames[cal.index], frames[:window], views=views)
     tracker = ModelFlow.of_fit(frames[cal.index], fit) if anchored_flow else None
     n, m = len(points), model.n_muscles
     est = np.full((n, m), np.nan)

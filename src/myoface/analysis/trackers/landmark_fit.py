@@ -255,6 +255,11 @@ class FitTracker(TrackerBase):
             None if calibration_frame is None else int(calibration_frame)
         )
         self._chosen = calibration_frame is None
+        #: None, or neutral frames from anywhere in the video that register the photometric
+        #: fit's appearance in place of the calibration window's, ``{frame index: (landmarks,
+        #: image)}`` (:meth:`ModelFit.set_appearance`'s ``views``; e.g. a first pass's
+        #: :func:`~myoface.analysis.modelfit.neutral_views`); set before the calibration
+        self.registration_views: dict | None = None
         self.how = ""
         self.use_synthesis = bool(synthesis)
         self.synthesis: LandmarkSynthesis | None = None
@@ -542,7 +547,7 @@ class FitTracker(TrackerBase):
         if self.settings.photometric:
             if frame is None:
                 raise MyofaceValueError("the calibration frame was not kept")
-            self.fit.set_appearance(frame, images)
+            self.fit.set_appearance(frame, images, views=self.registration_views)
         if self.settings.reads_lids and frame is not None:
             self.fit.set_lid_reference(frame)  # (the lids' template)
         if self.gaze is not None:  # the person's eyeballs and open lids
