@@ -152,3 +152,51 @@ def test_analyze_and_batch_with_photometric_on_the_sample_video(tmp_path):
     batch_doc, batch = analysed(out / "single_face")
     assert batch_doc["fit_settings"] == doc["fit_settings"]
     np.testing.assert_allclose(batch, photo, atol=1e-4)
+
+
+def test_two_pass_is_refused_without_the_photometric_fit(tmp_path, capsys):
+    """``myoface analyze --two-pass`` registers the photometric fit's appearance: refused
+    with MediaPipe's points alone and with the snakes, before anything is analysed."""
+    from myoface.render import VideoWriter
+
+    video = tmp_path / "grey.mp4"
+    with VideoWriter(video, fps=10) as vw:
+        for _ in range(2):
+            vw.write(np.full((64, 64, 3), 128, np.uint8))
+    out = tmp_path / "out"
+    why = "--two-pass is for the landmarks' 3-D fit with its photometric term"
+    for argv in (["--no-photometric"], ["--tracker", "snakes"]):
+        assert main(["analyze", str(video), "-o", str(out), "--two-pass", *argv, "--quiet"]) == 1
+        assert capsys.readouterr().err.strip().splitlines()[-1] == f"myoface analyze: error: {why}"
+        assert not out.exists()
+
+
+@needs_mediapipe
+@pytest.mark.shared_data
+@pytest.mark.slow  # ~15 s on a loaded 2-core machine: the model, three passes of 20 frames
+def test_two_pass_registers_the_appearance_on_the_first_pass_neutral_frames(tmp_path):
+    """``--two-pass`` on single_face.mp4's first 20 frames (at rest until frame 18): the
+    appearance is registered on the first pass's frames labelled neutral, spread over the
+    video (:func:`~myoface.analysis.pipeline.neutral_frames_of`, the same frames when the
+    first pass is run again), and every frame is measured."""
+    import csv
+
+    from myoface.analysis.pipeline import make_analyzer, neutral_frames_of
+    from myoface.analysis.video import open_video
+    from myoface.model import load_face_model
+
+    video = shared_path("video", "single_face.mp4")
+    out = tmp_path / "two"
+    assert main(["analyze", str(video), "-o", str(out), "--two-pass", "--max-frames", "20",
+                 "--quiet"]) == 0  # fmt: skip
+    doc = json.loads((out / "analysis.json").read_text())
+    with open(out / "contractions.csv", newline="") as fh:
+        assert [r["quality"] for r in csv.DictReader(fh)] == ["ok"] * 20
+    model = load_face_model(None)
+    an, first = make_analyzer(model, open_video(video), "landmarks", calibration_frame=None)
+    views = neutral_frames_of(model, open_video(video), an, first, max_frames=20)
+    cal = doc["calibration_frame"]
+    assert 6 <= len(views) <= 12 and min(views) >= 2  # (three neutral frames running)
+    assert doc["calibration"]["appearance_registered_on"] == [cal] + [
+        k for k in sorted(views) if k != cal
+    ]

@@ -400,9 +400,16 @@ def neutral_views(labels, n: int = NEUTRAL_VIEWS_MAX) -> list[int]:
         if k >= NEUTRAL_VIEWS_RUN - 1
         and all(labels[j] == "neutral" for j in range(k - NEUTRAL_VIEWS_RUN + 1, k + 1))
     ]
-    if len(ok) <= n:
-        return ok
-    return sorted({ok[int(i)] for i in np.linspace(0, len(ok) - 1, n)})
+    return spread_evenly(ok, n)
+
+
+def spread_evenly(frames, n: int) -> list:
+    """At most ``n`` of ``frames`` (in order), evenly spread over them: the first, the last
+    and those between at equal steps of their positions."""
+    frames = list(frames)
+    if len(frames) <= n:
+        return frames
+    return sorted({frames[int(i)] for i in np.linspace(0, len(frames) - 1, n)})
 
 
 def registration_frames(scores, index: int) -> list[int]:

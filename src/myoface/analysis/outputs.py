@@ -286,6 +286,7 @@ def analyze_to_folder(
     finish=None,
     flow: bool = False,
     photometric: bool | None = None,
+    two_pass: bool = False,
 ) -> FolderResult:
     """Analyse ``video`` and write the analysis into the folder ``out`` (see the module's
     table); the code path of ``myoface analyze``.
@@ -334,6 +335,13 @@ def analyze_to_folder(
     face : the face model's file (``None``: the bundled face); recorded in analysis.json, and
         loaded when ``model`` is None.
     show_progress : a progress bar over the frames on stderr.
+    two_pass : the 3-D fit with its photometric term only: a first pass over the video whose
+        frames labelled neutral, spread over it, register the appearance of the second (the
+        one written; :func:`~myoface.analysis.pipeline.neutral_frames_of`,
+        :attr:`~myoface.analysis.trackers.landmark_fit.FitTracker.registration_views`): the
+        calibration window shows the face from one view, and what that view cannot tell is
+        read at every other as expression (docs/expressions.md, "What holds the readings").
+        Twice the time.
     finish : ``finish(folder, result)`` is called once the analysis' files are written into
         ``folder`` (the transaction's, not yet in place), for extra outputs such as
         ``myoface analyze``'s ``--format openface`` and ``--report``; if it fails, nothing
@@ -367,10 +375,17 @@ def analyze_to_folder(
     with contextlib.ExitStack() as keep, opened as tx:
         if model is None:
             model = load_face_model(face)
-        an, first = make_analyzer(
-            model, video, tracker, init or None, calibration_frame, refine, sigma,
-            estimator=estimator, flow=flow, photometric=photometric,
-        )  # fmt: skip
+
+        def analyzer():
+            return make_analyzer(
+                model, video, tracker, init or None, calibration_frame, refine, sigma,
+                estimator=estimator, flow=flow, photometric=photometric,
+            )  # fmt: skip
+
+        views = _first_pass(analyzer, model, video, max_frames, show_progress) if two_pass else None
+        an, first = analyzer()
+        if views is not None:
+            an.registration_views = views
         folder = tx.path
         run = Tracking(video, an, first, max_frames)
         try:
@@ -419,6 +434,21 @@ def analyze_to_folder(
             ]
             raise interrupted
     return result
+
+
+def _first_pass(analyzer, model, video, max_frames, show_progress) -> dict:
+    """:func:`analyze_to_folder`'s first pass (``two_pass``): the frames that register the
+    second's appearance (:func:`~myoface.analysis.pipeline.neutral_frames_of`)."""
+    from myoface.analysis.pipeline import neutral_frames_of
+    from myoface.analysis.trackers.landmark_fit import FitTracker
+
+    an, first = analyzer()
+    if not isinstance(an, FitTracker) or not an.settings.photometric:
+        an.close()
+        raise MyofaceValueError(
+            "two passes (--two-pass) are for the landmarks' 3-D fit with its photometric term"
+        )
+    return neutral_frames_of(model, video, an, first, max_frames, show_progress)
 
 
 def _kept_note(result: FolderResult, target) -> str:

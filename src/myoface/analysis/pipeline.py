@@ -423,3 +423,57 @@ def measure_frames(video, tracker, first: int = 0, max_frames: int | None = None
         yield from it
     finally:
         it.close()
+
+
+#: :func:`neutral_frames_of`: the candidates kept while the first pass runs, at most this many
+#: times the frames wanted (every other one dropped when there are more, and from then on
+#: every other one taken: spread over the video whatever its length)
+FIRST_PASS_KEEP = 4
+
+
+def neutral_frames_of(model, video, tracker, first: int = 0, max_frames: int | None = None,
+                      show_progress: bool = False) -> dict:  # fmt: skip
+    """A first pass of ``tracker`` (a 3-D fit's :class:`FitTracker`, made by
+    :func:`make_analyzer`; closed here) over ``video``: its frames labelled neutral by the
+    expression reader (:class:`~myoface.analysis.expressions.ExpressionReader`, as
+    contractions.csv labels them), spread over the video
+    (:func:`~myoface.analysis.modelfit.neutral_views`), as ``{frame index: (MediaPipe's
+    points, image)}``: a second pass's :attr:`FitTracker.registration_views` (``myoface
+    analyze --two-pass``). Only those frames' images are kept (at most
+    :data:`~myoface.analysis.modelfit.NEUTRAL_VIEWS_MAX` x :data:`FIRST_PASS_KEEP`), and their
+    points are detected again on each image alone."""
+    from myoface.analysis.expressions import ExpressionReader
+    from myoface.analysis.modelfit import NEUTRAL_VIEWS_MAX, NEUTRAL_VIEWS_RUN, spread_evenly
+    from myoface.facemesh import FaceMeshDetector
+
+    reader = ExpressionReader(tracker.ids)
+    labels: list[str] = []
+    kept: dict = {}  # (candidate frame index -> image)
+    stride, seen = 1, 0
+    try:
+        frames = measure_frames(video, tracker, first, max_frames)
+        for frame, m in progress(frames, desc="first pass", enabled=show_progress):
+            pose = getattr(m, "pose", None)
+            ok = m.quality == "ok" and np.isfinite(m.contractions).all()
+            labels += [""] * (m.index - len(labels))  # (frames not handed: not measured)
+            label = reader.read(m.contractions, pose.angles_deg)[1] if ok else ""
+            labels.append(label)
+            run = labels[-NEUTRAL_VIEWS_RUN:]
+            if len(run) == NEUTRAL_VIEWS_RUN and all(x == "neutral" for x in run):
+                if seen % stride == 0:
+                    kept[m.index] = frame
+                seen += 1
+                if len(kept) > FIRST_PASS_KEEP * NEUTRAL_VIEWS_MAX:
+                    kept = dict(list(kept.items())[::2])
+                    stride *= 2
+    finally:
+        tracker.close()
+    # (the candidates are neutral_views' frames, every stride-th: spread over them)
+    picks = spread_evenly(sorted(kept), NEUTRAL_VIEWS_MAX)
+    out = {}
+    with FaceMeshDetector(video=False) as det:
+        for k in picks:
+            p = det.detect(kept[k])
+            if p is not None:
+                out[k] = (p, kept[k])
+    return out

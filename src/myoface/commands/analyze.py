@@ -82,6 +82,14 @@ def add_arguments(p):
         "resynthesis as earlier reports did; fidelity.json and fidelity.png (needs the "
         "mediapipe extra)",
     )
+    p.add_argument(
+        "--two-pass",
+        action="store_true",
+        help="landmarks' 3-D fit with its photometric term: analyse the video twice, the "
+        "second time with the appearance registered on the first pass's neutral frames spread "
+        "over the video (not on the first seconds' view alone): fewer expressions read at rest "
+        "where the head turns (see docs/expressions.md); twice the time",
+    )
     p.add_argument("--quiet", action="store_true")
     add_face_argument(p)
 
@@ -141,6 +149,12 @@ def _run(args) -> int:
     if not args.output:
         raise MyofaceValueError("give an output folder with -o")
     settings = analysis_settings(args)
+    if args.two_pass:
+        if settings["tracker"] != "landmarks" or not settings["photometric"]:
+            raise MyofaceValueError(
+                "--two-pass is for the landmarks' 3-D fit with its photometric term"
+            )
+        settings["two_pass"] = True
     if settings["init"]:
         load_init(settings["init"])  # a bad file fails before the model is built
     if args.report:

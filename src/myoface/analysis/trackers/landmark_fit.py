@@ -260,6 +260,7 @@ class FitTracker(TrackerBase):
         #: image)}`` (:meth:`ModelFit.set_appearance`'s ``views``; e.g. a first pass's
         #: :func:`~myoface.analysis.modelfit.neutral_views`); set before the calibration
         self.registration_views: dict | None = None
+        self._first_index = 0
         self.how = ""
         self.use_synthesis = bool(synthesis)
         self.synthesis: LandmarkSynthesis | None = None
@@ -392,6 +393,7 @@ class FitTracker(TrackerBase):
         after them: an iterator can go on from there); an error when no frame has a face.
         Returns the calibration frame's index in the video."""
         t_start = time.perf_counter()
+        self._first_index = int(first_index)  # (the window's first frame, in the video)
         if self._flow is not None and self._refiner is self._flow:
             # the flow's tracks and counts start with the calibration's first frame
             self._flow = self._refiner = FlowRefiner()
@@ -547,7 +549,10 @@ class FitTracker(TrackerBase):
         if self.settings.photometric:
             if frame is None:
                 raise MyofaceValueError("the calibration frame was not kept")
-            self.fit.set_appearance(frame, images, views=self.registration_views)
+            views = self.registration_views
+            if views is not None:  # (by their place in the window, as the calibration's)
+                views = {k - self._first_index: v for k, v in views.items()}
+            self.fit.set_appearance(frame, images, views=views)
         if self.settings.reads_lids and frame is not None:
             self.fit.set_lid_reference(frame)  # (the lids' template)
         if self.gaze is not None:  # the person's eyeballs and open lids
