@@ -34,18 +34,11 @@ CLIPS = ((0, 0), (7, 3), (11, 5), (23, 9), (31, 1))
 def spread_views(frames, closure, n: int = 12) -> dict:
     """``{frame: (MediaPipe's points, image)}`` of ``n`` frames spread evenly over the clip,
     those whose lids close (``closure`` > 0 on either eye) left out."""
-    from myoface.facemesh import FaceMeshDetector
+    from myoface.analysis.modelfit import spread_evenly
+    from myoface.analysis.pipeline import detected_views
 
     shut = np.asarray(closure, dtype=np.float64).reshape(len(frames), -1).max(axis=1) > 0
-    open_ = [k for k in range(len(frames)) if not shut[k]]
-    pick = [open_[int(i)] for i in np.linspace(0, len(open_) - 1, n)]
-    out = {}
-    with FaceMeshDetector(video=False) as det:
-        for k in pick:
-            p = det.detect(frames[k])
-            if p is not None:
-                out[k] = (p, frames[k])
-    return out
+    return detected_views({k: frames[k] for k in spread_evenly(np.flatnonzero(~shut), n)})
 
 
 def main(argv=None) -> None:

@@ -444,7 +444,6 @@ def neutral_frames_of(model, video, tracker, first: int = 0, max_frames: int | N
     points are detected again on each image alone."""
     from myoface.analysis.expressions import ExpressionReader
     from myoface.analysis.modelfit import NEUTRAL_VIEWS_MAX, NEUTRAL_VIEWS_RUN, spread_evenly
-    from myoface.facemesh import FaceMeshDetector
 
     reader = ExpressionReader(tracker.ids)
     labels: list[str] = []
@@ -469,11 +468,19 @@ def neutral_frames_of(model, video, tracker, first: int = 0, max_frames: int | N
     finally:
         tracker.close()
     # (the candidates are neutral_views' frames, every stride-th: spread over them)
-    picks = spread_evenly(sorted(kept), NEUTRAL_VIEWS_MAX)
+    return detected_views({k: kept[k] for k in spread_evenly(sorted(kept), NEUTRAL_VIEWS_MAX)})
+
+
+def detected_views(images: dict) -> dict:
+    """``{frame index: (MediaPipe's points, image)}`` of ``images`` ({frame index: image}),
+    each detected alone (frames with no face left out): registration views
+    (:meth:`~myoface.analysis.modelfit.ModelFit.set_appearance`'s ``views``)."""
+    from myoface.facemesh import FaceMeshDetector
+
     out = {}
     with FaceMeshDetector(video=False) as det:
-        for k in picks:
-            p = det.detect(kept[k])
+        for k, image in images.items():
+            p = det.detect(image)
             if p is not None:
-                out[k] = (p, kept[k])
+                out[k] = (p, image)
     return out
