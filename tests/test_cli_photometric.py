@@ -194,7 +194,7 @@ def test_two_pass_registers_the_appearance_on_the_first_pass_neutral_frames(tmp_
         assert [r["quality"] for r in csv.DictReader(fh)] == ["ok"] * 20
     model = load_face_model(None)
     an, first = make_analyzer(model, open_video(video), "landmarks", calibration_frame=None)
-    views = neutral_frames_of(model, open_video(video), an, first, max_frames=20)
+    views = neutral_frames_of(open_video(video), an, first, max_frames=20)
     cal = doc["calibration_frame"]
     assert 6 <= len(views) <= 12 and min(views) >= 2  # (three neutral frames running)
     assert doc["calibration"]["appearance_registered_on"] == [cal] + [

@@ -382,7 +382,7 @@ def analyze_to_folder(
                 estimator=estimator, flow=flow, photometric=photometric,
             )  # fmt: skip
 
-        views = _first_pass(analyzer, model, video, max_frames, show_progress) if two_pass else None
+        views = _first_pass(analyzer, video, max_frames, show_progress) if two_pass else None
         an, first = analyzer()
         if views is not None:
             an.registration_views = views
@@ -436,7 +436,7 @@ def analyze_to_folder(
     return result
 
 
-def _first_pass(analyzer, model, video, max_frames, show_progress) -> dict:
+def _first_pass(analyzer, video, max_frames, show_progress) -> dict:
     """:func:`analyze_to_folder`'s first pass (``two_pass``): the frames that register the
     second's appearance (:func:`~myoface.analysis.pipeline.neutral_frames_of`)."""
     from myoface.analysis.pipeline import neutral_frames_of
@@ -448,7 +448,7 @@ def _first_pass(analyzer, model, video, max_frames, show_progress) -> dict:
         raise MyofaceValueError(
             "two passes (--two-pass) are for the landmarks' 3-D fit with its photometric term"
         )
-    return neutral_frames_of(model, video, an, first, max_frames, show_progress)
+    return neutral_frames_of(video, an, first, max_frames, show_progress)
 
 
 def _kept_note(result: FolderResult, target) -> str:

@@ -431,7 +431,7 @@ def measure_frames(video, tracker, first: int = 0, max_frames: int | None = None
 FIRST_PASS_KEEP = 4
 
 
-def neutral_frames_of(model, video, tracker, first: int = 0, max_frames: int | None = None,
+def neutral_frames_of(video, tracker, first: int = 0, max_frames: int | None = None,
                       show_progress: bool = False) -> dict:  # fmt: skip
     """A first pass of ``tracker`` (a 3-D fit's :class:`FitTracker`, made by
     :func:`make_analyzer`; closed here) over ``video``: its frames labelled neutral by the
@@ -446,19 +446,22 @@ def neutral_frames_of(model, video, tracker, first: int = 0, max_frames: int | N
     from myoface.analysis.modelfit import NEUTRAL_VIEWS_MAX, NEUTRAL_VIEWS_RUN, spread_evenly
 
     reader = ExpressionReader(tracker.ids)
-    labels: list[str] = []
     kept: dict = {}  # (candidate frame index -> image)
     stride, seen = 1, 0
+    run, last = 0, None  # (the frames labelled neutral in a row, up to the last one handed)
     try:
         frames = measure_frames(video, tracker, first, max_frames)
         for frame, m in progress(frames, desc="first pass", enabled=show_progress):
-            pose = getattr(m, "pose", None)
             ok = m.quality == "ok" and np.isfinite(m.contractions).all()
-            labels += [""] * (m.index - len(labels))  # (frames not handed: not measured)
-            label = reader.read(m.contractions, pose.angles_deg)[1] if ok else ""
-            labels.append(label)
-            run = labels[-NEUTRAL_VIEWS_RUN:]
-            if len(run) == NEUTRAL_VIEWS_RUN and all(x == "neutral" for x in run):
+            neutral = ok and reader.read(m.contractions, m.pose.angles_deg)[1] == "neutral"
+            if not neutral:
+                run = 0
+            elif last is not None and m.index != last + 1:
+                run = 1  # (a frame not handed between two is not measured: a new run)
+            else:
+                run += 1
+            last = m.index
+            if run >= NEUTRAL_VIEWS_RUN:
                 if seen % stride == 0:
                     kept[m.index] = frame
                 seen += 1
