@@ -9,7 +9,7 @@ whole clip's scores).
                                         [--points-without-room] [--wide-registration]
 
 Clips: the benchmark's (:data:`myoface.bench.expression.CLIPS`: ``bench``, ``heldp``,
-``p2``, and since 2026-12-06 evening ``h3``, ``h4``, ``h5``, which this tool held out until
+``p2``, and since 2026-12-06 06:57 UTC ``h3``, ``h4``, ``h5``, which this tool held out until
 then and which start with the head turned 30 degrees (``h4``, ``h5``) or nearly frontal
 (``h3``)), and three more held out of it now (:data:`HELD_OUT`: ``h6``, ``h7``, ``h8``, the
 same episodes in other orders, the head's loop started elsewhere, camera seeds 6-8; written
@@ -53,7 +53,7 @@ import argparse
 import numpy as np
 
 #: the held-out clips (name -> episodes' order, where the head's loop starts, camera seed):
-#: ``h3``-``h5`` (2026-12-06) are the benchmark's since that evening; these were written then
+#: ``h3``-``h5`` (2026-12-06) are the benchmark's since 06:57 UTC that day; these were written then
 #: to check decisions read on the benchmark's six
 HELD_OUT = {
     "h6": ("bench reversed", 0.25, 6),

@@ -21,7 +21,7 @@ the frames of six clips pooled (:data:`CLIPS`, :func:`pool_scores`; a quick run:
 the benchmark's first clip and five more, the same face in other orders and intensities,
 the head's loop started elsewhere (two of them turned 30 degrees at the start), other camera
 noise (before 2026-12-06 the value was the first clip's alone, an optimistic draw; until
-that evening, the first three's). The detail has both, per expression and intensity, the confusion (played -> labels counted), the
+06:57 UTC that day, the first three's). The detail has both, per expression and intensity, the confusion (played -> labels counted), the
 rule on the true contractions (what the rule says when the fit is perfect), the rule on each
 frame alone (no rest reference), whether the AUs the fit reads at rest follow the head's pose
 (:func:`rest_readings_vs_pose`), what the fit makes
@@ -102,7 +102,7 @@ P2 = (
 #: clip's numbers moved with its draw by more than settings changed them (2026-12-05, the
 #: default analysis: 0.71 / 0.76 on ``bench`` where four held-out clips gave 0.68-0.80 /
 #: 0.69-0.93), and a decision read on it alone went the wrong way for the others.
-#: Since 2026-12-06 (evening) also ``h3``, ``h4``, ``h5`` (until then held out of the
+#: Since 2026-12-06 06:57 UTC also ``h3``, ``h4``, ``h5`` (until then held out of the
 #: benchmark by ``tools/expression_calibration.py``): the same episodes in other orders, the
 #: head's loop started elsewhere, camera seeds 3-5; ``h4`` and ``h5`` start with the head
 #: turned 30 degrees, where the calibration frame then is (the first three start nearly
