@@ -13,7 +13,9 @@ Clips: the benchmark's (:data:`myoface.bench.expression.CLIPS`: ``bench``, ``hel
 then and which start with the head turned 30 degrees (``h4``, ``h5``) or nearly frontal
 (``h3``)), and three more held out of it now (:data:`HELD_OUT`: ``h6``, ``h7``, ``h8``, the
 same episodes in other orders, the head's loop started elsewhere, camera seeds 6-8; written
-when the others joined the benchmark, not yet run). ``--points-without-room``: the first rest's
+when the others joined the benchmark. Their baseline, the default analysis of 2d9f340
+(2026-12-06 07:20 UTC; each starts with the head turned 21-30 degrees), apex / rest: ``h6``
+0.667 / 0.897, ``h7`` 0.823 / 0.690, ``h8`` 0.646 / 0.431). ``--points-without-room``: the first rest's
 MediaPipe points (the frames the calibration is chosen among and fitted on) taken from the
 same frames rendered without the room behind the head, every other frame as the benchmark's.
 ``--wide-registration``: each run twice, the second with the appearance registered on the
