@@ -213,3 +213,30 @@ def test_the_3d_alignment_takes_out_a_turn_of_the_head(default_face):
         # the prior on the turn (POSE_PRIOR) leaves a part of it: under half the 2-D leak
         left = np.sqrt((damped.displacements(still)[chin_brows] ** 2).sum(-1).mean())
         assert left < leak / 2, (ypr, left, leak)
+
+
+@pytest.mark.parametrize("method", ["dis", "lk"])
+def test_a_large_face_is_read_scaled_down_in_the_frames_own_pixels(method):
+    """A face larger than :data:`~myoface.analysis.motionreader.READER_IOD_PX` is read on frames
+    scaled down to it (:class:`~myoface.analysis.motionreader.ScaledReader`), its points given
+    and returned in the frames' own pixels: a smooth texture shifted by a known amount is read
+    as that shift (within 0.2 px of the 640 px frame, where the reader works at 0.4 of it)."""
+    from myoface.analysis.motionreader import READER_IOD_PX, ScaledReader
+
+    rng = np.random.default_rng(1)
+    img = cv2.GaussianBlur(rng.uniform(0, 255, (640, 640)).astype(np.float32), (0, 0), 6.0)
+    img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    pts = np.array([[200.0, 250.0], [320.0, 330.0], [430.0, 380.0], [300.0, 420.0]])
+    iod = READER_IOD_PX / 0.4
+    reader = make_reader(method, img, pts, iod)
+    assert isinstance(reader, ScaledReader)
+    shift = (3.0, -2.0)
+    m = np.float32([[1, 0, shift[0]], [0, 1, shift[1]]])
+    moved = cv2.warpAffine(
+        img, m, (640, 640), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT
+    )
+    q, ok = reader.read(moved)
+    assert ok.all()
+    np.testing.assert_allclose(q - pts, np.tile(shift, (len(pts), 1)), atol=0.2)
+    # a face at the scale is read as it is
+    assert not isinstance(make_reader(method, img, pts, READER_IOD_PX), ScaledReader)

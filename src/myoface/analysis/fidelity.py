@@ -11,7 +11,9 @@ benchmark ``analysis.fidelity``) reads the two sides with instruments that are n
   moving, DIS reads 0.96-1.04 of every region's motion (explained 0.988-1.0), Lucas-Kanade
   0.96-1.08 (0.92-0.998) (``tests/analysis/test_motionreader.py``, 2026-12-01). DIS, not
   Lucas-Kanade, because the analysis' own optical flow is Lucas-Kanade's: the instrument a
-  fit is fitted to must not judge it;
+  fit is fitted to must not judge it. A face larger than the scales it was validated at is
+  read on frames scaled down (:data:`~myoface.analysis.motionreader.READER_IOD_PX`: at its own
+  1080p resolution the sample scored 0.246 against 0.778);
 - **the model**, exactly: its skin vertices at each frame's contractions (the tissue relaxed,
   warm-started from the previous frame's), x and y of the head frame, the face front on
   (:func:`model_displacements`). Vertex i of the default face and of a face made from a photo
