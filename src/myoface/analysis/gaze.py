@@ -317,6 +317,19 @@ steady offset of up to 2 px per eye, in a direction that changes with it, and th
 error runs from 4.4 to 8.3 deg with it: the neutral's pose and appearance are read from one
 view, and what that view cannot tell stays in every frame. The expressions' readings show the
 same (docs/expressions.md, "What holds the readings").
+
+The eyes' vergence, measured and not constrained (2026-12-06, the benchmark's three clips and
+(23, 9), (31, 1), the default analysis). Every clip reads the two eyes as diverging where the
+truth's axes are parallel: the left eye's yaw less the right's errs by +2.7, +3.2, +5.0, +4.0
+and +6.3 deg. With the yaws moved about their mean until the eyes no longer diverge (their
+convergence held in [0, 18] deg), the worse eye reads 4.16, 6.56, 6.84, 7.55, 6.25 -> 3.54,
+5.97, 5.73, 7.36, 5.50 deg (the benchmark's median 6.56 -> 5.73); what is left is both eyes'
+common error (yaw -4.4 to +4.2 deg, pitch -2.6 to -8.6 deg, down on all five: on the
+benchmark's three the eyeballs' centres placed 0.3-1.0 px high, above). Not taken: what the reader measures is the iris' axis,
+and a person's visual axis lies nasal of it by angle kappa (2.8-3.3 deg by synoptophore,
+5.5-5.6 by Orbscan II: Basmak et al., J. Refract. Surg. 23, 2007), so real eyes fixating far
+away read as diverging by twice that; the renders' eyes have none. A bound on the divergence
+that held on real eyes would be about -11 deg, where none of these clips reaches.
 """
 
 from __future__ import annotations
