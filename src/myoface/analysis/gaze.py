@@ -325,11 +325,12 @@ and +6.3 deg. With the yaws moved about their mean until the eyes no longer dive
 convergence held in [0, 18] deg), the worse eye reads 4.16, 6.56, 6.84, 7.55, 6.25 -> 3.54,
 5.97, 5.73, 7.36, 5.50 deg (the benchmark's median 6.56 -> 5.73); what is left is both eyes'
 common error (yaw -4.4 to +4.2 deg, pitch -2.6 to -8.6 deg, down on all five: on the
-benchmark's three the eyeballs' centres placed 0.3-1.0 px high, above). Not taken: what the reader measures is the iris' axis,
-and a person's visual axis lies nasal of it by angle kappa (2.8-3.3 deg by synoptophore,
-5.5-5.6 by Orbscan II: Basmak et al., J. Refract. Surg. 23, 2007), so real eyes fixating far
-away read as diverging by twice that; the renders' eyes have none. A bound on the divergence
-that held on real eyes would be about -11 deg, where none of these clips reaches.
+benchmark's three the eyeballs' centres placed 0.3-1.0 px high, above). Not taken: what the
+reader measures is the iris' axis, and a person's visual axis lies nasal of it by angle kappa
+(2.8-3.3 deg by synoptophore, 5.5-5.6 by Orbscan II: Basmak et al., J. Refract. Surg. 23,
+2007), so real eyes fixating far away read as diverging by twice that; the renders' eyes
+have none. A bound on the divergence that held on real eyes would be about -11 deg, where
+none of these clips reaches.
 """
 
 from __future__ import annotations

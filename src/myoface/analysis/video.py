@@ -7,9 +7,11 @@ said in a warning.
 
 A movie's frames are given upright as its display matrix says (:func:`display_orientation`):
 a phone stores a video filmed in portrait as landscape frames and a matrix that turns them a
-quarter for display, which players apply and a decoder does not; analysed as stored, the face
-lies on its side and the face mesh does not find it. Quarter turns and mirrors are applied
-(the only ones phones and cameras write); another angle is said in a warning and left."""
+quarter for display, which players apply and a decoder does not. Analysed as stored, the face
+lies on its side: the sample video so stored read its head rolled -85.9 deg (3.1 upright), its
+muscles 0.027 from the upright reading on average (0.009 for the codec's loss alone), and the
+overlays came out on their side. Quarter turns and mirrors are applied (the only ones phones
+and cameras write); another angle is said in a warning and left."""
 
 from __future__ import annotations
 
