@@ -20,6 +20,14 @@ Measured 2026-12-05 (90 frames; overall explained / gain, and the regions' expla
   0.81 at a gain of 0.79);
 - ``turn`` 0.2 (yaw +-6, pitch and roll +-3): 0.791 / 0.76 (brows 0.62, eyelids 0.58).
 
+Since 2026-12-06 the reader's forward-backward check is 0.01 of the face's inter-ocular
+distance (:data:`~myoface.analysis.motionreader.FB_IOD_PX`: 1.57 px on these renders' 157 px
+face, 1 px before): ``turn`` 0.1 reads 0.929 / 0.98 (mouth corners 0.92, lower lip 0.98, brows
+0.87, eyelids 0.70, chin 0.95), the others the same to 0.02. With 1 px the readings about the
+eyes failed the check on frame 41, which was taken for a blink (its head pose fitted to the
+nose ridge alone), and that one frame cost 0.12 of the score. What follows was measured
+before.
+
 So the judge holds for a head held still or nearly so, and not for turns of a few degrees.
 Which of its two stages: given the renders' exact points in place of the flow's (the true
 vertices projected), the same alignment scores 0.990 still, 0.969 at ``turn`` 0.1 and 0.894
