@@ -97,20 +97,23 @@ def _needs_display_matrix_writer():
 
 
 @pytest.mark.parametrize(
-    "degrees, hflip, size, rows, cols",
+    "degrees, hflip, size, rows, cols, turned",
     [
         # (a block at the stored frame's top left, 8 rows x 16 columns of 48 x 64: where the
         # display matrix puts it, as a player shows it: a quarter turn counter-clockwise
         # takes the top left to the bottom left, clockwise to the top right)
-        (90, False, (48, 64), slice(48, 64), slice(0, 8)),
-        (-90, False, (48, 64), slice(0, 16), slice(40, 48)),
-        (180, False, (64, 48), slice(40, 48), slice(48, 64)),
-        (0, True, (64, 48), slice(0, 8), slice(48, 64)),
-        (90, True, (48, 64), slice(48, 64), slice(40, 48)),
+        (90, False, (48, 64), slice(48, 64), slice(0, 8), "a quarter turn counter-clockwise"),
+        (-90, False, (48, 64), slice(0, 16), slice(40, 48), "a quarter turn clockwise"),
+        (180, False, (64, 48), slice(40, 48), slice(48, 64), "a half turn"),
+        (0, True, (64, 48), slice(0, 8), slice(48, 64), "mirrored left to right"),
+        (
+            90, True, (48, 64), slice(48, 64), slice(40, 48),
+            "a quarter turn counter-clockwise, then mirrored left to right",
+        ),
     ],
-)
+)  # fmt: skip
 def test_a_movie_is_read_upright_as_its_display_matrix_says(
-    tmp_path, degrees, hflip, size, rows, cols
+    tmp_path, degrees, hflip, size, rows, cols, turned
 ):
     _needs_display_matrix_writer()
     stored = np.full((3, 48, 64, 3), 20, np.uint8)
@@ -118,7 +121,7 @@ def test_a_movie_is_read_upright_as_its_display_matrix_says(
     path = tmp_path / "turned.mp4"
     _stored_with_display_matrix(path, stored, degrees, hflip)
     v = open_video(path)
-    assert v.size == size
+    assert v.size == size and v.turned == turned
     got = v.read_all()
     assert got.shape == (3, size[1], size[0], 3)
     block = np.zeros(got.shape[1:3], bool)
@@ -132,6 +135,7 @@ def test_a_phones_portrait_video_is_analysed_upright(tmp_path):
     display matrix that turns them back: the frames come out as the sample's, and the
     analysis finds the face on every frame."""
     import csv
+    import json
 
     from myoface.cli import main
 
@@ -148,3 +152,7 @@ def test_a_phones_portrait_video_is_analysed_upright(tmp_path):
     with open(tmp_path / "out" / "contractions.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 12 and all(r["quality"] == "ok" for r in rows)
+    side = json.loads((tmp_path / "out" / "analysis.json").read_text())
+    assert side["turned_upright"] == "a quarter turn counter-clockwise"
+    assert side["size"] == [frames.shape[2], frames.shape[1]]
+    assert open_video(shared_path("video", "single_face.mp4")).turned is None

@@ -510,6 +510,9 @@ def _write_results(out, run, log, how_init, tracker, face, *, interrupted, plot=
         "video": str(Path(video.path).resolve()),
         "fps": video.fps,
         "size": list(video.size),
+        # (the frames as a player shows them: how they were turned from the way they are
+        # stored, or None)
+        "turned_upright": getattr(video, "turned", None),
         "tracker": tracker,
         "calibration_frame": run.start,
         "face": str(face) if face else "default",

@@ -78,6 +78,12 @@ class Video:
         for _, frame in self.timed():
             yield frame
 
+    @property
+    def turned(self) -> str | None:
+        """How the frames were turned upright from the way they are stored (the display
+        matrix, :func:`display_orientation`), in words; None: they are shown as stored."""
+        return None if self._orient is None else _TURNS[self._orient]
+
     def timed(self) -> Iterator[tuple[float, np.ndarray]]:
         """``(time_s, frame)`` for every frame: a movie's times from its container's
         timestamps (PyAV's ``pts * time_base``), the first frame's at 0 s; a folder's frames
@@ -293,6 +299,18 @@ def display_orientation(frame, where="video") -> tuple[bool, int, int] | None:
     else:
         orient = (True, int(q[1]), int(q[2]))
     return None if orient == (False, 1, 1) else orient
+
+
+#: :func:`display_orientation`'s results in words (:attr:`Video.turned`)
+_TURNS = {
+    (True, -1, 1): "a quarter turn counter-clockwise",
+    (True, 1, -1): "a quarter turn clockwise",
+    (False, -1, -1): "a half turn",
+    (False, 1, -1): "mirrored left to right",
+    (False, -1, 1): "mirrored top to bottom",
+    (True, 1, 1): "a quarter turn clockwise, then mirrored left to right",
+    (True, -1, -1): "a quarter turn counter-clockwise, then mirrored left to right",
+}
 
 
 def upright(frame: np.ndarray, orient: tuple[bool, int, int] | None) -> np.ndarray:
