@@ -156,3 +156,20 @@ def test_a_phones_portrait_video_is_analysed_upright(tmp_path):
     assert side["turned_upright"] == "a quarter turn counter-clockwise"
     assert side["size"] == [frames.shape[2], frames.shape[1]]
     assert open_video(shared_path("video", "single_face.mp4")).turned is None
+
+
+def test_a_display_matrix_that_is_not_a_quarter_turn_is_warned_of_and_left(tmp_path):
+    """A matrix turning the picture 30 degrees (no camera writes one): the frames are read as
+    stored, and a warning says so with the angle."""
+    from myoface.errors import MyofaceWarning
+
+    _needs_display_matrix_writer()
+    stored = np.full((2, 48, 64, 3), 20, np.uint8)
+    stored[:, :8, :16] = 235
+    path = tmp_path / "tilted.mp4"
+    _stored_with_display_matrix(path, stored, 30)
+    with pytest.warns(MyofaceWarning, match=r"30\.0 deg, not a quarter turn"):
+        v = open_video(path)
+    assert v.size == (64, 48) and v.turned is None
+    got = v.read_all()
+    assert got[:, :8, :16].mean() > 200 and got[:, 16:, 16:].mean() < 40
