@@ -20,21 +20,13 @@ from pathlib import Path
 
 def reencoded(video, crf: int, path: Path) -> Path:
     """``video``'s frames encoded again by libx264 at ``crf`` into ``path``."""
-    import av
-
     from myoface.analysis.video import open_video
+    from myoface.render import VideoWriter
 
     v = open_video(video)
-    with av.open(str(path), "w") as out:
-        s = out.add_stream("libx264", rate=round(v.fps))
-        s.width, s.height = v.size
-        s.pix_fmt = "yuv420p"
-        s.options = {"crf": str(crf)}
+    with VideoWriter(path, fps=v.fps, quality_crf=crf, preset="medium") as vw:
         for f in v:
-            for p in s.encode(av.VideoFrame.from_ndarray(f, format="rgb24")):
-                out.mux(p)
-        for p in s.encode():
-            out.mux(p)
+            vw.write(f)
     return path
 
 

@@ -89,7 +89,7 @@ rigid points are not quite rigid: in the blink at frames 25-29 the outer eye cor
 
 **Its repeatability** (2026-12-06, ``tools/fidelity_repeatability.py``): one analysis of
 ``single_face.mp4`` judged against the video and against its frames encoded again by H.264
-(crf 12-28) scores 0.778 and 0.712-0.761 overall, its regions up to 0.2 apart (the brows
+(crf 12-28) scores 0.778 and 0.732-0.767 overall, its regions up to 0.2 apart (the brows
 0.58-0.77, the chin 0.07-0.23): the input's compression alone moves the reading that much.
 
 **The measure of earlier reports** (:func:`measure_fidelity`, fidelity.json's

@@ -226,8 +226,8 @@ METHODS = ("lk", "dis")
 #: 1080p 38 % of its readings failed the check (10 % at 640 x 360), so the frames were taken
 #: for blinks and the head's pose fitted to the nose ridge alone, and its regions' readings
 #: were 0.007-0.084 IOD RMS off the 640 x 360 reading's (the chin 0.084, its motion 0.024
-#: IOD RMS). Read so, 14 % fail and the regions are 0.003-0.015 off (the mouth corners 0.048;
-#: the same 640 x 360 frames encoded again move them by 0.004-0.012 and 0.034), the 1080p
+#: IOD RMS). Read so, 14 % fail and the regions are 0.003-0.016 off (the mouth corners 0.039;
+#: the same 640 x 360 frames encoded again move them by 0.002-0.007 and 0.028), the 1080p
 #: reading 2.6 times faster (8.0 s against 21.0 for the 72 frames; ``tests/analysis/
 #: test_fidelity.py::test_a_large_face_is_read_at_the_readers_scale``); the analyses' fidelity
 #: 0.778 / 0.779 / 0.685 (the 1080p's mouth corners 0.76 against 0.90: the judge's corners
