@@ -938,3 +938,36 @@ def test_neutral_views_are_spread_over_runs_of_neutral_frames():
     assert len(got) == 5 and set(got) <= set(ok)
     assert got[0] == 2 and got[-1] == 37  # (the first and the last of them: spread)
     assert neutral_views(["neutral", "neutral", "sadness"]) == []
+
+
+def test_the_face_at_rest_is_read_against_the_nearest_views_appearance(turning):
+    """:meth:`ModelFit.set_view_appearances`, a known answer: the face at rest rendered turned
+    24 degrees under the renderer's lights, which stay where they are as the head turns, does
+    not look as the calibration frame's appearance seen from there does, and the fit reads
+    some of the difference as expression. Given that view at rest (the frame itself, its
+    true pose), a frame there is read against its own appearance: the spurious contractions
+    mostly go (measured 2026-12-06: summed over the muscles 2.28 -> 0.27), and the eyes' rim
+    samples weigh as at the view's own pose (their turn is from the view, not from the
+    calibration's)."""
+    from dataclasses import replace
+
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.weights import FitSettings
+
+    fm, cam, poses, frames, points = turning
+    n = len(frames)
+    read = {}
+    for bank in (False, True):
+        fit = ModelFit(fm, cam, replace(FitSettings(), photometric=True))
+        fit.calibrate(points, 0, scores=np.zeros(n))
+        fit.set_appearance(frames[0])
+        if bank:
+            fit.set_view_appearances([(frames[3], poses[3])])
+            assert len(fit.view_appearances) == 2
+        fit.fit(points[2], image=frames[2])  # (18 deg: the last frame, nearer the 24's view)
+        r = fit.fit(points[3], image=frames[3])
+        read[bank] = (float(r.contractions.sum()), fit)
+    fit = read[True][1]
+    assert fit.appearance is fit.view_appearances[1][1]
+    assert np.array_equal(fit._view_rotation(), poses[3].rotation)
+    assert read[False][0] > 1.0 and read[True][0] < 0.25 * read[False][0], read

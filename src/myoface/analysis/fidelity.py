@@ -77,6 +77,25 @@ mentalis' push of the chin boss at 0.69 (explained 0.79). On ``single_face.mp4``
 chin's motion is sideways (0.02 IOD to the subject's left from frame 18 on, the lower lip's
 centre staying put), which no muscle of the model makes: the model's reach there is 0.55.
 
+**The chin on** ``single_face.mp4``, **asked of other instruments** (2026-12-06; the analysis'
+default, frames 40-60 of the smile, each reading relative to the nose ridge's top, points 168
+and 6; the face 99.5 px between the outer eye corners). The judge (DIS, from frame 0) reads
+the chin points (200, 199, 175, 152) 2.9-4.0 px to the image's right (the subject's left) of
+where the ridge's motion puts them; DIS started afresh on each frame, its other presets and
+Farneback's flow 2.5-3.9 px; Lucas-Kanade (15-21 px windows) 2.5-3.8 at 200 and 199 (the lower
+two sit on the chin's edge, where it does not hold); with everything outside the face's oval
+made flat, DIS moves by at most 0.4 px at 200 and 199 (the neck does not drag it). Two
+instruments that are not dense flows read less: MediaPipe's face mesh (image mode) 1.3-1.6
+px, and the chin boss matched as a block (40 x 28 px below the lower lip, least absolute
+difference, the vertical free) 1.9-2.1 px. The fit's own chin (its vertices projected) moves
+with the head, 0.3-0.7 px, and the photometric term's samples on the chin boss at frame 50
+fit best 0.5 px (brightness) and 1.5 px (redness) further left of where the fit put them, not
+right. So the chin lags the head's motion by about 2 px (0.02 inter-ocular distances) by two
+readers that are not the judge's kind, the judge reads half as much again, and the fit does
+not follow it: neither its pixels nor, when freed (``FitSettings.jaw_sideways``), the lateral
+pterygoids (read at most 0.19, on the other side). The chin's 0.08 is as much the fit's as the
+judge's; which reading of the chin is right is not settled.
+
 What the validation does not cover (measured on ``single_face.mp4``, 2026-12-01): where the
 lips part, the inner lip points (13, 14) sit on an edge that the teeth come out of, which no
 optical flow can follow through (hence not judged) (at the smile's apex DIS and MediaPipe differ there by 5.2 and

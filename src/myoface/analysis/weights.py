@@ -335,6 +335,20 @@ class FitSettings:
     #: but single_face.mp4's fidelity 0.705 / 0.768 / 0.771 and the degraded head-motion
     #: renders, head moving, skin 1.37 / 1.03 / 0.95 mm, median RMSE 0.187 / 0.150 / 0.146,
     #: head 1.23 / 1.20 / 1.14 deg: kept at 0.5.
+    #: Tried since and not kept (2026-12-06; the expression benchmark's clips, apex / rest %
+    #: read right; patches of the study, not in the code): the weight from the skin's
+    #: displacement at the frame's start (the last frame's contractions) rather than from the
+    #: largest any muscle could make, ``1 / (1 + (0.5 d / sigma)^2)``: the brows and the lips
+    #: read more fully (AU1's gain 0.51 -> 0.83, AU25's 0.01 -> 0.43; ``bench`` 70.8 / 75.9 ->
+    #: 82.3 / 50.0), but a face at rest then weighs its pixels in full and the turning head's
+    #: look is read as expression. Eased in, the static weight at rest and the displacement's
+    #: by ``min(1, d / E0)``: E0 4 mm, the benchmark's six clips pooled 65.1 / 81.8 -> 74.7 /
+    #: 71.7, three held out 71.2 / 67.3 -> 77.8 / 46.5 (E0 2 and 8 mm on ``bench``: 81.2 /
+    #: 62.1, 78.1 / 75.9); with ``d`` MediaPipe's points' displacement instead (no feedback
+    #: from the fit's own reading; E0 3 mm) the same trade (``p2`` 87.5 / 89.7 -> 83.3 / 38.8).
+    #: The apex gains are real; what they cost at rest is the appearance's view
+    #: (:meth:`~myoface.analysis.modelfit.ModelFit.set_view_appearances`: with the views at
+    #: rest given, ``bench`` 83.3 / 94.8 with the MediaPipe-eased weight).
     photo_model_error: float = 0.5
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
