@@ -26,7 +26,13 @@ first-pass pose. Prints both passes' apex and rest accuracies (the benchmark's
 ``score_labels``) and the truth's phase at each view (``--list``: the views only, no second
 pass). About two minutes a clip.
 
-Measured 2026-12-06 (docs/expressions.md, "The face at rest from its views").
+Measured 2026-12-06 (docs/expressions.md, "The face at rest from its views"). ``--still-points
+1.5`` (the candidates also those whose MediaPipe points lie within 1.5 mm of the neutral at
+the fitted pose, 90th percentile: at rest 0.4-3.0 mm, median 1.3-1.4, at the apex frames the
+first pass missed 1.5-4.5) left 0-5 views a clip and no gain: the turned views' points sit
+further from the neutral than that, and on ``p2`` a single view beside the calibration's took
+its rest frames from 89.7 to 66.4 %: a view's appearance is only as good as the pose it is
+taken at.
 """
 
 from __future__ import annotations
@@ -46,6 +52,9 @@ RUN = 6
 #: ``first-pass``: the contractions' largest change from a frame to the next within two frames
 #: of a view (summed over the muscles)
 STILL_CHANGE = 0.45
+#: ``--still-points``: the percentile over the points of their distance (mm, image plane) from
+#: the person's neutral at the frame's fitted pose (the detector's offsets taken off)
+POINTS_PCT = 90
 
 
 def _angle(ra, rb) -> float:
@@ -93,6 +102,13 @@ def main(argv=None) -> None:
     ap.add_argument("--clip", default="bench")
     ap.add_argument("--views", choices=("oracle", "first-pass"), default="first-pass")
     ap.add_argument("--list", action="store_true", help="the views only, no second pass")
+    ap.add_argument(
+        "--still-points",
+        type=float,
+        default=None,
+        metavar="MM",
+        help="first-pass: also MediaPipe's points within MM of the posed neutral (POINTS_PCT)",
+    )
     a = ap.parse_args(argv)
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from expression_calibration import register_held_out
@@ -106,12 +122,17 @@ def main(argv=None) -> None:
     phase, frames, points = clip[2], clip[6], clip[8]
     index = {id(p): k for k, p in enumerate(points) if p is not None}
     poses: dict = {}
+    moved: dict = {}  # (MediaPipe's points' distance from the posed neutral, mm: POINTS_PCT)
     fit = modelfit.ModelFit.fit
 
     def recording(self, p, *args, **kw):  # (each frame's photometric fit's pose, pass 1)
         r = fit(self, p, *args, **kw)
         if id(p) in index:
             poses[index[id(p)]] = r.pose
+            q = self._corrected(np.asarray(p, dtype=np.float64), r.pose)
+            uv0 = self.camera.project(r.pose.apply(self.neutral + self.identity_mm))
+            d = np.linalg.norm(q[:, :2] - uv0, axis=1) * self._pixel_mm(r.pose)
+            moved[index[id(p)]] = float(np.nanpercentile(d, POINTS_PCT))
         return r
 
     modelfit.ModelFit.fit = recording
@@ -127,11 +148,20 @@ def main(argv=None) -> None:
         cand = [k for k in range(2, len(rest)) if rest[k] and rest[k - 1] and rest[k - 2]]
     else:
         cand = first_pass_candidates(labels, arr["estimate"])
+        if a.still_points is not None:
+            cand = [k for k in cand if moved.get(k, np.inf) <= a.still_points]
     views = choose_views(cand, strength, poses, first["calibration_frame"])
     print(f"{a.clip}: pass 1 apex {first['apex_accuracy']:.3f} rest {first['rest_accuracy']:.3f}")
     print(f"  views ({a.views}): {views}")
     print(f"  the truth's phase there: {[str(phase[k]) for k in views]}")
     if a.list:
+        if a.views == "first-pass":  # (each candidate's points' distance, by the truth's phase)
+            for ph in ("first rest", "rest", "onset", "apex", "offset"):
+                ds = [moved[k] for k in first_pass_candidates(labels, arr["estimate"])
+                      if str(phase[k]) == ph and k in moved]  # fmt: skip
+                if ds:
+                    print(f"  {ph}: {len(ds)} candidates, points' distance (mm) "
+                          f"{np.round(np.percentile(ds, [0, 50, 100]), 2)}")  # fmt: skip
         return
     bank = [(frames[k], poses[k]) for k in views]
     take = modelfit.ModelFit.set_appearance

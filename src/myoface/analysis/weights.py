@@ -348,7 +348,7 @@ class FitSettings:
     #: from the fit's own reading; E0 3 mm) the same trade (``p2`` 87.5 / 89.7 -> 83.3 / 38.8).
     #: The apex gains are real; what they cost at rest is the appearance's view
     #: (:meth:`~myoface.analysis.modelfit.ModelFit.set_view_appearances`: with the views at
-    #: rest given, ``bench`` 83.3 / 94.8 with the MediaPipe-eased weight).
+    #: rest given, ``bench`` 83.3 / 94.8, ``p2`` 78.1 / 89.7 with the MediaPipe-eased weight).
     photo_model_error: float = 0.5
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
