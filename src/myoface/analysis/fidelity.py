@@ -82,12 +82,13 @@ default, frames 40-60 of the smile, each reading relative to the nose ridge's to
 and 6; the face 99.5 px between the outer eye corners). The judge (DIS, from frame 0) reads
 the chin points (200, 199, 175, 152) 2.9-4.0 px to the image's right (the subject's left) of
 where the ridge's motion puts them; DIS started afresh on each frame, its other presets and
-Farneback's flow 2.5-3.9 px; Lucas-Kanade (15-21 px windows) 2.5-3.8 at 200 and 199 (the lower
-two sit on the chin's edge, where it does not hold); with everything outside the face's oval
+Farneback's flow 2.4-3.9 px at 199, 175 and 152 (at 200, just under the lower lip, -2.3 to
+3.3 at frame 60); Lucas-Kanade (15-21 px windows) 2.5-3.8 at 200 and 199 (the lower two sit
+on the chin's edge, where it does not hold); with everything outside the face's oval
 made flat, DIS moves by at most 0.4 px at 200 and 199 (the neck does not drag it). Two
 instruments that are not dense flows read less: MediaPipe's face mesh (image mode) 1.3-1.6
 px, and the chin boss matched as a block (40 x 28 px below the lower lip, least absolute
-difference, the vertical free) 1.9-2.1 px. The fit's own chin (its vertices projected) moves
+difference, the vertical free) 1.8-2.1 px (frames 50 and 60; 0.8-1.2 at frame 30). The fit's own chin (its vertices projected) moves
 with the head, 0.3-0.7 px, and the photometric term's samples on the chin boss at frame 50
 fit best 0.5 px (brightness) and 1.5 px (redness) further left of where the fit put them, not
 right. So the chin lags the head's motion by about 2 px (0.02 inter-ocular distances) by two
