@@ -57,11 +57,6 @@ STILL_CHANGE = 0.45
 POINTS_PCT = 90
 
 
-def _angle(ra, rb) -> float:
-    c = (np.trace(ra @ rb.T) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
-
-
 def first_pass_candidates(labels, estimate) -> list[int]:
     """The frames a first pass's readings put at rest (see the module's docstring)."""
     out, k, n = [], 0, len(labels)
@@ -84,12 +79,14 @@ def first_pass_candidates(labels, estimate) -> list[int]:
 def choose_views(candidates, strength, poses, calibration: int) -> list[int]:
     """At most :data:`MAX_VIEWS` of ``candidates``, the least ``strength`` first, each
     :data:`MIN_SEPARATION_DEG` from the calibration frame's view and the others chosen."""
+    from myoface.analysis.camera import rotation_angle_deg
+
     chosen = [calibration]
     for k in sorted(candidates, key=lambda k: strength[k]):
         if len(chosen) > MAX_VIEWS:
             break
         if k in poses and all(
-            _angle(poses[k].rotation, poses[j].rotation) >= MIN_SEPARATION_DEG
+            rotation_angle_deg(poses[k].rotation, poses[j].rotation) >= MIN_SEPARATION_DEG
             for j in chosen
             if j in poses
         ):
