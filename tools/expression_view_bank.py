@@ -144,9 +144,10 @@ def main(argv=None) -> None:
         rest = [str(p) in ("rest", "first rest") for p in phase]
         cand = [k for k in range(2, len(rest)) if rest[k] and rest[k - 1] and rest[k - 2]]
     else:
-        cand = first_pass_candidates(labels, arr["estimate"])
+        found = first_pass_candidates(labels, arr["estimate"])
+        cand = found
         if a.still_points is not None:
-            cand = [k for k in cand if moved.get(k, np.inf) <= a.still_points]
+            cand = [k for k in found if moved.get(k, np.inf) <= a.still_points]
     views = choose_views(cand, strength, poses, first["calibration_frame"])
     print(f"{a.clip}: pass 1 apex {first['apex_accuracy']:.3f} rest {first['rest_accuracy']:.3f}")
     print(f"  views ({a.views}): {views}")
@@ -154,8 +155,7 @@ def main(argv=None) -> None:
     if a.list:
         if a.views == "first-pass":  # (each candidate's points' distance, by the truth's phase)
             for ph in ("first rest", "rest", "onset", "apex", "offset"):
-                ds = [moved[k] for k in first_pass_candidates(labels, arr["estimate"])
-                      if str(phase[k]) == ph and k in moved]  # fmt: skip
+                ds = [moved[k] for k in found if str(phase[k]) == ph and k in moved]
                 if ds:
                     print(f"  {ph}: {len(ds)} candidates, points' distance (mm) "
                           f"{np.round(np.percentile(ds, [0, 50, 100]), 2)}")  # fmt: skip
