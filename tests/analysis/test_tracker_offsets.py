@@ -244,3 +244,102 @@ def test_the_spread_weighs_the_points_whose_offsets_move_with_the_view(fm):
     ratio = w[1.0] / w[0.0]
     np.testing.assert_allclose(ratio, offset_spread_weights(spread, 1.0, 1.0))
     assert (ratio[table.chin] < 0.25).all() and (ratio[~table.chin] > 0.9).all()
+
+
+class ContextReader(SyntheticReader):
+    """A detector whose error on the video's frames is not the table's: on a render laid
+    over a frame (``context`` given) it reads the head pitched by :func:`context_bias_deg`,
+    as it does the video itself; on the table's plain renders by :func:`bias_deg`."""
+
+    def tracker_error(self, skin, pose, context=None):
+        if context is None:
+            return super().tracker_error(skin, pose)
+        self.calls += 1
+        err = seen_in_context(skin, pose) - CAMERA.project(pose.apply(skin))
+        return np.column_stack([err, np.zeros(len(err))])
+
+
+def context_bias_deg(pose: HeadPose) -> float:
+    """The detector's pitch error among the video's surroundings: 2 deg more than on the
+    table's renders, and it reads the view's elevation at half its change."""
+    return 5.0 - 0.5 * view_angles(pose)[1]
+
+
+def seen_in_context(skin: np.ndarray, pose: HeadPose) -> np.ndarray:
+    """:func:`seen` with :func:`context_bias_deg`."""
+    c = skin.mean(axis=0)
+    turned = (skin - c) @ rotmat(np.array([np.radians(context_bias_deg(pose)), 0.0, 0.0])).T + c
+    return CAMERA.project(pose.apply(turned))
+
+
+def test_the_detectors_context_is_measured_at_the_calibration(fm):
+    """ModelFit.measure_detector_context: where the detector errs on the video's frames
+    otherwise than on the table's renders, the calibration corrected by the table alone is
+    pitched by the difference; measured on the model laid over the calibration frames (the
+    reader given the frame as its context), the calibration's pose comes within a tenth of
+    a degree (the detector reading the render's pitch at half its change: the steps
+    over-relaxed), and a later frame turned aside is corrected alike (the context added to
+    the table at every view). Without a table there is nothing to measure."""
+    skin = fm.skin_vertices()
+    pose = HeadPose.from_euler(4.0, -3.0, 1.0, (0.0, 0.0, -500.0))
+    frames = [seen_in_context(skin, pose)] * 3
+    images = [np.zeros((4, 4, 3), np.uint8)] * 3  # (the reader does not look at them)
+    fit = ModelFit(fm, CAMERA, FitSettings(offset_spread=0.0))
+    reader = ContextReader()
+    fit.set_offsets(TrackerOffsets(reader, fit.neutral, CAMERA))
+    cal = fit.calibrate(frames, index=0)
+    before = np.abs(cal.pose.angles_deg - pose.angles_deg).max()
+    calls = reader.calls
+    info = fit.measure_detector_context(images)
+    after = np.abs(fit.calibration.pose.angles_deg - pose.angles_deg).max()
+    assert before > 1.5 and after < 0.1, (before, after)
+    assert info is not None and info["frames"] == 1 and info["context_rms_mm"] > 0.1, info
+    assert fit.calibration.extra["detector_context"] == info
+    assert reader.calls > calls  # (the frame's context read)
+    # a later frame turned aside (the context's excess over the table's is the same there:
+    # both depend on the elevation alone): the table with the context added corrects it
+    later = HeadPose.from_euler(-15.0, -3.0, 1.0, (10.0, 0.0, -510.0))
+    errs = {}
+    for measured in (False, True):
+        one = ModelFit(fm, CAMERA, FitSettings(offset_spread=0.0))
+        one.set_offsets(TrackerOffsets(ContextReader(), one.neutral, CAMERA))
+        one.calibrate(frames, index=0)
+        if measured:
+            one.measure_detector_context(images)
+        r = one.fit(seen_in_context(skin, later))
+        errs[measured] = np.abs(r.pose.angles_deg - later.angles_deg)
+    assert errs[True][1] < 0.5 < 1.5 < errs[False][1], errs  # (pitch)
+    assert errs[True].max() < 0.7, errs
+    plain = ModelFit(fm, CAMERA)
+    plain.calibrate(frames, index=0)
+    assert plain.measure_detector_context(images) is None
+
+
+def test_the_render_is_laid_over_the_frame_it_is_read_in(fm):
+    """LandmarkSynthesis.tracker_error with a context: the detector is given the render
+    over the frame, the frame's own pixels where the render drew no head, the render's on
+    the face; without one, the renderer's own background."""
+    from myoface.analysis.synthesis import LandmarkSynthesis
+
+    class Grab:
+        def detect(self, image):
+            self.image = image
+            return None
+
+        def close(self):
+            pass
+
+    grab = Grab()
+    syn = LandmarkSynthesis(fm.face, CAMERA, (640, 480), detector=grab)
+    pose = HeadPose.from_euler(10.0, 0.0, 0.0, (0.0, 0.0, -520.0))
+    room = np.zeros((480, 640, 3), np.uint8)
+    room[..., 1] = 200
+    assert syn.tracker_error(fm.skin_vertices(), pose, context=room) is None
+    seen_img = grab.image
+    nose = CAMERA.project(pose.apply(fm.skin_vertices()))[4].round().astype(int)
+    np.testing.assert_array_equal(seen_img[:40, :40], room[:40, :40])
+    assert np.abs(seen_img[nose[1], nose[0]].astype(int) - (0, 200, 0)).max() > 50
+    syn.tracker_error(fm.skin_vertices(), pose)
+    assert np.abs(grab.image[:40, :40].astype(int) - (0, 200, 0)).max() > 50
+    with pytest.raises(Exception, match="context must be"):
+        syn.tracker_error(fm.skin_vertices(), pose, context=room[:10])

@@ -13,6 +13,8 @@ the real hairline, so its top row does not lie on an image edge.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from myoface.analysis.sections import section_vertices
@@ -196,7 +198,13 @@ class TrackerOffsets:
     takes the calibration's pitch to 1.25 deg (and the moving head's yaw from -1.69 to -0.88);
     over the video's first frame with the face inpainted (what an analysis could know), only
     part of it (the still head's pose 1.46 -> 1.14-1.29 deg RMS for hull margins 0-0.3), while
-    the moving head's worst muscle got worse (0.287 -> 0.31-0.33): not adopted.
+    the moving head's worst muscle got worse (0.287 -> 0.31-0.33): not adopted. What is
+    done instead (2026-12-06, :attr:`~myoface.analysis.weights.FitSettings.detector_context`):
+    the model laid over the calibration frames themselves, where the video's surroundings
+    are what the detector sees around it, and the excess of its error there over the table's
+    added to every view (:meth:`with_context`, measured by
+    :meth:`~myoface.analysis.modelfit.ModelFit.measure_detector_context`, where the numbers
+    are).
 
     This is the table of analysis by synthesis (:attr:`FitSettings.synthesis_rounds`) at the
     neutral, paid once per view instead of once per frame.
@@ -215,6 +223,23 @@ class TrackerOffsets:
         self.depth_mm: float | None = None
         #: cells the detector found no face in (their offsets taken as zero)
         self.missed = 0
+        #: (V, 3) mm, head frame, or None: the detector's offsets on the video's own frames
+        #: beyond the table's, added at every view (:meth:`with_context`)
+        self.context_mm: np.ndarray | None = None
+
+    def with_context(self, context_mm) -> TrackerOffsets:
+        """This table with ``context_mm`` (V, 3) mm, head frame (None: none), added to its
+        offsets at every view: what the detector does on the video's frames that it does not on the table's
+        renders (the room, hair and neck around the face; measured at the calibration by
+        :meth:`~myoface.analysis.modelfit.ModelFit.measure_detector_context`). The new table
+        shares this one's cells and detector."""
+        out = copy.copy(self)
+        out.context_mm = (
+            None
+            if context_mm is None
+            else np.asarray(context_mm, dtype=np.float64).reshape(self.shape.shape)
+        )
+        return out
 
     @classmethod
     def of_textured_face(cls, face, shape, camera, size, tracking) -> TrackerOffsets | None:
@@ -270,6 +295,8 @@ class TrackerOffsets:
                           (1, 1, a * b)):  # fmt: skip
             if w > 1e-9:
                 out += w * self._cell(i0 + di, j0 + dj)
+        if self.context_mm is not None:
+            out += self.context_mm
         return out
 
     def spread(self, pose, azimuth_deg: float = SPREAD_AZIMUTH_DEG,

@@ -143,11 +143,17 @@ class LandmarkSynthesis:
         textured = FaceMesh(face.vertices, face.triangles, uv, img, face.landmarks, name=face.name)
         return cls(textured, camera, (w, h), **kw)
 
-    def tracker_error(self, skin: np.ndarray, pose: HeadPose) -> np.ndarray | None:
+    def tracker_error(self, skin: np.ndarray, pose: HeadPose,
+                      context: np.ndarray | None = None) -> np.ndarray | None:  # fmt: skip
         """(V, 3): the tracker's points on the model rendered with ``skin`` (V, 3) mm, head
         frame, at ``pose``, less the model's own (x, y pixels; z relative depth, pixels, up to
-        a constant); None when the tracker finds no face in the render."""
+        a constant); None when the tracker finds no face in the render. ``context``: a frame
+        (H, W, 3) uint8 of the video the render is laid over (:meth:`composite`), so that
+        the tracker sees the model among what the frame shows around the face (its room,
+        hair, neck) rather than on the renderer's plain background."""
         img = self.renderer.render(skin, pose=(pose.rotation, pose.translation_mm))
+        if context is not None:
+            img = self.composite(img, context)
         q = self.detector.detect(img)
         if q is None:
             return None
@@ -157,6 +163,23 @@ class LandmarkSynthesis:
         err = np.column_stack([q[:, :2] - uv, q[:, 2] - z])
         err[:, 2] -= err[:, 2].mean()
         return err
+
+    def composite(self, render: np.ndarray, frame: np.ndarray) -> np.ndarray:
+        """The last render (``render``, (H, W, 3) uint8) laid over ``frame`` (the same size):
+        each pixel mixed by the share of it the render drew the head on
+        (:func:`~myoface.render.degrade.coverage`: the head's silhouette anti-aliased), the
+        frame's own pixel where the render drew none."""
+        from myoface.render.degrade import coverage
+
+        img = np.asarray(frame)
+        if img.ndim != 3 or img.shape[:2] != render.shape[:2] or img.shape[2] < 3:
+            raise MyofaceValueError(
+                f"the context must be an (H, W, 3) image of the render's size {render.shape[:2]};"
+                f" got {img.shape}"
+            )
+        a = coverage(self.renderer)[:, :, None]
+        out = a * render.astype(np.float32) + (1.0 - a) * img[:, :, :3].astype(np.float32)
+        return np.clip(np.rint(out), 0, 255).astype(np.uint8)
 
     def close(self) -> None:
         self.detector.close()

@@ -366,6 +366,13 @@ class FitSettings:
     #: then the calibration done again with the corrected points. Off: measured 2026-12-02
     #: it does not help on the real video (see the README's 3-D fit section).
     tracker_offsets_frame: bool = False
+    #: with the detector's offsets of a textured face (:attr:`tracker_offsets`): at the
+    #: calibration, MediaPipe's error also measured on the person's model laid over each
+    #: calibration frame (the video's own room, hair and neck around it), and its excess over
+    #: the table's (which renders the model on a plain background) added to the table at
+    #: every view (:meth:`~myoface.analysis.modelfit.ModelFit.measure_detector_context`,
+    #: where what was measured is).
+    detector_context: bool = True
     #: with the detector's offsets taken off (:attr:`tracker_offsets`): a point's landmark
     #: variance grows by ``(offset_spread * spread)^2``, ``spread`` (mm) how far the detector's
     #: offset at that point, less the face's rigid part, moves across the views of a turning

@@ -369,8 +369,10 @@ def run_headmotion(
     (:class:`~myoface.analysis.synthesis.LandmarkSynthesis`: the model's face, its own texture).
     With ``settings.photometric`` the fit also reads ``frames`` (the images the points were
     detected on), as :class:`~myoface.analysis.trackers.landmark_fit.FitTracker` does: the
-    appearance taken from the calibration frame, each frame's pixels read against it.
-    ``detector_offsets``: take MediaPipe's offsets on this face off the points
+    appearance taken from the calibration frame, each frame's pixels read against it; given
+    ``frames``, the detector's offsets (below) also measured in their context at the
+    calibration (:attr:`~myoface.analysis.weights.FitSettings.detector_context`), as
+    FitTracker does. ``detector_offsets``: take MediaPipe's offsets on this face off the points
     (:class:`~myoface.analysis.landmarks.TrackerOffsets`, as
     :attr:`~myoface.analysis.weights.FitSettings.tracker_offsets` says, for a face with a
     texture, without synthesis); by default when the points are MediaPipe's, i.e. carry its
@@ -411,6 +413,9 @@ def run_headmotion(
         )
     window = max(1, int(round(CALIBRATION_WINDOW_S * fps)))
     cal = fit.calibrate(points[:window], synthesis=syn)
+    if frames is not None and fit.settings.detector_context and fit.offsets is not None:
+        fit.measure_detector_context(frames[:window])  # (as FitTracker: the room around)
+        cal = fit.calibration
     if photometric:
         views = None
         if registration is not None:
@@ -655,7 +660,7 @@ def _run(quick: bool, still: bool, synthesis: bool = False, flow: bool | None = 
         t0 = time.perf_counter()
         res = run_headmotion(
             fm, points, truth, poses, skins, settings=settings, synthesis=synthesis,
-            frames=_frames(quick, still, degraded, seed) if photometric or anchored else None,
+            frames=_frames(quick, still, degraded, seed),
             anchored_flow=anchored,
         )  # fmt: skip
         detail = {

@@ -543,7 +543,16 @@ class FitTracker(TrackerBase):
         """What the fit and the gaze take from the calibration (after :meth:`ModelFit.calibrate`;
         ``images``: the calibration window's frames by position, None where one was not
         kept): the appearance for the photometric term (registered on every frame the
-        calibration used), the lids' template, the person's eyeballs."""
+        calibration used), the lids' template, the person's eyeballs; before them, with a
+        face of its own texture, the detector's context on the calibration's frames
+        (:attr:`~myoface.analysis.weights.FitSettings.detector_context`)."""
+        if (
+            self.settings.detector_context
+            and self.fit.offsets is not None
+            and self.model.face.texture is not None
+        ):
+            self.fit.measure_detector_context(images)
+            self.calibration = self.fit.calibration
         cal = self.fit.calibration
         frame = images[cal.index]
         if self.settings.photometric:
