@@ -958,12 +958,12 @@ class ModelFit:
         read as expression. (Only at the calibration's frames: a render and a detection a
         step, about 20 in all.)
 
-        Measured 2026-12-06 (the benchmarks' personal face, degraded renders). On the still
-        head's frames MediaPipe read the head pitched 5.1-6.5 deg, its points less the
-        table's offsets 2.8-4.2, less its error on the model rendered over the frame at the
-        true pose 0.7-0.8 (the points' error 1.6-1.8 -> 0.8-0.9 px RMS against the table's);
-        at the table's pose instead, one plain step 1.4-2.7 deg. Against the same tree
-        without it (medians over the benchmarks' camera seeds and clips):
+        Measured 2026-12-06 (the benchmarks' personal face, degraded renders;
+        ``tools/detector_context.py``). On the still head's frames 0, 10 and 20 MediaPipe's
+        points are 3.8-4.1 px RMS from the true vertices and give the head pitched 5.1-5.6
+        deg; less the table's offsets 1.8-2.4 px and 2.3-2.7 deg; less its error on the model
+        rendered over the frame at the true pose 0.5-0.8 px and 0.2-0.8 deg. Against the same
+        tree without it (medians over the benchmarks' camera seeds and clips):
         ``analysis.headmotion`` head still: head 1.76 -> 0.92 deg RMS, worst correlation
         0.12 -> 0.38, worst RMSE 0.176 -> 0.172, median RMSE 0.072 -> 0.077, skin 0.62 ->
         0.63 mm; head moving: worst RMSE 0.206 -> 0.199, worst correlation 0.38 -> 0.49,

@@ -1,0 +1,133 @@
+"""The detector's context (``FitSettings.detector_context``,
+:meth:`~myoface.analysis.modelfit.ModelFit.measure_detector_context`) with and without, on the
+benchmarks' personal face and degraded renders.
+
+    PYTHONPATH=src python tools/detector_context.py [--known-answer] [--headmotion] [--gaze]
+
+``--known-answer``: on the still head-motion clip's frames 0, 10 and 20 (camera seed 0),
+MediaPipe's points against the true vertices (px RMS) raw, less the offsets' table and less
+its error on the model rendered over the frame at the true pose, and the head's pitch each
+gives (a pose fitted to them alone). ``--headmotion``: ``analysis.headmotion``'s headline
+numbers (head still and moving, each camera seed and their median) with the context measured
+and without. ``--gaze``: ``analysis.gaze_error_deg`` on its three clips, each clip's worse
+eye and the median, with and without. With no option: all three (about 10 minutes on two
+cores). "Without" is the same analysis with ``measure_detector_context`` doing nothing.
+
+Measured 2026-12-06 (the numbers in ``measure_detector_context``'s docstring and the
+README's *The detector in the video's own surroundings*).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+
+import numpy as np
+
+KEYS = ("rmse_worst", "corr_worst", "rmse_median_all", "skin_mm", "pose_deg")
+
+
+@contextlib.contextmanager
+def without_context():
+    """The analysis with the detector's context not measured."""
+    from myoface.analysis.modelfit import ModelFit
+
+    saved = ModelFit.measure_detector_context
+    ModelFit.measure_detector_context = lambda self, images: None
+    try:
+        yield
+    finally:
+        ModelFit.measure_detector_context = saved
+
+
+def known_answer() -> None:
+    from myoface.analysis.camera import PinholeCamera, initial_pose
+    from myoface.analysis.landmarks import TrackerOffsets
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.bench import headmotion as H
+
+    fm, _, poses, skins, points, _ = H._sequence(False, True, False, True)
+    frames = H._frames(False, True, True)
+    cam = PinholeCamera.for_image(H.SIZE[0], H.SIZE[1], H.FOV_DEG)
+    fit = ModelFit(fm, cam)
+    table = TrackerOffsets.of_textured_face(fm.face, fit.neutral, cam, H.SIZE, False)
+    print("| frame | px RMS: raw / table / context | pitch (deg): raw / table / context |")
+    print("|---|---|---|")
+    try:
+        for k in (0, 10, 20):
+            p = np.asarray(points[k], dtype=np.float64)
+            want = cam.project(poses[k].apply(skins[k]))
+            err = table.synthesis.tracker_error(skins[k], poses[k], context=frames[k])
+            read = {
+                "raw": p,
+                "table": table.correct(p, poses[k], skins[k]),
+                "context": p - err,
+            }
+            rms, pitch = [], []
+            for q in read.values():
+                rms.append(np.sqrt(((q[:, :2] - want) ** 2).sum(1).mean()))
+                pose = fit._pose_only(q, initial_pose(skins[k], q, cam), skins[k])
+                pitch.append(pose.angles_deg[1] - poses[k].angles_deg[1])
+            print(f"| {k} | {' / '.join(f'{v:.2f}' for v in rms)} | "
+                  f"{' / '.join(f'{v:+.2f}' for v in pitch)} |")  # fmt: skip
+    finally:
+        table.close()
+
+
+def headmotion() -> None:
+    from myoface.bench import headmotion as H
+
+    rows = {}
+    for label, ctx in (("without", without_context), ("with", contextlib.nullcontext)):
+        with ctx():
+            for still in (True, False):
+                # (the runs and their headlines made again; the frames and points kept)
+                for key in [k for k in H._cache if isinstance(k, tuple) and k and
+                            (isinstance(k[0], bool) or k[0] == "headline")]:  # fmt: skip
+                    del H._cache[key]
+                rows[(label, still)] = H._headline(False, still)
+    print("| head | context | " + " | ".join(KEYS) + " |")
+    print("|---|---|" + "---|" * len(KEYS))
+    for still in (True, False):
+        for label in ("without", "with"):
+            h = rows[(label, still)]
+            cells = [
+                f"{h['median'][k]:.3f} ({', '.join(f'{v:.3f}' for v in h['per_seed'][k])})"
+                for k in KEYS
+            ]
+            print(f"| {'still' if still else 'moving'} | {label} | " + " | ".join(cells) + " |")
+
+
+def gaze() -> None:
+    from myoface.bench import gaze as G
+
+    print("| context | " + " | ".join(str(c) for c in G.CLIPS) + " | median |")
+    print("|---|" + "---|" * (len(G.CLIPS) + 1))
+    for label, ctx in (("without", without_context), ("with", contextlib.nullcontext)):
+        values = []
+        with ctx():
+            for clip in G.CLIPS:
+                model, frames, poses, g, closure, skins, _, _ = G._sequence(False, clip)
+                values.append(G.run_gaze(model, frames, poses, g, closure, skins)["value"])
+        cells = " | ".join(f"{v:.2f}" for v in values)
+        print(f"| {label} | {cells} | {np.median(values):.2f} |")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--known-answer", action="store_true", help="the points on the true pose")
+    ap.add_argument("--headmotion", action="store_true", help="the head-motion headline")
+    ap.add_argument("--gaze", action="store_true", help="the gaze benchmark's clips")
+    a = ap.parse_args(argv)
+    every = not (a.known_answer or a.headmotion or a.gaze)
+    if a.known_answer or every:
+        known_answer()
+    if a.headmotion or every:
+        headmotion()
+    if a.gaze or every:
+        gaze()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
