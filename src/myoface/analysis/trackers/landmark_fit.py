@@ -797,6 +797,11 @@ class FitTracker(TrackerBase):
                 "lid_gains": cal.extra.get("lid_gains", {}),
                 "pose": cal.pose.columns(),
             }
+            if "detector_context" in cal.extra:
+                # MediaPipe's error among the video's surroundings beyond its offsets'
+                # table (FitSettings.detector_context): on how many calibration frames, its
+                # size (mm RMS over the face) and how far it turned the calibration's pose
+                out["calibration"]["detector_context"] = cal.extra["detector_context"]
             if "registration" in cal.extra:
                 # the photometric fit's appearance: the frames it was registered on, and how
                 # far their landmarks moved it from the calibration frame's (head frame)
