@@ -970,7 +970,7 @@ class ModelFit:
         median RMSE 0.115 -> 0.103, skin 0.84 -> 0.89 mm, head 0.69 -> 0.71 deg;
         ``analysis.gaze_error_deg`` 6.56 -> 5.02 deg (clips 4.16 / 6.56 / 6.84 -> 5.02 / 5.89
         / 4.88); the expression benchmark's six clips, apex / rest read right, 65.1 / 81.8 ->
-        66.9 / 81.9 %. On a real video (single_face.mp4 analysed with the person's face made
+        66.8 / 81.9 %. On a real video (single_face.mp4 analysed with the person's face made
         from its first frame, ``myoface face from-photo``; the context measured 0.92 mm RMS,
         the calibration turned 0.78 deg by it): the validated fidelity 0.786 -> 0.794 (lower
         lip 0.57 -> 0.68, chin 0.11 -> 0.16, corners 0.91 -> 0.90, brows 0.71 -> 0.69, lids
