@@ -166,6 +166,18 @@ def view_rotation(azimuth_deg: float, elevation_deg: float) -> np.ndarray:
     return np.array([x, np.cross(u, x), u])
 
 
+def head_frame_offsets(err_px, pose, shape, camera) -> np.ndarray:
+    """Image offsets ``err_px`` (V, 2+) px of the points ``shape`` (V, 3) mm, head frame,
+    seen at ``pose`` through ``camera``, as offsets (V, 3) mm in the head frame, each
+    perpendicular to the view at its point's depth (what :meth:`TrackerOffsets.correct`
+    projects back)."""
+    err = np.asarray(err_px, dtype=np.float64)
+    depth = -pose.apply(shape)[:, 2:3]
+    mm = err[:, :2] * depth / camera.focal_px
+    cam = np.column_stack([mm[:, 0], -mm[:, 1], np.zeros(len(mm))])
+    return cam @ pose.rotation  # camera frame -> head frame
+
+
 class TrackerOffsets:
     """Where the landmark detector puts the points of *this* face relative to its true
     vertices, as a function of the view: measured once per view direction on the person's
@@ -273,10 +285,7 @@ class TrackerOffsets:
                 self.missed += 1
                 self.cells[(i, j)] = np.zeros_like(self.shape)
             else:
-                depth = -pose.apply(self.shape)[:, 2:3]
-                mm = err[:, :2] * depth / self.camera.focal_px
-                cam = np.column_stack([mm[:, 0], -mm[:, 1], np.zeros(len(mm))])
-                self.cells[(i, j)] = cam @ rot  # camera frame -> head frame
+                self.cells[(i, j)] = head_frame_offsets(err, pose, self.shape, self.camera)
         return self.cells[(i, j)]
 
     def offsets(self, pose) -> np.ndarray:

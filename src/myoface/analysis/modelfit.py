@@ -983,7 +983,7 @@ class ModelFit:
         not share one context); plain steps (3: the still head 1.08 deg, 6: 1.05); the model
         rendered with the gaze the reader finds on the frame (the eyes' contour moves with
         the gaze): one gaze clip 3.9 -> 8.8 deg, that reading not good enough to steer it."""
-        from myoface.analysis.landmarks import TrackerOffsets
+        from myoface.analysis.landmarks import TrackerOffsets, head_frame_offsets
 
         cal = self.calibration
         if cal is None:
@@ -996,7 +996,6 @@ class ModelFit:
         syn = plain.synthesis
         self.offsets = plain  # (the poses below from the table's points alone)
         base = self.neutral + self.identity_mm
-        f = float(self.camera.focal_px)
         deltas = []
         try:
             for k in cal.extra.get("frames", [cal.index]):
@@ -1023,9 +1022,7 @@ class ModelFit:
                 # points less the error give (the last step's)
                 shifted = plain.correct(p, pose, base)
                 d = err[:, :2] - (p[:, :2] - shifted[:, :2])
-                depth = -pose.apply(base)[:, 2] / f
-                cam = np.column_stack([d[:, 0] * depth, -d[:, 1] * depth, np.zeros(len(d))])
-                deltas.append(cam @ pose.rotation)  # camera frame -> head frame
+                deltas.append(head_frame_offsets(d, pose, base, self.camera))
         finally:
             self.offsets = table
         if not deltas:
