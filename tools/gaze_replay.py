@@ -35,7 +35,11 @@ the move that puts the skin ring where the truth's is (a perfect registration of
 surroundings: the ceiling of a socket), ``oracle=centre`` by the one that puts the eyeball's
 centre where the truth's is; ``oracle=anchor`` moves each eye by one constant for the whole
 clip, the mean of the moves that put its centre where the truth's is (the best a per-video
-anchor of the eye could do, the socket left to take the rest)."""
+anchor of the eye could do, the socket left to take the rest); ``oracle=lids`` gives the
+reader the truth's lid margins relative to the eyeball's centre (the lids' shape; the eye's
+place stays the fit's). ``record clip:G,C PATH`` records the benchmark's head and blinks
+with gaze programme seed G and camera seed C (the benchmark's clips are 0,0, 7,3 and 11,5;
+``upper_margin``'s docstring in :mod:`myoface.analysis.gaze` used 3,1 and 5,2 held out)."""
 
 from __future__ import annotations
 
@@ -64,7 +68,17 @@ def record(source: str, out: str, face: str = "bench", tracker: str = "fit") -> 
 
     model = _model() if face == "bench" else load_face_model(None)
     truth = None
-    if source in ("bench", "bench2", "bench-clean"):
+    if source.startswith("clip:"):  # (clip:G,C: gaze programme seed G, camera seed C)
+        from myoface.render.degrade import CameraDegradation
+
+        gaze_seed, camera_seed = (int(v) for v in source[5:].split(","))
+        n = 90
+        poses, gaze, closure, skins = B.make_gaze_sequence(model, n, gaze_seed)
+        frames, _ = B.render_gaze_sequence(model.face, poses, gaze, skins,
+                                           CameraDegradation(seed=camera_seed))  # fmt: skip
+        video = _Clip(frames)
+        truth = {"gaze": gaze, "closure": closure, "poses": poses, "skins": skins}
+    elif source in ("bench", "bench2", "bench-clean"):
         n = 90
         poses, gaze, closure, skins = B.make_gaze_sequence(model, n)
         deg = None
@@ -260,6 +274,24 @@ def _placed_summary(rows) -> dict:
             "centre_minus_skin_px": part(a[:, :2] - a[:, 2:])}  # fmt: skip
 
 
+def _true_lids(rec, reader, shape, k) -> np.ndarray:
+    """``oracle=lids``: the fitted skin ``shape`` with each eye's lid margins the truth's at
+    frame ``k``, relative to the eyeball's centre (the truth's margins moved by the calibrated
+    neutral's centre less the truth's): the lids' shape the truth's, the eye's place the
+    fit's."""
+    from myoface.bench.headmotion import _model
+    from myoface.face.eyes import eye_loop, eyeball_center
+
+    face = _model().face
+    shape = np.array(shape)
+    for side, group in (("l", "eye_l"), ("r", "eye_r")):
+        true_c = eyeball_center(face.vertices, eye_loop(face, group))
+        _, upper, lower = reader._eyes[side]
+        idx = np.concatenate([upper, lower])
+        shape[idx] = rec["truth"]["skins"][k][idx] - true_c + reader.centres_mm[side]
+    return shape
+
+
 def replay(path: str, settings, oracle: str | None = None) -> dict:
     """The reader with ``settings`` over the recording at ``path``: its readings, their errors
     (with the truth) or spread, where it placed the eyes (with the truth), and the CPU time a
@@ -278,7 +310,7 @@ def replay(path: str, settings, oracle: str | None = None) -> dict:
         sys.exit("an oracle needs a recording with the truth")
     if oracle == "anchor":
         _anchor(rec, reader)
-    orc = None if oracle in (None, "anchor") else _Oracle(oracle, rec, reader)
+    orc = None if oracle in (None, "anchor", "lids") else _Oracle(oracle, rec, reader)
     out, prev, placed = [], None, {}
     t0 = time.process_time()
     for (frame, camera, pose, shape, points, _), k in zip(rec["frames"], rec["index"],
@@ -288,6 +320,8 @@ def replay(path: str, settings, oracle: str | None = None) -> dict:
         prev = k
         if orc is not None:
             orc.k = k
+        if oracle == "lids":
+            shape = _true_lids(rec, reader, shape, k)
         out.append(reader.measure(frame, camera, pose, shape, points))
         if rec["truth"] is not None and "poses" in rec["truth"]:
             _placed(rec, reader, (camera, pose), k, placed)
@@ -380,8 +414,8 @@ def main(argv) -> None:
     kw = {k: ast.literal_eval(v) for k, v in (a.split("=", 1) for a in argv[1:] if "=" in a)
           if k != "oracle"}  # fmt: skip
     oracle = next((a.split("=", 1)[1] for a in argv[1:] if a.startswith("oracle=")), None)
-    if oracle not in (None, "skin", "centre", "anchor"):
-        sys.exit(f"oracle must be skin, centre or anchor; got {oracle!r}")
+    if oracle not in (None, "skin", "centre", "anchor", "lids"):
+        sys.exit(f"oracle must be skin, centre, anchor or lids; got {oracle!r}")
     settings = GazeSettings(**kw)
     for p in paths:
         print(p, replay(p, settings, oracle))
