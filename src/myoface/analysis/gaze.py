@@ -394,6 +394,13 @@ class GazeSettings:
         replayed, 2026-12-02).
     edge_px : the softness (px) of the iris' edge in the model: the renders' anti-aliasing and
         a webcam's blur are about a pixel wide (1.0 px read 2-6 deg worse on sharp renders).
+        Measured and not taken (2026-12-06, ``tools/gaze_replay.py`` on the benchmark's three
+        clips and two held out, the worse eye's deg, 0.6 / 0.45 / 0.35 / 0.25): sharper read
+        the degraded renders better on every clip (4.21 -> 4.10 / 4.04 / 4.02, 3.65 -> 3.39 /
+        3.42 / 3.31, 3.88 -> 3.87 / 3.86 / 3.79, 4.48 -> 4.42 / 4.41 / 4.47, 3.89 -> 3.64 /
+        3.53 / 3.49; the reader on the true geometry 2.4-3.4 -> 2.0-2.8), but on
+        single_face.mp4 the readings' SD stayed 0.7-1.6 deg at every value: the renderer's
+        limbus is a hard line, a real one is not, and the benchmark's gain is the renderer's.
     upper_margin, lower_margin : pixels this close to the upper / lower lid margin, in iris
         radii, are not read (the lashes and the margin's own error; 0.1 and 0.05 against none:
         the worst reading 61 -> 3 deg yaw on one eye). The upper lid's 0.25: below its margin
