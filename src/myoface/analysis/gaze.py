@@ -412,7 +412,7 @@ class GazeSettings:
         three clips 5.02 / 4.28 / 4.22 / 4.35 / 4.25, 5.89 / 4.49 / 3.65 / 3.54 / 3.49, 4.88 /
         3.99 / 3.89 / 4.05 / 4.16, two clips held out (gaze seeds 3 and 5, camera seeds 1 and
         2) 4.90 / 4.51 / 4.48 / 4.61 / 4.60, 5.02 / 4.30 / 3.89 / 3.99 / 3.97; the pitch's
-        mean error -1.9 to -6.2 deg -> -0.3 to -3.0 at 0.25; the reader on the true geometry
+        mean error -1.9 to -6.2 deg -> -0.3 to -3.1 at 0.25; the reader on the true geometry
         2.1-3.7 -> 2.1-3.4. With the lids' shape the truth's (the margins relative to the
         eyeball's centre) the pitch's bias went the same way at 0.1 (-2.0 -> -0.4 deg) and
         gained nothing more at 0.25. On single_face.mp4 the readings' SD 0.6-1.6 deg either

@@ -94,9 +94,10 @@ bias +2.95, the other way), the photometric term 6.01 (pitch bias +4.7 / +4.8), 
 5.5): the reader reads the iris against the fitted eyeball, not the camera's direction.
 
 The upper lid's margin read wider (2026-12-06, :attr:`~myoface.analysis.gaze.GazeSettings.
-upper_margin` 0.1 -> 0.25 iris radii; ``myoface bench --only analysis.gaze_error_deg``):
-5.02 -> 3.88 deg (the clips 5.02 / 5.89 / 4.88 -> 4.22 / 3.65 / 3.89; BENCHMARKS.md, 17:03 UTC), the pitch's steady
-bias (-2.0 to -6.2 deg on every eye of every clip) -> -0.3 to -3.1. What is left is the yaw's
+upper_margin` 0.1 -> 0.25 iris radii; ``myoface bench --only analysis.gaze_error_deg``,
+BENCHMARKS.md of 17:03 UTC): 5.02 -> 3.88 deg (the clips 5.02 / 5.89 / 4.88 -> 4.22 / 3.65 /
+3.89), the pitch's steady bias (-2.0 to -6.2 deg on every eye of every clip) -> -0.3 to
+-3.1. What is left is the yaw's
 bias per eye, the eyeball's centre where the fit's pose puts it, on average over the clip
 (``tools/gaze_replay.py``, each clip's fit recorded and replayed): each eye moved by one
 constant per clip, the mean of the moves that put its centre where the truth's is
