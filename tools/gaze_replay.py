@@ -48,6 +48,7 @@ import os
 import pickle
 import sys
 import time
+from functools import lru_cache
 
 import numpy as np
 
@@ -60,6 +61,29 @@ TRACKERS = {
 }
 
 
+def _synthetic_source(source: str):
+    """``record``'s rendered sources as (gaze programme seed, camera degradation): ``bench``
+    (0, the camera's default draw), ``bench2`` (7, camera seed 3), ``bench-clean`` (0, no
+    degradation but the texture's resolution), ``clip:G,C`` (G, camera seed C); None for a
+    video's path."""
+    from dataclasses import replace
+
+    from myoface.render.degrade import CameraDegradation
+
+    if source == "bench":
+        return 0, CameraDegradation()
+    if source == "bench2":
+        return 7, CameraDegradation(seed=3)
+    if source == "bench-clean":
+        return 0, replace(CameraDegradation(), light_amplitude=0.0, exposure_drift=0.0,
+                          background=False, blur_sigma_px=0.0, full_scale_electrons=1e9,
+                          read_noise_electrons=0.0, crf=None)  # fmt: skip
+    if source.startswith("clip:"):
+        gaze_seed, camera_seed = (int(v) for v in source[5:].split(","))
+        return gaze_seed, CameraDegradation(seed=camera_seed)
+    return None
+
+
 def record(source: str, out: str, face: str = "bench", tracker: str = "fit") -> None:
     import myoface.bench.gaze as B
     from myoface.analysis.pipeline import Tracking, make_analyzer
@@ -68,35 +92,10 @@ def record(source: str, out: str, face: str = "bench", tracker: str = "fit") -> 
 
     model = _model() if face == "bench" else load_face_model(None)
     truth = None
-    if source.startswith("clip:"):  # (clip:G,C: gaze programme seed G, camera seed C)
-        from myoface.render.degrade import CameraDegradation
-
-        gaze_seed, camera_seed = (int(v) for v in source[5:].split(","))
-        n = 90
-        poses, gaze, closure, skins = B.make_gaze_sequence(model, n, gaze_seed)
-        frames, _ = B.render_gaze_sequence(model.face, poses, gaze, skins,
-                                           CameraDegradation(seed=camera_seed))  # fmt: skip
-        video = _Clip(frames)
-        truth = {"gaze": gaze, "closure": closure, "poses": poses, "skins": skins}
-    elif source in ("bench", "bench2", "bench-clean"):
-        n = 90
-        poses, gaze, closure, skins = B.make_gaze_sequence(model, n)
-        deg = None
-        if source == "bench2":
-            from dataclasses import replace
-
-            from myoface.render.degrade import CameraDegradation
-
-            gaze = B.gaze_programme(n, seed=7)
-            deg = replace(CameraDegradation(), seed=3)
-        if source == "bench-clean":
-            from dataclasses import replace
-
-            from myoface.render.degrade import CameraDegradation
-
-            deg = replace(CameraDegradation(), light_amplitude=0.0, exposure_drift=0.0,
-                          background=False, blur_sigma_px=0.0, full_scale_electrons=1e9,
-                          read_noise_electrons=0.0, crf=None)  # fmt: skip
+    sequence = _synthetic_source(source)
+    if sequence is not None:  # (a render of the benchmark's head, gaze and blinks)
+        gaze_seed, deg = sequence
+        poses, gaze, closure, skins = B.make_gaze_sequence(model, 90, gaze_seed)
         frames, _ = B.render_gaze_sequence(model.face, poses, gaze, skins, deg)
         video = _Clip(frames)
         truth = {"gaze": gaze, "closure": closure, "poses": poses, "skins": skins}
@@ -148,6 +147,18 @@ def _skin_ring(neutral, centre) -> np.ndarray:
     )
 
 
+@lru_cache(maxsize=1)
+def _true_centres() -> dict:
+    """The benchmark's face's eyeball centres (mm, head frame), ``{"l": (3,), "r": (3,)}``:
+    the truth's."""
+    from myoface.bench.headmotion import _model
+    from myoface.face.eyes import eye_loop, eyeball_center
+
+    face = _model().face
+    return {s: eyeball_center(face.vertices, eye_loop(face, g))
+            for s, g in (("l", "eye_l"), ("r", "eye_r"))}  # fmt: skip
+
+
 class _Oracle:
     """Each frame's socket offsets replaced by the truth's answer (``kind``: ``"skin"``, the
     move that puts the eye's skin ring where the truth's is in the image; ``"centre"``, the
@@ -155,14 +166,11 @@ class _Oracle:
 
     def __init__(self, kind, rec, reader):
         from myoface.analysis.camera import PinholeCamera
-        from myoface.bench.headmotion import FOV_DEG, SIZE, _model
-        from myoface.face.eyes import eye_loop, eyeball_center
+        from myoface.bench.headmotion import FOV_DEG, SIZE
 
         self.kind, self.rec, self.reader = kind, rec, reader
         self.cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
-        face = _model().face
-        self.true_c = {s: eyeball_center(face.vertices, eye_loop(face, g))
-                       for s, g in (("l", "eye_l"), ("r", "eye_r"))}  # fmt: skip
+        self.true_c = _true_centres()
         self.k = 0
         for side, sock in reader.sockets.items():
             sock.offset = self._offset(side)
@@ -196,15 +204,13 @@ def _anchor(rec, reader) -> dict:
     lids' margins and its socket's grid (a perfect per-video anchor, the frame-to-frame
     misplacement left to the socket). Returns the moves (mm, head frame x and y)."""
     from myoface.analysis.camera import PinholeCamera
-    from myoface.bench.headmotion import FOV_DEG, SIZE, _model
-    from myoface.face.eyes import eye_loop, eyeball_center
+    from myoface.bench.headmotion import FOV_DEG, SIZE
 
     truth = rec["truth"]
     cam = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
-    face = _model().face
     moves = {}
-    for side, group in (("l", "eye_l"), ("r", "eye_r")):
-        true_c = eyeball_center(face.vertices, eye_loop(face, group))
+    for side in ("l", "r"):
+        true_c = _true_centres()[side]
         c = reader.centres_mm[side]
         ds = []
         for (_, camera, pose, *_), k in zip(rec["frames"], rec["index"], strict=True):
@@ -238,17 +244,14 @@ def _placed(rec, reader, frame_pose, k, acc) -> None:
     """Add frame ``k``'s misplacements (px) of each eye (its centre and its skin ring, moved by
     the socket's offset) against the truth's to ``acc``."""
     from myoface.analysis.camera import PinholeCamera
-    from myoface.bench.headmotion import FOV_DEG, SIZE, _model
-    from myoface.face.eyes import eye_loop, eyeball_center
+    from myoface.bench.headmotion import FOV_DEG, SIZE
 
     truth = rec["truth"]
     if truth["closure"][k] > 0.05:
         return
     if "true_c" not in acc:
-        face = _model().face
         acc["cam"] = PinholeCamera.for_image(SIZE[0], SIZE[1], FOV_DEG)
-        acc["true_c"] = {s: eyeball_center(face.vertices, eye_loop(face, g))
-                         for s, g in (("l", "eye_l"), ("r", "eye_r"))}  # fmt: skip
+        acc["true_c"] = _true_centres()
     camera, pose = frame_pose
     cam, tp = acc["cam"], truth["poses"][k]
     for s in "lr":
@@ -279,13 +282,8 @@ def _true_lids(rec, reader, shape, k) -> np.ndarray:
     frame ``k``, relative to the eyeball's centre (the truth's margins moved by the calibrated
     neutral's centre less the truth's): the lids' shape the truth's, the eye's place the
     fit's."""
-    from myoface.bench.headmotion import _model
-    from myoface.face.eyes import eye_loop, eyeball_center
-
-    face = _model().face
     shape = np.array(shape)
-    for side, group in (("l", "eye_l"), ("r", "eye_r")):
-        true_c = eyeball_center(face.vertices, eye_loop(face, group))
+    for side, true_c in _true_centres().items():
         _, upper, lower = reader._eyes[side]
         idx = np.concatenate([upper, lower])
         shape[idx] = rec["truth"]["skins"][k][idx] - true_c + reader.centres_mm[side]

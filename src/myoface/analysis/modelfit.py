@@ -940,8 +940,9 @@ class ModelFit:
         TrackerOffsets` of a face with its own texture) says, and calibrate again with it
         (after :meth:`calibrate`; ``images``: the frames given to it, by position, None where
         one was not kept). Returns what was measured (also the calibration's
-        ``extra["detector_context"]``), or None where it cannot be (no table, or no
-        calibration frame's image).
+        ``extra["detector_context"]``), or None where it is not done
+        (:attr:`~myoface.analysis.weights.FitSettings.detector_context` off) or cannot be (no
+        table, or no calibration frame's image).
 
         The table renders the person's model on the renderer's plain background; on a video
         the detector sees the face among its room, hair and neck, and places its points
@@ -989,7 +990,11 @@ class ModelFit:
         if cal is None:
             raise MyofaceValueError("measure_detector_context() needs a calibration first")
         table = self.offsets
-        if not isinstance(table, TrackerOffsets) or self._calibration_input is None:
+        if (
+            not self.settings.detector_context
+            or not isinstance(table, TrackerOffsets)
+            or self._calibration_input is None
+        ):
             return None
         frames, index, scores = self._calibration_input
         plain = table.with_context(None)

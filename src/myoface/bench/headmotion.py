@@ -413,7 +413,7 @@ def run_headmotion(
         )
     window = max(1, int(round(CALIBRATION_WINDOW_S * fps)))
     cal = fit.calibrate(points[:window], synthesis=syn)
-    if frames is not None and fit.settings.detector_context and fit.offsets is not None:
+    if frames is not None:
         fit.measure_detector_context(frames[:window])  # (as FitTracker: the room around)
         cal = fit.calibration
     if photometric:

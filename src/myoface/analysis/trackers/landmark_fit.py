@@ -546,11 +546,7 @@ class FitTracker(TrackerBase):
         calibration used), the lids' template, the person's eyeballs; before them, with a
         face of its own texture, the detector's context on the calibration's frames
         (:attr:`~myoface.analysis.weights.FitSettings.detector_context`)."""
-        if (
-            self.settings.detector_context
-            and self.fit.offsets is not None
-            and self.model.face.texture is not None
-        ):
+        if self.model.face.texture is not None:  # (not a table textured by the frame)
             self.fit.measure_detector_context(images)
             self.calibration = self.fit.calibration
         cal = self.fit.calibration
