@@ -14,7 +14,13 @@ module constants (``--const``: ``module.NAME`` under ``myoface.analysis``, JSON;
   the benchmark's clip), head moving unless ``--still``, degraded by the camera unless
   ``--clean``: prints the benchmark's summary (worst and median RMSE, worst correlation,
   skin mm, its rest and expression frames apart, head deg and its mean error yaw / pitch /
-  roll) and the appearance's parallax turn (``modelfit.PARALLAX_REFINE``);
+  roll) and the appearance's parallax turn (``modelfit.PARALLAX_REFINE``). ``--only
+  PARTS``: the camera's degradation with only these of its parts (comma-separated among
+  :data:`PARTS`: ``texture``, ``light``, ``background``, ``blur``, ``noise``, ``h264``;
+  ``none``: the renders as drawn); ``--points-from clean``: MediaPipe's points read on the
+  renders as drawn while the fit's pixels are the degraded frames (which of the two, the
+  points or the pixels, a degradation costs); ``--table``: every muscle's RMSE and
+  correlation;
 - ``expression``: the expression benchmark's synthetic clip (:func:`myoface.bench.expression.
   _synthetic`, the default analysis with the overrides): prints the apex and rest accuracy
   and the contractions' median RMSE.
@@ -24,6 +30,7 @@ module constants (``--const``: ``module.NAME`` under ``myoface.analysis``, JSON;
     python tools/photometric_ablation.py video --out /tmp/pm \\
         --const '{"photometric.SHADE_FIELD_ORDER": 2}'
     python tools/photometric_ablation.py headmotion --const '{"modelfit.PARALLAX_REFINE": false}'
+    python tools/photometric_ablation.py headmotion --only background --points-from clean
     python tools/photometric_ablation.py expression --set '{"photo_rate_per_s": 4.0}'
 
 The numbers of issue 30's report (2026-12-02) were taken this way.
@@ -34,6 +41,23 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+
+#: the camera's degradation by parts (``headmotion --only``): each part's fields of
+#: :class:`~myoface.render.degrade.CameraDegradation` as its defaults have them; a part left
+#: out takes the values in ``OFF``; ``texture`` is the renders' texture at
+#: :data:`~myoface.bench.headmotion.TEXTURE_FACTOR` of its resolution
+PARTS = {
+    "texture": (),
+    "light": ("light_amplitude", "exposure_drift"),
+    "background": ("background",),
+    "blur": ("blur_sigma_px",),
+    "noise": ("full_scale_electrons", "read_noise_electrons"),
+    "h264": ("crf",),
+}
+OFF = {
+    "light_amplitude": 0.0, "exposure_drift": 0.0, "background": False, "blur_sigma_px": 0.0,
+    "full_scale_electrons": None, "read_noise_electrons": 0.0, "crf": None,
+}  # fmt: skip
 
 
 def _constants(consts: dict) -> None:
@@ -53,6 +77,14 @@ def main(argv=None) -> None:
     ap.add_argument("--moving", action="store_true", help="warp: with fake head motion")
     ap.add_argument("--still", action="store_true", help="headmotion: the head still")
     ap.add_argument("--clean", action="store_true", help="headmotion: the renderer's frames")
+    ap.add_argument("--only", default=None, help="headmotion: the camera's parts kept (PARTS)")
+    ap.add_argument(
+        "--points-from",
+        default="same",
+        choices=("same", "clean"),
+        help="headmotion: MediaPipe on the degraded frames or the clean renders",
+    )
+    ap.add_argument("--table", action="store_true", help="headmotion: every muscle's numbers")
     ap.add_argument("--look", action="store_true", help="warp: with the expressions' look")
     ap.add_argument("--expressions", default="happiness,surprise")
     ap.add_argument("--video", default=None, help="video: default the sample video")
@@ -78,7 +110,12 @@ def main(argv=None) -> None:
         )
         return
     if a.mode == "headmotion":
-        _headmotion(a.still, not a.clean, fs, consts)
+        only = None if a.only is None else tuple(p for p in a.only.split(",") if p != "none")
+        if only is not None and set(only) - set(PARTS):
+            raise SystemExit(f"--only takes some of {', '.join(PARTS)} or none; got {a.only}")
+        if only is not None and a.clean:
+            raise SystemExit("--only and --clean: --clean is --only none")
+        _headmotion(a.still, not a.clean, fs, consts, only, a.points_from, a.table)
         return
     if a.mode == "expression":
         from myoface.bench.expression import _synthetic
@@ -112,15 +149,37 @@ def main(argv=None) -> None:
     print(f"video {fs} {consts}: fidelity {d['overall']['explained']:.3f} ({regions})")
 
 
-def _headmotion(still: bool, degraded: bool, fs: dict, consts: dict) -> None:
+def _camera_frames(still: bool, only: tuple):
+    """The head-motion clip's frames degraded by ``only`` of the camera's :data:`PARTS`."""
+    from myoface.bench import headmotion as hm
+    from myoface.render.degrade import CameraDegradation
+
+    default = CameraDegradation()
+    kept = {f: getattr(default, f) for p in only for f in PARTS[p]}
+    deg = CameraDegradation(**{**OFF, **kept})
+    fm = hm._model()
+    truth, poses, skins = hm._truth(False, still)
+    factor = hm.TEXTURE_FACTOR if "texture" in only else None
+    return hm.degraded_sequence(fm.face, poses, skins, deg, texture_factor=factor)[0]
+
+
+def _headmotion(still: bool, degraded: bool, fs: dict, consts: dict, only=None,
+                points_from: str = "same", table: bool = False) -> None:  # fmt: skip
     import numpy as np
 
     from myoface.analysis import modelfit
     from myoface.analysis.weights import FitSettings
     from myoface.bench import headmotion as hm
 
-    fm, truth, poses, skins, points, _ = hm._sequence(False, still, False, degraded)
-    frames = hm._frames(False, still, degraded)
+    if only is not None:
+        fm, truth, poses, skins, _, _ = hm._sequence(False, still, False, False)
+        frames = _camera_frames(still, only)
+        points = hm.detect_sequence(frames)[0]
+    else:
+        fm, truth, poses, skins, points, _ = hm._sequence(False, still, False, degraded)
+        frames = hm._frames(False, still, degraded)
+    if points_from == "clean":
+        points = hm._sequence(False, still, False, False)[4]
     turned = {}
     take = modelfit.ModelFit.set_appearance
 
@@ -142,13 +201,18 @@ def _headmotion(still: bool, degraded: bool, fs: dict, consts: dict) -> None:
     def rms(sel):
         return float(np.sqrt(np.nanmean(skin[ok & sel] ** 2)))
 
+    camera = ("degraded" if degraded else "clean") if only is None else f"only {only}"
+    if points_from == "clean":
+        camera += ", MediaPipe on the clean renders"
     print(
-        f"headmotion {'still' if still else 'moving'} {'degraded' if degraded else 'clean'} "
+        f"headmotion {'still' if still else 'moving'} {camera} "
         f"{fs} {consts}: worst {m['rmse_worst']:.3f} median {m['rmse_median_all']:.3f} "
         f"corr {m['corr_worst']:.2f} skin {m['skin_mm']:.3f} mm (rest {rms(~act):.3f}, "
         f"expressions {rms(act):.3f}) head {m['pose_deg']:.3f} deg (mean error "
         f"{m['pose_err_mean_deg']}); parallax turn {turned.get('rotation_deg')}"
     )
+    if table:
+        print(r.table())
 
 
 if __name__ == "__main__":

@@ -69,6 +69,33 @@ head moving, skin 1.21 / 1.30 / 1.36 mm, head 1.55 / 1.48 / 1.88 deg, worst RMSE
 those it keeps are 0.8 and 2.2 px from the true skin point (median; the chained flow's 0.8
 and 4.1 px): the renders' shading does not turn with the skin. The tracker costs 7-8 ms of
 CPU a frame here.
+
+What each of the camera's parts costs the photometric fit, the default (2026-12-06, head
+moving, camera seed 0; ``tools/photometric_ablation.py headmotion --only PART``, the renders
+degraded by that part alone; worst RMSE / median RMSE / worst correlation / skin mm): as
+drawn 0.113 / 0.072 / 0.68 / 0.55; the texture at half resolution 0.140 / 0.070 / 0.59 /
+0.57; the moving light 0.107 / 0.076 / 0.63 / 0.54; the room 0.173 / 0.084 / 0.06 / 0.68;
+the blur 0.103 / 0.078 / 0.65 / 0.56; the noise 0.153 / 0.086 / 0.43 / 0.56; H.264 0.108 /
+0.087 / 0.31 / 0.68; all of them (the benchmark) 0.199 / 0.103 / 0.25 / 0.89. Which side
+pays (``--points-from clean``: MediaPipe's points read on the renders as drawn, the fit's
+pixels degraded): the room costs through the points (0.156 / 0.100 / 0.62 / 0.62 with the
+clean ones): around a face with no head the clutter moves MediaPipe's points by 1-2.7 px
+(median per frame), almost all of it one shift per region (after a similarity on the rigid
+points, of the chin's 2.5 px RMS 2.3 are common to its points, of the lower lip's 1.8 1.8,
+of the brows' 1.1-1.4 1.0-1.3), which the fit reads as the lower lip's depressors and the
+mentalis (their correlation 0.06). H.264 and the noise cost through the pixels (0.68 and 0.60
+mm with the clean points), and so does everything together: 0.89 mm with the clean points as
+with the degraded ones. The skin's error is the expressions' (0.96 mm against 0.21 at rest),
+read short: the skin's displacement at gain 0.88 overall, 0.77 at the brows, 0.72 on the
+cheeks. Measured and not kept: the points' error shared by each region's points as a term of
+the noise (each region's one common shift, SD 1 or 2 mm, marginalised, so that no region's
+translation is read from the points): skin 1.19 / 1.07 mm, worst RMSE 0.34 / 0.32 (as drawn
+0.59 / 0.61 mm): a region's translation is what the expressions make too; MediaPipe shown the
+face alone (the frame beyond the true face's outline, dilated by 0, 5, 10, 20, 40 px, grey):
+skin 0.97, 0.95, 0.91, 0.80, 0.85 mm. The AU-space prior (``au_prior_sigma`` 0.1) reads
+this clip better (skin 0.77 mm, worst RMSE 0.156, correlation 0.46), but the renders'
+contractions lie in the AU table's span by construction and single_face.mp4's validated
+fidelity falls with it (docs/expression_trackers.md): it stays opt-in.
 """
 
 from __future__ import annotations
@@ -278,9 +305,11 @@ def render_sequence(face, poses, skins) -> list[np.ndarray]:
     ]
 
 
-def degraded_sequence(face, poses, skins, degradation=None) -> tuple[list[np.ndarray], dict]:
+def degraded_sequence(face, poses, skins, degradation=None,
+                      texture_factor: float | None = TEXTURE_FACTOR) -> tuple[list[np.ndarray], dict]:  # fmt: skip
     """The frames of the sequence as a webcam would give them, and what was done to them: the
-    face rendered with its texture resampled (:data:`TEXTURE_FACTOR`), its coverage kept, then
+    face rendered with its texture resampled (``texture_factor``, default
+    :data:`TEXTURE_FACTOR`; None: its own), its coverage kept, then
     ``degradation`` (default: :class:`~myoface.render.degrade.CameraDegradation`'s defaults),
     its H.264 decoded by the analysis' reader (:func:`~myoface.analysis.video.open_video`).
     The report has the stream's bitrate, the PSNR (dB) the H.264 round trip leaves and the
@@ -299,7 +328,9 @@ def degraded_sequence(face, poses, skins, degradation=None) -> tuple[list[np.nda
 
     t0 = time.perf_counter()
     deg = CameraDegradation() if degradation is None else degradation
-    tex = None if face.texture is None else resample_texture(face.texture, TEXTURE_FACTOR)
+    tex = None
+    if face.texture is not None and texture_factor is not None:
+        tex = resample_texture(face.texture, texture_factor)
     ren = camera_renderer(face, texture=tex)
     frames, alpha = [], []
     for p, s in zip(poses, skins, strict=True):
@@ -316,9 +347,9 @@ def degraded_sequence(face, poses, skins, degradation=None) -> tuple[list[np.nda
         report["h264_kbit_s"] = round(n_bytes * 8 / 1e3 / (len(raw) / deg.fps), 1)
         report["h264_psnr_db"] = round(float(10 * np.log10(255**2 / mse)), 2)
     report["texture"] = (
-        f"the face's own resampled to {TEXTURE_FACTOR}x (area) and back (bilinear)"
+        f"the face's own resampled to {texture_factor}x (area) and back (bilinear)"
         if tex is not None
-        else "the face's own (it has none to resample)"
+        else "the face's own"
     )
     report["render_seconds"] = round(t_render, 2)
     report["degrade_seconds"] = round(time.perf_counter() - t0 - t_render, 2)
