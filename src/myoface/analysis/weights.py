@@ -470,7 +470,17 @@ class FitSettings:
     #: -> 0.42 / 0.62 (the lids' raiser, cheap, read at rest and in smiles: AU5 0.04 -> 0.14
     #: at rest), the known warps' worst gain 0.897 -> 0.878 -> 0.858 (the corners),
     #: single_face.mp4's validated fidelity 0.766 -> 0.774 -> 0.731 (the corners' gain 0.87
-    #: -> 0.86 -> 0.69). Not taken.
+    #: -> 0.86 -> 0.69). Not taken. Nor (2026-12-06) each muscle weighed by its price in
+    #: the AU table's units, one over the largest weight any AU gives it (the frontalis'
+    #: middle part, 0.25 in AU1 and 0.5 in AU2, and the depressor supercilii and the
+    #: orbital sphincter's upper part at 2, the rest 1-1.1): on the degraded head-motion
+    #: renders the L1 prior gives a brow raise to the frontalis' middle part alone at its
+    #: bound (surprise's apex: 1.0 where the truth has 0.47, the inner and outer parts 0.2
+    #: for 0.7), which the clean renders split right. Priced so, head moving (camera seeds
+    #: 0, 1, 2, median) worst RMSE 0.199 -> 0.181, median 0.103 -> 0.108, worst correlation
+    #: 0.49 -> 0.47, skin 0.894 -> 0.867 mm; head still worst 0.172 -> 0.158, skin 0.629 ->
+    #: 0.620 mm; the six expression clips pooled, apex / rest 0.668 / 0.819 -> 0.656 / 0.855
+    #: (per clip -0.07 to +0.04 at the apex): within the clips' spread, not taken.
     sparsity_reach: float = 0.0
     #: the symmetry prior (:class:`~myoface.analysis.terms.SymmetryPrior`): each pair of
     #: muscles that mirror one another contract alike, within this sigma (a contraction; None:
