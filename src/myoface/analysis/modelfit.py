@@ -193,6 +193,15 @@ SCORE_ITERATIONS = 3
 #: near the calibration frame are the same frame); single_face.mp4's validated fidelity
 #: 0.771 -> 0.762 (its chin 0.14 -> 0.05, the lower lip 0.57 -> 0.58). Its cost: a pose fit
 #: by the pixels of each registration frame, once: 115 ms on the sample (11 frames).
+#: Measured and not kept (2026-12-06): the appearance averaged over the registration frames
+#: (each frame's pose fitted to its pixels against the calibration frame's appearance, its
+#: own appearance taken there, each sample's albedo the mean over the frames that see it,
+#: brightness under the calibration frame's shading: a template with the sensor's noise and
+#: the codec's blocks of one frame averaged away). The degraded head-motion renders over
+#: camera seeds 0, 1, 2, head moving: skin 0.894, 0.905, 0.835 -> 0.982, 0.713, 0.798 mm
+#: (median 0.894 -> 0.798), head 0.711 -> 0.621 deg, median RMSE 0.103 -> 0.099, but the
+#: worst correlation 0.487 -> 0.218, worst RMSE 0.199 -> 0.206; head still skin 0.629 ->
+#: 0.660 mm, worst RMSE 0.172 -> 0.157: no better on the whole.
 REGISTER_APPEARANCE = True
 #: the frames that register the appearance: the calibration frame's neighbours within this
 #: many frames (either side) whose scores are within :data:`NEUTRAL_MARGIN_MM` of the
