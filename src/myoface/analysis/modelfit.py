@@ -236,6 +236,12 @@ REGISTRATION_MAX = 12
 #: 0.78 mm, head 1.21 -> 0.84 deg (the yaw found short by the lights: 1.4 where ambient light
 #: gives 2.3-2.7); the expression clip's fit skin 0.96 -> 0.90 mm, head 1.27 -> 0.91 deg. Head
 #: still: no frame seen from another view, nothing done. About 1.7 s once (18-22 costs).
+#: On the degraded renders the same oracle does not help (2026-12-06, camera seeds 0, 1, 2,
+#: head moving; the calibration's pose 0.5-1.0 deg off in yaw): the appearance taken at the
+#: calibration frame's true pose, after everything else as the fit has it, reads skin 1.01,
+#: 1.04, 1.09 mm against 0.89, 0.91, 0.84, worst correlation -0.04 against 0.49 (median):
+#: there the appearance's pose is not what holds the moving head's numbers (the camera's
+#: degradation of the pixels is: ``bench/headmotion.py``'s docstring).
 PARALLAX_REFINE = True
 #: the registration frames it reads, those seen from the farthest views, at most this many,
 #: and none seen within :data:`PARALLAX_MIN_DEG` of the calibration frame's view: a slide of a
