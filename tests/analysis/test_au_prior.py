@@ -8,9 +8,16 @@ import numpy as np
 import pytest
 
 from myoface.analysis.au_intensity import OPENFACE_AUS, au_basis
-from myoface.analysis.au_prior import AUSubspacePrior, au_prior_terms, off_table_projector
+from myoface.analysis.au_prior import (
+    AUSubspacePrior,
+    au_prior_terms,
+    off_table_projector,
+    shared_aus,
+    shared_projector,
+)
 from myoface.analysis.camera import HeadPose
 from myoface.analysis.terms import Estimate
+from myoface.errors import MyofaceValueError
 
 
 @pytest.fixture(scope="module")
@@ -110,6 +117,48 @@ def test_the_hook_follows_the_settings(ids):
     assert au_prior_terms(ids, object()) == []  # (settings without the field: off)
     from myoface.analysis.weights import FitSettings
 
-    assert au_prior_terms(ids, FitSettings()) == []  # opt-in
-    assert au_prior_terms(ids, FitSettings(au_prior_sigma=0.1))[0].sigma == 0.1
+    # the whole table's: opt-in; by default the AUs that share a muscle (shared_au_sigma)
+    (default,) = au_prior_terms(ids, FitSettings())
+    np.testing.assert_array_equal(default.q, shared_projector(ids))
+    assert au_prior_terms(ids, FitSettings(shared_au_sigma=None)) == []
+    full = au_prior_terms(ids, FitSettings(au_prior_sigma=0.1))
+    assert len(full) == 1 and full[0].sigma == 0.1
+    np.testing.assert_array_equal(full[0].q, off_table_projector(ids))
     assert au_prior_terms(("no_such_muscle",), S()) == []
+    with pytest.raises(MyofaceValueError):
+        FitSettings(shared_au_sigma=-0.1)
+
+
+def test_the_shared_aus_are_the_brow_raisers():
+    """AU1 and AU2 share the frontalis' middle part, the principal muscle of neither; the
+    orbital sphincter's upper part, AU6's and AU7's partner, does not count: AU7 is not
+    measured."""
+    assert shared_aus() == (1, 2)
+
+
+def test_the_shared_prior_holds_the_frontalis_to_au1_and_au2(ids):
+    q = shared_projector(ids)
+    np.testing.assert_allclose(q @ q, q, atol=1e-10)
+    np.testing.assert_allclose(q, q.T, atol=1e-12)
+    held = {ids[i] for i in np.flatnonzero(np.abs(q).sum(axis=1) > 1e-12)}
+    assert held == {f"frontalis_{p}_{s}" for p in ("inner", "major", "outer") for s in "lr"}
+    # three parts a side, two AUs a side: one direction a side is off their span
+    assert round(np.trace(q)) == 2
+    prior = AUSubspacePrior(ids, 0.1, projector=q)
+    w = au_basis(list(ids), (1, 2)).weights
+    rng = np.random.default_rng(7)
+    for _ in range(5):  # any AU1 and AU2 on either side: free
+        assert prior.cost(_est(w @ rng.uniform(0, 1, w.shape[1]), [])) < 1e-12
+    c = np.zeros(len(ids))
+    c[ids.index("zygomaticus_major_l")] = 0.8  # (muscles of other AUs: not held at all)
+    c[ids.index("corrugator_supercilii_r")] = 0.6
+    assert prior.cost(_est(c, [])) == 0.0
+    # the middle part alone (what the fit read on blurred frames) is mostly off the span,
+    # and costs more than the inner and outer parts making the same raise with it
+    alone = np.zeros(len(ids))
+    alone[ids.index("frontalis_major_l")] = 1.0
+    parts = np.zeros(len(ids))
+    for p, v in (("inner", 0.7), ("major", 0.47), ("outer", 0.7)):
+        parts[ids.index(f"frontalis_{p}_l")] = v
+    assert prior.cost(_est(alone, [])) > 50 * max(prior.cost(_est(parts, [])), 1e-3)
+    assert prior.cost(_est(alone, [])) > 50.0

@@ -51,26 +51,82 @@ def off_table_projector(muscle_ids: tuple) -> np.ndarray | None:
     return np.eye(len(muscle_ids)) - q @ q.T
 
 
+def shared_aus() -> tuple[int, ...]:
+    """The measured AUs (OpenFace's, less :data:`~myoface.analysis.au_intensity.
+    UNMEASURED_AUS`) that share a muscle which none of them drives as its principal one
+    (its largest weight): the muscle's contraction belongs to neither AU, and the skin's
+    motion alone does not say how to split it. In the AU table: AU1 and AU2, which share the
+    frontalis' middle part (0.25 and 0.5 of their principal parts, the inner and the outer).
+    (The orbital sphincter's upper part is AU6's and AU7's partner alike, but AU7 is not
+    measured: its muscles are AU6's and AU45's.)"""
+    from myoface.analysis.au_intensity import OPENFACE_AUS, UNMEASURED_AUS
+    from myoface.control.facs import au_table
+
+    table = au_table()
+    aus = [n for n in OPENFACE_AUS if n in table and n not in UNMEASURED_AUS]
+    partners: dict[str, list[int]] = {}
+    for n in aus:
+        top = max(table[n].muscles.values())
+        for base, w in table[n].muscles.items():
+            if w < top:
+                partners.setdefault(base, []).append(n)
+    principal = {
+        b for n in aus for b, w in table[n].muscles.items() if w == max(table[n].muscles.values())
+    }
+    out: set[int] = set()
+    for base, ns in partners.items():
+        if len(ns) >= 2 and base not in principal:
+            out.update(ns)
+    return tuple(sorted(out))
+
+
+@lru_cache(maxsize=8)
+def shared_projector(muscle_ids: tuple) -> np.ndarray | None:
+    """``I - P`` (M, M) over the muscles of :func:`shared_aus` (zero elsewhere): the
+    component of their contractions that no combination of those AUs makes; None when the
+    model has none of them."""
+    from myoface.analysis.au_intensity import au_basis
+
+    w = au_basis(list(muscle_ids), shared_aus()).weights
+    rows = np.flatnonzero(np.abs(w).sum(axis=1) > 0)
+    if len(rows) == 0:
+        return None
+    q, r = np.linalg.qr(w[rows])
+    keep = np.abs(np.diag(r)) > 1e-9 * max(1.0, np.abs(r).max())
+    q = q[:, keep]
+    out = np.zeros((len(muscle_ids), len(muscle_ids)))
+    out[np.ix_(rows, rows)] = np.eye(len(rows)) - q @ q.T
+    return out
+
+
 def au_prior_terms(muscle_ids, settings=None) -> list:
     """The fit's AU-space prior for one frame's energy (the hook
     :meth:`~myoface.analysis.modelfit.ModelFit.terms` calls): ``[AUSubspacePrior]`` at
-    ``settings.au_prior_sigma`` (:attr:`~myoface.analysis.weights.FitSettings.au_prior_sigma`),
-    or ``[]`` when it is None or 0 (the default: off) or the AU table spans none of the
-    muscles."""
+    ``settings.au_prior_sigma`` (:attr:`~myoface.analysis.weights.FitSettings.au_prior_sigma`:
+    the whole AU table's span; opt-in), else over the AUs that share a muscle
+    (:func:`shared_projector`) at ``settings.shared_au_sigma``
+    (:attr:`~myoface.analysis.weights.FitSettings.shared_au_sigma`: on by default), or ``[]``
+    when the sigma is None or 0 or the AUs span none of the muscles."""
+    ids = tuple(muscle_ids)
     sigma = getattr(settings, "au_prior_sigma", None)
-    if not sigma or off_table_projector(tuple(muscle_ids)) is None:
-        return []
-    return [AUSubspacePrior(muscle_ids, sigma)]
+    if sigma:
+        return [] if off_table_projector(ids) is None else [AUSubspacePrior(ids, sigma)]
+    sigma = getattr(settings, "shared_au_sigma", None)
+    if sigma:
+        q = shared_projector(ids)
+        return [] if q is None else [AUSubspacePrior(ids, sigma, projector=q)]
+    return []
 
 
 class AUSubspacePrior:
     """``|(I - P) c| / sigma``: the contractions held near the AU table's span (see the
     module's docstring)."""
 
-    def __init__(self, muscle_ids, sigma: float = AU_PRIOR_SIGMA):
+    def __init__(self, muscle_ids, sigma: float = AU_PRIOR_SIGMA, projector=None):
         self.ids = tuple(muscle_ids)
         self.sigma = float(sigma)
-        self.q = off_table_projector(self.ids)
+        #: ``I - P`` (M, M): the whole table's (:func:`off_table_projector`) or a part's
+        self.q = off_table_projector(self.ids) if projector is None else np.asarray(projector)
 
     def prepare(self, est) -> None:
         pass
