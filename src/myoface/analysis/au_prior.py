@@ -17,6 +17,11 @@ exact and cheap). ``sigma`` says how far from the table a face may go before the
 have to pay for it. Muscles no AU uses (the marginal orbicularis oris) are outside the span
 entirely and are held near 0 by it.
 
+By default (:attr:`~myoface.analysis.weights.FitSettings.shared_au_sigma`) the fit holds only
+the AUs that share a muscle none of them drives as its principal one near their span
+(:func:`shared_aus`: AU1 and AU2, which share the frontalis' middle part); the whole table's
+prior is opt-in (:attr:`~myoface.analysis.weights.FitSettings.au_prior_sigma`).
+
 Like the other priors it takes the terms' protocol (:mod:`myoface.analysis.terms`):
 ``prepare``, ``normal_equations`` (``H = J^T J``, ``b = -J^T r`` on the contraction block)
 and ``cost``.
@@ -45,10 +50,16 @@ def off_table_projector(muscle_ids: tuple) -> np.ndarray | None:
     w = au_basis(list(muscle_ids), OPENFACE_AUS).weights
     if w.size == 0 or not np.abs(w).any():
         return None
+    return _complement(w)
+
+
+def _complement(w) -> np.ndarray:
+    """``I - Q Q^T`` (N, N): the orthogonal projector onto what the columns of ``w`` (N, K)
+    do not span (their rank from the QR's diagonal)."""
     q, r = np.linalg.qr(w)
     keep = np.abs(np.diag(r)) > 1e-9 * max(1.0, np.abs(r).max())
     q = q[:, keep]
-    return np.eye(len(muscle_ids)) - q @ q.T
+    return np.eye(len(w)) - q @ q.T
 
 
 def shared_aus() -> tuple[int, ...]:
@@ -64,15 +75,15 @@ def shared_aus() -> tuple[int, ...]:
 
     table = au_table()
     aus = [n for n in OPENFACE_AUS if n in table and n not in UNMEASURED_AUS]
-    partners: dict[str, list[int]] = {}
+    partners: dict[str, list[int]] = {}  # (muscle: the AUs that drive it below their top)
+    principal: set[str] = set()
     for n in aus:
         top = max(table[n].muscles.values())
         for base, w in table[n].muscles.items():
             if w < top:
                 partners.setdefault(base, []).append(n)
-    principal = {
-        b for n in aus for b, w in table[n].muscles.items() if w == max(table[n].muscles.values())
-    }
+            else:
+                principal.add(base)
     out: set[int] = set()
     for base, ns in partners.items():
         if len(ns) >= 2 and base not in principal:
@@ -91,11 +102,8 @@ def shared_projector(muscle_ids: tuple) -> np.ndarray | None:
     rows = np.flatnonzero(np.abs(w).sum(axis=1) > 0)
     if len(rows) == 0:
         return None
-    q, r = np.linalg.qr(w[rows])
-    keep = np.abs(np.diag(r)) > 1e-9 * max(1.0, np.abs(r).max())
-    q = q[:, keep]
     out = np.zeros((len(muscle_ids), len(muscle_ids)))
-    out[np.ix_(rows, rows)] = np.eye(len(rows)) - q @ q.T
+    out[np.ix_(rows, rows)] = _complement(w[rows])
     return out
 
 
