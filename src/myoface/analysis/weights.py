@@ -559,10 +559,14 @@ class FitSettings:
     symmetry_scale: float | None = 0.2
 
     def __post_init__(self) -> None:
-        for name in ("symmetry_sigma", "symmetry_scale", "au_prior_sigma", "shared_au_sigma"):
+        for name in ("symmetry_sigma", "symmetry_scale"):
             v = getattr(self, name)
             if v is not None and not (np.isfinite(v) and v > 0):
                 raise MyofaceValueError(f"{name} must be None (none) or > 0; got {v}")
+        for name in ("au_prior_sigma", "shared_au_sigma"):  # (None or 0: off, as before)
+            v = getattr(self, name)
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                raise MyofaceValueError(f"{name} must be None or 0 (off) or > 0; got {v}")
         g = self.photo_landmark_gain
         if g is not None and not 0 < g <= 1.5:
             raise MyofaceValueError(
