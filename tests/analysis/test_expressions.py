@@ -503,6 +503,29 @@ def test_the_rest_reference_takes_off_readings_that_follow_the_pose():
     assert lab == "happiness" and s[0] > 0.9, s
 
 
+def test_the_rest_reference_takes_off_readings_that_grow_with_the_turn_either_way():
+    """Known answer: at rest the head turns to one side and then the other, and the fit reads
+    AU6 and AU23 in proportion to how far it is turned, whichever way (0.35 and 0.45 at 30
+    deg). A reference linear in the angles cannot follow that (a straight line through a
+    V): the next sweep, read in order by one ExpressionReader, is neutral on every frame,
+    and its reference at 30 deg either way is what it saw there."""
+    from myoface.analysis.expressions import ExpressionReader
+
+    yaw = np.concatenate(
+        [np.linspace(0, 30, 16), np.linspace(30, -30, 31), np.linspace(-30, 0, 16)]
+    )
+    x = np.array([_aus(AU06=0.35 * t, AU23=0.45 * t) for t in np.abs(yaw) / 30.0])
+    ang = np.column_stack([yaw, np.zeros_like(yaw), np.zeros_like(yaw)])
+    r = ExpressionReader([], aus=rule_aus())
+    for row, a in zip(x, ang, strict=True):  # (the first sweep: the reference learns)
+        r.read_aus(row, a)
+    labels = [r.read_aus(row, a)[1] for row, a in zip(x, ang, strict=True)]
+    assert labels == [NEUTRAL] * len(x), labels
+    for side in (30.0, -30.0):
+        np.testing.assert_allclose(r.reference([side, 0.0, 0.0]), x[15], atol=0.03)
+    np.testing.assert_allclose(r.reference([0.0, 0.0, 0.0]), 0.0, atol=0.03)
+
+
 def test_the_rest_reference_does_not_extrapolate_above_what_it_saw():
     """A pose beyond any seen at rest: the reference stays within the largest reading of each
     AU on the neutral frames (it does not guess the readings of a turn it never saw)."""

@@ -12,7 +12,8 @@ appearance. Per frame:
    ``x_a`` in [0, 1], FACS's letters A-E at 0.2-1.0. In a video (:class:`ExpressionReader`,
    what contractions.csv is written with) each AU is read above the person's **rest
    reference**: what the fit reads of it on this video's frames labelled neutral, as a linear
-   function of the head's pose (yaw, pitch, roll), ``x_a - b_a(pose)`` (0 below it). With
+   function of the head's pose (yaw, pitch, roll, and |yaw|: how far it is turned either
+   way), ``x_a - b_a(pose)`` (0 below it). With
    the head moving, the fit reads AUs that are not there, in step with the pose (AU17 up to
    1.0 with the head turned 30 deg; docs/expressions.md); the reference takes them off. A
    single frame (:func:`expression_scores`) has no reference.
@@ -141,6 +142,17 @@ REST_POSE_SCALE_DEG = 30.0
 #: :data:`REST_POSE_SCALE_DEG`): until about a frame's worth of neutral frames have been seen
 #: turned that far, the reference is mostly the same at every pose (its level alone)
 REST_RIDGE = 0.3
+#: the rest reference's terms, in order: its level, the head's yaw, pitch and roll, and how
+#: far the head is turned either way (|yaw|). The last because the fit's spurious readings
+#: at rest grow with the turn to either side (the face's far side foreshortened): on the
+#: expression benchmark's six clips (2026-12-06, the fit's readings recorded once and read
+#: again) a linear function of the angles explained 1-63 % of the rest readings' variance of
+#: AU2, AU6, AU10 and AU23, one with |yaw| added 63-95 % (AU6: 0.01 -> 0.78); the rest
+#: frames labelled neutral 0.825 -> 0.885, the apex frames their expression 0.689 -> 0.696.
+#: Measured and not taken: |pitch| too (rest 0.864, apex 0.674), |roll| as well (0.869 /
+#: 0.696), the angles' squares in place of |yaw| (0.881 / 0.708: about the same, three
+#: terms where one does).
+REST_TERMS = ("level", "yaw", "pitch", "roll", "|yaw|")
 #: AUs that go with any expression: the lips parting and the jaw dropping ("25 or 26 may
 #: occur with all prototypes or major variants", table 10-1), and a blink
 ANY_EXPRESSION_AUS = (25, 26, 45)
@@ -350,8 +362,10 @@ class ExpressionReader:
     The fit reads AUs where there are none, and with the head moving it reads them in step
     with the pose (docs/expressions.md: at rest, AU17 correlates 0.74 with the turn of the
     head, AU10 and AU12 -0.87 and -0.82 with its pitch, and a linear function of the angles
-    explains 73-79 % of the variance of those two). The reference of AU ``a`` is
-    ``b_a(pose) = w_a . (1, yaw, pitch, roll) / 30 deg``, least squares over the frames read
+    explains 73-79 % of the variance of those two; others grow with the turn to either
+    side, :data:`REST_TERMS`). The reference of AU ``a`` is
+    ``b_a(pose) = w_a . (1, yaw / 30, pitch / 30, roll / 30, |yaw| / 30)`` (degrees), least
+    squares over the frames read
     so far whose label is neutral
     (:data:`REST_RIDGE` holding the pose terms near 0 until neutral frames at other poses
     show them), kept within 0 and the largest reading of the AU on those frames (no
@@ -374,8 +388,8 @@ class ExpressionReader:
     def __init__(self, muscle_ids, aus=None):
         self.ids = tuple(muscle_ids)
         self.aus = tuple(rule_aus() if aus is None else aus)
-        self._gram = np.diag([1e-9, REST_RIDGE, REST_RIDGE, REST_RIDGE])
-        self._rhs = np.zeros((4, len(self.aus)))
+        self._gram = np.diag([1e-9] + [REST_RIDGE] * (len(REST_TERMS) - 1))
+        self._rhs = np.zeros((len(REST_TERMS), len(self.aus)))
         self._high = np.zeros(len(self.aus))
         self.n_neutral = 0
 
@@ -384,7 +398,8 @@ class ExpressionReader:
         a = np.zeros(3) if angles_deg is None else np.asarray(angles_deg, dtype=np.float64)
         if a.shape != (3,) or not np.isfinite(a).all():
             a = np.zeros(3)
-        return np.concatenate([[1.0], a / REST_POSE_SCALE_DEG])
+        a = a / REST_POSE_SCALE_DEG
+        return np.array([1.0, a[0], a[1], a[2], abs(a[0])])
 
     def reference(self, angles_deg=None) -> np.ndarray:
         """The rest reference (len(aus),) in [0, 1] at the pose ``angles_deg`` (yaw, pitch,
