@@ -206,6 +206,11 @@ class FitSettings:
     #: pixels"; BENCHMARKS.md, 2026-12-05 10:45 UTC). Without a frame given (:meth:`~myoface.analysis.modelfit.ModelFit.fit`'s
     #: ``image``) a fit reads the points alone either way.
     photometric: bool = True
+    #: (Measured 2026-12-06 against 8, the degraded head-motion renders, head moving, camera
+    #: seeds 0, 1, 2: 5.6 worst RMSE 0.166, 0.132, 0.149 -> 0.142, 0.188, 0.194, skin 0.81,
+    #: 0.83, 0.82 -> 0.71, 0.93, 0.85 mm; 4 -> 0.165, 0.269, 0.256 and 0.68, 1.02, 0.96 mm,
+    #: though the corrugators' RMSE 0.20 -> 0.12-0.15: the pixels weighing more read the
+    #: camera's noise as muscle.)
     photo_sigma: float = 8.0
     photo_huber: float = 2.0
     #: (MediaPipe's points under the photometric term: they read 0.5-0.7 of an expression's
