@@ -145,10 +145,11 @@ REST_RIDGE = 0.3
 #: the rest reference's terms, in order: its level, the head's yaw, pitch and roll, and how
 #: far the head is turned either way (|yaw|). The last because the fit's spurious readings
 #: at rest grow with the turn to either side (the face's far side foreshortened): on the
-#: expression benchmark's six clips (2026-12-06, the fit's readings recorded once and read
-#: again) a linear function of the angles explained 1-63 % of the rest readings' variance of
-#: AU2, AU6, AU10 and AU23, one with |yaw| added 63-95 % (AU6: 0.01 -> 0.78); the rest
-#: frames labelled neutral 0.825 -> 0.885, the apex frames their expression 0.689 -> 0.696.
+#: expression benchmark's clip (BENCHMARKS.md of 2026-12-06 19:29 UTC, its detail's
+#: ``rest_readings_vs_pose``) a linear function of the angles explained 1-63 % of the rest
+#: readings' variance of AU2, AU6, AU10 and AU23, one with |yaw| added 63-95 % (AU6: 0.01 ->
+#: 0.78); on its six clips (the fit's readings recorded once and read again) the rest frames
+#: labelled neutral 0.825 -> 0.885, the apex frames their expression 0.689 -> 0.696.
 #: Measured and not taken: |pitch| too (rest 0.864, apex 0.674), |roll| as well (0.869 /
 #: 0.696), the angles' squares in place of |yaw| (0.881 / 0.708: about the same, three
 #: terms where one does).
