@@ -138,6 +138,10 @@ NEUTRAL_MARGIN_MM = 1.0
 #: head moving 0.280 / 0.165 / 1.40 mm / 1.67 deg, but the apex 0.490). Not taken yet: the
 #: second scoring and the larger identity fit cost ~0.45 s once (6 ms a frame of the
 #: benchmark's 72-frame clip, which would take the analysis below 0.25x of MediaPipe).
+#: (2026-12-06: 12 frames for the eyes' sake, whose place in the head the calibration's
+#: neutral sets: the gaze benchmark's three clips 4.24 / 3.55 / 4.39 -> 3.06 / 4.24 / 6.64
+#: deg, each eye's mean misplacement in the image moved by up to 1 px either way,
+#: ``tools/gaze_replay.py``: not a noise that more frames average out.)
 CALIBRATION_FRAMES = 5
 #: the detector's context (:meth:`ModelFit.measure_detector_context`): the steps of each
 #: calibration frame's pose, and how far each step goes (past the pose its points give:
