@@ -22,8 +22,10 @@ module constants (``--const``: ``module.NAME`` under ``myoface.analysis``, JSON;
   points or the pixels, a degradation costs); ``--table``: every muscle's RMSE and
   correlation;
 - ``expression``: the expression benchmark's synthetic clip (:func:`myoface.bench.expression.
-  _synthetic`, the default analysis with the overrides): prints the apex and rest accuracy
-  and the contractions' median RMSE.
+  _synthetic`, the default analysis with the overrides; ``--clip NAME`` another of
+  :data:`~myoface.bench.expression.CLIPS`, ``--clip all`` each and their pool, as the benchmark
+  pools them): prints the apex and rest accuracy and the contractions' median RMSE;
+  ``--only PARTS`` as for ``headmotion`` (the clips rendered and degraded afresh).
 
     python tools/photometric_ablation.py warp --look --expressions happiness \\
         --set '{"photo_landmark_weight": 0.01}'
@@ -32,6 +34,7 @@ module constants (``--const``: ``module.NAME`` under ``myoface.analysis``, JSON;
     python tools/photometric_ablation.py headmotion --const '{"modelfit.PARALLAX_REFINE": false}'
     python tools/photometric_ablation.py headmotion --only background --points-from clean
     python tools/photometric_ablation.py expression --set '{"photo_rate_per_s": 4.0}'
+    python tools/photometric_ablation.py expression --clip all --only texture,light,noise
 
 The numbers of issue 30's report (2026-12-02) were taken this way.
 """
@@ -39,6 +42,7 @@ The numbers of issue 30's report (2026-12-02) were taken this way.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 
@@ -77,7 +81,14 @@ def main(argv=None) -> None:
     ap.add_argument("--moving", action="store_true", help="warp: with fake head motion")
     ap.add_argument("--still", action="store_true", help="headmotion: the head still")
     ap.add_argument("--clean", action="store_true", help="headmotion: the renderer's frames")
-    ap.add_argument("--only", default=None, help="headmotion: the camera's parts kept (PARTS)")
+    ap.add_argument(
+        "--only", default=None, help="headmotion, expression: the camera's parts kept (PARTS)"
+    )
+    ap.add_argument(
+        "--clip",
+        default="bench",
+        help="expression: a clip of myoface.bench.expression.CLIPS, or all",
+    )
     ap.add_argument(
         "--points-from",
         default="same",
@@ -109,22 +120,16 @@ def main(argv=None) -> None:
             f"{exprs} {fs} {consts}: {regions} leak {r['leak']:.3f}"
         )
         return
+    only = None if a.only is None else tuple(p for p in a.only.split(",") if p != "none")
+    if only is not None and set(only) - set(PARTS):
+        raise SystemExit(f"--only takes some of {', '.join(PARTS)} or none; got {a.only}")
     if a.mode == "headmotion":
-        only = None if a.only is None else tuple(p for p in a.only.split(",") if p != "none")
-        if only is not None and set(only) - set(PARTS):
-            raise SystemExit(f"--only takes some of {', '.join(PARTS)} or none; got {a.only}")
         if only is not None and a.clean:
             raise SystemExit("--only and --clean: --clean is --only none")
         _headmotion(a.still, not a.clean, fs, consts, only, a.points_from, a.table)
         return
     if a.mode == "expression":
-        from myoface.bench.expression import _synthetic
-
-        r = _synthetic(False, overrides=tuple(fs.items()))
-        print(
-            f"expression {fs} {consts}: apex {r['apex_accuracy']:.3f} rest "
-            f"{r['rest_accuracy']:.3f} median RMSE {r['contraction_rmse_median']:.4f}"
-        )
+        _expression(a.clip, fs, consts, only)
         return
     import myoface.analysis.pipeline as pipeline
     from myoface.analysis.sample import fetch_sample_video
@@ -149,14 +154,80 @@ def main(argv=None) -> None:
     print(f"video {fs} {consts}: fidelity {d['overall']['explained']:.3f} ({regions})")
 
 
+def _partial_camera(only: tuple) -> dict:
+    """:class:`~myoface.render.degrade.CameraDegradation`'s fields for only the ``only``
+    :data:`PARTS` of its defaults (the others as in :data:`OFF`)."""
+    from myoface.render.degrade import CameraDegradation
+
+    default = CameraDegradation()
+    kept = {f: getattr(default, f) for p in only for f in PARTS[p]}
+    return {**OFF, **kept}
+
+
+@contextlib.contextmanager
+def _camera_parts(only: tuple | None):
+    """The benchmarks' camera (:mod:`myoface.render.degrade`, as
+    :func:`myoface.bench.headmotion.degraded_sequence` applies it) with only ``only`` of its
+    :data:`PARTS` while in the context (None: all of them, unchanged)."""
+    import myoface.bench.headmotion as hm
+    import myoface.render.degrade as degrade
+
+    if only is None:
+        yield
+        return
+    whole, sequence = degrade.CameraDegradation, hm.degraded_sequence
+    kept = {f for p in only for f in PARTS[p]}
+    off = {f: v for f, v in OFF.items() if f not in kept}
+
+    class Partial(whole):
+        # (dataclasses.replace makes its copies through __init__: the parts kept take what
+        # they are given there, e.g. the H.264 round trip's crf=None, the others stay off)
+        def __init__(self, *args, **kw):
+            super().__init__(*args, **kw)
+            for f, v in off.items():
+                object.__setattr__(self, f, v)
+
+    def partial_sequence(face, poses, skins, degradation=None, texture_factor=None):
+        factor = hm.TEXTURE_FACTOR if "texture" in only else None
+        return sequence(face, poses, skins, degradation, texture_factor=factor)
+
+    degrade.CameraDegradation, hm.degraded_sequence = Partial, partial_sequence
+    try:
+        yield
+    finally:
+        degrade.CameraDegradation, hm.degraded_sequence = whole, sequence
+
+
+def _expression(clip: str, fs: dict, consts: dict, only) -> None:
+    from myoface.bench.expression import CLIPS, _synthetic
+
+    names = list(CLIPS) if clip == "all" else [clip]
+    if set(names) - set(CLIPS):
+        raise SystemExit(f"--clip takes one of {', '.join(CLIPS)} or all; got {clip}")
+    camera = "" if only is None else f" only {only}"
+    apex = rest = n_apex = n_rest = 0
+    with _camera_parts(only):
+        for name in names:
+            r = _synthetic(False, overrides=tuple(fs.items()), clip=name)
+            print(
+                f"expression {name}{camera} {fs} {consts}: apex {r['apex_accuracy']:.3f} rest "
+                f"{r['rest_accuracy']:.3f} median RMSE {r['contraction_rmse_median']:.4f}",
+                flush=True,
+            )
+            apex += r["apex_accuracy"] * r["apex_frames"]
+            rest += r["rest_accuracy"] * r["rest_frames"]
+            n_apex, n_rest = n_apex + r["apex_frames"], n_rest + r["rest_frames"]
+    if len(names) > 1:
+        print(f"expression pooled{camera} {fs} {consts}: apex {apex / n_apex:.3f} "
+              f"rest {rest / n_rest:.3f}")  # fmt: skip
+
+
 def _camera_frames(still: bool, only: tuple):
     """The head-motion clip's frames degraded by ``only`` of the camera's :data:`PARTS`."""
     from myoface.bench import headmotion as hm
     from myoface.render.degrade import CameraDegradation
 
-    default = CameraDegradation()
-    kept = {f: getattr(default, f) for p in only for f in PARTS[p]}
-    deg = CameraDegradation(**{**OFF, **kept})
+    deg = CameraDegradation(**_partial_camera(only))
     fm = hm._model()
     truth, poses, skins = hm._truth(False, still)
     factor = hm.TEXTURE_FACTOR if "texture" in only else None
