@@ -90,7 +90,12 @@ LABEL_MIN = TRACE
 #: a frame shows an expression only when its strongest AU reaches a trace: FACS scores no AU
 #: below A (Ekman, Friesen & Hager 2002, ch. 1), and the prototypes compare the AUs with the
 #: strongest (so a pattern read at any gain matches), which says nothing of whether the face
-#: moved at all
+#: moved at all. (Replayed 2026-12-06 on the six clips' recorded readings, pooled apex / rest:
+#: 0.696 / 0.885 as it is; the level gate at 0.15, 0.694 / 0.713; at 0.25, 0.689 / 0.950;
+#: :data:`LABEL_MIN` 0.15 or 0.25, 0.705 / 0.861 and 0.693 / 0.892. The apex frames missed are
+#: not below a level but without the AUs their prototypes need (docs/expressions.md, "Which
+#: stage holds AU4 and AU5"), and a gate above FACS's trace would be one set on these clips'
+#: rest frames: not taken.)
 LEVEL_MIN = TRACE
 
 #: The EMFACS prototypes and major variants (Ekman, Friesen & Hager 2002, FACS

@@ -331,6 +331,16 @@ reader measures is the iris' axis, and a person's visual axis lies nasal of it b
 2007), so real eyes fixating far away read as diverging by twice that; the renders' eyes
 have none. A bound on the divergence that held on real eyes would be about -11 deg, where
 none of these clips reaches.
+
+Not the neutral's eye openings either (2026-12-06, night; the benchmark's three clips
+recorded by ``tools/gaze_replay.py``, the worse eye, 4.24 / 3.55 / 4.39 deg as they are). On
+clip (0, 0) the calibrated neutral has the eyes 0.6 mm further apart than the face's
+(``eyeball_centre_neutral_mm``: +0.64 and -0.60 mm in x), on the other two within 0.33 mm. With
+each eyeball's centre placed from the neutral's eye corners alone (their midpoint plus the
+model's own offset from its corners' midpoint to its eyeball: MediaPipe's lid points, which
+move with the gaze and the lids, left out): 4.38 / 3.46 / 5.28; the corners for x only, 4.39 /
+3.43 / 5.21; for y only, 4.21 / 3.43 / 4.48. The yaw's bias of (0, 0)'s left eye (-4.7 deg)
+stays with each: it is the frames' placement, not the neutral's.
 """
 
 from __future__ import annotations

@@ -160,7 +160,15 @@ from myoface.errors import MyofaceValueError
 from myoface.facemesh import import_opencv
 
 #: barycentric subdivision of each triangle: the samples at (i, j, k) / N, i + j + k = N, all
-#: three >= 1 (inside the triangle): N = 4 gives 3 per triangle, ~2700 on the default face
+#: three >= 1 (inside the triangle): N = 4 gives 3 per triangle, ~2700 on the default face.
+#: More samples read more of the frame's pixels but weigh the model's own errors (the
+#: shading, the texture's parallax as the head turns) as more independent evidence too:
+#: measured 2026-12-06, night, on the degraded head-motion renders, head moving, camera seeds
+#: 0, 1, 2 (median worst RMSE / median RMSE / worst correlation / skin mm / head deg), N = 5
+#: (6 a triangle) 0.188 / 0.092 / 0.49 / 0.879 / 0.74, N = 6 (10) 0.229 / 0.122 / 0.46 /
+#: 0.942 / 0.79, against 0.149 / 0.101 / 0.51 / 0.818 / 0.72 (seed 0 with N = 6: the rest
+#: frames' skin 0.24 -> 0.57 mm; N = 8 worse again; N = 6 with :attr:`~myoface.analysis.
+#: weights.FitSettings.photo_sigma` raised by the samples' count, 11 or 14.6, worse still)
 SUBDIVISION = 4
 #: the Gaussian blurs (pixels) of the coarse-to-fine levels, and how many of a frame's
 #: Gauss-Newton steps each coarse level gets (one where not said; the last level takes the
@@ -308,7 +316,13 @@ def _zbuffer(uv, depth, tris, h, w):
 #: pushed the mentalis to 1.0 while the head turned (worst RMSE of the 12 muscles and the jaw
 #: 0.61, skin 1.15 mm, head 0.90 degrees); with 1 blur 0.48, 1.05 mm, 0.81 degrees (with 2
 #: blurs 0.45, but the known-warp brows' gain fell from 0.91 to 0.88, with 1 to 0.89). The
-#: mentalis itself still reads 0.79 RMSE there: what drives it is not found yet
+#: mentalis itself still reads 0.79 RMSE there: what drives it is not found yet. (Measured
+#: 2026-12-06 and not kept: the samples within 1 or 2 blurs (plus a pixel) of the edge of the
+#: face's footprint in the z-buffer, the outline and a turned cheek's occluding contour both,
+#: weighing 0 as well: the renders with only the cluttered background, head moving, worst
+#: RMSE 0.154 -> 0.155 / 0.155, skin 0.641 -> 0.645 / 0.648 mm: what the background costs is
+#: not at the silhouette; ``myoface.analysis.modelfit.ModelFit.measure_detector_context``
+#: has where it is.)
 OUTLINE_BLURS = 1.0
 
 

@@ -269,7 +269,22 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     % faster, the expression clip's apex 0.74 -> 0.66; the brightness alone
     (``photo_colour=False``), 17 %, the sample's fidelity 0.77 -> 0.65. 0.25x MediaPipe needs
     the fit's own time a frame cut by about 40 %: fewer interpreted operations a step, not
-    threads."""
+    threads.
+
+    The pass's critical path (2026-12-06, night; each stage's span and thread timed in one
+    pass of 1.8 s, a loaded machine): the calibration window is scored as MediaPipe gives its
+    points (from 33 ms), the speculative calibration starts once the 30 frames its appearance
+    may register on are scored (241 ms: the identity 122 ms, the appearance 165 ms, to 535 ms),
+    then the window's 60 frames are measured on the detector's thread (to 1577 ms, 17 ms each
+    with the rest of the window's scoring) and the last 12 on the main thread (to 1790 ms): one
+    chain of 72 measurements, each starting from the last. So on this 72-frame clip 0.25x
+    (about 0.93 s a pass against MediaPipe's 0.23 s) would need both the half second before
+    the first measurement and the measurements' 14-17 ms a frame roughly halved; on a long
+    video the first part goes and the ratio is MediaPipe's 3.2 ms against a measurement's.
+    Measured and not kept: the redness's step on the calling thread rather than beside it
+    (five passes alternating: 1.52 against 1.40 s); the score's fits at 1 Gauss-Newton step
+    instead of :data:`~myoface.analysis.modelfit.SCORE_ITERATIONS` (3): the same pass time
+    (1.77 / 1.77 s, four alternating passes): the scoring is not on the critical path."""
     path = _sample_video()
     m = None if not quick else 24
     # the default, MediaPipe alone and --flow (the points read against the calibration frame
