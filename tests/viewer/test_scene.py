@@ -169,6 +169,45 @@ def test_playback_video_leaves_the_live_face_alone(viewer, tmp_path):
     assert not (tmp_path / "q.mp4").exists()
 
 
+def test_play_plays_from_the_click_and_once(viewer, monkeypatch):
+    import threading
+    import time
+    import types
+
+    import myoface.viewer.app as app
+
+    # the playback's thread held back until released: what a busy machine does to it
+    go, started = threading.Event(), []
+
+    class Held(threading.Thread):
+        def run(self):
+            go.wait(10)
+            super().run()
+
+        def start(self):
+            started.append(self)
+            super().start()
+
+    # (the viewer module's own threads only: a namespace in place of its threading module)
+    monkeypatch.setattr(app, "threading", types.SimpleNamespace(Thread=Held, Event=threading.Event))
+    viewer.state.load_playback(REPO / "examples" / "talk.toml")
+    viewer._time.max, viewer._time.value = 0.4, 0.0
+    try:
+        viewer._play()
+        assert viewer._playing  # from the click on, not once the loop's thread runs
+        viewer._play()  # a second click meanwhile starts no second loop
+        assert len(started) == 1
+        go.set()
+        deadline = time.time() + 10
+        while time.time() < deadline and viewer._playing:
+            time.sleep(0.05)
+        assert not viewer._playing
+        assert viewer._time.value > 0.2  # it ran to (about) the playback's end
+    finally:
+        go.set()
+        viewer.state.playback = None
+
+
 def test_presets_save_apply_and_load(tmp_path):
     fm = build_face_model()
     st = ViewerState(fm)

@@ -564,9 +564,11 @@ class FaceViewer:
             raise MyofaceError("load a contractions.csv or a timeline first")
         if self._playing:
             return
+        # (playing from the click on: a second click before the loop's thread runs starts
+        # no second loop)
+        self._playing = True
 
         def loop():
-            self._playing = True
             try:
                 t0 = time.perf_counter()
                 dur = self._time.max
@@ -581,7 +583,11 @@ class FaceViewer:
             finally:
                 self._playing = False
 
-        threading.Thread(target=loop, daemon=True).start()
+        try:
+            threading.Thread(target=loop, daemon=True).start()
+        except BaseException:
+            self._playing = False
+            raise
 
     # ------------------------------------------------------------------ lifetime
     def apply(self, contractions, timeout_s: float = 10.0) -> np.ndarray:
