@@ -154,14 +154,12 @@ def main(argv=None) -> None:
     print(f"video {fs} {consts}: fidelity {d['overall']['explained']:.3f} ({regions})")
 
 
-def _partial_camera(only: tuple) -> dict:
-    """:class:`~myoface.render.degrade.CameraDegradation`'s fields for only the ``only``
-    :data:`PARTS` of its defaults (the others as in :data:`OFF`)."""
-    from myoface.render.degrade import CameraDegradation
-
-    default = CameraDegradation()
-    kept = {f: getattr(default, f) for p in only for f in PARTS[p]}
-    return {**OFF, **kept}
+def _parts_off(only: tuple) -> dict:
+    """The fields of :class:`~myoface.render.degrade.CameraDegradation` that turn off every
+    part of :data:`PARTS` but ``only`` (their values in :data:`OFF`; the parts kept take
+    the class's defaults, or what they are given)."""
+    kept = {f for p in only for f in PARTS[p]}
+    return {f: v for f, v in OFF.items() if f not in kept}
 
 
 @contextlib.contextmanager
@@ -176,8 +174,7 @@ def _camera_parts(only: tuple | None):
         yield
         return
     whole, sequence = degrade.CameraDegradation, hm.degraded_sequence
-    kept = {f for p in only for f in PARTS[p]}
-    off = {f: v for f, v in OFF.items() if f not in kept}
+    off = _parts_off(only)
 
     class Partial(whole):
         # (dataclasses.replace makes its copies through __init__: the parts kept take what
@@ -227,7 +224,7 @@ def _camera_frames(still: bool, only: tuple):
     from myoface.bench import headmotion as hm
     from myoface.render.degrade import CameraDegradation
 
-    deg = CameraDegradation(**_partial_camera(only))
+    deg = CameraDegradation(**_parts_off(only))
     fm = hm._model()
     truth, poses, skins = hm._truth(False, still)
     factor = hm.TEXTURE_FACTOR if "texture" in only else None
