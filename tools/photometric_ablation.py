@@ -13,8 +13,8 @@ module constants (``--const``: ``module.NAME`` under ``myoface.analysis``, JSON;
 - ``headmotion``: the head-motion renders (:func:`myoface.bench.headmotion.run_headmotion`,
   the benchmark's clip), head moving unless ``--still``, degraded by the camera unless
   ``--clean``: prints the benchmark's summary (worst and median RMSE, worst correlation,
-  skin mm, its rest and expression frames apart, head deg and its mean error yaw / pitch /
-  roll) and the appearance's parallax turn (``modelfit.PARALLAX_REFINE``). ``--only
+  the paper's muscles' median and least gain, skin mm, its rest and expression frames apart,
+  head deg and its mean error yaw / pitch / roll) and the appearance's parallax turn (``modelfit.PARALLAX_REFINE``). ``--only
   PARTS``: the camera's degradation with only these of its parts (comma-separated among
   :data:`PARTS`: ``texture``, ``light``, ``background``, ``blur``, ``noise``, ``h264``;
   ``none``: the renders as drawn); ``--points-from clean``: MediaPipe's points read on the
@@ -275,7 +275,8 @@ def _headmotion(still: bool, degraded: bool, fs: dict, consts: dict, only=None,
     print(
         f"headmotion {'still' if still else 'moving'} {camera} "
         f"{fs} {consts}: worst {m['rmse_worst']:.3f} median {m['rmse_median_all']:.3f} "
-        f"corr {m['corr_worst']:.2f} skin {m['skin_mm']:.3f} mm (rest {rms(~act):.3f}, "
+        f"corr {m['corr_worst']:.2f} gain {m['gain_median']:.2f} (least {m['gain_least']:.2f}) "
+        f"skin {m['skin_mm']:.3f} mm (rest {rms(~act):.3f}, "
         f"expressions {rms(act):.3f}) head {m['pose_deg']:.3f} deg (mean error "
         f"{m['pose_err_mean_deg']}); parallax turn {turned.get('rotation_deg')}"
     )
