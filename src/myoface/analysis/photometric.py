@@ -416,6 +416,15 @@ CHANNELS = {"grey": grey, "redness": redness}
 COLOURLESS_SD = 1.0
 
 
+#: (Tried 2026-12-07 and not kept: each level's image band-passed, its blur less a Gaussian
+#: local mean of ``max(L, 3 blur)`` px (plus a constant, in the frame and the appearance alike),
+#: so that the H.264 blocks' offsets and the light's smooth error would not be read; the
+#: head-motion renders, head moving, camera seed 0, worst RMSE / skin mm / head deg, the
+#: default 0.166 / 0.81 / 0.72: L 6 px 0.275 / 1.12 / 1.30, 10 px 0.264 / 1.05 / 1.22 (clean
+#: renders 0.24-0.25 / 1.02-1.04 / 1.2-1.5 where the default has 0.098 / 0.54 / 0.90), the
+#: frontalis read at a gain of 0.03-0.3; with :attr:`~myoface.analysis.weights.FitSettings.
+#: photo_sigma` 3 for the smaller signal, 0.226 / 1.15 / 1.56: the brows' and the head's
+#: reading is in the image's large scales.)
 def blurred(image: np.ndarray, sigma_px: float) -> np.ndarray:
     return _cv2().GaussianBlur(image, (0, 0), float(sigma_px))
 

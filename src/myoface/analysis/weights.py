@@ -406,6 +406,25 @@ class FitSettings:
     #: The apex gains are real; what they cost at rest is the appearance's view
     #: (:meth:`~myoface.analysis.modelfit.ModelFit.set_view_appearances`: with the views at
     #: rest given, ``bench`` 83.3 / 94.8, ``p2`` 78.1 / 89.7 with the MediaPipe-eased weight).
+    #: (2026-12-07: what this weight does to the gain, :meth:`~myoface.bench.headmotion.
+    #: HeadMotionResult.gain`, on the head-motion renders, head moving, camera seed 0; the
+    #: paper's frontalis parts / the corrugators / the depressor anguli oris, the skin at rest
+    #: and in expressions, mm; ``tools/photometric_ablation.py headmotion``. 0.5: degraded
+    #: 0.58-0.68 / 0.46 / 0.36, rest 0.24, expressions 0.87; clean 0.77-0.87 / 0.55 / 0.72,
+    #: 0.36 and 0.57. 0: degraded 1.02-1.48 / 1.03 / 1.10 but rest 1.08, expressions 1.27, the
+    #: risorius read at 1.66; clean 1.00-1.11 / 0.97 / 1.56, rest 0.79: the weight is what
+    #: holds the gain, and what it holds back is the turning head's look, read at rest
+    #: even on the clean renders. Tried and not kept, over camera seeds 0, 1, 2 against the
+    #: default's worst RMSE 0.166, 0.132, 0.149 and skin 0.81, 0.83, 0.82 mm: the weight from
+    #: the strain the muscles make at the sample rather than its displacement (the
+    #: appearance is carried exactly where the skin only moves; it cannot follow where the
+    #: skin stretches or folds), ``1 / (1 + (s / s0)^2)`` with ``s`` the largest linearised
+    #: strain of the sample's vertex's edges at any muscle's full contraction: s0 0.1 gave
+    #: seed 0 0.165 and 0.75 mm (the gains 0.87-1.04 / 0.79 / 0.88) but seeds 1 and 2 0.235,
+    #: 0.288 and 0.92, 0.99 mm, rest 0.41-0.70 mm; s0 0.05, 0.07, 0.14 the same trade; 0.25
+    #: with :attr:`photo_sigma` 10 or 12 (the moving skin weighing more, the pixels as a whole
+    #: less): worst 0.148, 0.204, 0.207 and 0.175, 0.199, 0.193, skin 0.86-0.97 mm, rest
+    #: 0.49-0.67 mm.)
     photo_model_error: float = 0.5
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
