@@ -1173,7 +1173,15 @@ class ModelFit:
         0.83 / 0.82; at rest 0.18 / 0.20 / 0.18), head 0.66 / 0.68 / 0.64 deg (median 0.72):
         the views help where their poses are the fit's own, a little, with the frames at rest
         known. With :attr:`~myoface.analysis.weights.FitSettings.photo_model_error` 0.25 as
-        well, worse (worst 0.122 / 0.189 / 0.194, skin 0.78 / 0.86 / 0.84 mm)."""
+        well, worse (worst 0.122 / 0.189 / 0.194, skin 0.78 / 0.86 / 0.84 mm). Chosen from
+        the first pass's readings instead (frames whose five-frame neighbourhood reads every
+        contraction under 0.25, none under 0.1 anywhere, the least expressive first, 8 deg
+        apart): seed 0 took frame 75 (fear's onset, truth 0.44, read as rest) and read worse
+        (worst 0.194, skin 0.99 mm, correlation 0.38), seeds 1 and 2 (their views all at
+        rest) better (0.140 / 0.132, skin 0.74 / 0.73 mm) but for the worst correlation
+        (0.34 / 0.29 against 0.49 / 0.51): the medians 0.140 / 0.102 / 0.34 / 0.741 / 0.75
+        against the default's 0.149 / 0.101 / 0.51 / 0.818 / 0.72. Which frames are at rest
+        is still the open part."""
         if self.appearance is None or self.calibration is None:
             raise MyofaceValueError("set_view_appearances() needs set_appearance() first")
         first = (
