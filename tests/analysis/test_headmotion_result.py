@@ -28,3 +28,9 @@ def test_gain_is_the_reading_over_the_truth_and_ignores_scatter_and_lost_frames(
         abs(s["gain_least"] - g[0]) < 1e-12 and abs(s["gain_median"] - 0.5 * (g[0] + g[1])) < 1e-12
     )
     assert "gain" in res.table().splitlines()[0]
+    # a muscle that moves only on frames that were lost has no gain either (not a division by 0)
+    t2 = np.zeros((6, 1))
+    t2[3] = 0.5
+    e2 = np.zeros((6, 1))
+    e2[3] = np.nan
+    assert np.isnan(_result(t2, e2, ids[:1]).gain()[0])

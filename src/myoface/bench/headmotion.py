@@ -258,8 +258,9 @@ class HeadMotionResult:
         for j in range(len(self.ids)):
             e, t = self.estimate[:, j], self.truth[:, j]
             ok = np.isfinite(e)
-            if np.ptp(t) > 0.05 and ok.any():
-                out[j] = float(t[ok] @ e[ok]) / float(t[ok] @ t[ok])
+            tt = float(t[ok] @ t[ok])
+            if np.ptp(t) > 0.05 and tt > 0.0:
+                out[j] = float(t[ok] @ e[ok]) / tt
         return out
 
     def summary(self, muscles=PAPER_MUSCLES) -> dict:
