@@ -424,7 +424,13 @@ class FitSettings:
     #: 0.288 and 0.92, 0.99 mm, rest 0.41-0.70 mm; s0 0.05, 0.07, 0.14 the same trade; 0.25
     #: with :attr:`photo_sigma` 10 or 12 (the moving skin weighing more, the pixels as a whole
     #: less): worst 0.148, 0.204, 0.207 and 0.175, 0.199, 0.193, skin 0.86-0.97 mm, rest
-    #: 0.49-0.67 mm.)
+    #: 0.49-0.67 mm. Nor with views of the face at rest (:meth:`~myoface.analysis.modelfit.
+    #: ModelFit.set_view_appearances`, the clean renders' frames at rest 3, 6 and 87 at the
+    #: fit's own poses): 0.5 / 0.25 / 0.1 worst 0.109 / 0.130 / 0.145, skin 0.51 / 0.62 /
+    #: 0.78 mm (the frontalis' gains 0.71-0.89 / 0.87-1.03 / 0.92-1.06), and with the
+    #: renderer's furrows off as well the same (0.51 / 0.61, and 0 0.85 mm): on renders whose
+    #: texture and surface are the model's own, the moving skin's pixels weighed more read the
+    #: expressions in full and the rest less well.)
     photo_model_error: float = 0.5
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
