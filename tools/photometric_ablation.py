@@ -14,13 +14,14 @@ module constants (``--const``: ``module.NAME`` under ``myoface.analysis``, JSON;
   the benchmark's clip), head moving unless ``--still``, degraded by the camera unless
   ``--clean``: prints the benchmark's summary (worst and median RMSE, worst correlation,
   the paper's muscles' median and least gain, skin mm, its rest and expression frames apart,
-  head deg and its mean error yaw / pitch / roll) and the appearance's parallax turn (``modelfit.PARALLAX_REFINE``). ``--only
+  head deg and its mean error yaw / pitch / roll) and the appearance's parallax turn
+  (``modelfit.PARALLAX_REFINE``). ``--only
   PARTS``: the camera's degradation with only these of its parts (comma-separated among
   :data:`PARTS`: ``texture``, ``light``, ``background``, ``blur``, ``noise``, ``h264``;
   ``none``: the renders as drawn); ``--points-from clean``: MediaPipe's points read on the
   renders as drawn while the fit's pixels are the degraded frames (which of the two, the
-  points or the pixels, a degradation costs); ``--table``: every muscle's RMSE and
-  correlation;
+  points or the pixels, a degradation costs); ``--table``: every muscle's RMSE,
+  correlation and gain;
 - ``expression``: the expression benchmark's synthetic clip (:func:`myoface.bench.expression.
   _synthetic`, the default analysis with the overrides; ``--clip NAME`` another of
   :data:`~myoface.bench.expression.CLIPS`, ``--clip all`` each and their pool, as the benchmark
@@ -222,13 +223,11 @@ def _expression(clip: str, fs: dict, consts: dict, only) -> None:
 def _camera_frames(still: bool, only: tuple):
     """The head-motion clip's frames degraded by ``only`` of the camera's :data:`PARTS`."""
     from myoface.bench import headmotion as hm
-    from myoface.render.degrade import CameraDegradation
 
-    deg = CameraDegradation(**_parts_off(only))
     fm = hm._model()
     truth, poses, skins = hm._truth(False, still)
-    factor = hm.TEXTURE_FACTOR if "texture" in only else None
-    return hm.degraded_sequence(fm.face, poses, skins, deg, texture_factor=factor)[0]
+    with _camera_parts(only):
+        return hm.degraded_sequence(fm.face, poses, skins)[0]
 
 
 def _headmotion(still: bool, degraded: bool, fs: dict, consts: dict, only=None,
