@@ -967,3 +967,36 @@ def test_a_large_face_is_read_at_the_readers_scale(tmp_path):
         ok = np.isfinite(a).all(-1) & np.isfinite(b).all(-1)
         diff = float(np.sqrt(((a[ok] - b[ok]) ** 2).sum(-1).mean()))
         assert diff <= (0.07 if region == "mouth_corners" else 0.02), (region, diff)
+
+
+def test_frames_the_judge_cannot_read_are_left_out_and_said():
+    """A frame most of whose readings fail the reader's forward-backward check is not judged
+    (:func:`~myoface.analysis.fidelity.unjudged`: more than half), the result counts it, and
+    the report says so: "not measurable" when the judge read fewer than half of the measured
+    frames (the scores over those it read given beside it), else how many it read."""
+    from myoface.analysis.fidelity import FidelityResult, Scores, unjudged
+    from myoface.commands.analyze import fidelity_lines
+
+    unsure = np.zeros((4, 10), bool)
+    unsure[1, :5] = True  # half: still judged
+    unsure[2, :6] = True  # more than half: not
+    unsure[3] = True
+    np.testing.assert_array_equal(unjudged(unsure), [False, False, True, True])
+
+    s = Scores(0.8, 0.9, 0.95, 0.05, 0.045)
+    regions = {"mouth_corners": s}
+
+    def result(n, lost):
+        return FidelityResult(s, regions, 0, n, 2, reader="DIS from frame 0", frames_unjudged=lost)
+
+    ok = result(70, 0)
+    assert ok.valid and ok.coverage == 1.0 and ok.as_dict()["valid"] is True
+    line = fidelity_lines(ok)[0]
+    assert line.startswith("fidelity: 0.80 of the input's") and "could not" not in line
+    some = result(60, 10)
+    assert some.valid and "60 of the 70 measured frames" in fidelity_lines(some)[0]
+    few = result(30, 70)
+    assert not few.valid and few.as_dict()["judge_coverage"] == 0.3
+    line = fidelity_lines(few)[0]
+    assert line.startswith("fidelity: not measurable on this video")
+    assert "could not read 70 of the 100 measured frames" in line and "0.80" in line

