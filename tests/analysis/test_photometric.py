@@ -538,7 +538,7 @@ class _NumpyTerm(PhotometricTerm):
         h = (rows * sw[:, None]).T @ (rows * sw[:, None])
         return h, -(rows * sw[:, None]).T @ (res * sw)
 
-    def occlusion(self, est):
+    def lost_patches(self, est):
         from myoface.analysis import photometric as ph
 
         lev = len(self.app.levels) - 1
@@ -561,13 +561,11 @@ class _NumpyTerm(PhotometricTerm):
         cab = g @ (a * b) / np.maximum(n, 1) - ma * mb
         ncc = cab / np.sqrt(np.maximum(va * vb, 1e-12))
         textured = (n >= 9) & (va > ph.TEXTURED_GREY**2)
-        if not textured.any():
-            return 0.0
         ratio = np.sqrt(np.maximum(vb, 0.0) / np.maximum(va, 1e-12))
         lost = (ncc < ph.AGREEMENT_MIN) & (
             (ratio < 1.0 / ph.CONTRAST_CHANGE) | (ratio > ph.CONTRAST_CHANGE)
         )
-        return float(lost[textured].mean())
+        return lost & textured, textured
 
     def cost(self, est):
         _, uv = self._uv(est)
@@ -650,10 +648,59 @@ def test_the_compiled_step_is_the_numpy_step(rendered):
             assert np.array_equal(usen, useo)
             assert _close(rn, ro) and _close(resn, reso)
             checked += 1
+        (ln, tn), (lo, to) = new.lost_patches(e), old.lost_patches(e)
+        assert np.array_equal(ln, lo) and np.array_equal(tn, to)
         assert new.occlusion(e) == old.occlusion(e)
-        occluded.append(old.occlusion(e))
+        occluded.append(lo[to].mean())
     assert checked == 3 * (len(app.levels) + 1)
     assert max(occluded) > 0.0  # (the frame at rest: patches that do not look as at rest)
+
+
+def test_only_an_area_that_no_longer_looks_as_at_calibration_is_an_occlusion():
+    """:meth:`PhotometricTerm.occlusion` counts the patches that no longer look as they did
+    at calibration only when they include one connected area of at least
+    :data:`~myoface.analysis.photometric.OCCLUSION_AREA_MIN` of the textured patches: the
+    same number of such patches scattered over the face (an expression's folds) is no
+    occlusion, gathered into one area (a hand) it is, at their share."""
+    from myoface.analysis import photometric as ph
+    from myoface.face import load_default_face
+
+    face = load_default_face()
+    tri = np.asarray(face.triangles)
+    nv = face.n_vertices
+    # one area: the k vertices a breadth-first walk over the mesh's edges reaches first from
+    # the left cheek (MediaPipe's 205); scattered: every 20th vertex
+    k = int(0.12 * nv)
+    nbr = {v: set() for v in range(nv)}
+    for a, b, c in tri:
+        nbr[a] |= {b, c}
+        nbr[b] |= {a, c}
+        nbr[c] |= {a, b}
+    order, seen = [205], {205}
+    for v in order:
+        for w in sorted(nbr[v] - seen):
+            seen.add(w)
+            order.append(w)
+    area = np.zeros(nv, bool)
+    area[order[:k]] = True
+    spread = np.zeros(nv, bool)
+    spread[::20] = True
+    assert ph._largest_group(tri, area) == k
+    assert ph._largest_group(tri, spread) < 0.5 * ph.OCCLUSION_AREA_MIN * nv
+    assert ph._largest_group(tri, np.zeros(nv, bool)) == 0
+
+    class _Term:
+        app = type("App", (), {"triangles": tri})()
+        occlusion = ph.PhotometricTerm.occlusion
+
+        def __init__(self, lost):
+            self._lost = lost
+
+        def lost_patches(self, est):
+            return self._lost, np.ones(nv, bool)
+
+    assert _Term(area).occlusion(None) == pytest.approx(k / nv)
+    assert _Term(spread).occlusion(None) == 0.0
 
 
 def test_clear_of_a_polyline_is_the_distance_test():
