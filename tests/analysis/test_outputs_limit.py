@@ -1,9 +1,16 @@
-"""The muscles at the model's limit: their share of the measured frames, and the note."""
+"""The muscles at the model's limit: their share of the measured frames, and the note; the note
+of a lone frame, its own neutral."""
 
 import numpy as np
 import pytest
 
-from myoface.analysis.outputs import AT_LIMIT, at_limit, limit_note, plot_contractions
+from myoface.analysis.outputs import (
+    AT_LIMIT,
+    at_limit,
+    limit_note,
+    own_neutral_note,
+    plot_contractions,
+)
 
 
 def test_at_limit_counts_the_measured_frames_at_the_bound():
@@ -52,3 +59,12 @@ def test_plot_marks_the_frames_at_the_limit(tmp_path):
     img = iio.imread(tmp_path / "d.png")[..., :3].astype(int)
     red = (img[..., 0] > 180) & (img[..., 1] < 90) & (img[..., 2] < 90)
     assert red.sum() == 0
+
+
+def test_a_lone_frame_is_said_to_be_its_own_neutral():
+    """One frame analysed (a photo) is its own calibration, so it reads no expression: the
+    note says so; with more frames, or the one frame not measured, there is none."""
+    note = own_neutral_note(1, 1)
+    assert note.startswith("note: one frame was analysed, and it is its own neutral")
+    assert own_neutral_note(72, 72) is None
+    assert own_neutral_note(0, 1) is None

@@ -114,6 +114,20 @@ def limit_note(shares: dict[str, float]) -> str | None:
     )
 
 
+def own_neutral_note(n_measured: int, n_frames: int) -> str | None:
+    """The line ``myoface analyze`` prints when a single frame was analysed: the
+    calibration takes the person's neutral from the frames it is given, so a lone frame is
+    its own neutral and reads no expression whatever the face does (a photo of a smile reads
+    every contraction 0). None for more frames."""
+    if n_frames != 1 or n_measured != 1:
+        return None
+    return (
+        "note: one frame was analysed, and it is its own neutral (the calibration): every "
+        "contraction reads 0 and the expression neutral, whatever the face does; to measure an "
+        "expression give a video, or a folder of frames, in which the face is first at rest"
+    )
+
+
 def plot_contractions(path, ids, times, table, quality) -> None:
     """The contractions ``table`` (T, M) over ``times`` (T,) s, one panel per muscle pair
     (the paper's Fig. 8); frames whose ``quality`` is not "ok" shaded grey, and red ticks at

@@ -208,7 +208,7 @@ def analyze_video(
     ``myoface batch`` runs for each video; then openface.csv (``fmt="openface"``) and the
     fidelity report (``report``); the command's lines printed. Returns the
     :class:`~myoface.analysis.outputs.FolderResult`."""
-    from myoface.analysis.outputs import analyze_to_folder, limit_note
+    from myoface.analysis.outputs import analyze_to_folder, limit_note, own_neutral_note
 
     video_path = video if video_path is None else video_path
     lines: list[str] = []  # the report's, said once its files are in place
@@ -224,9 +224,9 @@ def analyze_video(
             lines=lines,
         ),
     )  # fmt: skip
-    note = limit_note(res.at_limit())
-    if note is not None:
-        lines.append(note)
+    for note in (limit_note(res.at_limit()), own_neutral_note(res.n_measured, len(res.frames))):
+        if note is not None:
+            lines.append(note)
     try:
         for line in lines:
             print(line)
