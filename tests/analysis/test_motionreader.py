@@ -91,6 +91,24 @@ def test_a_point_read_over_its_support():
             DenseFlowMotionReader(img, pts, support=bad)
 
 
+def _read_points(pts):
+    """The known-warp tests' points of the face's MediaPipe points ``pts``: the regions' (the
+    bumps at REGIONS' points; the judged ones read too), {region: indices}, their positions
+    ``pos`` among the points read ``idx``, the rigid points' and outer eye corners' positions,
+    the reference points, the inter-ocular distance, and the mouth corners' supports."""
+    from myoface.analysis.fidelity import CORNER_SUPPORT_IOD
+
+    iod = float(np.linalg.norm(pts[EYE_OUTER[0], :2] - pts[EYE_OUTER[1], :2]))
+    read_at = {**REGIONS, **JUDGED_REGIONS}
+    idx = sorted({i for v in read_at.values() for i in v} | set(RIGID_POINTS))
+    pos = {i: k for k, i in enumerate(idx)}
+    rigid = [pos[i] for i in RIGID_POINTS]
+    eyes = (pos[EYE_OUTER[0]], pos[EYE_OUTER[1]])
+    support = np.zeros(len(idx))
+    support[[pos[i] for i in REGIONS["mouth_corners"]]] = CORNER_SUPPORT_IOD
+    return read_at, idx, pos, rigid, eyes, pts[idx, :2], iod, support
+
+
 @pytest.mark.shared_data
 @needs_mediapipe
 @pytest.mark.parametrize("method,alignment", [("lk", "2d"), ("dis", "2d"), ("dis", "3d")])
@@ -111,7 +129,6 @@ def test_the_reader_reads_known_warps_at_gain_one(method, alignment, head_moves)
     over the fidelity measure's support (:data:`~myoface.analysis.fidelity.CORNER_SUPPORT_IOD`)
     as the measure does (2026-12-02: corners 0.96-1.00, explained 0.991-0.995, head still and
     moving, either alignment; every region 0.95-1.04)."""
-    from myoface.analysis.fidelity import CORNER_SUPPORT_IOD
     from myoface.analysis.video import open_video
     from myoface.facemesh import FaceMeshDetector
 
@@ -121,18 +138,7 @@ def test_the_reader_reads_known_warps_at_gain_one(method, alignment, head_moves)
     frame = next(iter(open_video(path)))
     with FaceMeshDetector(video=False) as det:
         pts = det.detect(frame)
-    iod = float(np.linalg.norm(pts[EYE_OUTER[0], :2] - pts[EYE_OUTER[1], :2]))
-    read_at = {
-        **REGIONS,
-        **JUDGED_REGIONS,
-    }  # (the bumps at REGIONS' points; the judged ones read too)
-    idx = sorted({i for v in read_at.values() for i in v} | set(RIGID_POINTS))
-    pos = {i: k for k, i in enumerate(idx)}
-    rigid = [pos[i] for i in RIGID_POINTS]
-    eyes = (pos[EYE_OUTER[0]], pos[EYE_OUTER[1]])
-    ref = pts[idx, :2]
-    support = np.zeros(len(idx))
-    support[[pos[i] for i in REGIONS["mouth_corners"]]] = CORNER_SUPPORT_IOD
+    read_at, idx, pos, rigid, eyes, ref, iod, support = _read_points(pts)
     reader = make_reader(method, frame, ref, iod, support)
     head3d = None
     if alignment == "3d":
@@ -182,7 +188,7 @@ def test_the_stabilized_reader_reads_a_rolling_head_at_gain_one():
     3-D alignment takes the head out); the same reader unstabilized misreads it (some region
     below 0.9 explained: measured 2026-12-07, the brows -7.9, the chin 0.09; stabilized 0.91-1.05
     and 0.99-1.0)."""
-    from myoface.analysis.fidelity import CORNER_SUPPORT_IOD, STABILIZER_POINTS
+    from myoface.analysis.fidelity import STABILIZER_POINTS
     from myoface.analysis.motionreader import StabilizedReader
     from myoface.analysis.video import open_video
     from myoface.face.personal import face_from_photo
@@ -195,15 +201,7 @@ def test_the_stabilized_reader_reads_a_rolling_head_at_gain_one():
     det = FaceMeshDetector(video=False)
     try:
         pts = det.detect(frame)
-        iod = float(np.linalg.norm(pts[EYE_OUTER[0], :2] - pts[EYE_OUTER[1], :2]))
-        read_at = {**REGIONS, **JUDGED_REGIONS}
-        idx = sorted({i for v in read_at.values() for i in v} | set(RIGID_POINTS))
-        pos = {i: k for k, i in enumerate(idx)}
-        rigid = [pos[i] for i in RIGID_POINTS]
-        eyes = (pos[EYE_OUTER[0]], pos[EYE_OUTER[1]])
-        ref = pts[idx, :2]
-        support = np.zeros(len(idx))
-        support[[pos[i] for i in REGIONS["mouth_corners"]]] = CORNER_SUPPORT_IOD
+        read_at, idx, pos, rigid, eyes, ref, iod, support = _read_points(pts)
         face, _ = face_from_photo(frame)
         head3d = HeadPose3D(ref, face.vertices[idx], rigid, eyes)
         anchors = list(STABILIZER_POINTS)
