@@ -962,11 +962,12 @@ def read_video_points(video_path, frames, calibration_frame: int, reader: str = 
     not return to the reference point within 1 px), and with ``detect_landmarks_too`` MediaPipe's
     points on every frame of ``frames`` (len(frames), 468, 3), else None).
 
-    ``stabilize`` (the default): each frame is read turned back onto the calibration frame
-    (:class:`~myoface.analysis.motionreader.StabilizedReader`) by the similarity of
-    MediaPipe's rigid points (:data:`RIGID_POINTS`) on that frame (image mode) onto the
-    calibration frame's: the reader was validated within a few degrees and pixels of the
-    reference, and a real video's head rolls by tens of degrees.
+    ``stabilize`` (the default): a frame whose head has moved further from the calibration
+    frame's than the reader reads (:data:`~myoface.analysis.motionreader.STABILIZE_BEYOND`)
+    is read turned back onto it (:class:`~myoface.analysis.motionreader.StabilizedReader`)
+    by the similarity of MediaPipe's midline points (:data:`STABILIZER_POINTS`) on that frame
+    (image mode) onto the calibration frame's: the reader was validated within a few degrees
+    and pixels of the reference, and a real video's head rolls by tens of degrees.
 
     Raises
     ------
@@ -994,8 +995,8 @@ def read_video_points(video_path, frames, calibration_frame: int, reader: str = 
     lm = np.full((len(frames), 468, 3), np.nan) if detect_landmarks_too else None
     support = np.zeros(len(POINTS))
     support[[_POS[i] for i in REGIONS["mouth_corners"]]] = CORNER_SUPPORT_IOD
-    rigid = list(STABILIZER_POINTS)
-    anchors0 = np.asarray(p, dtype=np.float64)[rigid, :2]
+    mid = list(STABILIZER_POINTS)
+    anchors0 = np.asarray(p, dtype=np.float64)[mid, :2]
 
     def new_reader():
         r = make_reader(reader, first, ref, iod, support)
@@ -1004,7 +1005,7 @@ def read_video_points(video_path, frames, calibration_frame: int, reader: str = 
     def read(r, img, found):
         if not stabilize:
             return r.read(img)
-        return r.read(img, None if found is None else np.asarray(found)[rigid, :2])
+        return r.read(img, None if found is None else np.asarray(found)[mid, :2])
 
     fwd = new_reader()
     before: dict = {}

@@ -322,7 +322,7 @@ STABILIZE_BEYOND = (8.0, 0.15, 25.0)
 class StabilizedReader:
     """A reader (:func:`make_reader`'s) run on each frame turned back onto the reference: the
     frame is resampled by a 2-D similarity that takes ``anchors`` (K, 2), the frame's own
-    places of some of the face's points (e.g. MediaPipe's eye corners and nose ridge on
+    places of some of the face's points (the fidelity measure's: MediaPipe's midline points on
     that frame), onto ``reference_anchors`` (the same points in the reference frame), the
     reader reads the points there, and its readings are mapped back through the same
     similarity. The similarity is a known motion that is undone exactly, so whatever the
