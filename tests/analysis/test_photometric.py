@@ -664,6 +664,7 @@ def test_only_an_area_that_no_longer_looks_as_at_calibration_is_an_occlusion():
     occlusion, gathered into one area (a hand) it is, at their share."""
     from myoface.analysis import photometric as ph
     from myoface.face import load_default_face
+    from myoface.face.mesh import unique_edges
 
     face = load_default_face()
     tri = np.asarray(face.triangles)
@@ -685,12 +686,13 @@ def test_only_an_area_that_no_longer_looks_as_at_calibration_is_an_occlusion():
     area[order[:k]] = True
     spread = np.zeros(nv, bool)
     spread[::20] = True
-    assert ph._largest_group(tri, area) == k
-    assert ph._largest_group(tri, spread) < 0.5 * ph.OCCLUSION_AREA_MIN * nv
-    assert ph._largest_group(tri, np.zeros(nv, bool)) == 0
+    edges = unique_edges(tri)
+    assert ph._largest_group(edges, area) == k
+    assert ph._largest_group(edges, spread) < 0.5 * ph.OCCLUSION_AREA_MIN * nv
+    assert ph._largest_group(edges, np.zeros(nv, bool)) == 0
 
     class _Term:
-        app = type("App", (), {"triangles": tri})()
+        app = type("App", (), {"edges": staticmethod(lambda: edges)})()
         occlusion = ph.PhotometricTerm.occlusion
 
         def __init__(self, lost):

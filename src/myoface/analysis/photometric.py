@@ -271,17 +271,16 @@ OCCLUSION_LIT = True
 OCCLUSION_AREA_MIN = 0.025
 
 
-def _largest_group(triangles, mask) -> int:
+def _largest_group(edges, mask) -> int:
     """The size (vertices) of the largest connected group of the vertices ``mask`` (V,) over
-    the edges of ``triangles``."""
+    the mesh's ``edges`` (E, 2; :meth:`Appearance.edges`)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     m = np.asarray(mask, dtype=bool)
     if not m.any():
         return 0
-    t = np.asarray(triangles)
-    e = np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    e = np.asarray(edges)
     e = e[m[e[:, 0]] & m[e[:, 1]]]
     n = len(m)
     g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
@@ -619,6 +618,16 @@ class Appearance:
         if cached is None or len(cached[0]) != n_vertices + 1:
             tri = np.asarray(self.triangles, dtype=np.int64)
             cached = self._pairs = _pk.vertex_pairs(tri, int(n_vertices))
+        return cached
+
+    def edges(self) -> np.ndarray:
+        """The mesh's unique edges (E, 2) (:func:`~myoface.face.mesh.unique_edges`), made once
+        (the occlusion test groups its patches over them every frame)."""
+        cached = getattr(self, "_edges", None)
+        if cached is None:
+            from myoface.face.mesh import unique_edges
+
+            cached = self._edges = unique_edges(np.asarray(self.triangles))
         return cached
 
     def known_albedo(self) -> tuple[list, list]:
@@ -1154,7 +1163,7 @@ class PhotometricTerm:
         lost, textured = self.lost_patches(est)
         if not textured.any():
             return 0.0
-        if _largest_group(self.app.triangles, lost) < OCCLUSION_AREA_MIN * textured.sum():
+        if _largest_group(self.app.edges(), lost) < OCCLUSION_AREA_MIN * textured.sum():
             return 0.0  # (scattered: the changes of look an expression makes)
         return float(lost[textured].mean())
 

@@ -409,6 +409,7 @@ def _unseen_video_detail(fm) -> dict:
     against :data:`UNSEEN_VIDEO_LABELS` (the share of each labelled range's frames given that
     label; the hand's frames counted as right when not measured)."""
     import csv
+    import json
     import tempfile
     from collections import Counter
     from pathlib import Path
@@ -421,8 +422,9 @@ def _unseen_video_detail(fm) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         res = analyze_to_folder(path, Path(tmp) / "unseen", model=fm, tracker="landmarks")
         fid = write_fidelity_report(res.folder, path, mediapipe_on_both=False)
-        rows = list(csv.DictReader((res.folder / "contractions.csv").open()))
-        cal = json_load(res.folder / "analysis.json").get("calibration_frame")
+        with open(res.folder / "contractions.csv", newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        cal = json.loads((res.folder / "analysis.json").read_text()).get("calibration_frame")
     by_frame = {int(r["frame"]): r for r in rows}
     labels: dict = {}
     for name, ranges in UNSEEN_VIDEO_LABELS.items():
@@ -461,12 +463,6 @@ def _unseen_video_detail(fm) -> dict:
         ),
         "labels_against_a_viewer": labels,
     }
-
-
-def json_load(path) -> dict:
-    import json
-
-    return json.loads(path.read_text())
 
 
 @benchmark("analysis.fidelity", "-", higher_is_better=True)
