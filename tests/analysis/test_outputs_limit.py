@@ -39,6 +39,8 @@ def test_limit_note_names_the_muscles_held_there():
     assert note.startswith("note: 2 muscles at the model's limit")
     assert "zygomaticus_major_l 64%" in note and "risorius_l 50%" in note
     assert "mentalis" not in note
+    # (both reasons a muscle sits there, as measured on the sample: docs/expressions.md)
+    assert "more than the muscle can move it" in note and "another makes" in note
     many = {f"m{k}": 0.5 for k in range(9)}
     assert "and 3 more" in limit_note(many)
 

@@ -109,7 +109,9 @@ def limit_note(shares: dict[str, float]) -> str | None:
     return (
         f"note: {len(many)} muscle{'s' if len(many) > 1 else ''} at the model's limit "
         f"(contraction 1) on {LIMIT_NOTE_SHARE:.0%} of the measured frames or more ({named}"
-        f"{more}): the skin moved more there than the model's muscles can move it "
+        f"{more}): there they read the model's limit, not the person's effort (the skin "
+        "moved more than the muscle can move it, or the fit gave the muscle motion that "
+        "another makes; docs/expressions.md, \"Muscles at their limit\") "
         '(analysis.json\'s "at_limit"; red ticks in contractions.png)'
     )
 
