@@ -111,7 +111,7 @@ def limit_note(shares: dict[str, float]) -> str | None:
         f"(contraction 1) on {LIMIT_NOTE_SHARE:.0%} of the measured frames or more ({named}"
         f"{more}): there they read the model's limit, not the person's effort (the skin "
         "moved more than the muscle can move it, or the fit gave the muscle motion that "
-        "another makes; docs/expressions.md, \"Muscles at their limit\") "
+        'another makes; docs/expressions.md, "Muscles at their limit") '
         '(analysis.json\'s "at_limit"; red ticks in contractions.png)'
     )
 
