@@ -311,6 +311,26 @@ def test_gaze_turns_the_iris(fm):
             r.render(skin, gaze=bad)
 
 
+def test_each_eye_can_turn_its_own_way(fm):
+    """A gaze per eye (``{"l": ..., "r": ...}``, eyes that converge on a near point): each
+    eyeball is placed as a common gaze of its own angles places it, the other as its own;
+    an eye not given looks ahead; unknown keys are refused."""
+    face = fm.face
+    r = Renderer(face, Camera.front(face.vertices, width=64, height=64), ssaa=1)
+    skin = face.vertices
+    eyes = {side: slice(a, b) for (a, b, _), side in zip(r._eyeballs, r._eye_sides, strict=True)}
+    assert sorted(eyes) == ["l", "r"]
+    left, right = (0.2, -0.1), (-0.15, 0.05)
+    both = r.positions(skin, gaze={"l": left, "r": right})
+    np.testing.assert_allclose(both[eyes["l"]], r.positions(skin, gaze=left)[eyes["l"]])
+    np.testing.assert_allclose(both[eyes["r"]], r.positions(skin, gaze=right)[eyes["r"]])
+    assert np.abs(both[eyes["l"]] - r.positions(skin, gaze=right)[eyes["l"]]).max() > 1.0
+    only = r.positions(skin, gaze={"l": left})
+    np.testing.assert_allclose(only[eyes["r"]], r.positions(skin)[eyes["r"]])
+    with pytest.raises(MyofaceValueError, match="per eye"):
+        r.render(skin, gaze={"left": left})
+
+
 def test_gaze_events_in_a_timeline_turn_the_eyes(fm):
     from myoface.synth import Synthesizer
 

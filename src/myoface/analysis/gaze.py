@@ -364,6 +364,22 @@ needing the whole clip before the first reading, and resting on the offsets tabl
 correction of the eyes, which holds on renders of the person's own face and is not known on a
 real one. The reference the gaze needs is still the eye's place to about 0.3 px, which
 neither the detector's mean nor the calibration gives.
+
+Nor a look into the camera (2026-12-07): an eye tracker's calibration, the person looking at a
+known target, on the one target every video has. Built and measured, not kept: each eye's
+offset the median over the look's frames of its reading less the direction from its eyeball's
+centre (the fit's, through the frame's pose) to the camera's centre, each eye converging on
+it, taken off every reading. Rendered with each eye its own gaze (the renderer's
+``gaze={"l": ..., "r": ...}``), the benchmark's three clips after 45 frames looking into
+the lens: with the head held still for the look, the readings there sit within 0.1-0.2 deg
+of each other, but their offset is not the clip's (clip (7, 3): (-1.5, +1.1) deg on the look,
+(+1.8, -1.2) over the clip), and the worse eye reads 2.59 / 3.28 / 4.07 deg as read and 2.58 /
+4.08 / 3.41 calibrated (median 3.28 -> 3.41); with the head turning through the look (the
+eyes then 20-37 deg into their orbits, counter-rotating as a fixating person's do), 3.86 /
+4.56 / 5.58 -> 3.98 / 4.01 / 2.96. The misplacement is steady at a view, not over views:
+what the fit gets wrong about the eye changes as the head turns, so one view's offset does
+not carry to the others (an offset from the clip's own frames, which sample its views, reads
+2.62 / 2.97 / 2.64: the simulation that made it look worth building).
 """
 
 from __future__ import annotations

@@ -346,6 +346,9 @@ class Renderer:
             return first
 
         self._eyeballs = []
+        #: each eyeball's side ("l", "r"; the opening's name's last letter), in
+        #: ``_eyeballs``' order, for a gaze given per eye
+        self._eye_sides = []
         for op in openings:
             if not op.name.startswith("eye"):
                 continue
@@ -353,6 +356,7 @@ class Renderer:
             v, t, nrm, col = dressing.eyeball(center, np.array([0, 0, 1.0]), dressing.EYE_RADIUS_MM)
             first = add_static(v, t, nrm, col)
             self._eyeballs.append((first, first + len(v), center))
+            self._eye_sides.append(op.name[-1])
         jaw_first = n
         self._teeth_tri0 = sum(len(t) for t in tris)
         if cavity is not None:
@@ -393,8 +397,7 @@ class Renderer:
             mouth.cavity_positions(skin[loop], pos[first : first + 2 * len(loop) + 1])
         pos[sc.n_dynamic :] = self._static_pos
         if gaze is not None:
-            g = gaze_rotation(gaze)
-            for a, b, c in self._eyeballs:
+            for (a, b, c), g in zip(self._eyeballs, self._eye_rotations(gaze), strict=True):
                 pos[a:b] = (pos[a:b] - c) @ g.T + c
         if jaw is not None:
             rot, shift = _check_pose(jaw, "jaw")
@@ -402,6 +405,21 @@ class Renderer:
         return pos
 
     # ------------------------------------------------------------------ render
+    def _eye_rotations(self, gaze) -> list[np.ndarray]:
+        """Each eyeball's rotation (``_eyeballs``' order) for ``gaze``: ``(yaw_rad,
+        pitch_rad)`` for both, or ``{"l": (yaw_rad, pitch_rad), "r": ...}`` per eye (the
+        subject's left and right; an eye not given looks straight ahead)."""
+        if isinstance(gaze, dict):
+            unknown = set(gaze) - {"l", "r"}
+            if unknown:
+                raise MyofaceValueError(
+                    f"a gaze per eye is {{'l': (yaw, pitch), 'r': (yaw, pitch)}}; got keys "
+                    f"{sorted(map(str, unknown))}"
+                )
+            return [gaze_rotation(gaze.get(side, (0.0, 0.0))) for side in self._eye_sides]
+        g = gaze_rotation(gaze)
+        return [g] * len(self._eyeballs)
+
     def render_linear(self, vertices=None, pose=None, jaw=None, gaze=None) -> np.ndarray:
         """The image (H, W, 3) float32 in linear RGB (before tone mapping); ``pose``, ``jaw``
         and ``gaze`` as for :meth:`render`."""
@@ -419,7 +437,9 @@ class Renderer:
         same form (:meth:`myoface.model.FaceModel.jaw_pose`): the lower teeth and the tongue
         follow it.
         ``gaze``: None (straight ahead), or ``(yaw_rad, pitch_rad)``: both eyeballs turned about
-        their centres, yaw towards the subject's left (+x), pitch up (:func:`gaze_rotation`)."""
+        their centres, yaw towards the subject's left (+x), pitch up (:func:`gaze_rotation`);
+        or ``{"l": (yaw_rad, pitch_rad), "r": (yaw_rad, pitch_rad)}``, each eye its own (eyes
+        that converge on a near point, e.g. the camera)."""
         out = np.empty((self.camera.height, self.camera.width, 3), np.uint8)
         self._draw(vertices, out, None, pose, jaw, gaze)
         return out
@@ -440,8 +460,7 @@ class Renderer:
         vertex_normals_numba(pos[: sc.n_dynamic], sc.dyn_tris, normals[: sc.n_dynamic])
         normals[sc.n_dynamic :] = sc.normals_static
         if gaze is not None:
-            g = gaze_rotation(gaze)
-            for a, b, _ in self._eyeballs:
+            for (a, b, _), g in zip(self._eyeballs, self._eye_rotations(gaze), strict=True):
                 normals[a:b] = normals[a:b] @ g.T
         if jaw is not None:
             jrot = np.asarray(jaw[0], dtype=np.float64)
