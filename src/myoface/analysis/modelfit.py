@@ -210,7 +210,11 @@ REGISTER_APPEARANCE = True
 #: the frames that register the appearance: the calibration frame's neighbours within this
 #: many frames (either side) whose scores are within :data:`NEUTRAL_MARGIN_MM` of the
 #: lowest, at most :data:`REGISTRATION_MAX` of them spread evenly over those (MediaPipe's
-#: errors on neighbouring frames are alike: frames farther apart average them)
+#: errors on neighbouring frames are alike: frames farther apart average them). Not more
+#: of them from further away (2026-12-07, :data:`REGISTRATION_MAX` 30 within 45 frames; the
+#: gaze benchmark's three clips, ``tools/gaze_replay.py``-style recordings): the worse eye
+#: 4.24 / 3.55 / 4.39 -> 4.37 / 6.15 / 6.41 deg (frames of other gazes and views register
+#: the eyes worse, as the detector's context did: :meth:`ModelFit.measure_detector_context`)
 REGISTRATION_SPAN = 29
 REGISTRATION_MAX = 12
 

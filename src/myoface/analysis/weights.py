@@ -77,7 +77,17 @@ class FitSettings:
         0.790; on the known warps (head still / moving) the brows 0.47 / 0.43 against 0.61 /
         0.59, the lids 0.43 / 0.37 against 0.62 / 0.61, the corners 0.64 / 0.62 against 0.59
         / 0.60, the lips 0.55 / 0.59 against 0.47 / 0.51, leak 0.25-0.27 against 0.20-0.21.
-        Still off.
+        Still off. Again with the photometric term the default (2026-12-07, tracking against
+        detecting; ``tools/photometric_ablation.py``): single_face.mp4's fidelity 0.780
+        against 0.778 (the lower lip 0.69 against 0.61, the chin -0.04 against 0.08); the
+        known warps' worst gain 0.89 against 0.90 and the leak 0.054-0.058 against
+        0.046-0.047; the degraded head-motion render (camera seed 0, head moving) worst RMSE
+        0.110 against 0.166, median 0.089 against 0.100, but the worst correlation 0.48
+        against 0.65 and the skin 0.892 against 0.811 mm (its rest frames 0.59 against
+        0.24); the expression benchmark's clip apex / rest 0.531 / 0.698 against 0.698 /
+        0.914; the pass over the sample 7 % faster (five alternating passes, 0.184x against
+        0.170x MediaPipe). The rest read as expression costs more than the time saved:
+        still off.
     flow : read the points optical flow tracks as a term of the fit's own
         (:class:`~myoface.analysis.terms.OpticalFlowTerm`), because MediaPipe reads an
         expression's motion short. Since 2026-12-02 the points come from
