@@ -205,7 +205,8 @@ def test_the_papers_fiducial_scheme_recovers_the_zygomatic_majors(fiducials):
     raises=AssertionError,
     reason="known regression of the jaw's (two-phase, 493ac9d): the estimator on the model's "
     "true curves ends at worst RMSE 0.0059 after 6 rounds (depressor labii inferioris; 0.009 "
-    "with the camera framed at rest) against 0.0006 when written",
+    "with the camera framed at rest) against 0.0006 when written; 0.0047 on 2026-12-07 "
+    "(frontalis inner; it passes, under the 0.005 bound by a hair: kept non-strict)",
 )
 def test_the_estimator_alone_converges_on_true_curves():
     """``tracker="oracle"``: the curve fit given the model's exact section curves. The
