@@ -37,7 +37,11 @@ centre where the truth's is; ``oracle=anchor`` moves each eye by one constant fo
 clip, the mean of the moves that put its centre where the truth's is (the best a per-video
 anchor of the eye could do, the socket left to take the rest); ``oracle=lids`` gives the
 reader the truth's lid margins relative to the eyeball's centre (the lids' shape; the eye's
-place stays the fit's). ``record clip:G,C PATH`` records the benchmark's head and blinks
+place stays the fit's). ``record ... calibration=N`` runs the same analysis with its
+calibration frame (the most neutral of the first 2 s) replaced by the frame ``N`` of that
+window, every frame still measured from the first (``myoface analyze --calibration-frame N``
+would start the analysis at ``N``): how much the calibration's draw moves the reading,
+:mod:`myoface.analysis.gaze`'s docstring. ``record clip:G,C PATH`` records the benchmark's head and blinks
 with gaze programme seed G and camera seed C (the benchmark's clips are 0,0, 7,3 and 11,5;
 ``upper_margin``'s docstring in :mod:`myoface.analysis.gaze` used 3,1 and 5,2 held out)."""
 
@@ -84,7 +88,8 @@ def _synthetic_source(source: str):
     return None
 
 
-def record(source: str, out: str, face: str = "bench", tracker: str = "fit") -> None:
+def record(source: str, out: str, face: str = "bench", tracker: str = "fit",
+           calibration: str | None = None) -> None:  # fmt: skip
     import myoface.bench.gaze as B
     from myoface.analysis.pipeline import Tracking, make_analyzer
     from myoface.bench.headmotion import _Clip, _model
@@ -103,6 +108,17 @@ def record(source: str, out: str, face: str = "bench", tracker: str = "fit") -> 
         from myoface.analysis.video import open_video
 
         video = open_video(os.path.expanduser(source))
+    if calibration is not None:
+        # the default analysis (every frame from the first, the calibration scored as it
+        # goes) with its choice of the calibration frame replaced: the same analysis on
+        # another draw (``--calibration-frame`` starts the analysis at that frame instead)
+        import myoface.analysis.modelfit as mf
+        import myoface.analysis.trackers.landmark_fit as lf
+
+        def chosen(scores, k=int(calibration)):
+            return k
+
+        mf.choose_calibration_frame = lf.choose_calibration_frame = chosen
     an, first = make_analyzer(model, video, "landmarks", calibration_frame=None,
                               **TRACKERS[tracker])  # fmt: skip
     by_reader, neutrals = {}, {}  # (per reader: a speculative calibration makes a new one)

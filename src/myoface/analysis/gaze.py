@@ -389,8 +389,14 @@ to the image's left, both yaws +7 to +8 deg; frame 55: within 0.5 px, yaws +2.1 
 head's mean rotation error hardly (within 0.8 deg for every one), and neither the calibration
 frame's gaze (-24 to +22 deg across these) nor MediaPipe's residual there (the eye points'
 1.4-3.6 px RMS against the fitted model) predicts which draw is good. One clip's error spans
-2.7-7.2 deg over the frames that could calibrate it: the benchmark's three clips are three
-draws, and what would move the headline is a placement that does not rest on one frame.
+2.7-7.2 deg over the frames that could calibrate it. The other two clips alike
+(``tools/gaze_replay.py record ... calibration=N``): clip (0, 0) on frames 0 (the default's
+choice), 5, 40, 44, 47, 52, 55: 4.24, 2.86, 3.42, 3.53, 3.61, 3.06, 2.90; clip (7, 3) on 0,
+5, 15, 35, 44, 47, 55: 3.55, 5.76, 6.13, 3.17, 5.12, 4.14, 3.48. The medians over the draws,
+3.42 / 4.14 / 3.37 deg (the best 2.86 / 3.17 / 2.71): the benchmark's three clips are three
+draws of a spread of about 1.5 deg either way, and a placement that did not rest on one frame
+would take the spread away but not the error (about 3.4 deg); 3 deg needs the placement
+itself better, not only steadier.
 """
 
 from __future__ import annotations
