@@ -385,7 +385,7 @@ How large the calibration's draw is (2026-12-07; the benchmark's clip (11, 5), t
 analysis recorded with the calibration frame forced, ``tools/gaze_replay.py``; the worse eye,
 deg): calibrated on frame 0 (the default's choice) 4.39, on 5 3.24, 15 7.16, 33 3.50, 38 2.71,
 44 4.08, 47 2.81, 55 2.76. The eyes' placement moves with it (frame 15: both eyes 1.4-2.0 px
-to the image's left, both yaws +7 to +8 deg; frame 55: within 0.5 px, yaws +2.1 / -0.7), the
+to the image's left, the yaws +6.8 and +8.1 deg; frame 55: within 0.5 px, yaws +2.1 / -0.7), the
 head's mean rotation error hardly (within 0.8 deg for every one), and neither the calibration
 frame's gaze (-24 to +22 deg across these) nor MediaPipe's residual there (the eye points'
 1.4-3.6 px RMS against the fitted model) predicts which draw is good. One clip's error spans
