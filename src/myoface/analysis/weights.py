@@ -413,6 +413,10 @@ class FitSettings:
     #: 71.7, three held out 71.2 / 67.3 -> 77.8 / 46.5 (E0 2 and 8 mm on ``bench``: 81.2 /
     #: 62.1, 78.1 / 75.9); with ``d`` MediaPipe's points' displacement instead (no feedback
     #: from the fit's own reading; E0 3 mm) the same trade (``p2`` 87.5 / 89.7 -> 83.3 / 38.8).
+    #: Again with the rest reference's |yaw| term (2026-12-07; E0 4 mm, the last frame's
+    #: contractions): ``bench`` 0.698 / 0.914 -> 0.698 / 0.629, the corrugators read at a gain
+    #: of 0.93 where the default reads 0.62, but the risorius at 1.29 and the orbital sphincter
+    #: at 1.36, and the rest frames as disgust: the same trade, the rest reference no help.
     #: The apex gains are real; what they cost at rest is the appearance's view
     #: (:meth:`~myoface.analysis.modelfit.ModelFit.set_view_appearances`: with the views at
     #: rest given, ``bench`` 83.3 / 94.8, ``p2`` 78.1 / 89.7 with the MediaPipe-eased weight).
