@@ -42,8 +42,8 @@ calibration frame (the most neutral of the first 2 s) replaced by the frame ``N`
 window, every frame still measured from the first (``myoface analyze --calibration-frame N``
 would start the analysis at ``N``): how much the calibration's draw moves the reading,
 :mod:`myoface.analysis.gaze`'s docstring. ``record clip:G,C PATH`` records the benchmark's
-head and blinks with gaze programme seed G and camera seed C (the benchmark's clips are 0,0, 7,3 and 11,5;
-``upper_margin``'s docstring in :mod:`myoface.analysis.gaze` used 3,1 and 5,2 held out)."""
+head and blinks with gaze programme seed G and camera seed C (the benchmark's clips are 0,0,
+7,3 and 11,5; ``upper_margin``'s docstring in :mod:`myoface.analysis.gaze` used 3,1 and 5,2 held out)."""
 
 from __future__ import annotations
 
@@ -90,6 +90,19 @@ def _synthetic_source(source: str):
 
 def record(source: str, out: str, face: str = "bench", tracker: str = "fit",
            calibration: str | None = None) -> None:  # fmt: skip
+    if calibration is not None:
+        # the default analysis (every frame from the first, the calibration scored as it
+        # goes) with its choice of the calibration frame replaced: the same analysis on
+        # another draw (``--calibration-frame`` starts the analysis at that frame instead)
+        import myoface.analysis.modelfit as mf
+        import myoface.analysis.trackers.landmark_fit as lf
+
+        choose = mf.choose_calibration_frame
+        mf.choose_calibration_frame = lf.choose_calibration_frame = lambda scores: int(calibration)
+        try:
+            return record(source, out, face, tracker)
+        finally:
+            mf.choose_calibration_frame = lf.choose_calibration_frame = choose
     import myoface.bench.gaze as B
     from myoface.analysis.pipeline import Tracking, make_analyzer
     from myoface.bench.headmotion import _Clip, _model
@@ -108,17 +121,6 @@ def record(source: str, out: str, face: str = "bench", tracker: str = "fit",
         from myoface.analysis.video import open_video
 
         video = open_video(os.path.expanduser(source))
-    if calibration is not None:
-        # the default analysis (every frame from the first, the calibration scored as it
-        # goes) with its choice of the calibration frame replaced: the same analysis on
-        # another draw (``--calibration-frame`` starts the analysis at that frame instead)
-        import myoface.analysis.modelfit as mf
-        import myoface.analysis.trackers.landmark_fit as lf
-
-        def chosen(scores, k=int(calibration)):
-            return k
-
-        mf.choose_calibration_frame = lf.choose_calibration_frame = chosen
     an, first = make_analyzer(model, video, "landmarks", calibration_frame=None,
                               **TRACKERS[tracker])  # fmt: skip
     by_reader, neutrals = {}, {}  # (per reader: a speculative calibration makes a new one)
