@@ -21,12 +21,16 @@ module constants (``--const``: ``module.NAME`` under ``myoface.analysis``, JSON;
   ``none``: the renders as drawn); ``--points-from clean``: MediaPipe's points read on the
   renders as drawn while the fit's pixels are the degraded frames (which of the two, the
   points or the pixels, a degradation costs); ``--table``: every muscle's RMSE,
-  correlation and gain;
+  correlation and gain; ``--specular S``: the renders' skin with a specular lobe of
+  strength ``S`` (the renderer's default 0.10; 0, a matte skin, what the fit's Lambertian
+  light models); ``--identity exact``: the calibration's identity offset zero (an oracle:
+  the rendered face is the fitted model, so its neutral is the truth's);
 - ``expression``: the expression benchmark's synthetic clip (:func:`myoface.bench.expression.
   _synthetic`, the default analysis with the overrides; ``--clip NAME`` another of
   :data:`~myoface.bench.expression.CLIPS`, ``--clip all`` each and their pool, as the benchmark
   pools them): prints the apex and rest accuracy and the contractions' median RMSE;
-  ``--only PARTS`` as for ``headmotion`` (the clips rendered and degraded afresh).
+  ``--only PARTS``, ``--specular`` and ``--identity`` as for ``headmotion`` (the clips
+  rendered and degraded afresh).
 
     python tools/photometric_ablation.py warp --look --expressions happiness \\
         --set '{"photo_landmark_weight": 0.01}'
@@ -36,6 +40,9 @@ module constants (``--const``: ``module.NAME`` under ``myoface.analysis``, JSON;
     python tools/photometric_ablation.py headmotion --only background --points-from clean
     python tools/photometric_ablation.py expression --set '{"photo_rate_per_s": 4.0}'
     python tools/photometric_ablation.py expression --clip all --only texture,light,noise
+    python tools/photometric_ablation.py headmotion --clean --specular 0 \\
+        --set '{"photo_model_error": 0.0}'
+    python tools/photometric_ablation.py expression --clip all --identity exact
 
 The numbers of issue 30's report (2026-12-02) were taken this way.
 """
@@ -44,6 +51,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import importlib
 import json
 
@@ -97,6 +105,18 @@ def main(argv=None) -> None:
         help="headmotion: MediaPipe on the degraded frames or the clean renders",
     )
     ap.add_argument("--table", action="store_true", help="headmotion: every muscle's numbers")
+    ap.add_argument(
+        "--specular",
+        type=float,
+        default=None,
+        help="headmotion, expression: the renders' specular strength (SkinMaterial.specular)",
+    )
+    ap.add_argument(
+        "--identity",
+        default="fitted",
+        choices=("fitted", "exact"),
+        help="headmotion, expression: exact, the person's neutral the model's own (an oracle)",
+    )
     ap.add_argument("--look", action="store_true", help="warp: with the expressions' look")
     ap.add_argument("--expressions", default="happiness,surprise")
     ap.add_argument("--video", default=None, help="video: default the sample video")
@@ -124,13 +144,19 @@ def main(argv=None) -> None:
     only = None if a.only is None else tuple(p for p in a.only.split(",") if p != "none")
     if only is not None and set(only) - set(PARTS):
         raise SystemExit(f"--only takes some of {', '.join(PARTS)} or none; got {a.only}")
-    if a.mode == "headmotion":
-        if only is not None and a.clean:
-            raise SystemExit("--only and --clean: --clean is --only none")
-        _headmotion(a.still, not a.clean, fs, consts, only, a.points_from, a.table)
-        return
-    if a.mode == "expression":
-        _expression(a.clip, fs, consts, only)
+    if a.mode in ("headmotion", "expression"):
+        # (the renders' and the calibration's overrides printed with the constants)
+        if a.specular is not None:
+            consts = {**consts, "specular": a.specular}
+        if a.identity != "fitted":
+            consts = {**consts, "identity": a.identity}
+        with _specular(a.specular), _identity(a.identity):
+            if a.mode == "expression":
+                _expression(a.clip, fs, consts, only)
+                return
+            if only is not None and a.clean:
+                raise SystemExit("--only and --clean: --clean is --only none")
+            _headmotion(a.still, not a.clean, fs, consts, only, a.points_from, a.table)
         return
     import myoface.analysis.pipeline as pipeline
     from myoface.analysis.sample import fetch_sample_video
@@ -153,6 +179,54 @@ def main(argv=None) -> None:
     d = json.load(open(f"{a.out}/fidelity.json"))
     regions = " ".join(f"{k} {v['explained']:.2f}/{v['gain']:.2f}" for k, v in d["regions"].items())
     print(f"video {fs} {consts}: fidelity {d['overall']['explained']:.3f} ({regions})")
+
+
+@contextlib.contextmanager
+def _specular(strength: float | None):
+    """The renders' skin with a specular lobe of ``strength`` (the renderer's
+    :class:`~myoface.render.renderer.SkinMaterial` default, 0.10, unless given) while in the
+    context: how much of what the fit reads as the turning head's look is the highlight's,
+    which its Lambertian light does not model."""
+    from myoface.render.renderer import SkinMaterial
+
+    if strength is None:
+        yield
+        return
+    names = [f.name for f in dataclasses.fields(SkinMaterial)]
+    before = SkinMaterial.__init__.__defaults__
+    after = list(before)
+    after[names.index("specular") - (len(names) - len(before))] = float(strength)
+    SkinMaterial.__init__.__defaults__ = tuple(after)
+    try:
+        yield
+    finally:
+        SkinMaterial.__init__.__defaults__ = before
+
+
+@contextlib.contextmanager
+def _identity(kind: str):
+    """``exact``: the calibration's identity offset replaced by zero, the poses fitted again
+    on the model's own neutral (an oracle: the benchmarks' rendered face is the fitted model,
+    so its neutral is the truth's), while in the context; ``fitted``: unchanged."""
+    import numpy as np
+
+    from myoface.analysis.modelfit import ModelFit
+
+    if kind == "fitted":
+        yield
+        return
+    fitted = ModelFit._fit_identity
+
+    def exact(self, frames):
+        ident, poses, resid = fitted(self, frames)
+        poses = [self._pose_only(p, q, self.neutral) for p, q in zip(frames, poses, strict=True)]
+        return np.zeros_like(ident), poses, resid
+
+    ModelFit._fit_identity = exact
+    try:
+        yield
+    finally:
+        ModelFit._fit_identity = fitted
 
 
 def _parts_off(only: tuple) -> dict:

@@ -113,6 +113,50 @@ def test_the_benchmark_fit_takes_frames_as_the_tracker_does(degraded_smile, monk
 @needs_mediapipe
 @pytest.mark.slow
 @pytest.mark.shared_data
+@pytest.mark.parametrize("lid_edges", [None, True])
+def test_the_benchmark_fit_reads_the_lids_as_the_tracker_does(degraded_smile, monkeypatch,
+                                                              lid_edges):  # fmt: skip
+    """Where the settings read the lids from the image (:attr:`~myoface.analysis.weights.
+    FitSettings.reads_lids`), ``run_headmotion`` takes the calibration frame as the lids'
+    reference, as ``FitTracker`` does, and each frame's fit builds the lids' term; by default
+    (off with the photometric term) it does neither (until 2026-12-07 the benchmark never
+    set the reference, so ``lid_edges`` measured nothing there)."""
+    from myoface.analysis.lidtemplate import LidTemplateTerm
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.weights import FitSettings
+    from myoface.bench.headmotion import run_headmotion
+
+    fm, frames, points, truth, poses, skins = degraded_smile
+    n = NEUTRAL + 2
+    taken, built = [], []
+    set_ref, edge_term = ModelFit.set_lid_reference, ModelFit.lid_edge_term
+
+    def spy_ref(self, frame):
+        taken.append(frame)
+        return set_ref(self, frame)
+
+    def spy_term(self, image):
+        term = edge_term(self, image)
+        built.append(term)
+        return term
+
+    monkeypatch.setattr(ModelFit, "set_lid_reference", spy_ref)
+    monkeypatch.setattr(ModelFit, "lid_edge_term", spy_term)
+    settings = FitSettings(photometric=True, lid_edges=lid_edges)
+    res = run_headmotion(fm, points[:n], truth[:n], poses[:n], skins[:n], settings=settings,
+                         frames=frames[:n])  # fmt: skip
+    assert np.isfinite(res.estimate).all()
+    if lid_edges:
+        assert len(taken) == 1 and taken[0] is frames[res.calibration_index]
+        assert len(built) >= n
+        assert all(any(isinstance(t, LidTemplateTerm) for t in b.terms) for b in built)
+    else:
+        assert taken == [] and built == []
+
+
+@needs_mediapipe
+@pytest.mark.slow
+@pytest.mark.shared_data
 @pytest.mark.parametrize("side", ["l", "r"])
 def test_a_one_sided_smile_is_read_on_its_side(side):
     """The symmetry prior (FitSettings.symmetry_sigma) holds the two sides alike where the

@@ -476,6 +476,8 @@ def run_headmotion(
         if registration is not None:
             views = {int(k): (points[k], frames[k]) for k in registration if points[k] is not None}
         fit.set_appearance(frames[cal.index], frames[:window], views=views)
+    if frames is not None and fit.settings.reads_lids:  # (the lids' template, as FitTracker)
+        fit.set_lid_reference(frames[cal.index])
     tracker = ModelFlow.of_fit(frames[cal.index], fit) if anchored_flow else None
     n, m = len(points), model.n_muscles
     est = np.full((n, m), np.nan)
