@@ -397,6 +397,17 @@ choice), 5, 40, 44, 47, 52, 55: 4.24, 2.86, 3.42, 3.53, 3.61, 3.06, 2.90; clip (
 draws of a spread of about 1.5 deg either way, and a placement that did not rest on one frame
 would take the spread away but not the error (about 3.4 deg); 3 deg needs the placement
 itself better, not only steadier.
+
+Two more stages asked (2026-12-07, afternoon; the three clips (0, 0) / (7, 3) / (11, 5) as
+above, the default 4.24 / 3.55 / 4.39 deg): the person's neutral the model's own (the
+calibration's identity offset zero, an oracle: the benchmark's face is the fitted model)
+4.38 / 3.55 / 5.50, the eyes' placement in the frames still 0.5-1.1 px off (clip (0, 0):
+the right eye's yaw -4.9 deg on average where it was +1.0 before): the neutral's eyeball
+centres were not what held it; MediaPipe's points on the eyes' margins weighing 0 in the fit
+(they move with the gaze, up to 1 px at 15 deg) 5.40 / 4.25 / 4.46; the appearance's albedo
+the median over the registration frames rather than the calibration frame's alone (each
+sampled at the pose its pixels give) 3.66 / 4.37 / 3.95. Each moves the clips by about the
+draw's spread, in no one direction (docs/expressions.md, "Eight more stages asked").
 """
 
 from __future__ import annotations

@@ -338,6 +338,14 @@ class FitSettings:
     #: :data:`~myoface.analysis.photometric.BLUR_SCHEDULE_PX`.) A frame whose schedule skips
     #: the coarsest level (:data:`~myoface.analysis.photometric.COARSE_START_PX`) takes one
     #: step fewer: the same steps on the levels it is on.
+    #: (2026-12-07, for ``analysis.fps``: the pass over single_face.mp4 against MediaPipe
+    #: alone, five interleaved runs each, 5 / 3: 0.158x / 0.192x (medians 1.63 / 1.37 s); the
+    #: degraded head-motion renders, head moving, camera seed 0, 5 / 4 / 3: worst RMSE 0.166 /
+    #: 0.167 / 0.197, worst correlation 0.65 / 0.65 / 0.55, gain 0.65 / 0.63 / 0.60, skin
+    #: 0.811 / 0.831 / 0.875 mm, head 0.72 / 0.75 / 0.76 deg; single_face.mp4's fidelity
+    #: 0.778 / 0.780 / 0.783. Fewer steps leave the turning head's frames short: kept at 5.
+    #: Nor were they made to go further by starting each frame from the head pose
+    #: extrapolated from the last two (at 5: skin 0.949 mm, head 0.99 deg).)
     photo_iterations: int = 5
     #: the lids read from the image as a term (:func:`myoface.analysis.lidtemplate.lid_term`:
     #: the closure of each eye's opening against the calibration frame, where it closes, in
@@ -445,6 +453,15 @@ class FitSettings:
     #: renderer's furrows off as well the same (0.51 / 0.61, and 0 0.85 mm): on renders whose
     #: texture and surface are the model's own, the moving skin's pixels weighed more read the
     #: expressions in full and the rest less well.)
+    #: (2026-12-07, what that look is: on the clean renders at 0 the skin at rest 0.79 mm,
+    #: 0.57 with the renders' specular highlight off (``tools/photometric_ablation.py
+    #: headmotion --clean --specular 0``; the fit's light is Lambertian) and 0.43 with the
+    #: person's neutral exact too (``--identity exact``). And the weight eased by the head's
+    #: turn from the calibration's pose, ``0.5 turn^2 / (turn^2 + 10^2)`` (full weight near
+    #: the calibration's view): degraded, seed 0, skin 0.811 -> 0.860 mm, at rest 0.236 ->
+    #: 0.628: the frames near the calibration's view read the camera's degradation as
+    #: expression as much as the far ones read the turn. docs/expressions.md, "Eight more
+    #: stages asked".)
     photo_model_error: float = 0.5
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
