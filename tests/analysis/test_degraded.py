@@ -113,14 +113,15 @@ def test_the_benchmark_fit_takes_frames_as_the_tracker_does(degraded_smile, monk
 @needs_mediapipe
 @pytest.mark.slow
 @pytest.mark.shared_data
-@pytest.mark.parametrize("lid_edges", [None, True])
+@pytest.mark.parametrize("photometric, lid_edges", [(True, None), (True, True), (False, None)])
 def test_the_benchmark_fit_reads_the_lids_as_the_tracker_does(degraded_smile, monkeypatch,
-                                                              lid_edges):  # fmt: skip
+                                                              photometric, lid_edges):  # fmt: skip
     """Where the settings read the lids from the image (:attr:`~myoface.analysis.weights.
     FitSettings.reads_lids`), ``run_headmotion`` takes the calibration frame as the lids'
     reference, as ``FitTracker`` does, and each frame's fit builds the lids' term; by default
-    (off with the photometric term) it does neither (until 2026-12-07 the benchmark never
-    set the reference, so ``lid_edges`` measured nothing there)."""
+    (off with the photometric term) it does neither; the fit on the points alone reads them
+    (until 2026-12-07 the benchmark never set the reference, and the points' fit had no image
+    for them)."""
     from myoface.analysis.lidtemplate import LidTemplateTerm
     from myoface.analysis.modelfit import ModelFit
     from myoface.analysis.weights import FitSettings
@@ -142,11 +143,11 @@ def test_the_benchmark_fit_reads_the_lids_as_the_tracker_does(degraded_smile, mo
 
     monkeypatch.setattr(ModelFit, "set_lid_reference", spy_ref)
     monkeypatch.setattr(ModelFit, "lid_edge_term", spy_term)
-    settings = FitSettings(photometric=True, lid_edges=lid_edges)
+    settings = FitSettings(photometric=photometric, lid_edges=lid_edges)
     res = run_headmotion(fm, points[:n], truth[:n], poses[:n], skins[:n], settings=settings,
                          frames=frames[:n])  # fmt: skip
     assert np.isfinite(res.estimate).all()
-    if lid_edges:
+    if settings.reads_lids:
         assert len(taken) == 1 and taken[0] is frames[res.calibration_index]
         assert len(built) >= n
         assert all(any(isinstance(t, LidTemplateTerm) for t in b.terms) for b in built)

@@ -427,7 +427,10 @@ def run_headmotion(
     appearance taken from the calibration frame, each frame's pixels read against it; given
     ``frames``, the detector's offsets (below) also measured in their context at the
     calibration (:attr:`~myoface.analysis.weights.FitSettings.detector_context`), as
-    FitTracker does. ``detector_offsets``: take MediaPipe's offsets on this face off the points
+    FitTracker does; and where the settings read the lids from the image (the fit on the
+    points alone: :attr:`~myoface.analysis.weights.FitSettings.reads_lids`), ``frames`` give
+    the lids' term its reference and each frame, as FitTracker does (before 2026-12-07 the
+    benchmark fitted the points alone without it). ``detector_offsets``: take MediaPipe's offsets on this face off the points
     (:class:`~myoface.analysis.landmarks.TrackerOffsets`, as
     :attr:`~myoface.analysis.weights.FitSettings.tracker_offsets` says, for a face with a
     texture, without synthesis); by default when the points are MediaPipe's, i.e. carry its
@@ -476,7 +479,10 @@ def run_headmotion(
         if registration is not None:
             views = {int(k): (points[k], frames[k]) for k in registration if points[k] is not None}
         fit.set_appearance(frames[cal.index], frames[:window], views=views)
-    if frames is not None and fit.settings.reads_lids:  # (the lids' template, as FitTracker)
+    # the lids read from the image where the settings say (FitSettings.reads_lids: the fit
+    # on the points alone), their reference the calibration frame, as FitTracker reads them
+    lids = frames is not None and fit.settings.reads_lids
+    if lids:
         fit.set_lid_reference(frames[cal.index])
     tracker = ModelFlow.of_fit(frames[cal.index], fit) if anchored_flow else None
     n, m = len(points), model.n_muscles
@@ -500,7 +506,7 @@ def run_headmotion(
             prep = tracker.prepare(frames[k], p)
             flow = tracker.track(frames[k], p, pred, prepared=prep, since=since)
         before = fit.frame_state()
-        r = fit.fit(p, syn, image=frames[k] if photometric else None, flow=flow)
+        r = fit.fit(p, syn, image=frames[k] if photometric or lids else None, flow=flow)
         t_fit[k] = time.perf_counter() - t0
         resid[k] = r.residual_mm
         quality = frame_quality(r, photometric)
