@@ -402,7 +402,7 @@ Two more stages asked (2026-12-07, afternoon; the three clips (0, 0) / (7, 3) / 
 above, the default 4.24 / 3.55 / 4.39 deg): the person's neutral the model's own (the
 calibration's identity offset zero, an oracle: the benchmark's face is the fitted model)
 4.38 / 3.55 / 5.50, the eyes' placement in the frames still 0.5-1.1 px off (clip (0, 0):
-the right eye's yaw -4.9 deg on average where it was +1.0 before): the neutral's eyeball
+the right eye's yaw -4.9 deg on average where the default's is -0.3): the neutral's eyeball
 centres were not what held it; MediaPipe's points on the eyes' margins weighing 0 in the fit
 (they move with the gaze, up to 1 px at 15 deg) 5.40 / 4.25 / 4.46; the appearance's albedo
 the median over the registration frames rather than the calibration frame's alone (each

@@ -344,8 +344,8 @@ class FitSettings:
     #: 0.167 / 0.197, worst correlation 0.65 / 0.65 / 0.55, gain 0.65 / 0.63 / 0.60, skin
     #: 0.811 / 0.831 / 0.875 mm, head 0.72 / 0.75 / 0.76 deg; single_face.mp4's fidelity
     #: 0.778 / 0.780 / 0.783. Fewer steps leave the turning head's frames short: kept at 5.
-    #: Nor were they made to go further by starting each frame from the head pose
-    #: extrapolated from the last two (at 5: skin 0.949 mm, head 0.99 deg).)
+    #: Nor did starting each frame from the head pose extrapolated from the last two
+    #: frames' help (at 5 steps: skin 0.949 mm, head 0.99 deg).)
     photo_iterations: int = 5
     #: the lids read from the image as a term (:func:`myoface.analysis.lidtemplate.lid_term`:
     #: the closure of each eye's opening against the calibration frame, where it closes, in
