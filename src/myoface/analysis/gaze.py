@@ -407,7 +407,7 @@ centres were not what held it; MediaPipe's points on the eyes' margins weighing 
 (they move with the gaze, up to 1 px at 15 deg) 5.40 / 4.25 / 4.46; the appearance's albedo
 the median over the registration frames rather than the calibration frame's alone (each
 sampled at the pose its pixels give) 3.66 / 4.37 / 3.95. Each moves the clips by about the
-draw's spread, in no one direction (docs/expressions.md, "Nine more stages asked").
+draw's spread, in no one direction (docs/expressions.md, "Ten more stages asked").
 """
 
 from __future__ import annotations

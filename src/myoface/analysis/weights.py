@@ -460,7 +460,7 @@ class FitSettings:
     #: turn from the calibration's pose, ``0.5 turn^2 / (turn^2 + 10^2)`` (full weight near
     #: the calibration's view): degraded, seed 0, skin 0.811 -> 0.860 mm, at rest 0.236 ->
     #: 0.628: the frames near the calibration's view read the camera's degradation as
-    #: expression as much as the far ones read the turn. docs/expressions.md, "Nine more
+    #: expression as much as the far ones read the turn. docs/expressions.md, "Ten more
     #: stages asked".)
     photo_model_error: float = 0.5
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
