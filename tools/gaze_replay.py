@@ -43,7 +43,8 @@ window, every frame still measured from the first (``myoface analyze --calibrati
 would start the analysis at ``N``): how much the calibration's draw moves the reading,
 :mod:`myoface.analysis.gaze`'s docstring. ``record clip:G,C PATH`` records the benchmark's
 head and blinks with gaze programme seed G and camera seed C (the benchmark's clips are 0,0,
-7,3 and 11,5; ``upper_margin``'s docstring in :mod:`myoface.analysis.gaze` used 3,1 and 5,2 held out)."""
+7,3 and 11,5; ``upper_margin``'s docstring in :mod:`myoface.analysis.gaze` used 3,1 and 5,2
+held out)."""
 
 from __future__ import annotations
 

@@ -430,8 +430,8 @@ def run_headmotion(
     FitTracker does; and where the settings read the lids from the image (the fit on the
     points alone: :attr:`~myoface.analysis.weights.FitSettings.reads_lids`), ``frames`` give
     the lids' term its reference and each frame, as FitTracker does (before 2026-12-07 the
-    benchmark fitted the points alone without it). ``detector_offsets``: take MediaPipe's offsets on this face off the points
-    (:class:`~myoface.analysis.landmarks.TrackerOffsets`, as
+    benchmark fitted the points alone without it). ``detector_offsets``: take MediaPipe's
+    offsets on this face off the points (:class:`~myoface.analysis.landmarks.TrackerOffsets`, as
     :attr:`~myoface.analysis.weights.FitSettings.tracker_offsets` says, for a face with a
     texture, without synthesis); by default when the points are MediaPipe's, i.e. carry its
     relative depth (x, y, z): points given as (x, y) only (e.g. the model's own projected
