@@ -351,6 +351,50 @@ def test_a_hand_over_the_mouth_is_not_an_expression():
 
 @pytest.mark.shared_data
 @needs_mediapipe
+def test_a_neutral_frame_after_the_start_calibrates_the_frames_before_it():
+    """A video that starts in a smile and ends at rest (the known-warp smile played
+    backwards), analysed as ``myoface analyze --calibration-frame N`` does with N its last
+    frame: every frame is measured from the first (before 2026-12-07 the analysis started at
+    the calibration frame, so the smile before it was not analysed at all), the calibration
+    is that frame's, and the smile is read as a smile against it (the zygomatici as when the
+    same clip is played forwards and calibrated on its first, neutral frame), the rest as
+    rest."""
+    from myoface.analysis.pipeline import Tracking, make_analyzer
+    from myoface.analysis.sample import fetch_sample_video
+    from myoface.analysis.video import open_video
+    from myoface.bench.knownwarp import _Clip, make_clip
+    from myoface.facemesh import FaceMeshDetector
+
+    frame = next(iter(open_video(fetch_sample_video(quiet=True))))
+    with FaceMeshDetector(video=False) as det:
+        pts = det.detect(frame)
+    model = build_face_model()
+    clip, _, true_c = make_clip(frame, pts, model, "happiness", False, quick=True)
+    zyg = [model.ids.index("zygomaticus_major_l"), model.ids.index("zygomaticus_major_r")]
+    read = {}
+    for name, frames, cal in (("forwards", clip, 0), ("backwards", clip[::-1], len(clip) - 1)):
+        video = _Clip(frames, 30.0)
+        tracker, first = make_analyzer(model, video, "landmarks", calibration_frame=cal)
+        try:
+            assert first == 0
+            measured = [m for _, m in Tracking(video, tracker, first)]
+            assert tracker.calibration_frame == cal
+        finally:
+            tracker.close()
+        assert [m.index for m in measured] == list(range(len(frames))), name
+        assert all(m.quality == "ok" for m in measured), name
+        c = np.array([m.contractions for m in measured])
+        read[name] = c if name == "forwards" else c[::-1]
+    apex = int(np.argmax(true_c[:, zyg].mean(1)))
+    rest = np.flatnonzero(np.abs(true_c).max(1) == 0)
+    fwd, back = read["forwards"], read["backwards"]
+    assert back[apex, zyg].min() > 0.4, back[apex, zyg]  # (a smile: truth 0.72)
+    assert np.abs(back[apex, zyg] - fwd[apex, zyg]).max() < 0.15, (back[apex, zyg], fwd[apex, zyg])
+    assert back[rest][:, zyg].max() < 0.15, back[rest][:, zyg]
+
+
+@pytest.mark.shared_data
+@needs_mediapipe
 def test_a_looped_clip_does_not_drift():
     """The known-warp smile (head moving) played six times over: the last loop is read as the
     second was, and its apex as the first's (the appearance is always the calibration frame's, never the previous

@@ -105,7 +105,7 @@ def make_analyzer(
     stderr is a terminal). ``tracker="landmarks"``: ``estimator`` ``"fit"`` (default): the
     3-D fit of the whole model (:class:`~myoface.analysis.trackers.landmark_fit.FitTracker`:
     head pose and every muscle, calibrated on ``calibration_frame``, or when it is None on the
-    most neutral frame of the first seconds, the analysis then starting at frame 0);
+    most neutral frame of the first seconds; either way the analysis starts at frame 0);
     ``"fit-synthesis"``: the same with analysis by synthesis; ``"paper"``: the paper's 12
     muscles in a 2-D head frame
     (:class:`~myoface.analysis.trackers.landmark_paper.PaperLandmarkTracker`). ``init`` must
@@ -151,7 +151,7 @@ def make_analyzer(
                 model, fps=fps, settings=settings, synthesis=est == "fit-synthesis",
                 deferred_relax=True, calibration_frame=calibration_frame,
             )  # fmt: skip
-            return an, first
+            return an, 0  # (calibrated on its frame, every frame analysed)
         if flow:
             raise MyofaceValueError("--flow is for the 3-D fit, not --estimator paper")
         if photometric:

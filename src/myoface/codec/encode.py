@@ -286,8 +286,9 @@ class VideoParams:
     """A video's frames' parameters by the analysis' 3-D fit (iterate them, in order); its
     :attr:`setup` once the calibration frame is measured (None before).
 
-    ``calibration_frame``: the frame to calibrate on (None: the most neutral of the first
-    seconds); ``max_frames``: at most that many frames from the first."""
+    ``calibration_frame``: the frame to calibrate on, where the stream then starts (None: the
+    most neutral of the first seconds, the stream starting at frame 0); ``max_frames``: at
+    most that many frames from the first."""
 
     def __init__(self, video, *, calibration_frame: int | None = None,
                  max_frames: int | None = None, show_progress: bool = False):  # fmt: skip
@@ -300,6 +301,10 @@ class VideoParams:
         self.tracker, first = make_analyzer(
             self.model, self.video, "landmarks", calibration_frame=calibration_frame
         )
+        if calibration_frame is not None:
+            # (the stream starts at its calibration frame: the decoder's header is that
+            # frame's, and the frames before it would be held until it is measured)
+            first = int(calibration_frame)
         self.run = Tracking(self.video, self.tracker, first, max_frames)
         self.max_frames = max_frames
         self.show_progress = show_progress

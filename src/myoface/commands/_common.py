@@ -187,9 +187,10 @@ def add_analysis_arguments(p) -> None:
         type=integer(0),
         default=None,
         metavar="N",
-        help="the neutral frame to calibrate on; analysis starts there (default: 0; for the "
-        "landmarks' 3-D fit the most neutral frame of the first 2 s, and every frame is "
-        "analysed); with --init, the contours are on this frame",
+        help="the neutral frame to calibrate on (default: for the landmarks' 3-D fit the most "
+        "neutral frame of the first 2 s, for the snakes frame 0). The 3-D fit analyses every "
+        "frame, those before it too; the snakes start there (with --init, the contours are "
+        "on this frame)",
     )
     p.add_argument(
         "--max-frames",

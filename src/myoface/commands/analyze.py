@@ -16,8 +16,9 @@ from myoface.errors import MyofaceValueError
 NAME = "analyze"
 HELP = "track facial features in a video and estimate muscle contractions per frame"
 DESCRIPTION = """Track the face's features through a video and estimate the contractions of the
-paper's 12 muscles and the jaw rotation, frame by frame. The first frame is the neutral
-calibration frame.
+paper's 12 muscles and the jaw rotation, frame by frame, against a neutral calibration frame
+(the snakes: the first frame; the 3-D fit: the most neutral of the first 2 s; either: the
+frame --calibration-frame names).
 
 Trackers (--tracker):
   snakes     the paper's: deformable contours on the feature edges. They start from a JSON

@@ -46,7 +46,8 @@ def add_arguments(p):
         "--calibration-frame",
         type=int,
         metavar="N",
-        help="the neutral frame (default: the most neutral of the first 2 s)",
+        help="the neutral frame, where the stream starts (default: the most neutral of the "
+        "first 2 s, the stream starting at frame 0)",
     )
     p.add_argument("--max-frames", type=int, metavar="N", help="encode at most N frames")
     p.add_argument(

@@ -152,6 +152,22 @@ class FitMeasurement(Measurement):
         return cells + (self.gaze.cells() if self.gaze is not None else [""] * n_gaze)
 
 
+def _passed_over(frames, n: int):
+    """``frames`` with their first ``n`` taken but given as None (passed over: not kept, not
+    detected), then the next one; nothing after it."""
+    it = iter(frames)
+    for _ in range(n):
+        if next(it, _END) is _END:
+            return
+        yield None
+    frame = next(it, _END)
+    if frame is not _END:
+        yield frame
+
+
+_END = object()
+
+
 class FitTracker(TrackerBase):
     """The landmark tracker with the 3-D fit: MediaPipe's face mesh on every frame (detection
     on each, or tracking with :attr:`FitSettings.tracking`), :class:`ModelFit` on its points.
@@ -175,10 +191,11 @@ class FitTracker(TrackerBase):
         the last relax (:meth:`ModelFit.fit` ``deferred=True``; what a video analysis does,
         what a video's analysis does), instead of a second fitting round through it.
 
-    calibration_frame : the frame (its index in the video) to calibrate on, where the
-        analysis then starts; None: the most neutral of the first
-        :data:`~myoface.analysis.modelfit.CALIBRATION_WINDOW_S` s from the first frame with a
-        face, the analysis starting at the first frame given (:meth:`calibrate`).
+    calibration_frame : the frame (its index in the video) to calibrate on; None: the most
+        neutral of the first :data:`~myoface.analysis.modelfit.CALIBRATION_WINDOW_S` s from
+        the first frame with a face. Either way the analysis starts at the first frame given
+        (:meth:`calibrate`): a neutral frame in the middle of a video calibrates the frames
+        before it too.
 
     The driver (:class:`~myoface.analysis.pipeline.Tracking`) runs :meth:`observe`
     (MediaPipe) on a worker thread ahead of :meth:`measure` (the fit).
@@ -356,8 +373,9 @@ class FitTracker(TrackerBase):
     def calibrate(self, frames, first_index: int = 0) -> int:
         """The protocol's calibration: on ``frames`` (the video's from ``first_index`` on),
         the most neutral frame of the first :data:`CALIBRATION_WINDOW_S` s from the first
-        frame with a face, or the frame :attr:`calibration_frame` (then the first frame
-        given); the analysis starts at the first frame given (returns 0)."""
+        frame with a face, or the frame :attr:`calibration_frame` (at or after
+        ``first_index``: the frames before it are passed over here, neither kept nor
+        detected); the analysis starts at the first frame given (returns 0)."""
         what = "the 3-D fit" + (" with analysis by synthesis" if self.use_synthesis else "")
         if self._chosen:
             window = max(1, int(round(CALIBRATION_WINDOW_S * self.fps)))
@@ -368,19 +386,20 @@ class FitTracker(TrackerBase):
             )
         else:
             first = self.calibration_frame
-            if first != first_index:
+            if first < first_index:
                 raise MyofaceValueError(
-                    f"calibration frame {first} is not the first frame given ({first_index})"
+                    f"calibration frame {first} is before the first frame given ({first_index})"
                 )
-            one = list(itertools.islice(frames, 1))
-            if not one:
+            ahead = first - first_index
+            given = list(_passed_over(frames, ahead))
+            if len(given) <= ahead:
                 raise MyofaceValueError(f"the video has no frame {first}")
-            cal = self._calibrate(one, first, first_index=first)
+            cal = self._calibrate(given, first, first_index=first_index, skipped=ahead)
             self.how = f"MediaPipe face mesh on every frame, {what}; calibrated on frame {cal}"
         return 0
 
     def _calibrate(self, frames, calibration_frame: int | None = None, first_index: int = 0,
-                   window: int | None = None):  # fmt: skip
+                   window: int | None = None, skipped: int = 0):  # fmt: skip
         """Calibrate on ``frames`` (an iterable of RGB frames, or None for a frame without a
         face: the first :data:`CALIBRATION_WINDOW_S` s of the video, from its frame
         ``first_index``): the most neutral one, or the frame ``calibration_frame`` (an index
@@ -391,6 +410,10 @@ class FitTracker(TrackerBase):
         them). ``window``: ``frames`` are the video's frames from ``first_index`` on, of
         which those up to ``window`` frames after the first with a face are taken (none
         after them: an iterator can go on from there); an error when no frame has a face.
+        ``skipped``: the first frames of ``frames`` are None because they were passed over,
+        not because they show no face (:meth:`calibrate` with a calibration frame after the
+        first): nothing is kept of them, and the analysis starts afresh at the first frame
+        (the fit as after a lost face, a detector of its own).
         Returns the calibration frame's index in the video."""
         t_start = time.perf_counter()
         self._first_index = int(first_index)  # (the window's first frame, in the video)
@@ -501,6 +524,15 @@ class FitTracker(TrackerBase):
                 self._detector.close()
             self._detector = det
         self._detected = {first_index + k: obs for k, obs in enumerate(observed)}
+        if skipped:
+            # (the analysis starts before the calibration frame: the detector and the flow
+            # start there again, MediaPipe tracking from the frames it is then given)
+            self._detected = {}
+            if self._own_detector:
+                self._detector.close()
+                self._detector = None
+            if self._flow is not None and self._refiner is self._flow:
+                self._flow = self._refiner = FlowRefiner()
         if calibration_frame is not None:
             idx = int(calibration_frame) - first_index
             if not 0 <= idx < len(points):
@@ -535,6 +567,8 @@ class FitTracker(TrackerBase):
             self.calibration.scores = cal.scores
         if not finished:
             self._set_up(images)
+        if skipped:
+            self.fit.lose_track()  # (the first frame measured is not the calibration's)
         self.calibration_frame = first_index + self.calibration.index
         self.timings["calibration_s"] += time.perf_counter() - t_start
         return self.calibration_frame
