@@ -40,7 +40,7 @@ reader the truth's lid margins relative to the eyeball's centre (the lids' shape
 place stays the fit's). ``record ... calibration=N`` runs the same analysis with its
 calibration frame (the most neutral of the first 2 s) replaced by the frame ``N`` of that
 window, every frame still measured from the first (``myoface analyze --calibration-frame N``
-would start the analysis at ``N``): how much the calibration's draw moves the reading,
+calibrates on ``N`` alone, without the window's scores): how much the calibration's draw moves the reading,
 :mod:`myoface.analysis.gaze`'s docstring. ``record clip:G,C PATH`` records the benchmark's
 head and blinks with gaze programme seed G and camera seed C (the benchmark's clips are 0,0,
 7,3 and 11,5; ``upper_margin``'s docstring in :mod:`myoface.analysis.gaze` used 3,1 and 5,2
@@ -94,7 +94,7 @@ def record(source: str, out: str, face: str = "bench", tracker: str = "fit",
     if calibration is not None:
         # the default analysis (every frame from the first, the calibration scored as it
         # goes) with its choice of the calibration frame replaced: the same analysis on
-        # another draw (``--calibration-frame`` starts the analysis at that frame instead)
+        # another draw (``--calibration-frame`` calibrates on that frame without the scores)
         import myoface.analysis.modelfit as mf
         import myoface.analysis.trackers.landmark_fit as lf
 
