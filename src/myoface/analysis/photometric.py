@@ -697,9 +697,11 @@ class Appearance:
 
 #: the weight of the samples on triangles with a vertex on the mouth's opening (the inner lip
 #: contour): what shows there is not the neutral's skin once the lips part or press (teeth,
-#: the tongue, the dark of the mouth, the red of a lip rolling in), and the face model's lips
-#: are apart at rest where a person's are closed, so their motion there is the model's least
-#: like the person's
+#: the tongue, the dark of the mouth, the red of a lip rolling in). Set when the face model's
+#: lips were apart at rest; measured again on the closed-lipped face (2026-12-07,
+#: ``tools/photometric_ablation.py video``, single_face.mp4's validated fidelity, explained /
+#: gain): 0 0.778 (lower lip 0.61 / 0.49, chin 0.08 / 0.25), 1 0.768 (lower lip 0.54 / 0.45,
+#: chin 0.12 / 0.24): still 0
 MOUTH_RIM_WEIGHT = 0.0
 #: a sample is seen where its triangle faces the camera by more than this cosine
 FACING_MIN = 0.2
