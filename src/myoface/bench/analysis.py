@@ -284,7 +284,23 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     Measured and not kept: the redness's step on the calling thread rather than beside it
     (five passes alternating: 1.52 against 1.40 s); the score's fits at 1 Gauss-Newton step
     instead of :data:`~myoface.analysis.modelfit.SCORE_ITERATIONS` (3): the same pass time
-    (1.77 / 1.77 s, four alternating passes): the scoring is not on the critical path."""
+    (1.77 / 1.77 s, four alternating passes): the scoring is not on the critical path.
+
+    What bounds it (2026-12-07). A pass's process CPU is 2.06 s at a wall time of 1.53 s
+    (each thread's CPU read from ``/proc``: the detector's thread, which runs MediaPipe and
+    the calibration window's measurements, 1.19 s; the redness's thread 0.30; the main
+    thread's last 12 frames 0.19; decoding 0.07; the relaxes 0.06; MediaPipe's own threads
+    0.06), so on two cores no schedule of the same work finishes in under about 1.03 s, where
+    0.25x MediaPipe (0.24 s alone in that run) is 0.96 s: the ratio needs the work cut, not
+    spread. MediaPipe is not most of it: with each frame's points replayed from an earlier
+    pass (its detection free, the same points) four alternating passes took 1.53 s against
+    1.77 (median). Nor OpenCV's threads: ``cv2.setNumThreads(1)`` against its default (2)
+    1.62 / 1.60 s, the frames' blurs and gradients (``PhotometricTerm._crop``, 166 a pass)
+    1.3 ms of CPU each in the pass either way (0.45 ms alone on an idle machine). The fit's
+    CPU is spread thin (yappi, CPU clock): the compiled photometric Gram
+    (``pair_normal_equations``) 0.2-0.3 ms a call, 704 calls a pass; OpenCV's remap 1568;
+    the landmarks' normal equations 643; numpy's reductions 10,000 calls (12 us each: a
+    ``(N, 2)`` array's ``min(0)`` takes 78 us on numpy 2.4 where each column's takes 4)."""
     path = _sample_video()
     m = None if not quick else 24
     # the default, MediaPipe alone and --flow (the points read against the calibration frame
