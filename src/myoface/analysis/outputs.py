@@ -241,7 +241,8 @@ class FolderResult:
     ids : tuple of str — the estimated muscles (and ``"jaw"``).
     frames : :class:`FrameLog` — each analysed frame's index, time, quality and contractions,
         in order (``len(frames)`` frames).
-    calibration_frame : int — the index of the neutral frame the analysis started on.
+    calibration_frame : int — the index of the neutral frame the analysis calibrated on (the
+        snakes start there; the 3-D fit analyses from the first frame).
     interrupted : str or None — where the run was interrupted, if it was.
     """
 
@@ -409,7 +410,9 @@ def analyze_to_folder(
         except BaseException:
             an.close()
             raise
-        result = FolderResult(tx.target, Path(video.path), tuple(an.ids), log, run.start)
+        cal = getattr(an, "calibration_frame", None)  # (the 3-D fit's, once calibrated)
+        cal = cal if isinstance(cal, int) else run.start
+        result = FolderResult(tx.target, Path(video.path), tuple(an.ids), log, cal)
         stage = "frames" if interrupted is not None else "plots"
         side = (run, log, how_init, tracker, face)
         try:
