@@ -408,6 +408,26 @@ centres were not what held it; MediaPipe's points on the eyes' margins weighing 
 the median over the registration frames rather than the calibration frame's alone (each
 sampled at the pose its pixels give) 3.66 / 4.37 / 3.95. Each moves the clips by about the
 draw's spread, in no one direction (docs/expressions.md, "Ten more stages asked").
+
+What the camera costs the reader itself (2026-12-07, evening): clip (0, 0)'s frames rendered
+again with one of the camera's parts at a time and read on the true geometry (the true pose,
+skin and camera; left / right eye, RMS deg): none 0.82 / 1.24 (the pitch's gain, the
+readings against the truth's, 1.01), the moving light 0.81 / 1.23, the background 0.82 /
+1.24, the sensor's noise 0.82 / 1.16, H.264 0.84 / 1.32, the lens' 1-px blur 2.08 / 2.37
+(pitch gain 1.17; 0.7 px 1.51 / 1.81, 1.5 px 3.05 / 3.29, gains 1.11 and 1.21): the blur
+alone is what the reader loses to the camera, and it reads every look further from level
+than it is. Not taken, on the blurred frames: the iris' edge softer in the model (0.9 px,
+2.64 / 2.98), the frames sharpened first (unsharp masking, sigma 1 px, amount 1-2: 1.91 /
+2.09-2.13), the margins' strips wider (lower 0.15 / 0.3: the clips' worse eye 4.28 / 4.82,
+3.74 / 4.48, 4.38 / 4.77), the band wider (0.6: 2.03 / 2.35); the pupil in every fine step
+reads them at 1.59 / 1.93 (``pupil``'s docstring has why it is not the default). What the
+blur is worth in the headline: clip (0, 0)'s recorded fit (its poses and skin as the blurred
+frames gave them) read on the same frames rendered without the blur (the camera's other
+parts and draws the same): 4.24 -> 3.53 deg (pitch 2.46 -> 1.58, the yaw's bias -4.74 ->
+-4.29); the whole analysis on those frames 4.14 (its placement moved the other way: the left
+eye's centre 1.1 px left of the truth's, its yaw +4.24). On the clip rendered without any
+camera part (``record bench-clean``) the analysis reads 1.97 deg. So of 4.24, about 0.7 is
+the reader's under the lens' blur and the rest the eye's placement by the fit.
 """
 
 from __future__ import annotations
