@@ -568,7 +568,7 @@ class FitTracker(TrackerBase):
         if not finished:
             self._set_up(images)
         if skipped:
-            self.fit.lose_track()  # (the first frame measured is not the calibration's)
+            self._lose_track()  # (the first frame measured is not the calibration's)
         self.calibration_frame = first_index + self.calibration.index
         self.timings["calibration_s"] += time.perf_counter() - t_start
         return self.calibration_frame
