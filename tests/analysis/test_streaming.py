@@ -120,6 +120,27 @@ def test_the_landmark_fit_streams_its_rows_too(tmp_path):
     assert len(rows) == m and rows[0]["head_yaw_deg"] != "" and rows[0]["residual_mm"] != ""
 
 
+@needs_mediapipe
+def test_a_calibration_frame_after_the_first_is_read_from_the_first(tmp_path):
+    """``myoface analyze --calibration-frame 5`` with the 3-D fit: every frame from the first
+    is analysed, the result and analysis.json name frame 5 as the one calibrated on (before
+    2026-12-07 the analysis started at frame 5 and the result named its first frame)."""
+    import json
+
+    from myoface.analysis.outputs import analyze_to_folder
+
+    path = shared_path("video", "single_face.mp4")
+    if not path.exists():
+        pytest.skip("../shared/data/video/single_face.mp4 is not here")
+    out = tmp_path / "out"
+    res = analyze_to_folder(open_video(path), out, tracker="landmarks", calibration_frame=5,
+                            max_frames=8)  # fmt: skip
+    assert res.frames.index[0] == 0 and len(res.frames) == 8
+    assert res.calibration_frame == 5
+    side = json.loads((out / "analysis.json").read_text())
+    assert side["calibration_frame"] == 5 and side["calibration"]["frames_used"][0] == 5
+
+
 def test_the_record_kept_per_frame_is_small():
     """What the streaming analysis keeps of a frame is its row's numbers, not the frame, its
     contours or its measurement: the memory a log holds grows from N to 2N frames by about
