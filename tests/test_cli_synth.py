@@ -262,7 +262,8 @@ def test_demo_real_video(model, tmp_path, monkeypatch, capsys):
         "fidelity, MediaPipe's face mesh on both (earlier reports' measure",
         # (the sample's broad smile holds muscles at the model's limit: said, with the share)
         "note: ",
-        f"analysed 72 frames (72 measured); output folder: {ana.resolve()}",
+        f"analysed 72 frames (72 measured, against frame 0 as the neutral); output folder: "
+        f"{ana.resolve()}",
         f"wrote {ana / 'resynth.mp4'} (72 frames at 30.0 fps)",
         "face found ",
         f"wrote {ana / 'person.png'}",
