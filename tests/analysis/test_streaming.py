@@ -120,6 +120,7 @@ def test_the_landmark_fit_streams_its_rows_too(tmp_path):
     assert len(rows) == m and rows[0]["head_yaw_deg"] != "" and rows[0]["residual_mm"] != ""
 
 
+@pytest.mark.slow
 @needs_mediapipe
 def test_a_calibration_frame_after_the_first_is_read_from_the_first(tmp_path):
     """``myoface analyze --calibration-frame 5`` with the 3-D fit: every frame from the first
