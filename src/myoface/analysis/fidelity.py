@@ -97,6 +97,35 @@ not follow it: neither its pixels nor, when freed (``FitSettings.jaw_sideways``)
 pterygoids (read at most 0.19, on the other side). The chin's 0.08 is as much the fit's as the
 judge's; which reading of the chin is right is not settled.
 
+**The chin's pixels move as the judge reads them; the fit's brightness model reads them the
+other way** (2026-12-07; the default analysis' frame 40, its photometric terms taken as its
+last Gauss-Newton step left them). The calibration frame's pixels at the fit's brightness
+samples within 9 mm of point 175 (12 samples, its finest level) against frame 40's at the
+same samples' pixels there, shifted: by normalised correlation the best shift is 3.0 px to
+the image's right (0.991 against 0.957 unshifted), and a 17 x 17 px block about 175
+matched from frame 0 into frame 40 (correlation 0.97) lands 3.7-4.0 px right of where the
+rigid points' motion puts it on frames 30-60, the judge 2.9-3.6. The term's own residual
+(each sample's appearance under the frame's light, its squared difference) is least 3.0 px
+to the left: what the pixels show agrees with the judge, and what the term predicts of
+their brightness (one light's shading and an offset per quarter of the face) puts the chin
+the other way. Lighting models that predict the brightness more locally, measured on the
+sample, the known warps (head still and moving), the degraded head-motion render (camera
+seed 0, head moving) and the six expression clips (``tools/photometric_ablation.py``; the
+default's 0.778, worst gain 0.90, worst RMSE / median / worst correlation / skin / head
+0.166 / 0.100 / 0.65 / 0.811 mm / 0.72 deg, apex / rest 0.696 / 0.885): an offset per cell
+of a 3 x 4 grid over the face instead of per quarter 0.787 (chin 0.07), 0.91, 0.202 / 0.101
+/ 0.54 / 0.895 / 0.69, 0.625 / 0.861 (4 x 5: 0.768, chin -0.24); the brightness high-passed
+(less its Gaussian blur of 8 px) 0.777 (lower lip 0.77, chin -0.07); the brightness
+normalised by its local mean and spread (Gaussian 5 px, a floor of 4 grey levels: what a
+correlation is insensitive to) 0.802 (lower lip 0.80, chin 0.06, the mouth corners' gain
+0.78), 0.92, 0.212 / 0.121 / 0.23 / 0.989 / 1.02, 0.566 / 0.793 (a floor of 10: 0.782, the
+renders and clips worse still); the shading's smooth field (``photometric.
+SHADE_FIELD_ORDER``) 1 / 2 / 3: 0.780 / 0.783 / 0.784 (chin 0.07 / 0.04 / 0.03). None moves
+the chin, and with the lateral pterygoids freed as well (``FitSettings.jaw_sideways``) it
+reads -0.44 to 0.07: the model's sideways jaw moves the lower lip's centre as far as the
+chin (1.65 px each at 0.2 of the pterygoid), where the judge reads the lip's centre moving a
+third as far as the chin. Not taken.
+
 What the validation does not cover (measured on ``single_face.mp4``, 2026-12-01): where the
 lips part, the inner lip points (13, 14) sit on an edge that the teeth come out of, which no
 optical flow can follow through (hence not judged) (at the smile's apex DIS and MediaPipe differ there by 5.2 and
