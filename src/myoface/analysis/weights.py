@@ -462,6 +462,16 @@ class FitSettings:
     #: 0.628: the frames near the calibration's view read the camera's degradation as
     #: expression as much as the far ones read the turn. docs/expressions.md, "Ten more
     #: stages asked".)
+    #: (2026-12-07, later: the damping undone after the fact, as a relaxed lasso does
+    #: (Meinshausen 2007): each frame, once fitted, two more Gauss-Newton steps with only
+    #: the muscles it read above 0.05 free, the moving skin's pixels weighed in full and no
+    #: sparsity prior (a scratch patch of ``ModelFit._fit``). The degraded head-motion
+    #: render, seed 0, head moving: the paper's muscles' median gain 0.65 -> 1.06, but worst
+    #: RMSE 0.166 -> 0.219, median 0.100 -> 0.129, worst correlation 0.65 -> 0.34, skin
+    #: 0.811 -> 1.049 mm (at rest 0.24 -> 0.55); single_face.mp4's validated fidelity 0.778
+    #: -> 0.750. Half way (the weight's floor at 0.25, the sparsity prior kept): gain 0.75,
+    #: worst RMSE 0.220, worst correlation 0.01, skin 0.899 mm; fidelity 0.768. What the
+    #: weight damps is noise as much as gain: not taken.)
     photo_model_error: float = 0.5
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
