@@ -232,7 +232,8 @@ def analyze_video(
         for line in lines:
             print(line)
         print(
-            f"analysed {len(res.frames)} frames ({res.n_measured} measured, against frame "
+            f"analysed {len(res.frames)} frame{'' if len(res.frames) == 1 else 's'} "
+            f"({res.n_measured} measured, against frame "
             f"{res.calibration_frame} as the neutral); output folder: {res.folder.resolve()}"
         )
     except KeyboardInterrupt as exc:  # (the outputs are in place)
