@@ -314,7 +314,15 @@ def _cv2():
 
 #: a sample is hidden when the face's nearest surface at its pixel is this much (mm) in
 #: front of it (another part of the face covers it: the nose at a large yaw, a cheek bulging
-#: over the nasolabial fold)
+#: over the nasolabial fold). (Measured 2026-12-07 and not taken: samples within 2 px of a
+#: part of the face 8 mm or more nearer than them also left out, since their blurred pixel
+#: mixes in the occluding edge (the cheek beside the nose at a large yaw: the expression
+#: benchmark's rest frames that fail are those of the clips' segments at |yaw| 22-29 deg,
+#: read as disgust or anger; a scratch patch of :func:`unoccluded`, the z-buffer's minimum
+#: over a 5 x 5 window): the degraded head-motion render (seed 0, head moving) worst RMSE
+#: 0.166 -> 0.197, median 0.100 -> 0.093, skin 0.811 -> 0.864 mm (at rest 0.236 -> 0.224);
+#: single_face.mp4's validated fidelity 0.778 -> 0.760, its lower lip 0.61 -> 0.44: the
+#: lower lip's edge over the labiomental fold is such an edge, and its motion is there.)
 OCCLUSION_MM = 1.5
 
 
