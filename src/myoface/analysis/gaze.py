@@ -440,6 +440,17 @@ parts and draws the same): 4.24 -> 3.53 deg (pitch 2.46 -> 1.58, the yaw's bias 
 eye's centre 1.1 px left of the truth's, its yaw +4.24). On the clip rendered without any
 camera part (``record bench-clean``) the analysis reads 1.97 deg. So of 4.24, about 0.7 is
 the reader's under the lens' blur and the rest the eye's placement by the fit.
+
+The blur's share is a gain, in yaw as well as pitch (2026-12-07, night; the three clips'
+recordings replayed, each eye's readings regressed on the truth's over its open frames):
+the slope is 1.03-1.12 in yaw and 1.12-1.22 in pitch on every eye of every clip, through the
+fit's geometry and on the true one alike (their means 1.07 and 1.16), and the errors
+correlate 0.16-0.81 with the true yaw and 0.35-0.45 with the true pitch. Divided by those
+two gains, the readings' worse eye is 3.73 / 3.15 / 3.80 deg against 4.24 / 3.55 / 4.39
+(clip (0, 0)'s left eye's yaw bias, -4.74 deg, stays). Not taken as a constant: the gain is
+the lens' (1.01 without blur, 1.11 / 1.17 / 1.21 in pitch at 0.7 / 1 / 1.5 px), so a
+correction must follow a blur measured on the video itself, an instrument not yet built or
+validated; and it would leave the placement, which holds the rest.
 """
 
 from __future__ import annotations
