@@ -411,7 +411,7 @@ def analyze_to_folder(
             an.close()
             raise
         cal = getattr(an, "calibration_frame", None)  # (the 3-D fit's, once calibrated)
-        cal = cal if isinstance(cal, int) else run.start
+        cal = run.start if cal is None else int(cal)
         result = FolderResult(tx.target, Path(video.path), tuple(an.ids), log, cal)
         stage = "frames" if interrupted is not None else "plots"
         side = (run, log, how_init, tracker, face)
