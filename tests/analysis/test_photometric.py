@@ -223,6 +223,54 @@ def test_the_eyes_rim_weighs_less_as_the_head_turns_from_the_calibration(scene, 
     assert eye_rim_weight(20.0) == 1.0
 
 
+def test_a_sample_weighs_less_the_more_its_foreshortening_changed_since_calibration(
+    scene, monkeypatch
+):
+    """Each sample's step weight is its own times (min(c, c0) / max(c, c0))^power of its
+    facing now (c) and at calibration (c0, kept by the appearance): 1 where the head is as it
+    was, less on the side the turn takes towards grazing (and on the side it brings round),
+    and the weights the step uses are those."""
+    import myoface.analysis.photometric as ph
+    from myoface.analysis.camera import HeadPose
+    from myoface.analysis.modelfit import ModelFit
+    from myoface.analysis.photometric import facing, foreshortening_weight
+    from myoface.analysis.weights import FitSettings
+
+    w = foreshortening_weight(np.array([0.5, 1.0, 0.8, -0.2]), np.array([1.0, 0.5, 0.8, 0.5]), 2)
+    assert np.allclose(w[:3], [0.25, 0.25, 1.0]) and 0 <= w[3] < 1e-5
+    assert foreshortening_weight(np.array([0.5]), np.array([1.0]), 3)[0] == pytest.approx(1 / 8)
+
+    model, cam, shape, pose, frame = scene
+    fit = ModelFit(model, cam, FitSettings(photometric=True))
+    fit.calibrate([cam.project(pose.apply(shape))], 0)
+    fit.set_appearance(frame)
+    app = fit.appearance
+    c0 = facing(app.samples, model.face.triangles, pose.apply(shape))
+    assert np.allclose(app.facing0, c0, atol=1e-3)  # (the calibration's neutral: the same skin)
+    c0 = app.facing0
+
+    def step_weights(at):
+        term = fit.photometric_term(frame)[0]
+        m = fit.n_muscles
+        term.begin(Estimate(at, np.zeros(m), shape, np.zeros((len(shape), 3, m)), np.arange(m)))
+        return term._here[4]
+
+    assert np.allclose(step_weights(pose), 1.0, atol=1e-2)
+    turned = HeadPose.from_euler(25, -3, 2, (0, 0, -450))
+    got = step_weights(turned)
+    c = facing(app.samples, model.face.triangles, turned.apply(shape))
+    ratio = foreshortening_weight(c, c0, 1.0)
+    assert np.allclose(got, ratio**ph.FORESHORTENING_POWER)
+    side = app.head_xy[:, 0]
+    seen = (c0 > ph.FACING_MIN) & (c > ph.FACING_MIN)
+    # (a turn of 20 deg: some samples keep their slant, most change it; the two sides of the
+    # face change it unalike)
+    assert np.quantile(ratio[seen], 0.95) > 0.95 and np.median(ratio[seen]) < 0.9
+    assert abs(np.median(ratio[seen & (side > 0.5)]) - np.median(ratio[seen & (side < -0.5)])) > 0.1
+    monkeypatch.setattr(ph, "FORESHORTENING_POWER", None)
+    assert step_weights(turned) is None
+
+
 def test_a_mesh_warp_moves_its_points_exactly_and_does_not_fold():
     rng = np.random.default_rng(1)
     pts = rng.uniform(50, 150, (60, 2))
@@ -547,6 +595,9 @@ class _NumpyTerm(PhotometricTerm):
             far = ok & (np.abs(r) > ph.OUTLIER_SIGMAS)
             hub[far] = 0.0
         own = 1.0 if self.app.prior is None else self.app.prior
+        if ph.FORESHORTENING_POWER is not None and self.app.facing0 is not None:
+            c, c0 = np.maximum(cos, 1e-3), np.maximum(self.app.facing0, 1e-3)
+            own = own * (np.minimum(c, c0) / np.maximum(c, c0)) ** ph.FORESHORTENING_POWER
         self._w = np.where(ok, indep * hub * self.weight * own, 0.0)
 
     def _rows(self, est):
@@ -903,7 +954,9 @@ def test_the_appearance_pose_is_found_by_the_parallax_of_turned_frames(
     the fit of a frame seen 24 degrees away (its pixels, its landmarks weak) inherits the
     bias (2.3 degrees off, measured 2026-12-05); the parallax of the turned frames finds the
     turn that undoes it (-2.5 degrees), and the fit's head comes within a degree of the truth
-    (0.7: the landmarks, weak beside the pixels, still pull it toward their bias)."""
+    (0.7; 0.76 since 2026-12-07, the pixels of a view turned 24 degrees from the calibration's
+    weighing less by how their foreshortening changed, ``photometric.FORESHORTENING_POWER``:
+    the landmarks, weak beside the pixels, still pull it toward their bias)."""
     from dataclasses import replace
 
     from myoface.analysis import modelfit

@@ -1343,11 +1343,14 @@ class ModelFit:
                 try:
                     px, c, _, _ = self._gauss_newton(
                         p, lm, zeros, zeros, np.zeros_like(base), response, base, None,
-                        photo=self.photometric_term(image),
+                        photo=self.photometric_term(image, foreshortening=False),
                     )  # fmt: skip
                 finally:
                     self._gain_one = False
-                total += self._photo_cost(image, px, base + _linear(response, c))
+                # (each sample in full: weights that moved with the turn tried
+                # (photometric.FORESHORTENING_POWER, from the appearance's pose) would bias
+                # the costs compared)
+                total += self._photo_cost(image, px, base + _linear(response, c), False)
             return total
 
         d = np.zeros(3)
@@ -1395,13 +1398,13 @@ class ModelFit:
             "evaluations": n,
         }
 
-    def _photo_cost(self, image, pose, shape) -> float:
+    def _photo_cost(self, image, pose, shape, foreshortening: bool = True) -> float:
         """The photometric terms' cost of ``image`` on their finest level at ``pose`` and
-        skin ``shape`` (V, 3) mm, head frame."""
+        skin ``shape`` (V, 3) mm, head frame (``foreshortening``: :meth:`photometric_term`'s)."""
         est = Estimate(pose, np.zeros(self.n_muscles), shape,
                        np.zeros((len(shape), 3, self.n_muscles)), np.zeros(0, dtype=np.int64))  # fmt: skip
         total = 0.0
-        for t in self.photometric_term(image):
+        for t in self.photometric_term(image, foreshortening=foreshortening):
             while t.settling:
                 t.advance()
             t.prepare(est)
@@ -1426,23 +1429,27 @@ class ModelFit:
             pose = self._pose_only(self.offsets.correct(p, pose, base), pose, base)
         return self.offsets.correct(p, pose, base)
 
-    def photometric_term(self, image, start_level: int = 0,
-                         eye_weight: float = 1.0) -> list[PhotometricTerm] | None:  # fmt: skip
+    def photometric_term(self, image, start_level: int = 0, eye_weight: float = 1.0,
+                         foreshortening: bool = True) -> list[PhotometricTerm] | None:  # fmt: skip
         """The photometric terms of ``image``: its brightness, and its redness with
         :attr:`FitSettings.photo_colour` (None without an image or an appearance); their
         coarse-to-fine schedule from ``start_level`` (:func:`~myoface.analysis.photometric.
         coarse_start`), the eyes' rim samples weighing ``eye_weight``
-        (:func:`~myoface.analysis.photometric.eye_rim_weight`)."""
+        (:func:`~myoface.analysis.photometric.eye_rim_weight`), the samples weighed by their
+        foreshortening's change since calibration or not (``foreshortening``,
+        :data:`~myoface.analysis.photometric.FORESHORTENING_POWER`)."""
         if image is None or self.appearance is None:
             return None
         s = self.settings
+        kw = {"start_level": start_level, "eye_weight": eye_weight,
+              "foreshortening": foreshortening}  # fmt: skip
         out = [PhotometricTerm(image, self.appearance, self.camera, s.photo_sigma, s.photo_huber,
-                               start_level=start_level, eye_weight=eye_weight)]  # fmt: skip
+                               **kw)]  # fmt: skip
         if self.appearance_colour is not None:  # (the same samples: the brightness's geometry)
             out.append(
                 PhotometricTerm(image, self.appearance_colour, self.camera,
                                 s.photo_colour_sigma, s.photo_huber, channel="redness",
-                                peer=out[0], start_level=start_level, eye_weight=eye_weight)
+                                peer=out[0], **kw)
             )  # fmt: skip
         return out
 

@@ -472,7 +472,15 @@ class FitSettings:
     #: -> 0.750. Half way (the weight's floor at 0.25, the sparsity prior kept): gain 0.75,
     #: worst RMSE 0.220, worst correlation 0.01, skin 0.899 mm; fidelity 0.768. What the
     #: weight damps is noise as much as gain: not taken.)
-    photo_model_error: float = 0.5
+    #: 0.35 since 2026-12-07, night, with each sample weighed also by how little its
+    #: foreshortening changed since calibration
+    #: (:data:`~myoface.analysis.photometric.FORESHORTENING_POWER`, whose comment has the
+    #: numbers): the turning head's look weighed down where it arises, this weight, which held
+    #: it back over the moving skin everywhere, eased. The two together against 0.5 alone:
+    #: the head-motion renders' skin 0.82 -> 0.74 mm and median RMSE 0.101 -> 0.089, the
+    #: expression clips 0.696 / 0.885 -> 0.748 / 0.892 (held out 0.608 / 0.672 -> 0.632 /
+    #: 0.770), the gaze's clips 4.17 -> 4.36 deg on average (worse).
+    photo_model_error: float = 0.35
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
     identity_edge_sigma_mm: float = 1.0
