@@ -744,11 +744,16 @@ FACING_MIN = 0.2
 #:   ``tools/expression_calibration.py``'s) 0.632 / 0.770 (0.608 / 0.672);
 #: - the gaze's five clips (gaze seed, camera seed 0,0 / 7,3 / 11,5 / 3,1 / 5,2; the worse
 #:   eye, deg, ``tools/gaze_replay.py record``): 4.60 / 4.04 / 4.05 / 5.31 / 3.82 against
-#:   4.24 / 3.55 / 4.39 / 4.98 / 3.71 (means 4.36 and 4.17; ``analysis.gaze_error_deg`` is
-#:   the first): worse, the eye's surroundings placed a little further off (clip 0,0's left
-#:   eye's skin ring 0.98 -> 1.16 px to the image's right of the truth's at the power 2);
+#:   4.24 / 3.55 / 4.39 / 4.98 / 3.71 (means 4.36 and 4.17, worse; ``analysis.gaze_error_deg``,
+#:   the median of the first three, 4.05 against 4.24): the eye's surroundings placed a
+#:   little further off (clip 0,0's left eye's skin ring 0.98 -> 1.16 px to the image's
+#:   right of the truth's at the power 2);
 #: - single_face.mp4's validated fidelity 0.780 (0.778); the known warps' worst gain 0.91
-#:   (0.90), leak 0.041.
+#:   (0.90), leak 0.041;
+#: - the codec (BENCHMARKS.md of 2026-12-07 20:05 UTC against 11:56): 26.2 bits a frame
+#:   (24.0; the contractions' packets 14.3 bits against 12.3), face PSNR 26.62 dB (26.59),
+#:   its decoded fidelity 0.547 (0.618: the mouth corners 0.75 -> 0.69, the eyelids 0.70 ->
+#:   0.62, the chin -0.28 -> -0.64, the lower lip 0.76 -> 0.77): worse.
 #:
 #: The power 2: head moving 0.138, 0.55, 0.073, 0.74 mm, 0.75 deg; the clips 0.655 / 0.905,
 #: held out 0.615 / 0.790; the gaze's clips 4.66 / 4.71 / 4.03 / 5.10 / 3.89 (the

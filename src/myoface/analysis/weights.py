@@ -479,7 +479,8 @@ class FitSettings:
     #: it back over the moving skin everywhere, eased. The two together against 0.5 alone:
     #: the head-motion renders' skin 0.82 -> 0.74 mm and median RMSE 0.101 -> 0.089, the
     #: expression clips 0.696 / 0.885 -> 0.748 / 0.892 (held out 0.608 / 0.672 -> 0.632 /
-    #: 0.770), the gaze's clips 4.17 -> 4.36 deg on average (worse).
+    #: 0.770), the gaze's five clips 4.17 -> 4.36 deg on average (worse; the benchmark's
+    #: median of three 4.24 -> 4.05), the codec's decoded fidelity 0.618 -> 0.547 (worse).
     photo_model_error: float = 0.35
     #: identity offset (calibration): the difference of neighbouring vertices' offsets (mm, 1
     #: sd) and the offset itself (mm, 1 sd)
