@@ -270,10 +270,14 @@ def display_orientation(frame, where="video") -> tuple[bool, int, int] | None:
     ``libavutil/display.h``: a quarter turn counter-clockwise is ``(0, -1; 1, 0)``; an
     iPhone's portrait video says -90 degrees, a quarter turn clockwise). A matrix that is
     not a quarter turn or a mirror is left, with a warning."""
-    sd = next(
-        (x for x in (getattr(frame, "side_data", None) or ()) if "DISPLAYMATRIX" in str(x.type)),
-        None,
-    )
+    data = getattr(frame, "side_data", None) or ()
+    sd = None
+    for x in data:
+        # (iterating the frame's side data gives the data, each with its ``type``, up to
+        # PyAV 18.1.0, and the types, keys to the data, from 18.1.1)
+        if "DISPLAYMATRIX" in str(getattr(x, "type", x)):
+            sd = x if hasattr(x, "type") else data[x]
+            break
     if sd is None:
         return None
     m = np.frombuffer(bytes(sd), dtype=np.int32)
