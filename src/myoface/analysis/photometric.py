@@ -870,8 +870,8 @@ class PhotometricTerm:
         #: whether each step's weights take :func:`foreshortening_weight` (with
         #: :data:`FORESHORTENING_POWER`): not where the appearance's own pose is what is
         #: searched for (:data:`~myoface.analysis.modelfit.PARALLAX_REFINE`: the weights
-        #: would move with it)
-        self._foreshortening = bool(foreshortening)
+        #: would move with it), and not without the calibration's facing to compare with
+        self._foreshortening = bool(foreshortening) and appearance.facing0 is not None
         #: a term on the same samples prepared before this one at each step (the brightness's,
         #: for the redness's): its geometry of the step (:meth:`_geometry`, its z-buffer of
         #: the round too) is taken, not made again
@@ -1081,11 +1081,7 @@ class PhotometricTerm:
         cos = _pk.facing(pc, self._triangles, self._tri_index)
         seen = cos > FACING_MIN
         fore = None  # (each sample's foreshortening weight: the step's own weights times it)
-        if (
-            self._foreshortening
-            and FORESHORTENING_POWER is not None
-            and (self.app.facing0 is not None)
-        ):
+        if self._foreshortening and FORESHORTENING_POWER is not None:
             fore = foreshortening_weight(cos, self.app.facing0, FORESHORTENING_POWER)
         if self._unoccluded is None:
             # (once a round: a step moves the skin by far less than a part of the face is
