@@ -318,6 +318,25 @@ error runs from 4.4 to 8.3 deg with it: the neutral's pose and appearance are re
 view, and what that view cannot tell stays in every frame. The expressions' readings show the
 same (docs/expressions.md, "What holds the readings").
 
+The offset is there at the calibration frame itself, and it is the pose's, not the
+neutral's shape (2026-12-07, evening; the benchmark's three clips recorded by
+``tools/gaze_replay.py``, all three calibrated on frame 0, head (0, 12.6, 13.6) deg). The
+eye's skin ring (``tools/gaze_replay.py``'s ``placed``) is (2.43, -1.10) / (-0.03, -1.10) px
+from the truth's on clip (0, 0), left / right eye, (1.11, -1.63) / (1.03, -2.30) on (7, 3),
+(-0.96, -0.19) / (-1.52, -0.88) on (11, 5); the fitted skin's ring there is 0.03-0.62 mm
+from the truth's in the head frame (0.04-1.05 px of the offset), the rest is where the
+calibration's pose (and camera: the analysis assumes 45 deg, the renders have 40) puts it. The clips differ only in the camera's noise and the gaze (frame 0 looks at (6.8,
+-6.9), (6.3, 11.9) and (-18.6, 0) deg): on the renderer's own frames of the face at rest,
+MediaPipe's 16 contour points of an eye move 0.1-1.2 px (their mean) as the gaze alone
+changes by 10-19 deg, at three head poses, and the rest of its face mesh 0.1-0.5 px, in no
+direction that follows the gaze (a look 15 deg either way moved the left eye's points up by
+1.05 and 1.16 px alike): the calibration's points are one draw of the detector's response to
+what the eyes do, and no correction by the gaze read there would take it off. Nor is it the
+assumed camera: with the analysis' camera at the renders' 40 deg the three clips read 3.99 /
+6.76 / 5.36 deg (4.60 / 4.04 / 4.05 at 45), the skin rings (0.87, 0.04) / (0.00, -0.24),
+(0.32, -0.66) / (1.55, -1.47), (-1.21, -0.79) / (-1.11, -1.47) px off on average: another
+draw, no nearer the truth.
+
 The eyes' vergence, measured and not constrained (2026-12-06, the benchmark's three clips and
 (23, 9), (31, 1), the default analysis). Every clip reads the two eyes as diverging where the
 truth's axes are parallel: the left eye's yaw less the right's errs by +2.7, +3.2, +5.0, +4.0

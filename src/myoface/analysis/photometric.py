@@ -794,6 +794,31 @@ def foreshortening_weight(cos: np.ndarray, cos0: np.ndarray, power: float) -> np
 #: degraded head-motion renders, head moving, worst RMSE 0.267 -> 0.274, median 0.127 both,
 #: skin 0.916 -> 0.949 mm, head 1.162 -> 1.093 deg (head still the same); the five gaze clips
 #: 3.36, 5.72, 5.55, 3.44, 4.50 -> 3.61, 5.68, 4.78, 3.13, 5.27 deg (mean 4.51 -> 4.49)
+#:
+#: Measured 2026-12-07 (evening) and not kept: each rim sample weighed by the part of the turn
+#: that slides the eyeball across its own margin rather than by the whole turn. With ``w``
+#: the turn's rotation vector in the head frame and ``n`` the opening's outward normal at the
+#: sample (x, y; the opening as the ellipse of its loop), the yaw slides the eyeball sideways
+#: and the pitch up or down, the roll turns eyeball and lids together: across the margin
+#: ``|n_x w_y - n_y w_x|``, along it ``|n_x w_x + n_y w_y|``; the turn counted as
+#: ``sqrt(across^2 + (a along)^2)``. Against the default (the whole turn), degraded head-motion
+#: renders, head moving, camera seeds 0 / 1 / 2 (worst RMSE; worst correlation; skin mm; head
+#: deg), the six expression clips (apex / rest) and the gaze's three clips (the worse eye):
+#:
+#: - the default: 0.140 / 0.146 / 0.138; 0.76 / 0.35 / 0.45; 0.72 / 0.74 / 0.76; 0.68 / 0.78
+#:   / 0.67; 0.748 / 0.892; 4.60 / 4.04 / 4.05 deg;
+#: - ``a`` 0 (across alone; the rims of the upper and lower lids, whose normals are nearly
+#:   vertical, keep their weight under a yaw): 0.134 / 0.142 / 0.135; 0.78 / 0.37 / 0.40;
+#:   0.68 / 0.74 / 0.74; 0.63 / 0.81 / 0.59; 0.748 / 0.862; 4.79 / 4.97 / 3.87. The
+#:   corrugators read better on every seed (RMSE 0.185 / 0.200 / 0.180 -> 0.146 / 0.194 /
+#:   0.159, correlation 0.68 / 0.67 / 0.70 -> 0.85 / 0.70 / 0.79), but the levators' gain rose
+#:   from 0.01-0.09 to 0.19-0.45 at a correlation of -0.2 to 0.06: a lid raise read with the
+#:   yaw, not the lid's (what slides along the margin, the iris' sides under it, changes the
+#:   look too), and the expression clips' rest frames and the gaze paid for it;
+#: - ``a`` 0.5: seeds 1 / 2 0.144 / 0.131, 0.36 / 0.42, 0.74 / 0.75 mm, 0.79 / 0.63 deg; 0.753
+#:   / 0.852; 4.59 / 4.15 / 3.93;
+#: - ``a`` 1 (the whole turn but its roll): 0.140 / 0.146 / 0.134, 0.76 / 0.35 / 0.45, 0.71 /
+#:   0.74 / 0.75 mm, 0.67 / 0.79 / 0.66 deg; 0.750 / 0.892; 4.60 / 4.10 / 3.98: the default's.
 EYE_RIM_TURN_DEG: float | None = 10.0
 
 
