@@ -31,7 +31,27 @@ class FitSettings:
         calibration does not read it into the person's neutral
         (:data:`~myoface.analysis.modelfit.IDENTITY_DEPTH`: its tilt pitched the head frame).
     oval_weight : weight of the face oval's points (the mesh's outer rim), which MediaPipe
-        puts on the face's silhouette, not on fixed skin, as the head turns.
+        puts on the face's silhouette, not on fixed skin, as the head turns. What is behind
+        the head moves more of MediaPipe's points than the oval's (2026-12-07, evening; the
+        degraded head-motion renders, head moving, camera seed 1, the same frames with and
+        without the cluttered room): after a similarity transform, its points move 0.88 px
+        (median), the oval's 2-2.8 and the ring just inside it 1.8-2.3, and the chin's inner
+        points (175, 396, 171, 199, 200, 428, 208) shift along the mentalis' response: with
+        the room the mentalis reads 1.0 with the head turned 30 deg where the truth is 0
+        (RMSE 0.395, gain 2.0 on seed 1; 0.376 on seed 2; 0.053 on seed 0), without it 0.078.
+        The points, not the pixels: MediaPipe's points from the frames without the room and
+        the pixels from those with it, 0.167; the other way round, 0.675. Measured and not
+        kept (seeds 1 / 2, worst RMSE, worst correlation, skin mm against 0.146 / 0.138, 0.35 /
+        0.44, 0.74 / 0.76): the oval at 0.02, mentalis unchanged (0.392); the ring next to the
+        oval at 0.5 (and seed 0: 0.136 / 0.139 / 0.165, 0.81 / 0.29 / 0.52, 0.70 / 0.69 /
+        0.84; the six expression clips 0.733 / 0.904 against 0.748 / 0.892; gaze 4.52 deg
+        against 4.05) or 0.2 (0.134 / 0.156 / 0.158, skin 0.71 / 0.83 / 0.79), mentalis
+        0.37-0.47; every point weighed by ``d^2 / (d^2 + r^2)`` of its distance ``d`` from the
+        projected oval, ``r`` 0.08 of the face's width: mentalis 0.11 / 0.18, worst RMSE 0.133
+        / 0.127, skin 0.72 / 0.72, but the depressor labii inferioris, which the same chin
+        points read, 0.42 / 0.55 -> 0.30 / 0.11 in correlation (the worst correlation 0.17 /
+        0.08); ``r`` 0.04: mentalis 0.14 / 0.43, skin 0.68 / 0.80. (The renders' face has no
+        neck: the room meets the chin directly, where a person's neck would be.)
     model_error : the model's own error at a point, as a fraction of the largest skin
         displacement any one muscle makes there at full contraction
         (:func:`model_error_weights`): a point the muscles move far (lips, cheeks, chin) is
