@@ -1350,7 +1350,9 @@ class ModelFit:
                 # (each sample in full: weights that moved with the turn tried
                 # (photometric.FORESHORTENING_POWER, from the appearance's pose) would bias
                 # the costs compared)
-                total += self._photo_cost(image, px, base + _linear(response, c), False)
+                total += self._photo_cost(
+                    image, px, base + _linear(response, c), foreshortening=False
+                )
             return total
 
         d = np.zeros(3)
