@@ -152,6 +152,8 @@ def _detail_table(r: dict) -> list[str]:
 
 def render(records: list[dict], command: str, date: str, docs: dict[str, str]) -> str:
     machine = records[0]["machine"] if records else "unknown"
+    # (runs written before the records named their libraries' versions have none)
+    software = records[0].get("software") if records else None
     lines = [
         "# Benchmarks",
         "",
@@ -160,6 +162,7 @@ def render(records: list[dict], command: str, date: str, docs: dict[str, str]) -
         "",
         f"Machine: {machine}.",
         "",
+        *([f"Software: {software}.", ""] if software else []),
         "Values are medians of *n* repeats (models and JIT compilation outside the timed region).",
         "Where a peer is named, it did the same work in the same run; the ratio is how many",
         "times better myoface is (> 1: myoface better). These machines are shared and noisy:",

@@ -53,7 +53,12 @@ def test_bench_json_record_schema(quick_run):
         "peer_value",
         "n",
         "machine",
+        "software",
     }
+    # the libraries' versions the numbers rest on, as installed here
+    from importlib.metadata import version
+
+    assert f"numpy {version('numpy')}" in r["software"]
     assert r["name"] == "tissue.rk2_steps_per_s" and r["unit"] == "1/s" and r["higher_is_better"]
     # a rate measured on at least one repeat: finite and positive
     assert 0 < r["value"] < float("inf") and isinstance(r["n"], int) and r["n"] >= 1
@@ -73,6 +78,7 @@ def test_benchmarks_md_generator(tmp_path):
                     "peer_value": 10.0,
                     "n": 5,
                     "machine": "test machine",
+                    "software": "numpy 9.9.9, mediapipe -",
                 },
                 {
                     "name": "tissue.relax_ms",
@@ -102,6 +108,7 @@ def test_benchmarks_md_generator(tmp_path):
     )
     text = md.read_text()
     assert "test machine" in text
+    assert "Software: numpy 9.9.9, mediapipe -." in text
     assert "| `snakes.track_fps_9x40_256` | 1,000 | 1/s | skimage | 10 | 100× |" in text
     assert ">= 500 (met)" in text and "<= 10 (**not met**)" in text
 

@@ -39,7 +39,8 @@ class Measurement:
 class BenchRecord:
     """One row of ``myoface bench --json``: the benchmark's name, its median ``value`` over
     ``n`` repeats in ``unit``, which way is better, the peer measured in the same run (if
-    any) and its median, and the machine."""
+    any) and its median, the machine, and the versions of the libraries the numbers rest on
+    (:func:`software_description`)."""
 
     name: str
     value: float
@@ -50,6 +51,7 @@ class BenchRecord:
     n: int
     machine: str
     detail: dict | None = None
+    software: str = ""
 
     def to_dict(self) -> dict:
         """The record as ``--json`` writes it (the breakdown ``detail`` goes to its own file)."""
@@ -112,6 +114,30 @@ def machine_description() -> str:
     )
 
 
+#: the distributions whose versions :func:`software_description` names: those whose numerics
+#: the benchmarks' numbers pass through (the detector, the image and video libraries, the
+#: compiler of the hot loops, the linear algebra). The analysis' numbers are sensitive to
+#: them: on 2026-12-07 the same commit on a new install (a new machine, the versions pip
+#: chose that day) read the head-motion renders' camera seed 0 with a worst correlation of
+#: 0.11 where the run before had 0.76 (see BENCHMARKS.md's history in git)
+SOFTWARE = ("numpy", "scipy", "numba", "opencv-contrib-python", "mediapipe", "av", "pillow",
+            "trimesh")  # fmt: skip
+
+
+def software_description() -> str:
+    """The versions of :data:`SOFTWARE` installed here, ``name version`` comma-separated
+    (``name -`` for one not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = []
+    for name in SOFTWARE:
+        try:
+            out.append(f"{name} {version(name)}")
+        except PackageNotFoundError:
+            out.append(f"{name} -")
+    return ", ".join(out)
+
+
 def load_all() -> dict[str, Benchmark]:
     """Import every ``myoface.bench.<area>`` module so its benchmarks register."""
     import myoface.bench as pkg
@@ -128,6 +154,7 @@ def run(
     """Run the registered benchmarks whose name starts with ``prefix`` (all if None)."""
     reg = load_all()
     machine = machine_description()
+    software = software_description()
     out = []
     for name in sorted(reg):
         if prefix and not name.startswith(prefix):
@@ -147,6 +174,7 @@ def run(
                 int(m.n),
                 machine,
                 m.detail,
+                software,
             )
         )
     return out
