@@ -198,7 +198,7 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     frame less than detecting; the fit detects, see
     :attr:`~myoface.analysis.weights.FitSettings.tracking`), in the same run; the tracker includes
     MediaPipe, so the ratio is the cost of myoface's calibration and fit and of detection over
-    tracking (the detail gives the share of a frame that is not MediaPipe's, and the same with ``--refine 0``, the linear response only; and per frame the
+    tracking (the detail gives the share of a frame that is not MediaPipe's, and the same with ``--refine 0``, the linear response only, not in a quick run; and per frame the
     last timed pass's wall and process CPU time of each, ours by stage, with the ratio of the
     CPU times: on a busy machine the work each does, where the wall times also measure how
     much of a second core was free). The model's one-time set-up (its responses to each
@@ -320,15 +320,20 @@ def bench_analysis_fps(quick: bool) -> Measurement:
     peer_t = _breakdown(("timings", "mediapipe"))
     # --no-photometric --flow (the points read against the calibration frame through the
     # model, on a thread of their own: modelflow.PREDICTION_LAG), and --refine 0 on the points
-    flow, _ = _fps(lambda: _analysis_pass(path, "landmarks", m, photometric=False, flow=True),
-                   quick)  # fmt: skip
+    # (not in a quick run, a smoke run that is part of the test suite: None)
+    flow = lin = None
+    if not quick:
+        flow, _ = _fps(
+            lambda: _analysis_pass(path, "landmarks", m, photometric=False, flow=True), quick
+        )
+        lin, _ = _fps(
+            lambda: _analysis_pass(path, "landmarks", m, refine=0, photometric=False), quick
+        )
     flow_t = _breakdown(("timings", "landmarks", None, False, "flow"))
-    lin, _ = _fps(lambda: _analysis_pass(path, "landmarks", m, refine=0, photometric=False),
-                  quick)  # fmt: skip
     detail = {
         "fit_share_of_frame": 1.0 - ours / peer,
         "fps_refine0": lin,
-        "fit_share_of_frame_refine0": 1.0 - lin / peer,
+        "fit_share_of_frame_refine0": None if lin is None else 1.0 - lin / peer,
         # the same video, frames and repeats, the same breakdown (below), --no-photometric
         "fps_points": points,
         "points_ratio": points / peer,
@@ -341,7 +346,7 @@ def bench_analysis_fps(quick: bool) -> Measurement:
         },
         # the same with --flow: frames a second, its ratio to MediaPipe's
         "fps_flow": flow,
-        "flow_ratio": flow / peer,
+        "flow_ratio": None if flow is None else flow / peer,
         "cpu_ratio_flow": (
             peer_t["cpu_ms_per_frame"] / flow_t["cpu_ms_per_frame"]
             if flow_t.get("cpu_ms_per_frame") and peer_t.get("cpu_ms_per_frame")
@@ -503,7 +508,8 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
     fit on MediaPipe's points alone (``points_alone``: ``--no-photometric``, the default
     before 2026-12-05) and with them refined by optical flow (``--no-photometric --flow``),
     and of the default with the model-anchored flow (``--flow``: ``default_with_optical_flow``;
-    the three not in a quick run). The analysis is the default, the 3-D fit with its
+    these three, the judge on the resynthesis and the earlier 2-D alignment not in a quick
+    run, a smoke run that is part of the test suite). The analysis is the default, the 3-D fit with its
     photometric term.
 
     Measured 2026-12-01: 0.20 (MediaPipe on both 0.87); per region explained / gain: mouth
@@ -548,17 +554,19 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
         )  # fmt: skip
         fid = write_fidelity_report(res.folder, path)
         doc = json.loads((res.folder / "fidelity.json").read_text())
-        # the judge on a known answer with this video's own motion: the person's face
-        # rendered at the contractions measured (fidelity.judge_on_resynthesis)
         person = person_model(path, fid.reference)[0]
-        _, table, quality = read_contractions_csv(res.folder / "contractions.csv", person.ids)
-        measured = table[np.array([q == "ok" for q in quality])]
-        judge_self = judge_on_resynthesis(person, measured, Path(tmp) / "resynthesis.mp4")
-        # the judge's earlier alignment, for comparison (see below)
-        fid2, _ = fidelity_of_analysis(
-            path, res.folder / "contractions.csv", calibration_frame=fid.reference,
-            mediapipe_on_both=False, alignment="2d",
-        )  # fmt: skip
+        judge_self = fid2 = None  # (not in a quick run: a smoke run in the test suite)
+        if not quick:
+            # the judge on a known answer with this video's own motion: the person's face
+            # rendered at the contractions measured (fidelity.judge_on_resynthesis)
+            _, table, quality = read_contractions_csv(res.folder / "contractions.csv", person.ids)
+            measured = table[np.array([q == "ok" for q in quality])]
+            judge_self = judge_on_resynthesis(person, measured, Path(tmp) / "resynthesis.mp4")
+            # the judge's earlier alignment, for comparison (see below)
+            fid2, _ = fidelity_of_analysis(
+                path, res.folder / "contractions.csv", calibration_frame=fid.reference,
+                mediapipe_on_both=False, alignment="2d",
+            )  # fmt: skip
         alone: dict = {}  # (the points' fit, and with the flow; not in a quick run)
         if not quick:
             # the same on MediaPipe's points alone (--no-photometric, the default before
@@ -584,7 +592,6 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
 
     reach, _ = model_reach(person, fid.d_in)
     regions = {k: v.explained for k, v in fid.regions.items()}
-    reach2, _ = model_reach(person, fid2.d_in, alignment="2d")
 
     def explained(r):
         return {
@@ -592,16 +599,18 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
             "regions": {k: round(float(v.explained), 4) for k, v in r.regions.items()},
         }
 
-    flat = {
-        "what": (
-            "the measure and the model's reach with the judge's earlier alignment, the rigid "
-            "points' 2-D similarity on both sides (on renders it read a still face's nod of 5 "
-            "degrees as 0.019 IOD RMS of chin motion: fidelity.READER_VALIDATION's "
-            "head_motion_3d)"
-        ),
-        "fidelity": explained(fid2),
-        "model_reach": explained(reach2),
-    }
+    flat = None
+    if fid2 is not None:
+        flat = {
+            "what": (
+                "the measure and the model's reach with the judge's earlier alignment, the "
+                "rigid points' 2-D similarity on both sides (on renders it read a still face's "
+                "nod of 5 degrees as 0.019 IOD RMS of chin motion: fidelity.READER_VALIDATION's "
+                "head_motion_3d)"
+            ),
+            "fidelity": explained(fid2),
+            "model_reach": explained(model_reach(person, fid2.d_in, alignment="2d")[0]),
+        }
     detail = {
         **_fidelity_detail(fid, doc),
         "model_reach": {
@@ -623,7 +632,8 @@ def bench_analysis_fidelity(quick: bool) -> Measurement:
         # which stage holds it, per region: MediaPipe's points (the default's input) against the
         # judge, and the model against MediaPipe's points (fidelity._stages)
         "stages": doc.get("stages"),
-        "judge_on_resynthesis": {
+        "judge_on_resynthesis": judge_self
+        and {
             "what": (
                 "the judge on a known answer with this video's motion: the person's face "
                 "rendered front on (384 px) at the contractions the analysis measured, read "

@@ -807,12 +807,13 @@ def _snakes(quick: bool, still: bool, degraded: bool = True) -> dict:
 
 def _both(quick: bool) -> dict:
     """Every variant's detail: moving / still head; the default (the fit with its
-    photometric term, ``..., photometric``) on the camera's frames and on the clean renders
-    (not in a quick run); the fit on MediaPipe's points alone (``..., fit``: ``myoface
-    analyze --no-photometric``, the default before 2026-12-05) on both; that fit with
-    synthesis, with MediaPipe's points refined by optical flow, and the paper's snakes, on
-    the camera's frames, the snakes also on the clean renders (these not in a quick run);
-    what the camera did."""
+    photometric term, ``..., photometric``) on the camera's frames and on the clean renders;
+    the fit on MediaPipe's points alone (``..., fit``: ``myoface analyze
+    --no-photometric``, the default before 2026-12-05) on both; that fit with synthesis,
+    with MediaPipe's points refined by optical flow, with the anchored flow and the AU prior,
+    and the paper's snakes, on the camera's frames, the snakes also on the clean renders;
+    what the camera did. A quick run (a smoke run of the pipeline, part of the test suite)
+    has the default and the points' fit on the camera's frames alone."""
     out = {}
     for head, still in (("moving", False), ("still", True)):
         out[f"{head}, photometric"] = _run(quick, still, photometric=True)[1]
@@ -820,6 +821,9 @@ def _both(quick: bool) -> dict:
         for seed in CAMERA_SEEDS[1:] if not quick else ():
             out[f"{head}, photometric, camera seed {seed}"] = _run(quick, still, seed=seed)[1]
         out[f"{head}, fit"] = _run(quick, still, photometric=False)[1]
+        if quick:  # (a smoke run: the default and the points' fit alone)
+            out[f"{head}, camera"] = _cache[("camera", bool(quick), still, True)]
+            continue
         clean = _run(quick, still, degraded=False, photometric=False)
         out[f"{head}, fit, clean renders"] = clean[1]
         # the points' fit with the model-anchored point tracker (--no-photometric --flow)
@@ -839,18 +843,16 @@ def _both(quick: bool) -> dict:
         out[f"{head}, photometric with anchored flow"] = _run(
             quick, still, photometric=True, anchored=True
         )[1]
-        if not quick:
-            out[f"{head}, photometric, clean renders"] = _run(
-                quick, still, degraded=False, photometric=True
-            )[1]
-            out[f"{head}, fit-synthesis"] = _run(quick, still, True, photometric=False)[1]
-            # MediaPipe's points refined by the chained flow (FlowRefiner; before 2026-12-02
-            # what --flow did)
-            out[f"{head}, fit with optical flow"] = _run(
-                quick, still, False, True, photometric=False
-            )[1]
-            out[f"{head}, snakes"] = _snakes(quick, still)
-            out[f"{head}, snakes, clean renders"] = _snakes(quick, still, False)
+        out[f"{head}, photometric, clean renders"] = _run(
+            quick, still, degraded=False, photometric=True
+        )[1]
+        out[f"{head}, fit-synthesis"] = _run(quick, still, True, photometric=False)[1]
+        # MediaPipe's points refined by the chained flow (FlowRefiner; before 2026-12-02
+        # what --flow did)
+        flowed = _run(quick, still, False, True, photometric=False)
+        out[f"{head}, fit with optical flow"] = flowed[1]
+        out[f"{head}, snakes"] = _snakes(quick, still)
+        out[f"{head}, snakes, clean renders"] = _snakes(quick, still, False)
         out[f"{head}, camera"] = _cache[("camera", bool(quick), still, True)]
     return out
 
