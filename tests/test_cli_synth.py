@@ -372,3 +372,18 @@ def test_demo_synthetic_fallback(model, tmp_path, monkeypatch, capsys):
     sbs = iio.imread(ana / "resynth.mp4", plugin="pyav")
     assert sbs.shape == (len(env), 360, 360 + 360, 3)  # the 256 px input scaled to 360 rows
     _check_face_visible(sbs[0, :, 360:], corner=20, tol=CODEC_MAD_LEVELS)
+
+
+def test_the_first_run_on_a_new_install_says_it_compiles(monkeypatch, tmp_path):
+    """``myoface demo``'s note on a new install (numba compiles the kernels then, several times
+    the run's later length): said while the tissue solver's kernel is not in numba's cache,
+    not once it is."""
+    from myoface.commands._common import first_run_note
+    from myoface.tissue.solver import _newton
+
+    index = tmp_path / "solver._newton.nbi"
+    monkeypatch.setattr(_newton._cache._cache_file, "_index_path", str(index))
+    note = first_run_note()
+    assert note is not None and "compiles myoface's kernels" in note
+    index.write_bytes(b"")
+    assert first_run_note() is None

@@ -43,6 +43,33 @@ MAX_REFINE = 10
 FACE_SIZE_MM = (50.0, 500.0)
 
 
+def first_run_note() -> str | None:
+    """The line a command prints on the first run on a new install, when numba has not yet
+    compiled myoface's kernels (it caches them for later runs, beside the sources or in
+    numba's cache folder): that run is several times longer, and its progress bars pause at
+    each stage's first frame while it compiles. Measured 2026-12-08 on the 2-core machine:
+    ``myoface demo`` 204 s on a new install, 159 s of it compiling (the tissue solver's
+    Newton step 36 s, the renderer's shading 26 s, the gaze's kernels about 40 s), against
+    about 40 s once compiled. None once the tissue solver's kernel is in numba's cache (or
+    when that cannot be told)."""
+    try:
+        import os
+
+        from myoface.tissue.solver import _newton
+
+        if os.environ.get("NUMBA_DISABLE_JIT"):
+            return None
+        index = _newton._cache._cache_file._index_path  # (numba.core.caching's own path)
+        if os.path.exists(index):
+            return None
+    except Exception:  # noqa: BLE001 - a note, never a failure
+        return None
+    return (
+        "first run on this install: numba compiles myoface's kernels as they are first used "
+        "(a few minutes, once; cached for later runs)"
+    )
+
+
 def number(lo: float, hi: float, *, lo_open: bool = False, unit: str = ""):
     """An argparse ``type``: a finite float in [lo, hi] (or (lo, hi] with ``lo_open``)."""
     interval = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"

@@ -62,9 +62,13 @@ def run(args) -> int:
     import time
 
     from myoface._io import check_output_dir, output_dir
+    from myoface.commands._common import first_run_note
 
     check_output_dir(args.output, "-o")
     t0 = time.perf_counter()
+    note = first_run_note()
+    if note:
+        print(note)
     with output_dir(args.output, "-o") as out:
         _run(args, out)
     print(f"done in {time.perf_counter() - t0:.0f} s; output folder: {out.resolve()}")

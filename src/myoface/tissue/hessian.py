@@ -98,6 +98,14 @@ class HessianPattern:
         return sp.csr_matrix((data, self.indices, self.indptr), shape=(n, n))
 
 
+def _kernel_positions(x: np.ndarray) -> np.ndarray:
+    """``x`` as the kernels are compiled for: C-contiguous, float64 and writeable (a copy of a
+    read-only array such as a model's rest positions), so that numba compiles each kernel
+    once rather than again for read-only arrays (a kernel's compilation is seconds, on every
+    new install: measured 2026-12-08, the Hessian's kernels were compiled for both)."""
+    return np.require(x, np.float64, ("C", "W"))
+
+
 def hessian_pattern(model: TissueModel) -> HessianPattern:
     """The model's :class:`HessianPattern`, built once (kept in ``model.memo``)."""
     return model.memo(
@@ -112,7 +120,7 @@ def stiffness_matrix(model: TissueModel, x: np.ndarray, materials: np.ndarray | 
     pat = hessian_pattern(model)
     data = np.empty(pat.nnz)
     assemble_hessian_numba(
-        x,
+        _kernel_positions(x),
         *kernel_args(model, materials),
         pat.fmap,
         pat.block_indptr,
@@ -423,6 +431,7 @@ class SymmetricPattern:
         """Fill ``dvals``, ``lvals`` with the exact Hessian at ``x`` (N, 3) mm."""
         dvals[:] = 0.0
         lvals[:] = 0.0
+        x = _kernel_positions(x)
         add_spring_hessian(x, self.springs, dvals, lvals)
         add_prism_hessian(x, self.prisms, dvals, lvals)
 
